@@ -1,0 +1,30 @@
+# crowdstudy: the two commands of the README are `make demo` and `make test`.
+SHELL := /bin/bash
+VENV := .venv
+PY := $(VENV)/bin/python
+export WARP_CACHE_PATH := $(CURDIR)/build/warp-cache
+export MPLBACKEND := Agg
+export PYTHONUNBUFFERED := 1
+
+.PHONY: setup demo test test-fast figures bench clean
+
+setup:
+	@bash scripts/setup.sh
+
+demo: setup
+	$(VENV)/bin/crowdstudy demo
+
+test: setup
+	$(PY) -m pytest -q
+
+test-fast: setup
+	$(PY) -m pytest -q -m "not slow and not browser"
+
+figures: setup
+	$(PY) paper_figs/make_all.py
+
+bench: setup
+	$(VENV)/bin/crowdstudy bench all
+
+clean:
+	rm -rf build demo_out paper_figs/out paper_figs/cache

@@ -1,0 +1,5 @@
+import sys
+
+from crowdstudy.cli import main
+
+sys.exit(main())

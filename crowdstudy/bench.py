@@ -1,0 +1,96 @@
+"""``crowdstudy bench NAME``: side-by-side performance scripts in ``benchmarks/``.
+
+Each ``benchmarks/NAME.py`` defines ``main(argv: list[str]) -> int``. Benchmarks report
+medians over repeated runs and ratios against a peer measured in the same run (pyrvo for
+navigation, MuJoCo for physics ...); they write their table as JSON under
+``build/bench/NAME.json`` with the provenance of the run. The helpers here keep their
+output uniform.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib.util
+import json
+import statistics
+import time
+from pathlib import Path
+from typing import Callable
+
+from crowdstudy.errors import InvalidInputError
+from crowdstudy.provenance import provenance, repository_root
+
+__all__ = ["configure", "run", "measure", "write_report", "format_table", "benchmarks_dir", "available"]
+
+
+def benchmarks_dir() -> Path:
+    return repository_root() / "benchmarks"
+
+
+def available() -> list[str]:
+    folder = benchmarks_dir()
+    return sorted(p.stem for p in folder.glob("*.py") if not p.stem.startswith("_")) if folder.is_dir() else []
+
+
+def measure(fn: Callable[[], object], *, repeat: int = 20, warmup: int = 2) -> dict:
+    """Time ``fn`` ``repeat`` times after ``warmup`` calls; seconds: median, min, max, all."""
+    for _ in range(warmup):
+        fn()
+    times = []
+    for _ in range(repeat):
+        t0 = time.perf_counter()
+        fn()
+        times.append(time.perf_counter() - t0)
+    return {"median": statistics.median(times), "min": min(times), "max": max(times), "n": repeat}
+
+
+def format_table(rows: list[dict], columns: list[str] | None = None) -> str:
+    """A plain-text table of dict rows (floats with 4 significant digits)."""
+    if not rows:
+        return "(no rows)"
+    columns = columns or list(rows[0])
+
+    def fmt(v):
+        if isinstance(v, float):
+            return f"{v:.4g}"
+        return str(v)
+
+    cells = [[fmt(r.get(c, "")) for c in columns] for r in rows]
+    widths = [max(len(c), *(len(row[i]) for row in cells)) for i, c in enumerate(columns)]
+    line = "  ".join(c.rjust(w) for c, w in zip(columns, widths))
+    sep = "  ".join("-" * w for w in widths)
+    body = ["  ".join(v.rjust(w) for v, w in zip(row, widths)) for row in cells]
+    return "\n".join([line, sep, *body])
+
+
+def write_report(name: str, rows: list[dict], *, out: Path | None = None, seed: int | None = None, **extra) -> Path:
+    """Save a benchmark table with provenance to ``build/bench/NAME.json`` (or ``out``)."""
+    out = Path(out) if out else repository_root() / "build" / "bench" / f"{name}.json"
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text(json.dumps({"benchmark": name, "rows": rows, "provenance": provenance(seed), **extra},
+                              indent=2, default=float))
+    return out
+
+
+def _load(name: str):
+    path = benchmarks_dir() / f"{name}.py"
+    if not path.is_file():
+        raise InvalidInputError(f"unknown benchmark {name!r}; available: {', '.join(available()) or 'none'}")
+    spec = importlib.util.spec_from_file_location(f"crowdstudy_benchmarks.{name}", path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def configure(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("name", help="benchmark to run: one of the scripts in benchmarks/, or 'all'")
+    parser.add_argument("bench_args", nargs=argparse.REMAINDER, help="arguments passed to the benchmark")
+
+
+def run(args: argparse.Namespace) -> int:
+    names = available() if args.name == "all" else [args.name]
+    status = 0
+    for name in names:
+        print(f"== benchmark {name} ==", flush=True)
+        status |= int(_load(name).main(list(args.bench_args)) or 0)
+    return status

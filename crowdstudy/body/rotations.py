@@ -1,0 +1,108 @@
+"""Rotation conversions, vectorised over any leading batch shape.
+
+Conventions (DESIGN.md): quaternions are scalar-last ``(x, y, z, w)``; files store
+rotations as axis-angle vectors (angle = norm, in radians); matrices act on column
+vectors (``v_world = R @ v_local``).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = [
+    "axis_angle_to_matrix",
+    "matrix_to_axis_angle",
+    "quaternion_to_matrix",
+    "matrix_to_quaternion",
+    "skew",
+]
+
+
+def skew(v: np.ndarray) -> np.ndarray:
+    """Cross-product matrix ``[v]x`` so that ``skew(v) @ u == cross(v, u)``; (..., 3) -> (..., 3, 3)."""
+    v = np.asarray(v, dtype=np.float64)
+    out = np.zeros(v.shape[:-1] + (3, 3))
+    out[..., 0, 1], out[..., 0, 2] = -v[..., 2], v[..., 1]
+    out[..., 1, 0], out[..., 1, 2] = v[..., 2], -v[..., 0]
+    out[..., 2, 0], out[..., 2, 1] = -v[..., 1], v[..., 0]
+    return out
+
+
+def axis_angle_to_matrix(rotvec: np.ndarray) -> np.ndarray:
+    """Rodrigues' formula. ``rotvec``: (..., 3) axis * angle in radians -> (..., 3, 3)."""
+    rotvec = np.asarray(rotvec, dtype=np.float64)
+    theta = np.linalg.norm(rotvec, axis=-1)[..., None, None]
+    k = skew(rotvec)
+    small = theta < 1e-6
+    safe = np.where(small, 1.0, theta)
+    # Taylor expansions keep the small-angle branch exact to double precision.
+    a = np.where(small, 1.0 - theta**2 / 6.0, np.sin(safe) / safe)
+    b = np.where(small, 0.5 - theta**2 / 24.0, (1.0 - np.cos(safe)) / safe**2)
+    eye = np.broadcast_to(np.eye(3), k.shape)
+    return eye + a * k + b * (k @ k)
+
+
+def matrix_to_quaternion(matrix: np.ndarray) -> np.ndarray:
+    """(..., 3, 3) rotation matrices -> (..., 4) unit quaternions ``(x, y, z, w)`` with w >= 0."""
+    m = np.asarray(matrix, dtype=np.float64)
+    batch = m.shape[:-2]
+    m = m.reshape(-1, 3, 3)
+    tr = np.trace(m, axis1=1, axis2=2)
+    # Shepperd's method: pick the largest of w, x, y, z to divide by.
+    cand = np.stack([tr, m[:, 0, 0], m[:, 1, 1], m[:, 2, 2]], axis=1)
+    pick = np.argmax(cand, axis=1)
+    q = np.empty((m.shape[0], 4))
+    for case in range(4):
+        sel = pick == case
+        if not np.any(sel):
+            continue
+        r = m[sel]
+        if case == 0:
+            s = np.sqrt(1.0 + tr[sel]) * 2.0
+            q[sel] = np.stack([(r[:, 2, 1] - r[:, 1, 2]) / s, (r[:, 0, 2] - r[:, 2, 0]) / s,
+                               (r[:, 1, 0] - r[:, 0, 1]) / s, 0.25 * s], axis=1)
+        elif case == 1:
+            s = np.sqrt(1.0 + r[:, 0, 0] - r[:, 1, 1] - r[:, 2, 2]) * 2.0
+            q[sel] = np.stack([0.25 * s, (r[:, 0, 1] + r[:, 1, 0]) / s,
+                               (r[:, 0, 2] + r[:, 2, 0]) / s, (r[:, 2, 1] - r[:, 1, 2]) / s], axis=1)
+        elif case == 2:
+            s = np.sqrt(1.0 + r[:, 1, 1] - r[:, 0, 0] - r[:, 2, 2]) * 2.0
+            q[sel] = np.stack([(r[:, 0, 1] + r[:, 1, 0]) / s, 0.25 * s,
+                               (r[:, 1, 2] + r[:, 2, 1]) / s, (r[:, 0, 2] - r[:, 2, 0]) / s], axis=1)
+        else:
+            s = np.sqrt(1.0 + r[:, 2, 2] - r[:, 0, 0] - r[:, 1, 1]) * 2.0
+            q[sel] = np.stack([(r[:, 0, 2] + r[:, 2, 0]) / s, (r[:, 1, 2] + r[:, 2, 1]) / s,
+                               0.25 * s, (r[:, 1, 0] - r[:, 0, 1]) / s], axis=1)
+    q /= np.linalg.norm(q, axis=1, keepdims=True)
+    q[q[:, 3] < 0] *= -1.0
+    return q.reshape(batch + (4,))
+
+
+def quaternion_to_matrix(quat: np.ndarray) -> np.ndarray:
+    """(..., 4) quaternions ``(x, y, z, w)`` (normalised here) -> (..., 3, 3)."""
+    q = np.asarray(quat, dtype=np.float64)
+    q = q / np.linalg.norm(q, axis=-1, keepdims=True)
+    x, y, z, w = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
+    out = np.empty(q.shape[:-1] + (3, 3))
+    out[..., 0, 0] = 1 - 2 * (y * y + z * z)
+    out[..., 0, 1] = 2 * (x * y - z * w)
+    out[..., 0, 2] = 2 * (x * z + y * w)
+    out[..., 1, 0] = 2 * (x * y + z * w)
+    out[..., 1, 1] = 1 - 2 * (x * x + z * z)
+    out[..., 1, 2] = 2 * (y * z - x * w)
+    out[..., 2, 0] = 2 * (x * z - y * w)
+    out[..., 2, 1] = 2 * (y * z + x * w)
+    out[..., 2, 2] = 1 - 2 * (x * x + y * y)
+    return out
+
+
+def matrix_to_axis_angle(matrix: np.ndarray) -> np.ndarray:
+    """(..., 3, 3) -> (..., 3) axis-angle with angle in [0, pi] (through the quaternion,
+    which stays accurate near 0 and pi)."""
+    q = matrix_to_quaternion(matrix)
+    vec = q[..., :3]
+    sin_half = np.linalg.norm(vec, axis=-1)
+    angle = 2.0 * np.arctan2(sin_half, q[..., 3])
+    small = sin_half < 1e-12
+    scale = np.where(small, 2.0, angle / np.where(small, 1.0, sin_half))
+    return vec * scale[..., None]

@@ -1,0 +1,130 @@
+"""The 24-joint kinematic tree (SMPL-compatible) and forward kinematics.
+
+Rest pose conventions (DESIGN.md, plus the choices made here):
+
+* Z up, floor at z = 0 in world space; in the *rest* (T-pose) the character faces **+y**,
+  so its right-hand side is **+x** and its left-hand side **-x**; arms are horizontal.
+* Rest joint positions ``rest_joints`` (J, 3) are given relative to the pelvis (joint 0 at
+  the origin); ``root_translation`` places the pelvis in the world.
+* ``joint_rotations[..., 0, :]`` is the global root orientation; every other joint's
+  rotation is relative to its parent. With all rotations zero the character stands in the
+  rest pose.
+* Forward kinematics: ``G_0 = R_0``, ``G_j = G_parent(j) R_j``;
+  ``p_0 = root_translation``, ``p_j = p_parent(j) + G_parent(j) (rest_j - rest_parent(j))``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from crowdstudy.body.rotations import axis_angle_to_matrix
+from crowdstudy.errors import InvalidInputError
+
+__all__ = [
+    "JOINT_NAMES",
+    "PARENTS",
+    "NUM_JOINTS",
+    "JOINT_INDEX",
+    "DEFAULT_REST_JOINTS",
+    "DEFAULT_PELVIS_HEIGHT",
+    "forward_kinematics",
+    "joint_index",
+    "children",
+]
+
+JOINT_NAMES: tuple[str, ...] = (
+    "pelvis", "left_hip", "right_hip", "spine1", "left_knee", "right_knee", "spine2",
+    "left_ankle", "right_ankle", "spine3", "left_foot", "right_foot", "neck",
+    "left_collar", "right_collar", "head", "left_shoulder", "right_shoulder",
+    "left_elbow", "right_elbow", "left_wrist", "right_wrist", "left_hand", "right_hand",
+)
+PARENTS: np.ndarray = np.array(
+    [-1, 0, 0, 0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 9, 9, 12, 13, 14, 16, 17, 18, 19, 20, 21],
+    dtype=np.int64)
+NUM_JOINTS = len(JOINT_NAMES)
+JOINT_INDEX: dict[str, int] = {name: i for i, name in enumerate(JOINT_NAMES)}
+
+# An average adult (about 1.70 m) in the T-pose, metres, relative to the pelvis. Only a
+# default for shape-independent work (clip authoring, tests): body models provide the rest
+# joints of each shape.
+_HALF = {  # left-side joints; the right side mirrors x
+    "left_hip": (-0.060, -0.010, -0.090), "left_knee": (-0.105, -0.005, -0.475),
+    "left_ankle": (-0.088, -0.040, -0.880), "left_foot": (-0.115, 0.080, -0.935),
+    "left_collar": (-0.075, -0.020, 0.440), "left_shoulder": (-0.165, -0.025, 0.485),
+    "left_elbow": (-0.420, -0.045, 0.475), "left_wrist": (-0.675, -0.050, 0.475),
+    "left_hand": (-0.760, -0.055, 0.470),
+}
+_MID = {"pelvis": (0.0, 0.0, 0.0), "spine1": (0.0, -0.020, 0.115), "spine2": (0.0, -0.005, 0.255),
+        "spine3": (0.0, 0.000, 0.315), "neck": (0.0, -0.020, 0.525), "head": (0.0, 0.020, 0.615)}
+
+
+def _default_rest() -> np.ndarray:
+    out = np.zeros((NUM_JOINTS, 3))
+    for name, pos in _MID.items():
+        out[JOINT_INDEX[name]] = pos
+    for name, (x, y, z) in _HALF.items():
+        out[JOINT_INDEX[name]] = (x, y, z)
+        out[JOINT_INDEX[name.replace("left_", "right_")]] = (-x, y, z)
+    return out
+
+
+DEFAULT_REST_JOINTS: np.ndarray = _default_rest()
+DEFAULT_REST_JOINTS.flags.writeable = False
+#: Height of the pelvis above the floor for DEFAULT_REST_JOINTS standing (sole ~4 cm below the foot joint).
+DEFAULT_PELVIS_HEIGHT = 0.975
+
+
+def joint_index(name: str) -> int:
+    """Index of a joint by name; unknown names raise an error listing the valid ones."""
+    try:
+        return JOINT_INDEX[name]
+    except KeyError:
+        raise InvalidInputError(
+            f"unknown joint name {name!r}; expected one of {', '.join(JOINT_NAMES)}") from None
+
+
+def children(parents: np.ndarray = PARENTS) -> list[list[int]]:
+    """Children of each joint, in index order."""
+    out: list[list[int]] = [[] for _ in range(len(parents))]
+    for j, p in enumerate(parents):
+        if p >= 0:
+            out[int(p)].append(j)
+    return out
+
+
+def forward_kinematics(rest_joints: np.ndarray, joint_rotations: np.ndarray,
+                       root_translation: np.ndarray, parents: np.ndarray = PARENTS,
+                       *, rotations_are_matrices: bool = False) -> tuple[np.ndarray, np.ndarray]:
+    """Global joint rotations and positions.
+
+    Args:
+        rest_joints: (..., J, 3) float, metres; rest-pose joint positions (any origin).
+        joint_rotations: (..., J, 3) axis-angle radians, or (..., J, 3, 3) matrices when
+            ``rotations_are_matrices``; joint 0 global, the others parent-relative.
+        root_translation: (..., 3) metres, world position of joint 0.
+        parents: (J,) parent indices with ``parents[j] < j`` and -1 for the root.
+
+    Returns:
+        ``(global_rotations (..., J, 3, 3), joint_positions (..., J, 3))``, the leading
+        shapes broadcast together.
+    """
+    rest = np.asarray(rest_joints, dtype=np.float64)
+    rot = np.asarray(joint_rotations, dtype=np.float64)
+    local = rot if rotations_are_matrices else axis_angle_to_matrix(rot)
+    n_j = len(parents)
+    if rest.shape[-2:] != (n_j, 3):
+        raise InvalidInputError(f"rest_joints: expected shape (..., {n_j}, 3), got {rest.shape}")
+    if local.shape[-3:] != (n_j, 3, 3):
+        raise InvalidInputError(f"joint_rotations: expected (..., {n_j}, 3) axis-angle, got {rot.shape}")
+    root = np.asarray(root_translation, dtype=np.float64)
+    batch = np.broadcast_shapes(rest.shape[:-2], local.shape[:-3], root.shape[:-1])
+    glob = np.empty(batch + (n_j, 3, 3))
+    pos = np.empty(batch + (n_j, 3))
+    glob[..., 0, :, :] = local[..., 0, :, :]
+    pos[..., 0, :] = root
+    offsets = rest - rest[..., np.maximum(parents, 0), :]
+    for j in range(1, n_j):
+        p = int(parents[j])
+        glob[..., j, :, :] = glob[..., p, :, :] @ local[..., j, :, :]
+        pos[..., j, :] = pos[..., p, :] + np.einsum("...ab,...b->...a", glob[..., p, :, :], offsets[..., j, :])
+    return glob, pos

@@ -1,0 +1,83 @@
+"""The ``crowdstudy`` command line.
+
+Each subcommand lives in the stage that owns it, as a module with two functions::
+
+    def configure(parser: argparse.ArgumentParser) -> None   # add the arguments
+    def run(args: argparse.Namespace) -> int                 # do the work, return an exit code
+
+Only the chosen subcommand's module is imported, so ``crowdstudy --help`` stays fast.
+Errors raised on bad input (:class:`~crowdstudy.errors.CrowdstudyError`, ``ValueError``,
+``FileNotFoundError``) are printed as one line naming what is wrong, with exit code 2.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+
+from crowdstudy import __version__
+from crowdstudy.errors import CrowdstudyError
+
+__all__ = ["main", "COMMANDS"]
+
+#: (name, module, one-line description), in pipeline order.
+COMMANDS: tuple[tuple[str, str, str], ...] = (
+    ("layout", "crowdstudy.layout.cli", "Place characters in a region as a Poisson-disk set (stationary crowds)."),
+    ("navigate", "crowdstudy.navigation.cli", "Walk a crowd with ORCA (corridor scenario) and write its trajectories."),
+    ("animate", "crowdstudy.motion.cli", "Turn layouts or trajectories into the Baseline full-body crowd animation."),
+    ("correct", "crowdstudy.physics.cli", "Resolve character collisions with the physics layer (Baseline -> Ours)."),
+    ("metrics", "crowdstudy.metrics.cli", "Measure overlap volume, tracking error and smoothness of an animation."),
+    ("render", "crowdstudy.render.cli", "Render an animation to an MP4 video or a PNG frame (headless EGL)."),
+    ("stimuli", "crowdstudy.render.stimuli_cli", "Build the whole stimulus video set and its manifest from a study design."),
+    ("serve", "crowdstudy.study.cli_serve", "Run the browser questionnaire server for participant sessions."),
+    ("export", "crowdstudy.study.cli_export", "Export participant answers and demographics from the study database to CSV."),
+    ("simulate-participants", "crowdstudy.study.cli_simulate", "Simulated participants answering through the server's API."),
+    ("analyze", "crowdstudy.stats.cli", "Repeated-measures ANOVA, post hoc tests, tables and figures from responses."),
+    ("power", "crowdstudy.stats.cli_power", "Simulate studies to estimate the power to detect the Method effects."),
+    ("bench", "crowdstudy.bench", "Run a benchmark from benchmarks/ (navigation, animation, physics, render, stats)."),
+    ("demo", "crowdstudy.demo", "Run the whole pipeline on a small configuration (what `make demo` runs)."),
+)
+
+
+def _build_parser(chosen: str | None) -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="crowdstudy",
+        description="Perception research on dense 3D crowds: stimuli, participant sessions, statistics.",
+    )
+    parser.add_argument("--version", action="version", version=f"crowdstudy {__version__}")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", title="commands")
+    for name, module_name, help_text in COMMANDS:
+        p = sub.add_parser(name, help=help_text, description=help_text)
+        if name == chosen:
+            try:
+                module = importlib.import_module(module_name)
+            except ModuleNotFoundError as exc:
+                if exc.name and module_name.startswith(exc.name):
+                    parser.exit(2, f"crowdstudy {name}: not available in this installation ({module_name} missing)\n")
+                raise
+            module.configure(p)
+            p.set_defaults(_run=module.run)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    argv = list(sys.argv[1:] if argv is None else argv)
+    chosen = next((a for a in argv if not a.startswith("-")), None)
+    parser = _build_parser(chosen)
+    args = parser.parse_args(argv)
+    if getattr(args, "_run", None) is None:
+        parser.print_help()
+        return 0 if not argv else 2
+    try:
+        return int(args._run(args) or 0)
+    except (CrowdstudyError, ValueError, FileNotFoundError, NotADirectoryError, PermissionError) as exc:
+        print(f"crowdstudy {args.command}: error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print(f"crowdstudy {args.command}: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

@@ -1,0 +1,61 @@
+#!/usr/bin/env bash
+# Idempotent set-up for crowdstudy on Debian: system packages (as root, when missing),
+# a local virtual environment in .venv with the package and all extras, and the web
+# front end's npm packages. Re-running it does only what is missing or out of date.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+ROOT=$(pwd)
+STAMP_DIR="$ROOT/build/stamps"
+mkdir -p "$STAMP_DIR"
+
+# --- Debian packages ---------------------------------------------------------
+DEB_PKGS=(python3 python3-venv python3-dev ffmpeg chromium libegl1 libegl-mesa0 libgl1-mesa-dri
+          libgles2 libglib2.0-0 fonts-dejavu-core nodejs npm git ca-certificates)
+missing=()
+for p in "${DEB_PKGS[@]}"; do
+    case "$p" in
+        # Satisfied by any working interpreter/tool on PATH (pyenv, nodesource ...).
+        python3|python3-venv|python3-dev) command -v python3 >/dev/null && python3 -c 'import venv, sys; sys.exit(sys.version_info < (3, 11))' 2>/dev/null && continue ;;
+        nodejs) command -v node >/dev/null && continue ;;
+        npm) command -v npm >/dev/null && continue ;;
+        git) command -v git >/dev/null && continue ;;
+    esac
+    dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
+done
+if [ ${#missing[@]} -gt 0 ]; then
+    if [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null; then
+        echo "[setup] installing Debian packages: ${missing[*]}"
+        apt-get update -qq
+        DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends "${missing[@]}" >/dev/null
+    else
+        echo "[setup] missing Debian packages: ${missing[*]}" >&2
+        echo "[setup] install them with: sudo apt-get install ${missing[*]}" >&2
+        exit 1
+    fi
+fi
+
+# --- Python virtual environment ------------------------------------------------
+if [ ! -x .venv/bin/python ]; then
+    echo "[setup] creating .venv"
+    python3 -m venv .venv
+fi
+if [ ! -f "$STAMP_DIR/pip" ] || [ pyproject.toml -nt "$STAMP_DIR/pip" ]; then
+    echo "[setup] installing Python dependencies into .venv (first time takes a few minutes)"
+    .venv/bin/python -m pip install -q --upgrade pip
+    .venv/bin/python -m pip install -q -e ".[all]"
+    touch "$STAMP_DIR/pip"
+fi
+
+# --- Web front end (jsPsych from npm) ------------------------------------------
+if [ -f ui/package.json ]; then
+    if [ ! -d ui/node_modules ] || [ ui/package.json -nt "$STAMP_DIR/npm" ] || \
+       { [ -f ui/package-lock.json ] && [ ui/package-lock.json -nt "$STAMP_DIR/npm" ]; }; then
+        echo "[setup] installing the questionnaire's npm packages"
+        if [ -f ui/package-lock.json ]; then
+            (cd ui && npm ci --no-audit --no-fund --loglevel=error)
+        else
+            (cd ui && npm install --no-audit --no-fund --loglevel=error)
+        fi
+        touch "$STAMP_DIR/npm"
+    fi
+fi
