@@ -22,7 +22,12 @@ def get_warp():
     os.makedirs(cache, exist_ok=True)
     import warp as wp
 
-    wp.config.quiet = True
+    # Warp >= 1.10 replaced ``config.quiet`` with ``config.log_level``: silence the banner and
+    # the per-module load lines either way.
+    if hasattr(wp, "LOG_WARNING"):
+        wp.config.log_level = wp.LOG_WARNING
+    else:  # pragma: no cover - older Warp
+        wp.config.quiet = True
     wp.config.kernel_cache_dir = cache
     wp.init()
     return wp

@@ -1,0 +1,43 @@
+"""The stationary concert crowd of study stage 1: a Poisson-disk layout on the floor."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from crowdstudy.errors import InvalidInputError
+from crowdstudy.layout.discs import disc_radius
+from crowdstudy.layout.poisson import poisson_disk
+from crowdstudy.provenance import provenance
+from crowdstudy.scene import Crowd
+
+__all__ = ["concert_layout"]
+
+
+def concert_layout(design, level: str, seed) -> Crowd:
+    """The concert crowd of one density level as a one-frame :class:`Crowd`.
+
+    ``design.n_characters(level)`` characters on the ``floor_width x floor_depth`` floor
+    centred on the origin, ``design.scenarios["concert"]["margin"]`` metres from its edges,
+    all facing the stage (+y, heading pi/2).
+
+    Returns:
+        Crowd with positions (1, N, 2) metres, radius (N,) from
+        :func:`~crowdstudy.layout.discs.disc_radius`, headings (1, N) radians, region the
+        floor rectangle (4, 2), meta {scenario, density_level, density, n_characters, seed,
+        margin, min_distance, target_distance, provenance}.
+    """
+    if level not in design.densities:
+        raise InvalidInputError(f"level: unknown density level {level!r}; "
+                                f"expected one of {', '.join(design.densities)}")
+    n = design.n_characters(level)
+    density = float(design.densities[level])
+    margin = float(design.scenarios["concert"]["margin"])
+    layout = poisson_disk((design.floor_width, design.floor_depth), n, seed=seed, margin=margin)
+    seed_value = layout.seed
+    return Crowd(
+        positions=layout.points[None], radius=np.full(n, disc_radius(density)), fps=float(design.fps),
+        headings=np.full((1, n), np.pi / 2), region=layout.region,
+        meta={"scenario": "concert", "density_level": level, "density": density, "n_characters": n,
+              "seed": seed_value, "margin": margin, "min_distance": layout.min_distance,
+              "target_distance": layout.target_distance, "area": layout.area,
+              "provenance": provenance(seed_value, stage="layout")})
