@@ -1,0 +1,20 @@
+"""Statistics of the perceptual study (DESIGN.md, "The study", Analysis).
+
+- :mod:`~crowdstudy.stats.scoring`: validate responses.csv, reverse negative items,
+  item-pair reliability, composites, per participant x cell means.
+- :mod:`~crowdstudy.stats.anova`: ``rm_anova`` for any number of within factors, with
+  Mauchly's test, Greenhouse-Geisser / Huynh-Feldt and partial / generalized eta squared
+  (matched to R's afex).
+- :mod:`~crowdstudy.stats.posthoc`: ``pairwise`` comparisons as emmeans' multivariate
+  model, Tukey / Bonferroni / Holm.
+- :mod:`~crowdstudy.stats.assumptions`: Shapiro-Wilk and Q-Q plots of residuals per cell.
+- :mod:`~crowdstudy.stats.report`, :mod:`~crowdstudy.stats.figures`,
+  :mod:`~crowdstudy.stats.pipeline`: tables, APA text, paper-style figures, ``analyze``.
+- :mod:`~crowdstudy.stats.synthetic`, :mod:`~crowdstudy.stats.power`: simulated
+  participants and Monte-Carlo power.
+
+Each public name has one import path, its module (``from crowdstudy.stats.anova import
+rm_anova``); importing this package imports nothing heavy.
+"""
+
+__all__: list[str] = []

@@ -1,0 +1,159 @@
+"""Input handling shared by the ANOVA and the post hoc tests: long/wide data -> a complete
+subject x cell matrix, with errors that name the column, level or subject at fault."""
+
+from __future__ import annotations
+
+import dataclasses
+import itertools
+
+import numpy as np
+import pandas as pd
+
+from crowdstudy.errors import InvalidInputError
+
+__all__ = ["CellMatrix", "cell_matrix", "factor_levels"]
+
+
+@dataclasses.dataclass(frozen=True)
+class CellMatrix:
+    """Per-subject cell means of a fully within-subject design.
+
+    ``values``: (n_subjects, n_cells) float64, cells in row-major order of ``levels``
+    (the last factor varies fastest); ``subjects``: the kept subject ids; ``factors``:
+    factor names; ``levels``: one tuple of levels per factor; ``dropped``: subjects removed
+    by listwise deletion; ``aggregated``: True when some subject x cell had several rows
+    (averaged, as afex does).
+    """
+    values: np.ndarray
+    subjects: tuple
+    factors: tuple[str, ...]
+    levels: tuple[tuple, ...]
+    dropped: tuple = ()
+    aggregated: bool = False
+
+    @property
+    def shape(self) -> tuple[int, ...]:
+        return tuple(len(lv) for lv in self.levels)
+
+    def cells(self) -> list[tuple]:
+        return list(itertools.product(*self.levels))
+
+
+def factor_levels(series: pd.Series) -> tuple:
+    """Level order of a factor: categorical order if categorical, else sorted unique values."""
+    if isinstance(series.dtype, pd.CategoricalDtype):
+        present = set(series.dropna().unique())
+        return tuple(c for c in series.cat.categories if c in present)
+    values = series.dropna().unique().tolist()
+    try:
+        return tuple(sorted(values))
+    except TypeError:
+        return tuple(sorted(values, key=str))
+
+
+def _as_list(within) -> list[str]:
+    if within is None:
+        return []
+    if isinstance(within, str):
+        return [within]
+    try:
+        out = list(within)
+    except TypeError:
+        raise InvalidInputError(f"within must be a column name or a list of column names, got {within!r}") from None
+    if not all(isinstance(w, str) for w in out):
+        raise InvalidInputError(f"within must list column names (strings), got {within!r}")
+    return out
+
+
+def _wide_to_long(data: pd.DataFrame, within: list[str], subject: str | None) -> tuple[pd.DataFrame, str, list, str]:
+    cols = data.columns
+    names = [n for n in cols.names] if isinstance(cols, pd.MultiIndex) else [cols.name]
+    if within:
+        if len(within) != len(names):
+            raise InvalidInputError(f"wide data has {len(names)} column level(s) {names}; within names {len(within)}")
+        names = within
+    if any(n is None for n in names):
+        raise InvalidInputError("wide data: name the column levels (data.columns.names) or pass within=[...]")
+    subj = subject or data.index.name or "subject"
+    long = data.copy()
+    long.columns = pd.MultiIndex.from_tuples([c if isinstance(c, tuple) else (c,) for c in cols], names=names)
+    long.index = long.index.rename(subj)
+    long = long.stack(list(range(len(names))), future_stack=True).rename("value").reset_index()
+    return long, "value", names, subj
+
+
+def cell_matrix(data: pd.DataFrame, dv: str | None, within, subject: str | None, *,
+                missing: str = "raise") -> CellMatrix:
+    """Validate ``data`` and arrange it as a subject x cell matrix (see :class:`CellMatrix`).
+
+    Long input: one row per observation with columns ``subject``, the ``within`` factors and
+    ``dv``. Wide input (``dv=None``): one row per subject (index = subject), columns = the
+    cells (a MultiIndex whose level names are the factors, or ``within`` names them).
+    ``missing="raise"`` rejects a subject without every cell (naming subject and cell);
+    ``"drop"`` removes such subjects (listwise deletion; listed in ``.dropped``).
+    """
+    if not isinstance(data, pd.DataFrame):
+        raise InvalidInputError(f"data must be a pandas DataFrame, got {type(data).__name__}")
+    if missing not in ("raise", "drop"):
+        raise InvalidInputError(f"missing must be 'raise' or 'drop', got {missing!r}")
+    within = _as_list(within)
+    if dv is None:
+        data, dv, within, subject = _wide_to_long(data, within, subject)
+    if not within:
+        raise InvalidInputError("within must name at least one within-subject factor")
+    if len(set(within)) != len(within):
+        raise InvalidInputError(f"within lists a factor twice: {within}")
+    for role, col in [("dv", dv), ("subject", subject), *[("within", w) for w in within]]:
+        if not isinstance(col, str) or col not in data.columns:
+            raise InvalidInputError(f"{role} column {col!r} is not in the data; columns: {', '.join(map(str, data.columns))}")
+    if subject in within or dv in within or dv == subject:
+        raise InvalidInputError(f"dv {dv!r}, subject {subject!r} and within {within} must be distinct columns")
+    y = data[dv]
+    if not (pd.api.types.is_numeric_dtype(y) and not pd.api.types.is_bool_dtype(y)):
+        converted = pd.to_numeric(y, errors="coerce")
+        bad = y[converted.isna() & y.notna()]
+        if len(bad):
+            raise InvalidInputError(f"dv column {dv!r} must be numeric; row {bad.index[0]!r} holds {bad.iloc[0]!r}")
+        y = converted
+    y = y.astype(float)
+    if np.isinf(y).any():
+        raise InvalidInputError(f"dv column {dv!r} holds an infinite value (row {y.index[np.isinf(y)][0]!r})")
+    for col in [subject, *within]:
+        if data[col].isna().any():
+            raise InvalidInputError(f"column {col!r} has a missing value (row {data.index[data[col].isna()][0]!r})")
+    levels = [factor_levels(data[w]) for w in within]
+    for w, lv in zip(within, levels):
+        if len(lv) < 2:
+            raise InvalidInputError(f"within factor {w!r} has a single level {lv[0]!r}; a factor needs >= 2 levels")
+    frame = pd.DataFrame({"_s": data[subject].to_numpy(), "_y": y.to_numpy()})
+    for i, w in enumerate(within):
+        frame[f"_f{i}"] = data[w].to_numpy()
+    keys = ["_s", *[f"_f{i}" for i in range(len(within))]]
+    grouped = frame.dropna(subset=["_y"]).groupby(keys, sort=False, observed=True)["_y"]
+    counts = grouped.size()
+    aggregated = bool((counts > 1).any())
+    means = grouped.mean()
+    subjects = factor_levels(data[subject])
+    cells = list(itertools.product(*levels))
+    full_index = pd.MultiIndex.from_tuples([(s, *c) for s in subjects for c in cells], names=keys)
+    values = means.reindex(full_index).to_numpy().reshape(len(subjects), len(cells))
+    holes = np.isnan(values)
+    dropped: tuple = ()
+    if holes.any():
+        bad_rows = np.flatnonzero(holes.any(axis=1))
+        if missing == "raise":
+            s = bad_rows[0]
+            cell = cells[int(np.flatnonzero(holes[s])[0])]
+            where = ", ".join(f"{w}={c!r}" for w, c in zip(within, cell))
+            raise InvalidInputError(
+                f"subject {subjects[s]!r} has no {dv!r} value for the cell {where} "
+                f"({len(bad_rows)} subject(s) lack some cell); pass missing='drop' (CLI: --missing drop) for listwise deletion")
+        dropped = tuple(subjects[i] for i in bad_rows)
+        keep = ~holes.any(axis=1)
+        values = values[keep]
+        subjects = tuple(s for s, k in zip(subjects, keep) if k)
+    if len(subjects) < 2:
+        raise InvalidInputError(f"need at least 2 subjects with every cell, got {len(subjects)}"
+                                + (f" after dropping {len(dropped)}" if dropped else ""))
+    return CellMatrix(values=values, subjects=tuple(subjects), factors=tuple(within), levels=tuple(levels),
+                      dropped=dropped, aggregated=aggregated)

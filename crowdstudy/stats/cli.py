@@ -1,0 +1,49 @@
+"""``crowdstudy analyze responses.csv --out DIR``: the paper's analysis of exported responses."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from crowdstudy.errors import InvalidInputError
+
+__all__ = ["configure", "run"]
+
+
+def configure(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("responses", help="responses.csv exported by `crowdstudy export` (or simulated)")
+    parser.add_argument("--out", required=True, help="output folder for tables, figures and summary.md")
+    parser.add_argument("--design", default=None, help="study design TOML (default: stimuli/study.toml)")
+    parser.add_argument("--correction", choices=("auto", "always", "never"), default="auto",
+                        help="Greenhouse-Geisser: where Mauchly's p < alpha (auto, the paper's rule), always "
+                             "(afex's default) or never")
+    parser.add_argument("--alpha", type=float, default=0.05, help="significance level (default 0.05)")
+    parser.add_argument("--adjust", choices=("tukey", "bonferroni", "holm"), default="tukey",
+                        help="post hoc p-value adjustment (default tukey)")
+    parser.add_argument("--effsize", choices=("np2", "ng2"), default="np2",
+                        help="effect size quoted in the APA summary (both are in the tables)")
+    parser.add_argument("--missing", choices=("raise", "drop"), default="raise",
+                        help="a participant without every condition: error (raise) or listwise deletion (drop)")
+    parser.add_argument("--error-bars", choices=("sd", "se", "ci95"), default="sd", help="figure error bars")
+    parser.add_argument("--stage", type=int, action="append", default=None,
+                        help="analyse only this stage number (repeatable)")
+    parser.add_argument("--no-figures", action="store_true", help="skip the figures (tables only)")
+
+
+def run(args: argparse.Namespace) -> int:
+    from crowdstudy.design import load_design
+    from crowdstudy.stats.pipeline import analyze
+
+    path = Path(args.responses)
+    if not path.is_file():
+        raise InvalidInputError(f"responses file {str(path)!r} does not exist")
+    if not 0 < args.alpha < 1:
+        raise InvalidInputError(f"--alpha must be in (0, 1), got {args.alpha}")
+    design = load_design(args.design)
+    correction = {"auto": "auto", "always": True, "never": False}[args.correction]
+    result = analyze(path, design, args.out, correction=correction, alpha=args.alpha, effsize=args.effsize,
+                     missing=args.missing, adjust=args.adjust, error=args.error_bars, stages=args.stage,
+                     figures=not args.no_figures, progress=True)
+    print(result.summary)
+    print(f"wrote {len(result.files)} files to {args.out}")
+    return 0
