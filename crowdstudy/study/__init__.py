@@ -1,0 +1,34 @@
+"""Participant sessions: the browser questionnaire's server, its durable storage and export.
+
+Running a study
+---------------
+::
+
+    crowdstudy serve --stimuli stimuli/videos --db sqlite:///study.db \\
+        --completion-code C1A2B3 --redirect-url "https://app.prolific.com/submissions/complete?cc=C1A2B3"
+
+prints the participant URL (``/?PROLIFIC_PID=...`` or ``/?participant=...``; without an id
+the page asks for one) and the admin token (set ``CROWDSTUDY_ADMIN_TOKEN`` to keep it
+fixed and out of the process list). ``/admin?token=...`` shows progress;
+``crowdstudy export --db sqlite:///study.db --out responses.csv --demographics demographics.csv``
+writes the analysis input. The server binds 127.0.0.1; for an online study run it behind
+an HTTPS reverse proxy (``--host`` only when the proxy is on another machine), one
+process per database. ``crowdstudy simulate-participants --url ... -n 10`` runs bots
+through the same API (demo, load test, checking the analysis end to end).
+
+Modules (import them directly; heavy dependencies load only there):
+
+- :mod:`crowdstudy.study.schedule`: per-participant randomised trial order.
+- :mod:`crowdstudy.study.stimulus_set`: the stimulus manifest the server reads.
+- :mod:`crowdstudy.study.storage`: SQLAlchemy Core tables (SQLite with WAL, group commit).
+- :mod:`crowdstudy.study.app`: the Starlette ASGI application (UI, videos, JSON API, admin).
+- :mod:`crowdstudy.study.server`: a StudyConfig from the files (design, stimuli, consent, db).
+- :mod:`crowdstudy.study.consent`: the consent Markdown file as safe HTML.
+- :mod:`crowdstudy.study.export`: responses.csv / demographics.csv from a database.
+- :mod:`crowdstudy.study.dashboard`: the admin progress page.
+- :mod:`crowdstudy.study.bots`: simulated participants answering through the HTTP API.
+- :mod:`crowdstudy.study.fake_stimuli`: a tiny stimulus folder for tests and demos.
+- :mod:`crowdstudy.study.local_server`: ``crowdstudy serve`` as a child process on a free port.
+"""
+
+__all__: list[str] = []

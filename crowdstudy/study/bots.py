@@ -1,0 +1,215 @@
+"""Simulated participants that take the study through the server's HTTP API.
+
+Each bot registers, consents, gives demographics, answers the practice trial, then every
+trial of its schedule in order with answers drawn from
+:class:`crowdstudy.stats.synthetic.ResponseModel`, and completes. Bots run concurrently
+(asyncio, one keep-alive connection each); every answer's round-trip latency is recorded, so the same code serves
+the demo, load tests and end-to-end checks of the server.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import dataclasses
+import json
+import time
+import urllib.parse
+
+import numpy as np
+
+from crowdstudy.errors import InvalidInputError
+
+__all__ = ["SimulationResult", "simulate_participants", "run_simulation"]
+
+
+@dataclasses.dataclass
+class SimulationResult:
+    """Outcome of a simulation.
+
+    participants: ids that completed; answers: answers stored (HTTP 201 or 200);
+    latencies_ms: (n_answers,) float64 round-trip time of each answer POST, milliseconds;
+    errors: one message per bot that failed; wall_s: seconds for the whole run.
+    """
+    participants: list[str]
+    answers: int
+    latencies_ms: np.ndarray
+    errors: list[str]
+    wall_s: float
+
+    def percentile(self, q: float) -> float:
+        """Answer latency percentile ``q`` (0..100), milliseconds (nan without answers)."""
+        return float(np.percentile(self.latencies_ms, q)) if self.latencies_ms.size else float("nan")
+
+    def summary(self) -> dict:
+        return {"participants": len(self.participants), "answers": self.answers, "errors": len(self.errors),
+                "wall_s": round(self.wall_s, 3), "latency_ms_p50": round(self.percentile(50), 2),
+                "latency_ms_p95": round(self.percentile(95), 2), "latency_ms_p99": round(self.percentile(99), 2),
+                "latency_ms_max": round(float(self.latencies_ms.max()), 2) if self.latencies_ms.size else None}
+
+
+class _Connection:
+    """A minimal HTTP/1.1 keep-alive JSON client over one asyncio stream (plain http:// only).
+
+    A load generator must cost far less CPU than the server it measures; a general client
+    (httpx) costs about 2 ms of CPU per request, this one a tenth of that. It sends JSON,
+    reads responses with a Content-Length (what the study server sends) and reconnects
+    once when the server closed an idle connection.
+    """
+
+    def __init__(self, host: str, port: int, timeout: float):
+        self.host, self.port, self.timeout = host, port, timeout
+        self.reader = self.writer = None
+
+    async def _connect(self):
+        self.reader, self.writer = await asyncio.wait_for(asyncio.open_connection(self.host, self.port), self.timeout)
+
+    async def close(self):
+        if self.writer is not None:
+            self.writer.close()
+            try:
+                await self.writer.wait_closed()
+            except (ConnectionError, OSError):
+                pass
+            self.writer = None
+
+    async def request(self, method: str, path: str, payload: dict | None, secret: str | None) -> tuple[int, dict]:
+        body = b"" if payload is None else json.dumps(payload).encode()
+        head = [f"{method} {path} HTTP/1.1", f"Host: {self.host}:{self.port}", f"Content-Length: {len(body)}",
+                "Accept: application/json"]
+        if payload is not None:
+            head.append("Content-Type: application/json")
+        if secret:
+            head.append(f"X-Participant-Secret: {secret}")
+        data = ("\r\n".join(head) + "\r\n\r\n").encode() + body
+        for attempt in range(2):
+            try:
+                if self.writer is None:
+                    await self._connect()
+                self.writer.write(data)
+                return await asyncio.wait_for(self._read(), self.timeout)
+            except (ConnectionError, asyncio.IncompleteReadError, OSError):
+                await self.close()
+                if attempt:
+                    raise
+        raise ConnectionError("unreachable")  # pragma: no cover
+
+    async def _read(self) -> tuple[int, dict]:
+        head = await self.reader.readuntil(b"\r\n\r\n")
+        lines = head.decode("latin-1").split("\r\n")
+        status = int(lines[0].split(" ", 2)[1])
+        headers = {k.strip().lower(): v.strip() for k, _, v in (ln.partition(":") for ln in lines[1:] if ln)}
+        if "content-length" not in headers:
+            raise ConnectionError(f"response without Content-Length (status {status})")
+        raw = await self.reader.readexactly(int(headers["content-length"]))
+        if headers.get("connection", "").lower() == "close":
+            await self.close()
+        return status, (json.loads(raw) if raw else {})
+
+
+def _bot_rng(seed: int, index: int) -> np.random.Generator:
+    return np.random.default_rng([int(seed), int(index)])
+
+
+def _model(study: dict, method_effect: float, noise_sd: float, **kwargs):
+    from crowdstudy.stats.synthetic import ResponseModel
+    composites = {k: tuple(v) for k, v in study["composites"].items()}
+    kwargs.setdefault("composite_effects", {c: e for c, e in ResponseModel().composite_effects.items()
+                                            if c in composites})
+    return ResponseModel(method_effect=float(method_effect), noise_sd=float(noise_sd), composites=composites,
+                         reversed_items=tuple(it["id"] for it in study["items"] if it["reverse"]),
+                         likert_points=int(study["points"]), **kwargs)
+
+
+async def _post(conn: _Connection, url: str, secret: str | None, payload: dict):
+    status, data = await conn.request("POST", url, payload, secret)
+    if status >= 400:
+        raise RuntimeError(f"POST {url} -> {status} {str(data)[:200]}")
+    return data
+
+
+async def _one_bot(client: _Connection, pid: str, model, rng: np.random.Generator, think_time: float, latencies: list,
+                   ) -> int:
+    reg = await _post(client, "/api/participants", None, {"participant_id": pid})
+    secret, state = reg["secret"], reg["state"]
+    base = f"/api/participants/{pid}"
+    if not state["consented"]:
+        await _post(client, base + "/consent", secret, {"consent": True})
+    if not state["demographics"]:
+        await _post(client, base + "/demographics", secret,
+                    {"age": int(rng.integers(18, 71)), "gender": str(rng.choice(["female", "male"]))})
+    offsets = model.draw_participant(rng)
+    if not state["practice_done"]:
+        ans = model.answer({"density": 4.44, "method": "practice", "scenario": "concert"}, offsets, rng)
+        await _post(client, base + "/practice", secret, {"answers": ans, "rt_ms": 5000.0})
+    n = 0
+    for trial in state["trials"][state["next_trial_index"]:]:
+        if think_time > 0:
+            await asyncio.sleep(float(rng.uniform(0.0, 2.0 * think_time)))
+        answers = model.answer(trial, offsets, rng)
+        rt = float(np.round(2000.0 + rng.lognormal(np.log(8000.0), 0.4), 1))
+        t0 = time.perf_counter()
+        await _post(client, base + "/responses", secret,
+                    {"trial_index": trial["trial_index"], "stimulus_id": trial["stimulus_id"], "answers": answers,
+                     "rt_ms": rt})
+        latencies.append((time.perf_counter() - t0) * 1000.0)
+        n += 1
+    await _post(client, base + "/complete", secret, {})
+    return n
+
+
+async def simulate_participants(url: str, n: int, *, method_effect: float = 1.0, noise_sd: float = 0.9,
+                                seed: int = 1, concurrency: int = 10, think_time: float = 0.0,
+                                prefix: str = "bot", timeout: float = 60.0, model_kwargs: dict | None = None
+                                ) -> SimulationResult:
+    """Run ``n`` bots against the server at ``url``, at most ``concurrency`` at once.
+
+    think_time: mean pause before each answer (s; uniform 0..2x), 0 = as fast as possible.
+    Participant ids are ``{prefix}-{seed}-{index:05d}``; the answers depend only on ``seed``.
+    """
+    for name, value in (("n", n), ("concurrency", concurrency), ("seed", seed)):
+        if not isinstance(value, int) or isinstance(value, bool) or value < (0 if name == "seed" else 1):
+            raise InvalidInputError(f"{name} must be a positive integer, got {value!r}")
+    parsed = urllib.parse.urlsplit(url)
+    if parsed.scheme != "http" or not parsed.hostname or parsed.path not in ("", "/"):
+        raise InvalidInputError(f"--url must be a plain http://HOST:PORT base URL, got {url!r}")
+    host, port = parsed.hostname, parsed.port or 80
+    if think_time < 0:
+        raise InvalidInputError(f"think_time must be >= 0 seconds, got {think_time!r}")
+    t_start = time.perf_counter()
+    probe = _Connection(host, port, timeout)
+    try:
+        status, study = await probe.request("GET", "/api/study", None, None)
+    except (ConnectionError, OSError, asyncio.TimeoutError) as exc:
+        raise InvalidInputError(f"--url {url}: no study server answers there ({exc})") from None
+    finally:
+        await probe.close()
+    if status != 200:
+        raise InvalidInputError(f"--url {url}: GET /api/study answered {status}")
+    model = _model(study, method_effect, noise_sd, **(model_kwargs or {}))
+    gate = asyncio.Semaphore(concurrency)
+    latencies: list[float] = []
+    done: list[str] = []
+    errors: list[str] = []
+    counts: list[int] = []
+
+    async def run(i: int):
+        pid = f"{prefix}-{seed}-{i:05d}"
+        async with gate:
+            conn = _Connection(host, port, timeout)
+            try:
+                counts.append(await _one_bot(conn, pid, model, _bot_rng(seed, i), think_time, latencies))
+                done.append(pid)
+            except (RuntimeError, ConnectionError, OSError, asyncio.TimeoutError, ValueError) as exc:
+                errors.append(f"{pid}: {type(exc).__name__}: {exc}")
+            finally:
+                await conn.close()
+
+    await asyncio.gather(*(run(i) for i in range(n)))
+    return SimulationResult(participants=sorted(done), answers=int(sum(counts)),
+                            latencies_ms=np.asarray(latencies, dtype=np.float64), errors=errors,
+                            wall_s=time.perf_counter() - t_start)
+
+
+def run_simulation(url: str, n: int, **kwargs) -> SimulationResult:
+    """Blocking wrapper of :func:`simulate_participants`."""
+    return asyncio.run(simulate_participants(url, n, **kwargs))

@@ -1,0 +1,451 @@
+"""Durable storage of participant sessions: SQLAlchemy Core tables, any SQLAlchemy URL.
+
+SQLite (the default, one file) runs in WAL mode with ``synchronous=FULL``, so an answer is
+on disk when :meth:`StudyStore.record_answer` returns. SQLite allows one writer at a time
+and each commit costs an fsync (about 10 ms on a virtual disk), so all writes go through
+one writer thread that commits the jobs arriving together in one transaction ("group
+commit"): each caller still returns only after the commit holding its write. Other
+databases (PostgreSQL for multi-site studies) run ordinary concurrent transactions. Every
+statement is built with SQLAlchemy expressions (bound parameters), never by formatting ids
+into SQL text.
+
+Tables
+------
+- ``stimuli``: the study's stimulus metadata (so the export needs only the database).
+- ``participants``: one row per participant: secret hash, consent / demographics /
+  practice / completion timestamps, age, gender, completion code.
+- ``schedule``: the participant's trial order, key (participant_id, trial_index).
+- ``responses``: one row per answer, UNIQUE (participant_id, trial_index); the practice
+  answer is stored with ``practice = true`` and ``trial_index = -1``.
+
+Timestamps are ISO 8601 strings in UTC.
+"""
+
+from __future__ import annotations
+
+import datetime as _dt
+import math
+import threading
+from typing import Iterable, Mapping, Sequence
+
+from crowdstudy.errors import InvalidInputError
+
+__all__ = ["StudyStore", "ITEM_IDS", "PRACTICE_TRIAL_INDEX", "utc_now", "sqlite_url"]
+
+ITEM_IDS = ("Q1", "Q2", "Q3", "Q4", "Q5", "Q6")
+PRACTICE_TRIAL_INDEX = -1
+
+
+def utc_now() -> str:
+    """Now as an ISO 8601 UTC string with milliseconds (``2026-01-08T09:00:00.123+00:00``)."""
+    return _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="milliseconds")
+
+
+def sqlite_url(path) -> str:
+    """The SQLAlchemy URL of an SQLite file."""
+    return f"sqlite:///{path}"
+
+
+def _tables(metadata):
+    import sqlalchemy as sa
+    stimuli = sa.Table(
+        "stimuli", metadata,
+        sa.Column("stimulus_id", sa.String(64), primary_key=True),
+        sa.Column("stage", sa.Integer, nullable=False),
+        sa.Column("scenario", sa.String(32), nullable=False),
+        sa.Column("density_level", sa.String(16), nullable=False),
+        sa.Column("density", sa.Float, nullable=False),
+        sa.Column("viewpoint", sa.String(16), nullable=False),
+        sa.Column("method", sa.String(32), nullable=False),
+        sa.Column("characters", sa.Integer, nullable=True),
+    )
+    participants = sa.Table(
+        "participants", metadata,
+        sa.Column("participant_id", sa.String(64), primary_key=True),
+        sa.Column("secret_hash", sa.String(64), nullable=False),
+        sa.Column("schedule_seed", sa.BigInteger, nullable=False),
+        sa.Column("started_at", sa.String(40), nullable=False),
+        sa.Column("user_agent", sa.String(512), nullable=True),
+        sa.Column("consented_at", sa.String(40), nullable=True),
+        sa.Column("age", sa.Integer, nullable=True),
+        sa.Column("gender", sa.String(32), nullable=True),
+        sa.Column("demographics_at", sa.String(40), nullable=True),
+        sa.Column("practice_at", sa.String(40), nullable=True),
+        sa.Column("completed_at", sa.String(40), nullable=True),
+        sa.Column("completion_code", sa.String(128), nullable=True),
+    )
+    schedule = sa.Table(
+        "schedule", metadata,
+        sa.Column("participant_id", sa.String(64), sa.ForeignKey("participants.participant_id"), primary_key=True),
+        sa.Column("trial_index", sa.Integer, primary_key=True),
+        sa.Column("stage", sa.Integer, nullable=False),
+        sa.Column("stimulus_id", sa.String(64), sa.ForeignKey("stimuli.stimulus_id"), nullable=False),
+    )
+    responses = sa.Table(
+        "responses", metadata,
+        sa.Column("id", sa.Integer, primary_key=True, autoincrement=True),
+        sa.Column("participant_id", sa.String(64), sa.ForeignKey("participants.participant_id"), nullable=False),
+        sa.Column("trial_index", sa.Integer, nullable=False),
+        sa.Column("practice", sa.Boolean, nullable=False, default=False),
+        sa.Column("stimulus_id", sa.String(64), nullable=False),
+        sa.Column("stage", sa.Integer, nullable=False),
+        *[sa.Column(q, sa.SmallInteger, nullable=False) for q in ITEM_IDS],
+        sa.Column("rt_ms", sa.Float, nullable=False),
+        sa.Column("shown_at", sa.String(40), nullable=False),
+        sa.Column("answered_at", sa.String(40), nullable=False),
+        sa.UniqueConstraint("participant_id", "trial_index", name="uq_response_participant_trial"),
+    )
+    return stimuli, participants, schedule, responses
+
+
+class _GroupCommitWriter:
+    """One writer thread: write jobs that arrive together share one transaction and so one
+    fsync; each caller returns only after the commit that contains its job. If a job
+    raises, the batch rolls back and its jobs are re-run one transaction each, so one bad
+    job never loses another's write."""
+
+    _STOP = object()
+
+    def __init__(self, engine, max_batch: int = 256):
+        import queue
+        self.engine, self.max_batch = engine, max_batch
+        self.queue: "queue.SimpleQueue" = queue.SimpleQueue()
+        self.thread = threading.Thread(target=self._loop, name="crowdstudy-db-writer", daemon=True)
+        self.thread.start()
+
+    def submit(self, job):
+        """Run ``job(connection)`` in a committed transaction; return its result (or raise)."""
+        import concurrent.futures
+        if not self.thread.is_alive():
+            raise RuntimeError("the database writer is closed")
+        fut: concurrent.futures.Future = concurrent.futures.Future()
+        self.queue.put((job, fut))
+        return fut.result()
+
+    def close(self) -> None:
+        if self.thread.is_alive():
+            self.queue.put(self._STOP)
+            self.thread.join(timeout=10)
+
+    def _run_one(self, item) -> None:
+        job, fut = item
+        try:
+            with self.engine.begin() as conn:
+                res = job(conn)
+        except BaseException as exc:  # noqa: BLE001 - handed to the waiting caller
+            fut.set_exception(exc)
+        else:
+            fut.set_result(res)
+
+    def _run_batch(self, batch) -> None:
+        if len(batch) == 1:
+            self._run_one(batch[0])
+            return
+        results = []
+        try:
+            with self.engine.begin() as conn:
+                for job, _fut in batch:
+                    results.append(job(conn))
+        except Exception:  # noqa: BLE001 - isolate the failing job
+            for item in batch:
+                self._run_one(item)
+            return
+        for (_job, fut), res in zip(batch, results):
+            fut.set_result(res)
+
+    def _loop(self) -> None:
+        import queue
+        while True:
+            first = self.queue.get()
+            if first is self._STOP:
+                return
+            batch, stop = [first], False
+            while len(batch) < self.max_batch:
+                try:
+                    item = self.queue.get_nowait()
+                except queue.Empty:
+                    break
+                if item is self._STOP:
+                    stop = True
+                    break
+                batch.append(item)
+            try:
+                self._run_batch(batch)
+            except BaseException as exc:  # noqa: BLE001 - never leave a caller waiting
+                for _job, fut in batch:
+                    if not fut.done():
+                        fut.set_exception(exc)
+            if stop:
+                return
+
+
+class StudyStore:
+    """The study database behind ``crowdstudy serve`` and ``crowdstudy export``.
+
+    url: an SQLAlchemy URL (``sqlite:///study.db``, ``postgresql+psycopg://...``);
+    create: create missing tables (False: the tables must exist, e.g. for export).
+    """
+
+    def __init__(self, url: str, *, create: bool = True):
+        import sqlalchemy as sa
+        from sqlalchemy import event
+        from sqlalchemy.engine import make_url
+        from sqlalchemy.exc import ArgumentError
+
+        if not isinstance(url, str) or not url:
+            raise InvalidInputError(f"--db must be an SQLAlchemy URL such as sqlite:///study.db, got {url!r}")
+        try:
+            parsed = make_url(url)
+        except ArgumentError:
+            raise InvalidInputError(f"--db: {url!r} is not an SQLAlchemy URL (e.g. sqlite:///study.db)") from None
+        self.url = url
+        self.is_sqlite = parsed.get_backend_name() == "sqlite"
+        kwargs: dict = {}
+        if self.is_sqlite:
+            from sqlalchemy.pool import StaticPool
+            kwargs["connect_args"] = {"check_same_thread": False, "timeout": 30}
+            if parsed.database in (None, "", ":memory:"):
+                kwargs["poolclass"] = StaticPool
+            else:
+                kwargs.update(pool_size=8, max_overflow=32)
+        try:
+            self.engine = sa.create_engine(url, **kwargs)
+        except (ModuleNotFoundError, sa.exc.NoSuchModuleError) as exc:
+            raise InvalidInputError(f"--db {url!r}: the database driver is not installed ({exc})") from None
+        if self.is_sqlite:
+            @event.listens_for(self.engine, "connect")
+            def _pragmas(dbapi_connection, _record):
+                cur = dbapi_connection.cursor()
+                cur.execute("PRAGMA journal_mode=WAL")
+                cur.execute("PRAGMA synchronous=FULL")
+                cur.execute("PRAGMA foreign_keys=ON")
+                cur.execute("PRAGMA busy_timeout=30000")
+                cur.close()
+        self.metadata = sa.MetaData()
+        self.stimuli, self.participants, self.schedule_t, self.responses = _tables(self.metadata)
+        try:
+            if create:
+                self.metadata.create_all(self.engine)
+            else:
+                names = set(sa.inspect(self.engine).get_table_names())
+                absent = [t for t in self.metadata.tables if t not in names]
+                if absent:
+                    raise InvalidInputError(f"--db {url!r}: not a crowdstudy database "
+                                            f"(missing tables: {', '.join(absent)})")
+        except sa.exc.OperationalError as exc:
+            raise InvalidInputError(f"--db {url!r}: cannot open the database ({exc.orig})") from None
+        self._writer = _GroupCommitWriter(self.engine) if self.is_sqlite else None
+
+    # -- plumbing -------------------------------------------------------------------
+    def _transact(self, job):
+        """Run ``job(connection)`` in a committed write transaction and return its result."""
+        if self._writer is not None:
+            return self._writer.submit(job)
+        with self.engine.begin() as conn:
+            return job(conn)
+
+    def close(self) -> None:
+        if self._writer is not None:
+            self._writer.close()
+        self.engine.dispose()
+
+    # -- stimuli --------------------------------------------------------------------
+    def sync_stimuli(self, rows: Iterable[Mapping]) -> None:
+        """Insert the study's stimuli; a stimulus already stored with other metadata is an
+        error (a different study in the same database)."""
+        import sqlalchemy as sa
+        cols = ("stage", "scenario", "density_level", "density", "viewpoint", "method")
+        rows = list(rows)
+
+        def job(conn):
+            existing = {r.stimulus_id: r for r in conn.execute(sa.select(self.stimuli))}
+            for row in rows:
+                old = existing.get(row["stimulus_id"])
+                if old is None:
+                    conn.execute(sa.insert(self.stimuli).values(
+                        stimulus_id=row["stimulus_id"], characters=row.get("characters"),
+                        **{c: row[c] for c in cols}))
+                    continue
+                for c in cols:
+                    a, b = getattr(old, c), row[c]
+                    same = math.isclose(a, b, rel_tol=1e-9) if c == "density" else a == b
+                    if not same:
+                        raise InvalidInputError(
+                            f"--db {self.url}: stimulus {row['stimulus_id']} is stored with {c}={a!r} but the "
+                            f"stimulus set says {b!r}; use a new database for a different study")
+        self._transact(job)
+
+    # -- participants -----------------------------------------------------------------
+    def register(self, participant_id: str, secret_hash: str, schedule: Sequence, *, seed: int,
+                 user_agent: str | None = None) -> bool:
+        """Create a participant with its schedule (ScheduledTrial items). False if the id exists."""
+        import sqlalchemy as sa
+        from sqlalchemy.exc import IntegrityError
+        p = self.participants
+
+        def job(conn):
+            if conn.execute(sa.select(p.c.participant_id).where(p.c.participant_id == participant_id)).first():
+                return False
+            conn.execute(sa.insert(p).values(participant_id=participant_id, secret_hash=secret_hash,
+                                             schedule_seed=int(seed), started_at=utc_now(),
+                                             user_agent=(user_agent or "")[:512]))
+            conn.execute(sa.insert(self.schedule_t), [
+                {"participant_id": participant_id, "trial_index": t.trial_index, "stage": t.stage,
+                 "stimulus_id": t.stimulus_id} for t in schedule])
+            return True
+        try:
+            return self._transact(job)
+        except IntegrityError:  # registered concurrently (non-SQLite databases)
+            return False
+
+    def replace_secret(self, participant_id: str, secret_hash: str) -> bool:
+        """Give a participant a new secret hash (the old secret stops working). False if unknown."""
+        import sqlalchemy as sa
+        p = self.participants
+
+        def job(conn):
+            return conn.execute(sa.update(p).where(p.c.participant_id == participant_id)
+                                .values(secret_hash=secret_hash)).rowcount == 1
+        return self._transact(job)
+
+    def participant(self, participant_id: str) -> dict | None:
+        import sqlalchemy as sa
+        with self.engine.connect() as conn:
+            row = conn.execute(sa.select(self.participants)
+                               .where(self.participants.c.participant_id == participant_id)).first()
+        return None if row is None else dict(row._mapping)
+
+    def schedule(self, participant_id: str) -> list[dict]:
+        """The participant's trials joined with stimulus metadata, by trial_index."""
+        import sqlalchemy as sa
+        s, st = self.schedule_t, self.stimuli
+        q = (sa.select(s.c.trial_index, s.c.stage, s.c.stimulus_id, st.c.scenario, st.c.density_level,
+                       st.c.density, st.c.viewpoint, st.c.method, st.c.characters)
+             .join(st, st.c.stimulus_id == s.c.stimulus_id)
+             .where(s.c.participant_id == participant_id).order_by(s.c.trial_index))
+        with self.engine.connect() as conn:
+            return [dict(r._mapping) for r in conn.execute(q)]
+
+    def answered_indices(self, participant_id: str) -> list[int]:
+        """trial_index of every stored study answer (practice excluded), ascending."""
+        import sqlalchemy as sa
+        r = self.responses
+        with self.engine.connect() as conn:
+            return [x for (x,) in conn.execute(
+                sa.select(r.c.trial_index).where(r.c.participant_id == participant_id, r.c.practice.is_(False))
+                .order_by(r.c.trial_index))]
+
+    def _update_once(self, participant_id: str, column: str, values: dict) -> dict:
+        """Set ``values`` unless ``column`` is already set; return the participant row."""
+        import sqlalchemy as sa
+        p = self.participants
+
+        def job(conn):
+            conn.execute(sa.update(p).where(p.c.participant_id == participant_id, p.c[column].is_(None))
+                         .values(**values))
+            return dict(conn.execute(sa.select(p).where(p.c.participant_id == participant_id)).first()._mapping)
+        return self._transact(job)
+
+    def set_consent(self, participant_id: str) -> dict:
+        return self._update_once(participant_id, "consented_at", {"consented_at": utc_now()})
+
+    def set_demographics(self, participant_id: str, age: int, gender: str) -> dict:
+        return self._update_once(participant_id, "demographics_at",
+                                 {"age": int(age), "gender": gender, "demographics_at": utc_now()})
+
+    def set_practice_done(self, participant_id: str) -> dict:
+        return self._update_once(participant_id, "practice_at", {"practice_at": utc_now()})
+
+    def set_completed(self, participant_id: str, completion_code: str | None) -> dict:
+        return self._update_once(participant_id, "completed_at",
+                                 {"completed_at": utc_now(), "completion_code": completion_code})
+
+    # -- answers --------------------------------------------------------------------------
+    def record_answer(self, participant_id: str, trial_index: int, stimulus_id: str, stage: int,
+                      answers: Mapping[str, int], rt_ms: float, shown_at: str | None, *,
+                      practice: bool = False) -> tuple[str, dict]:
+        """Store one answer, committed (and on SQLite fsynced) before returning.
+
+        Returns (status, row): "created"; "exists" (the same answer, i.e. the same stimulus,
+        six values and rt_ms, was already stored: a resend); "conflict" (a different answer
+        is stored for this trial; the stored one is kept); "out_of_order" (an earlier trial
+        is unanswered; row = {"expected": index}). Study answers must arrive in trial order.
+        shown_at: ISO 8601 UTC from the client, or None for answered_at - rt_ms.
+        """
+        import sqlalchemy as sa
+        from sqlalchemy.exc import IntegrityError
+        r = self.responses
+        answered_at = utc_now()
+        values = dict(participant_id=participant_id, trial_index=int(trial_index), practice=bool(practice),
+                      stimulus_id=stimulus_id, stage=int(stage), rt_ms=float(rt_ms), answered_at=answered_at,
+                      shown_at=shown_at or _minus_ms(answered_at, rt_ms), **{q: int(answers[q]) for q in ITEM_IDS})
+
+        def job(conn):
+            old = conn.execute(sa.select(r).where(r.c.participant_id == participant_id,
+                                                  r.c.trial_index == trial_index)).first()
+            if old is not None:
+                old = dict(old._mapping)
+                return ("exists" if _same_answer(old, values) else "conflict"), old
+            if not practice:
+                n = conn.execute(sa.select(sa.func.count()).select_from(r).where(
+                    r.c.participant_id == participant_id, r.c.practice.is_(False))).scalar_one()
+                if trial_index != n:
+                    return "out_of_order", {"expected": int(n)}
+            conn.execute(sa.insert(r).values(**values))
+            return "created", values
+
+        try:
+            return self._transact(job)
+        except IntegrityError:  # a concurrent insert of the same key (non-SQLite): read it back
+            return self._transact(job)
+
+    # -- admin and export ------------------------------------------------------------------
+    def progress(self) -> list[dict]:
+        """Per participant: timestamps of each step, answers stored, trials scheduled."""
+        import sqlalchemy as sa
+        p, s, r = self.participants, self.schedule_t, self.responses
+        n_trials = sa.select(s.c.participant_id, sa.func.count().label("n")).group_by(s.c.participant_id).subquery()
+        n_ans = (sa.select(r.c.participant_id, sa.func.count().label("n")).where(r.c.practice.is_(False))
+                 .group_by(r.c.participant_id).subquery())
+        q = (sa.select(p.c.participant_id, p.c.started_at, p.c.consented_at, p.c.demographics_at, p.c.practice_at,
+                       p.c.completed_at, sa.func.coalesce(n_ans.c.n, 0).label("answered"),
+                       sa.func.coalesce(n_trials.c.n, 0).label("trials"))
+             .outerjoin(n_ans, n_ans.c.participant_id == p.c.participant_id)
+             .outerjoin(n_trials, n_trials.c.participant_id == p.c.participant_id)
+             .order_by(p.c.started_at, p.c.participant_id))
+        with self.engine.connect() as conn:
+            return [dict(x._mapping) for x in conn.execute(q)]
+
+    def response_rows(self, participant_id: str | None = None) -> list[dict]:
+        """Answered study trials (practice excluded) joined with stimulus metadata, sorted by
+        participant and trial_index, in the responses.csv schema."""
+        import sqlalchemy as sa
+        r, st = self.responses, self.stimuli
+        q = (sa.select(r.c.participant_id, r.c.stage, st.c.scenario, r.c.trial_index, r.c.stimulus_id,
+                       st.c.density_level, st.c.density, st.c.viewpoint, st.c.method,
+                       *[r.c[q] for q in ITEM_IDS], r.c.rt_ms, r.c.shown_at, r.c.answered_at)
+             .join(st, st.c.stimulus_id == r.c.stimulus_id)
+             .where(r.c.practice.is_(False)).order_by(r.c.participant_id, r.c.trial_index))
+        if participant_id is not None:
+            q = q.where(r.c.participant_id == participant_id)
+        with self.engine.connect() as conn:
+            return [dict(x._mapping) for x in conn.execute(q)]
+
+    def demographics_rows(self) -> list[dict]:
+        """One row per participant in the demographics.csv schema."""
+        import sqlalchemy as sa
+        p = self.participants
+        q = sa.select(p.c.participant_id, p.c.age, p.c.gender, p.c.started_at, p.c.completed_at,
+                      p.c.completion_code).order_by(p.c.participant_id)
+        with self.engine.connect() as conn:
+            return [dict(x._mapping) for x in conn.execute(q)]
+
+
+def _same_answer(old: Mapping, new: Mapping) -> bool:
+    return (old["stimulus_id"] == new["stimulus_id"] and all(int(old[q]) == int(new[q]) for q in ITEM_IDS)
+            and math.isclose(float(old["rt_ms"]), float(new["rt_ms"]), rel_tol=0, abs_tol=1e-6))
+
+
+def _minus_ms(iso: str, ms: float) -> str:
+    t = _dt.datetime.fromisoformat(iso) - _dt.timedelta(milliseconds=float(ms))
+    return t.isoformat(timespec="milliseconds")

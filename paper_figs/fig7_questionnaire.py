@@ -1,0 +1,84 @@
+"""Fig. 7: the questionnaire page (a looping stimulus video beside the six Likert items).
+
+Starts ``crowdstudy serve`` on a free loopback port, walks headless Chromium through
+consent, demographics, instructions and the practice trial to the first study trial,
+answers some items, and screenshots the page to ``paper_figs/out/fig7_questionnaire.png``.
+
+Stimuli: ``--stimuli DIR`` if given, else ``stimuli/videos`` when it holds a manifest
+(the rendered study videos), else a few test-pattern clips written to a temporary folder.
+
+    python paper_figs/fig7_questionnaire.py [--quick] [--stimuli DIR] [--out PNG]
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import tempfile
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+CHROMIUM = "/usr/bin/chromium"
+CHROMIUM_ARGS = ["--no-sandbox", "--headless", "--disable-gpu", "--disable-background-networking",
+                 "--disable-component-update", "--disable-sync", "--no-first-run"]
+
+
+def screenshot(url: str, out: Path, *, width: int, height: int, video_timeout_ms: float) -> None:
+    from playwright.sync_api import sync_playwright
+    with sync_playwright() as pw:
+        browser = pw.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS)
+        try:
+            page = browser.new_page(viewport={"width": width, "height": height})
+            page.goto(f"{url}/?participant=FIG7-screenshot")
+            page.click("button:has-text('I agree')")
+            page.fill("#cs-age", "30")
+            page.select_option("#cs-gender", "prefer not to say")
+            page.click("#jspsych-survey-html-form-next")
+            page.click("#jspsych-instructions-next")
+            page.click("#jspsych-instructions-next")
+            page.wait_for_selector(".cs-trial .cs-next")
+            for q in range(1, 7):
+                page.check(f'input[name="Q{q}"][value="4"]')
+            page.wait_for_selector(".cs-next:not([disabled])", timeout=video_timeout_ms)
+            page.click(".cs-next")
+            page.click("button:has-text('Start')")
+            page.wait_for_selector(".cs-trial .cs-next")
+            for q, v in (("Q1", 5), ("Q2", 2), ("Q3", 4), ("Q4", 3)):
+                page.check(f'input[name="{q}"][value="{v}"]')
+            page.wait_for_function("document.querySelector('.cs-video').currentTime > 0.3", timeout=video_timeout_ms)
+            out.parent.mkdir(parents=True, exist_ok=True)
+            page.screenshot(path=str(out), full_page=False)
+        finally:
+            browser.close()
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--quick", action="store_true", help="smaller window (1280x720) and test-pattern clips")
+    parser.add_argument("--stimuli", type=Path, help="stimulus folder with manifest.json")
+    parser.add_argument("--out", type=Path, default=ROOT / "paper_figs" / "out" / "fig7_questionnaire.png")
+    args = parser.parse_args(argv)
+    sys.path.insert(0, str(ROOT))
+    from crowdstudy.study.fake_stimuli import write_fake_stimuli
+    from crowdstudy.study.local_server import LocalServer
+
+    if not Path(CHROMIUM).exists():
+        print(f"fig7: {CHROMIUM} not found (apt-get install chromium)", file=sys.stderr)
+        return 2
+    width, height = (1280, 720) if args.quick else (1600, 900)
+    with tempfile.TemporaryDirectory(prefix="fig7-") as tmp:
+        stim = args.stimuli
+        if stim is None and not args.quick and (ROOT / "stimuli" / "videos" / "manifest.json").is_file():
+            stim = ROOT / "stimuli" / "videos"
+        if stim is None:
+            size = (320, 180) if args.quick else (1280, 720)
+            stim = write_fake_stimuli(Path(tmp) / "stim", n_files=2, seconds=1.0, width=size[0], height=size[1])
+        serve_args = ["--stimuli", str(stim), "--db", f"sqlite:///{tmp}/fig7.db"]
+        with LocalServer(serve_args) as srv:
+            screenshot(srv.url, args.out, width=width, height=height, video_timeout_ms=90_000)
+    print(f"fig7: wrote {args.out}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,320 @@
+/*
+ * crowdstudy session flow (jsPsych 8):
+ * participant id -> consent -> demographics -> instructions + one practice trial ->
+ * stage 1 (randomised per participant) -> break -> stage 2 -> debriefing.
+ *
+ * The server holds the schedule and every answer; this page keeps only the participant id
+ * and the session secret (localStorage), so a reload, a closed browser or a restarted server
+ * resumes at the first unanswered trial. Each answer is POSTed when given and the next trial
+ * appears only once the server has committed it; failed sends retry with exponential backoff
+ * while a notice tells the participant.
+ */
+(function () {
+  "use strict";
+
+  const ID_PARAMS = ["PROLIFIC_PID", "participant", "participant_id", "workerId", "PID", "pid", "SONA_ID", "id"];
+  const ID_RE = /^[A-Za-z0-9][A-Za-z0-9_-]{0,63}$/;
+  const S = { pid: null, secret: null, study: null, state: null, declined: false, demo: null,
+              breakShown: {}, completion: null };
+
+  const storage = {
+    get(k) { try { return window.localStorage.getItem(k); } catch (e) { return null; } },
+    set(k, v) { try { window.localStorage.setItem(k, v); } catch (e) { /* private mode: resume needs the URL id */ } },
+  };
+  const secretKey = (pid) => "crowdstudy:secret:" + pid;
+  const sleep = (ms) => new Promise((r) => setTimeout(r, ms));
+  const esc = (s) => String(s).replace(/[&<>"']/g, (c) => ({ "&": "&amp;", "<": "&lt;", ">": "&gt;", '"': "&quot;", "'": "&#39;" }[c]));
+
+  const noticeEl = () => document.getElementById("cs-notice");
+  function showNotice(msg) { const n = noticeEl(); n.textContent = msg; n.hidden = false; }
+  function hideNotice() { const n = noticeEl(); n.hidden = true; n.textContent = ""; }
+
+  class ApiError extends Error {
+    constructor(status, message) { super(message); this.status = status; }
+  }
+
+  /** fetch JSON; network errors, 5xx, 408 and 429 are retried with exponential backoff (forever). */
+  async function api(method, path, body) {
+    let delay = 500;
+    for (let attempt = 1; ; attempt++) {
+      let resp = null;
+      try {
+        const headers = { "Accept": "application/json" };
+        if (body !== undefined) headers["Content-Type"] = "application/json";
+        if (S.secret) headers["X-Participant-Secret"] = S.secret;
+        resp = await fetch(path, { method, headers, cache: "no-store",
+                                   body: body === undefined ? undefined : JSON.stringify(body) });
+      } catch (e) { resp = null; }
+      if (resp && resp.status < 500 && resp.status !== 408 && resp.status !== 429) {
+        if (attempt > 1) hideNotice();
+        let data = {};
+        try { data = await resp.json(); } catch (e) { data = {}; }
+        if (!resp.ok) throw new ApiError(resp.status, data.error || ("HTTP " + resp.status));
+        return data;
+      }
+      const wait = Math.round(delay * (0.8 + 0.4 * Math.random()));
+      showNotice(`Cannot reach the study server (attempt ${attempt}). Your answers are kept; ` +
+                 `retrying in ${Math.max(1, Math.round(wait / 1000))} s. Please keep this page open.`);
+      await sleep(wait);
+      delay = Math.min(delay * 2, 15000);
+    }
+  }
+
+  /** An admin-issued resume link carries ?resume=<secret>: keep it, then drop it from the address bar. */
+  function takeResumeSecret(pid) {
+    const q = new URLSearchParams(window.location.search);
+    const secret = q.get("resume");
+    if (!secret || !pid) return;
+    storage.set(secretKey(pid), secret);
+    S.resumeSecret = secret;
+    q.delete("resume");
+    const rest = q.toString();
+    window.history.replaceState(null, "", window.location.pathname + (rest ? "?" + rest : ""));
+  }
+
+  function idFromUrl() {
+    const q = new URLSearchParams(window.location.search);
+    for (const k of ID_PARAMS) {
+      const v = q.get(k);
+      if (v && ID_RE.test(v.trim())) return v.trim();
+    }
+    return null;
+  }
+
+  const cur = () => S.state.trials[S.state.next_trial_index];
+  const nextTrial = () => S.state.trials[S.state.next_trial_index + 1];
+  const stageInfo = (n) => S.study.stages.find((s) => s.number === n) || { number: n, description: "" };
+
+  async function refreshState() {
+    S.state = await api("GET", `/api/participants/${encodeURIComponent(S.pid)}`);
+  }
+
+  async function main() {
+    S.study = await api("GET", "/api/study");
+    S.pid = idFromUrl() || storage.get("crowdstudy:last");
+    takeResumeSecret(S.pid);
+    const jsPsych = initJsPsych({ display_element: "cs-target" });
+    window.crowdstudy = { jsPsych, session: S };  // for debugging and the end-to-end test
+    const abort = (html) => jsPsych.abortExperiment(`<div class="cs-page">${html}</div>`);
+    const callAsync = (fn) => ({
+      type: jsPsychCallFunction, async: true,
+      func: (done) => { fn().then(() => done(null), (err) => { abort(`<p>${esc(err.message || err)}</p>`); }); },
+    });
+    const timeline = [];
+
+    // Participant id, when the URL does not carry one.
+    timeline.push({
+      conditional_function: () => !S.pid,
+      timeline: [{
+        timeline: [{
+          type: jsPsychSurveyText,
+          preamble: () => `<div class="cs-page"><h2>${esc(S.study.name)}</h2>` +
+            (S.idError ? `<p style="color:#a33">${esc(S.idError)}</p>` : "") + "</div>",
+          questions: [{ prompt: "Please enter your participant ID", name: "pid", required: true }],
+          button_label: "Continue",
+          on_finish: (data) => {
+            const v = String(data.response.pid || "").trim();
+            if (ID_RE.test(v)) { S.pid = v; S.idError = null; }
+            else S.idError = "An ID has 1-64 letters, digits, '_' or '-'.";
+          },
+        }],
+        loop_function: () => !S.pid,
+      }],
+    });
+
+    // Registration, or resumption with the stored secret.
+    timeline.push(callAsync(async () => {
+      const stored = S.resumeSecret || storage.get(secretKey(S.pid));
+      let reg;
+      try {
+        reg = await api("POST", "/api/participants", stored ? { participant_id: S.pid, secret: stored }
+                                                           : { participant_id: S.pid });
+      } catch (err) {
+        if (err.status === 409 || err.status === 403) {
+          throw new Error("This participant ID has already started the study in another browser. " +
+                          "Please continue there, or contact the researchers.");
+        }
+        throw err;
+      }
+      S.secret = reg.secret;
+      storage.set(secretKey(S.pid), reg.secret);
+      storage.set("crowdstudy:last", S.pid);
+      S.state = reg.state;
+    }));
+
+    // Informed consent.
+    timeline.push({
+      conditional_function: () => !S.state.consented,
+      timeline: [{
+        type: jsPsychHtmlButtonResponse,
+        stimulus: () => `<div class="cs-page"><h1>Informed consent</h1><div class="cs-consent">${S.study.consent_html}</div></div>`,
+        choices: ["I agree", "I do not agree"],
+        on_finish: (data) => { S.declined = data.response !== 0; },
+      }, callAsync(async () => {
+        if (S.declined) {
+          abort("<p>You chose not to take part. Thank you for your time; you may close this page.</p>");
+          return;
+        }
+        S.state = await api("POST", `/api/participants/${encodeURIComponent(S.pid)}/consent`, { consent: true });
+      })],
+    });
+
+    // Demographics.
+    const genderOptions = () => S.study.genders.map((g) => `<option value="${esc(g)}">${esc(g)}</option>`).join("");
+    timeline.push({
+      conditional_function: () => !S.state.demographics,
+      timeline: [{
+        timeline: [{
+          type: jsPsychSurveyHtmlForm,
+          preamble: () => `<div class="cs-page"><h2>About you</h2>` +
+            (S.demoError ? `<p style="color:#a33">${esc(S.demoError)}</p>` : "") + "</div>",
+          html: () => `<div class="cs-page cs-form">
+              <label for="cs-age">Age (years)</label>
+              <input id="cs-age" name="age" type="number" min="${S.study.age_range[0]}" max="${S.study.age_range[1]}" step="1" required>
+              <label for="cs-gender">Gender</label>
+              <select id="cs-gender" name="gender" required><option value="" selected disabled>Choose...</option>${genderOptions()}</select>
+            </div>`,
+          button_label: "Continue",
+          on_finish: (data) => { S.demo = data.response; },
+        }, callAsync(async () => {
+          try {
+            S.state = await api("POST", `/api/participants/${encodeURIComponent(S.pid)}/demographics`,
+                                { age: parseInt(S.demo.age, 10), gender: S.demo.gender });
+            S.demoError = null;
+          } catch (err) {
+            if (err.status !== 422) throw err;
+            S.demoError = err.message;
+          }
+        })],
+        loop_function: () => !S.state.demographics,
+      }],
+    });
+
+    // Instructions and one practice trial (stored flagged as practice).
+    const likertParams = () => ({ items: S.study.items.map((it) => ({ id: it.id, text: it.text })), labels: S.study.labels });
+    timeline.push({
+      conditional_function: () => !S.state.practice_done,
+      timeline: [{
+        type: jsPsychInstructions,
+        pages: () => [
+          `<div class="cs-page"><h2>Instructions</h2><p>You will watch short silent videos of animated crowds.
+           Each video repeats in a loop. Beside it, six statements describe the crowd: for each one, choose how much
+           you agree, from (1) "${esc(S.study.labels[0])}" to (${S.study.labels.length})
+           "${esc(S.study.labels[S.study.labels.length - 1])}".</p>
+           <p>Answer every statement. The button to go on becomes available once all statements are answered and
+           the video has played through at least once.</p></div>`,
+          `<div class="cs-page"><h2>Practice</h2><p>There are ${S.study.stages.length} parts, with a short break in
+           between. We start with one practice video so you can get used to the page; its answers are not part of
+           the study.</p></div>`,
+        ],
+        show_clickable_nav: true, button_label_next: "Continue", button_label_previous: "Back",
+      }, {
+        type: jsPsychVideoLikertLoop,
+        stimulus: () => S.state.practice.video_url,
+        items: () => likertParams().items,
+        labels: () => likertParams().labels,
+        progress_text: "Practice video",
+        preload: () => (cur() ? [cur().video_url] : []),
+        save: (data) => api("POST", `/api/participants/${encodeURIComponent(S.pid)}/practice`,
+                            { answers: data.responses, rt_ms: data.rt, shown_at: data.shown_at }),
+        on_finish: () => { S.state.practice_done = true; },
+      }, {
+        type: jsPsychHtmlButtonResponse,
+        stimulus: `<div class="cs-page"><h2>The study begins</h2><p>The practice is over. The videos of the
+          study now follow.</p></div>`,
+        choices: ["Start"],
+      }],
+    });
+
+    // Stage trials with a break screen between stages.
+    const needsBreak = () => {
+      const i = S.state.next_trial_index;
+      return i > 0 && i < S.state.n_trials && S.state.trials[i].stage !== S.state.trials[i - 1].stage &&
+        !S.breakShown[S.state.trials[i].stage];
+    };
+    const stagePosition = () => {
+      const t = cur();
+      const same = S.state.trials.filter((x) => x.stage === t.stage);
+      const k = same.findIndex((x) => x.trial_index === t.trial_index) + 1;
+      const stages = S.study.stages.map((s) => s.number);
+      return `Part ${stages.indexOf(t.stage) + 1} of ${stages.length} &middot; video ${k} of ${same.length}`;
+    };
+    async function saveAnswer(data) {
+      const t = cur();
+      const body = { trial_index: t.trial_index, stimulus_id: t.stimulus_id, answers: data.responses,
+                     rt_ms: data.rt, shown_at: data.shown_at };
+      try {
+        await api("POST", `/api/participants/${encodeURIComponent(S.pid)}/responses`, body);
+        S.state.next_trial_index = t.trial_index + 1;
+        S.state.n_answered += 1;
+      } catch (err) {
+        if (err.status !== 409) throw err;
+        await refreshState(); // stored earlier (another tab, a lost reply): continue where the server is
+      }
+    }
+    timeline.push({
+      conditional_function: () => S.state.next_trial_index < S.state.n_trials,
+      timeline: [{
+        timeline: [{
+          conditional_function: needsBreak,
+          timeline: [{
+            type: jsPsychHtmlButtonResponse,
+            stimulus: () => {
+              const st = stageInfo(cur().stage);
+              const k = S.study.stages.findIndex((s) => s.number === st.number) + 1;
+              return `<div class="cs-page"><h2>Break</h2><p>Part ${k - 1} is complete, thank you! Take a short
+                break if you like.</p><p>Part ${k} of ${S.study.stages.length}: ${esc(st.description || "")}.
+                The questions stay the same.</p></div>`;
+            },
+            choices: ["Continue"],
+            on_finish: () => { S.breakShown[cur().stage] = true; },
+          }],
+        }, {
+          type: jsPsychVideoLikertLoop,
+          stimulus: () => cur().video_url,
+          items: () => likertParams().items,
+          labels: () => likertParams().labels,
+          progress_text: stagePosition,
+          preload: () => (nextTrial() ? [nextTrial().video_url] : []),
+          save: saveAnswer,
+          data: { phase: "trial" },
+        }],
+        loop_function: () => S.state.next_trial_index < S.state.n_trials,
+      }],
+    });
+
+    // Completion and debriefing.
+    timeline.push(callAsync(async () => {
+      S.completion = await api("POST", `/api/participants/${encodeURIComponent(S.pid)}/complete`, {});
+    }));
+    timeline.push({
+      type: jsPsychHtmlButtonResponse,
+      stimulus: () => {
+        const c = S.completion || {};
+        let html = `<div class="cs-page cs-debrief"><h2>Thank you!</h2><p>You have completed the study. All your
+          answers are saved.</p><p>The videos showed crowds animated with and without a method that removes
+          the overlaps between characters' bodies; your ratings tell us how much this affects how realistic
+          the crowds look.</p>`;
+        if (c.completion_code) html += `<p>Your completion code: <span class="cs-code">${esc(c.completion_code)}</span></p>`;
+        if (c.redirect_url) html += `<p>Click the button to return to the recruitment platform.</p>`;
+        return html + "</div>";
+      },
+      choices: () => (S.completion && S.completion.redirect_url ? ["Return"] : []),
+      on_load: () => {
+        if (S.completion && S.completion.redirect_url) {
+          setTimeout(() => { window.location.href = S.completion.redirect_url; }, 15000);
+        }
+      },
+      on_finish: () => {
+        if (S.completion && S.completion.redirect_url) window.location.href = S.completion.redirect_url;
+      },
+    });
+
+    await jsPsych.run(timeline);
+  }
+
+  main().catch((err) => {
+    document.getElementById("cs-target").innerHTML =
+      `<div class="cs-page"><p>The study could not start: ${esc(err.message || err)}. Please reload the page.</p></div>`;
+  });
+})();
