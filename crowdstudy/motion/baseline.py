@@ -1,0 +1,476 @@
+"""The Baseline crowd animation: layouts and trajectories -> full-body characters.
+
+* **Stationary** (concert): every character stands at its Poisson-disk spot facing the
+  stage (+y) with a small random yaw, and dances one of the shipped dance clips from a
+  random phase. Clips are dealt so each is used about equally often.
+* **Walking** (corridor): characters follow their ORCA trajectories. The instantaneous
+  speed (smoothed finite differences of the positions) selects a blend of the 4 walking
+  clips; the gait phase advances by the *distance travelled* divided by the blended
+  stride length, so the planted foot does not slide. Body size enters through the leg
+  scale ``s = pelvis_height / DEFAULT_PELVIS_HEIGHT``: a character at speed ``v`` uses the
+  clips at speed ``v / s`` with strides scaled by ``s`` (geometric similarity).
+
+Clip root heights are scaled by ``s`` so the soles stay on the floor (z = 0) for every
+body. Both functions return a :class:`~crowdstudy.scene.CrowdAnimation`;
+:func:`build_baseline` runs the whole cell of a study design.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from crowdstudy.body.skeleton import DEFAULT_PELVIS_HEIGHT, JOINT_INDEX, JOINT_NAMES, PARENTS
+from crowdstudy.errors import InvalidInputError
+from crowdstudy.motion.library import list_clips, load_clip, walk_clips
+from crowdstudy.motion.quaternions import quat_about_z, quat_multiply, quat_to_axis_angle
+from crowdstudy.provenance import provenance
+from crowdstudy.scene import Crowd, CrowdAnimation
+
+__all__ = ["build_baseline", "animate_stationary", "animate_walking", "body_scales", "gait_blend", "plant_legs"]
+
+#: Standard deviation of the random yaw around facing the stage (rad, about 8 degrees).
+YAW_JITTER_SD = 0.14
+#: Samples per gait cycle in the walking clips' phase tables (linear interpolation between).
+_GAIT_SAMPLES = 512
+#: Shortest stride, as a fraction of the slowest clip's, used below the slowest clip's speed.
+_MIN_STRIDE_FACTOR = 0.5
+#: Fraction of the swing over which a foot-lock offset fades out.
+_FADE_END = 0.8
+#: Speeds below this (m/s) keep the previous facing direction.
+_TURN_SPEED = 0.15
+
+
+def _rng(seed, stream: int) -> np.random.Generator:
+    if isinstance(seed, np.random.Generator):
+        return seed
+    if seed is None:
+        raise InvalidInputError("seed: expected an int or numpy Generator, got None")
+    return np.random.default_rng([int(seed), stream])
+
+
+def body_scales(bodies: list[dict]) -> np.ndarray:
+    """(N,) leg scale of each body record: its pelvis height over the authoring skeleton's."""
+    return _body_geometry(bodies)[1]
+
+
+def _body_geometry(bodies: list[dict]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Rest joints (N, 24, 3), leg scales (N,) and ankle heights above the soles (N,)."""
+    from crowdstudy.body import load_body
+
+    loaded = [load_body(rec) for rec in bodies]
+    rest = np.stack([b.rest_joints for b in loaded])
+    pelvis = np.array([b.pelvis_height for b in loaded], dtype=np.float64)
+    ankle = pelvis + 0.5 * (rest[:, JOINT_INDEX["left_ankle"], 2] + rest[:, JOINT_INDEX["right_ankle"], 2])
+    return rest, pelvis / DEFAULT_PELVIS_HEIGHT, ankle
+
+
+def _segment_starts(mask: np.ndarray, wrapped: np.ndarray) -> np.ndarray:
+    """(T, N) index of the first frame of the current run of ``mask`` (-1 outside runs); a
+    run also restarts where ``wrapped`` (a new gait cycle) is set."""
+    frames = np.arange(mask.shape[0])[:, None]
+    prev = np.concatenate([np.zeros((1,) + mask.shape[1:], bool), mask[:-1]], axis=0)
+    start = mask & (~prev | wrapped)
+    idx = np.maximum.accumulate(np.where(start, frames, -1), axis=0)
+    return np.where(mask, idx, -1)
+
+
+def _lock_offsets(ankle: np.ndarray, ball: np.ndarray, foot_phase: np.ndarray, flat_end: float,
+                  stance_end: float) -> np.ndarray:
+    """(T, N, 3) horizontal corrections of an ankle target that pin the foot on the floor.
+
+    ankle, ball: (T, N, 3) the clip's ankle and ball-of-foot positions; foot_phase: (T, N)
+    phase since this foot's heel strike. While flat (``phase < flat_end``) the ankle is
+    held where the stance began; then, while the heel rises (until ``stance_end``), the
+    ball of the foot is held; the offset left at toe-off fades out (quintic smoothstep)
+    before the heel comes down (by 80 % of the swing). Without it, a clip blend that changes under a planted foot
+    (speed changes) makes the foot slide.
+    """
+    from crowdstudy.motion.posing import smoothstep5
+
+    cols = np.arange(ankle.shape[1])[None, :]
+    wrapped = np.concatenate([np.zeros((1,) + foot_phase.shape[1:], bool), foot_phase[1:] < foot_phase[:-1]], 0)
+    flat = foot_phase < flat_end
+    roll = (foot_phase >= flat_end) & (foot_phase < stance_end)
+    offset = np.zeros(ankle.shape)
+    start = _segment_starts(flat, wrapped)
+    offset[..., :2] = np.where((start >= 0)[..., None], ankle[np.maximum(start, 0), cols, :2] - ankle[..., :2], 0.0)
+    # heel rise: hold the ball where it was (with the flat-phase offset it had then)
+    flat_start = start
+    start = _segment_starts(roll, wrapped)
+    s0 = np.maximum(start, 0)
+    before = np.maximum(s0 - 1, 0)
+    was_flat = flat[before, cols] & (start > 0)
+    held = ankle[np.maximum(flat_start[before, cols], 0), cols, :2] - ankle[s0, cols, :2]   # flat offset at s0
+    ball_lock = ball[s0, cols, :2] + np.where(was_flat[..., None], held, 0.0)
+    offset[..., :2] = np.where((start >= 0)[..., None], ball_lock - ball[..., :2], offset[..., :2])
+    # swing: carry the last stance offset, fading out by the next heel strike
+    frames = np.arange(ankle.shape[0])[:, None]
+    last = np.maximum.accumulate(np.where(flat | roll, frames, -1), axis=0)
+    fade = 1.0 - smoothstep5((foot_phase - stance_end) / (_FADE_END * (1.0 - stance_end)))
+    swing = ~(flat | roll) & (last >= 0)
+    return np.where(swing[..., None], offset[np.maximum(last, 0), cols] * fade[..., None], offset)
+
+
+def plant_legs(joint_rotations: np.ndarray, root_translation: np.ndarray, rest_joints: np.ndarray,
+               scale: np.ndarray, ankle_height: np.ndarray, foot_phase: np.ndarray | None = None,
+               flat_end: float = 0.0, stance_end: float = 0.0) -> np.ndarray:
+    """Re-solve the legs so each body puts its ankles where the clip put them.
+
+    The clips are authored on :data:`DEFAULT_REST_JOINTS`; a body with other proportions
+    posed with the same rotations would lift, sink or slide its feet. The wanted ankle
+    positions are those of the authoring skeleton scaled by ``scale`` (with the ankle
+    height above the floor corrected to the body's own), reached by analytic two-bone IK
+    on the body's thigh and shank; the feet keep the clip's global orientation.
+
+    Args:
+        joint_rotations: (T, N, 24, 3) axis-angle; root_translation: (T, N, 3) metres.
+        rest_joints: (N, 24, 3) metres; scale: (N,); ankle_height: (N,) metres.
+        foot_phase: optional (T, N, 2) phase since each foot's (left, right) heel strike;
+            with it the ankles are also pinned while ``foot_phase < flat_end`` (the clip
+            blend changing under a planted foot would otherwise make it slide): the ankle
+            while ``foot_phase < flat_end``, the ball of the foot until ``stance_end``.
+
+    Returns:
+        (T, N, 24, 3) joint rotations with new hip, knee and ankle rotations.
+    """
+    from crowdstudy.body.rotations import axis_angle_to_matrix, matrix_to_axis_angle
+    from crowdstudy.motion.posing import two_bone_ik
+    from crowdstudy.motion.rig import ANKLE_HEIGHT, REST
+
+    out = np.array(joint_rotations, dtype=np.float64, copy=True)
+    s = scale[None, :, None]
+    pelvis = axis_angle_to_matrix(out[:, :, 0])
+    for k, side in enumerate(("left", "right")):
+        hip, knee, ankle = (JOINT_INDEX[f"{side}_{n}"] for n in ("hip", "knee", "ankle"))
+        r_hip, r_knee, r_ankle = (axis_angle_to_matrix(out[:, :, j]) for j in (hip, knee, ankle))
+        g_hip = pelvis @ r_hip
+        g_knee = g_hip @ r_knee
+        g_ankle = g_knee @ r_ankle
+        hip_pos = root_translation + s * np.einsum("tnab,b->tna", pelvis, REST[hip])
+        knee_pos = hip_pos + s * np.einsum("tnab,b->tna", g_hip, REST[knee] - REST[hip])
+        ankle_pos = knee_pos + s * np.einsum("tnab,b->tna", g_knee, REST[ankle] - REST[knee])
+        ankle_pos[..., 2] += ankle_height[None, :] - scale[None, :] * ANKLE_HEIGHT
+        if foot_phase is not None:
+            ball_pos = ankle_pos + s * np.einsum("tnab,b->tna", g_ankle, REST[ankle + 3] - REST[ankle])
+            ankle_pos += _lock_offsets(ankle_pos, ball_pos, foot_phase[..., k], flat_end, stance_end)
+        pole = 2.0 * knee_pos - hip_pos - ankle_pos + 0.02 * g_hip[..., :, 1]
+        body_hip = root_translation + np.einsum("tnab,nb->tna", pelvis, rest_joints[:, hip] - rest_joints[:, 0])
+        loc_a, loc_b, glob_b = two_bone_ik(body_hip, ankle_pos, pole, pelvis, rest_joints[:, hip],
+                                           rest_joints[:, knee], rest_joints[:, ankle], np.array([0.0, 1.0, 0.0]))
+        out[:, :, hip] = matrix_to_axis_angle(loc_a)
+        out[:, :, knee] = matrix_to_axis_angle(loc_b)
+        out[:, :, ankle] = matrix_to_axis_angle(np.swapaxes(glob_b, -1, -2) @ g_ankle)
+    return out
+
+
+def _bodies(n: int, seed, bodies):
+    if bodies is None:
+        from crowdstudy.body import sample_bodies
+
+        bodies = sample_bodies(n, seed)
+    bodies = [dict(b) for b in bodies]
+    if len(bodies) != n:
+        raise InvalidInputError(f"bodies: expected {n} records (one per character), got {len(bodies)}")
+    return bodies
+
+
+def _place(quat: np.ndarray, root_local: np.ndarray, yaw: np.ndarray, xy: np.ndarray, scale: np.ndarray):
+    """Turn clip poses (..., 24, 4) / roots (..., 3) to the world: yaw (...,) about z, then
+    translate to xy (..., 2); root offsets scaled by ``scale`` (...,)."""
+    quat = quat.copy()
+    quat[..., 0, :] = quat_multiply(quat_about_z(yaw), quat[..., 0, :])
+    c, s = np.cos(yaw), np.sin(yaw)
+    local = root_local * scale[..., None]
+    root = np.empty(root_local.shape)
+    root[..., 0] = xy[..., 0] + c * local[..., 0] - s * local[..., 1]
+    root[..., 1] = xy[..., 1] + s * local[..., 0] + c * local[..., 1]
+    root[..., 2] = local[..., 2]
+    return quat_to_axis_angle(quat), root
+
+
+def _check_timing(duration, fps) -> tuple[float, int]:
+    try:
+        duration, fps = float(duration), float(fps)
+    except (TypeError, ValueError):
+        raise InvalidInputError(f"duration/fps: expected numbers, got {duration!r}, {fps!r}") from None
+    if not np.isfinite(fps) or fps <= 0:
+        raise InvalidInputError(f"fps: expected a positive frame rate, got {fps!r}")
+    if not np.isfinite(duration) or duration <= 0:
+        raise InvalidInputError(f"duration: expected a positive number of seconds, got {duration!r}")
+    return fps, max(1, int(round(duration * fps)))
+
+
+def animate_stationary(crowd: Crowd, *, duration: float = 20.0, fps: float = 30.0, seed=0,
+                       bodies: list[dict] | None = None, clip_names: list[str] | None = None,
+                       yaw_jitter: float = YAW_JITTER_SD, meta: dict | None = None) -> CrowdAnimation:
+    """A dancing crowd on the layout ``crowd`` (its first frame).
+
+    Args:
+        crowd: positions (T, N, 2) metres; frame 0 gives each character's spot and, when
+            the crowd has headings, its facing (default +y, the stage).
+        duration, fps: length (s) and frame rate of the animation.
+        seed: int or Generator for clip choice, phase and yaw; also seeds
+            ``sample_bodies`` when ``bodies`` is None.
+        bodies: N body records (default ``sample_bodies(N, seed)``).
+        clip_names: dance clips to deal from (default all 15).
+        yaw_jitter: standard deviation (rad) of the random yaw around that facing.
+
+    Returns:
+        CrowdAnimation with root_translation (T, N, 3) m and joint_rotations (T, N, 24, 3);
+        ``clips[i] = {"kind": "dance", "clips": [name], "weights": [1.0], "phase": s,
+        "yaw": rad, "scale": leg scale}``.
+    """
+    if not isinstance(crowd, Crowd):
+        raise InvalidInputError(f"crowd: expected a Crowd, got {type(crowd).__name__}")
+    fps, n_frames = _check_timing(duration, fps)
+    n = crowd.n_agents
+    names = list(clip_names) if clip_names is not None else list_clips("dance")
+    if not names:
+        raise InvalidInputError("clip_names: expected at least one dance clip")
+    clips = [load_clip(name) for name in names]
+    rng = _rng(seed, 1)
+    choice = rng.permutation(np.resize(np.arange(len(clips)), n))
+    phase = rng.uniform(0.0, 1.0, n) * np.array([clips[c].duration for c in choice])
+    yaw = np.clip(rng.normal(0.0, yaw_jitter, n), -2.5 * yaw_jitter, 2.5 * yaw_jitter) if yaw_jitter > 0 \
+        else np.zeros(n)
+    if crowd.headings is not None:                 # face the crowd's headings (the stage: +y)
+        yaw = yaw + crowd.headings[0] - np.pi / 2
+    bodies = _bodies(n, seed, bodies)
+    rest, scale, ankle_height = _body_geometry(bodies)
+    xy = crowd.positions[0]
+    rot = np.empty((n_frames, n, len(JOINT_NAMES), 3))
+    root = np.empty((n_frames, n, 3))
+    tempo = np.ones(n)
+    frames = np.arange(n_frames)
+    for k, clip in enumerate(clips):
+        members = np.flatnonzero(choice == k)
+        if members.size == 0:
+            continue
+        # One loop on the output frame grid (the tempo changes by under 1 % to fit whole
+        # frames); every character is then a pure gather from that table.
+        n_loop = max(4, int(round(clip.duration * fps)))
+        tempo[members] = clip.duration * fps / n_loop
+        quat_table, root_table = clip.loop_table(n_loop)
+        aa_table = quat_to_axis_angle(quat_table)
+        start = np.floor(phase[members] / clip.duration * n_loop).astype(np.int64)
+        idx = (start[None, :] + frames[:, None]) % n_loop                       # (T, M)
+        rot[:, members] = aa_table[idx]
+        y = np.broadcast_to(yaw[members], idx.shape)
+        q0 = quat_multiply(quat_about_z(y), quat_table[idx, 0])
+        rot[:, members, 0] = quat_to_axis_angle(q0)
+        local = root_table[idx] * scale[members][None, :, None]
+        c, s_ = np.cos(y), np.sin(y)
+        root[:, members, 0] = xy[members, 0] + c * local[..., 0] - s_ * local[..., 1]
+        root[:, members, 1] = xy[members, 1] + s_ * local[..., 0] + c * local[..., 1]
+        root[:, members, 2] = local[..., 2]
+        phase[members] = start * clip.duration / n_loop
+    rot = plant_legs(rot, root, rest, scale, ankle_height)
+    records = tuple({"kind": "dance", "clips": [names[c]], "weights": [1.0], "phase": float(ph),
+                     "yaw": float(y), "scale": float(s), "tempo": float(tp)}
+                    for c, ph, y, s, tp in zip(choice, phase, yaw, scale, tempo))
+    out_meta = {"method": "Baseline", "scenario": crowd.meta.get("scenario", "concert"),
+                "provenance": provenance(seed if not isinstance(seed, np.random.Generator) else None)}
+    out_meta.update(meta or {})
+    return CrowdAnimation(joint_names=JOINT_NAMES, parents=PARENTS, root_translation=root, joint_rotations=rot,
+                          fps=fps, bodies=tuple(bodies), clips=records, meta=out_meta)
+
+
+def gait_blend(speed: np.ndarray, clip_speeds: np.ndarray) -> np.ndarray:
+    """(..., K) blend weights of K walking clips (speeds ascending) for ``speed`` (...,) m/s:
+    linear between the two nearest clip speeds, clamped to the slowest / fastest clip."""
+    speeds = np.asarray(clip_speeds, dtype=np.float64)
+    v = np.clip(np.asarray(speed, dtype=np.float64), speeds[0], speeds[-1])
+    hi = np.clip(np.searchsorted(speeds, v, side="right"), 1, len(speeds) - 1)
+    lo = hi - 1
+    frac = (v - speeds[lo]) / (speeds[hi] - speeds[lo])
+    w = np.zeros(v.shape + (len(speeds),))
+    np.put_along_axis(w, lo[..., None], (1.0 - frac)[..., None], axis=-1)
+    np.put_along_axis(w, hi[..., None], frac[..., None], axis=-1)
+    return w
+
+
+def _resample_track(positions: np.ndarray, fps_in: float, fps_out: float) -> np.ndarray:
+    t_in = np.arange(positions.shape[0]) / fps_in
+    n_out = int(np.floor(t_in[-1] * fps_out + 1e-9)) + 1
+    t_out = np.arange(n_out) / fps_out
+    idx = np.clip(np.searchsorted(t_in, t_out, side="right") - 1, 0, len(t_in) - 2) if len(t_in) > 1 \
+        else np.zeros(n_out, dtype=int)
+    if len(t_in) == 1:
+        return np.repeat(positions, n_out, axis=0)
+    frac = ((t_out - t_in[idx]) * fps_in)[:, None, None]
+    return positions[idx] * (1.0 - frac) + positions[idx + 1] * frac
+
+
+def _headings(vel: np.ndarray, speed: np.ndarray, initial: np.ndarray, fps: float, smooth_s: float) -> np.ndarray:
+    """(T, N) facing angles from the motion direction, held while slow, unwrapped and smoothed."""
+    from scipy.ndimage import gaussian_filter1d
+
+    ang = np.arctan2(vel[..., 1], vel[..., 0])
+    ang = np.where(speed > _TURN_SPEED, ang, np.nan)
+    ang[0] = np.where(np.isnan(ang[0]), initial, ang[0])
+    # forward fill the slow frames
+    idx = np.where(np.isnan(ang), 0, np.arange(ang.shape[0])[:, None])
+    np.maximum.accumulate(idx, axis=0, out=idx)
+    ang = np.take_along_axis(ang, idx, axis=0)
+    ang = np.unwrap(ang, axis=0)
+    if smooth_s > 0 and ang.shape[0] > 1:
+        ang = gaussian_filter1d(ang, smooth_s * fps, axis=0, mode="nearest")
+    return ang
+
+
+def animate_walking(crowd: Crowd, *, fps: float | None = None, seed=0, bodies: list[dict] | None = None,
+                    facing: str = "auto", velocity_smoothing: float = 0.12, heading_smoothing: float = 0.25,
+                    meta: dict | None = None) -> CrowdAnimation:
+    """Walking characters along the trajectories of ``crowd``.
+
+    Args:
+        crowd: positions (T, N, 2) metres at ``crowd.fps`` (unwrapped when periodic) and
+            optionally headings (T, N) radians.
+        facing: "crowd" (the crowd's headings), "motion" (the direction of the smoothed
+            velocity, held while standing) or "auto" (the headings when the crowd has
+            them). The gait is a forward walk: headings far from the direction of motion
+            would make the feet slide sideways.
+        fps: output frame rate (default the crowd's); positions are linearly resampled.
+        seed: int or Generator for the initial gait phases; seeds ``sample_bodies`` too.
+        bodies: N body records (default ``sample_bodies(N, seed)``).
+        velocity_smoothing, heading_smoothing: Gaussian smoothing (s) of the speed used to
+            pick the clips and of the facing direction ("motion"; "crowd" headings are
+            smoothed over a third of it).
+
+    Returns:
+        CrowdAnimation; ``clips[i] = {"kind": "walk", "clips": [4 names], "weights":
+        time-averaged blend weights, "phase": initial gait phase (0..1), "scale",
+        "mean_speed"}``; ``meta["periodic"]`` copied from the crowd.
+    """
+    from scipy.ndimage import gaussian_filter1d
+
+    if not isinstance(crowd, Crowd):
+        raise InvalidInputError(f"crowd: expected a Crowd, got {type(crowd).__name__}")
+    if crowd.n_frames < 2:
+        raise InvalidInputError("crowd: walking needs trajectories with at least 2 frames, got a layout (T = 1)")
+    fps_out = crowd.fps if fps is None else float(fps)
+    if not np.isfinite(fps_out) or fps_out <= 0:
+        raise InvalidInputError(f"fps: expected a positive frame rate, got {fps!r}")
+    pos = crowd.positions if fps_out == crowd.fps else _resample_track(crowd.positions, crowd.fps, fps_out)
+    n_frames, n = pos.shape[:2]
+    rng = _rng(seed, 2)
+    phase0 = rng.uniform(0.0, 1.0, n)
+    bodies = _bodies(n, seed, bodies)
+    rest, scale, ankle_height = _body_geometry(bodies)
+
+    vel = np.gradient(pos, 1.0 / fps_out, axis=0) if n_frames > 2 else np.repeat(np.diff(pos, axis=0) * fps_out, 2, 0)
+    if velocity_smoothing > 0:
+        vel = gaussian_filter1d(vel, velocity_smoothing * fps_out, axis=0, mode="nearest")
+    speed = np.linalg.norm(vel, axis=-1)                                   # (T, N)
+    if facing not in ("auto", "crowd", "motion"):
+        raise InvalidInputError(f"facing: expected 'auto', 'crowd' or 'motion', got {facing!r}")
+    if facing == "crowd" and crowd.headings is None:
+        raise InvalidInputError("facing: 'crowd' needs a crowd with headings; this one has none")
+    if facing != "motion" and crowd.headings is not None:
+        heads = np.unwrap(crowd.headings, axis=0)
+        if fps_out != crowd.fps:
+            heads = _resample_track(heads[..., None], crowd.fps, fps_out)[..., 0]
+        heading = gaussian_filter1d(heads, heading_smoothing / 3 * fps_out, axis=0, mode="nearest") \
+            if heading_smoothing > 0 and n_frames > 1 else heads
+    else:
+        initial = crowd.headings[0] if crowd.headings is not None else np.full(n, np.pi / 2)
+        heading = _headings(vel, speed, initial, fps_out, heading_smoothing)
+
+    walks = walk_clips()
+    clip_speeds = np.array([c.speed for c in walks])
+    strides = np.array([c.meta["stride_length"] for c in walks])
+    weights = gait_blend(speed / scale, clip_speeds)                        # (T, N, K)
+    stride = (weights @ strides) * scale                                    # (T, N) metres per cycle
+    # Below the slowest clip, strides shorten (as in slow human walking: about 75 steps
+    # per minute at 0.5 m/s rather than a slow-motion 0.8 m/s gait); the foot locking in
+    # plant_legs keeps the planted feet still while the legs take the shorter steps.
+    stride = stride * np.sqrt(np.clip(speed / scale / clip_speeds[0], _MIN_STRIDE_FACTOR ** 2, 1.0))
+    step = np.linalg.norm(np.diff(pos, axis=0), axis=-1)                    # (T-1, N)
+    dphase = step / (0.5 * (stride[1:] + stride[:-1]))
+    phase = phase0 + np.concatenate([np.zeros((1, n)), np.cumsum(dphase, axis=0)], axis=0)
+
+    # Dense per-phase tables of the 4 clips; each frame blends the two active clips,
+    # each linearly interpolated between neighbouring table entries (nlerp).
+    tables = [c.loop_table(_GAIT_SAMPLES) for c in walks]
+    quat_tab = np.stack([q for q, _ in tables])                             # (K, S, J, 4)
+    root_tab = np.stack([r for _, r in tables])                             # (K, S, 3)
+    lo = np.clip(np.argmax(weights > 0, axis=-1), 0, len(walks) - 2)
+    w_hi = np.take_along_axis(weights, (lo + 1)[..., None], axis=-1)[..., 0]
+    u = np.mod(phase, 1.0) * _GAIT_SAMPLES
+    i0 = np.floor(u).astype(np.int64) % _GAIT_SAMPLES
+    i1 = (i0 + 1) % _GAIT_SAMPLES
+    f = u - np.floor(u)
+    terms = (((lo, i0), (1.0 - w_hi) * (1.0 - f)), ((lo, i1), (1.0 - w_hi) * f),
+             ((lo + 1, i0), w_hi * (1.0 - f)), ((lo + 1, i1), w_hi * f))
+    ref = quat_tab[lo, i0]
+    quat = np.zeros_like(ref)
+    root_local = np.zeros((n_frames, n, 3))
+    for n_term, ((k, i), w) in enumerate(terms):
+        q = quat_tab[k, i]
+        if n_term:
+            q = np.where((np.einsum("...c,...c->...", q, ref) < 0.0)[..., None], -q, q)
+        quat += w[..., None, None] * q
+        root_local += w[..., None] * root_tab[k, i]
+    quat /= np.sqrt(np.einsum("...c,...c->...", quat, quat))[..., None]
+    rot, root = _place(quat, root_local, heading - np.pi / 2, pos, np.broadcast_to(scale, (n_frames, n)))
+    from crowdstudy.motion.walk import DUTY_FACTOR, FLAT_STANCE_END, FOOT_PHASE_OFFSET, LANDING_HOVER, LIFT_OFF
+
+    # Foot locking holds each foot from the end of its swing's horizontal travel (it is
+    # then over its landing spot) through the flat stance, then the ball through the heel
+    # rise and the lift-off: foot phases are counted from that moment.
+    hover = LANDING_HOVER * (1.0 - DUTY_FACTOR)
+    foot_phase = np.stack([np.mod(phase - off + hover, 1.0) for off in FOOT_PHASE_OFFSET], axis=-1)
+    rot = plant_legs(rot, root, rest, scale, ankle_height, foot_phase, FLAT_STANCE_END + hover,
+                     DUTY_FACTOR + LIFT_OFF * (1.0 - DUTY_FACTOR) + hover)
+    records = tuple({"kind": "walk", "clips": [c.name for c in walks],
+                     "weights": [float(x) for x in weights[:, i].mean(axis=0)], "phase": float(phase0[i]),
+                     "scale": float(scale[i]), "mean_speed": float(speed[:, i].mean())} for i in range(n))
+    out_meta = {"method": "Baseline", "scenario": crowd.meta.get("scenario", "corridor"),
+                "provenance": provenance(seed if not isinstance(seed, np.random.Generator) else None)}
+    if crowd.meta.get("periodic"):
+        out_meta["periodic"] = dict(crowd.meta["periodic"])
+    out_meta.update(meta or {})
+    return CrowdAnimation(joint_names=JOINT_NAMES, parents=PARENTS, root_translation=root, joint_rotations=rot,
+                          fps=fps_out, bodies=tuple(bodies), clips=records, meta=out_meta)
+
+
+def build_baseline(design, stage, level: str, *, duration: float | None = None, fps: float | None = None,
+                   seed: int | None = None) -> CrowdAnimation:
+    """The Baseline animation of one (stage, density) cell of a study design.
+
+    Args:
+        design: a :class:`~crowdstudy.design.StudyDesign` (or a path to its TOML file).
+        stage: "stationary" / "walking" (or 1 / 2, or the scenario name).
+        level: density level, e.g. "D3".
+        duration, fps: default the design's video duration and frame rate.
+        seed: default the design's seed of the cell (``design.cell_seed``).
+
+    Returns:
+        CrowdAnimation with meta {stage, stage_number, scenario, density_level, density,
+        n_characters, seed, method "Baseline", provenance, periodic (corridor)}.
+    """
+    from crowdstudy.design import StudyDesign, load_design
+
+    if not isinstance(design, StudyDesign):
+        design = load_design(design)
+    st = design.stage(str(stage))
+    if level not in design.densities:
+        raise InvalidInputError(f"level: unknown density level {level!r}; "
+                                f"expected one of {', '.join(design.densities)}")
+    seed = design.cell_seed(st, level) if seed is None else int(seed)
+    duration = float(design.duration if duration is None else duration)
+    fps = float(design.fps if fps is None else fps)
+    meta = {"stage": st.key, "stage_number": st.number, "scenario": st.scenario, "density_level": level,
+            "density": design.densities[level], "n_characters": design.n_characters(level), "seed": seed,
+            "method": "Baseline", "provenance": provenance(seed, design=design.source)}
+    if st.scenario == "concert":
+        from crowdstudy.layout import concert_layout
+
+        crowd = concert_layout(design, level, seed)
+        return animate_stationary(crowd, duration=duration, fps=fps, seed=seed, meta=meta)
+    if st.scenario == "corridor":
+        from crowdstudy.navigation import corridor_crowd
+
+        crowd = corridor_crowd(design, level, seed, duration=duration, fps=fps)
+        return animate_walking(crowd, fps=fps, seed=seed, meta=meta)
+    raise InvalidInputError(f"stage {st.key!r}: scenario {st.scenario!r} has no Baseline animation")
