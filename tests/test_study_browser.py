@@ -1,8 +1,12 @@
 """End-to-end: a whole participant session in headless Chromium against a real server
 process, with a page reload mid-stage and a server kill -9 + restart; then the export must
-hold exactly the answers given."""
+hold exactly the answers given. Throughout, the participant is blinded: no page content,
+request URL, request body, jsPsych data or stored browser state names a stimulus id, a
+method or a density level."""
 
 import csv
+import json
+import re
 import sqlite3
 from pathlib import Path
 
@@ -56,6 +60,18 @@ def _wait_gone(page, progress: str, timeout: float = 30000) -> None:
         arg=progress, timeout=timeout)
 
 
+def _hidden_words(design_path: Path) -> list[str]:
+    """Every stimulus id, method name and density level of the design: the participant must see none."""
+    from crowdstudy.design import load_design
+    design = load_design(design_path)
+    words = {s.stimulus_id for s in design.stimuli()} | set(design.methods) | set(design.densities)
+    return sorted(words, key=len, reverse=True)
+
+
+def _leaks(text: str, words) -> list[str]:
+    return [w for w in words if re.search(rf"(?<![A-Za-z0-9]){re.escape(w)}(?![A-Za-z0-9])", text or "")]
+
+
 def _db_answers(db: Path) -> int:
     with sqlite3.connect(db) as con:
         return con.execute("SELECT COUNT(*) FROM responses WHERE practice = 0").fetchone()[0]
@@ -70,10 +86,24 @@ def test_full_session_reload_and_server_crash(small_study):
     server = LocalServer(["--stimuli", str(tmp / "stim"), "--design", str(design), "--db", f"sqlite:///{db}",
                           "--completion-code", CODE])
     given = {}  # trial_index -> answers
+    words = _hidden_words(design)
+    assert {"Ours", "Baseline", "D1", "D2", "S1-D1-V1-Ours"} <= set(words)
+    requests = []   # (url, body) of every request any page made
+    snapshots = []  # (where, page HTML) of every study trial shown
+
+    def watch(context):
+        context.on("request", lambda req: requests.append((req.url, req.post_data)))
+        return context
+
+    def answer_trial(page, answers):
+        page.wait_for_selector(".cs-trial .cs-next")
+        snapshots.append((page.inner_text(".cs-progress"), page.content()))
+        return _answer_trial(page, answers)
+
     with server, sync_playwright() as pw:
         browser = pw.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS)
         try:
-            page = browser.new_page(viewport={"width": 1280, "height": 800})
+            page = watch(browser.new_context(viewport={"width": 1280, "height": 800})).new_page()
             page.goto(f"{server.url}/?PROLIFIC_PID={PID}")
             # consent (text from the study folder's consent.md)
             page.wait_for_selector("text=Informed consent")
@@ -98,14 +128,14 @@ def test_full_session_reload_and_server_crash(small_study):
             # stage 1: two trials, then reload mid-stage
             for k in range(2):
                 given[k] = _answers_for(k)
-                prog = _answer_trial(page, given[k])
+                prog = answer_trial(page, given[k])
                 assert f"video {k + 1} of 4" in prog and "Part 1 of 2" in prog
                 _wait_gone(page, prog)
             page.reload()
             page.wait_for_selector(".cs-trial .cs-next")
             assert "Part 1 of 2 · video 3 of 4" in page.inner_text(".cs-progress"), "resume at trial index 2"
             given[2] = _answers_for(2)
-            _wait_gone(page, _answer_trial(page, given[2]))
+            _wait_gone(page, answer_trial(page, given[2]))
             assert _db_answers(db) == 3
 
             # server crash (kill -9) while the participant answers trial 3: the send fails,
@@ -113,7 +143,7 @@ def test_full_session_reload_and_server_crash(small_study):
             page.wait_for_selector(".cs-trial .cs-next")
             server.kill()
             given[3] = _answers_for(3)
-            prog = _answer_trial(page, given[3])
+            prog = answer_trial(page, given[3])
             page.wait_for_selector("#cs-notice:not([hidden])", timeout=15000)
             assert "retrying" in page.inner_text("#cs-notice")
             server.start()
@@ -125,7 +155,7 @@ def test_full_session_reload_and_server_crash(small_study):
             # stage 2 to the end
             for k in range(4, 8):
                 given[k] = _answers_for(k)
-                prog = _answer_trial(page, given[k])
+                prog = answer_trial(page, given[k])
                 assert "Part 2 of 2" in prog
                 _wait_gone(page, prog)
             page.wait_for_selector("text=Thank you!")
@@ -135,9 +165,18 @@ def test_full_session_reload_and_server_crash(small_study):
                                       ".select('preloaded').values")
             assert preloaded[-3:] == [True, True, True], preloaded
             secret = page.evaluate(f"localStorage.getItem('crowdstudy:secret:{PID}')")
+            # blinding: what the browser holds (jsPsych data, the session state, local storage,
+            # the final page) names no stimulus id, method or density level
+            held = {"jspsych data": page.evaluate("crowdstudy.jsPsych.data.get().json()"),
+                    "session": page.evaluate("JSON.stringify(crowdstudy.session)"),
+                    "localStorage": page.evaluate("JSON.stringify(Object.assign({}, localStorage))"),
+                    "debrief page": page.content()}
+            assert '"token"' in held["session"] and f"/videos/{PID}/" in held["jspsych data"]
+            for where, text in [*held.items(), *snapshots]:
+                assert not _leaks(text, words), (where, _leaks(text, words))
 
             # without an id in the URL the page asks for one (and rejects a malformed one)
-            other = browser.new_context().new_page()
+            other = watch(browser.new_context()).new_page()
             other.goto(server.url + "/")
             other.wait_for_selector("text=Please enter your participant ID")
             other.fill("#input-0", "bad id!")
@@ -150,7 +189,7 @@ def test_full_session_reload_and_server_crash(small_study):
             # an admin-issued resume link continues the session in another browser (here: at the debriefing)
             link = httpx.post(f"{server.url}/admin/participants/{PID}/resume-link",
                               headers={"Authorization": f"Bearer {server.admin_token}"}).json()["url"]
-            third = browser.new_context().new_page()
+            third = watch(browser.new_context()).new_page()
             third.goto(server.url + link)
             third.wait_for_selector("text=Thank you!")
             assert "resume=" not in third.url
@@ -161,7 +200,21 @@ def test_full_session_reload_and_server_crash(small_study):
         # the participant's schedule (the same order throughout) and the stored answers
         state = httpx.get(f"{server.url}/api/participants/{PID}", headers={"X-Participant-Secret": secret}).json()
         assert state["completed"] and state["n_answered"] == 8
-        schedule = {t["trial_index"]: t["stimulus_id"] for t in state["trials"]}
+        admin = httpx.get(f"{server.url}/admin/participants/{PID}/schedule",
+                          headers={"Authorization": f"Bearer {server.admin_token}"}).json()["trials"]
+        assert [t["token"] for t in admin] == [t["token"] for t in state["trials"]]
+        schedule = {t["trial_index"]: t["stimulus_id"] for t in admin}
+
+    # blinding on the wire: every request URL and body the pages sent
+    assert len(snapshots) == 8 and len(requests) > 30
+    for url, body in requests:
+        assert not _leaks(url, words) and not _leaks(body, words), (url, body)
+    videos = sorted({u.split("/videos/", 1)[1] for u, _ in requests if "/videos/" in u})
+    assert "practice" in videos and len(videos) == 9, videos  # the practice clip + 8 trial tokens
+    assert all(v == "practice" or re.fullmatch(rf"{PID}/[0-9a-f]{{20}}", v) for v in videos), videos
+    posted = [json.loads(b) for u, b in requests if u.endswith("/responses") and b]
+    assert posted and all(set(b) == {"trial_index", "token", "answers", "rt_ms", "shown_at"} for b in posted)
+    assert {b["token"] for b in posted} == {t["token"] for t in admin}
 
     out = tmp / "responses.csv"
     demo = tmp / "demographics.csv"

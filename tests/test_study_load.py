@@ -33,8 +33,8 @@ def server(tmp_path_factory):
 def test_fifty_participants_at_once(server):
     import httpx
     srv, db, tmp = server
-    res = run_simulation(srv.url, N_BOTS, concurrency=N_BOTS, think_time=THINK_TIME, seed=7,
-                         method_effect=1.0, noise_sd=0.9)
+    res = run_simulation(srv.url, N_BOTS, admin_token=srv.admin_token, concurrency=N_BOTS, think_time=THINK_TIME,
+                         seed=7, method_effect=1.0, noise_sd=0.9)
     metrics = httpx.get(srv.url + "/admin/metrics.json",
                         headers={"Authorization": f"Bearer {srv.admin_token}"}).json()["server_answer_latency"]
     load = os.getloadavg()[0]
@@ -78,20 +78,30 @@ def test_fifty_participants_at_once(server):
 def test_simulate_participants_cli(server, tmp_path):
     srv, db, _ = server
     out = tmp_path / "sim.json"
+    env = {k: v for k, v in os.environ.items() if k != "CROWDSTUDY_ADMIN_TOKEN"}
     p = subprocess.run([sys.executable, "-m", "crowdstudy", "simulate-participants", "--url", srv.url, "-n", "3",
                         "--seed", "11", "--concurrency", "3", "--prefix", "cli", "--json", str(out)],
-                       capture_output=True, text=True, cwd=ROOT, timeout=120)
+                       capture_output=True, text=True, cwd=ROOT, timeout=120, env={**env, "CROWDSTUDY_ADMIN_TOKEN":
+                                                                                   srv.admin_token})
     assert p.returncode == 0, p.stdout + p.stderr
     assert "3/3 completed, 180 answers" in p.stdout
     summary = json.loads(out.read_text())
     assert summary["answers"] == 180 and summary["provenance"]["seed"] == 11
     # running the same bots again: their ids exist, so registration is refused (no duplicates)
     p = subprocess.run([sys.executable, "-m", "crowdstudy", "simulate-participants", "--url", srv.url, "-n", "1",
-                        "--seed", "11", "--prefix", "cli"], capture_output=True, text=True, cwd=ROOT, timeout=60)
+                        "--seed", "11", "--prefix", "cli", "--admin-token", srv.admin_token],
+                       capture_output=True, text=True, cwd=ROOT, timeout=60, env=env)
     assert p.returncode == 1 and "already registered" in p.stdout
+    # the bots need the admin token (participants are blinded); a missing or wrong one is refused up front
+    for extra in ([], ["--admin-token", "wrong-admin-token-000000"]):
+        p = subprocess.run([sys.executable, "-m", "crowdstudy", "simulate-participants", "--url", srv.url, "-n", "1",
+                            "--prefix", "noadmin", *extra], capture_output=True, text=True, cwd=ROOT, timeout=60,
+                           env=env)
+        assert p.returncode == 2 and "--admin-token" in p.stderr, p.stderr
     with sqlite3.connect(db) as con:
         assert con.execute("SELECT COUNT(*) FROM responses WHERE participant_id LIKE 'cli-%' AND practice = 0"
                            ).fetchone()[0] == 180
+        assert con.execute("SELECT COUNT(*) FROM participants WHERE participant_id LIKE 'noadmin-%'").fetchone()[0] == 0
     p = subprocess.run([sys.executable, "-m", "crowdstudy", "simulate-participants", "--url", "ftp://x", "-n", "1"],
                        capture_output=True, text=True, cwd=ROOT, timeout=60)
     assert p.returncode == 2 and "--url" in p.stderr

@@ -65,8 +65,17 @@ def _register(api, pid="P001", *, ready=True):
 
 def _answer(api, pid, h, trial, answers=ANS, rt=1234.5):
     return api.post(f"/api/participants/{pid}/responses", headers=h,
-                    json={"trial_index": trial["trial_index"], "stimulus_id": trial["stimulus_id"],
+                    json={"trial_index": trial["trial_index"], "token": trial["token"],
                           "answers": answers, "rt_ms": rt})
+
+
+ADMIN = {"Authorization": f"Bearer {TOKEN}"}
+
+
+def _admin_schedule(api, pid):
+    r = api.get(f"/admin/participants/{pid}/schedule", headers=ADMIN)
+    assert r.status_code == 200, r.text
+    return r.json()["trials"]
 
 
 # -- schedule --------------------------------------------------------------------------------
@@ -125,8 +134,10 @@ def test_resume_after_server_restart_keeps_order_and_progress(stim_dir, tmp_path
     assert reg.status_code == 200 and reg.json()["resumed"]
     st = reg.json()["state"]
     assert st["next_trial_index"] == 5 and st["n_answered"] == 5
-    assert [t["stimulus_id"] for t in st["trials"]] == [t["stimulus_id"] for t in state["trials"]]
+    # the same order and the same tokens (the blinding secret lives in the database)
+    assert st["trials"] == state["trials"]
     assert st["consented"] and st["demographics"] and st["practice_done"] and not st["completed"]
+    assert _answer(api2, "P_resume", h, st["trials"][5]).status_code == 201
     cfg2.store.close()
 
 
@@ -170,9 +181,13 @@ def test_rejects_bad_answers(api, answers, fragment):
     ({"trial_index": 60}, "trial_index must be an integer 0..59"),
     ({"trial_index": "0"}, "trial_index must be an integer"),
     ({"trial_index": 0.0}, "trial_index must be an integer"),
-    ({"stimulus_id": "S9-D9-V9-Ours"}, "not in this participant's schedule"),
-    ({"stimulus_id": "../../manifest.json"}, "stimulus_id must be"),
-    ({"stimulus_id": "x' OR '1'='1"}, "stimulus_id must be"),
+    ({"token": "0123456789abcdef0123"}, "not in this participant's schedule"),
+    ({"token": "../../manifest.json"}, "token must be"),
+    ({"token": "x' OR '1'='1"}, "token must be"),
+    ({"token": "0123456789ABCDEF0123"}, "token must be"),
+    ({"token": None}, "token must be"),
+    ({"token": 12}, "token must be"),
+    ({"stimulus_id": "S1-D1-V1-Ours"}, "not a stimulus_id"),
     ({"rt_ms": -5}, "rt_ms must be"),
     ({"rt_ms": "fast"}, "rt_ms must be"),
     ({"shown_at": "yesterday"}, "shown_at must be an ISO 8601"),
@@ -180,21 +195,21 @@ def test_rejects_bad_answers(api, answers, fragment):
 def test_rejects_bad_trial_fields(api, patch, fragment):
     h, state = _register(api, "P_fields")
     t = state["trials"][0]
-    body = {"trial_index": 0, "stimulus_id": t["stimulus_id"], "answers": ANS, "rt_ms": 100, **patch}
+    body = {"trial_index": 0, "token": t["token"], "answers": ANS, "rt_ms": 100, **patch}
     r = api.post("/api/participants/P_fields/responses", json=body, headers=h)
     assert r.status_code == 422 and fragment in r.json()["error"], r.text
 
 
-def test_rejects_stimulus_of_another_trial(api):
+def test_rejects_token_of_another_trial(api):
     h, state = _register(api, "P_swap")
-    body = {"trial_index": 0, "stimulus_id": state["trials"][1]["stimulus_id"], "answers": ANS, "rt_ms": 100}
+    body = {"trial_index": 0, "token": state["trials"][1]["token"], "answers": ANS, "rt_ms": 100}
     r = api.post("/api/participants/P_swap/responses", json=body, headers=h)
-    assert r.status_code == 422 and "(that is trial 1)" in r.json()["error"]
+    assert r.status_code == 422 and "belongs to trial 1, not to trial_index 0" in r.json()["error"]
 
 
 def test_rejects_unknown_participant_and_bad_ids(api):
     h, state = _register(api, "P_real")
-    body = {"trial_index": 0, "stimulus_id": state["trials"][0]["stimulus_id"], "answers": ANS, "rt_ms": 1}
+    body = {"trial_index": 0, "token": state["trials"][0]["token"], "answers": ANS, "rt_ms": 1}
     r = api.post("/api/participants/P_ghost/responses", json=body, headers=h)
     assert r.status_code == 404 and "unknown participant" in r.json()["error"]
     assert api.get("/api/participants/P_ghost", headers=h).status_code == 404
@@ -241,6 +256,125 @@ def test_flow_order_and_demographics_validation(api):
                     headers=h).status_code == 200
     r = _answer(api, pid, h, state["trials"][0])
     assert r.status_code == 409 and "practice" in r.json()["error"]
+
+
+# -- blinding: participants never see stimulus ids or conditions -----------------------------
+def _condition_words(design):
+    """Every stimulus id, method name and density level of the design (what must stay hidden)."""
+    words = {s.stimulus_id for s in design.stimuli()} | set(design.methods) | set(design.densities)
+    return sorted(words, key=len, reverse=True)
+
+
+def _leaks(text: str, words) -> list[str]:
+    import re
+    return [w for w in words if re.search(rf"(?<![A-Za-z0-9]){re.escape(w)}(?![A-Za-z0-9])", text)]
+
+
+def test_participant_facing_responses_never_reveal_the_condition(api):
+    words = _condition_words(api.app.state.config.design)
+    assert {"Ours", "Baseline", "D3", "S1-D3-V2-Ours"} <= set(words)
+    seen = []  # every response body the participant's browser could receive
+
+    def call(method, url, **kw):
+        r = api.request(method, url, **kw)
+        seen.append((f"{method} {url} -> {r.status_code}", r.text))
+        return r
+
+    pid = "P_blind"
+    reg = call("POST", "/api/participants", json={"participant_id": pid})
+    h = {"X-Participant-Secret": reg.json()["secret"]}
+    state = reg.json()["state"]
+    assert all(set(t) == {"trial_index", "stage", "token", "video_url"} for t in state["trials"])
+    assert len({t["token"] for t in state["trials"]}) == 60
+    call("GET", "/api/study")
+    call("POST", f"/api/participants/{pid}/consent", json={"consent": True}, headers=h)
+    call("POST", f"/api/participants/{pid}/demographics", json={"age": 30, "gender": "male"}, headers=h)
+    call("POST", f"/api/participants/{pid}/practice", json={"answers": ANS, "rt_ms": 10}, headers=h)
+    trials = state["trials"]
+    body = {"trial_index": 0, "token": trials[0]["token"], "answers": ANS, "rt_ms": 100}
+    assert call("POST", f"/api/participants/{pid}/responses", json=body, headers=h).status_code == 201
+    assert call("POST", f"/api/participants/{pid}/responses", json=body, headers=h).status_code == 200
+    assert call("POST", f"/api/participants/{pid}/responses", json={**body, "answers": {**ANS, "Q1": 1}},
+                headers=h).status_code == 409
+    for patch in ({"trial_index": 1}, {"trial_index": 2, "token": trials[2]["token"]},
+                  {"trial_index": 1, "token": trials[3]["token"]}, {"token": "0" * 20}, {"token": "bad"}):
+        assert call("POST", f"/api/participants/{pid}/responses", json={**body, **patch}, headers=h).status_code in (
+            409, 422)
+    for t in trials[1:]:
+        assert call("POST", f"/api/participants/{pid}/responses", headers=h,
+                    json={"trial_index": t["trial_index"], "token": t["token"], "answers": ANS,
+                          "rt_ms": 100}).status_code == 201
+    own = call("GET", f"/api/participants/{pid}/responses", headers=h).json()["responses"]
+    assert [r["token"] for r in own] == [t["token"] for t in trials]
+    call("GET", f"/api/participants/{pid}", headers=h)
+    assert call("POST", f"/api/participants/{pid}/complete", headers=h).status_code == 200
+    call("POST", "/api/participants", json={"participant_id": pid, "secret": h["X-Participant-Secret"]})
+    for what, text in seen:
+        assert not _leaks(text, words), (what, _leaks(text, words), text[:300])
+    # the video responses carry no name either
+    r = api.get(trials[0]["video_url"])
+    assert r.status_code == 200 and not _leaks(str(r.headers), words)
+    # ... while the server stored the real stimulus ids and the admin export shows the conditions
+    admin = _admin_schedule(api, pid)
+    assert [t["token"] for t in admin] == [t["token"] for t in trials]
+    rows = list(csv.DictReader(api.get("/admin/export/responses.csv", headers=ADMIN).text.splitlines()))
+    assert [r["stimulus_id"] for r in rows] == [t["stimulus_id"] for t in admin]
+    assert {r["method"] for r in rows} == {"Baseline", "Ours"}
+
+
+def test_token_of_participant_a_is_rejected_for_b(api):
+    ha, sa_ = _register(api, "P_tokA")
+    hb, sb = _register(api, "P_tokB")
+    a, b = _admin_schedule(api, "P_tokA"), _admin_schedule(api, "P_tokB")
+    # the same stimulus has a different token for each participant
+    tok_a = {t["stimulus_id"]: t["token"] for t in a}
+    tok_b = {t["stimulus_id"]: t["token"] for t in b}
+    assert set(tok_a) == set(tok_b) and all(tok_a[k] != tok_b[k] for k in tok_a)
+    assert not set(tok_a.values()) & set(tok_b.values())
+    # B sends A's token of B's own first stimulus, then A's token of A's first trial: both refused
+    sid_b0 = b[0]["stimulus_id"]
+    for token in (tok_a[sid_b0], sa_["trials"][0]["token"]):
+        r = api.post("/api/participants/P_tokB/responses", headers=hb,
+                     json={"trial_index": 0, "token": token, "answers": ANS, "rt_ms": 100})
+        assert r.status_code == 422 and "not in this participant's schedule" in r.json()["error"]
+    assert api.get("/api/participants/P_tokB/responses", headers=hb).json()["responses"] == []
+    # and A's video token does not open a video under B's id
+    assert api.get(f"/videos/P_tokB/{sa_['trials'][0]['token']}").status_code == 404
+    assert api.get(sa_["trials"][0]["video_url"]).status_code == 200
+    assert _answer(api, "P_tokB", hb, sb["trials"][0]).status_code == 201
+
+
+def test_admin_schedule_endpoint(api):
+    _, state = _register(api, "P_sched", ready=False)
+    url = "/admin/participants/P_sched/schedule"
+    assert api.get(url).status_code == 401
+    assert api.get(url, headers={"Authorization": "Bearer wrong-token"}).status_code == 403
+    assert api.get(url, headers={"X-Participant-Secret": "x"}).status_code == 401
+    assert api.get("/admin/participants/P_nobody/schedule", headers=ADMIN).status_code == 404
+    assert api.get("/admin/participants/a%20b/schedule", headers=ADMIN).status_code == 400
+    trials = _admin_schedule(api, "P_sched")
+    assert [t["token"] for t in trials] == [t["token"] for t in state["trials"]]
+    design = api.app.state.config.design
+    by_id = {s.stimulus_id: s for s in design.stimuli()}
+    for t in trials:
+        s = by_id[t["stimulus_id"]]
+        assert (t["stage"], t["scenario"], t["density_level"], t["viewpoint"], t["method"]) == (
+            s.stage, s.scenario, s.density_level, s.viewpoint, s.method)
+        assert t["density"] == pytest.approx(s.density)
+
+
+def test_blinding_tokens():
+    from crowdstudy.study.blinding import TOKEN_LENGTH, TOKEN_PATTERN, stimulus_token, token_table
+    key = "k" * 64
+    t = stimulus_token(key, "P1", "S1-D3-V2-Ours")
+    assert TOKEN_PATTERN.fullmatch(t) and len(t) == TOKEN_LENGTH
+    assert t == stimulus_token(key.encode(), "P1", "S1-D3-V2-Ours")
+    assert len({t, stimulus_token(key, "P2", "S1-D3-V2-Ours"), stimulus_token(key, "P1", "S1-D3-V2-Baseline"),
+                stimulus_token("j" * 64, "P1", "S1-D3-V2-Ours")}) == 4
+    table = token_table(key, "P1", [s.stimulus_id for s in load_design().stimuli()])
+    assert len(set(table.values())) == 60
+    with pytest.raises(InvalidInputError, match="secret"):
+        stimulus_token("short", "P1", "S1")
 
 
 # -- access control ---------------------------------------------------------------------------
@@ -299,14 +433,24 @@ def test_admin_export_and_dashboard(api):
 
 
 # -- videos and static files -----------------------------------------------------------------
-def test_videos_support_range_requests_and_never_paths(api):
-    r = api.get("/videos/S1-D3-V2-Ours", headers={"Range": "bytes=0-99"})
+def test_videos_support_range_requests_and_never_paths(api, stim_dir):
+    _, state = _register(api, "P_video", ready=False)
+    t = state["trials"][0]
+    assert t["video_url"] == f"/videos/P_video/{t['token']}"
+    r = api.get(t["video_url"], headers={"Range": "bytes=0-99"})
     assert r.status_code == 206 and len(r.content) == 100 and r.headers["content-range"].startswith("bytes 0-99/")
     assert r.headers["content-type"] == "video/mp4"
+    # the token resolves, through the schedule and the manifest, to that trial's own file
+    sid = _admin_schedule(api, "P_video")[0]["stimulus_id"]
+    rel = {m["stimulus_id"]: m["file"] for m in json.loads((stim_dir / "manifest.json").read_text())["stimuli"]}[sid]
+    assert api.get(t["video_url"]).content == (stim_dir / rel).read_bytes()
     full = api.get("/videos/practice")
     assert full.status_code == 200 and full.content[4:8] == b"ftyp"
-    for bad in ["/videos/manifest.json", "/videos/..%2Fmanifest.json", "/videos/S9-D9-V9-Ours"]:
-        assert api.get(bad).status_code == 404
+    for bad in ["/videos/manifest.json", "/videos/..%2Fmanifest.json", "/videos/S1-D3-V2-Ours",
+                f"/videos/{sid}", "/videos/P_video/S1-D3-V2-Ours", f"/videos/P_video/{sid}",
+                "/videos/P_video/0123456789abcdef0123", f"/videos/P_ghost/{t['token']}",
+                f"/videos/P_video/{t['token']}x", f"/videos/..%2FP_video/{t['token']}"]:
+        assert api.get(bad).status_code == 404, bad
     assert api.get("/lib/jspsych/dist/index.browser.min.js").status_code == 200
     assert api.get("/lib/jspsych/package.json").status_code == 404
     page = api.get("/")
@@ -351,7 +495,7 @@ def test_export_cli_and_errors(api, tmp_path):
     summary = export_study(db_url, out, tmp_path / "d.csv")
     assert summary["responses"] == 2
     rows = list(csv.DictReader(out.open()))
-    assert [r["stimulus_id"] for r in rows] == [t["stimulus_id"] for t in state["trials"][:2]]
+    assert [r["stimulus_id"] for r in rows] == [t["stimulus_id"] for t in _admin_schedule(api, "P_cli")[:2]]
     assert rows[0]["scenario"] == "concert" and rows[0]["stage"] == "1"
     assert json.loads((tmp_path / "r.csv.provenance.json").read_text())["responses"] == 2
     demo = list(csv.DictReader((tmp_path / "d.csv").open()))

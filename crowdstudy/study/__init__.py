@@ -13,12 +13,25 @@ fixed and out of the process list). ``/admin?token=...`` shows progress;
 ``crowdstudy export --db sqlite:///study.db --out responses.csv --demographics demographics.csv``
 writes the analysis input. The server binds 127.0.0.1; for an online study run it behind
 an HTTPS reverse proxy (``--host`` only when the proxy is on another machine), one
-process per database. ``crowdstudy simulate-participants --url ... -n 10`` runs bots
-through the same API (demo, load test, checking the analysis end to end).
+process per database. ``crowdstudy simulate-participants --url ... --admin-token ... -n 10``
+runs bots through the same API (demo, load test, checking the analysis end to end).
+
+Blinding
+--------
+Participants never learn a clip's condition: stimulus ids such as ``S1-D3-V2-Ours`` (density,
+viewpoint, method) appear in nothing the browser receives. The participant API, the page's
+data and the video URLs (``/videos/<participant_id>/<token>``) name each trial by its index,
+its stage and an opaque per-participant token, an HMAC of (the study's random secret stored
+in the database, participant id, stimulus id) (:mod:`crowdstudy.study.blinding`). An answer
+carries ``trial_index`` and ``token``; the server checks the token against that participant's
+schedule and stores the real stimulus id, so ``responses.csv`` keeps its schema. The token ->
+stimulus mapping is admin-only (``GET /admin/participants/<id>/schedule``, what the simulated
+participants answer from, and the exports).
 
 Modules (import them directly; heavy dependencies load only there):
 
 - :mod:`crowdstudy.study.schedule`: per-participant randomised trial order.
+- :mod:`crowdstudy.study.blinding`: the opaque per-participant trial tokens.
 - :mod:`crowdstudy.study.stimulus_set`: the stimulus manifest the server reads.
 - :mod:`crowdstudy.study.storage`: SQLAlchemy Core tables (SQLite with WAL, group commit).
 - :mod:`crowdstudy.study.app`: the Starlette ASGI application (UI, videos, JSON API, admin).
@@ -26,7 +39,8 @@ Modules (import them directly; heavy dependencies load only there):
 - :mod:`crowdstudy.study.consent`: the consent Markdown file as safe HTML.
 - :mod:`crowdstudy.study.export`: responses.csv / demographics.csv from a database.
 - :mod:`crowdstudy.study.dashboard`: the admin progress page.
-- :mod:`crowdstudy.study.bots`: simulated participants answering through the HTTP API.
+- :mod:`crowdstudy.study.bots`: simulated participants answering through the HTTP API (they
+  read their trials' conditions from the admin API).
 - :mod:`crowdstudy.study.fake_stimuli`: a tiny stimulus folder for tests and demos.
 - :mod:`crowdstudy.study.local_server`: ``crowdstudy serve`` as a child process on a free port.
 """

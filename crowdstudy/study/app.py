@@ -1,25 +1,39 @@
 """The study server: a Starlette ASGI application.
 
+Blinding
+--------
+Participants never see a stimulus id (``S1-D3-V2-Ours`` names the density, viewpoint and
+method). Everything the participant API and the page return names a trial by its
+``trial_index``, its ``stage`` and an opaque per-participant ``token``
+(:mod:`crowdstudy.study.blinding`); the video URL is ``/videos/<participant_id>/<token>``,
+resolved on the server through that participant's stored schedule and the stimulus
+manifest. An answer carries ``trial_index`` and ``token``; the server checks the token
+against that trial of that participant's schedule and stores the real stimulus id, which
+only the admin endpoints (export, ``/admin/participants/<id>/schedule``) reveal.
+
 Routes
 ------
 Participant front end (no authentication):
     ``GET /``                     the jsPsych page (``ui/index.html``)
     ``GET /js/*, /css/*``         the page's own scripts and styles (``ui/js``, ``ui/css``)
     ``GET /lib/<package>/*``      jsPsych and its plugins' ``dist`` files from ``ui/node_modules``
-    ``GET /videos/<stimulus_id>`` a stimulus video (HTTP range requests); ``/videos/practice``
+    ``GET /videos/<id>/<token>``  a trial's video (HTTP range requests); ``/videos/practice``
     ``GET /api/study``            items, scale labels, consent HTML, stage sizes
 JSON API of one participant (header ``X-Participant-Secret`` from registration):
     ``POST /api/participants``                        register, or resume with the secret
-    ``GET  /api/participants/<id>``                   state: schedule, next unanswered trial
+    ``GET  /api/participants/<id>``                   state: trials ``{trial_index, stage, token,
+                                                      video_url}``, next unanswered trial
     ``POST /api/participants/<id>/consent``           ``{"consent": true}``
     ``POST /api/participants/<id>/demographics``      ``{"age": 31, "gender": "female"}``
     ``POST /api/participants/<id>/practice``          ``{"answers": {...}, "rt_ms": ...}``
-    ``POST /api/participants/<id>/responses``         ``{"trial_index", "stimulus_id", "answers", "rt_ms", "shown_at"}``
-    ``GET  /api/participants/<id>/responses``         the participant's own answers
+    ``POST /api/participants/<id>/responses``         ``{"trial_index", "token", "answers", "rt_ms", "shown_at"}``
+    ``GET  /api/participants/<id>/responses``         the participant's own answers (by token)
     ``POST /api/participants/<id>/complete``          completion code / redirect URL
 Admin (``Authorization: Bearer <token>`` or ``?token=<token>``):
     ``GET /admin``, ``/admin/progress.json``, ``/admin/metrics.json`` (server-side answer
     latency percentiles), ``/admin/export/responses.csv``, ``/admin/export/demographics.csv``;
+    ``GET /admin/participants/<id>/schedule``: that participant's trials with token, stimulus
+    id and conditions (what the simulated participants answer from);
     ``POST /admin/participants/<id>/resume-link``: a new secret and the URL that continues
     that participant's session in another browser (the old browser's secret stops working)
 
@@ -43,7 +57,8 @@ from typing import Any
 
 from crowdstudy.design import StudyDesign
 from crowdstudy.errors import InvalidInputError, MissingDependencyError
-from crowdstudy.study.schedule import PARTICIPANT_ID_PATTERN, STIMULUS_ID_PATTERN, make_schedule
+from crowdstudy.study.blinding import TOKEN_LENGTH, TOKEN_PATTERN, token_table
+from crowdstudy.study.schedule import PARTICIPANT_ID_PATTERN, make_schedule
 from crowdstudy.study.stimulus_set import StimulusSet
 from crowdstudy.study.storage import ITEM_IDS, PRACTICE_TRIAL_INDEX, StudyStore
 
@@ -121,6 +136,8 @@ class _Study:
         self.stage_numbers = sorted(self.by_stage)
         self.seed = int(config.design.seed)
         self._schedules: dict[str, list[dict]] = {}
+        self._public: dict[str, list[dict]] = {}
+        self._secret = config.store.blinding_secret()
         self._auth: dict[str, str] = {}
         self._ready: set[str] = set()
         self.store.sync_stimuli(config.stimuli.rows.values())
@@ -157,17 +174,36 @@ class _Study:
             raise ApiError(403, "wrong participant secret")
 
     def schedule(self, pid: str) -> list[dict]:
+        """The participant's trials with the REAL stimulus id and conditions plus each trial's
+        ``token`` and ``video_url`` (server side and admin only; [] for an unknown id)."""
         sched = self._schedules.get(pid)
         if sched is None:
             sched = self.store.schedule(pid)
+            tokens = token_table(self._secret, pid, [row["stimulus_id"] for row in sched])
             for row in sched:
-                row["video_url"] = f"/videos/{row['stimulus_id']}"
-            self._schedules[pid] = sched
+                row["token"] = tokens[row["stimulus_id"]]
+                row["video_url"] = f"/videos/{pid}/{row['token']}"
+            if sched:  # the public view first: a cached schedule always has one
+                self._public[pid] = [{k: row[k] for k in ("trial_index", "stage", "token", "video_url")}
+                                     for row in sched]
+                self._schedules[pid] = sched
         return sched
+
+    def public_trials(self, pid: str) -> list[dict]:
+        """The participant's trials as the browser sees them: trial_index, stage, token, video_url."""
+        self.schedule(pid)
+        return self._public.get(pid, [])
+
+    def video_file(self, pid: str, token: str) -> Path | None:
+        """The video file of ``token`` in participant ``pid``'s schedule (None if there is none)."""
+        if not PARTICIPANT_ID_PATTERN.fullmatch(pid) or not TOKEN_PATTERN.fullmatch(token):
+            return None
+        trial = next((t for t in self.schedule(pid) if t["token"] == token), None)
+        return None if trial is None else self.cfg.stimuli.files.get(trial["stimulus_id"])
 
     def state(self, pid: str) -> dict:
         row = self.store.participant(pid)
-        sched = self.schedule(pid)
+        sched = self.public_trials(pid)
         answered = self.store.answered_indices(pid)
         done = set(answered)
         nxt = next((t["trial_index"] for t in sched if t["trial_index"] not in done), len(sched))
@@ -259,26 +295,34 @@ class _Study:
         ti = body.get("trial_index")
         if not _is_int(ti) or not 0 <= ti < len(sched):
             raise ApiError(422, f"trial_index must be an integer 0..{len(sched) - 1}, got {ti!r:.40}")
-        sid = body.get("stimulus_id")
-        if not isinstance(sid, str) or not STIMULUS_ID_PATTERN.fullmatch(sid):
-            raise ApiError(422, "stimulus_id must be a stimulus id string such as 'S1-D3-V2-Ours'")
+        if "stimulus_id" in body:
+            raise ApiError(422, "send the trial's token, not a stimulus_id (participants never see stimulus ids)")
+        token = body.get("token")
+        if not isinstance(token, str) or not TOKEN_PATTERN.fullmatch(token):
+            raise ApiError(422, f"token must be the trial's {TOKEN_LENGTH}-digit lowercase hex token from the "
+                                "participant's state")
         trial = sched[ti]
-        if trial["stimulus_id"] != sid:
-            other = next((t["trial_index"] for t in sched if t["stimulus_id"] == sid), None)
+        if trial["token"] != token:
+            other = next((t["trial_index"] for t in sched if t["token"] == token), None)
             if other is None:
-                raise ApiError(422, f"stimulus {sid!r} is not in this participant's schedule")
-            raise ApiError(422, f"trial_index {ti} shows {trial['stimulus_id']!r}, not {sid!r} (that is trial {other})")
+                raise ApiError(422, f"token {token} is not in this participant's schedule")
+            raise ApiError(422, f"token {token} belongs to trial {other}, not to trial_index {ti}")
         answers, rt, shown = self.parse_answers(body)
-        status, row = self.store.record_answer(pid, ti, sid, trial["stage"], answers, rt, shown)
+        status, row = self.store.record_answer(pid, ti, trial["stimulus_id"], trial["stage"], answers, rt, shown)
         if status == "out_of_order":
             raise ApiError(409, f"trial {row['expected']} is not answered yet; answers arrive in trial order")
         if status == "conflict":
             raise ApiError(409, f"trial {ti} already has a different answer; the first one is kept")
         return (201 if status == "created" else 200), {"stored": True, "trial_index": ti,
-                                                       "answer": _public_answer(row)}
+                                                       "answer": _public_answer(row, token)}
 
     def own_responses(self, pid: str) -> dict:
-        return {"participant_id": pid, "responses": self.store.response_rows(pid)}
+        """The participant's stored answers, each naming its trial by token (no conditions)."""
+        tokens = {t["trial_index"]: t["token"] for t in self.schedule(pid)}
+        return {"participant_id": pid,
+                "responses": [{"participant_id": pid, "stage": row["stage"],
+                               **_public_answer(row, tokens[row["trial_index"]])}
+                              for row in self.store.response_rows(pid)]}
 
     def complete(self, pid: str) -> dict:
         st = self.state(pid)
@@ -289,6 +333,15 @@ class _Study:
         return self.state(pid)
 
     # -- admin ------------------------------------------------------------------------------
+    def admin_schedule(self, pid: str) -> dict:
+        """Participant ``pid``'s trials with token, stimulus id and conditions (admin only: this
+        is the token -> stimulus mapping the participant must not see)."""
+        self.check_pid(pid)
+        sched = self.schedule(pid)
+        if not sched:
+            raise ApiError(404, f"unknown participant {pid!r}")
+        return {"participant_id": pid, "trials": [dict(t) for t in sched]}
+
     def resume_link(self, pid: str) -> dict:
         """A new secret for ``pid`` (e.g. to continue on another device); the old one stops working."""
         self.check_pid(pid)
@@ -307,8 +360,10 @@ class _Study:
             raise ApiError(403, "wrong admin token")
 
 
-def _public_answer(row: dict) -> dict:
-    return {k: row[k] for k in ("trial_index", "stimulus_id", *ITEM_IDS, "rt_ms", "shown_at", "answered_at")}
+def _public_answer(row: dict, token: str) -> dict:
+    """A stored answer as its participant may see it: the trial's token, never the stimulus id."""
+    return {"trial_index": row["trial_index"], "token": token,
+            **{k: row[k] for k in (*ITEM_IDS, "rt_ms", "shown_at", "answered_at")}}
 
 
 class _SecurityHeaders:
@@ -395,8 +450,7 @@ def create_app(config: StudyConfig):
         raise MissingDependencyError(f"the questionnaire front end is incomplete ({absent[0]} missing); run "
                                      f"`make setup` or `cd {ui} && npm ci`")
     study = _Study(config)
-    videos = dict(config.stimuli.files)
-    videos["practice"] = config.stimuli.practice_file
+    practice_video = config.stimuli.practice_file
     no_store = {"Cache-Control": "no-store"}
 
     def error(status: int, message: str) -> JSONResponse:
@@ -455,11 +509,19 @@ def create_app(config: StudyConfig):
     async def index(_request: Request):
         return FileResponse(ui / "index.html", media_type="text/html", headers=no_store)
 
-    async def video(request: Request):
-        path = videos.get(request.path_params["key"])  # a dictionary lookup, never a path join
+    def video_response(path: Path | None):
         if path is None:
             return error(404, "no such video")
         return FileResponse(path, media_type="video/mp4", headers={"Cache-Control": "private, max-age=3600"})
+
+    async def practice_video_file(_request: Request):
+        return video_response(practice_video)
+
+    async def trial_video(request: Request):
+        # token -> stimulus id through the participant's stored schedule -> the manifest's
+        # file: dictionary lookups, never a path join with a request value
+        pid, token = request.path_params["pid"], request.path_params["token"]
+        return video_response(await run_in_threadpool(study.video_file, pid, token))
 
     async def health(_request: Request):
         return JSONResponse({"ok": True})
@@ -472,6 +534,9 @@ def create_app(config: StudyConfig):
             except ApiError as exc:
                 return error(exc.status, exc.message)
         return run
+
+    def admin_schedule(request):
+        return JSONResponse(study.admin_schedule(request.path_params["pid"]), headers=no_store)
 
     def admin_resume_link(request):
         return JSONResponse(study.resume_link(request.path_params["pid"]), headers=no_store)
@@ -518,11 +583,13 @@ def create_app(config: StudyConfig):
         Route("/api/participants/{pid}/responses", endpoint(study.answer, body=True), methods=["POST"]),
         Route("/api/participants/{pid}/responses", endpoint(study.own_responses), methods=["GET"]),
         Route("/api/participants/{pid}/complete", endpoint(study.complete), methods=["POST"]),
-        Route("/videos/{key}", video),
+        Route("/videos/practice", practice_video_file),
+        Route("/videos/{pid}/{token}", trial_video),
         Route("/admin", admin(admin_dashboard)),
         Route("/admin/progress.json", admin(admin_progress)),
         Route("/admin/metrics.json", admin(admin_metrics)),
         Route("/admin/participants/{pid}/resume-link", admin(admin_resume_link), methods=["POST"]),
+        Route("/admin/participants/{pid}/schedule", admin(admin_schedule)),
         Route("/admin/export/responses.csv", admin(admin_responses)),
         Route("/admin/export/demographics.csv", admin(admin_demographics)),
         Mount("/js", StaticFiles(directory=ui / "js")),

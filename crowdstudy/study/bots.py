@@ -5,6 +5,12 @@ trial of its schedule in order with answers drawn from
 :class:`crowdstudy.stats.synthetic.ResponseModel`, and completes. Bots run concurrently
 (asyncio, one keep-alive connection each); every answer's round-trip latency is recorded, so the same code serves
 the demo, load tests and end-to-end checks of the server.
+
+Participants are blinded: their API names trials only by opaque tokens. A bot needs each
+trial's condition (density, method, ...) for the response model, so it reads its schedule
+from the admin endpoint ``GET /admin/participants/<id>/schedule`` with the admin token, a
+route real participants do not have; it answers through the participant API like a
+browser does (``trial_index`` + ``token``).
 """
 
 from __future__ import annotations
@@ -72,7 +78,8 @@ class _Connection:
                 pass
             self.writer = None
 
-    async def request(self, method: str, path: str, payload: dict | None, secret: str | None) -> tuple[int, dict]:
+    async def request(self, method: str, path: str, payload: dict | None, secret: str | None,
+                      headers: dict | None = None) -> tuple[int, dict]:
         body = b"" if payload is None else json.dumps(payload).encode()
         head = [f"{method} {path} HTTP/1.1", f"Host: {self.host}:{self.port}", f"Content-Length: {len(body)}",
                 "Accept: application/json"]
@@ -80,6 +87,7 @@ class _Connection:
             head.append("Content-Type: application/json")
         if secret:
             head.append(f"X-Participant-Secret: {secret}")
+        head += [f"{k}: {v}" for k, v in (headers or {}).items()]
         data = ("\r\n".join(head) + "\r\n\r\n").encode() + body
         for attempt in range(2):
             try:
@@ -127,10 +135,20 @@ async def _post(conn: _Connection, url: str, secret: str | None, payload: dict):
     return data
 
 
+async def _admin_schedule(conn: _Connection, pid: str, admin_token: str) -> dict[int, dict]:
+    """{trial_index: trial with token, stimulus id and conditions} from the admin API."""
+    status, data = await conn.request("GET", f"/admin/participants/{pid}/schedule", None, None,
+                                      headers={"Authorization": f"Bearer {admin_token}"})
+    if status != 200:
+        raise RuntimeError(f"GET /admin/participants/{pid}/schedule -> {status} {str(data)[:200]}")
+    return {int(t["trial_index"]): t for t in data["trials"]}
+
+
 async def _one_bot(client: _Connection, pid: str, model, rng: np.random.Generator, think_time: float, latencies: list,
-                   ) -> int:
+                   admin_token: str) -> int:
     reg = await _post(client, "/api/participants", None, {"participant_id": pid})
     secret, state = reg["secret"], reg["state"]
+    conditions = await _admin_schedule(client, pid, admin_token)
     base = f"/api/participants/{pid}"
     if not state["consented"]:
         await _post(client, base + "/consent", secret, {"consent": True})
@@ -145,26 +163,30 @@ async def _one_bot(client: _Connection, pid: str, model, rng: np.random.Generato
     for trial in state["trials"][state["next_trial_index"]:]:
         if think_time > 0:
             await asyncio.sleep(float(rng.uniform(0.0, 2.0 * think_time)))
-        answers = model.answer(trial, offsets, rng)
+        full = conditions.get(trial["trial_index"])
+        if full is None or full["token"] != trial["token"]:
+            raise RuntimeError(f"trial {trial['trial_index']}: the admin schedule does not match the participant's")
+        answers = model.answer(full, offsets, rng)
         rt = float(np.round(2000.0 + rng.lognormal(np.log(8000.0), 0.4), 1))
         t0 = time.perf_counter()
         await _post(client, base + "/responses", secret,
-                    {"trial_index": trial["trial_index"], "stimulus_id": trial["stimulus_id"], "answers": answers,
-                     "rt_ms": rt})
+                    {"trial_index": trial["trial_index"], "token": trial["token"], "answers": answers, "rt_ms": rt})
         latencies.append((time.perf_counter() - t0) * 1000.0)
         n += 1
     await _post(client, base + "/complete", secret, {})
     return n
 
 
-async def simulate_participants(url: str, n: int, *, method_effect: float = 1.0, noise_sd: float = 0.9,
-                                seed: int = 1, concurrency: int = 10, think_time: float = 0.0,
+async def simulate_participants(url: str, n: int, *, admin_token: str, method_effect: float = 1.0,
+                                noise_sd: float = 0.9, seed: int = 1, concurrency: int = 10, think_time: float = 0.0,
                                 prefix: str = "bot", timeout: float = 60.0, model_kwargs: dict | None = None
                                 ) -> SimulationResult:
     """Run ``n`` bots against the server at ``url``, at most ``concurrency`` at once.
 
-    think_time: mean pause before each answer (s; uniform 0..2x), 0 = as fast as possible.
-    Participant ids are ``{prefix}-{seed}-{index:05d}``; the answers depend only on ``seed``.
+    admin_token: the server's admin token (the bots read their trials' conditions from the
+    admin API; participants are blinded). think_time: mean pause before each answer (s;
+    uniform 0..2x), 0 = as fast as possible. Participant ids are
+    ``{prefix}-{seed}-{index:05d}``; the answers depend only on ``seed``.
     """
     for name, value in (("n", n), ("concurrency", concurrency), ("seed", seed)):
         if not isinstance(value, int) or isinstance(value, bool) or value < (0 if name == "seed" else 1):
@@ -173,6 +195,9 @@ async def simulate_participants(url: str, n: int, *, method_effect: float = 1.0,
     if parsed.scheme != "http" or not parsed.hostname or parsed.path not in ("", "/"):
         raise InvalidInputError(f"--url must be a plain http://HOST:PORT base URL, got {url!r}")
     host, port = parsed.hostname, parsed.port or 80
+    if not isinstance(admin_token, str) or not admin_token or not admin_token.isprintable():
+        raise InvalidInputError("--admin-token (or $CROWDSTUDY_ADMIN_TOKEN) is required: the bots read their trials' "
+                                "conditions from the admin API (participants are blinded)")
     if think_time < 0:
         raise InvalidInputError(f"think_time must be >= 0 seconds, got {think_time!r}")
     t_start = time.perf_counter()
@@ -185,6 +210,15 @@ async def simulate_participants(url: str, n: int, *, method_effect: float = 1.0,
         await probe.close()
     if status != 200:
         raise InvalidInputError(f"--url {url}: GET /api/study answered {status}")
+    probe = _Connection(host, port, timeout)
+    try:
+        status, data = await probe.request("GET", "/admin/metrics.json", None, None,
+                                           headers={"Authorization": f"Bearer {admin_token}"})
+    finally:
+        await probe.close()
+    if status != 200:
+        raise InvalidInputError(f"--admin-token: the server at {url} refused it ({status}: "
+                                f"{str(data.get('error', ''))[:100]})")
     model = _model(study, method_effect, noise_sd, **(model_kwargs or {}))
     gate = asyncio.Semaphore(concurrency)
     latencies: list[float] = []
@@ -197,7 +231,8 @@ async def simulate_participants(url: str, n: int, *, method_effect: float = 1.0,
         async with gate:
             conn = _Connection(host, port, timeout)
             try:
-                counts.append(await _one_bot(conn, pid, model, _bot_rng(seed, i), think_time, latencies))
+                counts.append(await _one_bot(conn, pid, model, _bot_rng(seed, i), think_time, latencies,
+                                             admin_token))
                 done.append(pid)
             except (RuntimeError, ConnectionError, OSError, asyncio.TimeoutError, ValueError) as exc:
                 errors.append(f"{pid}: {type(exc).__name__}: {exc}")

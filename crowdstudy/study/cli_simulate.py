@@ -10,6 +10,9 @@ __all__ = ["configure", "run"]
 
 def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--url", default="http://127.0.0.1:8000", help="server base URL")
+    parser.add_argument("--admin-token", metavar="TOKEN",
+                        help="the server's admin token (default: $CROWDSTUDY_ADMIN_TOKEN); the bots read their "
+                             "trials' conditions from the admin API, participants only see opaque tokens")
     parser.add_argument("-n", type=int, default=10, help="number of simulated participants (default 10)")
     parser.add_argument("--method-effect", type=float, default=1.0,
                         help="Ours - Baseline on QCR at the reference density, Likert points (default 1.0)")
@@ -24,13 +27,18 @@ def configure(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    import os
+
     from crowdstudy.errors import InvalidInputError
     from crowdstudy.provenance import provenance
     from crowdstudy.study.bots import run_simulation
+    from crowdstudy.study.server import ADMIN_TOKEN_ENV
 
     if args.noise < 0:
         raise InvalidInputError(f"--noise must be >= 0, got {args.noise}")
-    result = run_simulation(args.url, args.n, method_effect=args.method_effect, noise_sd=args.noise, seed=args.seed,
+    admin_token = args.admin_token or os.environ.get(ADMIN_TOKEN_ENV)  # checked by the bots
+    result = run_simulation(args.url, args.n, admin_token=admin_token, method_effect=args.method_effect,
+                            noise_sd=args.noise, seed=args.seed,
                             concurrency=args.concurrency, think_time=args.think_time, prefix=args.prefix,
                             model_kwargs={"density_slope": args.density_slope})
     s = result.summary()

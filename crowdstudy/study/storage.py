@@ -16,7 +16,10 @@ Tables
   practice / completion timestamps, age, gender, completion code.
 - ``schedule``: the participant's trial order, key (participant_id, trial_index).
 - ``responses``: one row per answer, UNIQUE (participant_id, trial_index); the practice
-  answer is stored with ``practice = true`` and ``trial_index = -1``.
+  answer is stored with ``practice = true`` and ``trial_index = -1``. Answers store the
+  real stimulus id (the participant only ever sees its token, :mod:`crowdstudy.study.blinding`).
+- ``settings``: key/value pairs of the study; ``blinding_secret`` is the random key of the
+  participants' trial tokens (created once, so tokens survive server restarts).
 
 Timestamps are ISO 8601 strings in UTC.
 """
@@ -95,7 +98,12 @@ def _tables(metadata):
         sa.Column("answered_at", sa.String(40), nullable=False),
         sa.UniqueConstraint("participant_id", "trial_index", name="uq_response_participant_trial"),
     )
-    return stimuli, participants, schedule, responses
+    settings = sa.Table(
+        "settings", metadata,
+        sa.Column("key", sa.String(64), primary_key=True),
+        sa.Column("value", sa.String(256), nullable=False),
+    )
+    return stimuli, participants, schedule, responses, settings
 
 
 class _GroupCommitWriter:
@@ -222,13 +230,13 @@ class StudyStore:
                 cur.execute("PRAGMA busy_timeout=30000")
                 cur.close()
         self.metadata = sa.MetaData()
-        self.stimuli, self.participants, self.schedule_t, self.responses = _tables(self.metadata)
+        self.stimuli, self.participants, self.schedule_t, self.responses, self.settings = _tables(self.metadata)
         try:
             if create:
                 self.metadata.create_all(self.engine)
             else:
                 names = set(sa.inspect(self.engine).get_table_names())
-                absent = [t for t in self.metadata.tables if t not in names]
+                absent = [t for t in self.metadata.tables if t not in names and t != "settings"]
                 if absent:
                     raise InvalidInputError(f"--db {url!r}: not a crowdstudy database "
                                             f"(missing tables: {', '.join(absent)})")
@@ -248,6 +256,27 @@ class StudyStore:
         if self._writer is not None:
             self._writer.close()
         self.engine.dispose()
+
+    # -- settings -------------------------------------------------------------------
+    def blinding_secret(self) -> str:
+        """The study's random blinding secret (64 hex digits), created on first use and stored,
+        so every server process on this database derives the same trial tokens."""
+        import secrets
+        import sqlalchemy as sa
+        from sqlalchemy.exc import IntegrityError
+        t = self.settings
+        fresh = secrets.token_hex(32)
+
+        def job(conn):
+            row = conn.execute(sa.select(t.c.value).where(t.c.key == "blinding_secret")).first()
+            if row is not None:
+                return row[0]
+            conn.execute(sa.insert(t).values(key="blinding_secret", value=fresh))
+            return fresh
+        try:
+            return self._transact(job)
+        except IntegrityError:  # created concurrently by another process: read it back
+            return self._transact(job)
 
     # -- stimuli --------------------------------------------------------------------
     def sync_stimuli(self, rows: Iterable[Mapping]) -> None:

@@ -44,7 +44,7 @@ var jsPsychVideoLikertLoop = (function (jspsych) {
       video_width: { type: ParameterType.INT, default: 0 },
     },
     data: {
-      /** The video URL shown. */
+      /** The video URL shown (crowdstudy passes opaque /videos/<participant>/<token> URLs, never stimulus ids). */
       stimulus: { type: ParameterType.STRING },
       /** Answers keyed by item id, integers 1..points. */
       responses: { type: ParameterType.OBJECT },

@@ -5,9 +5,12 @@
  *
  * The server holds the schedule and every answer; this page keeps only the participant id
  * and the session secret (localStorage), so a reload, a closed browser or a restarted server
- * resumes at the first unanswered trial. Each answer is POSTed when given and the next trial
- * appears only once the server has committed it; failed sends retry with exponential backoff
- * while a notice tells the participant.
+ * resumes at the first unanswered trial. Participants are blinded: the page knows each trial
+ * only by its index, its stage and an opaque token (the video URL is /videos/<id>/<token>),
+ * never by the stimulus id or its conditions; an answer is sent with the index and the token.
+ * Each answer is POSTed when given and the next trial appears only once the server has
+ * committed it; failed sends retry with exponential backoff while a notice tells the
+ * participant.
  */
 (function () {
   "use strict";
@@ -241,7 +244,7 @@
     };
     async function saveAnswer(data) {
       const t = cur();
-      const body = { trial_index: t.trial_index, stimulus_id: t.stimulus_id, answers: data.responses,
+      const body = { trial_index: t.trial_index, token: t.token, answers: data.responses,
                      rt_ms: data.rt, shown_at: data.shown_at };
       try {
         await api("POST", `/api/participants/${encodeURIComponent(S.pid)}/responses`, body);
