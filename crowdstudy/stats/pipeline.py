@@ -94,14 +94,15 @@ def _stage_dir(stage) -> str:
 def analyze(responses: pd.DataFrame | str | Path, design=None, out_dir: str | Path | None = None, *,
             correction="auto", alpha: float = 0.05, effsize: str = "np2", composites=None, stages=None,
             missing: str = "raise", adjust: str = "tukey", error: str = "sd", figures: bool = True,
-            progress: bool = False) -> AnalysisResult:
+            progress: bool = False, figure_note: str = "") -> AnalysisResult:
     """Run the paper's analysis; write tables, figures and the summary when ``out_dir`` is set.
 
     ``responses``: a DataFrame in the responses.csv schema or a path to the CSV.
     ``design``: a StudyDesign (default: the paper's). ``correction``/``alpha``/``effsize``/
     ``missing``: as :func:`~crowdstudy.stats.anova.rm_anova`. ``composites``/``stages``:
     subsets (default all; stages by number). ``adjust``: post hoc adjustment. ``error``:
-    figure error bars ("sd", "se", "ci95").
+    figure error bars ("sd", "se", "ci95"). ``figure_note``: text appended to every figure
+    title (e.g. "simulated participants").
     """
     if design is None:
         from crowdstudy.design import load_design
@@ -186,7 +187,7 @@ def analyze(responses: pd.DataFrame | str | Path, design=None, out_dir: str | Pa
                                                   shapiro=shp))
             if figures and "Density" in factors:
                 files.append(method_figure({comp: (cm, by_cell)}, d / f"{comp}_by_density.png",
-                                           density_values=design.densities, error=error, title=label))
+                                           density_values=design.densities, error=error, title=label + figure_note))
     if out is not None:
         if figures:
             from crowdstudy.stats.figures import method_figure
@@ -196,7 +197,7 @@ def analyze(responses: pd.DataFrame | str | Path, design=None, out_dir: str | Pa
                     continue
                 files.append(method_figure(panels, out / _stage_dir(st) / "scores_by_density.png",
                                            density_values=design.densities, error=error,
-                                           title=f"Stage {st.number} ({st.scenario})"))
+                                           title=f"Stage {st.number} ({st.scenario}){figure_note}"))
         files += write_table(reliability, out / "reliability", caption="Item-pair reliability")
         summary_path = out / "summary.md"
         summary_path.write_text("\n".join(lines) + "\n")
