@@ -128,3 +128,80 @@ def forward_kinematics(rest_joints: np.ndarray, joint_rotations: np.ndarray,
         glob[..., j, :, :] = glob[..., p, :, :] @ local[..., j, :, :]
         pos[..., j, :] = pos[..., p, :] + np.einsum("...ab,...b->...a", glob[..., p, :, :], offsets[..., j, :])
     return glob, pos
+
+
+# --- Name maps from common BVH skeletons (for retargeting) -------------------------------
+# Keys are the BVH joint names, values our joint names. BVH joints that are missing from a
+# map (CMU's LHipJoint/RHipJoint/Neck1/finger and thumb joints, Mixamo's *_End and finger
+# joints) have no counterpart: a retargeter folds their rotation into the nearest mapped
+# joint (the parent for a fixed offset, the mapped child for an intermediate one).
+_CMU_SIDE = {"UpLeg": "hip", "Leg": "knee", "Foot": "ankle", "ToeBase": "foot",
+             "Shoulder": "collar", "Arm": "shoulder", "ForeArm": "elbow", "Hand": "wrist",
+             "FingerBase": "hand"}
+_MIXAMO_SIDE = {"UpLeg": "hip", "Leg": "knee", "Foot": "ankle", "ToeBase": "foot",
+                "Shoulder": "collar", "Arm": "shoulder", "ForeArm": "elbow", "Hand": "wrist",
+                "HandMiddle1": "hand"}
+
+
+def _side_map(table: dict[str, str], prefix: str = "") -> dict[str, str]:
+    out = {}
+    for bvh, ours in table.items():
+        out[f"{prefix}Left{bvh}"] = f"left_{ours}"
+        out[f"{prefix}Right{bvh}"] = f"right_{ours}"
+    return out
+
+
+#: ``{"cmu": {bvh_name: joint_name}, "mixamo": {...}}``. CMU (the mocap database's BVH
+#: conversion, e.g. ``12_01.bvh``): Hips, LowerBack, Spine, Spine1, Neck, Head and the
+#: Left/Right chains. Mixamo: the same names with the ``mixamorig:`` prefix (Spine, Spine1,
+#: Spine2 for our spine1..3; the middle finger's first joint stands for ``*_hand``).
+BVH_NAME_MAPS: dict[str, dict[str, str]] = {
+    "cmu": {"Hips": "pelvis", "LowerBack": "spine1", "Spine": "spine2", "Spine1": "spine3",
+            "Neck": "neck", "Head": "head", **_side_map(_CMU_SIDE)},
+    "mixamo": {"mixamorig:Hips": "pelvis", "mixamorig:Spine": "spine1",
+               "mixamorig:Spine1": "spine2", "mixamorig:Spine2": "spine3",
+               "mixamorig:Neck": "neck", "mixamorig:Head": "head",
+               **_side_map(_MIXAMO_SIDE, "mixamorig:")},
+}
+__all__ += ["BVH_NAME_MAPS", "bvh_name_map"]
+
+
+def bvh_name_map(bvh_joint_names, convention: str | None = None) -> dict[str, str]:
+    """The map ``{bvh_name: joint_name}`` that applies to a BVH file's joint names.
+
+    Args:
+        bvh_joint_names: the joint names of the file (any iterable of str).
+        convention: ``"cmu"``, ``"mixamo"`` or None to pick the one that matches most names.
+            Mixamo names are matched with any ``mixamorig*:`` namespace prefix or none.
+
+    Returns:
+        Only the entries for names present in the file. Raises InvalidInputError naming
+        the missing joints when the file lacks one of the 24 joints' counterparts.
+    """
+    names = list(bvh_joint_names)
+    if convention is not None and convention not in BVH_NAME_MAPS:
+        raise InvalidInputError(
+            f"convention: unknown BVH naming {convention!r}; expected one of {sorted(BVH_NAME_MAPS)}")
+
+    def strip(name: str) -> str:
+        return "mixamorig:" + name.split(":", 1)[1] if ":" in name else name
+
+    def candidates(conv: str) -> dict[str, str]:
+        table = BVH_NAME_MAPS[conv]
+        if conv == "mixamo":
+            found = {}
+            for n in names:
+                key = strip(n) if ":" in n else "mixamorig:" + n
+                if key in table:
+                    found[n] = table[key]
+            return found
+        return {n: table[n] for n in names if n in table}
+
+    convs = [convention] if convention else list(BVH_NAME_MAPS)
+    best = max((candidates(c) for c in convs), key=len)
+    missing = sorted(set(JOINT_NAMES) - set(best.values()))
+    if missing:
+        raise InvalidInputError(
+            f"BVH joint names: no counterpart for joints {', '.join(missing)} "
+            f"(conventions tried: {', '.join(convs)})")
+    return best

@@ -1,0 +1,98 @@
+"""Capsule proxies: fit quality (volume IoU against the mesh), geometry helpers, rest-pose
+touching pairs and posed capsules."""
+
+import numpy as np
+import pytest
+import trimesh
+
+import crowdstudy.body as cb
+from crowdstudy.body.capsules import (Capsules, capsule_mesh_iou, capsule_occupancy, mesh_occupancy,
+                                      posed_capsules, segment_distance)
+from crowdstudy.body.skeleton import PARENTS, forward_kinematics
+from crowdstudy.errors import InvalidInputError
+
+
+def test_capsule_union_fits_sampled_bodies_with_iou_over_075():
+    records = cb.sample_bodies(6, seed=11) + [
+        {"model": "open", "sex": "female", "height": 1.50, "shape": [-2.0, 2.0]},
+        {"model": "open", "sex": "male", "height": 1.95, "shape": [2.0, -2.0]},
+    ]
+    ious = []
+    for rec in records:
+        body = cb.load_body(rec)
+        report = capsule_mesh_iou(body, resolution=0.012)
+        ious.append(report["iou"])
+        # the voxel volume agrees with the mesh's exact volume
+        assert report["mesh_volume"] == pytest.approx(body.mesh().volume, rel=0.03)
+        caps = body.capsules
+        assert caps.start.shape == caps.end.shape == (24, 3) and caps.radius.shape == (24,)
+        assert np.all(caps.radius > 0.01) and np.all(caps.radius < 0.2)
+    assert min(ious) >= 0.75, ious
+
+
+def test_mesh_occupancy_matches_analytic_volumes():
+    sphere = trimesh.creation.icosphere(subdivisions=4, radius=0.3)
+    step = 0.01
+    origin = np.array([-0.35, -0.35, -0.35]) + step * np.array([0.2071, 0.2887, 0.2236])
+    occ = mesh_occupancy(sphere.vertices, sphere.faces, origin, step, (71, 71, 71))
+    assert occ.sum() * step**3 == pytest.approx(sphere.volume, rel=0.01)
+    # a capsule's occupancy matches its closed-form volume
+    caps = Capsules(start=np.zeros((24, 3)), end=np.zeros((24, 3)), radius=np.full(24, 0.01))
+    a, b, r = np.array([[-0.1, 0.0, 0.0]]), np.array([[0.1, 0.05, 0.0]]), np.array([0.08])
+    occ = capsule_occupancy(a, b, r, origin, step, (71, 71, 71))
+    single = Capsules(start=np.repeat(a, 24, 0), end=np.repeat(b, 24, 0), radius=np.repeat(r, 24))
+    assert occ.sum() * step**3 == pytest.approx(single.volume[0], rel=0.02)
+    assert caps.volume[0] == pytest.approx(4 / 3 * np.pi * 0.01**3)
+
+
+def test_segment_distance_against_dense_sampling():
+    rng = np.random.default_rng(0)
+    p0, p1, q0, q1 = rng.normal(size=(4, 50, 3))
+    p1[0] = p0[0]  # a degenerate segment
+    q1[1] = q0[1] + 1e-14
+    p1[2], q0[2], q1[2] = p0[2] + (1, 0, 0), p0[2] + (0, 1, 0), p0[2] + (2, 1, 0)  # parallel
+    got = segment_distance(p0, p1, q0, q1)
+    s = np.linspace(0, 1, 401)
+    a = p0[:, None] + s[None, :, None] * (p1 - p0)[:, None]
+    b = q0[:, None] + s[None, :, None] * (q1 - q0)[:, None]
+    brute = np.linalg.norm(a[:, :, None] - b[:, None, :], axis=-1).min(axis=(1, 2))
+    assert np.all(got <= brute + 1e-12)
+    np.testing.assert_allclose(got, brute, atol=5e-3)
+
+
+def test_rest_touching_pairs_include_adjacent_bones_only_nearby_ones():
+    body = cb.load_body({"model": "open", "sex": "male", "height": 1.75, "shape": [0.0, 0.0]})
+    pairs = body.rest_touching_pairs()
+    assert pairs.dtype == np.int32 and pairs.shape[1] == 2 and np.all(pairs[:, 0] < pairs[:, 1])
+    found = set(map(tuple, pairs.tolist()))
+    for child, parent in enumerate(PARENTS):
+        if parent >= 0:
+            assert (min(child, parent), max(child, parent)) in found
+    # hands, feet and the head never touch each other or the legs in the T-pose
+    assert (15, 20) not in found and (10, 11) not in found and (7, 20) not in found
+    assert len(found) < 40
+
+
+def test_posed_capsules_follow_the_bones():
+    body = cb.load_body({"model": "open", "sex": "female", "height": 1.6, "shape": [0.0, 0.0]})
+    caps = body.capsules
+    root = np.array([0.5, -0.2, body.pelvis_height])
+    start, end = posed_capsules(body, np.zeros((24, 3)), root)
+    np.testing.assert_allclose(start, caps.start + root, atol=1e-12)
+    rng = np.random.default_rng(2)
+    rot = rng.normal(0, 0.5, (2, 24, 3))
+    start, end = posed_capsules(body, rot, np.zeros((2, 3)))
+    glob, pos = forward_kinematics(body.rest_joints, rot, np.zeros((2, 3)))
+    j = 18
+    np.testing.assert_allclose(end[1, j], glob[1, j] @ (caps.end[j] - body.rest_joints[j]) + pos[1, j])
+    # capsule lengths are preserved by the rigid motion
+    np.testing.assert_allclose(np.linalg.norm(end - start, axis=-1), np.broadcast_to(caps.length, (2, 24)),
+                               atol=1e-12)
+
+
+def test_bad_capsule_input():
+    with pytest.raises(InvalidInputError, match="Capsules.radius"):
+        Capsules(start=np.zeros((24, 3)), end=np.zeros((24, 3)), radius=np.zeros(23))
+    body = cb.load_body({"model": "open", "sex": "male"})
+    with pytest.raises(InvalidInputError, match="resolution"):
+        capsule_mesh_iou(body, resolution=0.0)
