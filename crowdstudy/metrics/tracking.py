@@ -1,0 +1,208 @@
+"""Motion-quality metrics: tracking error, jerk and intra-body penetration.
+
+* :func:`tracking_error`: how far the corrected animation strays from its input (mean
+  joint-position deviation, cm), with each character's own ``rest_joints``.
+* :func:`mean_jerk`: smoothness, the mean norm of the third time derivative of joint
+  positions (m/s^3), by third finite differences.
+* :func:`intra_penetration`: how deep a character's own bone capsules sink into each other,
+  over pairs that do not already touch in the rest pose (adjacent bones are skipped, as
+  the physics layer skips them).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import Any, Sequence
+
+import numpy as np
+
+from crowdstudy.errors import InvalidInputError
+from crowdstudy.metrics.overlap import capsules_world, frame_indices, resolve_bodies
+
+__all__ = ["joint_positions", "tracking_error", "mean_jerk", "intra_penetration", "IntraPenetrationResult",
+           "segment_distance", "intra_pairs"]
+
+_FRAME_CHUNK = 64
+
+
+def joint_positions(anim, *, bodies: Sequence | None = None, frames: Any = None) -> np.ndarray:
+    """World joint positions by forward kinematics with each body's ``rest_joints``.
+
+    Returns:
+        (F, N, J, 3) float64 metres for the selected ``frames`` (all by default).
+    """
+    from crowdstudy.body.skeleton import forward_kinematics
+
+    idx = frame_indices(frames, anim.n_frames)
+    body_objs = resolve_bodies(anim, bodies)
+    rest = np.stack([np.asarray(b.rest_joints, dtype=np.float64) for b in body_objs])  # (N, J, 3)
+    if rest.shape[1] != anim.n_joints:
+        raise InvalidInputError(
+            f"bodies: rest_joints have {rest.shape[1]} joints, the animation has {anim.n_joints}")
+    _, pos = forward_kinematics(rest[None], anim.joint_rotations[idx], anim.root_translation[idx],
+                                parents=anim.parents)
+    return pos
+
+
+def tracking_error(anim, reference, *, bodies: Sequence | None = None) -> float:
+    """Mean joint-position deviation of ``anim`` from ``reference`` (its input), cm.
+
+    Args:
+        anim: the corrected :class:`~crowdstudy.scene.CrowdAnimation`.
+        reference: the animation it should follow (same frames, characters, joints).
+        bodies: optional body objects overriding ``load_body`` (same for both).
+
+    Joint positions come from forward kinematics with each character's rest joints; in
+    periodic scenes the x difference is taken by the minimum image.
+    """
+    for name, value in (("anim", anim), ("reference", reference)):
+        if not hasattr(value, "joint_rotations"):
+            raise TypeError(f"{name}: expected a CrowdAnimation, got {type(value).__name__}")
+    if reference.root_translation.shape != anim.root_translation.shape or reference.n_joints != anim.n_joints:
+        raise InvalidInputError(
+            f"reference: expected the same (frames, characters, joints) as anim "
+            f"{anim.root_translation.shape[:2] + (anim.n_joints,)}, got "
+            f"{reference.root_translation.shape[:2] + (reference.n_joints,)}")
+    body_objs = resolve_bodies(anim, bodies)
+    total = 0.0
+    count = 0
+    length = anim.periodic_length
+    for c0 in range(0, anim.n_frames, _FRAME_CHUNK):
+        chunk = np.arange(c0, min(c0 + _FRAME_CHUNK, anim.n_frames))
+        diff = joint_positions(anim, bodies=body_objs, frames=chunk) - \
+            joint_positions(reference, bodies=body_objs, frames=chunk)
+        if length is not None:
+            diff[..., 0] -= length * np.round(diff[..., 0] / length)
+        dist = np.linalg.norm(diff, axis=-1)
+        total += float(dist.sum())
+        count += dist.size
+    return 100.0 * total / count
+
+
+def mean_jerk(anim, *, bodies: Sequence | None = None) -> float:
+    """Mean norm of the joint jerk (third derivative of joint positions), m/s^3.
+
+    Third finite differences of the world joint positions times ``fps^3``, averaged over
+    frames, characters and joints. Needs at least 4 frames.
+    """
+    if anim.n_frames < 4:
+        raise InvalidInputError(f"anim: mean_jerk needs at least 4 frames, got {anim.n_frames}")
+    body_objs = resolve_bodies(anim, bodies)
+    total = 0.0
+    count = 0
+    for c0 in range(0, anim.n_frames - 3, _FRAME_CHUNK):
+        chunk = np.arange(c0, min(c0 + _FRAME_CHUNK + 3, anim.n_frames))
+        pos = joint_positions(anim, bodies=body_objs, frames=chunk)
+        jerk = np.diff(pos, n=3, axis=0) * anim.fps ** 3
+        norm = np.linalg.norm(jerk, axis=-1)
+        total += float(norm.sum())
+        count += norm.size
+    return total / count
+
+
+def segment_distance(p0: np.ndarray, p1: np.ndarray, q0: np.ndarray, q1: np.ndarray) -> np.ndarray:
+    """Closest distance between segments [p0, p1] and [q0, q1] (arrays (..., 3)), metres."""
+    d1 = p1 - p0
+    d2 = q1 - q0
+    r = p0 - q0
+    a = np.einsum("...i,...i->...", d1, d1)
+    e = np.einsum("...i,...i->...", d2, d2)
+    f = np.einsum("...i,...i->...", d2, r)
+    c = np.einsum("...i,...i->...", d1, r)
+    b = np.einsum("...i,...i->...", d1, d2)
+    eps = 1e-14
+    a_ok = a > eps
+    e_ok = e > eps
+    safe_a = np.where(a_ok, a, 1.0)
+    safe_e = np.where(e_ok, e, 1.0)
+    denom = a * e - b * b
+    skew = denom > 1e-12 * np.maximum(a * e, eps)  # not parallel: unique closest points
+    s = np.where(skew, np.clip((b * f - c * e) / np.where(skew, denom, 1.0), 0.0, 1.0), 0.0)
+    t = (b * s + f) / safe_e
+    s = np.where(t < 0, np.clip(-c / safe_a, 0.0, 1.0), s)
+    s = np.where(t > 1, np.clip((b - c) / safe_a, 0.0, 1.0), s)
+    t = np.clip(t, 0.0, 1.0)
+    # Degenerate segments (points): project onto the other one.
+    s = np.where(~e_ok, np.clip(-c / safe_a, 0.0, 1.0), s)
+    t = np.where(~e_ok, 0.0, t)
+    s = np.where(~a_ok, 0.0, s)
+    t = np.where(~a_ok & e_ok, np.clip(f / safe_e, 0.0, 1.0), t)
+    cp = p0 + s[..., None] * d1
+    cq = q0 + t[..., None] * d2
+    return np.linalg.norm(cp - cq, axis=-1)
+
+
+def intra_pairs(body, *, parents: np.ndarray | None = None) -> np.ndarray:
+    """Capsule pairs (P, 2) of one body that are checked for self-penetration: both radii
+    positive, not parent and child, and not touching in the rest pose (the body's
+    ``rest_touching_pairs()`` when it has one, which the physics layer also skips, else
+    capsules within ``r_a + r_b`` of each other in the rest pose)."""
+    from crowdstudy.body.skeleton import PARENTS
+
+    parents = PARENTS if parents is None else np.asarray(parents)
+    caps = body.capsules
+    start = np.asarray(caps.start, dtype=np.float64)
+    end = np.asarray(caps.end, dtype=np.float64)
+    radius = np.asarray(caps.radius, dtype=np.float64)
+    a, b = np.triu_indices(len(radius), k=1)
+    ok = (radius[a] > 0) & (radius[b] > 0) & (parents[b] != a) & (parents[a] != b)
+    touching = getattr(body, "rest_touching_pairs", None)
+    if callable(touching):
+        skip = np.zeros((len(radius), len(radius)), bool)
+        pairs = np.asarray(touching(), dtype=np.int64).reshape(-1, 2)
+        skip[pairs[:, 0], pairs[:, 1]] = True
+        skip[pairs[:, 1], pairs[:, 0]] = True
+        ok &= ~skip[a, b]
+    else:
+        ok &= segment_distance(start[a], end[a], start[b], end[b]) > radius[a] + radius[b]
+    return np.stack([a[ok], b[ok]], axis=1)
+
+
+@dataclasses.dataclass(frozen=True)
+class IntraPenetrationResult:
+    """Self-penetration between a character's own non-adjacent capsules.
+
+    Attributes:
+        per_character: (F, N) float64 metres, the deepest penetration
+            ``r_a + r_b - distance`` over the character's checked pairs (0 when none).
+        frames: (F,) measured frame indices.
+        pairs: (N,) number of capsule pairs checked per character.
+    """
+
+    per_character: np.ndarray
+    frames: np.ndarray
+    pairs: np.ndarray
+
+    @property
+    def mean_depth(self) -> float:
+        """Mean of the deepest penetration over characters and frames, metres."""
+        return float(self.per_character.mean()) if self.per_character.size else 0.0
+
+    @property
+    def fraction(self) -> float:
+        """Share of (frame, character) samples with any self-penetration."""
+        return float((self.per_character > 0).mean()) if self.per_character.size else 0.0
+
+
+def intra_penetration(anim, *, frames: Any = None, bodies: Sequence | None = None) -> IntraPenetrationResult:
+    """Depth of self-penetration between non-adjacent bone capsules of each character.
+
+    Pairs that are parent and child, or that already touch in the rest pose, are skipped
+    (:func:`intra_pairs`); the depth of a pair is ``r_a + r_b - distance`` of the two
+    capsule segments when positive.
+    """
+    idx = frame_indices(frames, anim.n_frames)
+    body_objs = resolve_bodies(anim, bodies)
+    out = np.zeros((len(idx), anim.n_characters))
+    n_pairs = np.zeros(anim.n_characters, np.int64)
+    for i, body in enumerate(body_objs):
+        pairs = intra_pairs(body, parents=anim.parents)
+        n_pairs[i] = len(pairs)
+        if len(pairs) == 0:
+            continue
+        start, end, radius = capsules_world(body, anim.joint_rotations[idx, i], anim.root_translation[idx, i])
+        a, b = pairs[:, 0], pairs[:, 1]
+        dist = segment_distance(start[:, a], end[:, a], start[:, b], end[:, b])
+        depth = radius[a] + radius[b] - dist
+        out[:, i] = np.maximum(depth.max(axis=1), 0.0)
+    return IntraPenetrationResult(per_character=out, frames=idx, pairs=n_pairs)
