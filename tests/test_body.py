@@ -171,6 +171,72 @@ def test_pose_bodies_and_warp_skinner_match_body_pose():
     assert skinner.faces.max() == skinner.n_vertices - 1
 
 
+def _synthetic_body(rng, n_vertices, key, rest_joints=DEFAULT_REST_JOINTS):
+    """A point cloud with 1 to 4 random joints per vertex and random weights (many joint
+    sets, unlike the open model's ~60)."""
+    nk = rng.integers(1, 5, n_vertices)
+    weights = np.zeros((n_vertices, 24), np.float32)
+    for v in range(n_vertices):
+        weights[v, rng.choice(24, nk[v], replace=False)] = rng.dirichlet(np.ones(nk[v]))
+    weights /= weights.sum(axis=1, keepdims=True)
+    return Body(record={}, rest_joints=np.array(rest_joints, dtype=np.float64),
+                rest_vertices=rng.normal(0.0, 0.4, (n_vertices, 3)), faces=np.zeros((1, 3), np.int32),
+                weights=weights, pelvis_height=1.0, template_key=key)
+
+
+@pytest.mark.parametrize("options", [{"threads": 1}, {"threads": 2}, {"threads": 3, "schedule": "segments"},
+                                     {"schedule": "vertices"}])
+def test_crowd_skinner_schedules_equal_body_pose_on_random_poses(options):
+    from crowdstudy.body.skinning import CrowdSkinner
+
+    rng = np.random.default_rng(7)
+    open_bodies = [cb.load_body(r) for r in cb.sample_bodies(3, seed=11)]
+    # two synthetic bodies share a template_key but not their weights: they must not share data
+    synthetic = [_synthetic_body(rng, 700, "synthetic"), _synthetic_body(rng, 500, "synthetic"),
+                 _synthetic_body(rng, 300, "other", DEFAULT_REST_JOINTS * 1.1)]
+    bodies = [open_bodies[0], synthetic[0], open_bodies[1], synthetic[1], open_bodies[2], synthetic[2]]
+    skinner = CrowdSkinner(bodies, device="cpu", **options)
+    assert skinner.n_segments > 200  # the synthetic bodies have many joint sets
+    for trial in range(3):
+        rot = rng.normal(0.0, 0.8, (len(bodies), 24, 3))
+        rot[:, 5] = 0.0  # the zero-angle branch of the kinematics
+        root = rng.normal(0.0, 2.0, (len(bodies), 3))
+        verts, joints = skinner.pose(rot, root, copy=True)
+        assert verts.dtype == np.float32 and verts.shape == (skinner.n_vertices, 3)
+        for i, body in enumerate(bodies):
+            ref, ref_j = body.pose(rot[i], root[i])
+            np.testing.assert_allclose(verts[skinner.offsets[i]:skinner.offsets[i + 1]], ref, atol=1e-5,
+                                       err_msg=f"body {i}, trial {trial}")
+            np.testing.assert_allclose(joints[i], ref_j, atol=1e-5)
+
+
+def test_crowd_skinner_buffers_and_copies():
+    from crowdstudy.body.skinning import CrowdSkinner
+
+    rng = np.random.default_rng(3)
+    bodies = [_synthetic_body(rng, 200, "a"), _synthetic_body(rng, 100, "b")]
+    skinner = CrowdSkinner(bodies, device="cpu", threads=2)
+    rot, root = rng.normal(0, 0.5, (2, 24, 3)), rng.normal(0, 1, (2, 3))
+    view, _ = skinner.pose(rot, root)
+    kept, _ = skinner.pose(rot, root, copy=True)
+    np.testing.assert_array_equal(view, kept)
+    other, _ = skinner.pose(rot + 0.3, root, copy=True)
+    assert not np.shares_memory(kept, other) and np.abs(kept - other).max() > 1e-3
+    device_verts, device_joints = skinner.pose_device(rot, root)
+    assert device_verts.shape == (300,) and device_joints.shape == (2, 24)
+    np.testing.assert_array_equal(device_verts.numpy(), kept)
+    with pytest.raises(InvalidInputError, match="joint_rotations"):
+        skinner.pose(rot[:1], root)
+    with pytest.raises(InvalidInputError, match="root_translation"):
+        skinner.pose(rot, root[:, :2])
+    with pytest.raises(InvalidInputError, match="schedule"):
+        CrowdSkinner(bodies, device="cpu", schedule="tiles")
+    with pytest.raises(InvalidInputError, match="threads"):
+        CrowdSkinner(bodies, device="cpu", threads=0)
+    with pytest.raises(InvalidInputError, match="bodies"):
+        CrowdSkinner([], device="cpu")
+
+
 # ---------------------------------------------------------------- BVH names
 
 def test_bvh_name_maps_cover_the_skeleton(shared_dir):
