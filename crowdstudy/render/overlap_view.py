@@ -1,0 +1,170 @@
+"""Overlap view (paper Fig. 5): interpenetrating body parts painted red.
+
+Definition. A surface point of character A is *overlapping* when it lies inside another
+character B, B's body being represented by its capsules (``Body.capsules``, posed with the
+same skinning matrices as the mesh; a point counts when it is deeper than ``tolerance``
+inside a capsule). With opaque, closed bodies the nearest visible surface is never inside
+another body, so the overlapping surfaces are made visible by an x-ray rule:
+
+1. id pass: the index (and periodic copy) of the character visible at each pixel;
+2. overlap pass, without depth test: every fragment of every character is tested against
+   the candidate capsules of the other characters (pre-culled on the CPU by bounding
+   boxes); a fragment of A inside B marks its pixel when the pixel's visible surface
+   belongs to A itself or to B. The overlap is therefore seen *through the two bodies
+   that cause it*, but never through a third character or the floor.
+
+The red fraction of a frame is (marked pixels) / (all pixels); ``crowd_fraction`` divides
+by the pixels covered by characters instead.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+from crowdstudy.errors import InvalidInputError
+
+__all__ = ["OverlapFrame", "OverlapPass", "posed_capsules", "RED"]
+
+RED = np.array([225, 25, 30], dtype=np.float32)
+_MAX_CANDIDATES = 160
+
+
+@dataclasses.dataclass
+class OverlapFrame:
+    """One overlap-view frame.
+
+    Attributes:
+        image: (H, W, 3) uint8, the render, desaturated, with overlapping pixels in red.
+        mask: (H, W) bool, the overlapping pixels.
+        red_fraction: mask pixels / all pixels.
+        crowd_fraction: mask pixels / pixels covered by characters (0 when none).
+    """
+    image: np.ndarray
+    mask: np.ndarray
+    red_fraction: float
+    crowd_fraction: float
+
+
+def posed_capsules(bodies: list, skinning: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """World capsules of every character.
+
+    Args:
+        bodies: N bodies with ``capsules`` (start (24, 3), end (24, 3), radius (24,)) in
+            the rest frame.
+        skinning: (N, 24, 3, 4) skinning matrices of one frame.
+    Returns:
+        ``(start (N, 24, 3), end (N, 24, 3), radius (N, 24))`` float64, metres.
+    """
+    n = len(bodies)
+    start, end, radius = np.zeros((n, 24, 3)), np.zeros((n, 24, 3)), np.zeros((n, 24))
+    for i, body in enumerate(bodies):
+        caps = getattr(body, "capsules", None)
+        if caps is None:
+            raise InvalidInputError(f"bodies[{i}]: no 'capsules' for the overlap view")
+        m = np.asarray(skinning[i], dtype=np.float64)
+        start[i] = np.einsum("jab,jb->ja", m[:, :, :3], np.asarray(caps.start)) + m[:, :, 3]
+        end[i] = np.einsum("jab,jb->ja", m[:, :, :3], np.asarray(caps.end)) + m[:, :, 3]
+        radius[i] = np.asarray(caps.radius)
+    return start, end, radius
+
+
+def _candidates(start, end, radius, period: float | None) -> np.ndarray:
+    """(N, K + 1) float32: count, then flat capsule ids (owner * 24 + bone) near each character."""
+    n = start.shape[0]
+    lo = np.minimum(start, end) - radius[..., None]
+    hi = np.maximum(start, end) + radius[..., None]
+    body_lo, body_hi = lo.min(axis=1), hi.max(axis=1)           # (N, 3)
+    out = np.zeros((n, _MAX_CANDIDATES + 1), np.float32)
+    centre = 0.5 * (body_lo + body_hi)
+    for a in range(n):
+        shift = np.zeros((n, 1, 3))
+        if period:
+            dx = centre[:, 0] - centre[a, 0]
+            shift[:, 0, 0] = -period * np.round(dx / period)
+        hit = np.all((lo + shift <= body_hi[a]) & (hi + shift >= body_lo[a]), axis=2)  # (N, 24)
+        hit[a] = False
+        owners, bones = np.nonzero(hit)
+        if len(owners) > _MAX_CANDIDATES:
+            mid = 0.5 * (start + end)[owners, bones] + shift[owners, 0]
+            keep = np.argsort(np.linalg.norm(mid - centre[a], axis=1))[:_MAX_CANDIDATES]
+            owners, bones = owners[keep], bones[keep]
+        out[a, 0] = len(owners)
+        out[a, 1:1 + len(owners)] = owners * 24 + bones
+    return out
+
+
+class OverlapPass:
+    """GPU resources of the overlap view for one :class:`CrowdRenderer`."""
+
+    def __init__(self, renderer):
+        import moderngl
+
+        self.r = renderer
+        ctx = renderer.ctx
+        size = (renderer.width, renderer.height)
+        n = renderer.anim.n_characters
+        self.tex_ids = ctx.texture(size, 2, dtype="f4")
+        self.depth_ids = ctx.depth_renderbuffer(size)
+        self.fbo_ids = ctx.framebuffer(color_attachments=[self.tex_ids], depth_attachment=self.depth_ids)
+        self.tex_mask = ctx.texture(size, 1, dtype="f1")
+        self.fbo_mask = ctx.framebuffer(color_attachments=[self.tex_mask])
+        self.tex_caps = ctx.texture((48, n), 4, dtype="f4")
+        self.tex_cand = ctx.texture((_MAX_CANDIDATES + 1, n), 1, dtype="f4")
+        for tex in (self.tex_ids, self.tex_mask, self.tex_caps, self.tex_cand):
+            tex.filter = (moderngl.NEAREST, moderngl.NEAREST)
+        prog = renderer.prog_overlap
+        for name, unit in (("u_ids", 4), ("u_capsules", 5), ("u_candidates", 6)):
+            prog[name].value = unit
+        prog["u_period"].value = float(renderer.period or 0.0)
+
+    def run(self, frame: int, *, tolerance: float = 0.005) -> OverlapFrame:
+        import moderngl
+
+        r = self.r
+        raw = r.render_raw(frame)  # normal look; also loads the frame's bones and instances
+        image = np.frombuffer(raw, np.uint8).reshape(r.height, r.width, 3)[::-1].astype(np.float32)
+        start, end, radius = posed_capsules(r.bodies, r.skinning(frame))
+        caps = np.zeros((start.shape[0], 24, 2, 4), np.float32)
+        caps[:, :, 0, :3], caps[:, :, 0, 3] = start, radius
+        caps[:, :, 1, :3], caps[:, :, 1, 3] = end, np.arange(start.shape[0])[:, None]
+        self.tex_caps.write(caps.tobytes())
+        self.tex_cand.write(_candidates(start, end, radius, r.period).tobytes())
+        vp = r.camera.view_projection(r.width / r.height)
+        ctx = r.ctx
+        ctx.viewport = (0, 0, r.width, r.height)
+        # pass 1: visible character ids
+        self.fbo_ids.use()
+        ctx.viewport = (0, 0, r.width, r.height)
+        self.fbo_ids.clear(-1.0, -1.0, 0.0, 0.0, depth=1.0)
+        ctx.enable(moderngl.DEPTH_TEST)
+        ctx.disable(moderngl.CULL_FACE)
+        r._draw_characters(r.prog_id, vp)
+        # pass 2: overlapping fragments, no depth test
+        self.fbo_mask.use()
+        ctx.viewport = (0, 0, r.width, r.height)
+        self.fbo_mask.clear(0.0, 0.0, 0.0, 0.0)
+        ctx.disable(moderngl.DEPTH_TEST)
+        self.tex_ids.use(4)
+        self.tex_caps.use(5)
+        self.tex_cand.use(6)
+        r.prog_overlap["u_tolerance"].value = float(tolerance)
+        r._draw_characters(r.prog_overlap, vp)
+        ctx.enable(moderngl.DEPTH_TEST)
+        mask = np.frombuffer(self.fbo_mask.read(components=1, alignment=1), np.uint8)
+        mask = mask.reshape(r.height, r.width)[::-1] > 127
+        ids = np.frombuffer(self.fbo_ids.read(components=1, dtype="f4", alignment=1), np.float32)
+        crowd_pixels = int(np.count_nonzero(ids > -0.5))
+        # desaturate the scene so no red shirt can be taken for an overlap, then paint red
+        luma = image @ np.array([0.299, 0.587, 0.114], np.float32)
+        image = 0.3 * image + 0.7 * (0.85 * luma[..., None] + 30.0)
+        image[mask] = 0.15 * image[mask] + 0.85 * RED
+        n_red = int(np.count_nonzero(mask))
+        return OverlapFrame(image=np.clip(image, 0, 255).astype(np.uint8), mask=mask, red_fraction=n_red / mask.size,
+                            crowd_fraction=n_red / crowd_pixels if crowd_pixels else 0.0)
+
+    def release(self) -> None:
+        for o in (self.fbo_ids, self.depth_ids, self.tex_ids, self.fbo_mask, self.tex_mask, self.tex_caps,
+                  self.tex_cand):
+            o.release()

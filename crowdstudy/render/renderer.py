@@ -1,0 +1,531 @@
+"""The crowd renderer: GPU skinning, shadows, MSAA, environment, overlap view.
+
+Per frame the CPU uploads one RGBA32F texture of skinning matrices (3 rows of 4 floats per
+bone, one texture row per character, 69 KB for 60 characters) and the list of visible
+instances; each body template group is drawn with ONE instanced call, in a shadow pass, a
+colour pass (4x MSAA by default) and, for the overlap view, an id pass and an overlap pass
+(see :mod:`crowdstudy.render.overlap_view`).
+
+Periodic scenes (the corridor): every character is wrapped into the visible section
+[-L/2, L/2) along x and drawn at offsets k*L, k in -2..2 (instances outside the view
+frustum are culled), so the crowd looks continuous and nothing pops at the seams.
+
+Levels of detail: characters less than 300 (150) pixels tall on screen are drawn with
+half (a quarter) of the faces; shadow casters always with the coarsest mesh.
+
+Body meshes are decimated once per template (``max_faces``, 3000 at 1080p: at 1080p a
+character is at most ~500 px tall, and on llvmpipe the cost of a frame grows with the
+triangle count); characters are lit per vertex (see ``shaders/lighting.glsl``).
+"""
+
+from __future__ import annotations
+
+import functools
+from importlib import resources
+
+import numpy as np
+
+from crowdstudy.errors import InvalidInputError
+from crowdstudy.render.bodies import BodyGroup, default_body_loader, group_bodies
+from crowdstudy.render.camera import Camera, frame_viewpoint, look_at
+from crowdstudy.render.context import get_context
+from crowdstudy.render.palette import assign_colors
+from crowdstudy.render.scene import Environment, build_environment
+
+__all__ = ["CrowdRenderer", "render_frame", "resolve_camera", "scenario_of", "baseline_color_positions", "N_BONES"]
+
+N_BONES = 24
+_CHUNK = 32          # frames of skinning matrices computed at once
+_COPIES = (-2, -1, 0, 1, 2)
+_BOUND_RADIUS = 1.3  # m, bounding sphere of a character around its pelvis (arms raised)
+_LOD_PIXELS = (300.0, 150.0)  # on-screen height (px) below which the next coarser mesh is used
+
+
+@functools.lru_cache(maxsize=None)
+def _shader_source(name: str) -> str:
+    return resources.files("crowdstudy.render").joinpath("shaders", name).read_text(encoding="utf-8")
+
+
+def _program(ctx, vert: str, frag: str, *, lit_vertex: bool = False, lit_fragment: bool = False,
+             defines: tuple[str, ...] = ()):
+    """Compile a program; ``lit_*`` prepend the lighting functions to that stage."""
+    head = "#version 330 core\n" + "".join(f"#define {d} 1\n" for d in defines)
+    light = _shader_source("lighting.glsl")
+    vs = head + ("#define LIT 1\n" + light if lit_vertex else "") + _shader_source(vert)
+    fs = head + (light if lit_fragment else "") + _shader_source("display.glsl") + _shader_source(frag)
+    return ctx.program(vertex_shader=vs, fragment_shader=fs)
+
+
+def _set(prog, name: str, value) -> None:
+    if name in prog:
+        if isinstance(value, np.ndarray):
+            prog[name].write(np.ascontiguousarray(value, dtype=np.float32).tobytes())
+        else:
+            prog[name].value = value
+
+
+def _mat(m: np.ndarray) -> np.ndarray:
+    """Row-major numpy (4, 4) -> the column-major float32 layout GLSL expects."""
+    return np.ascontiguousarray(np.asarray(m, dtype=np.float64).T, dtype=np.float32)
+
+
+def _ortho(half: float, near: float, far: float) -> np.ndarray:
+    m = np.eye(4)
+    m[0, 0] = m[1, 1] = 1.0 / half
+    m[2, 2], m[2, 3] = -2.0 / (far - near), -(far + near) / (far - near)
+    return m
+
+
+def _frustum_planes(vp: np.ndarray) -> np.ndarray:
+    rows = [vp[3] + vp[0], vp[3] - vp[0], vp[3] + vp[1], vp[3] - vp[1], vp[3] + vp[2], vp[3] - vp[2]]
+    planes = np.array(rows)
+    return planes / np.linalg.norm(planes[:, :3], axis=1, keepdims=True)
+
+
+def scenario_of(anim) -> str:
+    """The scenario of an animation: ``meta["scenario"]``, else corridor when periodic."""
+    scen = anim.meta.get("scenario")
+    if scen in ("concert", "corridor"):
+        return scen
+    return "corridor" if anim.periodic_length else "concert"
+
+
+def resolve_camera(view, design, env_extent: tuple[float, float], aspect: float) -> Camera:
+    """A :class:`Camera` from a viewpoint id ("V1".."V4"), a Viewpoint, or a Camera."""
+    if isinstance(view, Camera):
+        return view
+    if isinstance(view, str):
+        if view not in design.viewpoints:
+            raise InvalidInputError(f"viewpoint: unknown viewpoint {view!r}; the design defines "
+                                    f"{', '.join(design.viewpoints)} (or use a free camera)")
+        view = design.viewpoints[view]
+    return frame_viewpoint(view, env_extent, aspect)
+
+
+class CrowdRenderer:
+    """Renders one :class:`~crowdstudy.scene.CrowdAnimation` frame by frame.
+
+    Args:
+        anim: the animation (T frames, N characters).
+        design: the study design (environment sizes, viewpoints); default the paper's.
+        width, height: image size in pixels.
+        msaa: samples per pixel (0 or 1 = off; clamped to what the driver supports).
+        shadows: draw the key light's shadow map.
+        shadow_size: shadow map resolution (pixels per side).
+        body_loader: record -> Body (default ``crowdstudy.body.load_body``).
+        color_seed: seed of the clothing colours (default the animation's seed).
+        color_positions: (N, 2) metres, the floor positions that decide which characters
+            are neighbours for the colour assignment (default: frame 0 of ``anim``). Pass
+            the Baseline's to render its corrected version with the same colours.
+        max_faces: level of detail of the body meshes (faces per template, None = full
+            meshes); "auto" scales with the image height: 3000 at 1080p (hardly
+            distinguishable from the full mesh there), down to 600 for tiny previews.
+    """
+
+    def __init__(self, anim, *, design=None, width: int = 1920, height: int = 1080, msaa: int = 4,
+                 shadows: bool = True, shadow_size: int = 2048, body_loader=None, color_seed: int | None = None,
+                 max_faces: int | str | None = "auto", color_positions=None):
+        import moderngl
+
+        if design is None:
+            from crowdstudy.design import load_design
+            design = load_design()
+        for name, value in (("width", width), ("height", height)):
+            if not isinstance(value, (int, np.integer)) or value < 16 or value > 8192:
+                raise InvalidInputError(f"{name}: expected an integer pixel size in [16, 8192], got {value!r}")
+        if not isinstance(msaa, (int, np.integer)) or msaa < 0 or msaa > 16:
+            raise InvalidInputError(f"msaa: expected 0..16 samples per pixel, got {msaa!r}")
+        if anim.n_joints != N_BONES:
+            raise InvalidInputError(f"anim.joint_names: the renderer needs the {N_BONES}-joint skeleton, got {anim.n_joints}")
+        self.anim, self.design = anim, design
+        self.width, self.height = int(width), int(height)
+        self.ctx = ctx = get_context()
+        self._owned: list = []  # every GL object created here, released by release()
+        self._overlap = None
+        own = self._own
+        self.samples = int(min(msaa, ctx.max_samples)) if msaa > 1 else 0
+        self.shadows = bool(shadows)
+        self.env: Environment = build_environment(scenario_of(anim), design)
+        self.period = anim.periodic_length
+        loader = body_loader or default_body_loader
+        self.bodies = [loader(rec) for rec in anim.bodies]
+        if max_faces == "auto":
+            max_faces = int(np.clip(3000 * self.height / 1080, 600, 3000))
+        elif max_faces is not None and (not isinstance(max_faces, (int, np.integer)) or max_faces < 100):
+            raise InvalidInputError(f"max_faces: expected 'auto', None or an integer >= 100, got {max_faces!r}")
+        self.max_faces = max_faces
+        self.groups: list[BodyGroup] = group_bodies(self.bodies, max_faces=max_faces)
+        # levels of detail by on-screen size: a character under _LOD_PIXELS[k] pixels tall uses
+        # level k + 1 (half, then a quarter of the faces); shadow casters use the coarsest
+        if max_faces:
+            faces = sorted({max_faces, max(600, max_faces // 2), max(600, max_faces // 4)}, reverse=True)
+        else:
+            faces = [None, 3000, 1500]
+        bounds = [np.inf, *_LOD_PIXELS[:len(faces) - 1], 0.0]
+        self._lods = [(self.groups if k == 0 else group_bodies(self.bodies, max_faces=f), bounds[k + 1], bounds[k])
+                      for k, f in enumerate(faces)]
+        n = anim.n_characters
+        seed = int(anim.meta.get("seed", 0) if color_seed is None else color_seed)
+        if color_positions is None:
+            color_positions = self._wrapped_roots(0)[:, :2]
+        color_positions = np.asarray(color_positions, dtype=np.float64)
+        if color_positions.shape != (n, 2):
+            raise InvalidInputError(f"color_positions: expected shape ({n}, 2), got {color_positions.shape}")
+        self.colors, _ = assign_colors(color_positions, seed, period=self.period)
+        self.camera: Camera | None = None
+        self._chunk_start, self._chunk = -1, None
+        self._frame_loaded = -1
+
+        # programs
+        self.prog_char = own(_program(ctx, "character.vert", "character.frag", lit_vertex=True))
+        self.prog_depth = own(_program(ctx, "character.vert", "depth.frag"))
+        self.prog_static = own(_program(ctx, "static.vert", "static.frag", lit_fragment=True))
+        self.prog_floor = own(_program(ctx, "static.vert", "static.frag", lit_fragment=True, defines=("FLOOR",)))
+        self.prog_id = own(_program(ctx, "character.vert", "id.frag"))
+        self.prog_overlap = own(_program(ctx, "character.vert", "overlap.frag"))
+        self._char_programs = (self.prog_char, self.prog_depth, self.prog_id, self.prog_overlap)
+
+        # per-character textures
+        self.tex_bones = own(ctx.texture((3 * N_BONES, n), 4, dtype="f4"))
+        self.tex_colors = own(ctx.texture((6, n), 4, data=np.concatenate(
+            [self.colors, np.ones((n, 6, 1), np.float32)], axis=2).astype("f4").tobytes(), dtype="f4"))
+        for tex in (self.tex_bones, self.tex_colors):
+            tex.filter = (moderngl.NEAREST, moderngl.NEAREST)
+
+        # template groups: static vertex attributes, rest-shape texture, instance buffer
+        self._gl_groups = []
+        last = len(self._lods) - 1
+        for g, lo, hi, coarse in ((g, lo, hi, k == last) for k, (groups, lo, hi) in enumerate(self._lods)
+                                  for g in groups):
+            vbo = own(ctx.buffer(np.concatenate([g.joints.view(np.float32), g.weights, g.scores],
+                                                axis=1).astype(np.float32, copy=False).tobytes()))
+            ibo = own(ctx.buffer(g.faces.astype(np.uint32).tobytes()))
+            texels = g.rest.reshape(-1, 4)
+            rest_w = 4096
+            rows = -(-len(texels) // rest_w)
+            padded = np.zeros((rows * rest_w, 4), np.float32)
+            padded[:len(texels)] = texels
+            tex_rest = own(ctx.texture((rest_w, rows), 4, data=padded.tobytes(), dtype="f4"))
+            tex_rest.filter = (moderngl.NEAREST, moderngl.NEAREST)
+            inst = own(ctx.buffer(reserve=len(g.members) * len(_COPIES) * 12, dynamic=True))
+            vaos = {}
+            for prog in self._char_programs:
+                vaos[prog] = own(ctx.vertex_array(prog, [(vbo, "4i 4f 4f 2f", "in_joints", "in_weights", "in_scores_a",
+                                                      "in_scores_b"),
+                                                     (inst, "1i 1i 1f /i", "in_char", "in_member", "in_shift")],
+                                                  index_buffer=ibo, index_element_size=4, skip_errors=True))
+            self._gl_groups.append({"group": g, "vbo": vbo, "ibo": ibo, "rest": tex_rest, "rest_width": rest_w,
+                                    "inst": inst, "vaos": vaos, "count": 0, "pixels": (lo, hi),
+                                    "coarse": coarse})
+
+        # environment
+        self._static = {}
+        for name in ("opaque", "walls", "stage"):
+            tris = getattr(self.env, name)
+            if len(tris):
+                buf = own(ctx.buffer(tris.astype("f4").tobytes()))
+                prog = self.prog_floor if name == "opaque" else self.prog_static  # "opaque": the ground
+                self._static[name] = own(ctx.vertex_array(prog, [(buf, "3f 3f 4f", "in_position", "in_normal",
+                                                                  "in_color")], skip_errors=True))
+
+        # shadow map
+        if not isinstance(shadow_size, (int, np.integer)) or not 64 <= shadow_size <= 8192:
+            raise InvalidInputError(f"shadow_size: expected an integer in [64, 8192], got {shadow_size!r}")
+        self.shadow_size = int(shadow_size)
+        self.tex_shadow = own(ctx.depth_texture((self.shadow_size, self.shadow_size)))
+        self.tex_shadow.compare_func = "<="
+        self.tex_shadow.filter = (moderngl.LINEAR, moderngl.LINEAR)
+        self.fbo_shadow = own(ctx.framebuffer(depth_attachment=self.tex_shadow))
+        self.light_dir = np.array([0.35, 0.55, 1.0]) / np.linalg.norm([0.35, 0.55, 1.0])
+        self.light_vp = self._light_view_proj()
+
+        # colour targets
+        size = (self.width, self.height)
+        if self.samples:
+            self.fbo_msaa = own(ctx.framebuffer(
+                color_attachments=[own(ctx.renderbuffer(size, 4, samples=self.samples))],
+                depth_attachment=own(ctx.depth_renderbuffer(size, samples=self.samples))))
+        else:
+            self.fbo_msaa = None
+        self.fbo_out = own(ctx.framebuffer(color_attachments=[own(ctx.renderbuffer(size, 4))],
+                                           depth_attachment=own(ctx.depth_renderbuffer(size))))
+
+        # constant uniforms
+        for prog in (self.prog_char, self.prog_static, self.prog_floor):
+            _set(prog, "u_light_dir", tuple(self.light_dir))
+            _set(prog, "u_light_color", (1.55, 1.48, 1.38))
+            _set(prog, "u_sky_color", (0.36, 0.39, 0.46))
+            _set(prog, "u_ground_color", (0.16, 0.15, 0.14))
+            _set(prog, "u_fog_color", tuple(self.env.clear_color))
+            _set(prog, "u_fog_density", 0.012)
+            _set(prog, "u_use_shadows", int(self.shadows))
+            _set(prog, "u_light_view_proj", _mat(self.light_vp))
+            _set(prog, "u_shadow_texel", 1.0 / self.shadow_size)
+            _set(prog, "u_shadow", 3)
+        for prog in self._char_programs:
+            _set(prog, "u_bones", 0)
+            _set(prog, "u_rest", 1)
+            _set(prog, "u_colors", 2)  # character.frag
+            _set(prog, "u_n_characters", n)
+
+    # -- camera and geometry -------------------------------------------------------------
+    def set_view(self, view) -> Camera:
+        """Use a viewpoint id ("V1".."V4"), a design Viewpoint or a :class:`Camera`."""
+        self.camera = resolve_camera(view, self.design, self.env.extent, self.width / self.height)
+        return self.camera
+
+    def _light_view_proj(self) -> np.ndarray:
+        w, d = self.env.extent
+        half = 0.5 * float(np.hypot(w, d)) + 1.5
+        if self.period:
+            half = max(half, 1.6 * self.period)
+        centre = np.array([0.0, 0.0, 0.9])
+        eye = centre + self.light_dir * 30.0
+        return _ortho(half, 1.0, 60.0) @ look_at(eye, centre)
+
+    def _wrapped_roots(self, frame: int) -> np.ndarray:
+        root = np.array(self.anim.root_translation[frame])
+        if self.period:
+            root[:, 0] -= self._wrap_offsets(root[:, 0])
+        return root
+
+    def _wrap_offsets(self, x: np.ndarray) -> np.ndarray:
+        """Multiples of the period to subtract so x falls in [-L/2, L/2)."""
+        if not self.period:
+            return np.zeros_like(x)
+        return self.period * np.floor((x + 0.5 * self.period) / self.period)
+
+    def skinning(self, frame: int) -> np.ndarray:
+        """(N, 24, 3, 4) float32 skinning matrices of ``frame`` (periodic scenes wrapped)."""
+        if not 0 <= frame < self.anim.n_frames:
+            raise InvalidInputError(f"frame: expected 0 <= frame < {self.anim.n_frames}, got {frame}")
+        start = frame - frame % _CHUNK
+        if start != self._chunk_start:
+            stop = min(start + _CHUNK, self.anim.n_frames)
+            rot = self.anim.joint_rotations[start:stop]
+            root = self.anim.root_translation[start:stop]
+            out = np.empty((stop - start, self.anim.n_characters, N_BONES, 3, 4), np.float32)
+            for i, body in enumerate(self.bodies):
+                m = np.asarray(body.skinning_matrices(rot[:, i], root[:, i]))
+                out[:, i] = m[..., :3, :]
+            if self.period:
+                out[..., 0, 3] -= self._wrap_offsets(root[..., 0])[:, :, None].astype(np.float32)
+            self._chunk_start, self._chunk = start, out
+        return self._chunk[frame - start]
+
+    def _instances(self, roots: np.ndarray, vp: np.ndarray, *, shadow: bool = False) -> None:
+        """Fill each group's instance buffer with the characters (and periodic copies)
+        inside the frustum of ``vp``, sorted front to back so early depth testing skips
+        the shading of hidden fragments (the crowd overdraws itself heavily). ``shadow``:
+        every caster with the coarse mesh; else each level of detail by camera distance."""
+        planes = _frustum_planes(vp)
+        copies = _COPIES if self.period else (0,)
+        eye = np.asarray(self.camera.eye)
+        focal_px = self.height / (2.0 * np.tan(np.radians(self.camera.fov) / 2.0))
+        for gl in self._gl_groups:
+            members = gl["group"].members
+            lo, hi = ((0.0, np.inf) if gl["coarse"] else (np.inf, np.inf)) if shadow else gl["pixels"]
+            if lo == np.inf:
+                gl["count"] = 0
+                continue
+            chars, local, shifts, depth = [], [], [], []
+            for k in copies:
+                shift = k * (self.period or 0.0)
+                centres = roots[members] + np.array([shift, 0.0, 0.0])
+                visible = np.all(centres @ planes[:, :3].T + planes[:, 3] > -_BOUND_RADIUS, axis=1)
+                size = focal_px * 1.8 / np.maximum(np.linalg.norm(centres - eye, axis=1), 1e-6)  # pixels tall
+                visible &= (size >= lo) & (size < hi)
+                idx = np.flatnonzero(visible)
+                chars.append(members[idx])
+                local.append(idx)
+                shifts.append(np.full(len(idx), shift))
+                depth.append(centres[idx] @ planes[4, :3] + planes[4, 3])  # distance from the near plane
+            order = np.argsort(np.concatenate(depth), kind="stable")
+            data = np.zeros(len(order), dtype=[("c", "<i4"), ("m", "<i4"), ("s", "<f4")])
+            data["c"] = np.concatenate(chars)[order]
+            data["m"] = np.concatenate(local)[order]
+            data["s"] = np.concatenate(shifts)[order]
+            if len(data):
+                gl["inst"].write(data.tobytes())
+            gl["count"] = len(data)
+
+    def _load_frame(self, frame: int) -> None:
+        mats = self.skinning(frame)
+        self.tex_bones.write(np.ascontiguousarray(mats, dtype=np.float32).tobytes())
+        self._frame_loaded = frame
+
+    def _cull_back_faces(self, on: bool) -> None:
+        import moderngl
+        if on:
+            self.ctx.enable(moderngl.CULL_FACE)
+            self.ctx.front_face = "ccw"
+            self.ctx.cull_face = "back"
+        else:
+            self.ctx.disable(moderngl.CULL_FACE)
+
+    def _draw_characters(self, prog, vp: np.ndarray) -> None:
+        _set(prog, "u_view_proj", _mat(vp))
+        self.tex_bones.use(0)
+        self.tex_colors.use(2)
+        for gl in self._gl_groups:
+            if gl["count"] == 0:
+                continue
+            gl["rest"].use(1)
+            _set(prog, "u_rest_width", gl["rest_width"])
+            _set(prog, "u_n_vertices", gl["group"].n_vertices)
+            gl["vaos"][prog].render(instances=gl["count"])
+
+    # -- passes --------------------------------------------------------------------------
+    def _prepare(self, frame: int, *, upload: bool = True) -> np.ndarray:
+        """Upload the frame's bones (unless done) and the camera's instances; the camera's
+        world-to-clip matrix."""
+        if self.camera is None:
+            raise InvalidInputError("no camera: call set_view() with a viewpoint or a free camera first")
+        if upload:
+            self._load_frame(frame)
+        vp = self.camera.view_projection(self.width / self.height)
+        self._instances(self._wrapped_roots(frame), vp)
+        return vp
+
+    def _shadow_pass(self) -> None:
+        import moderngl
+        if not self.shadows:
+            return
+        ctx = self.ctx
+        self.fbo_shadow.use()
+        ctx.viewport = (0, 0, self.shadow_size, self.shadow_size)
+        self.fbo_shadow.clear(depth=1.0)
+        ctx.enable(moderngl.DEPTH_TEST)
+        ctx.disable(moderngl.CULL_FACE)
+        # Shadow casters: every instance near the lit area (use the light's own frustum).
+        self._instances(self._wrapped_roots(self._frame_loaded), self.light_vp, shadow=True)
+        self._cull_back_faces(True)
+        self._draw_characters(self.prog_depth, self.light_vp)
+        self._cull_back_faces(False)
+
+    def _color_pass(self, vp: np.ndarray, fbo) -> None:
+        import moderngl
+        ctx = self.ctx
+        fbo.use()
+        ctx.viewport = (0, 0, self.width, self.height)
+        fbo.clear(*_display(self.env.clear_color), 1.0, depth=1.0)
+        ctx.enable(moderngl.DEPTH_TEST)
+        ctx.disable(moderngl.CULL_FACE)
+        self.tex_shadow.use(3)
+        eye = tuple(float(v) for v in self.camera.eye)
+        for prog in (self.prog_char, self.prog_static, self.prog_floor):
+            _set(prog, "u_eye", eye)
+            _set(prog, "u_view_proj", _mat(vp))
+        # characters first (sorted front to back), then the environment: the floor hidden
+        # behind the crowd fails the early depth test instead of being shaded and overdrawn
+        self._cull_back_faces(True)  # closed, outward-wound meshes: back faces are never seen
+        self._draw_characters(self.prog_char, vp)
+        self._cull_back_faces(False)
+        if "opaque" in self._static:
+            self._static["opaque"].render()
+        if "stage" in self._static and self.env.stage_front_y is not None and self.camera.eye[1] < self.env.stage_front_y:
+            self._static["stage"].render()
+        if "walls" in self._static:
+            self._cull_back_faces(True)
+            self._static["walls"].render()
+            self._cull_back_faces(False)
+
+    def render(self, frame: int) -> np.ndarray:
+        """The image of ``frame``: (H, W, 3) uint8, first row at the top."""
+        return _flip(self.render_raw(frame), self.height, self.width)
+
+    def render_raw(self, frame: int) -> bytes:
+        """The image of ``frame`` as raw RGB bytes, bottom row first (what OpenGL reads)."""
+        self._draw_frame(frame)
+        return self.fbo_out.read(components=3, alignment=1)
+
+    def render_into(self, frame: int, buffer) -> None:
+        """Render ``frame`` and start reading it back into a ``moderngl.Buffer`` (a pixel
+        pack buffer of W*H*3 bytes). On a GPU the copy runs asynchronously: read the
+        buffer after the next frame has been submitted (double buffering)."""
+        self._draw_frame(frame)
+        self.fbo_out.read_into(buffer, components=3, alignment=1)
+
+    def _draw_frame(self, frame: int) -> None:
+        if self.camera is None:
+            raise InvalidInputError("no camera: call set_view() with a viewpoint or a free camera first")
+        self._load_frame(frame)
+        self._shadow_pass()
+        vp = self._prepare(frame, upload=False)
+        if self.fbo_msaa is not None:
+            self._color_pass(vp, self.fbo_msaa)
+            self.ctx.copy_framebuffer(self.fbo_out, self.fbo_msaa)
+        else:
+            self._color_pass(vp, self.fbo_out)
+
+    def overlap(self, frame: int, *, tolerance: float = 0.005):
+        """Overlap view of ``frame``: see :func:`crowdstudy.render.overlap_view.overlap_mask`."""
+        from crowdstudy.render.overlap_view import OverlapPass
+        if self._overlap is None:
+            self._overlap = OverlapPass(self)
+        return self._overlap.run(frame, tolerance=tolerance)
+
+    def character_positions(self, frame: int) -> np.ndarray:
+        """(N, 3) pelvis positions in world space as drawn (wrapped for periodic scenes)."""
+        return self._wrapped_roots(frame)
+
+    def _own(self, obj):
+        self._owned.append(obj)
+        return obj
+
+    def release(self) -> None:
+        """Free the GL objects (the context stays, for reuse by the thread)."""
+        if self._overlap is not None:
+            self._overlap.release()
+            self._overlap = None
+        for obj in reversed(self._owned):
+            obj.release()
+        self._owned.clear()
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.release()
+
+
+def _display(linear) -> tuple[float, float, float]:
+    c = np.asarray(linear, dtype=np.float64)
+    c = (c * (2.51 * c + 0.03)) / (c * (2.43 * c + 0.59) + 0.14)
+    return tuple(float(v) for v in np.sqrt(np.clip(c, 0, 1)))  # as display.glsl
+
+
+def _flip(raw: bytes, height: int, width: int) -> np.ndarray:
+    return np.frombuffer(raw, dtype=np.uint8).reshape(height, width, 3)[::-1].copy()
+
+
+def baseline_color_positions(path) -> np.ndarray:
+    """(N, 2) frame-0 floor positions of an animation file (wrapped into the periodic
+    section), the ``color_positions`` that give its corrected version the same colours."""
+    from crowdstudy.scene import CrowdAnimation
+    anim = CrowdAnimation.load(path)
+    pos = np.array(anim.root_translation[0, :, :2])
+    if anim.periodic_length:
+        length = anim.periodic_length
+        pos[:, 0] -= length * np.floor((pos[:, 0] + 0.5 * length) / length)
+    return pos
+
+
+def render_frame(anim, viewpoint, frame: int, *, width: int = 1920, height: int = 1080, overlap_view: bool = False,
+                 msaa: int = 4, design=None, body_loader=None, color_positions=None) -> np.ndarray:
+    """Render one frame.
+
+    Args:
+        anim: CrowdAnimation.
+        viewpoint: "V1".."V4" (design viewpoints), a Viewpoint, or a Camera (free camera).
+        frame: frame index in [0, T).
+        overlap_view: paint the interpenetrating surfaces red (paper Fig. 5).
+    Returns:
+        (H, W, 3) uint8 image, first row at the top.
+    """
+    with CrowdRenderer(anim, design=design, width=width, height=height, msaa=msaa, body_loader=body_loader,
+                       color_positions=color_positions) as r:
+        r.set_view(viewpoint)
+        if overlap_view:
+            return r.overlap(frame).image
+        return r.render(frame)

@@ -1,0 +1,48 @@
+// Overlap view, pass 2 (no depth test): marks the pixels where a surface fragment of
+// character A lies inside a capsule of another character B, and the pixel's visible
+// surface (pass 1) belongs to A (same periodic copy) or to B: the interpenetration is
+// drawn through the two bodies that cause it, but never through a third body or the floor.
+uniform sampler2D u_ids;        // RG32F: visible character index (-1 none), copy code
+uniform sampler2D u_capsules;   // RGBA32F, width 48: (a.xyz, radius), (b.xyz, owner) per capsule, row = character
+uniform sampler2D u_candidates; // R32F, width K + 1: count, then flat capsule indices (owner * 24 + bone)
+uniform float u_period;         // periodic length along x (0 = not periodic)
+uniform float u_tolerance;      // metres: a point counts as inside when deeper than this
+
+in vec3 v_world;
+flat in int v_char;
+flat in int v_copy;
+flat in float v_shift;
+out vec4 f_mask;
+
+float segment_distance(vec3 p, vec3 a, vec3 b) {
+    vec3 ab = b - a;
+    float t = clamp(dot(p - a, ab) / max(dot(ab, ab), 1e-12), 0.0, 1.0);
+    return length(p - (a + t * ab));
+}
+
+void main() {
+    vec2 vis = texelFetch(u_ids, ivec2(gl_FragCoord.xy), 0).rg;
+    int vis_char = int(vis.r + 0.5);
+    if (vis.r < -0.5) discard;
+    bool self_visible = (vis_char == v_char) && (int(vis.g + 0.5) == v_copy);
+    vec3 p = v_world - vec3(v_shift, 0.0, 0.0);
+    int count = int(texelFetch(u_candidates, ivec2(0, v_char), 0).r + 0.5);
+    for (int i = 0; i < count; ++i) {
+        int ci = int(texelFetch(u_candidates, ivec2(i + 1, v_char), 0).r + 0.5);
+        int owner = ci / 24;
+        if (!self_visible && owner != vis_char) continue;
+        int bone = ci - owner * 24;
+        vec4 a = texelFetch(u_capsules, ivec2(bone * 2, owner), 0);
+        vec4 b = texelFetch(u_capsules, ivec2(bone * 2 + 1, owner), 0);
+        vec3 off = vec3(0.0);
+        if (u_period > 0.0) {
+            float dx = p.x - 0.5 * (a.x + b.x);
+            off.x = u_period * floor(dx / u_period + 0.5);
+        }
+        if (segment_distance(p, a.xyz + off, b.xyz + off) < a.w - u_tolerance) {
+            f_mask = vec4(1.0);
+            return;
+        }
+    }
+    discard;
+}

@@ -1,0 +1,252 @@
+"""MP4 videos: frames streamed from the renderer to ffmpeg (H.264, yuv420p, +faststart).
+
+Frames never accumulate in memory: each raw RGB frame is read back through two alternating
+pixel-pack buffers (asynchronous on GPUs: frame k is copied while frame k+1 renders) and
+handed to a writer thread that feeds ffmpeg's stdin while the next frame renders (bounded
+queue of two frames). OpenGL rows come bottom-up; ffmpeg's ``vflip`` filter turns them over, so
+Python never copies a frame. The video is written to ``NAME.part.mp4`` and renamed when
+ffmpeg succeeds, so an interrupted run never leaves a truncated file under the final name.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+import queue
+import shutil
+import subprocess
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+
+from crowdstudy.errors import InvalidInputError, MissingDependencyError
+
+__all__ = ["find_ffmpeg", "VideoWriter", "render_video", "sha256_file", "check_output_path", "probe_video"]
+
+
+def find_ffmpeg() -> str:
+    """The system ``ffmpeg``, else imageio-ffmpeg's bundled binary."""
+    exe = shutil.which("ffmpeg")
+    if exe:
+        return exe
+    try:
+        import imageio_ffmpeg
+        return imageio_ffmpeg.get_ffmpeg_exe()
+    except Exception:  # not installed, or its binary is missing for this platform
+        raise MissingDependencyError("no ffmpeg found: install it with `sudo apt-get install ffmpeg` "
+                                     "or `pip install imageio-ffmpeg`") from None
+
+
+def sha256_file(path: str | Path) -> str:
+    h = hashlib.sha256()
+    with open(path, "rb") as fh:
+        for block in iter(lambda: fh.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()
+
+
+def check_output_path(path: str | Path, what: str = "out") -> Path:
+    """Create the parent folder of ``path`` and check it is writable; return ``path``."""
+    path = Path(path)
+    folder = path.parent
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise InvalidInputError(f"{what}: cannot create the output folder {str(folder)!r} ({exc.strerror}); "
+                                "choose a writable location") from None
+    if not os.access(folder, os.W_OK | os.X_OK):
+        raise InvalidInputError(f"{what}: the output folder {str(folder)!r} is not writable; "
+                                "fix its permissions or choose another location")
+    if path.exists() and path.is_dir():
+        raise InvalidInputError(f"{what}: {str(path)!r} is a folder, expected a file path")
+    return path
+
+
+class VideoWriter:
+    """Streams raw RGB frames (bottom row first) into an H.264 MP4.
+
+    Args:
+        path: the .mp4 to write.
+        width, height: frame size in pixels (even numbers, for yuv420p).
+        fps: frames per second.
+        crf: x264 constant rate factor (lower = better quality; 18 is visually lossless).
+        preset: x264 speed preset.
+    """
+
+    def __init__(self, path: str | Path, width: int, height: int, fps: float, *, crf: int = 18,
+                 preset: str = "medium", bottom_up: bool = True):
+        if width % 2 or height % 2:
+            raise InvalidInputError(f"width/height: H.264 yuv420p needs even sizes, got {width}x{height}")
+        self.path = check_output_path(path)
+        self.part = self.path.with_name(self.path.stem + ".part.mp4")
+        self.frame_bytes = width * height * 3
+        self.frames = 0
+        vf = ["-vf", "vflip"] if bottom_up else []
+        cmd = [find_ffmpeg(), "-hide_banner", "-loglevel", "error", "-y", "-f", "rawvideo", "-pix_fmt", "rgb24",
+               "-s", f"{width}x{height}", "-framerate", f"{fps:g}", "-i", "pipe:0", *vf, "-c:v", "libx264",
+               "-preset", preset, "-crf", str(int(crf)), "-pix_fmt", "yuv420p", "-movflags", "+faststart",
+               "-threads", "2", "-fflags", "+bitexact", "-flags:v", "+bitexact", "-an", str(self.part)]
+        self.proc = subprocess.Popen(cmd, stdin=subprocess.PIPE, stderr=subprocess.PIPE)
+        self._queue: queue.Queue = queue.Queue(maxsize=2)
+        self._error: BaseException | None = None
+        self._thread = threading.Thread(target=self._pump, daemon=True)
+        self._thread.start()
+
+    def _pump(self) -> None:
+        while True:
+            item = self._queue.get()
+            if item is None:
+                return
+            try:
+                self.proc.stdin.write(item)
+            except (BrokenPipeError, OSError) as exc:
+                self._error = exc
+                return
+
+    def write(self, frame) -> None:
+        """Queue one frame: raw RGB bytes (bottom row first) or an (H, W, 3) uint8 array
+        (top row first when the writer was created with ``bottom_up=False``)."""
+        data = frame.tobytes() if isinstance(frame, np.ndarray) else bytes(frame)
+        if len(data) != self.frame_bytes:
+            raise InvalidInputError(f"frame: expected {self.frame_bytes} bytes, got {len(data)}")
+        if self._error is not None:
+            self._fail()
+        self._queue.put(data)
+        self.frames += 1
+
+    def _fail(self):
+        try:
+            self.proc.kill()
+        except OSError:
+            pass
+        err = self.proc.stderr.read().decode(errors="replace").strip() if self.proc.stderr else ""
+        self.part.unlink(missing_ok=True)
+        raise RuntimeError(f"ffmpeg failed writing {str(self.path)!r}: {err or self._error}")
+
+    def close(self) -> Path:
+        """Finish the file (waits for ffmpeg) and move it to its final name."""
+        self._queue.put(None)
+        self._thread.join()
+        if self._error is not None:
+            self._fail()
+        self.proc.stdin.close()
+        err = self.proc.stderr.read().decode(errors="replace").strip()
+        if self.proc.wait() != 0:
+            self.part.unlink(missing_ok=True)
+            raise RuntimeError(f"ffmpeg failed writing {str(self.path)!r}: {err}")
+        os.replace(self.part, self.path)
+        return self.path
+
+    def abort(self) -> None:
+        self._queue.put(None)
+        self._thread.join(timeout=5)
+        try:
+            self.proc.kill()
+            self.proc.wait(timeout=5)
+        except OSError:
+            pass
+        self.part.unlink(missing_ok=True)
+
+
+def probe_video(path: str | Path) -> dict:
+    """ffprobe of the first video stream: codec, pix_fmt, width, height, frames (decoded count)."""
+    exe = shutil.which("ffprobe")
+    if not exe:
+        raise MissingDependencyError("ffprobe not found: `sudo apt-get install ffmpeg`")
+    out = subprocess.run([exe, "-v", "error", "-select_streams", "v:0", "-count_frames", "-show_entries",
+                          "stream=codec_name,pix_fmt,width,height,nb_read_frames,r_frame_rate", "-of",
+                          "default=noprint_wrappers=1", str(path)], capture_output=True, text=True, check=True).stdout
+    info = dict(line.split("=", 1) for line in out.strip().splitlines() if "=" in line)
+    return {"codec": info.get("codec_name"), "pix_fmt": info.get("pix_fmt"), "width": int(info["width"]),
+            "height": int(info["height"]), "frames": int(info["nb_read_frames"]), "rate": info.get("r_frame_rate")}
+
+
+def _frame_plan(anim, duration: float | None, fps: float) -> np.ndarray:
+    if duration is None:
+        duration = anim.duration
+    if not np.isfinite(duration) or duration <= 0:
+        raise InvalidInputError(f"duration: expected a positive number of seconds, got {duration!r}")
+    if duration > anim.duration + 0.5 / anim.fps:
+        raise InvalidInputError(f"duration: {duration:g} s is longer than the animation ({anim.duration:g} s, "
+                                f"{anim.n_frames} frames at {anim.fps:g} fps)")
+    n = max(1, int(round(duration * fps)))
+    return np.minimum(np.round(np.arange(n) * anim.fps / fps).astype(int), anim.n_frames - 1)
+
+
+def render_video(anim, viewpoint, out_path, *, width: int | None = None, height: int | None = None,
+                 duration: float | None = None, fps: float | None = None, msaa: int = 4, overlap_view: bool = False,
+                 design=None, progress: bool = True, body_loader=None, crf: int = 18, preset: str = "medium",
+                 shadows: bool = True, red_sample_frames: int = 0, color_positions=None) -> dict:
+    """Render an animation to an MP4.
+
+    Args:
+        anim: CrowdAnimation.
+        viewpoint: "V1".."V4", a design Viewpoint, or a :class:`~crowdstudy.render.camera.Camera`.
+        out_path: the .mp4 to write (folders are created).
+        width, height, fps: default the design's video settings (1920x1080, 30 fps).
+        duration: seconds (default the whole animation); frames are resampled from the
+            animation's rate to ``fps`` (nearest frame).
+        overlap_view: paint interpenetrations red (paper Fig. 5); the red fraction of every
+            frame is returned.
+        red_sample_frames: with ``overlap_view`` False, also measure the overlap view's red
+            fraction on this many evenly spaced frames (rendered separately, not in the video).
+        color_positions: (N, 2) positions deciding the clothing colours (see
+            :class:`~crowdstudy.render.renderer.CrowdRenderer`); give the Baseline's frame 0
+            when rendering its corrected version.
+    Returns:
+        dict: path, frames, width, height, fps, duration, sha256, seconds, seconds_per_frame,
+        red_fraction (list, per measured frame), mean_red_fraction (or None).
+    """
+    from tqdm import tqdm
+
+    from crowdstudy.render.renderer import CrowdRenderer
+
+    if design is None:
+        from crowdstudy.design import load_design
+        design = load_design()
+    width = int(width or design.video_width)
+    height = int(height or design.video_height)
+    fps = float(fps or design.fps)
+    if fps <= 0 or not np.isfinite(fps):
+        raise InvalidInputError(f"fps: expected a positive frame rate, got {fps!r}")
+    plan = _frame_plan(anim, duration, fps)
+    out_path = check_output_path(out_path)
+    t0 = time.perf_counter()
+    red: list[float] = []
+    with CrowdRenderer(anim, design=design, width=width, height=height, msaa=msaa, shadows=shadows,
+                       body_loader=body_loader, color_positions=color_positions) as renderer:
+        renderer.set_view(viewpoint)
+        writer = VideoWriter(out_path, width, height, fps, crf=crf, preset=preset, bottom_up=not overlap_view)
+        try:
+            bar = tqdm(plan, desc=out_path.name, unit="frame", disable=not progress, leave=False)
+            if overlap_view:
+                for src in bar:
+                    frame = renderer.overlap(int(src))
+                    red.append(frame.red_fraction)
+                    writer.write(frame.image)
+            else:
+                # two pixel-pack buffers: frame k is read back while frame k+1 renders
+                pbos = [renderer.ctx.buffer(reserve=width * height * 3) for _ in range(2)]
+                try:
+                    for i, src in enumerate(bar):
+                        renderer.render_into(int(src), pbos[i % 2])
+                        if i > 0:
+                            writer.write(pbos[(i - 1) % 2].read())
+                    writer.write(pbos[(len(plan) - 1) % 2].read())
+                finally:
+                    for pbo in pbos:
+                        pbo.release()
+            writer.close()
+        except BaseException:
+            writer.abort()
+            raise
+        if not overlap_view and red_sample_frames > 0:
+            for src in plan[np.linspace(0, len(plan) - 1, min(red_sample_frames, len(plan))).round().astype(int)]:
+                red.append(renderer.overlap(int(src)).red_fraction)
+    seconds = time.perf_counter() - t0
+    return {"path": str(out_path), "frames": int(len(plan)), "width": width, "height": height, "fps": fps,
+            "duration": len(plan) / fps, "sha256": sha256_file(out_path), "seconds": seconds,
+            "seconds_per_frame": seconds / len(plan), "red_fraction": red,
+            "mean_red_fraction": float(np.mean(red)) if red else None}

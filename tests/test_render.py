@@ -1,0 +1,243 @@
+"""Renderer tests: frames, cameras, overlap view, MP4 output, bad input (tiny sizes)."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+import threading
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from render_fixtures import crowd_animation, grid_positions, mannequin_loader  # noqa: E402
+
+from crowdstudy.design import load_design  # noqa: E402
+from crowdstudy.errors import InvalidInputError, MissingDependencyError  # noqa: E402
+
+W, H = 192, 108
+
+
+@pytest.fixture(scope="module")
+def design():
+    return load_design()
+
+
+@pytest.fixture(scope="module")
+def concert():
+    return crowd_animation(grid_positions(12, margin=0.45), n_frames=6)
+
+
+def _renderer(anim, design, **kw):
+    from crowdstudy.render.renderer import CrowdRenderer
+    kw.setdefault("width", W)
+    kw.setdefault("height", H)
+    return CrowdRenderer(anim, design=design, body_loader=mannequin_loader, **kw)
+
+
+@pytest.mark.parametrize("view", ["V1", "V2", "V3", "V4"])
+def test_frame_is_not_blank_and_frames_every_character(concert, design, view):
+    with _renderer(concert, design) as r:
+        cam = r.set_view(view)
+        img = r.render(2)
+        empty = _renderer(concert.replace(root_translation=concert.root_translation + [0, 0, -50.0]), design)
+        empty.set_view(view)
+        background = empty.render(2)
+        empty.release()
+    assert img.shape == (H, W, 3) and img.dtype == np.uint8
+    assert img.std() > 10, "the frame is (nearly) uniform"
+    # every character's feet and head project inside the image ...
+    roots = concert.root_translation[2]
+    for z in (0.02, 1.75):
+        px, front = cam.project(np.c_[roots[:, :2], np.full(len(roots), z)], W, H)
+        assert front.all()
+        assert np.all((px[:, 0] >= 0) & (px[:, 0] < W) & (px[:, 1] >= 0) & (px[:, 1] < H)), px
+    # ... and the crowd changes the image where it stands
+    diff = np.abs(img.astype(int) - background.astype(int)).sum(axis=2) > 30
+    assert 0.02 < diff.mean() < 0.9
+    px, _ = cam.project(np.c_[roots[:, :2], np.full(len(roots), 1.0)], W, H)
+    ix = np.clip(px.astype(int), 0, [W - 1, H - 1])
+    assert diff[ix[:, 1], ix[:, 0]].mean() > 0.5
+
+
+def test_animation_moves_and_is_deterministic(concert, design):
+    with _renderer(concert, design) as r:
+        r.set_view("V3")
+        a, b, a2 = r.render(0), r.render(5), r.render(0)
+    assert np.array_equal(a, a2)
+    assert np.abs(a.astype(int) - b.astype(int)).sum() > 0
+
+
+def test_neighbours_have_different_clothes():
+    from crowdstudy.render.palette import assign_colors
+    pos = grid_positions(60, margin=0.2)
+    colors, choice = assign_colors(pos, seed=3)
+    d = np.linalg.norm(pos[:, None] - pos[None], axis=2)
+    np.fill_diagonal(d, np.inf)
+    nearest = np.argmin(d, axis=1)
+    assert np.all(choice[:, 2] != choice[nearest, 2])          # shirts differ from the nearest neighbour
+    assert len(np.unique(choice[:, 0])) >= 6                   # a diverse range of skin tones
+    assert colors.shape == (60, 6, 3) and np.all((colors >= 0) & (colors <= 1))
+    close = d < 0.9
+    assert not np.any(close & (choice[:, None, 2] == choice[None, :, 2]))
+    assert np.array_equal(assign_colors(pos, seed=3)[1], choice)
+
+
+def test_overlap_view_marks_forced_overlap(design):
+    pos = grid_positions(6, margin=0.6)
+    forced = pos.copy()
+    forced[1] = forced[0] + [0.12, 0.04]                      # two bodies sharing the same space
+    with _renderer(crowd_animation(forced, n_frames=2), design, width=240, height=136) as r:
+        r.set_view("V1")
+        hit = r.overlap(0)
+    with _renderer(crowd_animation(pos, n_frames=2), design, width=240, height=136) as r:
+        r.set_view("V1")
+        clear = r.overlap(0)
+    assert hit.red_fraction > 0.003
+    assert clear.red_fraction < 0.1 * hit.red_fraction
+    red = (hit.image[..., 0] > 180) & (hit.image[..., 1] < 90) & (hit.image[..., 2] < 90)
+    assert red[hit.mask].mean() > 0.5 and hit.mask.sum() == int(round(hit.red_fraction * hit.mask.size))
+
+
+def test_corridor_draws_periodic_copies(design):
+    anim = crowd_animation(np.array([[2.1, 0.0], [-0.5, 0.3]]), n_frames=3, scenario="corridor", period=4.5,
+                           velocity=(1.2, 0.0))
+    with _renderer(anim, design) as r:
+        cam = r.set_view("V4")
+        img = r.render(2)
+        shifts = {round(float(s), 2) for gl in r._gl_groups for s in
+                  np.frombuffer(gl["inst"].read(), dtype=[("c", "<i4"), ("m", "<i4"), ("s", "<f4")])[:gl["count"]]["s"]}
+        wrapped = r.character_positions(2)
+    assert {-4.5, 0.0} <= shifts                               # the copy across the seam is drawn
+    assert np.all(np.abs(wrapped[:, 0]) <= 2.25)               # unwrapped positions are wrapped for drawing
+    assert img.std() > 10
+
+
+def test_video_decodes_with_right_frames_and_size(concert, design, tmp_path):
+    from crowdstudy.render.video import probe_video, render_video
+    out = tmp_path / "clip.mp4"
+    res = render_video(concert, "V2", out, width=W, height=H, fps=30, design=design, progress=False,
+                       body_loader=mannequin_loader, red_sample_frames=2)
+    info = probe_video(out)
+    assert (info["codec"], info["pix_fmt"], info["width"], info["height"]) == ("h264", "yuv420p", W, H)
+    assert info["frames"] == res["frames"] == concert.n_frames
+    data = out.read_bytes()
+    assert data.index(b"moov") < data.index(b"mdat"), "moov atom must come first (+faststart)"
+    assert len(res["red_fraction"]) == 2 and len(res["sha256"]) == 64
+    assert not list(tmp_path.glob("*.part.mp4"))
+    # the decoded frames are the rendered ones, upright and in order
+    from crowdstudy.render.video import find_ffmpeg
+    raw = subprocess.run([find_ffmpeg(), "-loglevel", "error", "-i", str(out), "-f", "rawvideo", "-pix_fmt", "rgb24",
+                          "pipe:1"], capture_output=True, check=True).stdout
+    decoded = np.frombuffer(raw, np.uint8).reshape(-1, H, W, 3).astype(int)
+    with _renderer(concert, design) as r:
+        r.set_view("V2")
+        first, last = r.render(0).astype(int), r.render(concert.n_frames - 1).astype(int)
+    assert np.abs(decoded[0] - first).mean() < 6 and np.abs(decoded[-1] - last).mean() < 6
+    assert np.abs(decoded[0] - last).mean() > np.abs(decoded[0] - first).mean()
+
+
+def test_overlap_video_and_resampling(concert, design, tmp_path):
+    from crowdstudy.render.video import probe_video, render_video
+    res = render_video(concert, "V1", tmp_path / "o.mp4", width=W, height=H, fps=15, overlap_view=True,
+                       design=design, progress=False, body_loader=mannequin_loader)
+    assert res["frames"] == 3 and len(res["red_fraction"]) == 3
+    assert probe_video(tmp_path / "o.mp4")["frames"] == 3
+    with pytest.raises(InvalidInputError, match="duration"):
+        render_video(concert, "V1", tmp_path / "x.mp4", width=W, height=H, duration=5.0, design=design,
+                     progress=False, body_loader=mannequin_loader)
+
+
+def test_bad_inputs(concert, design, tmp_path):
+    from crowdstudy.render.video import render_video
+    with pytest.raises(InvalidInputError, match="viewpoint.*V9"):
+        with _renderer(concert, design) as r:
+            r.set_view("V9")
+    blocker = tmp_path / "file"
+    blocker.write_text("x")
+    with pytest.raises(InvalidInputError, match="output folder"):
+        render_video(concert, "V1", blocker / "sub" / "clip.mp4", width=W, height=H, design=design,
+                     progress=False, body_loader=mannequin_loader)
+    with pytest.raises(InvalidInputError, match="even"):
+        render_video(concert, "V1", tmp_path / "odd.mp4", width=W + 1, height=H, design=design, progress=False,
+                     body_loader=mannequin_loader)
+
+
+def test_missing_egl_names_packages(monkeypatch):
+    import moderngl
+
+    from crowdstudy.render import context
+
+    def broken(*args, **kwargs):
+        raise Exception("libEGL.so: cannot open shared object file")
+
+    monkeypatch.setattr(moderngl, "create_standalone_context", broken)
+    errors = []
+
+    def attempt():  # a fresh thread has no cached context
+        try:
+            context.get_context()
+        except MissingDependencyError as exc:
+            errors.append(str(exc))
+
+    t = threading.Thread(target=attempt)
+    t.start()
+    t.join()
+    assert errors and "apt-get install" in errors[0] and "libegl1" in errors[0]
+
+
+def _cli(*args):
+    return subprocess.run([sys.executable, "-m", "crowdstudy", "render", *map(str, args)], capture_output=True,
+                          text=True, timeout=120)
+
+
+def test_cli_png_with_real_bodies_and_errors(tmp_path):
+    pytest.importorskip("crowdstudy.body.model")
+    anim = crowd_animation(grid_positions(4, margin=0.6), n_frames=3)
+    bodies = tuple({"model": "open", "sex": b["sex"], "height": b["height"], "shape": [0.0, 0.0]}
+                   for b in anim.bodies)
+    path = anim.replace(bodies=bodies).save(tmp_path / "a.npz")
+    out = tmp_path / "f.png"
+    proc = _cli(path, "--view", "V3", "--frame", 1, "--png", "--out", out, "--width", 160, "--height", 90)
+    assert proc.returncode == 0, proc.stderr
+    from PIL import Image
+    img = np.asarray(Image.open(out))
+    assert img.shape == (90, 160, 3) and img.std() > 10
+    clip = tmp_path / "free.mp4"
+    proc = _cli(path, "--eye", "5,4,3", "--target", "0,0,1", "--out", clip, "--width", 96, "--height", 54,
+                "--duration", 0.1, "--quiet", "--no-shadows", "--msaa", 0)
+    assert proc.returncode == 0, proc.stderr
+    from crowdstudy.render.video import probe_video
+    assert probe_video(clip)["frames"] == 3
+    bad = tmp_path / "bad.npz"
+    bad.write_bytes(b"not a zip")
+    proc = _cli(bad, "--out", tmp_path / "x.mp4")
+    assert proc.returncode == 2 and "bad.npz" in proc.stderr and "error" in proc.stderr
+    proc = _cli(tmp_path / "missing.npz", "--out", tmp_path / "x.mp4")
+    assert proc.returncode == 2 and "does not exist" in proc.stderr
+    proc = _cli(path, "--view", "V7", "--out", tmp_path / "x.mp4")
+    assert proc.returncode == 2 and "V7" in proc.stderr
+
+
+def test_corrected_crowd_keeps_the_baseline_colours(design):
+    base = crowd_animation(grid_positions(20, margin=0.3), n_frames=2)
+    shift = np.random.default_rng(0).normal(0, 0.08, base.root_translation.shape) * [1, 1, 0]
+    moved = base.replace(root_translation=base.root_translation + shift)
+    with _renderer(base, design) as a, _renderer(moved, design,
+                                                 color_positions=base.root_translation[0, :, :2]) as b:
+        assert np.array_equal(a.colors, b.colors)
+    with pytest.raises(InvalidInputError, match="color_positions"):
+        _renderer(base, design, color_positions=np.zeros((3, 2)))
+
+
+def test_level_of_detail_and_culling_keep_the_picture(concert, design):
+    with _renderer(concert, design, max_faces=None) as full, _renderer(concert, design, width=W, height=H) as lod:
+        full.set_view("V3")
+        lod.set_view("V3")
+        a, b = full.render(1).astype(int), lod.render(1).astype(int)
+        assert lod.max_faces == 600 and lod.groups[0].faces.shape[0] <= 700
+        assert full.groups[0].faces.shape[0] > 2 * lod.groups[0].faces.shape[0]
+    assert np.abs(a - b).mean() < 6
+    with pytest.raises(InvalidInputError, match="max_faces"):
+        _renderer(concert, design, max_faces=5)
