@@ -1,0 +1,283 @@
+"""``crowdstudy demo`` (what ``make demo`` runs): the whole pipeline on a small configuration.
+
+1. Poisson-disk layouts of the five study densities and an ORCA corridor crowd (plot).
+2. A dense stationary (concert) and a dense walking (corridor) crowd: Baseline animations.
+3. The physics correction (Baseline -> Ours).
+4. Metrics: overlap volume before/after, tracking error, smoothness (table).
+5. Short videos of both crowds and an overlap image (red = interpenetrating surfaces).
+6. The study: the quick stimulus set (all 60 videos, small and short), simulated
+   participants answering through the real server and database, the export, and the
+   repeated-measures analysis with its report and figures.
+
+Every output goes under ``--out`` (default ``demo_out/``); the last lines list them and say
+how to run the full study.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+from pathlib import Path
+
+from crowdstudy.errors import InvalidInputError
+
+__all__ = ["configure", "run", "run_demo"]
+
+
+def configure(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--out", type=Path, default=Path("demo_out"), help="output folder (default demo_out/)")
+    parser.add_argument("--design", type=Path, default=None, help="study design TOML (default stimuli/study.toml)")
+    parser.add_argument("--density", default="D5", help="density level of the two showcase crowds (default D5)")
+    parser.add_argument("--duration", type=float, default=4.0, help="seconds of the showcase animations (default 4)")
+    parser.add_argument("--participants", type=int, default=12, help="simulated participants (default 12)")
+    parser.add_argument("--seed", type=int, default=1, help="seed of the simulated participants (default 1)")
+    parser.add_argument("--skip-study", action="store_true", help="stop after step 5 (no stimulus set, no participants)")
+
+
+def run(args: argparse.Namespace) -> int:
+    run_demo(out=args.out, design=args.design, density=args.density, duration=args.duration,
+             participants=args.participants, seed=args.seed, study=not args.skip_study)
+    return 0
+
+
+class _Steps:
+    def __init__(self, total: int):
+        self.total, self.index, self.t0 = total, 0, time.perf_counter()
+
+    def __call__(self, title: str) -> None:
+        self.index += 1
+        print(f"\n[{self.index}/{self.total}] {title}  (t = {time.perf_counter() - self.t0:.0f} s)", flush=True)
+
+
+def _table(rows: list[dict], columns: list[str]) -> str:
+    from crowdstudy.bench import format_table
+
+    return format_table(rows, columns)
+
+
+def run_demo(*, out: Path = Path("demo_out"), design=None, density: str = "D5", duration: float = 4.0,
+             participants: int = 12, seed: int = 1, study: bool = True) -> dict:
+    """Run the demo; returns ``{name: path}`` of everything written."""
+    from crowdstudy.design import load_design
+
+    design = load_design(design)
+    if density not in design.densities:
+        raise InvalidInputError(f"--density: unknown level {density!r}; expected one of {', '.join(design.densities)}")
+    if not duration > 0:
+        raise InvalidInputError(f"--duration: must be > 0 seconds, got {duration}")
+    if participants < 2:
+        raise InvalidInputError(f"--participants: need at least 2 for the analysis, got {participants}")
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    outputs: dict[str, Path] = {}
+    step = _Steps(6 if study else 5)
+
+    # 1. layouts and trajectories ------------------------------------------------------
+    step("Crowd layouts (Poisson disk) and corridor trajectories (ORCA)")
+    from crowdstudy.layout import concert_layout
+    from crowdstudy.navigation import corridor_crowd, trajectory_summary
+    from crowdstudy.navigation.plot import plot_layouts_and_trajectories
+
+    stationary, walking = design.stage("stationary"), design.stage("walking")
+    layouts, rows = [], []
+    for level in design.densities:
+        crowd = concert_layout(design, level, design.cell_seed(stationary, level))
+        layouts.append(crowd)
+        rows.append({"level": level, "density": design.densities[level], "characters": crowd.n_agents,
+                     "min_distance_m": float(crowd.meta.get("min_distance", float("nan"))),
+                     "required_m": float(crowd.meta.get("target_distance", float("nan")))})
+    print(_table(rows, list(rows[0])))
+    corridor = corridor_crowd(design, density, design.cell_seed(walking, density), duration=duration)
+    summary = trajectory_summary(corridor)
+    print(f"corridor {density}: {corridor.n_agents} walkers over {corridor.n_frames / corridor.fps:g} s, "
+          f"mean speed {summary['mean_speed']:.2f} m/s, largest disc overlap {100 * summary['max_overlap']:.1f} % "
+          f"of the radius (negative = gap), wall clearance {summary['wall_clearance']:.3f} m, "
+          f"fastest turn {summary['max_turn_rate'] * 180 / 3.141592653589793:.0f} deg/s")
+    outputs["layouts and trajectories"] = plot_layouts_and_trajectories(layouts, corridor,
+                                                                         out / "layouts_and_trajectories.png")
+
+    # 2. Baseline animations -----------------------------------------------------------
+    step(f"Baseline animations at {density} ({duration:g} s)")
+    from crowdstudy.motion import build_baseline
+
+    anims = {}
+    for stage in (stationary, walking):
+        t0 = time.perf_counter()
+        base = build_baseline(design, stage.key, density, duration=duration)
+        anims[(stage.key, "Baseline")] = base
+        outputs[f"{stage.key} Baseline animation"] = base.save(out / "animations" / f"{stage.key}_{density}_Baseline.npz")
+        print(f"{stage.key}: {base.n_characters} characters x {base.n_frames} frames in {time.perf_counter() - t0:.2f} s")
+
+    # 3. correction ----------------------------------------------------------------------
+    step("Physics correction (Baseline -> Ours)")
+    from crowdstudy.physics import correct
+
+    for stage in (stationary, walking):
+        t0 = time.perf_counter()
+        ours = correct(anims[(stage.key, "Baseline")], progress=True)
+        anims[(stage.key, "Ours")] = ours
+        outputs[f"{stage.key} Ours animation"] = ours.save(out / "animations" / f"{stage.key}_{density}_Ours.npz")
+        print(f"{stage.key}: corrected in {time.perf_counter() - t0:.1f} s")
+
+    # 4. metrics -------------------------------------------------------------------------
+    step("Metrics: overlap before / after correction (mesh grid 2 cm, every 5th frame)")
+    from crowdstudy.metrics import summarize
+
+    rows = []
+    for stage in (stationary, walking):
+        base = anims[(stage.key, "Baseline")]
+        for method in ("Baseline", "Ours"):
+            anim = anims[(stage.key, method)]
+            m = summarize(anim, None if method == "Baseline" else base, frames="every:5")
+            rows.append({"scene": stage.key, "method": method,
+                         "overlap_mesh_L": m.get("overlap_mesh_litres", float("nan")),
+                         "overlap_capsule_L": m.get("overlap_capsule_litres", float("nan")),
+                         "tracking_cm": m.get("tracking_error_cm", 0.0), "jerk_m_s3": m.get("jerk_m_s3", float("nan"))})
+    print(_table(rows, list(rows[0])))
+    metrics_path = out / "metrics.json"
+    from crowdstudy.provenance import provenance
+
+    metrics_path.write_text(json.dumps({"rows": rows, "provenance": provenance(None)}, indent=2))
+    outputs["metrics"] = metrics_path
+
+    # 5. rendering -----------------------------------------------------------------------
+    step("Rendering: short videos and the overlap image")
+    from crowdstudy.render import render_frame, render_video
+    from crowdstudy.render.renderer import baseline_color_positions
+
+    colours = {}
+    for stage in (stationary, walking):
+        view = stage.viewpoints[0] if stage.key == "walking" else "V3"
+        # "Ours" is dressed like its Baseline: colours follow the Baseline's frame-0 positions.
+        colours[stage.key] = baseline_color_positions(outputs[f"{stage.key} Baseline animation"])
+        for method in ("Baseline", "Ours"):
+            path = out / "videos" / f"{stage.key}_{density}_{view}_{method}.mp4"
+            render_video(anims[(stage.key, method)], view, path, width=640, height=360, design=design,
+                         progress=False, color_positions=colours[stage.key])
+            outputs[f"{stage.key} {method} video"] = path
+    outputs["overlap image"] = _overlap_image(anims[("stationary", "Baseline")], anims[("stationary", "Ours")],
+                                              design, out / "overlap_frame.png", render_frame,
+                                              colours["stationary"])
+    outputs["bodies and capsules"] = _capsule_image(anims[("stationary", "Baseline")], design,
+                                                    out / "bodies_capsules.png", render_frame, colours["stationary"])
+
+    if study:
+        # 6. the study -------------------------------------------------------------------
+        step(f"The study: quick stimulus set, {participants} simulated participants, analysis")
+        outputs.update(_study(design, out, participants, seed))
+
+    print("\nDone. Outputs:")
+    for name, path in outputs.items():
+        print(f"  {name:<32} {path}")
+    print("\nThe full study (1920x1080, 20 s videos, real participants):\n"
+          "  crowdstudy stimuli --design stimuli/study.toml --out stimuli/videos      # 60 videos (+ --scheduler for Dask)\n"
+          "  crowdstudy serve --stimuli stimuli/videos --db sqlite:///study.db          # participants open the printed URL\n"
+          "  crowdstudy export --db sqlite:///study.db --out responses.csv --demographics demographics.csv\n"
+          "  crowdstudy analyze responses.csv --out analysis_out")
+    return outputs
+
+
+def _overlap_image(base, ours, design, path: Path, render_frame, color_positions) -> Path:
+    """Baseline and Ours side by side in the overlap view (red = inside another body)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    frame = base.n_frames // 2
+    fig, axes = plt.subplots(1, 2, figsize=(12, 3.6))
+    for ax, anim, label in zip(axes, (base, ours), ("Baseline", "Ours")):
+        img = render_frame(anim, "V1", frame, width=960, height=540, overlap_view=True, design=design,
+                           color_positions=color_positions)
+        red = (img[..., 0] > 180) & (img[..., 1] < 80) & (img[..., 2] < 80)
+        ax.imshow(img)
+        ax.set_title(f"{label}: red pixels {100 * red.mean():.2f} %")
+        ax.axis("off")
+    fig.suptitle("Overlap view (paper Fig. 5): surfaces inside another character in red")
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def _capsule_image(anim, design, path: Path, render_frame, color_positions) -> Path:
+    """A frame of the dense crowd from the front: the rendered bodies beside their capsule
+    proxies (orthographic front view, capsules drawn far to near)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    import numpy as np
+    from matplotlib.collections import PolyCollection
+    from scipy.spatial import ConvexHull
+
+    from crowdstudy.body import load_body
+    from crowdstudy.body.capsules import posed_capsules
+
+    frame = anim.n_frames // 2
+    circle = np.stack([np.cos(np.linspace(0, 2 * np.pi, 24, endpoint=False)),
+                       np.sin(np.linspace(0, 2 * np.pi, 24, endpoint=False))], axis=1)
+    polys, colours, depth = [], [], []
+    for i in range(anim.n_characters):
+        body = load_body(anim.bodies[i])
+        start, end = posed_capsules(body, anim.joint_rotations[frame, i], anim.root_translation[frame, i])
+        base = np.array(plt.cm.tab20(i % 20)[:3])
+        for a, b, r in zip(start, end, body.capsules.radius):
+            # the outline of a capsule seen along y: the hull of its two end discs in (x, z)
+            pts = np.concatenate([a[[0, 2]] + r * circle, b[[0, 2]] + r * circle])
+            polys.append(pts[ConvexHull(pts).vertices])   # 2-D hull vertices come in counter-clockwise order
+            depth.append(0.5 * (a[1] + b[1]))
+            colours.append(base)
+    depth = np.asarray(depth)
+    shade = 0.55 + 0.45 * (depth - depth.min()) / max(np.ptp(depth), 1e-9)   # nearer (larger y) = brighter
+    order = np.argsort(depth)
+    fig, axes = plt.subplots(1, 2, figsize=(13, 4.2), gridspec_kw={"width_ratios": [1.45, 1]})
+    img = render_frame(anim, "V1", frame, width=960, height=540, design=design, color_positions=color_positions)
+    axes[0].imshow(img)
+    axes[0].set_title(f"rendered bodies (V1), frame {frame}")
+    axes[0].axis("off")
+    axes[1].add_collection(PolyCollection([polys[k] for k in order],
+                                          facecolors=[np.clip(colours[k] * shade[k], 0, 1) for k in order],
+                                          edgecolors=(0, 0, 0, 0.25), linewidths=0.3))
+    axes[1].set_xlim(-2.0, 2.0)
+    axes[1].set_ylim(0.0, 2.3)
+    axes[1].set_aspect("equal")
+    axes[1].set_title(f"capsule proxies, front view ({anim.n_characters} x 24 capsules)")
+    axes[1].set_xlabel("x (m)")
+    axes[1].set_ylabel("z (m)")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def _study(design, out: Path, participants: int, seed: int) -> dict:
+    from crowdstudy.render import build_stimuli
+    from crowdstudy.stats.pipeline import analyze
+    from crowdstudy.study.bots import run_simulation
+    from crowdstudy.study.export import export_study
+    from crowdstudy.study.local_server import LocalServer
+
+    stimuli_dir = out / "stimuli"
+    t0 = time.perf_counter()
+    build_stimuli(design, stimuli_dir, preset="quick", progress=True)
+    print(f"stimulus set (quick preset) ready in {time.perf_counter() - t0:.0f} s: {stimuli_dir / 'manifest.csv'}")
+    db_path = (out / "study.db").resolve()
+    db_url = f"sqlite:///{db_path}"
+    server_args = ["--stimuli", str(stimuli_dir.resolve()), "--db", db_url]
+    if design.source and design.source != "<memory>":
+        server_args += ["--design", str(design.source)]
+    with LocalServer(server_args) as server:
+        print(f"server running at {server.url}")
+        result = run_simulation(server.url, participants, seed=seed, admin_token=server.admin_token)
+        print(result.summary())
+    responses, demographics = out / "responses.csv", out / "demographics.csv"
+    export_study(db_url, responses, demographics)
+    analysis_dir = out / "analysis"
+    res = analyze(responses, design, out_dir=analysis_dir, figure_note=" - SIMULATED participants")
+    print("\n".join(res.summary.splitlines()[:25]))
+    return {"stimulus manifest": stimuli_dir / "manifest.csv", "study database": db_path, "responses": responses,
+            "demographics": demographics, "analysis report": analysis_dir / "summary.md",
+            "analysis figures": analysis_dir}
