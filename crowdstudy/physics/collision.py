@@ -1,0 +1,516 @@
+"""Collision detection: ground, environment, inter-body and intra-body capsule contacts.
+
+Pipeline (paper Sec. 3.4), every step on the state at the start of the step:
+
+1. one AABB per character (its capsules, grown by the margins);
+2. ground: both sphere ends of every capsule against the plane z = 0;
+3. environment: static objects point-sampled into a ``wp.Bvh``; each capsule's AABB
+   queries it (culled against the character AABB first);
+4. inter-body: character AABB pairs (minimum image along x in periodic scenes), then a
+   bounding-sphere test per capsule pair, then the exact segment-segment distance;
+5. intra-body: the model's pair list (pairs touching in the T-pose and parent-child pairs
+   are excluded), bounding-sphere test, exact distance.
+
+A contact stores body a, body b (-1 for static), the unit normal n from b to a, the signed
+depth ``delta = r_a + r_b + margin - distance`` (contacts are kept speculatively down to
+``-speculative_distance``; the solver linearises the depth to the predicted state and
+only penalises positive depths), the world lever arms from each body's centre of mass to
+the segment closest points, and the penalty stiffness (N/m). Inter-body and environment
+contacts use the radius plus the capsule's mesh skin (``Model.cap_skin``) plus the margin;
+ground and intra-body contacts the bare radius.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+
+import numpy as np
+
+from crowdstudy.errors import InvalidInputError
+
+__all__ = ["Contacts", "CollisionPipeline", "collision_kernels", "sample_static_walls", "static_walls_from_meta",
+           "KIND_GROUND", "KIND_ENVIRONMENT", "KIND_INTER", "KIND_INTRA"]
+
+KIND_GROUND, KIND_ENVIRONMENT, KIND_INTER, KIND_INTRA = 0, 1, 2, 3
+
+
+@functools.lru_cache(maxsize=1)
+def collision_kernels():
+    """Build (once) the Warp collision kernels."""
+    from types import SimpleNamespace
+
+    from crowdstudy.warp_runtime import get_warp
+
+    wp = get_warp()
+
+    @wp.func
+    def segment_params(p0: wp.vec3, p1: wp.vec3, q0: wp.vec3, q1: wp.vec3):
+        """Parameters (s, t) in [0, 1] of the closest points of two segments."""
+        d1 = p1 - p0
+        d2 = q1 - q0
+        r = p0 - q0
+        a = wp.dot(d1, d1)
+        e = wp.dot(d2, d2)
+        f = wp.dot(d2, r)
+        c = wp.dot(d1, r)
+        b = wp.dot(d1, d2)
+        eps = 1.0e-10
+        s = float(0.0)
+        t = float(0.0)
+        if a <= eps and e <= eps:
+            return wp.vec2(0.0, 0.0)
+        if a <= eps:
+            s = 0.0
+            t = wp.clamp(f / e, 0.0, 1.0)
+        elif e <= eps:
+            t = 0.0
+            s = wp.clamp(-c / a, 0.0, 1.0)
+        else:
+            denom = a * e - b * b
+            if denom > eps:
+                s = wp.clamp((b * f - c * e) / denom, 0.0, 1.0)
+            t = (b * s + f) / e
+            if t < 0.0:
+                t = 0.0
+                s = wp.clamp(-c / a, 0.0, 1.0)
+            elif t > 1.0:
+                t = 1.0
+                s = wp.clamp((b - c) / a, 0.0, 1.0)
+        return wp.vec2(s, t)
+
+    @wp.func
+    def push_contact(count: wp.array(dtype=wp.int32), capacity: int, a: int, b: int, n: wp.vec3, depth: float,
+                     lever_a: wp.vec3, lever_b: wp.vec3, k: float, kind: int,
+                     c_a: wp.array(dtype=wp.int32), c_b: wp.array(dtype=wp.int32),
+                     c_n: wp.array(dtype=wp.vec3), c_depth: wp.array(dtype=float),
+                     c_la: wp.array(dtype=wp.vec3), c_lb: wp.array(dtype=wp.vec3),
+                     c_k: wp.array(dtype=float), c_kind: wp.array(dtype=wp.int32)):
+        idx = wp.atomic_add(count, 0, 1)
+        if idx < capacity:
+            c_a[idx] = a
+            c_b[idx] = b
+            c_n[idx] = n
+            c_depth[idx] = depth
+            c_la[idx] = lever_a
+            c_lb[idx] = lever_b
+            c_k[idx] = k
+            c_kind[idx] = kind
+        return 0
+
+    @wp.kernel
+    def capsules_world_kernel(x: wp.array(dtype=wp.vec3), q: wp.array(dtype=wp.quat),
+                              cap_p0: wp.array(dtype=wp.vec3), cap_p1: wp.array(dtype=wp.vec3),
+                              cap_radius: wp.array(dtype=float), cap_skin: wp.array(dtype=float),
+                              n_joints: int, grow: float,
+                              p0w: wp.array(dtype=wp.vec3), p1w: wp.array(dtype=wp.vec3),
+                              char_lo: wp.array(dtype=wp.vec3), char_hi: wp.array(dtype=wp.vec3)):
+        """World capsule end points (m) and one AABB per character (thread), grown by ``grow``."""
+        i = wp.tid()
+        lo = wp.vec3(1.0e9, 1.0e9, 1.0e9)
+        hi = wp.vec3(-1.0e9, -1.0e9, -1.0e9)
+        for j in range(n_joints):
+            b = i * n_joints + j
+            a0 = x[b] + wp.quat_rotate(q[b], cap_p0[b])
+            a1 = x[b] + wp.quat_rotate(q[b], cap_p1[b])
+            p0w[b] = a0
+            p1w[b] = a1
+            r = cap_radius[b] + cap_skin[b] + grow
+            rv = wp.vec3(r, r, r)
+            lo = wp.min(lo, wp.min(a0, a1) - rv)
+            hi = wp.max(hi, wp.max(a0, a1) + rv)
+        char_lo[i] = lo
+        char_hi[i] = hi
+
+    @wp.kernel
+    def ground_kernel(x: wp.array(dtype=wp.vec3), p0w: wp.array(dtype=wp.vec3), p1w: wp.array(dtype=wp.vec3),
+                      cap_radius: wp.array(dtype=float), spec: float, k: float,
+                      count: wp.array(dtype=wp.int32), capacity: int,
+                      c_a: wp.array(dtype=wp.int32), c_b: wp.array(dtype=wp.int32), c_n: wp.array(dtype=wp.vec3),
+                      c_depth: wp.array(dtype=float), c_la: wp.array(dtype=wp.vec3), c_lb: wp.array(dtype=wp.vec3),
+                      c_k: wp.array(dtype=float), c_kind: wp.array(dtype=wp.int32)):
+        """Both end spheres of each capsule (thread) against the floor z = 0."""
+        b = wp.tid()
+        up = wp.vec3(0.0, 0.0, 1.0)
+        zero = wp.vec3(0.0, 0.0, 0.0)
+        r = cap_radius[b]
+        for e in range(2):
+            p = p0w[b]
+            if e == 1:
+                p = p1w[b]
+            depth = r - p[2]
+            if depth > -spec:
+                push_contact(count, capacity, b, -1, up, depth, p - x[b], zero, k, 0,
+                             c_a, c_b, c_n, c_depth, c_la, c_lb, c_k, c_kind)
+
+    @wp.kernel
+    def broadphase_kernel(char_lo: wp.array(dtype=wp.vec3), char_hi: wp.array(dtype=wp.vec3), period: float,
+                          pair_count: wp.array(dtype=wp.int32), pair_capacity: int,
+                          pair_i: wp.array(dtype=wp.int32), pair_j: wp.array(dtype=wp.int32),
+                          pair_shift: wp.array(dtype=float)):
+        """Character AABB pairs (i < j) that overlap, with the x shift (m) bringing j next to
+        i under the minimum-image convention (``period`` > 0 in periodic scenes)."""
+        i, j = wp.tid()
+        if j <= i:
+            return
+        shift = float(0.0)
+        if period > 0.0:
+            ci = 0.5 * (char_lo[i][0] + char_hi[i][0])
+            cj = 0.5 * (char_lo[j][0] + char_hi[j][0])
+            shift = period * wp.round((ci - cj) / period)
+        sv = wp.vec3(shift, 0.0, 0.0)
+        lo_j = char_lo[j] + sv
+        hi_j = char_hi[j] + sv
+        lo_i = char_lo[i]
+        hi_i = char_hi[i]
+        if lo_i[0] > hi_j[0] or lo_j[0] > hi_i[0] or lo_i[1] > hi_j[1] or lo_j[1] > hi_i[1]:
+            return
+        if lo_i[2] > hi_j[2] or lo_j[2] > hi_i[2]:
+            return
+        idx = wp.atomic_add(pair_count, 0, 1)
+        if idx < pair_capacity:
+            pair_i[idx] = i
+            pair_j[idx] = j
+            pair_shift[idx] = shift
+
+    @wp.kernel
+    def narrowphase_kernel(x: wp.array(dtype=wp.vec3), p0w: wp.array(dtype=wp.vec3), p1w: wp.array(dtype=wp.vec3),
+                           cap_radius: wp.array(dtype=float), cap_skin: wp.array(dtype=float),
+                           char_lo: wp.array(dtype=wp.vec3), char_hi: wp.array(dtype=wp.vec3), pair_i: wp.array(dtype=wp.int32),
+                           pair_j: wp.array(dtype=wp.int32), pair_shift: wp.array(dtype=float),
+                           n_joints: int, margin: float, spec: float, k: float,
+                           count: wp.array(dtype=wp.int32), capacity: int,
+                           c_a: wp.array(dtype=wp.int32), c_b: wp.array(dtype=wp.int32),
+                           c_n: wp.array(dtype=wp.vec3), c_depth: wp.array(dtype=float),
+                           c_la: wp.array(dtype=wp.vec3), c_lb: wp.array(dtype=wp.vec3),
+                           c_k: wp.array(dtype=float), c_kind: wp.array(dtype=wp.int32)):
+        """Thread (pair, capsule of the first character): bounding sphere vs the other
+        character's AABB, then vs each of its capsules, then the exact segment distance."""
+        tid = wp.tid()
+        p = tid / n_joints
+        ja = tid - p * n_joints
+        ia = pair_i[p]
+        ib = pair_j[p]
+        sv = wp.vec3(pair_shift[p], 0.0, 0.0)
+        ba = ia * n_joints + ja
+        a0 = p0w[ba]
+        a1 = p1w[ba]
+        ra = cap_radius[ba] + cap_skin[ba]
+        ca = 0.5 * (a0 + a1)
+        bound_a = 0.5 * wp.length(a1 - a0) + ra + margin + spec
+        # sphere of capsule a against the AABB of character b (already grown)
+        lo = char_lo[ib] + sv
+        hi = char_hi[ib] + sv
+        closest = wp.min(wp.max(ca, lo), hi)
+        if wp.length_sq(closest - ca) > bound_a * bound_a:
+            return
+        for jb in range(n_joints):
+            bb = ib * n_joints + jb
+            b0 = p0w[bb] + sv
+            b1 = p1w[bb] + sv
+            rb = cap_radius[bb] + cap_skin[bb]
+            cb = 0.5 * (b0 + b1)
+            reach = bound_a + 0.5 * wp.length(b1 - b0) + rb
+            if wp.length_sq(cb - ca) > reach * reach:
+                continue
+            st = segment_params(a0, a1, b0, b1)
+            pa = a0 + st[0] * (a1 - a0)
+            pb = b0 + st[1] * (b1 - b0)
+            d = pa - pb
+            dist = wp.length(d)
+            depth = ra + rb + margin - dist
+            if depth > -spec:
+                n = wp.vec3(0.0, 1.0, 0.0)
+                if dist > 1.0e-6:
+                    n = d / dist
+                else:
+                    dc = x[ba] - (x[bb] + sv)
+                    if wp.length(dc) > 1.0e-6:
+                        n = wp.normalize(dc)
+                push_contact(count, capacity, ba, bb, n, depth, pa - x[ba], pb - (x[bb] + sv), k, 2,
+                             c_a, c_b, c_n, c_depth, c_la, c_lb, c_k, c_kind)
+
+    @wp.kernel
+    def intra_kernel(x: wp.array(dtype=wp.vec3), p0w: wp.array(dtype=wp.vec3), p1w: wp.array(dtype=wp.vec3),
+                     cap_radius: wp.array(dtype=float), pairs: wp.array2d(dtype=wp.int32), spec: float, k: float,
+                     count: wp.array(dtype=wp.int32), capacity: int,
+                     c_a: wp.array(dtype=wp.int32), c_b: wp.array(dtype=wp.int32),
+                     c_n: wp.array(dtype=wp.vec3), c_depth: wp.array(dtype=float),
+                     c_la: wp.array(dtype=wp.vec3), c_lb: wp.array(dtype=wp.vec3),
+                     c_k: wp.array(dtype=float), c_kind: wp.array(dtype=wp.int32)):
+        """One intra-body capsule pair per thread: bounding spheres, then exact distance."""
+        t = wp.tid()
+        ba = pairs[t, 0]
+        bb = pairs[t, 1]
+        a0 = p0w[ba]
+        a1 = p1w[ba]
+        b0 = p0w[bb]
+        b1 = p1w[bb]
+        ra = cap_radius[ba]
+        rb = cap_radius[bb]
+        reach = 0.5 * wp.length(a1 - a0) + 0.5 * wp.length(b1 - b0) + ra + rb + spec
+        if wp.length_sq(0.5 * (a0 + a1) - 0.5 * (b0 + b1)) > reach * reach:
+            return
+        st = segment_params(a0, a1, b0, b1)
+        pa = a0 + st[0] * (a1 - a0)
+        pb = b0 + st[1] * (b1 - b0)
+        d = pa - pb
+        dist = wp.length(d)
+        depth = ra + rb - dist
+        if depth > -spec and dist > 1.0e-6:
+            push_contact(count, capacity, ba, bb, d / dist, depth, pa - x[ba], pb - x[bb], k, 3,
+                         c_a, c_b, c_n, c_depth, c_la, c_lb, c_k, c_kind)
+
+    @wp.kernel
+    def environment_kernel(x: wp.array(dtype=wp.vec3), p0w: wp.array(dtype=wp.vec3), p1w: wp.array(dtype=wp.vec3),
+                           cap_radius: wp.array(dtype=float), cap_skin: wp.array(dtype=float),
+                           body_char: wp.array(dtype=wp.int32),
+                           char_lo: wp.array(dtype=wp.vec3), char_hi: wp.array(dtype=wp.vec3),
+                           bvh: wp.uint64, points: wp.array(dtype=wp.vec3), env_lo: wp.vec3, env_hi: wp.vec3,
+                           period: float, margin: float, spec: float, k: float,
+                           count: wp.array(dtype=wp.int32), capacity: int,
+                           c_a: wp.array(dtype=wp.int32), c_b: wp.array(dtype=wp.int32),
+                           c_n: wp.array(dtype=wp.vec3), c_depth: wp.array(dtype=float),
+                           c_la: wp.array(dtype=wp.vec3), c_lb: wp.array(dtype=wp.vec3),
+                           c_k: wp.array(dtype=float), c_kind: wp.array(dtype=wp.int32)):
+        """Capsule (thread) against the static sample points (m) of the scene's BVH; in
+        periodic scenes the capsule is wrapped into [0, period) along x first."""
+        b = wp.tid()
+        i = body_char[b]
+        shift = float(0.0)
+        if period > 0.0:
+            cx = 0.5 * (char_lo[i][0] + char_hi[i][0])
+            shift = -period * wp.floor(cx / period)
+        sv = wp.vec3(shift, 0.0, 0.0)
+        # cull: the character AABB against the bounds of the static samples
+        clo = char_lo[i] + sv
+        chi = char_hi[i] + sv
+        if clo[0] > env_hi[0] or clo[1] > env_hi[1] or clo[2] > env_hi[2]:
+            return
+        if env_lo[0] > chi[0] or env_lo[1] > chi[1] or env_lo[2] > chi[2]:
+            return
+        a0 = p0w[b] + sv
+        a1 = p1w[b] + sv
+        r = cap_radius[b] + cap_skin[b] + margin
+        grow = wp.vec3(r + spec, r + spec, r + spec)
+        lo = wp.min(a0, a1) - grow
+        hi = wp.max(a0, a1) + grow
+        query = wp.bvh_query_aabb(bvh, lo, hi)
+        idx = int(0)
+        while wp.bvh_query_next(query, idx):
+            pt = points[idx]
+            d1 = a1 - a0
+            ll = wp.dot(d1, d1)
+            s = float(0.0)
+            if ll > 1.0e-10:
+                s = wp.clamp(wp.dot(pt - a0, d1) / ll, 0.0, 1.0)
+            c = a0 + s * d1
+            d = c - pt
+            dist = wp.length(d)
+            depth = r - dist
+            if depth > -spec and dist > 1.0e-6:
+                push_contact(count, capacity, b, -1, d / dist, depth, c - (x[b] + sv), wp.vec3(0.0, 0.0, 0.0), k, 1,
+                             c_a, c_b, c_n, c_depth, c_la, c_lb, c_k, c_kind)
+
+    return SimpleNamespace(wp=wp, segment_params=segment_params, capsules_world_kernel=capsules_world_kernel,
+                           ground_kernel=ground_kernel, broadphase_kernel=broadphase_kernel,
+                           narrowphase_kernel=narrowphase_kernel, intra_kernel=intra_kernel,
+                           environment_kernel=environment_kernel)
+
+
+def sample_static_walls(walls: np.ndarray, *, height: float = 2.2, spacing: float = 0.04,
+                        period: float | None = None, overhang: float = 0.6) -> np.ndarray:
+    """Point samples (P, 3) of vertical walls standing on the floor.
+
+    Args:
+        walls: (M, 2, 2) float, metres: wall segments in the floor plane.
+        height: wall height, m.
+        spacing: sample spacing, m.
+        period: for periodic scenes, walls are clipped to x in [-overhang, period + overhang).
+        overhang: m, see ``period`` (>= the largest capsule extent a query can have).
+    """
+    walls = np.asarray(walls, np.float64).reshape(-1, 2, 2)
+    pts = []
+    zs = np.arange(0.0, height + 1e-9, spacing)
+    for (x0, y0), (x1, y1) in walls:
+        if period:
+            lo, hi = -overhang, period + overhang
+            if abs(x1 - x0) > 1e-9:
+                t0, t1 = sorted(((lo - x0) / (x1 - x0), (hi - x0) / (x1 - x0)))
+                t0, t1 = max(t0, 0.0), min(t1, 1.0)
+                if t1 <= t0:
+                    continue
+                (x0, y0), (x1, y1) = ((x0 + t0 * (x1 - x0), y0 + t0 * (y1 - y0)),
+                                      (x0 + t1 * (x1 - x0), y0 + t1 * (y1 - y0)))
+        length = float(np.hypot(x1 - x0, y1 - y0))
+        n = max(int(np.ceil(length / spacing)), 1) + 1
+        t = np.linspace(0.0, 1.0, n)
+        xy = np.stack([x0 + t * (x1 - x0), y0 + t * (y1 - y0)], 1)
+        grid = np.concatenate([np.repeat(xy, len(zs), 0), np.tile(zs, len(xy))[:, None]], 1)
+        pts.append(grid)
+    return np.concatenate(pts) if pts else np.zeros((0, 3))
+
+
+def static_walls_from_meta(meta: dict) -> np.ndarray:
+    """(M, 2, 2) wall segments (m) of a scene: ``meta["obstacles"]`` when present, else the
+    corridor walls (y = +-width/2) or the concert stage front (y = depth/2 + stage_distance)
+    from the meta's scenario and the default study design."""
+    if "obstacles" in meta:
+        walls = np.asarray(meta["obstacles"], np.float64)
+        if walls.size == 0:
+            return np.zeros((0, 2, 2))
+        if walls.ndim != 3 or walls.shape[1:] != (2, 2):
+            raise InvalidInputError(f"meta['obstacles']: expected (M, 2, 2) wall segments, got shape {walls.shape}")
+        return walls
+    scenario = meta.get("scenario")
+    if scenario not in ("corridor", "concert"):
+        return np.zeros((0, 2, 2))
+    from crowdstudy.design import load_design
+
+    design = load_design()
+    scen = design.scenarios.get(scenario)
+    params = dict(getattr(scen, "params", {}) or {})
+    if scenario == "corridor":
+        width = float(meta.get("corridor_width", params.get("width", 2.0)))
+        per = meta.get("periodic") or {}
+        length = float(per.get("length", params.get("length", 4.5)))
+        return np.array([[[-1.0, -width / 2], [length + 1.0, -width / 2]],
+                         [[-1.0, width / 2], [length + 1.0, width / 2]]])
+    y = float(design.floor_depth) / 2 + float(params.get("stage_distance", 1.0))
+    half = float(design.floor_width)
+    return np.array([[[-half, y], [half, y]]])
+
+
+@dataclasses.dataclass(eq=False)
+class Contacts:
+    """Preallocated contact buffers on the device (capacity C).
+
+    count (1,) int32 (may exceed the capacity: the surplus was dropped); body_a, body_b (C,)
+    int32 (b = -1 for static); normal (C,) vec3 from b to a; depth (C,) m (signed);
+    lever_a, lever_b (C,) vec3 m (world, from each centre of mass to the contact point);
+    stiffness (C,) N/m; kind (C,) int32 (KIND_*).
+    """
+
+    capacity: int
+    count: object
+    body_a: object
+    body_b: object
+    normal: object
+    depth: object
+    lever_a: object
+    lever_b: object
+    stiffness: object
+    kind: object
+
+    @classmethod
+    def allocate(cls, capacity: int, device: str) -> "Contacts":
+        from crowdstudy.warp_runtime import get_warp
+
+        wp = get_warp()
+        return cls(capacity=int(capacity), count=wp.zeros(1, dtype=wp.int32, device=device),
+                   body_a=wp.zeros(capacity, dtype=wp.int32, device=device),
+                   body_b=wp.zeros(capacity, dtype=wp.int32, device=device),
+                   normal=wp.zeros(capacity, dtype=wp.vec3, device=device),
+                   depth=wp.zeros(capacity, dtype=wp.float32, device=device),
+                   lever_a=wp.zeros(capacity, dtype=wp.vec3, device=device),
+                   lever_b=wp.zeros(capacity, dtype=wp.vec3, device=device),
+                   stiffness=wp.zeros(capacity, dtype=wp.float32, device=device),
+                   kind=wp.zeros(capacity, dtype=wp.int32, device=device))
+
+    def buffers(self) -> list:
+        return [self.body_a, self.body_b, self.normal, self.depth, self.lever_a, self.lever_b, self.stiffness,
+                self.kind]
+
+    def n_active(self) -> int:
+        """Contacts stored (host sync on CUDA)."""
+        return min(int(self.count.numpy()[0]), self.capacity)
+
+    def to_numpy(self) -> dict:
+        n = self.n_active()
+        names = ("body_a", "body_b", "normal", "depth", "lever_a", "lever_b", "stiffness", "kind")
+        return {name: getattr(self, name).numpy()[:n].copy() for name in names}
+
+
+class CollisionPipeline:
+    """Detects all four contact kinds for a model; ``collide(state, contacts)``.
+
+    Args:
+        model: the :class:`~crowdstudy.physics.model.Model`.
+        config: :class:`~crowdstudy.physics.config.PhysicsConfig`.
+        static_points: (P, 3) metres, point samples of static objects (or None).
+        period: length (m) of the periodic x axis, or None.
+    """
+
+    def __init__(self, model, config, *, static_points: np.ndarray | None = None, period: float | None = None):
+        self.model = model
+        self.config = config
+        self.k = collision_kernels()
+        wp = self.k.wp
+        dev = model.device
+        n, nb = model.n_characters, model.n_bodies
+        self.period = float(period or 0.0)
+        self.speculative = float(config.speculative_distance)
+        self.p0w = wp.zeros(nb, dtype=wp.vec3, device=dev)
+        self.p1w = wp.zeros(nb, dtype=wp.vec3, device=dev)
+        self.char_lo = wp.zeros(n, dtype=wp.vec3, device=dev)
+        self.char_hi = wp.zeros(n, dtype=wp.vec3, device=dev)
+        self.pair_capacity = max(16 * n, 64)
+        self.pair_count = wp.zeros(1, dtype=wp.int32, device=dev)
+        self.pair_i = wp.zeros(self.pair_capacity, dtype=wp.int32, device=dev)
+        self.pair_j = wp.zeros(self.pair_capacity, dtype=wp.int32, device=dev)
+        self.pair_shift = wp.zeros(self.pair_capacity, dtype=wp.float32, device=dev)
+        self.dropped_pairs = 0
+        self.bvh = None
+        self.static_enabled = True  # switch static objects off (e.g. the damping study's release)
+        pts = None if static_points is None else np.asarray(static_points, np.float32).reshape(-1, 3)
+        if pts is not None and len(pts):
+            self.points = wp.array(pts, dtype=wp.vec3, device=dev)
+            self.bvh = wp.Bvh(self.points, self.points)
+            self.env_lo = wp.vec3(*(pts.min(0) - 1e-3))
+            self.env_hi = wp.vec3(*(pts.max(0) + 1e-3))
+        self.n_static_points = 0 if pts is None else len(pts)
+
+    def default_capacity(self) -> int:
+        return int(self.config.max_contacts_per_character) * self.model.n_characters + 2 * self.model.n_bodies
+
+    def collide(self, state, contacts: Contacts) -> None:
+        """Fill ``contacts`` from ``state`` (positions/orientations at the start of the step)."""
+        k, wp, m, cfg = self.k, self.k.wp, self.model, self.config
+        dev = m.device
+        W = m.wp
+        nj, n, nb = m.n_joints, m.n_characters, m.n_bodies
+        spec = self.speculative
+        margin = float(cfg.contact_margin)
+        contacts.count.zero_()
+        out = [contacts.count, contacts.capacity, *contacts.buffers()]
+        wp.launch(k.capsules_world_kernel, n, [state.x, state.q, W["cap_p0"], W["cap_p1"], W["cap_radius"],
+                                               W["cap_skin"], nj, margin + spec, self.p0w, self.p1w, self.char_lo, self.char_hi],
+                  device=dev)
+        if cfg.ground_stiffness > 0:
+            wp.launch(k.ground_kernel, nb, [state.x, self.p0w, self.p1w, W["cap_radius"], spec,
+                                            float(cfg.ground_stiffness), *out], device=dev)
+        if self.bvh is not None and self.static_enabled and cfg.environment_stiffness > 0:
+            wp.launch(k.environment_kernel, nb, [state.x, self.p0w, self.p1w, W["cap_radius"], W["cap_skin"],
+                                                 W["body_char"],
+                                                 self.char_lo, self.char_hi, self.bvh.id, self.points, self.env_lo,
+                                                 self.env_hi, self.period, margin, spec,
+                                                 float(cfg.environment_stiffness), *out], device=dev)
+        if n > 1 and cfg.contact_stiffness > 0:
+            self.pair_count.zero_()
+            wp.launch(k.broadphase_kernel, (n, n), [self.char_lo, self.char_hi, self.period, self.pair_count,
+                                                    self.pair_capacity, self.pair_i, self.pair_j, self.pair_shift],
+                      device=dev)
+            n_pairs = int(self.pair_count.numpy()[0])
+            if n_pairs > self.pair_capacity:
+                self.dropped_pairs += n_pairs - self.pair_capacity
+                n_pairs = self.pair_capacity
+            if n_pairs:
+                wp.launch(k.narrowphase_kernel, n_pairs * nj,
+                          [state.x, self.p0w, self.p1w, W["cap_radius"], W["cap_skin"], self.char_lo, self.char_hi,
+                           self.pair_i,
+                           self.pair_j, self.pair_shift, nj, margin, spec, float(cfg.contact_stiffness), *out],
+                          device=dev)
+        n_intra = W["intra_pairs"].shape[0]
+        if cfg.intra_body and n_intra and cfg.intra_stiffness > 0:
+            wp.launch(k.intra_kernel, n_intra, [state.x, self.p0w, self.p1w, W["cap_radius"], W["intra_pairs"],
+                                                spec, float(cfg.intra_stiffness), *out], device=dev)

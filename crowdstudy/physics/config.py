@@ -1,0 +1,166 @@
+"""Parameters of the collision-correction physics.
+
+The paper states d = 0.006 (Eq. 4) and that pelvis and feet are stiffer; it gives no other
+value. The remaining defaults are ours, chosen so that the Fig. 4 behaviour holds
+(:mod:`crowdstudy.physics.damping`) and the overlap/tracking bars of the study scenes are
+met (``crowdstudy bench physics --bars``).
+
+Every coefficient is a field of :class:`PhysicsConfig` (frozen dataclass), documented with
+its unit. Control terms follow paper Eq. 4::
+
+    E_control(R) = k/2 |R - R^|_F^2 + d/(2 h^2) |R - R_old - R^ + R^_old|_F^2
+
+with k the spring and d the damping coefficient. ``|R - R^|_F^2 = 8 sin^2(theta/2)``, so k
+is an energy (J = N m) per unit squared Frobenius distance, and d is k times a squared time
+(J s^2). The paper uses d = 0.006 for the body joints; pelvis and feet are stiffer and more
+damped (``pelvis_scale``, ``feet_scale`` multiply both k and d). The root is coupled in
+absolute rotation (Eq. 4 with the pelvis group's k, d) and absolute translation (a
+translational spring/damper of the same form on the pelvis bone's centre of mass); the
+foot bones get a weaker translational coupling of the same form (no foot skate when a
+collision pushes the body).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+from crowdstudy.errors import InvalidInputError
+
+__all__ = ["PhysicsConfig"]
+
+
+@dataclasses.dataclass(frozen=True)
+class PhysicsConfig:
+    """All physics parameters (SI units).
+
+    Attributes:
+        dt: time step h in seconds (1/60: two steps per 30 fps frame).
+        density: body density in kg/m^3 (masses and inertias of the bone capsules).
+        gravity: gravitational acceleration in m/s^2, along -z.
+        stiffness: k of Eq. 4 for the body joints (not pelvis/feet), J per unit
+            squared Frobenius distance (the restoring torque at a small angle theta is
+            2 k theta, N m).
+        damping: d of Eq. 4 for the body joints, J s^2 (paper: 0.006). The Fig. 4 study
+            varies this value; every group's damping scales with it.
+        pelvis_scale: multiplies k and d for the root's absolute rotation and the hips and
+            lower spine (trunk alignment).
+        feet_scale: multiplies k and d for the ankles and feet (no foot skate).
+        root_translation_stiffness: spring of the root's absolute translation, N/m.
+        root_translation_damping_scale: the root translation damper is
+            ``damping * root_translation_damping_scale`` in J s^2/m^2 (the term is
+            d_t/(2 h^2) |x - x_old - x^ + x^_old|^2), i.e. a damping force of
+            d_t / h N s/m relative to the animation's velocity.
+        feet_translation_stiffness: absolute translation spring (N/m) of each foot body
+            (ankle and toe bones) towards the animation, like the root's; 0 = off.
+        feet_translation_damping_scale: its damper is ``damping * this`` (J s^2/m^2).
+        joint_stiffness: soft ball joints, N/m: k_j/2 |anchor seen from parent - anchor
+            seen from child|^2.
+        contact_stiffness: inter-body penalty k_c of (k_c/2) depth^2, N/m.
+        intra_stiffness: intra-body (self) penalty, N/m.
+        ground_stiffness: capsule-ground penalty, N/m.
+        ground_friction: viscous friction of capsule-ground contacts, N s/m per contact
+            point (a force against the contact point's sliding velocity). Off by default,
+            as in the paper: 2000 cuts the foot skate of pushed characters 3-4x in the
+            study scenes, but it also damps the whole body's recovery (the Fig. 4 study then
+            no longer separates the values of d).
+        environment_stiffness: capsule-static object penalty, N/m (per sample point).
+        contact_margin: m added to the capsule radii (on top of the mesh skin) for
+            inter-body and environment contacts (not ground, not intra-body).
+        speculative_distance: m; capsule pairs closer than this are kept as (inactive)
+            contacts; the solver linearises their depth to the predicted state, so fast
+            limbs are stopped before they penetrate.
+        mesh_skin_percentile: per-capsule skin added for inter-body and environment
+            contacts: this percentile of how far the bone's mesh vertices reach outside its
+            capsule (crowdstudy.physics.model.capsule_skin); 0 = bare capsules.
+        intra_body: handle intra-body collisions (pairs touching in the T-pose and
+            parent-child pairs are always skipped).
+        environment_spacing: spacing of the point samples on static objects, m.
+        settle_time: s simulated on the first frame, the target frozen, before the clip
+            starts (so the corrected clip starts without the Baseline's overlaps); 0 starts
+            from the Baseline's first pose.
+        cg_tolerance: relative residual |r|/|b| at which CG stops.
+        cg_max_iterations: CG iteration cap per step.
+        max_contacts_per_character: contact capacity = this * characters (+ ground and
+            environment contacts); overflowing contacts are dropped and counted.
+    """
+
+    dt: float = 1.0 / 60.0
+    density: float = 1000.0
+    gravity: float = 9.81
+    stiffness: float = 2000.0
+    damping: float = 0.006
+    pelvis_scale: float = 8.0
+    feet_scale: float = 4.0
+    root_translation_stiffness: float = 1.0e4
+    root_translation_damping_scale: float = 4.25e3
+    feet_translation_stiffness: float = 5.0e3
+    feet_translation_damping_scale: float = 300.0
+    joint_stiffness: float = 2.0e5
+    contact_stiffness: float = 3.0e4
+    intra_stiffness: float = 1.0e4
+    ground_stiffness: float = 5.0e4
+    ground_friction: float = 0.0
+    environment_stiffness: float = 2.0e4
+    contact_margin: float = 0.005
+    speculative_distance: float = 0.02
+    mesh_skin_percentile: float = 90.0
+    intra_body: bool = True
+    environment_spacing: float = 0.04
+    settle_time: float = 0.5
+    cg_tolerance: float = 1e-4
+    cg_max_iterations: int = 60
+    max_contacts_per_character: int = 256
+
+    def __post_init__(self) -> None:
+        for field in dataclasses.fields(self):
+            value = getattr(self, field.name)
+            if field.type in ("bool", bool):
+                if not isinstance(value, bool):
+                    raise InvalidInputError(f"PhysicsConfig.{field.name}: expected true/false, got {value!r}")
+                continue
+            try:
+                num = float(value)
+            except (TypeError, ValueError):
+                raise InvalidInputError(f"PhysicsConfig.{field.name}: expected a number, got {value!r}") from None
+            if not num == num or num < 0 or num == float("inf"):
+                raise InvalidInputError(f"PhysicsConfig.{field.name}: expected a finite value >= 0, got {value!r}")
+        for name in ("dt", "density", "cg_tolerance", "cg_max_iterations", "max_contacts_per_character",
+                     "environment_spacing", "joint_stiffness"):
+            if float(getattr(self, name)) <= 0:
+                raise InvalidInputError(f"PhysicsConfig.{name}: expected a positive value, got {getattr(self, name)!r}")
+
+    def replace(self, **changes) -> "PhysicsConfig":
+        """A validated copy with some fields changed."""
+        unknown = set(changes) - {f.name for f in dataclasses.fields(self)}
+        if unknown:
+            raise InvalidInputError(f"PhysicsConfig: unknown field(s) {sorted(unknown)}; "
+                                    f"expected some of {[f.name for f in dataclasses.fields(self)]}")
+        return dataclasses.replace(self, **changes)
+
+    @classmethod
+    def from_strings(cls, items: list[str] | tuple[str, ...]) -> "PhysicsConfig":
+        """Parse ``["damping=0.01", "intra_body=false", ...]`` (the CLI's ``--config``)."""
+        fields = {f.name: f for f in dataclasses.fields(cls)}
+        changes: dict = {}
+        for item in items:
+            if "=" not in item:
+                raise InvalidInputError(f"--config: expected key=value, got {item!r}")
+            key, raw = (s.strip() for s in item.split("=", 1))
+            if key not in fields:
+                raise InvalidInputError(f"--config: unknown key {key!r}; expected one of {sorted(fields)}")
+            default = getattr(cls(), key)
+            try:
+                if isinstance(default, bool):
+                    if raw.lower() not in ("true", "false", "1", "0", "yes", "no"):
+                        raise ValueError(raw)
+                    changes[key] = raw.lower() in ("true", "1", "yes")
+                elif isinstance(default, int):
+                    changes[key] = int(raw)
+                else:
+                    changes[key] = float(raw)
+            except ValueError:
+                raise InvalidInputError(f"--config: {key} expects a {type(default).__name__}, got {raw!r}") from None
+        return cls(**changes)
+
+    def as_dict(self) -> dict:
+        return dataclasses.asdict(self)

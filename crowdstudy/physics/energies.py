@@ -1,0 +1,106 @@
+"""Reference (numpy, float64) energies with analytic gradients and Hessians.
+
+These restate, term by term, what the Warp kernels assemble; the tests check them against
+finite differences and the kernels against them. Increments per body are ``(dx, dw)``:
+``x <- x + dx`` (m) and ``R <- exp([dw]x) R`` (rad, world frame); gradients are ordered
+``[dx, dw]`` per body, Hessians accordingly.
+
+Notation: ``a(M) = (M12 - M21, M20 - M02, M01 - M10)`` so that ``tr([e]x M) = e . a(M)``;
+then ``d/dw tr(exp([w]x) R C) = a(R C)`` at w = 0 and the second derivative is
+``sym(R C) - tr(R C) Id`` (symmetrised).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from crowdstudy.body.rotations import skew
+from crowdstudy.physics.model import segment_distance
+
+__all__ = ["vee_asym", "inertia_energy", "gravity_energy", "ball_joint_energy", "control_energy",
+           "root_translation_energy", "contact_energy"]
+
+
+def vee_asym(m: np.ndarray) -> np.ndarray:
+    """a(M) for a (3, 3) matrix (see module docstring)."""
+    return np.array([m[1, 2] - m[2, 1], m[2, 0] - m[0, 2], m[0, 1] - m[1, 0]])
+
+
+def _sym(m):
+    return 0.5 * (m + m.T)
+
+
+def inertia_energy(x, R, x_pred, R_pred, mass, J, h):
+    """E = m/(2h^2) |x - x~|^2 + 1/(2h^2) tr((R - R~) J (R - R~)^T).
+
+    Args: x, x_pred (3,) m; R, R_pred (3, 3); mass kg; J (3, 3) kg m^2 body-frame second
+    moment; h s. Returns ``(E J, gradient (6,), Hessian (6, 6))`` (exact).
+    """
+    B = R @ J @ R_pred.T
+    e = 0.5 * mass / h**2 * np.sum((x - x_pred) ** 2) + (np.trace(J) - np.trace(B)) / h**2
+    g = np.concatenate([mass / h**2 * (x - x_pred), -vee_asym(B) / h**2])
+    H = np.zeros((6, 6))
+    H[:3, :3] = mass / h**2 * np.eye(3)
+    H[3:, 3:] = (np.trace(B) * np.eye(3) - _sym(B)) / h**2
+    return e, g, H
+
+
+def gravity_energy(x, mass, gravity=9.81):
+    """E = m g z. Returns ``(E, gradient (6,), Hessian (6, 6) = 0)``."""
+    g = np.zeros(6)
+    g[2] = mass * gravity
+    return mass * gravity * x[2], g, np.zeros((6, 6))
+
+
+def ball_joint_energy(xa, Ra, pa, xb, Rb, pb, k):
+    """Soft ball joint E = k/2 |x_a + R_a p_a - x_b - R_b p_b|^2 between a (parent) and b.
+
+    Returns ``(E, gradient (12,) [a; b], Gauss-Newton Hessian k J^T J (12, 12))``; exact
+    when the joint is closed (C = 0).
+    """
+    ra, rb = Ra @ pa, Rb @ pb
+    c = xa + ra - xb - rb
+    jac = np.hstack([np.eye(3), -skew(ra), -np.eye(3), skew(rb)])
+    return 0.5 * k * c @ c, k * jac.T @ c, k * jac.T @ jac
+
+
+def control_energy(Rp, Rc, target, damp_ref, k, dh2):
+    """Eq. 4 on the joint rotation R = Rp^T Rc (Rp = Id for the root's absolute rotation):
+    E = k/2 |R - target|_F^2 + dh2/2 |R - damp_ref|_F^2 with dh2 = d / h^2 and
+    damp_ref = R_old + R^ - R^_old.
+
+    Returns ``(E, gradient (6,) [dw_parent; dw_child], Gauss-Newton Hessian (6, 6))``, the
+    Hessian ``2 (k + dh2) [[I, -I], [-I, I]]`` (exact at zero residual).
+    """
+    rel = Rp.T @ Rc
+    e = 0.5 * k * np.sum((rel - target) ** 2) + 0.5 * dh2 * np.sum((rel - damp_ref) ** 2)
+    res = k * (rel - target) + dh2 * (rel - damp_ref)
+    gc = vee_asym(Rc @ res.T @ Rp.T)
+    c = 2.0 * (k + dh2)
+    H = np.block([[c * np.eye(3), -c * np.eye(3)], [-c * np.eye(3), c * np.eye(3)]])
+    return e, np.concatenate([-gc, gc]), H
+
+
+def root_translation_energy(x, x_old, target, target_old, k, dh2):
+    """E = k/2 |x - x^|^2 + dh2/2 |x - x_old - x^ + x^_old|^2 (m). Returns (E, g (3,), H (3, 3))."""
+    a, b = x - target, x - x_old - target + target_old
+    return 0.5 * k * a @ a + 0.5 * dh2 * b @ b, k * a + dh2 * b, (k + dh2) * np.eye(3)
+
+
+def contact_energy(xa, Ra, seg_a, ra, xb, Rb, seg_b, rb, k):
+    """Penalty (k/2) depth^2 between capsule a and capsule b (depth = r_a + r_b - distance).
+
+    Args: x (3,) m, R (3, 3), seg (2, 3) segment end points in the body frame (m), r m, k N/m.
+    Returns ``(E, gradient (12,), Gauss-Newton Hessian k u u^T (12, 12), depth)``, zero when
+    the capsules are apart.
+    """
+    a0, a1 = xa + Ra @ seg_a[0], xa + Ra @ seg_a[1]
+    b0, b1 = xb + Rb @ seg_b[0], xb + Rb @ seg_b[1]
+    s, t, dist = segment_distance(a0, a1, b0, b1)
+    depth = ra + rb - float(dist)
+    if depth <= 0:
+        return 0.0, np.zeros(12), np.zeros((12, 12)), depth
+    ca, cb = a0 + s * (a1 - a0), b0 + t * (b1 - b0)
+    n = (ca - cb) / max(float(dist), 1e-12)
+    u = np.concatenate([-n, -np.cross(ca - xa, n), n, np.cross(cb - xb, n)])
+    return 0.5 * k * depth**2, k * depth * u, k * np.outer(u, u), depth

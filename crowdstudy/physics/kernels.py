@@ -1,0 +1,268 @@
+"""Warp kernels of one implicit-Euler step: targets, prediction, assembly, update, projection.
+
+Kernels take typed ``wp.array`` arguments; one code path runs on CPU and CUDA. Units: metres,
+seconds, kilograms, radians. Bodies are indexed ``b = character * J + joint`` (model.py).
+
+The unknowns of a step are, per body, a translation increment ``dx`` (m) and a world-frame
+rotation increment ``dw`` (rad), applied as ``x <- x + dx``, ``R <- exp([dw]x) R``. The
+Newton system ``H [dx; dw] = -g`` is stored as 6x6 diagonal blocks ``[[A, B], [B^T, C]]``
+(three mat33 arrays), plus matrix-free off-diagonal terms per joint and per contact
+(see :mod:`crowdstudy.physics.solver`).
+
+The collision kernels live in :mod:`crowdstudy.physics.collision`.
+"""
+
+from __future__ import annotations
+
+import functools
+
+__all__ = ["kernels"]
+
+
+@functools.lru_cache(maxsize=1)
+def kernels():
+    """Build (once) and return a namespace with the Warp functions and kernels."""
+    from types import SimpleNamespace
+
+    from crowdstudy.warp_runtime import get_warp
+
+    wp = get_warp()
+
+    @wp.func
+    def quat_exp(w: wp.vec3):
+        """Unit quaternion of the rotation vector ``w`` (rad)."""
+        angle = wp.length(w)
+        if angle < 1.0e-7:
+            return wp.normalize(wp.quat(0.5 * w[0], 0.5 * w[1], 0.5 * w[2], 1.0))
+        return wp.quat_from_axis_angle(w / angle, angle)
+
+    @wp.func
+    def quat_log(q: wp.quat):
+        """Rotation vector (rad) of a unit quaternion, angle in [0, pi]."""
+        qq = q
+        if qq[3] < 0.0:
+            qq = wp.quat(-q[0], -q[1], -q[2], -q[3])
+        v = wp.vec3(qq[0], qq[1], qq[2])
+        s = wp.length(v)
+        if s < 1.0e-7:
+            return 2.0 * v
+        angle = 2.0 * wp.atan2(s, qq[3])
+        return v * (angle / s)
+
+    @wp.func
+    def vee_asym(m: wp.mat33):
+        """a(M) with tr([e]x M) = e . a(M): (M12 - M21, M20 - M02, M01 - M10)."""
+        return wp.vec3(m[1, 2] - m[2, 1], m[2, 0] - m[0, 2], m[0, 1] - m[1, 0])
+
+    @wp.func
+    def quat_nlerp(a: wp.quat, b: wp.quat, t: float):
+        """Normalised linear interpolation on the short arc."""
+        d = a[0] * b[0] + a[1] * b[1] + a[2] * b[2] + a[3] * b[3]
+        s = 1.0
+        if d < 0.0:
+            s = -1.0
+        return wp.normalize(wp.quat((1.0 - t) * a[0] + s * t * b[0], (1.0 - t) * a[1] + s * t * b[1],
+                                    (1.0 - t) * a[2] + s * t * b[2], (1.0 - t) * a[3] + s * t * b[3]))
+
+    @wp.kernel
+    def targets_kernel(anim_q: wp.array2d(dtype=wp.quat), anim_root: wp.array2d(dtype=wp.vec3),
+                       f0: int, f1: int, alpha: float, n_joints: int,
+                       body_parent: wp.array(dtype=wp.int32), anchor_parent: wp.array(dtype=wp.vec3),
+                       anchor_child: wp.array(dtype=wp.vec3),
+                       target_rel: wp.array(dtype=wp.quat), target_glob: wp.array(dtype=wp.quat),
+                       target_x: wp.array(dtype=wp.vec3)):
+        """Target pose of one character (thread) at ``(1 - alpha) frame f0 + alpha frame f1``.
+
+        anim_q: (F, B) joint rotations (root global, others parent-relative), unit quats.
+        anim_root: (F, N) pelvis joint positions, m. Writes target_rel (B,) (root: global),
+        target_glob (B,) world rotations, target_x (B,) world centres of mass, m.
+        """
+        i = wp.tid()
+        for j in range(n_joints):
+            b = i * n_joints + j
+            local = quat_nlerp(anim_q[f0, b], anim_q[f1, b], alpha)
+            target_rel[b] = local
+            p = body_parent[b]
+            if p < 0:
+                root = (1.0 - alpha) * anim_root[f0, i] + alpha * anim_root[f1, i]
+                target_glob[b] = local
+                target_x[b] = root - wp.quat_rotate(local, anchor_child[b])
+            else:
+                g = target_glob[p] * local
+                target_glob[b] = g
+                joint = target_x[p] + wp.quat_rotate(target_glob[p], anchor_parent[b])
+                target_x[b] = joint - wp.quat_rotate(g, anchor_child[b])
+
+    @wp.kernel
+    def predict_kernel(x: wp.array(dtype=wp.vec3), q: wp.array(dtype=wp.quat), v: wp.array(dtype=wp.vec3),
+                       w: wp.array(dtype=wp.vec3), h: float,
+                       x_pred: wp.array(dtype=wp.vec3), q_pred: wp.array(dtype=wp.quat)):
+        """Inertial prediction x~ = x + h v (m), R~ = exp(h [w]x) R (w in rad/s, world frame)."""
+        b = wp.tid()
+        x_pred[b] = x[b] + h * v[b]
+        q_pred[b] = wp.normalize(quat_exp(h * w[b]) * q[b])
+
+    @wp.func
+    def control_gradient(rp: wp.mat33, rc: wp.mat33, target: wp.mat33, damp_ref: wp.mat33, k: float,
+                         dh2: float):
+        """Gradient (w.r.t. the child's world rotation increment) of Eq. 4 on R = Rp^T Rc.
+
+        E = k/2 |R - target|^2 + dh2/2 |R - damp_ref|^2, dh2 = d / h^2 (J); the parent's
+        gradient is the negative. Gauss-Newton Hessian: 2 (k + dh2) [[I, -I], [-I, I]].
+        """
+        rel = wp.transpose(rp) * rc
+        res = k * (rel - target) + dh2 * (rel - damp_ref)
+        return vee_asym(rc * wp.transpose(res) * wp.transpose(rp))
+
+    @wp.func
+    def joint_control_terms(b: int, parent: int, q: wp.array(dtype=wp.quat), q_old: wp.array(dtype=wp.quat),
+                            t_rel: wp.array(dtype=wp.quat), t_rel_old: wp.array(dtype=wp.quat),
+                            k: float, dh2: float):
+        """Child-side rotational gradient of the PD term of the joint between parent and b."""
+        rp = wp.quat_to_matrix(q[parent])
+        rc = wp.quat_to_matrix(q[b])
+        rel_old = wp.quat_to_matrix(wp.quat_inverse(q_old[parent]) * q_old[b])
+        tgt = wp.quat_to_matrix(t_rel[b])
+        damp_ref = rel_old + tgt - wp.quat_to_matrix(t_rel_old[b])
+        return control_gradient(rp, rc, tgt, damp_ref, k, dh2)
+
+    @wp.kernel
+    def assemble_bodies_kernel(
+            x: wp.array(dtype=wp.vec3), q: wp.array(dtype=wp.quat),
+            x_old: wp.array(dtype=wp.vec3), q_old: wp.array(dtype=wp.quat),
+            t_rel: wp.array(dtype=wp.quat), t_rel_old: wp.array(dtype=wp.quat),
+            t_x: wp.array(dtype=wp.vec3), t_x_old: wp.array(dtype=wp.vec3),
+            body_mass: wp.array(dtype=float), body_J: wp.array(dtype=wp.mat33),
+            body_parent: wp.array(dtype=wp.int32), body_children: wp.array2d(dtype=wp.int32),
+            anchor_parent: wp.array(dtype=wp.vec3), anchor_child: wp.array(dtype=wp.vec3),
+            body_k: wp.array(dtype=float), body_d: wp.array(dtype=float),
+            body_kt: wp.array(dtype=float), body_dt: wp.array(dtype=float),
+            h: float, gravity: float, k_joint: float,
+            grad_t: wp.array(dtype=wp.vec3), grad_r: wp.array(dtype=wp.vec3),
+            hess_a: wp.array(dtype=wp.mat33), hess_b: wp.array(dtype=wp.mat33), hess_c: wp.array(dtype=wp.mat33),
+            lever_p: wp.array(dtype=wp.vec3), lever_c: wp.array(dtype=wp.vec3), ctrl_c: wp.array(dtype=float)):
+        """Gradient (N, N m) and diagonal Hessian block of every body at the predicted state.
+
+        Terms: inertia (zero gradient at the prediction; blocks m/h^2 I and R I_body R^T / h^2),
+        gravity m g z, soft ball joints k_j/2 |x_p + R_p a_p - x_b - R_b a_b|^2 (Gauss-Newton),
+        PD control of Eq. 4 (root: absolute rotation; others: parent-relative) and the
+        translational PD of bodies with body_kt/body_dt > 0 (root; feet when enabled).
+        Also stores, per body with a parent, the world lever arms of its joint on the parent
+        (lever_p) and on itself (lever_c), and the control coupling 2 (k + d/h^2) (ctrl_c),
+        used by the matrix-free off-diagonal products.
+        """
+        b = wp.tid()
+        inv_h2 = 1.0 / (h * h)
+        eye = wp.identity(n=3, dtype=float)
+        m = body_mass[b]
+        rb = wp.quat_to_matrix(q[b])
+        gt = wp.vec3(0.0, 0.0, m * gravity)
+        gr = wp.vec3(0.0, 0.0, 0.0)
+        a = (m * inv_h2) * eye
+        bb = wp.mat33(0.0)
+        jw = rb * body_J[b] * wp.transpose(rb)
+        c = (wp.trace(jw) * inv_h2) * eye - inv_h2 * jw
+        k = body_k[b]
+        dh2 = body_d[b] * inv_h2
+        kt = body_kt[b]
+        dth2 = body_dt[b] * inv_h2
+        if kt > 0.0 or dth2 > 0.0:
+            # absolute translation PD (root; feet when enabled): kt/2 |x - x^|^2 + dt/(2h^2) |dx - dx^|^2
+            gt += kt * (x[b] - t_x[b]) + dth2 * ((x[b] - x_old[b]) - (t_x[b] - t_x_old[b]))
+            a += (kt + dth2) * eye
+        p = body_parent[b]
+        if p < 0:
+            # Root: absolute rotation (Eq. 4 with Rp = I) and absolute translation.
+            tgt = wp.quat_to_matrix(t_rel[b])
+            damp_ref = wp.quat_to_matrix(q_old[b]) + tgt - wp.quat_to_matrix(t_rel_old[b])
+            gr += control_gradient(eye, rb, tgt, damp_ref, k, dh2)
+            c += (2.0 * (k + dh2)) * eye
+            lever_p[b] = wp.vec3(0.0, 0.0, 0.0)
+            lever_c[b] = wp.vec3(0.0, 0.0, 0.0)
+            ctrl_c[b] = 0.0
+        else:
+            # b is the child of joint (p, b).
+            r_p = wp.quat_rotate(q[p], anchor_parent[b])
+            r_c = wp.quat_rotate(q[b], anchor_child[b])
+            cvec = x[p] + r_p - x[b] - r_c
+            gt += -k_joint * cvec
+            gr += -k_joint * wp.cross(r_c, cvec)
+            sk = wp.skew(r_c)
+            a += k_joint * eye
+            bb += -k_joint * sk
+            c += -k_joint * (sk * sk)
+            gr += joint_control_terms(b, p, q, q_old, t_rel, t_rel_old, k, dh2)
+            cc = 2.0 * (k + dh2)
+            c += cc * eye
+            lever_p[b] = r_p
+            lever_c[b] = r_c
+            ctrl_c[b] = cc
+        for s in range(body_children.shape[1]):
+            ch = body_children[b, s]
+            if ch >= 0:
+                # b is the parent of joint (b, ch).
+                r_p = wp.quat_rotate(q[b], anchor_parent[ch])
+                r_c = wp.quat_rotate(q[ch], anchor_child[ch])
+                cvec = x[b] + r_p - x[ch] - r_c
+                gt += k_joint * cvec
+                gr += k_joint * wp.cross(r_p, cvec)
+                sk = wp.skew(r_p)
+                a += k_joint * eye
+                bb += -k_joint * sk
+                c += -k_joint * (sk * sk)
+                kc = body_k[ch]
+                dc = body_d[ch] * inv_h2
+                gr -= joint_control_terms(ch, b, q, q_old, t_rel, t_rel_old, kc, dc)
+                c += (2.0 * (kc + dc)) * eye
+        grad_t[b] = gt
+        grad_r[b] = gr
+        hess_a[b] = a
+        hess_b[b] = bb
+        hess_c[b] = c
+
+    @wp.kernel
+    def update_kernel(x_pred: wp.array(dtype=wp.vec3), q_pred: wp.array(dtype=wp.quat),
+                      x_old: wp.array(dtype=wp.vec3), q_old: wp.array(dtype=wp.quat),
+                      dx: wp.array(dtype=wp.vec3), dw: wp.array(dtype=wp.vec3), h: float,
+                      x_new: wp.array(dtype=wp.vec3), q_new: wp.array(dtype=wp.quat),
+                      v_new: wp.array(dtype=wp.vec3), w_new: wp.array(dtype=wp.vec3)):
+        """Apply the Newton increment; velocities (m/s, rad/s) from the change over h."""
+        b = wp.tid()
+        xn = x_pred[b] + dx[b]
+        qn = wp.normalize(quat_exp(dw[b]) * q_pred[b])
+        x_new[b] = xn
+        q_new[b] = qn
+        v_new[b] = (xn - x_old[b]) / h
+        w_new[b] = quat_log(qn * wp.quat_inverse(q_old[b])) / h
+
+    @wp.kernel
+    def project_kernel(x: wp.array(dtype=wp.vec3), q: wp.array(dtype=wp.quat),
+                       body_parent: wp.array(dtype=wp.int32), anchor_child: wp.array(dtype=wp.vec3),
+                       n_joints: int, frame: int,
+                       out_rot: wp.array2d(dtype=wp.vec3), out_root: wp.array2d(dtype=wp.vec3)):
+        """Joint rotations (axis-angle, rad; root global, others R_parent^T R_child) and the
+        pelvis joint position (m) of the rigid state, written to row ``frame`` of the outputs."""
+        b = wp.tid()
+        p = body_parent[b]
+        if p < 0:
+            out_rot[frame, b] = quat_log(q[b])
+            out_root[frame, b / n_joints] = x[b] + wp.quat_rotate(q[b], anchor_child[b])
+        else:
+            out_rot[frame, b] = quat_log(wp.quat_inverse(q[p]) * q[b])
+
+    @wp.kernel
+    def set_state_kernel(target_x: wp.array(dtype=wp.vec3), target_glob: wp.array(dtype=wp.quat),
+                         x: wp.array(dtype=wp.vec3), q: wp.array(dtype=wp.quat),
+                         v: wp.array(dtype=wp.vec3), w: wp.array(dtype=wp.vec3)):
+        """Place every body at its target, at rest."""
+        b = wp.tid()
+        x[b] = target_x[b]
+        q[b] = target_glob[b]
+        v[b] = wp.vec3(0.0, 0.0, 0.0)
+        w[b] = wp.vec3(0.0, 0.0, 0.0)
+
+    return SimpleNamespace(wp=wp, quat_exp=quat_exp, quat_log=quat_log, vee_asym=vee_asym,
+                           targets_kernel=targets_kernel, predict_kernel=predict_kernel,
+                           assemble_bodies_kernel=assemble_bodies_kernel, update_kernel=update_kernel,
+                           project_kernel=project_kernel, set_state_kernel=set_state_kernel,
+                           control_gradient=control_gradient)

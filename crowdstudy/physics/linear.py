@@ -1,0 +1,469 @@
+"""Linear algebra of a step: contact assembly, preconditioners, PCG, BSR export (Warp).
+
+* ``contact_assemble_kernel``: adds each contact's penalty gradient and Gauss-Newton
+  blocks to the body arrays (atomics).
+* ``tree_factor_kernel``: exact block LDL^T of each character's 6J x 6J block (diagonal
+  blocks plus joint couplings form a tree; leaves are eliminated into their parents), the
+  "character" block-Jacobi preconditioner; ``precond_kernel`` the 6x6 block Jacobi.
+* ``pcg_fused_kernel``: the whole PCG in one launch (one thread; for the CPU, where Warp
+  runs kernels on a single thread anyway and per-launch costs dominate small vector ops).
+* ``triplets_*_kernel``: the same system as BSR triplets (6x6 blocks) for
+  ``warp.optim.linear.cg`` (CUDA) and scipy (benchmark peer); ``tree_precond_kernel`` the
+  tree preconditioner as a ``LinearOperator`` for Warp's CG.
+"""
+
+from __future__ import annotations
+
+import functools
+
+import numpy as np
+
+__all__ = ["solver_kernels", "bsr_from_triplets"]
+
+
+@functools.lru_cache(maxsize=1)
+def solver_kernels():
+    """Build (once) the contact-assembly, preconditioner and PCG kernels."""
+    from types import SimpleNamespace
+
+    from crowdstudy.warp_runtime import get_warp
+
+    wp = get_warp()
+
+    @wp.kernel
+    def contact_assemble_kernel(count: wp.array(dtype=wp.int32), capacity: int,
+                                c_a: wp.array(dtype=wp.int32), c_b: wp.array(dtype=wp.int32),
+                                c_n: wp.array(dtype=wp.vec3), c_depth: wp.array(dtype=float),
+                                c_la: wp.array(dtype=wp.vec3), c_lb: wp.array(dtype=wp.vec3),
+                                c_k: wp.array(dtype=float), c_kind: wp.array(dtype=wp.int32), friction: float,
+                                v: wp.array(dtype=wp.vec3), w: wp.array(dtype=wp.vec3), h: float,
+                                grad_t: wp.array(dtype=wp.vec3), grad_r: wp.array(dtype=wp.vec3),
+                                hess_a: wp.array(dtype=wp.mat33), hess_b: wp.array(dtype=wp.mat33),
+                                hess_c: wp.array(dtype=wp.mat33),
+                                u_at: wp.array(dtype=wp.vec3), u_ar: wp.array(dtype=wp.vec3),
+                                u_bt: wp.array(dtype=wp.vec3), u_br: wp.array(dtype=wp.vec3),
+                                k_eff: wp.array(dtype=float)):
+        """Penalty (k/2) depth^2 of one contact (thread). depth(q) is linear in the increments
+        with gradient u_a = -(n, l_a x n), u_b = (n, l_b x n); linearised to the prediction
+        (q_t + h v); only positive predicted depths act. Gradient k depth u, Hessian k u u^T.
+
+        Ground contacts (kind 0) also get viscous friction: (c/(2h)) |P_t dp|^2, dp the
+        contact point's displacement over the step and P_t the tangent projector, i.e. a
+        force c v_t (c = ``friction``, N s/m) against sliding; Hessian (c/h) J^T P_t J."""
+        i = wp.tid()
+        n_active = wp.min(count[0], capacity)
+        if i >= n_active:
+            return
+        a = c_a[i]
+        b = c_b[i]
+        n = c_n[i]
+        at = -n
+        ar = -wp.cross(c_la[i], n)
+        bt = n
+        br = wp.cross(c_lb[i], n)
+        depth = c_depth[i] + h * (wp.dot(at, v[a]) + wp.dot(ar, w[a]))
+        if b >= 0:
+            depth += h * (wp.dot(bt, v[b]) + wp.dot(br, w[b]))
+        k = c_k[i]
+        if depth <= 0.0:
+            k_eff[i] = 0.0
+            return
+        k_eff[i] = k
+        u_at[i] = at
+        u_ar[i] = ar
+        u_bt[i] = bt
+        u_br[i] = br
+        f = k * depth
+        wp.atomic_add(grad_t, a, f * at)
+        wp.atomic_add(grad_r, a, f * ar)
+        wp.atomic_add(hess_a, a, k * wp.outer(at, at))
+        wp.atomic_add(hess_b, a, k * wp.outer(at, ar))
+        wp.atomic_add(hess_c, a, k * wp.outer(ar, ar))
+        if b >= 0:
+            wp.atomic_add(grad_t, b, f * bt)
+            wp.atomic_add(grad_r, b, f * br)
+            wp.atomic_add(hess_a, b, k * wp.outer(bt, bt))
+            wp.atomic_add(hess_b, b, k * wp.outer(bt, br))
+            wp.atomic_add(hess_c, b, k * wp.outer(br, br))
+        elif c_kind[i] == 0 and friction > 0.0:
+            lever = c_la[i]
+            pt = wp.identity(n=3, dtype=float) - wp.outer(n, n)
+            vp = v[a] + wp.cross(w[a], lever)
+            ft = friction * (pt * vp)
+            sl = wp.skew(lever)
+            ch = friction / h
+            wp.atomic_add(grad_t, a, ft)
+            wp.atomic_add(grad_r, a, wp.cross(lever, ft))
+            wp.atomic_add(hess_a, a, ch * pt)
+            wp.atomic_add(hess_b, a, -ch * (pt * sl))
+            wp.atomic_add(hess_c, a, -ch * (sl * pt * sl))
+
+    @wp.kernel
+    def precond_kernel(hess_a: wp.array(dtype=wp.mat33), hess_b: wp.array(dtype=wp.mat33),
+                       hess_c: wp.array(dtype=wp.mat33), p_tt: wp.array(dtype=wp.mat33),
+                       p_tr: wp.array(dtype=wp.mat33), p_rr: wp.array(dtype=wp.mat33)):
+        """Inverse of each 6x6 diagonal block [[A, B], [B^T, C]] by its Schur complement."""
+        i = wp.tid()
+        a = hess_a[i]
+        b = hess_b[i]
+        ai = wp.inverse(a)
+        s = hess_c[i] - wp.transpose(b) * ai * b
+        si = wp.inverse(s)
+        aib = ai * b
+        p_rr[i] = si
+        p_tr[i] = -aib * si
+        p_tt[i] = ai + aib * si * wp.transpose(aib)
+
+    @wp.func
+    def matvec(nb: int, n_contacts: int, x_t: wp.array(dtype=wp.vec3), x_r: wp.array(dtype=wp.vec3),
+               hess_a: wp.array(dtype=wp.mat33), hess_b: wp.array(dtype=wp.mat33), hess_c: wp.array(dtype=wp.mat33),
+               parent: wp.array(dtype=wp.int32), lever_p: wp.array(dtype=wp.vec3), lever_c: wp.array(dtype=wp.vec3),
+               ctrl_c: wp.array(dtype=float), k_joint: float,
+               c_a: wp.array(dtype=wp.int32), c_b: wp.array(dtype=wp.int32),
+               u_at: wp.array(dtype=wp.vec3), u_ar: wp.array(dtype=wp.vec3),
+               u_bt: wp.array(dtype=wp.vec3), u_br: wp.array(dtype=wp.vec3), k_eff: wp.array(dtype=float),
+               y_t: wp.array(dtype=wp.vec3), y_r: wp.array(dtype=wp.vec3)):
+        """y = H x, sequentially: diagonal blocks, joint couplings, contact couplings."""
+        for i in range(nb):
+            bm = hess_b[i]
+            y_t[i] = hess_a[i] * x_t[i] + bm * x_r[i]
+            y_r[i] = wp.transpose(bm) * x_t[i] + hess_c[i] * x_r[i]
+        for c in range(nb):
+            p = parent[c]
+            if p >= 0:
+                rp = lever_p[c]
+                rc = lever_c[c]
+                cc = ctrl_c[c]
+                zc = wp.cross(rc, x_r[c]) - x_t[c]
+                zp = x_t[p] - wp.cross(rp, x_r[p])
+                y_t[p] = y_t[p] + k_joint * zc
+                y_r[p] = y_r[p] + k_joint * wp.cross(rp, zc) - cc * x_r[c]
+                y_t[c] = y_t[c] - k_joint * zp
+                y_r[c] = y_r[c] - k_joint * wp.cross(rc, zp) - cc * x_r[p]
+        for i in range(n_contacts):
+            b = c_b[i]
+            k = k_eff[i]
+            if b >= 0 and k > 0.0:
+                a = c_a[i]
+                sa = wp.dot(u_at[i], x_t[a]) + wp.dot(u_ar[i], x_r[a])
+                sb = wp.dot(u_bt[i], x_t[b]) + wp.dot(u_br[i], x_r[b])
+                y_t[a] = y_t[a] + (k * sb) * u_at[i]
+                y_r[a] = y_r[a] + (k * sb) * u_ar[i]
+                y_t[b] = y_t[b] + (k * sa) * u_bt[i]
+                y_r[b] = y_r[b] + (k * sa) * u_br[i]
+        return 0
+
+    @wp.func
+    def block66(a: wp.mat33, b: wp.mat33, c: wp.mat33, d: wp.mat33):
+        m = wp.spatial_matrix()
+        for i in range(3):
+            for j in range(3):
+                m[i, j] = a[i, j]
+                m[i, j + 3] = b[i, j]
+                m[i + 3, j] = c[i, j]
+                m[i + 3, j + 3] = d[i, j]
+        return m
+
+    @wp.func
+    def sub33(m: wp.spatial_matrix, r0: int, c0: int):
+        out = wp.mat33(0.0)
+        for i in range(3):
+            for j in range(3):
+                out[i, j] = m[r0 + i, c0 + j]
+        return out
+
+    @wp.func
+    def inv66(m: wp.spatial_matrix):
+        """Inverse of a 6x6 matrix whose top-left 3x3 block is invertible (Schur complement)."""
+        a = sub33(m, 0, 0)
+        b = sub33(m, 0, 3)
+        c = sub33(m, 3, 0)
+        d = sub33(m, 3, 3)
+        ai = wp.inverse(a)
+        si = wp.inverse(d - c * ai * b)
+        aib = ai * b
+        cai = c * ai
+        return block66(ai + aib * si * cai, -aib * si, -si * cai, si)
+
+    @wp.func
+    def joint_block(kj: float, rp: wp.vec3, rc: wp.vec3, cc: float):
+        """The (parent, child) 6x6 block of a joint: k_j J_p^T J_c - 2 (k + d/h^2) on rotations."""
+        eye = wp.identity(n=3, dtype=float)
+        sp = wp.skew(rp)
+        sc = wp.skew(rc)
+        return block66(-kj * eye, kj * sc, -kj * sp, kj * (sp * sc) - cc * eye)
+
+    @wp.kernel
+    def tree_factor_kernel(n_joints: int, hess_a: wp.array(dtype=wp.mat33), hess_b: wp.array(dtype=wp.mat33),
+                           hess_c: wp.array(dtype=wp.mat33), parent: wp.array(dtype=wp.int32),
+                           lever_p: wp.array(dtype=wp.vec3), lever_c: wp.array(dtype=wp.vec3),
+                           ctrl_c: wp.array(dtype=float), k_joint: float,
+                           work: wp.array(dtype=wp.spatial_matrix), dinv: wp.array(dtype=wp.spatial_matrix),
+                           lmat: wp.array(dtype=wp.spatial_matrix), omat: wp.array(dtype=wp.spatial_matrix)):
+        """Exact block LDL^T of one character's (thread) 6J x 6J block (diagonal blocks plus
+        joint couplings, a tree): leaves are eliminated into their parents (parents[j] < j)."""
+        i = wp.tid()
+        for j in range(n_joints):
+            b = i * n_joints + j
+            bm = hess_b[b]
+            work[b] = block66(hess_a[b], bm, wp.transpose(bm), hess_c[b])
+        for jj in range(n_joints):
+            j = n_joints - 1 - jj
+            b = i * n_joints + j
+            di = inv66(work[b])
+            dinv[b] = di
+            p = parent[b]
+            if p >= 0:
+                o = joint_block(k_joint, lever_p[b], lever_c[b], ctrl_c[b])
+                l = o * di
+                omat[b] = o
+                lmat[b] = l
+                work[p] = work[p] - l * wp.transpose(o)
+
+    @wp.func
+    def tree_apply(nb: int, parent: wp.array(dtype=wp.int32), r_t: wp.array(dtype=wp.vec3),
+                   r_r: wp.array(dtype=wp.vec3), dinv: wp.array(dtype=wp.spatial_matrix),
+                   lmat: wp.array(dtype=wp.spatial_matrix), omat: wp.array(dtype=wp.spatial_matrix),
+                   y6: wp.array(dtype=wp.spatial_vector), z_t: wp.array(dtype=wp.vec3), z_r: wp.array(dtype=wp.vec3)):
+        """z = P r with P the inverse of every character's tree block (sequential)."""
+        for b in range(nb):
+            rt = r_t[b]
+            rr = r_r[b]
+            y6[b] = wp.spatial_vector(rt[0], rt[1], rt[2], rr[0], rr[1], rr[2])
+        for bb in range(nb):
+            b = nb - 1 - bb
+            p = parent[b]
+            if p >= 0:
+                y6[p] = y6[p] - lmat[b] * y6[b]
+        for b in range(nb):
+            p = parent[b]
+            y = y6[b]
+            if p >= 0:
+                y = y - wp.transpose(omat[b]) * y6[p]
+            x = dinv[b] * y
+            y6[b] = x
+            z_t[b] = wp.vec3(x[0], x[1], x[2])
+            z_r[b] = wp.vec3(x[3], x[4], x[5])
+        return 0
+
+    @wp.kernel
+    def tree_precond_kernel(n_joints: int, parent: wp.array(dtype=wp.int32),
+                            dinv: wp.array(dtype=wp.spatial_matrix), lmat: wp.array(dtype=wp.spatial_matrix),
+                            omat: wp.array(dtype=wp.spatial_matrix), x: wp.array(dtype=wp.spatial_vector),
+                            y: wp.array(dtype=wp.spatial_vector), z: wp.array(dtype=wp.spatial_vector),
+                            alpha: float, beta: float, work: wp.array(dtype=wp.spatial_vector)):
+        """z = alpha P x + beta y, P the tree solve of one character (thread); for
+        ``warp.optim.linear`` solvers (a LinearOperator preconditioner, CPU or CUDA)."""
+        i = wp.tid()
+        b0 = i * n_joints
+        for j in range(n_joints):
+            work[b0 + j] = x[b0 + j]
+        for jj in range(n_joints):
+            b = b0 + n_joints - 1 - jj
+            p = parent[b]
+            if p >= 0:
+                work[p] = work[p] - lmat[b] * work[b]
+        for j in range(n_joints):
+            b = b0 + j
+            p = parent[b]
+            v = work[b]
+            if p >= 0:
+                v = v - wp.transpose(omat[b]) * work[p]
+            work[b] = dinv[b] * v
+        for j in range(n_joints):
+            b = b0 + j
+            z[b] = alpha * work[b] + beta * y[b]
+
+    @wp.func
+    def apply_precond(mode: int, nb: int, parent: wp.array(dtype=wp.int32),
+                      r_t: wp.array(dtype=wp.vec3), r_r: wp.array(dtype=wp.vec3),
+                      p_tt: wp.array(dtype=wp.mat33), p_tr: wp.array(dtype=wp.mat33), p_rr: wp.array(dtype=wp.mat33),
+                      dinv: wp.array(dtype=wp.spatial_matrix), lmat: wp.array(dtype=wp.spatial_matrix),
+                      omat: wp.array(dtype=wp.spatial_matrix), y6: wp.array(dtype=wp.spatial_vector),
+                      z_t: wp.array(dtype=wp.vec3), z_r: wp.array(dtype=wp.vec3)):
+        """z = P r: mode 1 the per-character tree solve, mode 0 the 6x6 block Jacobi. Returns r.z."""
+        if mode == 1:
+            tree_apply(nb, parent, r_t, r_r, dinv, lmat, omat, y6, z_t, z_r)
+        else:
+            for i in range(nb):
+                ptr = p_tr[i]
+                z_t[i] = p_tt[i] * r_t[i] + ptr * r_r[i]
+                z_r[i] = wp.transpose(ptr) * r_t[i] + p_rr[i] * r_r[i]
+        rz = float(0.0)
+        for i in range(nb):
+            rz += wp.dot(r_t[i], z_t[i]) + wp.dot(r_r[i], z_r[i])
+        return rz
+
+    @wp.kernel
+    def pcg_fused_kernel(nb: int, count: wp.array(dtype=wp.int32), capacity: int,
+                         hess_a: wp.array(dtype=wp.mat33), hess_b: wp.array(dtype=wp.mat33),
+                         hess_c: wp.array(dtype=wp.mat33), p_tt: wp.array(dtype=wp.mat33),
+                         p_tr: wp.array(dtype=wp.mat33), p_rr: wp.array(dtype=wp.mat33),
+                         precond_mode: int, dinv: wp.array(dtype=wp.spatial_matrix),
+                         lmat: wp.array(dtype=wp.spatial_matrix), omat: wp.array(dtype=wp.spatial_matrix),
+                         y6: wp.array(dtype=wp.spatial_vector),
+                         parent: wp.array(dtype=wp.int32), lever_p: wp.array(dtype=wp.vec3),
+                         lever_c: wp.array(dtype=wp.vec3), ctrl_c: wp.array(dtype=float), k_joint: float,
+                         c_a: wp.array(dtype=wp.int32), c_b: wp.array(dtype=wp.int32),
+                         u_at: wp.array(dtype=wp.vec3), u_ar: wp.array(dtype=wp.vec3),
+                         u_bt: wp.array(dtype=wp.vec3), u_br: wp.array(dtype=wp.vec3), k_eff: wp.array(dtype=float),
+                         grad_t: wp.array(dtype=wp.vec3), grad_r: wp.array(dtype=wp.vec3),
+                         tol: float, max_iter: int,
+                         x_t: wp.array(dtype=wp.vec3), x_r: wp.array(dtype=wp.vec3),
+                         r_t: wp.array(dtype=wp.vec3), r_r: wp.array(dtype=wp.vec3),
+                         z_t: wp.array(dtype=wp.vec3), z_r: wp.array(dtype=wp.vec3),
+                         p_t: wp.array(dtype=wp.vec3), p_r: wp.array(dtype=wp.vec3),
+                         q_t: wp.array(dtype=wp.vec3), q_r: wp.array(dtype=wp.vec3),
+                         stats: wp.array(dtype=float)):
+        """PCG for H x = -g in one launch (one thread; for the CPU). stats = (iterations, |r|/|b|)."""
+        nc = wp.min(count[0], capacity)
+        bnorm2 = float(0.0)
+        for i in range(nb):
+            x_t[i] = wp.vec3(0.0, 0.0, 0.0)
+            x_r[i] = wp.vec3(0.0, 0.0, 0.0)
+            rt = -grad_t[i]
+            rr = -grad_r[i]
+            r_t[i] = rt
+            r_r[i] = rr
+            bnorm2 += wp.dot(rt, rt) + wp.dot(rr, rr)
+        rz = apply_precond(precond_mode, nb, parent, r_t, r_r, p_tt, p_tr, p_rr, dinv, lmat, omat, y6, z_t, z_r)
+        for i in range(nb):
+            p_t[i] = z_t[i]
+            p_r[i] = z_r[i]
+        it = int(0)
+        rel = float(0.0)
+        if bnorm2 > 0.0:
+            rel = 1.0
+        tol2 = tol * tol * bnorm2
+        while it < max_iter and rel > tol:
+            matvec(nb, nc, p_t, p_r, hess_a, hess_b, hess_c, parent, lever_p, lever_c, ctrl_c, k_joint,
+                   c_a, c_b, u_at, u_ar, u_bt, u_br, k_eff, q_t, q_r)
+            pq = float(0.0)
+            for i in range(nb):
+                pq += wp.dot(p_t[i], q_t[i]) + wp.dot(p_r[i], q_r[i])
+            if pq <= 0.0:
+                break
+            alpha = rz / pq
+            rr2 = float(0.0)
+            for i in range(nb):
+                x_t[i] = x_t[i] + alpha * p_t[i]
+                x_r[i] = x_r[i] + alpha * p_r[i]
+                rt = r_t[i] - alpha * q_t[i]
+                rr = r_r[i] - alpha * q_r[i]
+                r_t[i] = rt
+                r_r[i] = rr
+                rr2 += wp.dot(rt, rt) + wp.dot(rr, rr)
+            it += 1
+            rel = wp.sqrt(rr2 / bnorm2)
+            if rr2 <= tol2:
+                break
+            rz_new = apply_precond(precond_mode, nb, parent, r_t, r_r, p_tt, p_tr, p_rr, dinv, lmat, omat, y6,
+                                   z_t, z_r)
+            beta = rz_new / rz
+            rz = rz_new
+            for i in range(nb):
+                p_t[i] = z_t[i] + beta * p_t[i]
+                p_r[i] = z_r[i] + beta * p_r[i]
+        stats[0] = float(it)
+        stats[1] = rel
+
+    @wp.kernel
+    def triplets_bodies_kernel(nb: int, hess_a: wp.array(dtype=wp.mat33), hess_b: wp.array(dtype=wp.mat33),
+                               hess_c: wp.array(dtype=wp.mat33), parent: wp.array(dtype=wp.int32),
+                               lever_p: wp.array(dtype=wp.vec3), lever_c: wp.array(dtype=wp.vec3),
+                               ctrl_c: wp.array(dtype=float), k_joint: float,
+                               grad_t: wp.array(dtype=wp.vec3), grad_r: wp.array(dtype=wp.vec3),
+                               rows: wp.array(dtype=wp.int32), cols: wp.array(dtype=wp.int32),
+                               vals: wp.array(dtype=wp.spatial_matrix), rhs: wp.array(dtype=wp.spatial_vector)):
+        """BSR triplets: the diagonal block of body i and its joint's two off-diagonal blocks."""
+        i = wp.tid()
+        b = hess_b[i]
+        rows[i] = i
+        cols[i] = i
+        vals[i] = block66(hess_a[i], b, wp.transpose(b), hess_c[i])
+        gt = grad_t[i]
+        gr = grad_r[i]
+        rhs[i] = wp.spatial_vector(-gt[0], -gt[1], -gt[2], -gr[0], -gr[1], -gr[2])
+        p = parent[i]
+        j = nb + 2 * i
+        if p >= 0:
+            eye = wp.identity(n=3, dtype=float)
+            sp = wp.skew(lever_p[i])
+            sc = wp.skew(lever_c[i])
+            o = block66(-k_joint * eye, k_joint * sc, -k_joint * sp, k_joint * (sp * sc) - ctrl_c[i] * eye)
+            rows[j] = p
+            cols[j] = i
+            vals[j] = o
+            rows[j + 1] = i
+            cols[j + 1] = p
+            vals[j + 1] = wp.transpose(o)
+        else:
+            rows[j] = i
+            cols[j] = i
+            vals[j] = wp.spatial_matrix()
+            rows[j + 1] = i
+            cols[j + 1] = i
+            vals[j + 1] = wp.spatial_matrix()
+
+    @wp.kernel
+    def triplets_contacts_kernel(offset: int, count: wp.array(dtype=wp.int32), capacity: int,
+                                 c_a: wp.array(dtype=wp.int32), c_b: wp.array(dtype=wp.int32),
+                                 u_at: wp.array(dtype=wp.vec3), u_ar: wp.array(dtype=wp.vec3),
+                                 u_bt: wp.array(dtype=wp.vec3), u_br: wp.array(dtype=wp.vec3),
+                                 k_eff: wp.array(dtype=float),
+                                 rows: wp.array(dtype=wp.int32), cols: wp.array(dtype=wp.int32),
+                                 vals: wp.array(dtype=wp.spatial_matrix)):
+        """BSR triplets of the body-body contact couplings k u_a u_b^T (zero blocks otherwise)."""
+        i = wp.tid()
+        j = offset + 2 * i
+        n_active = wp.min(count[0], capacity)
+        b = int(-1)
+        k = float(0.0)
+        if i < n_active:
+            b = c_b[i]
+            k = k_eff[i]
+        if b >= 0 and k > 0.0:
+            a = c_a[i]
+            o = block66(k * wp.outer(u_at[i], u_bt[i]), k * wp.outer(u_at[i], u_br[i]),
+                        k * wp.outer(u_ar[i], u_bt[i]), k * wp.outer(u_ar[i], u_br[i]))
+            rows[j] = a
+            cols[j] = b
+            vals[j] = o
+            rows[j + 1] = b
+            cols[j + 1] = a
+            vals[j + 1] = wp.transpose(o)
+        else:
+            rows[j] = 0
+            cols[j] = 0
+            vals[j] = wp.spatial_matrix()
+            rows[j + 1] = 0
+            cols[j + 1] = 0
+            vals[j + 1] = wp.spatial_matrix()
+
+    @wp.kernel
+    def unpack_kernel(x6: wp.array(dtype=wp.spatial_vector), x_t: wp.array(dtype=wp.vec3),
+                      x_r: wp.array(dtype=wp.vec3)):
+        i = wp.tid()
+        s = x6[i]
+        x_t[i] = wp.vec3(s[0], s[1], s[2])
+        x_r[i] = wp.vec3(s[3], s[4], s[5])
+
+    return SimpleNamespace(wp=wp, contact_assemble_kernel=contact_assemble_kernel, precond_kernel=precond_kernel,
+                           tree_factor_kernel=tree_factor_kernel, tree_precond_kernel=tree_precond_kernel,
+                           pcg_fused_kernel=pcg_fused_kernel, triplets_bodies_kernel=triplets_bodies_kernel,
+                           triplets_contacts_kernel=triplets_contacts_kernel, unpack_kernel=unpack_kernel)
+
+
+def bsr_from_triplets(rows: np.ndarray, cols: np.ndarray, vals: np.ndarray, nb: int):
+    """scipy BSR matrix (6x6 blocks) summing duplicate triplets."""
+    import scipy.sparse as sp
+
+    keep = np.any(vals != 0, axis=(1, 2))
+    rows, cols, vals = rows[keep], cols[keep], vals[keep]
+    key = rows.astype(np.int64) * nb + cols
+    uniq, inverse = np.unique(key, return_inverse=True)
+    data = np.zeros((len(uniq), 6, 6))
+    np.add.at(data, inverse, vals)
+    ur, uc = uniq // nb, uniq % nb
+    indptr = np.searchsorted(ur, np.arange(nb + 1))
+    return sp.bsr_matrix((data, uc, indptr), shape=(6 * nb, 6 * nb))

@@ -1,0 +1,106 @@
+"""Simulation state (rigid bodies) and control (the animation's target pose for a step)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from crowdstudy.errors import InvalidInputError
+
+__all__ = ["State", "Control", "axis_angle_to_quat"]
+
+
+def axis_angle_to_quat(rotvec: np.ndarray) -> np.ndarray:
+    """(..., 3) axis-angle (rad) -> (..., 4) unit quaternions (x, y, z, w)."""
+    rotvec = np.asarray(rotvec, np.float64)
+    angle = np.linalg.norm(rotvec, axis=-1, keepdims=True)
+    half = 0.5 * angle
+    small = angle < 1e-8
+    scale = np.where(small, 0.5 - angle**2 / 48.0, np.sin(half) / np.where(small, 1.0, angle))
+    return np.concatenate([rotvec * scale, np.cos(half)], axis=-1)
+
+
+class State:
+    """Rigid state of all B bodies on the model's device.
+
+    Attributes (Warp arrays, length B): ``x`` vec3 centre of mass (m), ``q`` quat world
+    orientation (rest frame = identity), ``v`` vec3 linear velocity (m/s), ``w`` vec3
+    angular velocity (rad/s, world frame).
+    """
+
+    def __init__(self, model):
+        from crowdstudy.warp_runtime import get_warp
+
+        wp = get_warp()
+        nb, dev = model.n_bodies, model.device
+        self.x = wp.zeros(nb, dtype=wp.vec3, device=dev)
+        self.q = wp.array(np.tile(np.array([0, 0, 0, 1], np.float32), (nb, 1)), dtype=wp.quat, device=dev)
+        self.v = wp.zeros(nb, dtype=wp.vec3, device=dev)
+        self.w = wp.zeros(nb, dtype=wp.vec3, device=dev)
+
+    def numpy(self) -> dict:
+        """Host copies: x (B, 3), q (B, 4), v (B, 3), w (B, 3)."""
+        return {name: getattr(self, name).numpy().copy() for name in ("x", "q", "v", "w")}
+
+
+class Control:
+    """The animation's target for the current step and the previous one (Eq. 4 needs both).
+
+    ``frames`` holds F animation frames on the device: ``anim_q`` (F, B) joint rotations as
+    quaternions (root global, others parent-relative) and ``anim_root`` (F, N) pelvis
+    positions (m). :meth:`advance` moves the current target to "old" and computes the new one
+    at ``(1 - alpha) * frame f0 + alpha * frame f1`` (nlerp of rotations, lerp of the root):
+    ``t_rel`` (B,) quat, ``t_glob`` (B,) quat world rotations, ``t_x`` (B,) vec3 centres of
+    mass; ``t_rel_old`` and ``t_x_old`` the previous step's.
+    """
+
+    def __init__(self, model, n_frames: int = 2):
+        from crowdstudy.physics.kernels import kernels
+
+        self.model = model
+        self.k = kernels()
+        wp = self.k.wp
+        nb, n, dev = model.n_bodies, model.n_characters, model.device
+        self.anim_q = wp.zeros((n_frames, nb), dtype=wp.quat, device=dev)
+        self.anim_root = wp.zeros((n_frames, n), dtype=wp.vec3, device=dev)
+        self.t_rel = wp.zeros(nb, dtype=wp.quat, device=dev)
+        self.t_glob = wp.zeros(nb, dtype=wp.quat, device=dev)
+        self.t_x = wp.zeros(nb, dtype=wp.vec3, device=dev)
+        self.t_rel_old = wp.zeros(nb, dtype=wp.quat, device=dev)
+        self.t_glob_old = wp.zeros(nb, dtype=wp.quat, device=dev)
+        self.t_x_old = wp.zeros(nb, dtype=wp.vec3, device=dev)
+
+    def set_frames(self, joint_rotations: np.ndarray, root_translation: np.ndarray, start: int = 0) -> None:
+        """Upload frames: joint_rotations (F, N, J, 3) axis-angle rad, root_translation (F, N, 3) m."""
+        m = self.model
+        rot = np.asarray(joint_rotations, np.float64)
+        root = np.asarray(root_translation, np.float64)
+        if rot.ndim == 3:
+            rot, root = rot[None], root[None]
+        f = rot.shape[0]
+        if rot.shape[1:] != (m.n_characters, m.n_joints, 3) or root.shape != (f, m.n_characters, 3):
+            raise InvalidInputError(f"joint_rotations/root_translation: expected (F, {m.n_characters}, {m.n_joints}, 3)"
+                                    f" and (F, {m.n_characters}, 3), got {rot.shape} and {root.shape}")
+        if start < 0 or start + f > self.anim_q.shape[0]:
+            raise InvalidInputError(f"start: frames [{start}, {start + f}) do not fit the {self.anim_q.shape[0]} slots")
+        quats = axis_angle_to_quat(rot).reshape(f, -1, 4).astype(np.float32)
+        wp = self.k.wp
+        self.anim_q[start:start + f].assign(wp.array(quats, dtype=wp.quat, device=m.device))
+        self.anim_root[start:start + f].assign(wp.array(root.astype(np.float32), dtype=wp.vec3, device=m.device))
+
+    def advance(self, f0: int, f1: int, alpha: float) -> None:
+        """Shift the current target to "old" and compute the target between frames f0 and f1."""
+        self.t_rel, self.t_rel_old = self.t_rel_old, self.t_rel
+        self.t_glob, self.t_glob_old = self.t_glob_old, self.t_glob
+        self.t_x, self.t_x_old = self.t_x_old, self.t_x
+        m = self.model
+        self.k.wp.launch(self.k.targets_kernel, m.n_characters,
+                         [self.anim_q, self.anim_root, int(f0), int(f1), float(alpha), m.n_joints,
+                          m.wp["body_parent"], m.wp["anchor_parent"], m.wp["anchor_child"],
+                          self.t_rel, self.t_glob, self.t_x], device=m.device)
+
+    def hold(self) -> None:
+        """Make the previous target equal to the current one (no animation velocity)."""
+        self.t_rel_old.assign(self.t_rel)
+        self.t_glob_old.assign(self.t_glob)
+        self.t_x_old.assign(self.t_x)
+

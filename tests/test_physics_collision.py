@@ -1,0 +1,124 @@
+"""Collision detection: ground, environment, inter-body (incl. periodic), intra-body."""
+
+import types
+
+import numpy as np
+import pytest
+
+from crowdstudy.body.skeleton import DEFAULT_PELVIS_HEIGHT, DEFAULT_REST_JOINTS, PARENTS, children
+from crowdstudy.physics.collision import (KIND_ENVIRONMENT, KIND_GROUND, KIND_INTER, KIND_INTRA, CollisionPipeline,
+                                          Contacts, sample_static_walls, static_walls_from_meta)
+from crowdstudy.physics.config import PhysicsConfig
+from crowdstudy.physics.model import ModelBuilder, segment_distance
+from crowdstudy.physics.state import Control, State
+
+
+def fixture_body():
+    """Test-only capsules along the default skeleton's bones."""
+    rest = DEFAULT_REST_JOINTS
+    kids = children(PARENTS)
+    start, end, radius = rest.copy(), rest.copy(), np.full(24, 0.05)
+    radius[[0, 3, 6, 9]] = 0.1
+    for j in range(24):
+        tip = rest[kids[j]].mean(0) if kids[j] else rest[j] + 0.5 * (rest[j] - rest[PARENTS[j]])
+        d = tip - rest[j]
+        start[j] = rest[j] + 0.25 * d
+        end[j] = tip - 0.25 * d
+    return types.SimpleNamespace(rest_joints=rest, capsules=types.SimpleNamespace(start=start, end=end, radius=radius))
+
+
+def detect(roots, rot=None, cfg=None, points=None, period=None):
+    n = len(roots)
+    builder = ModelBuilder()
+    for _ in range(n):
+        b = fixture_body()
+        builder.add_character(b.rest_joints, b.capsules)
+    model = builder.finalize(device="cpu")
+    cfg = cfg or PhysicsConfig()
+    control = Control(model)
+    rot = np.zeros((n, 24, 3)) if rot is None else rot
+    control.set_frames(rot, np.asarray(roots, float))
+    control.advance(0, 0, 0.0)
+    state = State(model)
+    state.x.assign(control.t_x)
+    state.q.assign(control.t_glob)
+    pipe = CollisionPipeline(model, cfg, static_points=points, period=period)
+    contacts = Contacts.allocate(pipe.default_capacity(), "cpu")
+    pipe.collide(state, contacts)
+    return model, contacts.to_numpy(), pipe
+
+
+def test_ground_contacts_for_capsules_below_the_floor():
+    _, c, _ = detect([[0, 0, DEFAULT_PELVIS_HEIGHT - 0.05]])
+    ground = c["kind"] == KIND_GROUND
+    assert ground.any()
+    assert np.allclose(c["normal"][ground], [0, 0, 1])
+    _, c_high, _ = detect([[0, 0, 2.0]])
+    assert not (c_high["kind"] == KIND_GROUND).any()
+
+
+def test_inter_body_contacts_match_exact_capsule_distance():
+    model, c, _ = detect([[0, 0, 1.2], [0.15, 0.05, 1.2]], cfg=PhysicsConfig(contact_margin=0.0))
+    inter = (c["kind"] == KIND_INTER) & (c["depth"] > 0)
+    assert inter.sum() > 5
+    a, b = c["body_a"][inter], c["body_b"][inter]
+    assert np.all(model.body_char[a] != model.body_char[b])
+    # T-pose: world capsule = root + rest-frame end points; compare with the numpy distance
+    caps = fixture_body().capsules
+    roots = np.array([[0, 0, 1.2], [0.15, 0.05, 1.2]])
+    ja, jb = model.body_joint[a], model.body_joint[b]
+    ra, rb = roots[model.body_char[a]], roots[model.body_char[b]]
+    _, _, dist = segment_distance(ra + caps.start[ja], ra + caps.end[ja], rb + caps.start[jb], rb + caps.end[jb])
+    np.testing.assert_allclose(c["depth"][inter], caps.radius[ja] + caps.radius[jb] - dist, atol=1e-4)
+    # every overlapping capsule pair was found
+    all_a, all_b = np.meshgrid(np.arange(24), np.arange(24), indexing="ij")
+    _, _, d_all = segment_distance(roots[0] + caps.start[all_a], roots[0] + caps.end[all_a],
+                                   roots[1] + caps.start[all_b], roots[1] + caps.end[all_b])
+    assert inter.sum() == np.count_nonzero(caps.radius[all_a] + caps.radius[all_b] - d_all > 0)
+    _, far, _ = detect([[0, 0, 1.2], [3.0, 0, 1.2]])
+    assert not (far["kind"] == KIND_INTER).any()
+
+
+def test_periodic_minimum_image():
+    _, c, _ = detect([[0.05, 0, 1.2], [4.4, 0, 1.2]], period=4.5)
+    assert ((c["kind"] == KIND_INTER) & (c["depth"] > 0)).any()
+    _, c2, _ = detect([[0.05, 0, 1.2], [4.4, 0, 1.2]])
+    assert not (c2["kind"] == KIND_INTER).any()
+
+
+def test_intra_pairs_skip_rest_touching_and_parent_child():
+    model, c, _ = detect([[0, 0, 1.2]])
+    pairs = model.intra_pairs
+    assert len(pairs) > 50
+    assert not np.any(PARENTS[pairs[:, 1]] == pairs[:, 0])
+    caps = fixture_body().capsules
+    _, _, d = segment_distance(caps.start[pairs[:, 0]], caps.end[pairs[:, 0]], caps.start[pairs[:, 1]],
+                               caps.end[pairs[:, 1]])
+    assert np.all(d > caps.radius[pairs[:, 0]] + caps.radius[pairs[:, 1]])
+    assert not ((c["kind"] == KIND_INTRA) & (c["depth"] > 0)).any()    # the T-pose is free
+    # bend the right elbow so the forearm folds through the chest -> an intra contact
+    rot = np.zeros((1, 24, 3))
+    rot[0, 17] = [0, 0, 1.4]
+    rot[0, 19] = [0, 0, 2.6]
+    _, cb, _ = detect([[0, 0, 1.2]], rot=rot)
+    assert ((cb["kind"] == KIND_INTRA) & (cb["depth"] > 0)).any()
+
+
+def test_environment_points_push_away_from_walls():
+    walls = np.array([[[-2.0, 0.15], [2.0, 0.15]]])
+    pts = sample_static_walls(walls, spacing=0.03)
+    assert pts.shape[1] == 3 and pts[:, 2].max() >= 2.0
+    _, c, _ = detect([[0, 0, 1.2]], points=pts, cfg=PhysicsConfig(contact_margin=0.0))
+    env = (c["kind"] == KIND_ENVIRONMENT) & (c["depth"] > 0)
+    assert env.any()
+    assert np.all(c["normal"][env][:, 1] < 0)          # pushed towards -y, away from the wall
+
+
+def test_static_walls_from_meta():
+    corridor = static_walls_from_meta({"scenario": "corridor", "periodic": {"axis": 0, "length": 4.5}})
+    assert corridor.shape == (2, 2, 2) and sorted(corridor[:, 0, 1]) == [-1.0, 1.0]
+    stage = static_walls_from_meta({"scenario": "concert"})
+    assert stage.shape == (1, 2, 2) and stage[0, 0, 1] == pytest.approx(2.5)
+    assert static_walls_from_meta({}).shape == (0, 2, 2)
+    with pytest.raises(ValueError, match="obstacles"):
+        static_walls_from_meta({"obstacles": [[1, 2, 3]]})

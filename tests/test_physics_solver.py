@@ -1,0 +1,211 @@
+"""Solver behaviour: tracking, collision resolution, solver agreement, damping (Fig. 4), correct()."""
+
+import numpy as np
+import pytest
+
+from crowdstudy.physics import CrowdCorrector, PhysicsConfig, correct
+from crowdstudy.physics.collision import KIND_INTER, CollisionPipeline, Contacts
+
+
+@pytest.fixture(scope="module")
+def records():
+    from crowdstudy.body.shapes import sample_bodies
+
+    return sample_bodies(4, 11)
+
+
+@pytest.fixture(scope="module")
+def bodies(records):
+    from crowdstudy.physics.corrector import load_bodies
+
+    return load_bodies(records)
+
+
+def standing_root(bodies, xy):
+    return np.array([[x, y, b.pelvis_height] for b, (x, y) in zip(bodies, xy)])
+
+
+def inter_depth(corr):
+    pipe = CollisionPipeline(corr.model, corr.config.replace(contact_margin=0.0))
+    contacts = Contacts.allocate(pipe.default_capacity(), "cpu")
+    pipe.collide(corr.state, contacts)
+    c = contacts.to_numpy()
+    sel = (c["kind"] == KIND_INTER) & (c["depth"] > 0)
+    return float(c["depth"][sel].sum())
+
+
+def test_standing_character_tracks_its_animation_and_keeps_feet_on_ground(bodies):
+    corr = CrowdCorrector(bodies[:1], device="cpu")
+    root = standing_root(bodies[:1], [(0.0, 0.0)])
+    rot = np.zeros((1, 24, 3))
+    rot[0, 16] = [0, 0, -1.2]     # arms down
+    rot[0, 17] = [0, 0, 1.2]
+    corr.reset(rot, root)
+    for _ in range(45):
+        out_rot, out_root = corr.step(rot, root)
+    assert np.abs(out_root - root).max() < 0.01
+    from crowdstudy.body.skeleton import forward_kinematics
+
+    _, joints = forward_kinematics(bodies[0].rest_joints, out_rot[0], out_root[0])
+    _, target = forward_kinematics(bodies[0].rest_joints, rot[0], root[0])
+    assert np.linalg.norm(joints - target, axis=1).mean() < 0.02
+    assert abs(joints[[7, 8], 2] - target[[7, 8], 2]).max() < 0.01   # ankles stay where the animation puts them
+    assert corr.solver.last_cg[1] < 1e-3
+
+
+def test_overlapping_characters_separate(bodies):
+    corr = CrowdCorrector(bodies[:2], device="cpu")
+    root = standing_root(bodies[:2], [(0.0, 0.0), (0.2, 0.05)])
+    rot = np.zeros((2, 24, 3))
+    corr.reset(rot, root)
+    before = inter_depth(corr)
+    for _ in range(30):
+        corr.step(rot, root)
+    after = inter_depth(corr)
+    assert before > 0.1
+    assert after < 0.1 * before
+
+
+def test_reset_with_settle_starts_resolved(bodies):
+    corr = CrowdCorrector(bodies[:2], device="cpu", config=PhysicsConfig(settle_time=0.3))
+    root = standing_root(bodies[:2], [(0.0, 0.0), (0.2, 0.05)])
+    rot = np.zeros((2, 24, 3))
+    corr.reset(rot, root)
+    before = inter_depth(corr)
+    corr.reset(rot, root, settle=True)
+    assert inter_depth(corr) < 0.2 * before
+    out_rot, out_root = corr.step(rot, root)
+    assert out_rot.shape == (2, 24, 3) and out_root.shape == (2, 3)
+
+
+def test_linear_solvers_agree(bodies):
+    results = {}
+    for name in ("fused", "scipy", "warp"):
+        corr = CrowdCorrector(bodies[:2], device="cpu", linear_solver=name,
+                              config=PhysicsConfig(cg_tolerance=1e-6, cg_max_iterations=400))
+        root = standing_root(bodies[:2], [(0.0, 0.0), (0.25, 0.0)])
+        corr.reset(np.zeros((2, 24, 3)), root)
+        _, r = corr.step(np.zeros((2, 24, 3)), root + [0.0, 0.02, 0.0])
+        results[name] = (corr.solver.dx.numpy().copy(), r)
+    ref = results["fused"][0]
+    for name in ("scipy", "warp"):
+        assert np.abs(results[name][0] - ref).max() <= 1e-3 * np.abs(ref).max() + 1e-6, name
+
+
+@pytest.fixture(scope="module")
+def damping():
+    from crowdstudy.physics.damping import damping_study
+
+    return damping_study((0.0, 0.006, 0.06), device="cpu")
+
+
+def test_damping_paper_value_recovers_smoothly(damping):
+    m = damping["metrics"][0.006]
+    assert m["return_time"] < 1.0
+    assert m["overshoot"] < 0.05
+    held = damping["position"][0.006][np.searchsorted(damping["time"], 3.4)]
+    assert held < -0.1                        # it really was held back before the release
+
+
+def test_damping_zero_oscillates(damping):
+    m0, m = damping["metrics"][0.0], damping["metrics"][0.006]
+    assert m0["crossings"] >= 3
+    assert m0["overshoot"] > 0.05 and m0["overshoot"] > 3 * m["overshoot"]
+
+
+def test_damping_large_lags(damping):
+    m = damping["metrics"][0.06]
+    assert m["error_at_1s"] > 0.02
+    assert m["return_time"] > 1.0
+
+
+def _tiny_anim(records, bodies, n_frames=8):
+    from crowdstudy.body.skeleton import JOINT_NAMES, PARENTS
+    from crowdstudy.scene import CrowdAnimation
+
+    n = 3
+    root0 = standing_root(bodies[:n], [(0, 0), (0.3, 0.0), (0.15, 0.25)])
+    t = np.arange(n_frames) / 30.0
+    root = np.repeat(root0[None], n_frames, 0)
+    root[:, :, 1] += 0.3 * t[:, None]
+    rot = np.zeros((n_frames, n, 24, 3))
+    rot[:, :, 16, 2] = -1.1
+    rot[:, :, 17, 2] = 1.1
+    return CrowdAnimation(joint_names=JOINT_NAMES, parents=PARENTS, root_translation=root, joint_rotations=rot,
+                          fps=30.0, bodies=tuple(records[:n]), clips=tuple({"name": "test"} for _ in range(n)),
+                          meta={"method": "Baseline", "seed": 1})
+
+
+def test_correct_returns_ours_with_same_layout(records, bodies):
+    anim = _tiny_anim(records, bodies)
+    out = correct(anim, progress=False, device="cpu")
+    assert out.meta["method"] == "Ours" and out.meta["physics"]["steps"] == 2 * (anim.n_frames - 1)
+    assert out.root_translation.shape == anim.root_translation.shape
+    assert out.joint_rotations.shape == anim.joint_rotations.shape
+    assert out.bodies == anim.bodies and out.clips == anim.clips
+    assert np.abs(out.root_translation[0] - anim.root_translation[0]).max() < 0.15   # settled first frame
+    assert np.abs(out.root_translation - anim.root_translation).max() < 0.15
+
+
+def test_cli_correct_round_trip(tmp_path, records, bodies):
+    from crowdstudy.cli import main
+    from crowdstudy.scene import CrowdAnimation
+
+    src = _tiny_anim(records, bodies, n_frames=4).save(tmp_path / "in.npz")
+    rc = main(["correct", str(src), str(tmp_path / "out.npz"), "--no-progress", "--device", "cpu",
+               "--config", "damping=0.01"])
+    assert rc == 0
+    out = CrowdAnimation.load(tmp_path / "out.npz")
+    assert out.meta["method"] == "Ours" and out.meta["physics"]["config"]["damping"] == 0.01
+
+
+def test_bad_inputs_name_the_argument(bodies):
+    from crowdstudy.physics.model import ModelBuilder
+
+    with pytest.raises(ValueError, match="dt"):
+        PhysicsConfig(dt=-1.0)
+    with pytest.raises(ValueError, match="unknown key 'stifness'"):
+        PhysicsConfig.from_strings(["stifness=3"])
+    with pytest.raises(ValueError, match="damping"):
+        PhysicsConfig.from_strings(["damping=abc"])
+    with pytest.raises(ValueError, match="anim"):
+        correct("not an animation")
+    with pytest.raises(ValueError, match="linear_solver"):
+        CrowdCorrector(bodies[:1], device="cpu", linear_solver="magic")
+    with pytest.raises(ValueError, match="rest_joints"):
+        ModelBuilder().add_character(np.zeros((5, 3)), bodies[0].capsules)
+    with pytest.raises(ValueError, match="no characters"):
+        ModelBuilder().finalize(device="cpu")
+    corr = CrowdCorrector(bodies[:1], device="cpu")
+    with pytest.raises(ValueError, match="reset"):
+        corr.step(np.zeros((1, 24, 3)), np.zeros((1, 3)))
+    corr.reset(np.zeros((1, 24, 3)), standing_root(bodies[:1], [(0.0, 0.0)]))
+    with pytest.raises(ValueError, match="joint_rotations/root_translation"):
+        corr.step(np.zeros((2, 24, 3)), np.zeros((2, 3)))
+
+
+@pytest.mark.slow
+def test_real_scene_d1_meets_the_overlap_and_tracking_bars():
+    """Short clip of the study's stationary D1 cell: mesh overlap <= 10 % of the Baseline's,
+    tracking error < 5 cm (the full 20 s clips are measured by ``crowdstudy bench physics --bars``)."""
+    from crowdstudy.design import load_design
+    from crowdstudy.metrics.overlap import overlap_volume
+    from crowdstudy.metrics.tracking import tracking_error
+    from crowdstudy.motion.baseline import build_baseline
+
+    base = build_baseline(load_design(), "stationary", "D1", duration=1.0)
+    ours = correct(base, progress=False)
+    frames = np.arange(0, base.n_frames, 6)
+    ob = overlap_volume(base, geometry="mesh", frames=frames).mean
+    oo = overlap_volume(ours, geometry="mesh", frames=frames).mean
+    assert ob > 0
+    assert oo <= 0.1 * ob
+    assert tracking_error(ours, base) < 5.0
+    from crowdstudy.body.skeleton import forward_kinematics
+    from crowdstudy.physics.corrector import load_bodies
+
+    rest = np.stack([np.asarray(b.rest_joints) for b in load_bodies(base.bodies)])
+    _, p_ours = forward_kinematics(rest[None], ours.joint_rotations, ours.root_translation)
+    _, p_base = forward_kinematics(rest[None], base.joint_rotations, base.root_translation)
+    feet = [7, 8, 10, 11]
+    assert np.abs(p_ours[:, :, feet, 2] - p_base[:, :, feet, 2]).mean() < 0.02     # feet stay on the ground
