@@ -142,10 +142,8 @@ def resolve_bodies(anim, bodies: Sequence | None = None) -> list:
         if len(bodies) != n:
             raise InvalidInputError(f"bodies: expected {n} bodies (one per character), got {len(bodies)}")
         return bodies
-    try:
-        from crowdstudy.body import load_body
-    except ImportError as exc:
-        raise InvalidInputError(f"bodies: crowdstudy.body.load_body is not available ({exc})") from None
+    from crowdstudy.body import load_body
+
     return [load_body(rec) for rec in anim.bodies]
 
 
@@ -199,10 +197,8 @@ def _batch_poser(body_objs: list, backend: str = "numpy"):
         if WarpSkinner.supports(body_objs):
             skinner = WarpSkinner(body_objs, backend)
             return lambda bodies, rot, root: skinner(rot, root)
-    try:
-        from crowdstudy.body.model import Body, pose_bodies
-    except ImportError:
-        return None
+    from crowdstudy.body.model import Body, pose_bodies
+
     if not all(isinstance(b, Body) for b in body_objs):
         return None
     return lambda bodies, rot, root: pose_bodies(bodies, rot, root, dtype=np.float32)

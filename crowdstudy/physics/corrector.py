@@ -26,10 +26,8 @@ __all__ = ["CrowdCorrector", "correct", "load_bodies"]
 
 def load_bodies(records) -> list:
     """Body models (rest joints + capsules) for character records (``crowdstudy.body``)."""
-    try:
-        from crowdstudy.body import load_body
-    except ImportError:
-        from crowdstudy.body.model import load_body
+    from crowdstudy.body import load_body
+
     return [load_body(rec) for rec in records]
 
 
