@@ -26,18 +26,14 @@ from crowdstudy.bench import format_table, measure, write_report
 
 
 def _stationary_crowd(n: int, seed: int):
+    from crowdstudy.design import load_design
+    from crowdstudy.layout import concert_layout
     from crowdstudy.scene import Crowd
 
-    try:
-        from crowdstudy.design import load_design
-        from crowdstudy.layout import concert_layout
-
-        design = load_design()
-        level = next((lv for lv in design.densities if design.n_characters(lv) == n), None)
-        if level is not None:
-            return concert_layout(design, level, seed)
-    except ImportError:
-        pass
+    design = load_design()
+    level = next((lv for lv in design.densities if design.n_characters(lv) == n), None)
+    if level is not None:
+        return concert_layout(design, level, seed)
     rng = np.random.default_rng(seed)
     side = int(np.ceil(np.sqrt(n)))
     grid = np.stack(np.meshgrid(np.linspace(-1.3, 1.3, side), np.linspace(-1.3, 1.3, side)), -1).reshape(-1, 2)[:n]
@@ -45,18 +41,14 @@ def _stationary_crowd(n: int, seed: int):
 
 
 def _walking_crowd(n: int, duration: float, fps: float, seed: int):
+    from crowdstudy.design import load_design
+    from crowdstudy.navigation import corridor_crowd
     from crowdstudy.scene import Crowd
 
-    try:
-        from crowdstudy.design import load_design
-        from crowdstudy.navigation import corridor_crowd
-
-        design = load_design()
-        level = next((lv for lv in design.densities if design.n_characters(lv) == n), None)
-        if level is not None:
-            return corridor_crowd(design, level, seed, duration=duration, fps=fps)
-    except ImportError:
-        pass
+    design = load_design()
+    level = next((lv for lv in design.densities if design.n_characters(lv) == n), None)
+    if level is not None:
+        return corridor_crowd(design, level, seed, duration=duration, fps=fps)
     rng = np.random.default_rng(seed)
     t = np.arange(int(round(duration * fps))) / fps
     speed = rng.uniform(0.8, 1.5, n) + 0.2 * np.sin(t[:, None] + rng.uniform(0, 6, n))
@@ -68,7 +60,8 @@ def _naive_stationary(crowd, duration, fps, seed, bodies):
     """Per-frame, per-character loop (the peer)."""
     from crowdstudy.motion import list_clips, load_clip
     from crowdstudy.motion.baseline import body_scales
-    from crowdstudy.motion.quaternions import quat_about_z, quat_multiply, quat_to_axis_angle
+    from crowdstudy.body.rotations import quaternion_to_axis_angle
+    from crowdstudy.motion.quaternions import quat_about_z, quat_multiply
 
     names = list_clips("dance")
     rng = np.random.default_rng(seed)
@@ -86,7 +79,7 @@ def _naive_stationary(crowd, duration, fps, seed, bodies):
             q, r = clip.sample_quaternions(np.array(f / fps + phase[i]))
             q = q.copy()
             q[0] = quat_multiply(quat_about_z(np.array(yaw[i])), q[0])
-            rot[f, i] = quat_to_axis_angle(q)
+            rot[f, i] = quaternion_to_axis_angle(q)
             c, s = np.cos(yaw[i]), np.sin(yaw[i])
             root[f, i] = [crowd.positions[0, i, 0] + scale[i] * (c * r[0] - s * r[1]),
                           crowd.positions[0, i, 1] + scale[i] * (s * r[0] + c * r[1]), scale[i] * r[2]]
@@ -96,7 +89,8 @@ def _naive_stationary(crowd, duration, fps, seed, bodies):
 def _naive_walking(crowd, bodies):
     from crowdstudy.motion.baseline import body_scales, gait_blend
     from crowdstudy.motion.library import walk_clips
-    from crowdstudy.motion.quaternions import quat_about_z, quat_blend, quat_multiply, quat_to_axis_angle
+    from crowdstudy.body.rotations import quaternion_to_axis_angle
+    from crowdstudy.motion.quaternions import quat_about_z, quat_blend, quat_multiply
 
     walks = walk_clips()
     speeds = np.array([c.speed for c in walks])
@@ -122,7 +116,7 @@ def _naive_walking(crowd, bodies):
             r = (1 - w[k + 1]) * r0 + w[k + 1] * r1
             heading = np.arctan2(b[1] - a[1], b[0] - a[0]) - np.pi / 2
             q[0] = quat_multiply(quat_about_z(np.array(heading)), q[0])
-            rot[f, i] = quat_to_axis_angle(q)
+            rot[f, i] = quaternion_to_axis_angle(q)
             c, s = np.cos(heading), np.sin(heading)
             root[f, i] = [pos[f, i, 0] + scale[i] * (c * r[0] - s * r[1]),
                           pos[f, i, 1] + scale[i] * (s * r[0] + c * r[1]), scale[i] * r[2]]

@@ -35,15 +35,12 @@ from crowdstudy.bench import format_table, write_report
 
 
 def _scene(n: int, seed: int = 0):
-    """A stationary crowd: build_baseline's D5 cell when the motion stage is there."""
+    """A stationary crowd: build_baseline's D5 cell when ``n`` is its size, else a jittered grid."""
     from crowdstudy.design import load_design
+    from crowdstudy.motion import build_baseline
 
     design = load_design()
-    try:
-        from crowdstudy.motion import build_baseline
-    except ImportError:
-        build_baseline = None
-    if build_baseline is not None and n == design.n_characters("D5"):
+    if n == design.n_characters("D5"):
         return build_baseline(design, "stationary", "D5", duration=1.0), "build_baseline stationary D5"
     from crowdstudy.body.model import load_body
     from crowdstudy.body.skeleton import JOINT_NAMES, PARENTS

@@ -9,6 +9,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
+from crowdstudy.body.capsules import segment_distance
 from crowdstudy.body.rotations import axis_angle_to_matrix
 from crowdstudy.body.skeleton import DEFAULT_REST_JOINTS, JOINT_NAMES, PARENTS, forward_kinematics
 from crowdstudy.errors import InvalidInputError
@@ -20,7 +21,6 @@ from crowdstudy.metrics import (
     summarize,
     tracking_error,
 )
-from crowdstudy.metrics.tracking import segment_distance
 from crowdstudy.scene import CrowdAnimation
 
 trimesh = pytest.importorskip("trimesh")

@@ -5,11 +5,12 @@ import types
 import numpy as np
 import pytest
 
+from crowdstudy.body.capsules import closest_points_on_segments
 from crowdstudy.body.skeleton import DEFAULT_PELVIS_HEIGHT, DEFAULT_REST_JOINTS, PARENTS, children
 from crowdstudy.physics.collision import (KIND_ENVIRONMENT, KIND_GROUND, KIND_INTER, KIND_INTRA, CollisionPipeline,
                                           Contacts, sample_static_walls, static_walls_from_meta)
 from crowdstudy.physics.config import PhysicsConfig
-from crowdstudy.physics.model import ModelBuilder, segment_distance
+from crowdstudy.physics.model import ModelBuilder
 from crowdstudy.physics.state import Control, State
 
 
@@ -68,12 +69,13 @@ def test_inter_body_contacts_match_exact_capsule_distance():
     roots = np.array([[0, 0, 1.2], [0.15, 0.05, 1.2]])
     ja, jb = model.body_joint[a], model.body_joint[b]
     ra, rb = roots[model.body_char[a]], roots[model.body_char[b]]
-    _, _, dist = segment_distance(ra + caps.start[ja], ra + caps.end[ja], rb + caps.start[jb], rb + caps.end[jb])
+    _, _, dist = closest_points_on_segments(ra + caps.start[ja], ra + caps.end[ja],
+                                            rb + caps.start[jb], rb + caps.end[jb])
     np.testing.assert_allclose(c["depth"][inter], caps.radius[ja] + caps.radius[jb] - dist, atol=1e-4)
     # every overlapping capsule pair was found
     all_a, all_b = np.meshgrid(np.arange(24), np.arange(24), indexing="ij")
-    _, _, d_all = segment_distance(roots[0] + caps.start[all_a], roots[0] + caps.end[all_a],
-                                   roots[1] + caps.start[all_b], roots[1] + caps.end[all_b])
+    _, _, d_all = closest_points_on_segments(roots[0] + caps.start[all_a], roots[0] + caps.end[all_a],
+                                             roots[1] + caps.start[all_b], roots[1] + caps.end[all_b])
     assert inter.sum() == np.count_nonzero(caps.radius[all_a] + caps.radius[all_b] - d_all > 0)
     _, far, _ = detect([[0, 0, 1.2], [3.0, 0, 1.2]])
     assert not (far["kind"] == KIND_INTER).any()
@@ -92,8 +94,8 @@ def test_intra_pairs_skip_rest_touching_and_parent_child():
     assert len(pairs) > 50
     assert not np.any(PARENTS[pairs[:, 1]] == pairs[:, 0])
     caps = fixture_body().capsules
-    _, _, d = segment_distance(caps.start[pairs[:, 0]], caps.end[pairs[:, 0]], caps.start[pairs[:, 1]],
-                               caps.end[pairs[:, 1]])
+    _, _, d = closest_points_on_segments(caps.start[pairs[:, 0]], caps.end[pairs[:, 0]],
+                                         caps.start[pairs[:, 1]], caps.end[pairs[:, 1]])
     assert np.all(d > caps.radius[pairs[:, 0]] + caps.radius[pairs[:, 1]])
     assert not ((c["kind"] == KIND_INTRA) & (c["depth"] > 0)).any()    # the T-pose is free
     # bend the right elbow so the forearm folds through the chest -> an intra contact

@@ -30,6 +30,7 @@ __all__ = [
     "fit_capsules",
     "touching_pairs",
     "posed_capsules",
+    "closest_points_on_segments",
     "segment_distance",
     "mesh_occupancy",
     "capsule_occupancy",
@@ -169,33 +170,55 @@ def _grid_for(points: np.ndarray, step: float, pad: int = 1, symmetric_x: bool =
     return origin, shape
 
 
-def segment_distance(p0: np.ndarray, p1: np.ndarray, q0: np.ndarray, q1: np.ndarray) -> np.ndarray:
-    """Distance between segments p0-p1 and q0-q1, all (..., 3) m -> (...,) m."""
-    d1, d2, r = p1 - p0, q1 - q0, p0 - q0
+def closest_points_on_segments(p0: np.ndarray, p1: np.ndarray, q0: np.ndarray, q1: np.ndarray
+                               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Closest points of segments [p0, p1] and [q0, q1] (Ericson, Real-Time Collision
+    Detection, 5.1.9), vectorised.
+
+    Args:
+        p0, p1, q0, q1: (..., 3) float, metres (broadcast against each other).
+
+    Returns:
+        ``(s (...,), t (...,), distance (...,) m)``: the closest points are
+        ``p0 + s (p1 - p0)`` and ``q0 + t (q1 - q0)``, s, t in [0, 1]. Parallel segments are
+        detected with a test relative to the segment lengths (so short segments are not
+        mistaken for parallel ones) and take ``s = 0`` unless the partner point of p0 falls
+        outside [q0, q1]; a zero-length segment is projected onto the other one.
+    """
+    d1 = p1 - p0
+    d2 = q1 - q0
+    r = p0 - q0
     a = np.einsum("...i,...i->...", d1, d1)
     e = np.einsum("...i,...i->...", d2, d2)
     f = np.einsum("...i,...i->...", d2, r)
     c = np.einsum("...i,...i->...", d1, r)
     b = np.einsum("...i,...i->...", d1, d2)
-    eps = 1e-12
-    safe_a = np.where(a > eps, a, 1.0)
-    safe_e = np.where(e > eps, e, 1.0)
+    eps = 1e-14
+    a_ok = a > eps
+    e_ok = e > eps
+    safe_a = np.where(a_ok, a, 1.0)
+    safe_e = np.where(e_ok, e, 1.0)
     denom = a * e - b * b
-    # general case (Ericson, Real-Time Collision Detection, 5.1.9)
-    s = np.where(denom > eps, np.clip((b * f - c * e) / np.where(denom > eps, denom, 1.0), 0.0, 1.0), 0.0)
+    skew = denom > 1e-12 * np.maximum(a * e, eps)  # not parallel: unique closest points
+    s = np.where(skew, np.clip((b * f - c * e) / np.where(skew, denom, 1.0), 0.0, 1.0), 0.0)
     t = (b * s + f) / safe_e
-    s = np.where(t < 0.0, np.clip(-c / safe_a, 0.0, 1.0), np.where(t > 1.0, np.clip((b - c) / safe_a, 0.0, 1.0), s))
+    s = np.where(t < 0, np.clip(-c / safe_a, 0.0, 1.0), s)
+    s = np.where(t > 1, np.clip((b - c) / safe_a, 0.0, 1.0), s)
     t = np.clip(t, 0.0, 1.0)
-    # degenerate segments (points)
-    q_point = e <= eps
-    p_point = a <= eps
-    s = np.where(q_point, np.clip(-c / safe_a, 0.0, 1.0), s)
-    t = np.where(q_point, 0.0, t)
-    t = np.where(p_point, np.clip(f / safe_e, 0.0, 1.0), t)
-    s = np.where(p_point, 0.0, s)
-    t = np.where(p_point & q_point, 0.0, t)
-    diff = (p0 + s[..., None] * d1) - (q0 + t[..., None] * d2)
-    return np.linalg.norm(diff, axis=-1)
+    # Degenerate segments (points): project onto the other one.
+    s = np.where(~e_ok, np.clip(-c / safe_a, 0.0, 1.0), s)
+    t = np.where(~e_ok, 0.0, t)
+    s = np.where(~a_ok, 0.0, s)
+    t = np.where(~a_ok & e_ok, np.clip(f / safe_e, 0.0, 1.0), t)
+    cp = p0 + s[..., None] * d1
+    cq = q0 + t[..., None] * d2
+    return s, t, np.linalg.norm(cp - cq, axis=-1)
+
+
+def segment_distance(p0: np.ndarray, p1: np.ndarray, q0: np.ndarray, q1: np.ndarray) -> np.ndarray:
+    """Closest distance between segments p0-p1 and q0-q1, all (..., 3) m -> (...,) m
+    (see :func:`closest_points_on_segments`)."""
+    return closest_points_on_segments(p0, p1, q0, q1)[2]
 
 
 def touching_pairs(capsules: Capsules, margin: float = 0.005) -> np.ndarray:
@@ -210,18 +233,22 @@ def touching_pairs(capsules: Capsules, margin: float = 0.005) -> np.ndarray:
     return np.stack([i[touch], j[touch]], axis=1).astype(np.int32)
 
 
-def posed_capsules(body, joint_rotations: np.ndarray, root_translation: np.ndarray
-                   ) -> tuple[np.ndarray, np.ndarray]:
-    """World capsule segments at a pose: ``(start (..., 24, 3), end (..., 24, 3))`` m.
+def posed_capsules(body, joint_rotations: np.ndarray, root_translation: np.ndarray,
+                   parents: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """World capsule segments at a pose: ``(start (..., J, 3), end (..., J, 3))`` m.
 
     Args:
-        body: a Body; joint_rotations: (..., 24, 3) axis-angle rad; root_translation: (..., 3) m.
+        body: a Body (or anything with ``rest_joints`` (J, 3) m and ``capsules`` with
+            ``start``, ``end`` (J, 3) m in the rest frame); joint_rotations: (..., J, 3)
+            axis-angle rad; root_translation: (..., 3) m; parents: (J,) parent indices
+            (default: the 24-joint skeleton's ``PARENTS``).
     """
     caps = body.capsules
-    glob, pos = forward_kinematics(body.rest_joints, joint_rotations, root_translation)
-    rest = body.rest_joints
-    start = np.einsum("...jab,jb->...ja", glob, caps.start - rest) + pos
-    end = np.einsum("...jab,jb->...ja", glob, caps.end - rest) + pos
+    rest = np.asarray(body.rest_joints, dtype=np.float64)
+    glob, pos = forward_kinematics(rest, joint_rotations, root_translation,
+                                   PARENTS if parents is None else np.asarray(parents))
+    start = np.einsum("...jab,jb->...ja", glob, np.asarray(caps.start, dtype=np.float64) - rest) + pos
+    end = np.einsum("...jab,jb->...ja", glob, np.asarray(caps.end, dtype=np.float64) - rest) + pos
     return start, end
 
 

@@ -14,6 +14,8 @@ __all__ = [
     "matrix_to_axis_angle",
     "quaternion_to_matrix",
     "matrix_to_quaternion",
+    "axis_angle_to_quaternion",
+    "quaternion_to_axis_angle",
     "skew",
 ]
 
@@ -96,13 +98,32 @@ def quaternion_to_matrix(quat: np.ndarray) -> np.ndarray:
     return out
 
 
+def axis_angle_to_quaternion(rotvec: np.ndarray) -> np.ndarray:
+    """(..., 3) axis * angle (radians) -> (..., 4) unit quaternions ``(x, y, z, w)``
+    (no matrix round trip; w = cos(angle / 2), so w < 0 for angles beyond pi)."""
+    v = np.asarray(rotvec, dtype=np.float64)
+    angle = np.linalg.norm(v, axis=-1, keepdims=True)
+    half = 0.5 * angle
+    # sin(half)/angle with its Taylor expansion near zero.
+    small = angle < 1e-8
+    scale = np.where(small, 0.5 - angle**2 / 48.0, np.sin(half) / np.where(small, 1.0, angle))
+    return np.concatenate([v * scale, np.cos(half)], axis=-1)
+
+
+def quaternion_to_axis_angle(quat: np.ndarray) -> np.ndarray:
+    """(..., 4) quaternions ``(x, y, z, w)`` (any norm, either sign) -> (..., 3) axis-angle
+    with angle in [0, pi]; accurate near 0 and pi (arctan2 of the half-angle sine and cosine)."""
+    q = np.asarray(quat, dtype=np.float64)
+    vec = np.where(q[..., 3:4] < 0.0, -q[..., :3], q[..., :3])
+    w = np.abs(q[..., 3:4])
+    sin_half = np.sqrt(np.einsum("...c,...c->...", vec, vec))[..., None]
+    angle = 2.0 * np.arctan2(sin_half, w)     # scale-free: no normalisation needed
+    small = sin_half < 1e-12
+    scale = np.where(small, 2.0 / np.maximum(w, 1e-12), angle / np.where(small, 1.0, sin_half))
+    return vec * scale
+
+
 def matrix_to_axis_angle(matrix: np.ndarray) -> np.ndarray:
     """(..., 3, 3) -> (..., 3) axis-angle with angle in [0, pi] (through the quaternion,
     which stays accurate near 0 and pi)."""
-    q = matrix_to_quaternion(matrix)
-    vec = q[..., :3]
-    sin_half = np.linalg.norm(vec, axis=-1)
-    angle = 2.0 * np.arctan2(sin_half, q[..., 3])
-    small = sin_half < 1e-12
-    scale = np.where(small, 2.0, angle / np.where(small, 1.0, sin_half))
-    return vec * scale[..., None]
+    return quaternion_to_axis_angle(matrix_to_quaternion(matrix))

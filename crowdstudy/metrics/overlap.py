@@ -169,20 +169,10 @@ def capsules_world(body, joint_rotations: np.ndarray, root_translation: np.ndarr
     Returns:
         ``(start (F, J, 3), end (F, J, 3), radius (J,))`` metres.
     """
-    from crowdstudy.body.skeleton import forward_kinematics
+    from crowdstudy.body.capsules import posed_capsules
 
-    rest = np.asarray(body.rest_joints, dtype=np.float64)
-    caps = body.capsules
-    n_j = rest.shape[0]
-    parents = getattr(body, "parents", None)
-    if parents is None:
-        from crowdstudy.body.skeleton import PARENTS as parents
-    glob, pos = forward_kinematics(rest, joint_rotations, root_translation, parents=np.asarray(parents))
-    start = np.asarray(caps.start, dtype=np.float64)[:n_j] - rest
-    end = np.asarray(caps.end, dtype=np.float64)[:n_j] - rest
-    ws = np.einsum("fjab,jb->fja", glob, start) + pos
-    we = np.einsum("fjab,jb->fja", glob, end) + pos
-    return ws, we, np.asarray(caps.radius, dtype=np.float64)[:n_j]
+    start, end = posed_capsules(body, joint_rotations, root_translation, parents=getattr(body, "parents", None))
+    return start, end, np.asarray(body.capsules.radius, dtype=np.float64)
 
 
 def _batch_poser(body_objs: list, backend: str = "numpy"):

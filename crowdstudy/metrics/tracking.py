@@ -16,11 +16,12 @@ from typing import Any, Sequence
 
 import numpy as np
 
+from crowdstudy.body.capsules import segment_distance
 from crowdstudy.errors import InvalidInputError
 from crowdstudy.metrics.overlap import capsules_world, frame_indices, resolve_bodies
 
 __all__ = ["joint_positions", "tracking_error", "mean_jerk", "intra_penetration", "IntraPenetrationResult",
-           "segment_distance", "intra_pairs"]
+           "intra_pairs"]
 
 _FRAME_CHUNK = 64
 
@@ -98,38 +99,6 @@ def mean_jerk(anim, *, bodies: Sequence | None = None) -> float:
         total += float(norm.sum())
         count += norm.size
     return total / count
-
-
-def segment_distance(p0: np.ndarray, p1: np.ndarray, q0: np.ndarray, q1: np.ndarray) -> np.ndarray:
-    """Closest distance between segments [p0, p1] and [q0, q1] (arrays (..., 3)), metres."""
-    d1 = p1 - p0
-    d2 = q1 - q0
-    r = p0 - q0
-    a = np.einsum("...i,...i->...", d1, d1)
-    e = np.einsum("...i,...i->...", d2, d2)
-    f = np.einsum("...i,...i->...", d2, r)
-    c = np.einsum("...i,...i->...", d1, r)
-    b = np.einsum("...i,...i->...", d1, d2)
-    eps = 1e-14
-    a_ok = a > eps
-    e_ok = e > eps
-    safe_a = np.where(a_ok, a, 1.0)
-    safe_e = np.where(e_ok, e, 1.0)
-    denom = a * e - b * b
-    skew = denom > 1e-12 * np.maximum(a * e, eps)  # not parallel: unique closest points
-    s = np.where(skew, np.clip((b * f - c * e) / np.where(skew, denom, 1.0), 0.0, 1.0), 0.0)
-    t = (b * s + f) / safe_e
-    s = np.where(t < 0, np.clip(-c / safe_a, 0.0, 1.0), s)
-    s = np.where(t > 1, np.clip((b - c) / safe_a, 0.0, 1.0), s)
-    t = np.clip(t, 0.0, 1.0)
-    # Degenerate segments (points): project onto the other one.
-    s = np.where(~e_ok, np.clip(-c / safe_a, 0.0, 1.0), s)
-    t = np.where(~e_ok, 0.0, t)
-    s = np.where(~a_ok, 0.0, s)
-    t = np.where(~a_ok & e_ok, np.clip(f / safe_e, 0.0, 1.0), t)
-    cp = p0 + s[..., None] * d1
-    cq = q0 + t[..., None] * d2
-    return np.linalg.norm(cp - cq, axis=-1)
 
 
 def intra_pairs(body, *, parents: np.ndarray | None = None) -> np.ndarray:

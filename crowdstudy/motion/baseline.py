@@ -19,10 +19,11 @@ from __future__ import annotations
 
 import numpy as np
 
+from crowdstudy.body.rotations import quaternion_to_axis_angle
 from crowdstudy.body.skeleton import DEFAULT_PELVIS_HEIGHT, JOINT_INDEX, JOINT_NAMES, PARENTS
 from crowdstudy.errors import InvalidInputError
 from crowdstudy.motion.library import list_clips, load_clip, walk_clips
-from crowdstudy.motion.quaternions import quat_about_z, quat_multiply, quat_to_axis_angle
+from crowdstudy.motion.quaternions import quat_about_z, quat_multiply
 from crowdstudy.provenance import provenance
 from crowdstudy.scene import Crowd, CrowdAnimation
 
@@ -185,7 +186,7 @@ def _place(quat: np.ndarray, root_local: np.ndarray, yaw: np.ndarray, xy: np.nda
     root[..., 0] = xy[..., 0] + c * local[..., 0] - s * local[..., 1]
     root[..., 1] = xy[..., 1] + s * local[..., 0] + c * local[..., 1]
     root[..., 2] = local[..., 2]
-    return quat_to_axis_angle(quat), root
+    return quaternion_to_axis_angle(quat), root
 
 
 def _check_timing(duration, fps) -> tuple[float, int]:
@@ -251,13 +252,13 @@ def animate_stationary(crowd: Crowd, *, duration: float = 20.0, fps: float = 30.
         n_loop = max(4, int(round(clip.duration * fps)))
         tempo[members] = clip.duration * fps / n_loop
         quat_table, root_table = clip.loop_table(n_loop)
-        aa_table = quat_to_axis_angle(quat_table)
+        aa_table = quaternion_to_axis_angle(quat_table)
         start = np.floor(phase[members] / clip.duration * n_loop).astype(np.int64)
         idx = (start[None, :] + frames[:, None]) % n_loop                       # (T, M)
         rot[:, members] = aa_table[idx]
         y = np.broadcast_to(yaw[members], idx.shape)
         q0 = quat_multiply(quat_about_z(y), quat_table[idx, 0])
-        rot[:, members, 0] = quat_to_axis_angle(q0)
+        rot[:, members, 0] = quaternion_to_axis_angle(q0)
         local = root_table[idx] * scale[members][None, :, None]
         c, s_ = np.cos(y), np.sin(y)
         root[:, members, 0] = xy[members, 0] + c * local[..., 0] - s_ * local[..., 1]

@@ -20,10 +20,10 @@ import functools
 
 import numpy as np
 
+from crowdstudy.body.rotations import axis_angle_to_quaternion, quaternion_to_axis_angle
 from crowdstudy.body.skeleton import DEFAULT_REST_JOINTS, NUM_JOINTS, forward_kinematics
 from crowdstudy.errors import InvalidInputError
-from crowdstudy.motion.quaternions import (catmull_rom_weights, quat_align_signs, quat_from_axis_angle,
-                                           quat_to_axis_angle)
+from crowdstudy.motion.quaternions import catmull_rom_weights, quat_align_signs
 
 __all__ = ["MotionClip", "seam_discontinuity"]
 
@@ -106,7 +106,7 @@ class MotionClip:
     @functools.cached_property
     def quaternions(self) -> np.ndarray:
         """(T, 24, 4) unit quaternions, signs aligned frame to frame."""
-        return quat_align_signs(quat_from_axis_angle(self.joint_rotations), axis=0)
+        return quat_align_signs(axis_angle_to_quaternion(self.joint_rotations), axis=0)
 
     # -- sampling ------------------------------------------------------------------------
     def _neighbours(self, times: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -156,7 +156,7 @@ class MotionClip:
     def sample(self, times: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Like :meth:`sample_quaternions` with axis-angle rotations (..., 24, 3)."""
         quat, root = self.sample_quaternions(times)
-        return quat_to_axis_angle(quat), root
+        return quaternion_to_axis_angle(quat), root
 
     def travel(self, times: np.ndarray) -> np.ndarray:
         """(..., 3) forward progress of an in-place walking clip at ``times`` (zero otherwise)."""

@@ -1,8 +1,8 @@
 """Quaternion helpers for motion clips, vectorised over any leading batch shape.
 
 Quaternions are scalar-last ``(x, y, z, w)`` (DESIGN.md). These complement
-:mod:`crowdstudy.body.rotations` (matrices) with what clip sampling and blending need:
-products, axis-angle conversions without a matrix round trip, sign alignment and a
+:mod:`crowdstudy.body.rotations` (conversions between axis-angle, matrices and
+quaternions) with what clip sampling and blending need: products, sign alignment and a
 C1 periodic Catmull-Rom interpolation.
 """
 
@@ -13,8 +13,6 @@ import numpy as np
 __all__ = [
     "quat_multiply",
     "quat_conjugate",
-    "quat_from_axis_angle",
-    "quat_to_axis_angle",
     "quat_align_signs",
     "quat_blend",
     "quat_about_z",
@@ -37,29 +35,6 @@ def quat_conjugate(q: np.ndarray) -> np.ndarray:
     out = np.array(q, dtype=np.float64, copy=True)
     out[..., :3] *= -1.0
     return out
-
-
-def quat_from_axis_angle(rotvec: np.ndarray) -> np.ndarray:
-    """(..., 3) axis * angle (radians) -> (..., 4) unit quaternions."""
-    v = np.asarray(rotvec, dtype=np.float64)
-    angle = np.linalg.norm(v, axis=-1, keepdims=True)
-    half = 0.5 * angle
-    # sin(half)/angle with its Taylor expansion near zero.
-    small = angle < 1e-8
-    scale = np.where(small, 0.5 - angle**2 / 48.0, np.sin(half) / np.where(small, 1.0, angle))
-    return np.concatenate([v * scale, np.cos(half)], axis=-1)
-
-
-def quat_to_axis_angle(q: np.ndarray) -> np.ndarray:
-    """(..., 4) quaternions (normalised here) -> (..., 3) axis-angle with angle in [0, pi]."""
-    q = np.asarray(q, dtype=np.float64)
-    vec = np.where(q[..., 3:4] < 0.0, -q[..., :3], q[..., :3])
-    w = np.abs(q[..., 3:4])
-    sin_half = np.sqrt(np.einsum("...c,...c->...", vec, vec))[..., None]
-    angle = 2.0 * np.arctan2(sin_half, w)     # scale-free: no normalisation needed
-    small = sin_half < 1e-12
-    scale = np.where(small, 2.0 / np.maximum(w, 1e-12), angle / np.where(small, 1.0, sin_half))
-    return vec * scale
 
 
 def quat_align_signs(q: np.ndarray, axis: int = 0) -> np.ndarray:

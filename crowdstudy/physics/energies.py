@@ -14,8 +14,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from crowdstudy.body.capsules import closest_points_on_segments
 from crowdstudy.body.rotations import skew
-from crowdstudy.physics.model import segment_distance
 
 __all__ = ["vee_asym", "inertia_energy", "gravity_energy", "ball_joint_energy", "control_energy",
            "root_translation_energy", "contact_energy"]
@@ -96,7 +96,7 @@ def contact_energy(xa, Ra, seg_a, ra, xb, Rb, seg_b, rb, k):
     """
     a0, a1 = xa + Ra @ seg_a[0], xa + Ra @ seg_a[1]
     b0, b1 = xb + Rb @ seg_b[0], xb + Rb @ seg_b[1]
-    s, t, dist = segment_distance(a0, a1, b0, b1)
+    s, t, dist = closest_points_on_segments(a0, a1, b0, b1)
     depth = ra + rb - float(dist)
     if depth <= 0:
         return 0.0, np.zeros(12), np.zeros((12, 12)), depth

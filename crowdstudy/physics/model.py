@@ -19,10 +19,11 @@ import dataclasses
 
 import numpy as np
 
+from crowdstudy.body.capsules import closest_points_on_segments
 from crowdstudy.body.skeleton import JOINT_INDEX, PARENTS
 from crowdstudy.errors import InvalidInputError
 
-__all__ = ["ModelBuilder", "Model", "capsule_mass_properties", "segment_distance", "capsule_skin",
+__all__ = ["ModelBuilder", "Model", "capsule_mass_properties", "capsule_skin",
            "GROUP_BODY", "GROUP_PELVIS", "GROUP_FEET", "MAX_CHILDREN"]
 
 GROUP_BODY, GROUP_PELVIS, GROUP_FEET = 0, 1, 2
@@ -59,32 +60,6 @@ def capsule_mass_properties(start: np.ndarray, end: np.ndarray, radius: np.ndarr
     eye = np.eye(3)[None]
     J = j_cross[:, None, None] * (eye - uu) + j_axial[:, None, None] * uu
     return m_cyl + m_sph, J
-
-
-def segment_distance(p0, p1, q0, q1):
-    """Closest points of segments [p0, p1] and [q0, q1] (numpy, (..., 3) each).
-
-    Returns ``(s, t, distance)`` with the closest points ``p0 + s (p1 - p0)`` and
-    ``q0 + t (q1 - q0)``.
-    """
-    d1, d2 = p1 - p0, q1 - q0
-    r = p0 - q0
-    a = np.sum(d1 * d1, -1)
-    e = np.sum(d2 * d2, -1)
-    f = np.sum(d2 * r, -1)
-    c = np.sum(d1 * r, -1)
-    b = np.sum(d1 * d2, -1)
-    denom = a * e - b * b
-    eps = 1e-12
-    s = np.where(denom > eps, np.clip((b * f - c * e) / np.maximum(denom, eps), 0.0, 1.0), 0.0)
-    s = np.where(a > eps, s, 0.0)
-    t = np.where(e > eps, (b * s + f) / np.maximum(e, eps), 0.0)
-    s = np.where(t < 0.0, np.where(a > eps, np.clip(-c / np.maximum(a, eps), 0.0, 1.0), 0.0), s)
-    s = np.where(t > 1.0, np.where(a > eps, np.clip((b - c) / np.maximum(a, eps), 0.0, 1.0), 0.0), s)
-    t = np.clip(t, 0.0, 1.0)
-    cp = p0 + s[..., None] * d1
-    cq = q0 + t[..., None] * d2
-    return s, t, np.linalg.norm(cp - cq, axis=-1)
 
 
 def capsule_skin(body, percentile: float = 90.0, max_skin: float = 0.04) -> np.ndarray:
@@ -260,7 +235,7 @@ class ModelBuilder:
         pairs = []
         for c in range(n):
             s, e, r = start[c * n_j:(c + 1) * n_j], end[c * n_j:(c + 1) * n_j], radius[c * n_j:(c + 1) * n_j]
-            _, _, dist = segment_distance(s[ii], e[ii], s[jj], e[jj])
+            _, _, dist = closest_points_on_segments(s[ii], e[ii], s[jj], e[jj])
             keep = (parents[jj] != ii) & (parents[ii] != jj) & (dist > r[ii] + r[jj] + intra_touch_tolerance)
             pairs.append(np.stack([ii[keep], jj[keep]], 1) + c * n_j)
         intra = np.concatenate(pairs).astype(np.int64) if pairs else np.zeros((0, 2), np.int64)

@@ -4,19 +4,10 @@ from __future__ import annotations
 
 import numpy as np
 
+from crowdstudy.body.rotations import axis_angle_to_quaternion
 from crowdstudy.errors import InvalidInputError
 
-__all__ = ["State", "Control", "axis_angle_to_quat"]
-
-
-def axis_angle_to_quat(rotvec: np.ndarray) -> np.ndarray:
-    """(..., 3) axis-angle (rad) -> (..., 4) unit quaternions (x, y, z, w)."""
-    rotvec = np.asarray(rotvec, np.float64)
-    angle = np.linalg.norm(rotvec, axis=-1, keepdims=True)
-    half = 0.5 * angle
-    small = angle < 1e-8
-    scale = np.where(small, 0.5 - angle**2 / 48.0, np.sin(half) / np.where(small, 1.0, angle))
-    return np.concatenate([rotvec * scale, np.cos(half)], axis=-1)
+__all__ = ["State", "Control"]
 
 
 class State:
@@ -82,7 +73,7 @@ class Control:
                                     f" and (F, {m.n_characters}, 3), got {rot.shape} and {root.shape}")
         if start < 0 or start + f > self.anim_q.shape[0]:
             raise InvalidInputError(f"start: frames [{start}, {start + f}) do not fit the {self.anim_q.shape[0]} slots")
-        quats = axis_angle_to_quat(rot).reshape(f, -1, 4).astype(np.float32)
+        quats = axis_angle_to_quaternion(rot).reshape(f, -1, 4).astype(np.float32)
         wp = self.k.wp
         self.anim_q[start:start + f].assign(wp.array(quats, dtype=wp.quat, device=m.device))
         self.anim_root[start:start + f].assign(wp.array(root.astype(np.float32), dtype=wp.vec3, device=m.device))

@@ -8,17 +8,15 @@ few test-pattern clips, so the questionnaire can run without rendering anything.
 from __future__ import annotations
 
 import csv
-import hashlib
 import json
-import shutil
 import subprocess
 from pathlib import Path
 
 from crowdstudy.design import StudyDesign, load_design
-from crowdstudy.errors import InvalidInputError, MissingDependencyError
+from crowdstudy.errors import InvalidInputError
 from crowdstudy.provenance import provenance
 
-__all__ = ["write_fake_stimuli", "ffmpeg_executable", "MANIFEST_COLUMNS"]
+__all__ = ["write_fake_stimuli", "MANIFEST_COLUMNS"]
 
 MANIFEST_COLUMNS = ("stimulus_id", "stage", "scenario", "density_level", "density", "viewpoint", "method",
                     "characters", "seed", "file", "sha256", "duration", "fps", "width", "height", "overlap_mesh",
@@ -26,20 +24,10 @@ MANIFEST_COLUMNS = ("stimulus_id", "stage", "scenario", "density_level", "densit
 _PATTERNS = ("testsrc", "testsrc2", "smptebars", "rgbtestsrc")
 
 
-def ffmpeg_executable() -> str:
-    """Path of an ffmpeg binary (system ffmpeg, else the one of imageio-ffmpeg)."""
-    exe = shutil.which("ffmpeg")
-    if exe:
-        return exe
-    try:
-        import imageio_ffmpeg
-        return imageio_ffmpeg.get_ffmpeg_exe()
-    except (ImportError, RuntimeError):
-        raise MissingDependencyError("ffmpeg not found: apt-get install ffmpeg (or pip install imageio-ffmpeg)") from None
-
-
 def _encode(path: Path, pattern: str, width: int, height: int, seconds: float, fps: int) -> None:
-    cmd = [ffmpeg_executable(), "-loglevel", "error", "-y", "-f", "lavfi",
+    from crowdstudy.render.video import find_ffmpeg
+
+    cmd = [find_ffmpeg(), "-loglevel", "error", "-y", "-f", "lavfi",
            "-i", f"{pattern}=size={width}x{height}:rate={fps}:duration={seconds}",
            "-c:v", "libx264", "-pix_fmt", "yuv420p", "-preset", "veryfast", "-movflags", "+faststart",
            "-bitexact", "-map_metadata", "-1", str(path)]
@@ -61,13 +49,15 @@ def write_fake_stimuli(out_dir: str | Path, design: StudyDesign | str | Path | N
         raise InvalidInputError(f"width and height must be even and >= 16, got {width}x{height}")
     if not seconds > 0:
         raise InvalidInputError(f"seconds must be > 0, got {seconds!r}")
+    from crowdstudy.render.video import sha256_file
+
     out = Path(out_dir)
     (out / "videos").mkdir(parents=True, exist_ok=True)
     clips = []
     for k in range(n_files):
         rel = f"videos/clip{k}.mp4"
         _encode(out / rel, _PATTERNS[k % len(_PATTERNS)], width, height, seconds, fps)
-        clips.append((rel, hashlib.sha256((out / rel).read_bytes()).hexdigest()))
+        clips.append((rel, sha256_file(out / rel)))
     _encode(out / "practice.mp4", "testsrc2", width, height, seconds, fps)
     rows = []
     for i, stim in enumerate(design.stimuli()):
