@@ -15,7 +15,7 @@ missing=()
 for p in "${DEB_PKGS[@]}"; do
     case "$p" in
         # Satisfied by any working interpreter/tool on PATH (pyenv, nodesource ...).
-        python3|python3-venv|python3-dev) command -v python3 >/dev/null && python3 -c 'import venv, sys; sys.exit(sys.version_info < (3, 11))' 2>/dev/null && continue ;;
+        python3|python3-venv|python3-dev) command -v python3 >/dev/null && python3 -c 'import venv, ensurepip, sys; sys.exit(sys.version_info < (3, 11))' 2>/dev/null && continue ;;
         nodejs) command -v node >/dev/null && continue ;;
         npm) command -v npm >/dev/null && continue ;;
         git) command -v git >/dev/null && continue ;;
