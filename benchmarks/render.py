@@ -6,13 +6,17 @@ Measured in one run, on the same animation (the D5 stationary Baseline, 60 chara
   level of detail (3000 faces), frame read back;
 * peers: the same without shadows and MSAA (``plain``), and with the full-resolution
   body meshes (``full-mesh``);
-* ``ours+encode``: render and stream to ffmpeg/x264 (preset medium, crf 18), per frame,
-  and the encoder's own CPU time per frame for x264 presets medium, faster, veryfast;
-* a per-pass breakdown (shadow, floor, characters, MSAA resolve, read-back);
-* the projected time of the whole 60-video set (60 x 600 frames) on this machine.
+* ``ours+encode``: render and stream to ffmpeg/x264 with the "full" stimulus preset's
+  settings (x264 preset faster, crf 18), per frame, and the encoder's own CPU time per
+  frame for x264 presets medium, faster, veryfast;
+* a per-pass breakdown (shadow, characters, floor, MSAA resolve, read-back);
+* the projected time of the whole 60-video set (60 x 600 frames) on this machine, from
+  the wall time of ``ours+encode`` and, load-independent, from the CPU time of rendering
+  plus encoding spread over the machine's CPUs.
 
 Both wall-clock and process CPU seconds are reported: on a shared machine the CPU time
-(all llvmpipe threads together) is the steadier number.
+(all llvmpipe threads together) is the steadier number; when other processes hold a core,
+wall time approaches CPU time.
 """
 
 from __future__ import annotations
@@ -71,12 +75,12 @@ def _passes(renderer, frame: int) -> dict:
         ctx.viewport = (0, 0, renderer.width, renderer.height)
         fbo.clear(0.5, 0.5, 0.5, 1.0, depth=1.0)
         renderer.tex_shadow.use(3)
-        for prog in (renderer.prog_char, renderer.prog_static, renderer.prog_floor):
+        for prog in renderer._lit_programs:
             prog["u_view_proj"].write(np.ascontiguousarray(vp.T, dtype=np.float32).tobytes())
 
     timed("characters", lambda: (colour_static_setup(), renderer._cull_back_faces(True),
                                  renderer._draw_characters(renderer.prog_char, vp), renderer._cull_back_faces(False)))
-    timed("floor+stage", lambda: renderer._static["opaque"].render())
+    timed("floor", renderer._draw_floor)
     if renderer.fbo_msaa is not None:
         timed("msaa resolve", lambda: ctx.copy_framebuffer(renderer.fbo_out, renderer.fbo_msaa))
     timed("read-back", lambda: renderer.fbo_out.read(components=3, alignment=1))
@@ -93,7 +97,10 @@ def main(argv: list[str]) -> int:
 
     from crowdstudy.render.context import context_info
     from crowdstudy.render.renderer import CrowdRenderer
+    from crowdstudy.render.stimuli import PRESETS
     from crowdstudy.render.video import VideoWriter
+
+    x264, crf = PRESETS["full"]["x264_preset"], PRESETS["full"]["crf"]
 
     design, anim = _scene(duration=max(1.0, (args.frames + 2) / 30.0))
     frames = [int(f) for f in np.linspace(1, anim.n_frames - 1, args.frames).round()]
@@ -110,7 +117,8 @@ def main(argv: list[str]) -> int:
             if name == "ours":
                 breakdown = _passes(r, frames[-1])
                 with tempfile.TemporaryDirectory() as tmp:
-                    writer = VideoWriter(os.path.join(tmp, "b.mp4"), args.width, args.height, 30.0)
+                    writer = VideoWriter(os.path.join(tmp, "b.mp4"), args.width, args.height, 30.0, preset=x264,
+                                         crf=crf)
                     t0, c0 = time.perf_counter(), time.process_time()
                     for f in frames:
                         writer.write(r.render_raw(f))
@@ -123,7 +131,7 @@ def main(argv: list[str]) -> int:
                         before = resource.getrusage(resource.RUSAGE_CHILDREN)
                         t0 = time.perf_counter()
                         writer = VideoWriter(os.path.join(tmp, f"{preset}.mp4"), args.width, args.height, 30.0,
-                                             preset=preset)
+                                             preset=preset, crf=crf)
                         for k in range(len(frames)):
                             writer.write(raw[k % len(raw)])
                         writer.close()
@@ -136,22 +144,28 @@ def main(argv: list[str]) -> int:
                                          / 1024 / len(frames)})
         rows.append({"config": name, **res})
         if name == "ours":
-            rows.append({"config": "ours+encode (x264 medium)", **enc})
+            rows.append({"config": f"ours+encode (x264 {x264})", **enc})
     base = rows[0]["wall_s"]
     for row in rows:
         row["vs_ours"] = row["wall_s"] / base
         row["fps"] = 1.0 / row["wall_s"]
     n_set = 60 * int(round(design.duration * design.fps))
     projected_h = rows[1]["wall_s"] * n_set / 3600.0
+    cpus = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+    enc_cpu = next((e["ffmpeg_cpu_s"] for e in encoders if e["x264 preset"] == x264), 0.0)
+    cpu_per_frame = rows[0]["cpu_s"] + enc_cpu
+    projected_cpu_h = cpu_per_frame / cpus * n_set / 3600.0
     print(format_table(rows, ["config", "wall_s", "cpu_s", "fps", "vs_ours"]))
     print("where the time goes (one 'ours' frame, seconds):")
     for k, v in breakdown.items():
         print(f"  {k:14s} {v:.4f}")
     print("encoder alone (per 1080p frame; ffmpeg's CPU time, not in cpu_s above):")
     print(format_table(encoders))
-    print(f"projected whole set ({n_set} frames, render+encode): {projected_h:.2f} h on this machine "
+    print(f"projected whole set ({n_set} frames, render+encode): {projected_h:.2f} h at the measured wall time; "
+          f"{projected_cpu_h:.2f} h from CPU time ({cpu_per_frame:.3f} CPU-s per frame over {cpus} idle CPUs) "
           f"(target 0.15 s/frame -> {0.15 * n_set / 3600:.2f} h)")
-    path = write_report("render", rows, breakdown=breakdown, encoders=encoders, projected_set_hours=projected_h, gl=info,
+    path = write_report("render", rows, breakdown=breakdown, encoders=encoders, projected_set_hours=projected_h,
+                        projected_set_hours_cpu=projected_cpu_h, cpu_s_per_frame_render_encode=cpu_per_frame, gl=info,
                         load=os.getloadavg()[0], frames=args.frames, width=args.width, height=args.height)
     print(f"report: {path}")
     return 0

@@ -241,3 +241,32 @@ def test_level_of_detail_and_culling_keep_the_picture(concert, design):
     assert np.abs(a - b).mean() < 6
     with pytest.raises(InvalidInputError, match="max_faces"):
         _renderer(concert, design, max_faces=5)
+
+
+def test_floor_split_is_exact(concert, design, monkeypatch):
+    """The ground is drawn in two parts, only the part that can receive a character's
+    shadow with the shadow lookup: same area, same picture as shading it all."""
+    from crowdstudy.render.renderer import CrowdRenderer
+    from crowdstudy.render.scene import build_environment, split_floor
+
+    for scenario in ("concert", "corridor"):
+        ground = build_environment(scenario, design).opaque
+        inside, outside = split_floor(ground, (-1.0, -2.0, 3.0, 1.5))
+
+        def area(tris):
+            t = tris[:, :2].reshape(-1, 3, 2).astype(np.float64)
+            return 0.5 * np.abs(np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0])).sum()
+
+        assert area(inside) + area(outside) == pytest.approx(area(ground), rel=1e-6)
+        assert inside[:, 0].min() >= -1.0 and inside[:, 0].max() <= 3.0 and inside[:, 1].max() <= 1.5
+    with _renderer(concert, design) as split:
+        split.set_view("V2")
+        a = split.render(2).astype(int)
+        x0, y0, x1, y1 = split._shadow_receivers()
+        assert x1 - x0 < 12 and y1 - y0 < 12  # a few metres around the crowd, not the 80 m ground
+    monkeypatch.setattr(CrowdRenderer, "_shadow_receivers", lambda self: (-1e3, -1e3, 1e3, 1e3))
+    with _renderer(concert, design) as whole:
+        whole.set_view("V2")
+        b = whole.render(2).astype(int)
+    diff = np.abs(a - b).max(axis=2)
+    assert (diff > 2).mean() < 2e-3 and diff.mean() < 0.1

@@ -13,6 +13,10 @@ frustum are culled), so the crowd looks continuous and nothing pops at the seams
 Levels of detail: characters less than 300 (150) pixels tall on screen are drawn with
 half (a quarter) of the faces; shadow casters always with the coarsest mesh.
 
+The ground is split at the rectangle that the characters' shadows can reach (over the
+whole animation); only that part is shaded with the shadow-map lookup, the rest with a
+variant compiled without it (same picture, half the floor's cost on llvmpipe).
+
 Body meshes are decimated once per template (``max_faces``, 3000 at 1080p: at 1080p a
 character is at most ~500 px tall, and on llvmpipe the cost of a frame grows with the
 triangle count); characters are lit per vertex (see ``shaders/lighting.glsl``).
@@ -30,7 +34,7 @@ from crowdstudy.render.bodies import BodyGroup, default_body_loader, group_bodie
 from crowdstudy.render.camera import Camera, frame_viewpoint, look_at
 from crowdstudy.render.context import get_context
 from crowdstudy.render.palette import assign_colors
-from crowdstudy.render.scene import Environment, build_environment
+from crowdstudy.render.scene import Environment, build_environment, split_floor
 
 __all__ = ["CrowdRenderer", "render_frame", "resolve_camera", "scenario_of", "baseline_color_positions", "N_BONES"]
 
@@ -181,6 +185,12 @@ class CrowdRenderer:
         self.prog_depth = own(_program(ctx, "character.vert", "depth.frag"))
         self.prog_static = own(_program(ctx, "static.vert", "static.frag", lit_fragment=True))
         self.prog_floor = own(_program(ctx, "static.vert", "static.frag", lit_fragment=True, defines=("FLOOR",)))
+        # the ground where no character's shadow can fall: the same shading without the
+        # shadow lookup (llvmpipe samples textures even in branches no pixel takes; the
+        # lookup was half of the floor's cost)
+        self.prog_floor_plain = own(_program(ctx, "static.vert", "static.frag", lit_fragment=True,
+                                             defines=("FLOOR", "UNSHADOWED")))
+        self._lit_programs = (self.prog_char, self.prog_static, self.prog_floor, self.prog_floor_plain)
         self.prog_id = own(_program(ctx, "character.vert", "id.frag"))
         self.prog_overlap = own(_program(ctx, "character.vert", "overlap.frag"))
         self._char_programs = (self.prog_char, self.prog_depth, self.prog_id, self.prog_overlap)
@@ -218,16 +228,6 @@ class CrowdRenderer:
                                     "inst": inst, "vaos": vaos, "count": 0, "pixels": (lo, hi),
                                     "coarse": coarse})
 
-        # environment
-        self._static = {}
-        for name in ("opaque", "walls", "stage"):
-            tris = getattr(self.env, name)
-            if len(tris):
-                buf = own(ctx.buffer(tris.astype("f4").tobytes()))
-                prog = self.prog_floor if name == "opaque" else self.prog_static  # "opaque": the ground
-                self._static[name] = own(ctx.vertex_array(prog, [(buf, "3f 3f 4f", "in_position", "in_normal",
-                                                                  "in_color")], skip_errors=True))
-
         # shadow map
         if not isinstance(shadow_size, (int, np.integer)) or not 64 <= shadow_size <= 8192:
             raise InvalidInputError(f"shadow_size: expected an integer in [64, 8192], got {shadow_size!r}")
@@ -238,6 +238,22 @@ class CrowdRenderer:
         self.fbo_shadow = own(ctx.framebuffer(depth_attachment=self.tex_shadow))
         self.light_dir = np.array([0.35, 0.55, 1.0]) / np.linalg.norm([0.35, 0.55, 1.0])
         self.light_vp = self._light_view_proj()
+
+        # environment; the ground is split at the rectangle that can receive the characters'
+        # shadows (see _shadow_receivers); the rest is drawn without the shadow lookup
+        self._static = {}
+        parts = {"walls": (self.env.walls, self.prog_static), "stage": (self.env.stage, self.prog_static)}
+        if self.shadows:
+            inner, outer = split_floor(self.env.opaque, self._shadow_receivers())
+            parts["floor_shadowed"] = (inner, self.prog_floor)
+            parts["floor_plain"] = (outer, self.prog_floor_plain)
+        else:
+            parts["floor_plain"] = (self.env.opaque, self.prog_floor_plain)
+        for name, (tris, prog) in parts.items():
+            if len(tris):
+                buf = own(ctx.buffer(tris.astype("f4").tobytes()))
+                self._static[name] = own(ctx.vertex_array(prog, [(buf, "3f 3f 4f", "in_position", "in_normal",
+                                                                  "in_color")], skip_errors=True))
 
         # colour targets
         size = (self.width, self.height)
@@ -251,7 +267,7 @@ class CrowdRenderer:
                                            depth_attachment=own(ctx.depth_renderbuffer(size))))
 
         # constant uniforms
-        for prog in (self.prog_char, self.prog_static, self.prog_floor):
+        for prog in self._lit_programs:
             _set(prog, "u_light_dir", tuple(self.light_dir))
             _set(prog, "u_light_color", (1.55, 1.48, 1.38))
             _set(prog, "u_sky_color", (0.36, 0.39, 0.46))
@@ -413,7 +429,7 @@ class CrowdRenderer:
         ctx.disable(moderngl.CULL_FACE)
         self.tex_shadow.use(3)
         eye = tuple(float(v) for v in self.camera.eye)
-        for prog in (self.prog_char, self.prog_static, self.prog_floor):
+        for prog in self._lit_programs:
             _set(prog, "u_eye", eye)
             _set(prog, "u_view_proj", _mat(vp))
         # characters first (sorted front to back), then the environment: the floor hidden
@@ -421,14 +437,52 @@ class CrowdRenderer:
         self._cull_back_faces(True)  # closed, outward-wound meshes: back faces are never seen
         self._draw_characters(self.prog_char, vp)
         self._cull_back_faces(False)
-        if "opaque" in self._static:
-            self._static["opaque"].render()
+        self._draw_floor()
         if "stage" in self._static and self.env.stage_front_y is not None and self.camera.eye[1] < self.env.stage_front_y:
             self._static["stage"].render()
         if "walls" in self._static:
             self._cull_back_faces(True)
             self._static["walls"].render()
             self._cull_back_faces(False)
+
+    def _draw_floor(self) -> None:
+        for name in ("floor_shadowed", "floor_plain"):
+            if name in self._static:
+                self._static[name].render()
+
+    def _shadow_receivers(self, margin: float = 0.3) -> tuple[float, float, float, float]:
+        """(x0, y0, x1, y1) metres: the part of the ground that can receive a character's
+        shadow in any frame: the shadow map's footprint, cut down to the characters'
+        bounding spheres (over the whole animation, every periodic copy) and their
+        projections along the light onto z = 0, grown by ``margin``."""
+        fx0, fy0, fx1, fy1 = self._shadow_footprint()
+        roots = np.asarray(self.anim.root_translation, dtype=np.float64).reshape(-1, 3)
+        if not len(roots) or not np.all(np.isfinite(roots)):
+            return fx0, fy0, fx1, fy1
+        lo, hi = roots[:, :2].min(axis=0) - _BOUND_RADIUS, roots[:, :2].max(axis=0) + _BOUND_RADIUS
+        if self.period:  # wrapped into [-L/2, L/2) and drawn at k * L, k in _COPIES
+            lo[0] = -0.5 * self.period + min(_COPIES) * self.period - _BOUND_RADIUS
+            hi[0] = 0.5 * self.period + max(_COPIES) * self.period + _BOUND_RADIUS
+        top = max(float(roots[:, 2].max()) + _BOUND_RADIUS, 0.0)
+        shift = -self.light_dir[:2] / self.light_dir[2] * top  # where the highest point's shadow falls
+        lo, hi = np.minimum(lo, lo + shift) - margin, np.maximum(hi, hi + shift) + margin
+        return max(fx0, lo[0]), max(fy0, lo[1]), min(fx1, hi[0]), min(fy1, hi[1])
+
+    def _shadow_footprint(self, margin: float = 0.05) -> tuple[float, float, float, float]:
+        """(x0, y0, x1, y1) metres: a rectangle on the ground containing every point the
+        shadow map covers (light clip x, y in [-1, 1] at z = 0 and at the lookup's offset
+        of 0.02 m along the normal), grown by ``margin``."""
+        m = self.light_vp
+        corners = []
+        for z in (0.0, 0.02):
+            a = m[:2, :2]
+            for cx in (-1.0, 1.0):
+                for cy in (-1.0, 1.0):
+                    rhs = np.array([cx, cy]) - m[:2, 2] * z - m[:2, 3]
+                    corners.append(np.linalg.solve(a, rhs))
+        corners = np.array(corners)
+        lo, hi = corners.min(axis=0) - margin, corners.max(axis=0) + margin
+        return float(lo[0]), float(lo[1]), float(hi[0]), float(hi[1])
 
     def render(self, frame: int) -> np.ndarray:
         """The image of ``frame``: (H, W, 3) uint8, first row at the top."""

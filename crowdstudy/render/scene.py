@@ -15,7 +15,7 @@ import numpy as np
 
 from crowdstudy.render.palette import srgb_to_linear
 
-__all__ = ["Environment", "build_environment", "box_triangles", "quad_triangles"]
+__all__ = ["Environment", "build_environment", "box_triangles", "quad_triangles", "split_floor"]
 
 
 @dataclasses.dataclass
@@ -138,3 +138,43 @@ def build_environment(scenario: str, design) -> Environment:
     stage.append(box_triangles((-stage_w / 2, front - 0.35, 0), (stage_w / 2, front - 0.3, 1.1), _color((110, 110, 115))))
     return Environment(opaque=floor, walls=empty, stage=np.concatenate(stage), stage_front_y=front - 0.35,
                        extent=(width, depth), periodic_length=None, clear_color=tuple(_color((118, 126, 140))))
+
+
+def split_floor(triangles: np.ndarray, rect: tuple[float, float, float, float]) -> tuple[np.ndarray, np.ndarray]:
+    """Split horizontal axis-aligned floor quads at a rectangle.
+
+    Args:
+        triangles: (6K, 10) rows as :func:`quad_triangles` writes them for K quads lying in
+            planes z = const with edges along x and y (the ground of both scenarios).
+        rect: (x0, y0, x1, y1) metres.
+    Returns:
+        (inside, outside): the parts of the quads inside ``rect`` and the (up to 8 per
+        quad) rectangles around it, same row layout. Together they cover exactly the
+        input quads, without T-junctions.
+    """
+    rx0, ry0, rx1, ry1 = (float(v) for v in rect)
+    inside, outside = [], []
+    for quad in np.asarray(triangles).reshape(-1, 6, 10):
+        x0, y0 = quad[:, 0].min(), quad[:, 1].min()
+        x1, y1 = quad[:, 0].max(), quad[:, 1].max()
+        z, normal, color, pattern = quad[0, 2], quad[0, 3:6], quad[0, 6:9], quad[0, 9]
+
+        def emit(dest, a0, b0, a1, b1):
+            if a1 - a0 > 1e-9 and b1 - b0 > 1e-9:
+                corners = np.array([(a0, b0, z), (a1, b0, z), (a1, b1, z), (a0, b1, z)], dtype=np.float64)
+                rows = _rows(corners[[0, 1, 2, 0, 2, 3]], normal, color, pattern)
+                dest.append(rows)
+
+        ix0, iy0, ix1, iy1 = max(x0, rx0), max(y0, ry0), min(x1, rx1), min(y1, ry1)
+        if ix0 >= ix1 or iy0 >= iy1:
+            outside.append(quad)
+            continue
+        # a 3 x 3 grid of cells: neighbouring cells share whole edges (no T-junctions, so
+        # no cracks between them where the rasteriser rounds differently)
+        xs, ys = (x0, ix0, ix1, x1), (y0, iy0, iy1, y1)
+        for i in range(3):
+            for j in range(3):
+                emit(inside if (i, j) == (1, 1) else outside, xs[i], ys[j], xs[i + 1], ys[j + 1])
+    empty = np.zeros((0, 10), dtype=np.float32)
+    return (np.concatenate(inside).astype(np.float32) if inside else empty,
+            np.concatenate(outside).astype(np.float32) if outside else empty)

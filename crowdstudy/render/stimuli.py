@@ -40,9 +40,11 @@ MANIFEST_COLUMNS = ("stimulus_id", "stage", "scenario", "density_level", "densit
                     "overlap_capsule", "red_pixel_fraction", "software_version")
 
 #: Render settings per preset; None = the design's value. "quick" keeps the design's
-#: character counts and only shrinks resolution and duration.
+#: character counts and only shrinks resolution and duration. x264 "faster" at crf 18
+#: (measured on 1080p D5 concert frames: PSNR 45.9 dB, SSIM 0.993 against the raw frames,
+#: vs 46.2 dB / 0.993 for "medium") needs about 30% less encoder CPU than "medium".
 PRESETS = {
-    "full": {"width": None, "height": None, "duration": None, "msaa": 4, "crf": 18, "x264_preset": "medium",
+    "full": {"width": None, "height": None, "duration": None, "msaa": 4, "crf": 18, "x264_preset": "faster",
              "red_frames": 10, "metric_frames": "every:10"},
     "quick": {"width": 320, "height": 180, "duration": 2.0, "msaa": 4, "crf": 23, "x264_preset": "veryfast",
               "red_frames": 3, "metric_frames": "every:10"},
