@@ -13,7 +13,7 @@ import warnings
 
 import numpy as np
 
-from crowdstudy.errors import InvalidInputError, MissingDependencyError
+from crowdstudy.errors import InvalidInputError
 
 __all__ = ["BodyGroup", "group_bodies", "region_scores", "vertex_normals", "default_body_loader",
            "REGION_JOINTS"]
@@ -31,11 +31,8 @@ _HEAD = 15
 
 def default_body_loader(record: dict):
     """``crowdstudy.body.load_body`` (imported on first use)."""
-    try:
-        from crowdstudy.body import load_body
-    except ImportError as exc:
-        raise MissingDependencyError(f"crowdstudy.body.load_body is not available ({exc}); the renderer needs the "
-                                     "body models of crowdstudy.body") from None
+    from crowdstudy.body import load_body
+
     return load_body(record)
 
 

@@ -25,7 +25,7 @@ import numpy as np
 
 from crowdstudy.errors import InvalidInputError
 
-__all__ = ["OverlapFrame", "OverlapPass", "posed_capsules", "RED"]
+__all__ = ["OverlapFrame", "OverlapPass", "capsules_from_skinning", "RED"]
 
 RED = np.array([225, 25, 30], dtype=np.float32)
 _MAX_CANDIDATES = 160
@@ -47,7 +47,7 @@ class OverlapFrame:
     crowd_fraction: float
 
 
-def posed_capsules(bodies: list, skinning: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def capsules_from_skinning(bodies: list, skinning: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """World capsules of every character.
 
     Args:
@@ -125,7 +125,7 @@ class OverlapPass:
         r = self.r
         raw = r.render_raw(frame)  # normal look; also loads the frame's bones and instances
         image = np.frombuffer(raw, np.uint8).reshape(r.height, r.width, 3)[::-1].astype(np.float32)
-        start, end, radius = posed_capsules(r.bodies, r.skinning(frame))
+        start, end, radius = capsules_from_skinning(r.bodies, r.skinning(frame))
         caps = np.zeros((start.shape[0], 24, 2, 4), np.float32)
         caps[:, :, 0, :3], caps[:, :, 0, 3] = start, radius
         caps[:, :, 1, :3], caps[:, :, 1, 3] = end, np.arange(start.shape[0])[:, None]
