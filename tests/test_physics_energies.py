@@ -375,3 +375,85 @@ def test_ground_contact_friction_gradient():
         expected[a] += np.concatenate([cfg.ground_friction * vt, np.cross(lever, cfg.ground_friction * vt)])
     assert n_active >= 2
     np.testing.assert_allclose(g1 - g0, expected, atol=1e-3 * np.abs(expected).max())
+
+
+def test_foot_anchor_energy_gradient_and_hessian_match_finite_differences():
+    rng = np.random.default_rng(11)
+    x, x_old, t, t_old, off = rng.normal(scale=0.05, size=(5, 3))
+    h = 1.0 / 60.0
+    params = dict(w=0.7, k=3e5, c=50.0, h=h, kt=5e3, dh2=1.8 / h**2)
+    _, g, H = E.foot_anchor_energy(x, x_old, t, t_old, off, **params)
+    fd_g, fd_H = np.zeros(3), np.zeros((3, 3))
+    for i in range(3):
+        dx = np.zeros(3)
+        dx[i] = EPS
+        ep, gp, _ = E.foot_anchor_energy(x + dx, x_old, t, t_old, off, **params)
+        em, gm, _ = E.foot_anchor_energy(x - dx, x_old, t, t_old, off, **params)
+        fd_g[i] = (ep - em) / (2 * EPS)
+        fd_H[:, i] = (gp - gm) / (2 * EPS)
+    np.testing.assert_allclose(g, fd_g, rtol=1e-5, atol=1e-6 * np.abs(g).max())
+    np.testing.assert_allclose(H, fd_H, rtol=1e-5, atol=1e-6 * np.abs(H).max())
+    assert g[2] == 0 and H[2, 2] == 0                        # horizontal only
+
+
+def test_stance_foot_anchor_assembly_matches_reference():
+    """A planted foot is held where it stood (offset dragged only beyond the Coulomb slip
+    distance); a far-pushed foot steps (no anchor); a moving animation foot is free."""
+    from crowdstudy.physics import Control, ModelBuilder, PhysicsConfig, Solver, State
+    from crowdstudy.physics.collision import Contacts
+
+    builder = ModelBuilder()
+    builder.add_character(*vars(fixture_body()).values())
+    model = builder.finalize(device="cpu")
+    cfg = PhysicsConfig(foot_anchor_damping=40.0)
+    h = cfg.dt
+    slip = cfg.foot_anchor_max_force / cfg.foot_anchor_stiffness
+    control = Control(model)
+    control.set_frames(np.zeros((1, 24, 3)), np.array([[0.0, 0.0, 0.95]]))
+    control.advance(0, 0, 0.0)
+    control.hold()
+    wp = control.k.wp
+    state = State(model)
+    tx = control.t_x.numpy().astype(float)
+    shift = np.zeros_like(tx)
+    feet = np.array([7, 8, 10, 11])
+    shift[feet] = [[0.5 * slip, 0.0, 0.0], [0.03, -0.02, 0.0], [0.0, 0.0, 0.01], [0.3, 0.0, 0.0]]
+    state.x.assign(wp.array((tx + shift).astype(np.float32), dtype=wp.vec3))
+    state.q.assign(control.t_glob)
+    rng = np.random.default_rng(5)
+    state.v.assign(wp.array(rng.normal(scale=0.05, size=tx.shape).astype(np.float32), dtype=wp.vec3))
+    none = Contacts.allocate(0, "cpu")
+
+    def assembled(c):
+        s = Solver(model, c)
+        s.assemble(state, control, none, h)
+        return s, s.grad_t.numpy().astype(float), s.hess_a.numpy().astype(float)
+
+    on, g1, A1 = assembled(cfg)
+    _, g0, A0 = assembled(cfg.replace(foot_anchor_stiffness=0.0))
+    x_pred, x_old = on.x_pred.numpy().astype(float), state.x.numpy().astype(float)
+    kt, dh2 = on.body_kt.numpy().astype(float), on.body_dt.numpy().astype(float) / h**2
+    exp_g, exp_A = np.zeros_like(g0), np.zeros_like(A0)
+    offsets = on.foot_offset.numpy().astype(float)
+    for j, b in enumerate(feet):
+        w = E.foot_planted_weight(tx[b], tx[b], h, cfg.foot_planted_speed)
+        assert w == 1.0
+        off = E.foot_anchor_update(x_old[b], tx[b], np.zeros(3), w, slip)
+        if j == 3:                                           # pushed 30 cm: it steps, no anchor
+            assert on.foot_stepping.numpy()[b] == 1
+            continue
+        np.testing.assert_allclose(offsets[b], off, atol=1e-6)
+        _, g, H = E.foot_anchor_energy(x_pred[b], x_old[b], tx[b], tx[b], off, w, cfg.foot_anchor_stiffness,
+                                       cfg.foot_anchor_damping, h, kt[b], dh2[b])
+        exp_g[b], exp_A[b] = g, H
+    assert np.linalg.norm(offsets[8, :2] - shift[8, :2]) == pytest.approx(slip, rel=1e-3)  # dragged
+    np.testing.assert_allclose(offsets[7], 0.0, atol=1e-7)                               # held
+    np.testing.assert_allclose(g1 - g0, exp_g, atol=1e-4 * np.abs(exp_g).max())
+    np.testing.assert_allclose(A1 - A0, exp_A, atol=1e-4 * np.abs(exp_A).max())
+    # the animation's foot moves at 1 m/s: free, and the anchor follows the body
+    moving = control.t_x.numpy().astype(float)
+    moving[feet] += [1.0 * h, 0.0, 0.0]
+    control.t_x.assign(wp.array(moving.astype(np.float32), dtype=wp.vec3))
+    on.assemble(state, control, none, h)
+    assert np.all(on.foot_weight.numpy() == 0)
+    np.testing.assert_allclose(on.foot_offset.numpy()[feet, :2], shift[feet, :2], atol=1e-6)

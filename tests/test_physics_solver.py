@@ -209,3 +209,33 @@ def test_real_scene_d1_meets_the_overlap_and_tracking_bars():
     _, p_base = forward_kinematics(rest[None], base.joint_rotations, base.root_translation)
     feet = [7, 8, 10, 11]
     assert np.abs(p_ours[:, :, feet, 2] - p_base[:, :, feet, 2]).mean() < 0.02     # feet stay on the ground
+
+
+def _planted_foot_speed(anim, reference):
+    """Mean horizontal speed (cm/s) of the foot joints of ``anim`` over the frames where the
+    ``reference`` animation's foot is planted (within 10 cm of its lowest height, < 10 cm/s)."""
+    from crowdstudy.body.skeleton import forward_kinematics
+    from crowdstudy.physics.corrector import load_bodies
+
+    rest = np.stack([np.asarray(b.rest_joints) for b in load_bodies(reference.bodies)])
+    feet = [7, 8, 10, 11]
+    pa = forward_kinematics(rest[None], anim.joint_rotations, anim.root_translation)[1][:, :, feet]
+    pr = forward_kinematics(rest[None], reference.joint_rotations, reference.root_translation)[1][:, :, feet]
+    va = np.linalg.norm(np.diff(pa[..., :2], axis=0), axis=-1) * reference.fps
+    vr = np.linalg.norm(np.diff(pr[..., :2], axis=0), axis=-1) * reference.fps
+    planted = (pr[1:, ..., 2] < pr[..., 2].min() + 0.1) & (vr < 0.1)
+    return 100 * va[planted].mean(), 100 * vr[planted].mean()
+
+
+@pytest.mark.slow
+def test_real_walking_scene_keeps_planted_feet_planted():
+    """Corridor D1, 2 s: the corrected feet slide < 3 cm/s while the Baseline's are planted
+    (without the stance anchor they slide about 7 cm/s; the Baseline itself about 0.6)."""
+    from crowdstudy.design import load_design
+    from crowdstudy.motion.baseline import build_baseline
+
+    base = build_baseline(load_design(), "walking", "D1", duration=2.0)
+    ours = correct(base, progress=False)
+    skate, reference = _planted_foot_speed(ours, base)
+    assert reference < 1.0
+    assert skate < 3.0

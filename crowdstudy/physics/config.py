@@ -16,8 +16,15 @@ is an energy (J = N m) per unit squared Frobenius distance, and d is k times a s
 damped (``pelvis_scale``, ``feet_scale`` multiply both k and d). The root is coupled in
 absolute rotation (Eq. 4 with the pelvis group's k, d) and absolute translation (a
 translational spring/damper of the same form on the pelvis bone's centre of mass); the
-foot bones get a weaker translational coupling of the same form (no foot skate when a
-collision pushes the body).
+foot bones get a weaker translational coupling of the same form.
+
+No foot skate: while the ANIMATION's foot is planted (slow horizontally), each foot body
+(ankle and toe bones) is held horizontally where it touched down by a stiff anchor (a lagged
+static-friction anchor with a Coulomb slip limit; ``foot_anchor_*``, ``foot_planted_speed``)
+that replaces its horizontal coupling to the animation; a foot pushed far from the
+animation's foot takes a corrective step (``foot_release_distance``). Stiff joints
+(``joint_stiffness``) keep the output skeleton (joint rotations + root, re-posed by forward
+kinematics) close to the simulated bodies, so the rendered feet stay where the bodies are.
 """
 
 from __future__ import annotations
@@ -54,15 +61,35 @@ class PhysicsConfig:
             (ankle and toe bones) towards the animation, like the root's; 0 = off.
         feet_translation_damping_scale: its damper is ``damping * this`` (J s^2/m^2).
         joint_stiffness: soft ball joints, N/m: k_j/2 |anchor seen from parent - anchor
-            seen from child|^2.
+            seen from child|^2. The output drops the joints' stretch (forward kinematics of
+            the rotations), so a soft joint shows as sliding feet: 6e5 (rather than 2e5)
+            roughly halves the remaining foot skate; the per-character preconditioner
+            factors the joints exactly, so the CG cost does not change.
         contact_stiffness: inter-body penalty k_c of (k_c/2) depth^2, N/m.
         intra_stiffness: intra-body (self) penalty, N/m.
         ground_stiffness: capsule-ground penalty, N/m.
         ground_friction: viscous friction of capsule-ground contacts, N s/m per contact
             point (a force against the contact point's sliding velocity). Off by default,
-            as in the paper: 2000 cuts the foot skate of pushed characters 3-4x in the
-            study scenes, but it also damps the whole body's recovery (the Fig. 4 study then
-            no longer separates the values of d).
+            as in the paper: it damps the whole body's recovery (the Fig. 4 study then no
+            longer separates the values of d); the stance-foot anchor below handles foot
+            skate instead.
+        foot_anchor_stiffness: N/m, horizontal spring that holds a planted foot body (ankle
+            and toe bones) where it touched down, while the animation's foot is planted
+            (static friction; ``foot_anchor_kernel`` in :mod:`crowdstudy.physics.kernels`).
+            While it holds, it replaces the body's horizontal coupling to the animation
+            (``feet_translation_*``); height is left to the ground contact. 0 = off.
+        foot_anchor_damping: N s/m, horizontal damper of the planted foot's velocity relative
+            to the animation's foot (independent of ``damping``).
+        foot_anchor_max_force: N per foot body, the Coulomb limit of the anchor: beyond
+            ``foot_anchor_max_force / foot_anchor_stiffness`` m the anchor slips with the foot.
+        foot_planted_speed: m/s; the animation's foot body counts as planted (full anchor)
+            below this horizontal speed and free above twice it (linear in between).
+        foot_release_distance: m; a foot body pushed farther than this (horizontally) from
+            the animation's foot takes a corrective step: its anchor is released (the weak
+            ``feet_translation_stiffness`` pulls it back) until it is back within
+            ``foot_rejoin_distance`` m. 0 = never released. (The Fig. 4 character, held
+            0.25 m behind its animation, steps back this way.)
+        foot_rejoin_distance: m, see ``foot_release_distance``.
         environment_stiffness: capsule-static object penalty, N/m (per sample point).
         contact_margin: m added to the capsule radii (on top of the mesh skin) for
             inter-body and environment contacts (not ground, not intra-body).
@@ -95,11 +122,17 @@ class PhysicsConfig:
     root_translation_damping_scale: float = 4.25e3
     feet_translation_stiffness: float = 5.0e3
     feet_translation_damping_scale: float = 300.0
-    joint_stiffness: float = 2.0e5
+    joint_stiffness: float = 6.0e5
     contact_stiffness: float = 3.0e4
     intra_stiffness: float = 1.0e4
     ground_stiffness: float = 5.0e4
     ground_friction: float = 0.0
+    foot_anchor_stiffness: float = 3.0e5
+    foot_anchor_damping: float = 0.0
+    foot_anchor_max_force: float = 1000.0
+    foot_planted_speed: float = 0.1
+    foot_release_distance: float = 0.2
+    foot_rejoin_distance: float = 0.02
     environment_stiffness: float = 2.0e4
     contact_margin: float = 0.005
     speculative_distance: float = 0.02
@@ -125,7 +158,7 @@ class PhysicsConfig:
             if not num == num or num < 0 or num == float("inf"):
                 raise InvalidInputError(f"PhysicsConfig.{field.name}: expected a finite value >= 0, got {value!r}")
         for name in ("dt", "density", "cg_tolerance", "cg_max_iterations", "max_contacts_per_character",
-                     "environment_spacing", "joint_stiffness"):
+                     "environment_spacing", "joint_stiffness", "foot_planted_speed"):
             if float(getattr(self, name)) <= 0:
                 raise InvalidInputError(f"PhysicsConfig.{name}: expected a positive value, got {getattr(self, name)!r}")
 

@@ -95,6 +95,7 @@ class CrowdCorrector:
         k.wp.launch(k.set_state_kernel, self.model.n_bodies, [self.control.t_x, self.control.t_glob, self.state.x,
                                                               self.state.q, self.state.v, self.state.w],
                     device=self.model.device)
+        self.solver.reset_foot_anchors()
 
     def reset(self, joint_rotations: np.ndarray, root_translation: np.ndarray, *, settle: bool = False) -> None:
         """Place every body at the given pose, at rest: (N, J, 3) rad and (N, 3) m; with

@@ -17,7 +17,7 @@ import numpy as np
 from crowdstudy.body.capsules import closest_points_on_segments
 from crowdstudy.body.rotations import skew
 
-__all__ = ["vee_asym", "inertia_energy", "gravity_energy", "ball_joint_energy", "control_energy",
+__all__ = ["foot_planted_weight", "foot_anchor_update", "foot_anchor_energy", "vee_asym", "inertia_energy", "gravity_energy", "ball_joint_energy", "control_energy",
            "root_translation_energy", "contact_energy"]
 
 
@@ -85,6 +85,43 @@ def root_translation_energy(x, x_old, target, target_old, k, dh2):
     """E = k/2 |x - x^|^2 + dh2/2 |x - x_old - x^ + x^_old|^2 (m). Returns (E, g (3,), H (3, 3))."""
     a, b = x - target, x - x_old - target + target_old
     return 0.5 * k * a @ a + 0.5 * dh2 * b @ b, k * a + dh2 * b, (k + dh2) * np.eye(3)
+
+
+def foot_planted_weight(target, target_old, h, planted_speed):
+    """Anchor weight w of a foot body: 1 while the animation's foot moves slower than
+    ``planted_speed`` m/s horizontally, 0 above twice that, linear in between.
+    target, target_old: (3,) m; h: s."""
+    speed = np.linalg.norm((np.asarray(target) - target_old)[:2]) / h
+    return float(np.clip(2.0 - speed / planted_speed, 0.0, 1.0))
+
+
+def foot_anchor_update(x_old, target_old, offset, w, slip):
+    """Lagged stance anchor: the new horizontal offset (3,) m (z = 0) of a foot body from its
+    animation target. Free foot (w = 0): follows the body; planted: kept, but dragged along
+    so that |x_old - target_old - offset| <= slip (m, = max force / stiffness)."""
+    rel = np.asarray(x_old, np.float64) - target_old
+    rel[2] = 0.0
+    if w <= 0:
+        return rel
+    d = rel - offset
+    n = np.linalg.norm(d)
+    return offset + d * (1.0 - slip / n) if n > slip else np.asarray(offset, np.float64)
+
+
+def foot_anchor_energy(x, x_old, target, target_old, offset, w, k, c, h, kt, dh2):
+    """Stance-foot anchor of a foot body, horizontal (P = diag(1, 1, 0)), weight w:
+    E = w (k/2 |P(x - x^ - o)|^2 + c/(2h) |P(x - x_old - x^ + x^_old)|^2)
+        - w (kt/2 |P(x - x^)|^2 + dh2/2 |P(x - x_old - x^ + x^_old)|^2)
+    (the second line removes the body's horizontal tracking coupling while planted).
+    x, x_old, target, target_old, offset: (3,) m; k N/m; c N s/m; kt N/m; dh2 N/m.
+    Returns (E, g (3,), H (3, 3))."""
+    P = np.diag([1.0, 1.0, 0.0])
+    e = P @ (x - target - offset)
+    ea = P @ (x - target)
+    dv = P @ (x - x_old - target + target_old)
+    energy = w * (0.5 * k * e @ e + 0.5 * c / h * dv @ dv - 0.5 * kt * ea @ ea - 0.5 * dh2 * dv @ dv)
+    grad = w * (k * e + c / h * dv - kt * ea - dh2 * dv)
+    return energy, grad, w * (k + c / h - kt - dh2) * P
 
 
 def contact_energy(xa, Ra, seg_a, ra, xb, Rb, seg_b, rb, k):

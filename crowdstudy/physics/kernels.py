@@ -261,8 +261,74 @@ def kernels():
         v[b] = wp.vec3(0.0, 0.0, 0.0)
         w[b] = wp.vec3(0.0, 0.0, 0.0)
 
+    @wp.kernel
+    def foot_anchor_kernel(feet: wp.array(dtype=wp.int32), x_pred: wp.array(dtype=wp.vec3),
+                           x_old: wp.array(dtype=wp.vec3), t_x: wp.array(dtype=wp.vec3),
+                           t_x_old: wp.array(dtype=wp.vec3), offset: wp.array(dtype=wp.vec3),
+                           weight: wp.array(dtype=float), stepping: wp.array(dtype=wp.int32),
+                           body_kt: wp.array(dtype=float), body_dt: wp.array(dtype=float), h: float,
+                           planted_speed: float, k_anchor: float, c_anchor: float, max_force: float,
+                           release_distance: float, rejoin_distance: float,
+                           grad_t: wp.array(dtype=wp.vec3), hess_a: wp.array(dtype=wp.mat33)):
+        """Stance-foot anchor (static friction of planted feet), added to the assembled system.
+
+        The animation's foot body is planted when its horizontal speed |v^_xy| is below
+        ``planted_speed`` (weight w = 1), free above twice that (w = 0, linear in between).
+        While planted, the body's horizontal position is anchored at the animation's target
+        plus an offset frozen at touch-down (the simulated foot stays where it landed and
+        moves only as the animation's foot moves):
+        E = w (k/2 |P (x - x^ - o)|^2 + c/(2h) |P (x - x_old - x^ + x^_old)|^2), P = diag(1, 1, 0),
+        minus w times the horizontal part of the body's own translation PD (body_kt, body_dt),
+        which the anchor replaces while it holds (the xy Hessian stays
+        (1 - w)(kt + dt/h^2) + w (k + c/h) >= 0).
+        The offset o slips (is dragged along) when the spring would exceed ``max_force`` N
+        (a Coulomb limit): |x_old - x^_old - o| <= max_force / k. While free, o follows the
+        body (o = x_old - x^_old, horizontal). A foot farther than ``release_distance`` m
+        (horizontally) from the animation's foot takes a corrective step: it is free until it
+        is back within ``rejoin_distance`` m (``weight`` (F,) holds w, ``stepping`` (B,) the
+        flag).
+        """
+        i = wp.tid()
+        b = feet[i]
+        vt = (t_x[b] - t_x_old[b]) / h
+        speed = wp.sqrt(vt[0] * vt[0] + vt[1] * vt[1])
+        w = wp.clamp(2.0 - speed / planted_speed, 0.0, 1.0)
+        rel = x_old[b] - t_x_old[b]
+        rel = wp.vec3(rel[0], rel[1], 0.0)
+        dist = wp.length(rel)
+        if release_distance > 0.0:
+            if dist > release_distance:
+                stepping[b] = 1
+            elif dist < rejoin_distance:
+                stepping[b] = 0
+            if stepping[b] != 0:
+                w = 0.0
+        off = offset[b]
+        if w <= 0.0:
+            off = rel
+        else:
+            dlt = rel - off
+            n = wp.length(dlt)
+            slip = max_force / k_anchor
+            if n > slip:
+                off = off + dlt * (1.0 - slip / n)
+        offset[b] = off
+        weight[i] = w
+        if w > 0.0:
+            e = x_pred[b] - t_x[b] - off
+            dv = (x_pred[b] - x_old[b]) - (t_x[b] - t_x_old[b])
+            ch = c_anchor / h
+            g = w * (k_anchor * e + ch * dv)
+            # the anchor replaces the foot's horizontal coupling to the animation (body_kt, body_dt)
+            dth2 = body_dt[b] / (h * h)
+            ea = x_pred[b] - t_x[b]
+            g = g - w * (body_kt[b] * ea + dth2 * dv)
+            grad_t[b] = grad_t[b] + wp.vec3(g[0], g[1], 0.0)
+            s = w * (k_anchor + ch - body_kt[b] - dth2)
+            hess_a[b] = hess_a[b] + wp.mat33(s, 0.0, 0.0, 0.0, s, 0.0, 0.0, 0.0, 0.0)
+
     return SimpleNamespace(wp=wp, quat_exp=quat_exp, quat_log=quat_log, vee_asym=vee_asym,
                            targets_kernel=targets_kernel, predict_kernel=predict_kernel,
                            assemble_bodies_kernel=assemble_bodies_kernel, update_kernel=update_kernel,
                            project_kernel=project_kernel, set_state_kernel=set_state_kernel,
-                           control_gradient=control_gradient)
+                           control_gradient=control_gradient, foot_anchor_kernel=foot_anchor_kernel)

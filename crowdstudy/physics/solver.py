@@ -6,7 +6,8 @@
 2. assemble the gradient and the 6x6 diagonal Hessian blocks at the prediction
    (:mod:`crowdstudy.physics.kernels`), then add the contacts (penalty ``k/2 depth^2``, the
    depth linearised to the prediction, Gauss-Newton Hessian ``k u u^T``;
-   :mod:`crowdstudy.physics.linear`);
+   :mod:`crowdstudy.physics.linear`); the stance-foot anchor (``foot_anchor_kernel``) adds
+   its horizontal spring to the planted feet's blocks in between;
 3. solve ``H [dx; dw] = -g`` by preconditioned CG; the off-diagonal joint and contact
    couplings are applied matrix-free. Preconditioners (``preconditioner``):
    ``"character"`` (default) block Jacobi with one block per CHARACTER (6J x 6J: bodies and
@@ -111,8 +112,17 @@ class Solver:
                                         np.where(feet, config.feet_translation_damping_scale, 0.0))
         self.body_kt = wp.array(kt.astype(np.float32), dtype=wp.float32, device=dev)
         self.body_dt = wp.array(dtr.astype(np.float32), dtype=wp.float32, device=dev)
+        self.feet_index = wp.array(np.nonzero(feet)[0].astype(np.int32), dtype=wp.int32, device=dev)
+        self.foot_offset = z3()
+        self.foot_stepping = wp.zeros(nb, dtype=wp.int32, device=dev)
+        self.foot_weight = wp.zeros(max(int(feet.sum()), 1), dtype=wp.float32, device=dev)
         self._contact_capacity = -1
         self.last_cg = (0, 0.0)
+
+    def reset_foot_anchors(self) -> None:
+        """Forget the stance anchors (call after placing the bodies anew)."""
+        self.foot_offset.zero_()
+        self.foot_stepping.zero_()
 
     def _contact_buffers(self, capacity: int) -> None:
         if capacity == self._contact_capacity:
@@ -145,6 +155,14 @@ class Solver:
                    W["body_children"], W["anchor_parent"], W["anchor_child"], self.body_k, self.body_d,
                    self.body_kt, self.body_dt, float(dt), float(cfg.gravity), float(cfg.joint_stiffness), self.grad_t, self.grad_r, self.hess_a, self.hess_b, self.hess_c,
                    self.lever_p, self.lever_c, self.ctrl_c], device=dev)
+        if cfg.foot_anchor_stiffness > 0 and self.feet_index.shape[0]:
+            wp.launch(kb.foot_anchor_kernel, self.feet_index.shape[0],
+                      [self.feet_index, self.x_pred, state_in.x, control.t_x, control.t_x_old, self.foot_offset,
+                       self.foot_weight, self.foot_stepping, self.body_kt, self.body_dt, float(dt), float(cfg.foot_planted_speed),
+                       float(cfg.foot_anchor_stiffness), float(cfg.foot_anchor_damping),
+                       float(cfg.foot_anchor_max_force), float(cfg.foot_release_distance),
+                       float(cfg.foot_rejoin_distance), self.grad_t, self.hess_a],
+                      device=dev)
         if contacts.capacity:
             wp.launch(ks.contact_assemble_kernel, contacts.capacity,
                       [contacts.count, contacts.capacity, contacts.body_a, contacts.body_b, contacts.normal,
