@@ -17,7 +17,7 @@ HERE = Path(__file__).resolve().parent
 
 
 def scripts() -> list[Path]:
-    return sorted(HERE.glob("fig*.py"))
+    return sorted(p for p in HERE.glob("fig*.py") if p.stem != "figstyle")
 
 
 def main(argv=None) -> int:
