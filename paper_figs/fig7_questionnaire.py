@@ -5,7 +5,9 @@ consent, demographics, instructions and the practice trial to the first study tr
 answers some items, and screenshots the page to ``paper_figs/out/fig7_questionnaire.png``.
 
 Stimuli: ``--stimuli DIR`` if given, else ``stimuli/videos`` when it holds a manifest
-(the rendered study videos), else a few test-pattern clips written to a temporary folder.
+(the rendered study videos), else a short crowd clip rendered on the spot (a D3 concert
+Baseline from viewpoint V2) behind a temporary stimulus folder; ``--quick`` uses
+test-pattern clips instead.
 
     python paper_figs/fig7_questionnaire.py [--quick] [--stimuli DIR] [--out PNG]
 """
@@ -52,6 +54,30 @@ def screenshot(url: str, out: Path, *, width: int, height: int, video_timeout_ms
             browser.close()
 
 
+def _render_crowd_clips(stim: Path, size: tuple[int, int]) -> None:
+    """Replace the test-pattern clips of a fake stimulus folder by a rendered crowd clip."""
+    import json
+    import shutil
+
+    from crowdstudy.design import load_design
+    from crowdstudy.motion import build_baseline
+    from crowdstudy.render import render_video
+    from crowdstudy.render.video import sha256_file
+
+    design = load_design()
+    clip = stim / "crowd.mp4"
+    render_video(build_baseline(design, "stationary", "D3", duration=2.0), "V2", clip, width=size[0],
+                 height=size[1], design=design, progress=False)
+    digest = sha256_file(clip)
+    manifest = json.loads((stim / "manifest.json").read_text())
+    for row in manifest["stimuli"]:
+        shutil.copyfile(clip, stim / row["file"])
+        row["sha256"] = digest
+    (stim / "manifest.json").write_text(json.dumps(manifest, indent=2))
+    for practice in stim.glob("practice*.mp4"):
+        shutil.copyfile(clip, practice)
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="smaller window (1280x720) and test-pattern clips")
@@ -73,6 +99,8 @@ def main(argv: list[str] | None = None) -> int:
         if stim is None:
             size = (320, 180) if args.quick else (1280, 720)
             stim = write_fake_stimuli(Path(tmp) / "stim", n_files=2, seconds=1.0, width=size[0], height=size[1])
+            if not args.quick:
+                _render_crowd_clips(stim, size)
         serve_args = ["--stimuli", str(stim), "--db", f"sqlite:///{tmp}/fig7.db"]
         with LocalServer(serve_args) as srv:
             screenshot(srv.url, args.out, width=width, height=height, video_timeout_ms=90_000)
