@@ -17,9 +17,10 @@ The ground is split at the rectangle that the characters' shadows can reach (ove
 whole animation); only that part is shaded with the shadow-map lookup, the rest with a
 variant compiled without it (same picture, half the floor's cost on llvmpipe).
 
-Body meshes are decimated once per template (``max_faces``, 3000 at 1080p: at 1080p a
-character is at most ~500 px tall, and on llvmpipe the cost of a frame grows with the
-triangle count); characters are lit per vertex (see ``shaders/lighting.glsl``).
+Body meshes are decimated once per template (``max_faces``, 3000 at 1080p, hardly
+distinguishable from the full mesh there; on llvmpipe the cost of a frame grows with the
+triangle count), and characters less than 600 px tall on screen use half of that (under
+300 px a quarter); characters are lit per vertex (see ``shaders/lighting.glsl``).
 """
 
 from __future__ import annotations
@@ -42,7 +43,7 @@ N_BONES = 24
 _CHUNK = 32          # frames of skinning matrices computed at once
 _COPIES = (-2, -1, 0, 1, 2)
 _BOUND_RADIUS = 1.3  # m, bounding sphere of a character around its pelvis (arms raised)
-_LOD_PIXELS = (300.0, 150.0)  # on-screen height (px) below which the next coarser mesh is used
+_LOD_PIXELS = (600.0, 300.0)  # on-screen height (px) below which the next coarser mesh is used
 
 
 @functools.lru_cache(maxsize=None)
