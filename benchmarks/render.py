@@ -3,7 +3,7 @@
 Measured in one run, on the same animation (the D5 stationary Baseline, 60 characters):
 
 * ``ours``: the stimulus settings: 4x MSAA, 2048^2 shadow map, bodies at the renderer's
-  level of detail (3000 faces), frame read back;
+  levels of detail (3000 faces, half for characters under 600 px tall), frame read back;
 * peers: the same without shadows and MSAA (``plain``), and with the full-resolution
   body meshes (``full-mesh``);
 * ``ours+encode``: render and stream to ffmpeg/x264 with the "full" stimulus preset's
