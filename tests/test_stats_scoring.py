@@ -8,7 +8,8 @@ from crowdstudy.design import load_design
 from crowdstudy.errors import InvalidInputError
 from crowdstudy.stats.scoring import (cell_means, composite_scores, item_reliability, reverse_items,
                                       validate_responses)
-from crowdstudy.stats.synthetic import RESPONSE_COLUMNS, ResponseModel, simulate_responses
+from crowdstudy.stats.synthetic import ResponseModel, simulate_responses
+from crowdstudy.study.export import RESPONSE_COLUMNS
 
 
 @pytest.fixture(scope="module")

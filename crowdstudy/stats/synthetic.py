@@ -32,14 +32,10 @@ from typing import Mapping
 import numpy as np
 
 from crowdstudy.errors import InvalidInputError
+from crowdstudy.study.export import RESPONSE_COLUMNS
 
-__all__ = ["ResponseModel", "simulate_responses", "RESPONSE_COLUMNS", "ITEM_COLUMNS"]
+__all__ = ["ResponseModel", "simulate_responses", "ITEM_COLUMNS"]
 
-#: Columns of responses.csv, in order (INTERFACES.md, "Exported responses").
-RESPONSE_COLUMNS = (
-    "participant_id", "stage", "scenario", "trial_index", "stimulus_id", "density_level", "density",
-    "viewpoint", "method", "Q1", "Q2", "Q3", "Q4", "Q5", "Q6", "rt_ms", "shown_at", "answered_at",
-)
 #: The six Likert item columns of responses.csv.
 ITEM_COLUMNS = ("Q1", "Q2", "Q3", "Q4", "Q5", "Q6")
 
@@ -220,7 +216,8 @@ def simulate_responses(design, n_participants: int, model: ResponseModel | None 
     Each participant sees stage 1 then stage 2 (design order), each stage's trials in an
     independently shuffled order; ``trial_index`` counts over the whole schedule.
 
-    Returns a pandas DataFrame in the responses.csv schema (:data:`RESPONSE_COLUMNS`), one
+    Returns a pandas DataFrame in the responses.csv schema
+    (:data:`crowdstudy.study.export.RESPONSE_COLUMNS`), one
     row per trial, sorted by participant and trial_index; ``participant_id`` is
     ``"sim-001"``...; ``rt_ms`` float milliseconds; ``shown_at`` / ``answered_at`` ISO 8601
     UTC (deterministic, from a fixed epoch). Same seed -> identical frame.

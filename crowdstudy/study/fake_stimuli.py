@@ -16,11 +16,8 @@ from crowdstudy.design import StudyDesign, load_design
 from crowdstudy.errors import InvalidInputError
 from crowdstudy.provenance import provenance
 
-__all__ = ["write_fake_stimuli", "MANIFEST_COLUMNS"]
+__all__ = ["write_fake_stimuli"]
 
-MANIFEST_COLUMNS = ("stimulus_id", "stage", "scenario", "density_level", "density", "viewpoint", "method",
-                    "characters", "seed", "file", "sha256", "duration", "fps", "width", "height", "overlap_mesh",
-                    "overlap_capsule", "red_pixel_fraction", "software_version")
 _PATTERNS = ("testsrc", "testsrc2", "smptebars", "rgbtestsrc")
 
 
@@ -49,6 +46,7 @@ def write_fake_stimuli(out_dir: str | Path, design: StudyDesign | str | Path | N
         raise InvalidInputError(f"width and height must be even and >= 16, got {width}x{height}")
     if not seconds > 0:
         raise InvalidInputError(f"seconds must be > 0, got {seconds!r}")
+    from crowdstudy.render.stimuli import MANIFEST_COLUMNS
     from crowdstudy.render.video import sha256_file
 
     out = Path(out_dir)
