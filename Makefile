@@ -2,6 +2,7 @@
 SHELL := /bin/bash
 VENV := .venv
 PY := $(VENV)/bin/python
+export CROWDSTUDY_CACHE := $(CURDIR)/build/cache
 export WARP_CACHE_PATH := $(CURDIR)/build/warp-cache
 export MPLBACKEND := Agg
 export PYTHONUNBUFFERED := 1

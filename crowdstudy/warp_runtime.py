@@ -1,8 +1,8 @@
 """Importing and initialising NVIDIA Warp the same way everywhere.
 
 Warp compiles kernels on first use (seconds per module on CPU) and caches the binaries; the
-cache lives in ``build/warp-cache`` of the source tree unless ``WARP_CACHE_PATH`` says
-otherwise.
+cache lives in the per-user cache folder (``crowdstudy.paths``) unless ``WARP_CACHE_PATH``
+says otherwise.
 """
 
 from __future__ import annotations
@@ -10,7 +10,7 @@ from __future__ import annotations
 import functools
 import os
 
-from crowdstudy.provenance import repository_root
+from crowdstudy.paths import cache_dir
 
 __all__ = ["get_warp", "resolve_device"]
 
@@ -18,7 +18,7 @@ __all__ = ["get_warp", "resolve_device"]
 @functools.lru_cache(maxsize=1)
 def get_warp():
     """The initialised ``warp`` module, quiet, with the project's kernel cache."""
-    cache = os.environ.setdefault("WARP_CACHE_PATH", str(repository_root() / "build" / "warp-cache"))
+    cache = os.environ.get("WARP_CACHE_PATH") or str(cache_dir("warp-cache"))
     os.makedirs(cache, exist_ok=True)
     import warp as wp
 

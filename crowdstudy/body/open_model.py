@@ -15,7 +15,7 @@ narrows the pelvis (male) or the reverse (female). Both are about N(0, 1) across
 population (see ``crowdstudy.body.shapes``).
 
 The model is deterministic (no random numbers); it is generated at first use and cached as
-``build/body-cache/open_<sex>_v<version>.npz`` (about 0.7 MB each). Licence: the project's
+``body-cache/open_<sex>_v<version>.npz`` in the per-user cache folder (about 0.7 MB each). Licence: the project's
 MIT licence (crowdstudy/body/ASSETS.md).
 """
 
@@ -30,6 +30,7 @@ import numpy as np
 
 from crowdstudy.body.skeleton import DEFAULT_REST_JOINTS, JOINT_INDEX, NUM_JOINTS, PARENTS
 from crowdstudy.errors import InvalidInputError, MissingDependencyError
+from crowdstudy.paths import cache_dir
 
 __all__ = [
     "OPEN_MODEL_VERSION",
@@ -56,12 +57,7 @@ _TEMPLATE_BUILD = {"male": 0.8, "female": 1.6}  # build of the template in primi
 
 
 def _cache_dir() -> Path:
-    env = os.environ.get("CROWDSTUDY_CACHE")
-    if env:
-        return Path(env) / "body-cache"
-    from crowdstudy.provenance import repository_root
-
-    return repository_root() / "build" / "body-cache"
+    return cache_dir("body-cache")
 
 
 @dataclass(frozen=True)
