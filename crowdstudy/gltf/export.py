@@ -14,7 +14,8 @@ Layout of the file (``crowdstudy export-gltf anim.npz out.glb``):
   toolkit's axis-angle rotations.
 * Per character, 24 joint nodes ``cNN_<joint>`` (names of ``crowdstudy.body.skeleton``)
   under ``crowdstudy_world``: the pelvis translated to the root position, every other joint
-  at its rest offset from its parent. Their default transform is the animation's first frame.
+  at its rest offset from its parent. Their default transform is the bind pose (a T-pose
+  at the first frame's pelvis position), so importers (Blender) see the rest pose as rest.
 * Per character one mesh (one primitive): POSITION and NORMAL in the body's rest frame
   (pelvis at the origin), JOINTS_0 / WEIGHTS_0 (the four largest weights, renormalised),
   inverse bind matrices ``translate(-rest_joint)``; TEXCOORD_0 and a base-colour texture
@@ -212,8 +213,7 @@ def build_gltf(anim, *, bodies=None, colors: bool = True, progress: bool = False
         for jj, jname in enumerate(JOINT_NAMES):
             p = int(PARENTS[jj])
             offset = roots[0, i] if p < 0 else rest[jj] - rest[p]
-            node = {"name": prefix + jname, "translation": [float(x) for x in offset],
-                    "rotation": [float(x) for x in quats[0, i, jj]]}
+            node = {"name": prefix + jname, "translation": [float(x) for x in offset]}
             nodes.append(b.add("nodes", node))
             if p < 0:
                 b.doc["nodes"][world]["children"].append(nodes[-1])
