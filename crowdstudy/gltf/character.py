@@ -26,7 +26,7 @@ Steps (:func:`read_character`):
    hips' left-right line turned about z so the character faces +y, pelvis at the origin.
 5. Rest pose (the toolkit's T-pose convention): upper arms and forearms more than
    ``ARM_ELEVATION_LIMIT`` above or below horizontal (an A-pose) are raised or lowered to
-   that limit; thighs and shins more than ``LEG_TILT_LIMIT`` from vertical are brought to
+   that limit by a turn about the forward axis (in the coronal plane); thighs and shins more than ``LEG_TILT_LIMIT`` from vertical are brought to
    it. The mesh follows by linear blend skinning with the 24-joint weights. A file already
    in the toolkit's convention (a crowdstudy export) passes through unchanged.
 """
@@ -145,22 +145,26 @@ def _rotation_between(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return axis_angle_to_matrix(axis / s * math.atan2(s, float(np.dot(a, b))))
 
 
-def _limit_direction(d: np.ndarray, kind: str) -> np.ndarray:
-    """The rest-pose direction a bone should take (d itself when within the limits)."""
+def _rest_fix(d: np.ndarray, kind: str) -> np.ndarray:
+    """(3, 3) world rotation bringing bone direction d into the rest-pose limits (identity
+    when within them). Arms turn about the forward axis y (in the coronal plane, so the
+    bones below keep their forward offsets); legs by the smallest rotation."""
     u = d / np.linalg.norm(d)
     if kind == "arm":
-        horiz = math.hypot(u[0], u[1])
+        horiz = abs(u[0])
         elev = math.atan2(u[2], horiz)
         if abs(elev) <= ARM_ELEVATION_LIMIT or horiz < 1e-9:
-            return u if horiz >= 1e-9 else np.array([math.copysign(1.0, 1.0), 0.0, 0.0])
-        e = math.copysign(ARM_ELEVATION_LIMIT, elev)
-        return np.array([u[0] / horiz * math.cos(e), u[1] / horiz * math.cos(e), math.sin(e)])
+            return np.eye(3)
+        delta = math.copysign(ARM_ELEVATION_LIMIT, elev) - elev
+        theta = delta if u[0] < 0 else -delta
+        return axis_angle_to_matrix(np.array([0.0, theta, 0.0]))
     tilt = math.acos(max(-1.0, min(1.0, -u[2])))
     if tilt <= LEG_TILT_LIMIT:
-        return u
+        return np.eye(3)
     horiz = math.hypot(u[0], u[1])
     h = (u[0] / horiz, u[1] / horiz) if horiz > 1e-9 else (0.0, 0.0)
-    return np.array([h[0] * math.sin(LEG_TILT_LIMIT), h[1] * math.sin(LEG_TILT_LIMIT), -math.cos(LEG_TILT_LIMIT)])
+    target = np.array([h[0] * math.sin(LEG_TILT_LIMIT), h[1] * math.sin(LEG_TILT_LIMIT), -math.cos(LEG_TILT_LIMIT)])
+    return _rotation_between(u, target)
 
 
 #: Bones straightened into the rest convention: (joint, child joint, kind).
@@ -309,7 +313,7 @@ def read_character(path: str | Path, *, skin: int = 0, height: float | None = No
         j, c = JOINT_INDEX[jname], JOINT_INDEX[child]
         glob, p = forward_kinematics(joints, local, np.zeros(3), rotations_are_matrices=True)
         d = p[c] - p[j]
-        fix = _rotation_between(d, _limit_direction(d, kind))
+        fix = _rest_fix(d, kind)
         par = glob[int(PARENTS[j])]
         local[j] = par.T @ fix @ par @ local[j]
     glob, new_joints = forward_kinematics(joints, local, np.zeros(3), rotations_are_matrices=True)
