@@ -77,10 +77,37 @@ def a_pose_rotations() -> np.ndarray:
     return rot
 
 
-def write_mixamo_character(path, body, *, texture: bool = True) -> dict:
+def _rename(names: list[str], weights: np.ndarray, convention: str, omit: tuple[str, ...]):
+    """Other rigs: joint names of ``convention`` (a NAME_MAPS key, or "generic" for
+    ``bone_NN`` names), joints in ``omit`` removed (their weights go to their parent)."""
+    table = {ours: name for name, ours in NAME_MAPS[convention].items()} if convention != "generic" else {}
+    w = weights.copy()
+    keep = list(range(len(names)))
+    for ours in omit:
+        j = JOINT_INDEX[ours]
+        w[:, JOINT_INDEX[JOINT_NAMES[PARENTS[j]]]] += w[:, j]
+        keep.remove(j)
+    new = []
+    for k, name in enumerate(names):
+        if k < NUM_JOINTS:
+            new.append(table.get(JOINT_NAMES[k], f"bone_{k:02d}") if convention != "generic" else f"bone_{k:02d}")
+        else:
+            new.append(name.split(":", 1)[1] if convention != "generic" else f"bone_{k:02d}")
+    return new, w, keep
+
+
+def write_mixamo_character(path, body, *, texture: bool = True, convention: str = "mixamo",
+                           omit: tuple[str, ...] = (), vrm_extension: bool = False) -> dict:
     """Write ``body`` as a Mixamo-style skinned .glb; returns what a test compares against:
-    ``{"names", "weights" (V, K), "uv" (V, 2) bottom-left origin, "texture" (H, W, 3)}``."""
+    ``{"names", "weights" (V, K), "uv" (V, 2) bottom-left origin, "texture" (H, W, 3)}``.
+
+    ``convention`` names the 24 joints after another rig (``NAME_MAPS`` key, or "generic":
+    ``bone_NN``, usable with ``vrm_extension`` which writes a VRM 1.0 humanoid table);
+    ``omit`` drops joints (weights to the parent, children re-parented)."""
     names, weights = mixamo_weights(body)
+    mix_names = list(names)
+    names, weights, keep = _rename(names, weights, convention, omit) if (convention != "mixamo" or omit) \
+        else (names, weights, list(range(len(names))))
     rot = a_pose_rotations()
     local = axis_angle_to_matrix(rot)
     glob, pos = forward_kinematics(body.rest_joints, local, np.zeros(3), rotations_are_matrices=True)
@@ -106,6 +133,23 @@ def write_mixamo_character(path, body, *, texture: bool = True) -> dict:
                for j, n in enumerate(JOINT_NAMES)}
     parents.update({n: p for n, (p, _, _) in EXTRA.items()})
 
+    # re-key by the file's names, re-parent children of omitted joints
+    rename = dict(zip(mix_names, names))
+    omitted = {mix_names[JOINT_INDEX[o]] for o in omit}
+
+    old_parents = parents
+
+    def kept_parent(name):
+        par = old_parents[name]
+        while par is not None and par in omitted:
+            par = old_parents[par]
+        return par
+
+    frames = {rename[k]: v for k, v in frames.items()}
+    parents = {rename[k]: (None if kept_parent(k) is None else rename[kept_parent(k)])
+               for k in mix_names if k not in omitted}
+    weights = weights[:, keep]
+    names = [names[k] for k in keep]
     b = GltfBuilder(generator="crowdstudy test fixture (Mixamo-style)")
     armature = b.add("nodes", {"name": "Armature", "rotation": [-math.sqrt(0.5), 0.0, 0.0, math.sqrt(0.5)],
                                "scale": [0.01, 0.01, 0.01], "children": []})
@@ -131,13 +175,18 @@ def write_mixamo_character(path, body, *, texture: bool = True) -> dict:
         tex = np.stack([xx * 16, yy * 16, ((xx // 4 + yy // 4) % 2) * 255], axis=-1).astype(np.uint8)
     mesh_node = add_skinned_mesh(
         b, name="Body", vertices=bind_verts, faces=body.faces, joints=order[:, :4], weights=vals[:, :4],
-        joint_nodes=[index[n] for n in names], inverse_bind=ibm, skeleton=index["mixamorig:Hips"],
+        joint_nodes=[index[n] for n in names], inverse_bind=ibm, skeleton=index[names[0]],
         uv=None if uv is None else np.stack([uv[:, 0], 1.0 - uv[:, 1]], 1), texture=tex)
     # the other four influences as JOINTS_1 / WEIGHTS_1
     prim = b.doc["meshes"][b.doc["nodes"][mesh_node]["mesh"]]["primitives"][0]
     j1 = np.where(vals[:, 4:] > 0, order[:, 4:], 0).astype(np.uint8)
     prim["attributes"]["JOINTS_1"] = b.accessor(j1, target=34962)
     prim["attributes"]["WEIGHTS_1"] = b.accessor(vals[:, 4:].copy(), target=34962)
+    if vrm_extension:
+        b.doc["extensionsUsed"] = ["VRMC_vrm"]
+        bones = {vrm: {"node": index[rename[mix_names[JOINT_INDEX[ours]]]]}
+                 for vrm, ours in NAME_MAPS["vrm"].items() if ours not in omit}
+        b.doc["extensions"] = {"VRMC_vrm": {"specVersion": "1.0", "humanoid": {"humanBones": bones}}}
     b.doc["scenes"] = [{"nodes": [armature, mesh_node]}]
     b.doc["scene"] = 0
     b.write(path)

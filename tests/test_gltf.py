@@ -287,6 +287,45 @@ def test_import_texture_and_record(mixamo):
     assert verts[:, 2].min() == pytest.approx(0.0, abs=1e-9)
 
 
+@pytest.mark.parametrize("convention, omit, vrm, expect", [
+    ("mixamo", (), False, "mixamo"),   # Ready Player Me: Mixamo names without the prefix (below)
+    ("vrm", ("spine3", "left_foot", "right_foot"), False, "vrm"),  # upperChest and toes are optional in VRM
+    ("vroid", (), False, "vroid"),
+    ("rigify", ("left_hand", "right_hand"), False, "rigify"),
+    ("generic", ("spine3",), True, "vrm-extension"),  # bone_NN names, VRM 1.0 humanoid table
+    ("cmu", (), False, "cmu"),
+])
+def test_import_other_rigs(tmp_path, convention, omit, vrm, expect):
+    body = load_body({"model": "open", "sex": "female", "height": 1.6})
+    path = tmp_path / f"{convention}.glb"
+    exp = write_mixamo_character(path, body, convention=convention if convention != "mixamo" else "mixamo",
+                                 omit=omit, vrm_extension=vrm, texture=False)
+    if convention == "mixamo":  # strip the namespace: Ready Player Me's names
+        raw = path.read_bytes().replace(b'"mixamorig:', b'"')
+        path.write_bytes(raw)
+    ch = read_character(path)
+    assert ch.convention == expect and sorted(ch.synthesized) == sorted(omit)
+    kept = [j for j in JOINT_NAMES if j not in omit]
+    arm = {f"{s}_{j}" for s in ("left", "right") for j in ("elbow", "wrist", "hand")}
+    still = [JOINT_INDEX[j] for j in kept if j not in arm]
+    np.testing.assert_allclose(ch.joints[still], body.rest_joints[still], atol=1e-6)
+    np.testing.assert_allclose(ch.weights.sum(axis=1), 1.0, atol=1e-6)
+    for j in omit:
+        assert np.all(ch.weights[:, JOINT_INDEX[j]] == 0)  # placed, but moves no vertex
+    if "spine3" in omit:
+        mid = 0.5 * (body.rest_joints[JOINT_INDEX["spine2"]] + body.rest_joints[JOINT_INDEX["neck"]])
+        np.testing.assert_allclose(ch.joints[JOINT_INDEX["spine3"]], mid, atol=1e-6)
+    if "left_foot" in omit:
+        foot, ankle = ch.joints[JOINT_INDEX["left_foot"]], ch.joints[JOINT_INDEX["left_ankle"]]
+        assert foot[1] > ankle[1] + 0.08 and foot[2] < ankle[2]
+    if "left_hand" in omit:  # beyond the wrist, along the forearm
+        hand, wrist = ch.joints[JOINT_INDEX["left_hand"]], ch.joints[JOINT_INDEX["left_wrist"]]
+        assert hand[0] < wrist[0] - 0.05
+    rec = load_body({"model": "gltf", "path": str(path)})
+    verts, _ = rec.pose(np.zeros((24, 3)), np.zeros(3))
+    assert verts.shape == body.rest_vertices.shape
+
+
 def test_import_errors_name_the_problem(mixamo, tmp_path):
     body, path, _ = mixamo
     with pytest.raises(InvalidInputError, match="not found"):
