@@ -87,7 +87,7 @@ def add_skinned_mesh(builder: GltfBuilder, *, name: str, vertices: np.ndarray, f
                      joints: np.ndarray, weights: np.ndarray, joint_nodes: list[int],
                      inverse_bind: np.ndarray, skeleton: int | None = None, uv: np.ndarray | None = None,
                      texture: np.ndarray | None = None, colors: np.ndarray | None = None,
-                     normals: np.ndarray | None = None) -> int:
+                     normals: np.ndarray | None = None, indices: int | None = None) -> int:
     """Add a skinned mesh, its skin and material, and the (transform-free) node that binds
     them; returns that node's index (the caller puts it in a scene).
 
@@ -97,6 +97,8 @@ def add_skinned_mesh(builder: GltfBuilder, *, name: str, vertices: np.ndarray, f
         joint_nodes: node index of each skin joint; inverse_bind: (J, 4, 4) row-major.
         uv: (V, 2) with glTF's top-left origin, and texture (H, W, 3) uint8; or colors
             (V, 3) linear RGB in [0, 1]; or neither (a plain grey material).
+        indices: an index accessor written before for the same faces (bodies of one
+            template share it); by default a new one is written.
     """
     verts = np.asarray(vertices, dtype=np.float32)
     f = np.asarray(faces, dtype=np.int64)
@@ -125,8 +127,9 @@ def add_skinned_mesh(builder: GltfBuilder, *, name: str, vertices: np.ndarray, f
     else:
         material["pbrMetallicRoughness"]["baseColorFactor"] = [0.7, 0.7, 0.7, 1.0]
     idx_dtype = np.uint16 if len(verts) < 65535 else np.uint32
-    prim = {"attributes": attrs, "indices": builder.accessor(f.reshape(-1).astype(idx_dtype),
-                                                                 target=ELEMENT_ARRAY_BUFFER),
+    if indices is None:
+        indices = builder.accessor(f.reshape(-1).astype(idx_dtype), target=ELEMENT_ARRAY_BUFFER)
+    prim = {"attributes": attrs, "indices": indices,
             "material": builder.add("materials", material), "mode": 4}
     mesh = builder.add("meshes", {"name": name, "primitives": [prim]})
     skin = {"joints": list(joint_nodes), "inverseBindMatrices": builder.accessor(
@@ -200,6 +203,7 @@ def build_gltf(anim, *, bodies=None, colors: bool = True, progress: bool = False
     anim_doc = {"name": "crowd", "channels": [], "samplers": []}
     time_acc = b.accessor(times, bounds=True)
     mesh_nodes = []
+    index_accessors: dict[str, int] = {}  # bodies of one template share faces
     iterator = range(n)
     if progress:
         from tqdm import tqdm
@@ -229,7 +233,9 @@ def build_gltf(anim, *, bodies=None, colors: bool = True, progress: bool = False
         mesh_nodes.append(add_skinned_mesh(
             b, name=prefix + "body", vertices=body.rest_vertices, faces=body.faces, joints=idx,
             weights=val, joint_nodes=nodes, inverse_bind=ibm, skeleton=nodes[0], uv=uv, texture=tex,
-            colors=vcolors[i]))
+            colors=vcolors[i], indices=index_accessors.get(body.template_key)))
+        prim = b.doc["meshes"][b.doc["nodes"][mesh_nodes[-1]]["mesh"]]["primitives"][0]
+        index_accessors.setdefault(body.template_key, prim["indices"])
         for jj in range(NUM_JOINTS):
             s = _add_sampler(anim_doc, time_acc, b.accessor(quats[:, i, jj].astype(np.float32)))
             anim_doc["channels"].append({"sampler": s, "target": {"node": nodes[jj], "path": "rotation"}})
