@@ -154,6 +154,47 @@ def test_export_is_deterministic(exported, tmp_path):
     assert build_gltf(anim).to_glb() == path.read_bytes()
 
 
+def _textured(body, seed: int):
+    """The body with ``uv`` and ``texture`` (the interface i12-body adds to Body)."""
+    rng = np.random.default_rng(seed)
+    v = body.rest_vertices
+    body.uv = np.stack([(v[:, 0] - v[:, 0].min()) / np.ptp(v[:, 0]),
+                        (v[:, 2] - v[:, 2].min()) / np.ptp(v[:, 2])], axis=1).astype(np.float32)
+    body.texture = rng.integers(0, 256, (32, 16, 3), dtype=np.uint8)
+    return body
+
+
+@pytest.fixture(scope="module")
+def textured(exported, tmp_path_factory):
+    anim, _ = exported
+    from crowdstudy.body.model import Body
+
+    bodies = []
+    for i, rec in enumerate(anim.bodies):  # fresh objects: load_body's are cached and shared
+        b = load_body(rec)
+        bodies.append(_textured(Body(record=dict(rec), rest_joints=b.rest_joints, rest_vertices=b.rest_vertices,
+                                     faces=b.faces, weights=b.weights, pelvis_height=b.pelvis_height,
+                                     template_key=b.template_key), i))
+    return bodies, export_gltf(anim, tmp_path_factory.mktemp("textured") / "textured.glb", bodies=bodies)
+
+
+def test_export_textures_round_trip(textured):
+    bodies, path = textured
+    gltf = read_gltf(path)
+    assert len(gltf.doc["images"]) == N and len(gltf.doc["textures"]) == N
+    for i, body in enumerate(bodies):
+        prim = gltf.doc["meshes"][i]["primitives"][0]
+        assert "COLOR_0" not in prim["attributes"]
+        uv = gltf.accessor(prim["attributes"]["TEXCOORD_0"])
+        np.testing.assert_allclose(uv[:, 1], 1.0 - body.uv[:, 1], atol=1e-6)  # glTF: top-left origin
+        ch = read_character(path, skin=i)
+        np.testing.assert_array_equal(ch.texture, body.texture)
+        np.testing.assert_allclose(ch.uv, body.uv, atol=1e-6)
+    if shutil.which("node") and (JS / "node_modules" / "gltf-validator").is_dir():
+        res = subprocess.run(["node", str(JS / "validate.mjs"), str(path)], capture_output=True, text=True, timeout=60)
+        assert json.loads(res.stdout)["numErrors"] == 0, res.stdout
+
+
 def test_export_rejects_bad_arguments(exported, tmp_path):
     anim, _ = exported
     with pytest.raises(InvalidInputError, match="path"):
@@ -423,3 +464,13 @@ def test_threejs_loads_export_and_poses_it_like_the_toolkit(exported, browser_pa
                            template_key="top4")
         v_world, _ = posed.pose(anim.joint_rotations[frame, i], anim.root_translation[frame, i])
         np.testing.assert_allclose(vertices[i], v_world[[0, 1234, 4321]] @ Z_UP_TO_Y_UP.T, atol=1e-4)
+
+
+@pytest.mark.browser
+@pytest.mark.slow
+def test_threejs_loads_textured_export(textured, browser_page):
+    _, path = textured
+    site, page = browser_page
+    shutil.copy(path, site / "textured.glb")
+    info = page.evaluate("crowd.load('textured.glb')")
+    assert info["skinnedMeshes"] == N and info["textures"] == N and info["vertexColors"] == 0
