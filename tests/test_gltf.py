@@ -474,3 +474,72 @@ def test_threejs_loads_textured_export(textured, browser_page):
     shutil.copy(path, site / "textured.glb")
     info = page.evaluate("crowd.load('textured.glb')")
     assert info["skinnedMeshes"] == N and info["textures"] == N and info["vertexColors"] == 0
+
+
+# ---------------------------------------------------------------------- Blender (optional)
+
+BLENDER = shutil.which("blender")
+needs_blender = pytest.mark.skipif(BLENDER is None, reason="Blender not installed (optional: apt-get install blender)")
+
+
+def _blender(script: str, *args) -> subprocess.CompletedProcess:
+    res = subprocess.run([BLENDER, "-b", "--factory-startup", "--python", str(ROOT / "tests" / "blender" / script),
+                          "--", *map(str, args)], capture_output=True, text=True, timeout=300)
+    assert res.returncode == 0, res.stdout[-3000:] + res.stderr[-3000:]
+    return res
+
+
+@needs_blender
+@pytest.mark.slow
+def test_blender_imports_export_and_poses_it_like_the_toolkit(exported, tmp_path):
+    """Blender's glTF importer: same bones and skinned vertices at a keyframe, in Blender's
+    Z-up world where the toolkit's (x, y, z) read (-x, -y, z)."""
+    anim, path = exported
+    frame = 6
+    exp = {"fps": anim.fps, "frame": frame, "bones": {}, "vertices": {}}
+    want_vertices = {}
+    for i, rec in enumerate(anim.bodies):
+        body = load_body(rec)
+        pre = character_prefix(i, N)
+        _, pos = forward_kinematics(body.rest_joints, anim.joint_rotations[frame, i], anim.root_translation[frame, i])
+        exp["bones"].update({pre + j: pos[k].tolist() for k, j in enumerate(JOINT_NAMES)})
+        idx, val = body.top_weights(4)
+        top = np.zeros_like(body.weights)
+        np.put_along_axis(top, idx.astype(np.int64), val, axis=1)
+        v, _ = type(body)(record=body.record, rest_joints=body.rest_joints, rest_vertices=body.rest_vertices,
+                          faces=body.faces, weights=top, pelvis_height=body.pelvis_height,
+                          template_key="top4").pose(anim.joint_rotations[frame, i], anim.root_translation[frame, i])
+        exp["vertices"][pre + "body"] = {str(k): v[k].tolist() for k in (0, 3000, 6000)}
+        want_vertices[pre + "body"] = v
+    (tmp_path / "expected.json").write_text(json.dumps(exp))
+    _blender("check_export.py", path, tmp_path / "expected.json", tmp_path / "out.json")
+    out = json.loads((tmp_path / "out.json").read_text())
+    assert out["armatures"] == 1 and out["bones"] == N * 24 and out["actions"] == 1
+    assert out["frame_ranges"] == [[0.0, float(T - 1)]]
+    flip = np.diag([-1.0, -1.0, 1.0])
+    assert set(out["bone_positions"]) == set(exp["bones"])
+    for name, p in exp["bones"].items():
+        np.testing.assert_allclose(out["bone_positions"][name], flip @ np.asarray(p), atol=1e-5)
+    for mesh, verts in exp["vertices"].items():
+        for k, p in verts.items():
+            np.testing.assert_allclose(out["vertices"][mesh][k], flip @ np.asarray(p), atol=1e-5)
+
+
+@needs_blender
+@pytest.mark.slow
+def test_import_character_written_by_blender(mixamo, tmp_path):
+    """The Mixamo-style fixture through Blender's importer and exporter (Blender's node
+    layout, bone axes, armature object) imports to the same body."""
+    from scipy.spatial import cKDTree
+
+    body, path, _ = mixamo
+    out = tmp_path / "blender.glb"
+    _blender("reexport.py", path, out)
+    assert "Blender" in read_gltf(out).doc["asset"].get("generator", "")
+    ours, theirs = read_character(path), read_character(out)
+    assert theirs.convention == "mixamo" and theirs.unmapped == EXTRA_TARGET
+    np.testing.assert_allclose(theirs.joints, ours.joints, atol=1e-5)
+    dist, nearest = cKDTree(ours.vertices).query(theirs.vertices)
+    assert len(theirs.vertices) == len(ours.vertices) and dist.max() < 1e-5
+    np.testing.assert_allclose(theirs.weights, ours.weights[nearest], atol=1e-5)
+    np.testing.assert_array_equal(theirs.texture, ours.texture)
