@@ -26,8 +26,8 @@ Steps (:func:`read_character`):
    hips' left-right line turned about z so the character faces +y, pelvis at the origin.
 5. Rest pose (the toolkit's T-pose convention): upper arms and forearms more than
    ``ARM_ELEVATION_LIMIT`` above or below horizontal (an A-pose) are raised or lowered to
-   that limit by a turn about the forward axis (in the coronal plane); thighs and shins more than ``LEG_TILT_LIMIT`` from vertical are brought to
-   it. The mesh follows by linear blend skinning with the 24-joint weights. A file already
+   that limit by a turn about the forward axis (in the coronal plane); thighs and shins
+   more than ``LEG_TILT_LIMIT`` from vertical are brought to it. The mesh follows by linear blend skinning with the 24-joint weights. A file already
    in the toolkit's convention (a crowdstudy export) passes through unchanged.
 """
 

@@ -20,8 +20,9 @@
 
 (right side alike). Mixamo and CMU come from ``crowdstudy.body.skeleton.BVH_NAME_MAPS``.
 Names are compared after dropping a namespace (``mixamorig:``, ``mixamorig1:``, Blender's
-``mixamorig_``), case, and the characters ``_ . - space``. A VRM file's own humanoid table
-(``VRM`` or ``VRMC_vrm`` extension) takes precedence over the node names.
+``mixamorig_``), Rigify's ``DEF-``/``ORG-`` prefixes, case, and the characters
+``_ . - space``. A VRM file's own humanoid table (``VRM`` or ``VRMC_vrm`` extension) takes
+precedence over the node names.
 """
 
 from __future__ import annotations
@@ -74,6 +75,7 @@ def normalize_name(name: str, convention: str = "") -> str:
         return _CROWD_PREFIX.sub("", name)
     base = name.split(":", 1)[1] if ":" in name else name
     base = re.sub(r"^mixamorig\d*_", "", base)
+    base = re.sub(r"^(DEF|ORG)[-_]", "", base)  # Rigify's deform / original bone copies
     return re.sub(r"[\s_.\-]", "", base).lower()
 
 
