@@ -1,7 +1,8 @@
 """Render one frame of a glTF export in Chromium with three.js, beside crowdstudy's own render
 of the same frame from the same camera (for looking, not a test).
 
-    python tests/js/look.py ANIM.npz OUT_DIR [--frame 150] [--view V3] [--width 1280 --height 720]
+    python tests/js/look.py ANIM.npz OUT_DIR [--frame 150] [--view V3 | --eye X,Y,Z --target X,Y,Z --fov 30]
+                            [--width 1280 --height 720]
 
 Writes OUT_DIR/crowd.glb, OUT_DIR/threejs.png, OUT_DIR/crowdstudy.png and
 OUT_DIR/side_by_side.png (three.js left, crowdstudy right).
@@ -39,6 +40,9 @@ def main() -> None:
     ap.add_argument("--view", default="V3")
     ap.add_argument("--width", type=int, default=1280)
     ap.add_argument("--height", type=int, default=720)
+    ap.add_argument("--eye", help="free camera position x,y,z (toolkit metres) instead of --view")
+    ap.add_argument("--target", help="free camera target x,y,z (toolkit metres)")
+    ap.add_argument("--fov", type=float, default=30.0, help="free camera vertical field of view (deg)")
     args = ap.parse_args()
     from PIL import Image
     from playwright.sync_api import sync_playwright
@@ -49,7 +53,13 @@ def main() -> None:
     args.out.mkdir(parents=True, exist_ok=True)
     export_gltf(anim, args.out / "crowd.glb")
     with CrowdRenderer(anim, width=args.width, height=args.height) as r:
-        cam = r.set_view(args.view)
+        view = args.view
+        if args.eye:
+            from crowdstudy.render.camera import Camera
+
+            view = Camera(eye=tuple(float(x) for x in args.eye.split(",")),
+                          target=tuple(float(x) for x in args.target.split(",")), fov=args.fov)
+        cam = r.set_view(view)
         ours = r.render(args.frame)
     Image.fromarray(ours).save(args.out / "crowdstudy.png")
     eye = Z_UP_TO_Y_UP @ np.asarray(cam.eye)
