@@ -59,3 +59,12 @@ if [ -f ui/package.json ]; then
         touch "$STAMP_DIR/npm"
     fi
 fi
+
+# --- glTF test harness (three.js and the Khronos glTF-Validator from npm) -------
+if [ -f tests/js/package-lock.json ]; then
+    if [ ! -d tests/js/node_modules ] || [ tests/js/package-lock.json -nt "$STAMP_DIR/npm-gltf" ]; then
+        echo "[setup] installing the glTF tests' npm packages (three, gltf-validator)"
+        (cd tests/js && npm ci --no-audit --no-fund --loglevel=error)
+        touch "$STAMP_DIR/npm-gltf"
+    fi
+fi

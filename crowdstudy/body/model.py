@@ -298,7 +298,11 @@ def _load_cached(key: str) -> Body:
         from crowdstudy.body.smpl import load_smpl_body
 
         return load_smpl_body(record)
-    raise InvalidInputError(f"body record field 'model': expected 'open' or 'smpl', got {model!r}")
+    if model == "gltf":
+        from crowdstudy.gltf.character import load_gltf_body
+
+        return load_gltf_body(record)
+    raise InvalidInputError(f"body record field 'model': expected 'open', 'smpl' or 'gltf', got {model!r}")
 
 
 #: Record fields any model accepts and ignores (labels for people and renderers).

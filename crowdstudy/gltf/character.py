@@ -1,0 +1,431 @@
+"""Import a skinned glTF character as a toolkit body (``{"model": "gltf", ...}`` records).
+
+A body record::
+
+    {"model": "gltf", "path": "character.glb", "skin": 0, "height": 1.74, "sex": "female"}
+
+``skin`` (default 0) picks the skin in the file (a crowdstudy export holds one per
+character); every skinned mesh bound to that skeleton is merged. ``height`` (optional)
+rescales the character uniformly to that stature in metres; ``sex`` is a label.
+
+Steps (:func:`read_character`):
+
+1. The mesh and the joints are taken in the bind pose (the inverse bind matrices), carried
+   to the file's world (glTF's Y-up metres) by ``J_r IBM_r`` of the skin's pelvis joint r
+   (armature scale and rotation included; an animated default pose does not deform it).
+2. Joint names are mapped to the 24 joints (:mod:`crowdstudy.gltf.names`); a VRM file's
+   humanoid table wins over names. Missing optional joints are placed from their
+   neighbours: ``spine3`` half-way between ``spine2`` and ``neck``; a collar 40 % of the way
+   from ``spine3`` to the shoulder; ``*_hand`` 0.3 of the forearm's length beyond the wrist;
+   ``*_foot`` 0.35 of the shin's length beyond the ankle, forward and down to the sole.
+3. Weights: every skin joint gives its weights to its nearest mapped ancestor (itself when
+   mapped; fingers to ``*_hand`` or ``*_wrist``, twist bones to their limb joint, an
+   armature root above the hips to ``pelvis``).
+4. Frame: glTF -> toolkit axes (inverse of the export's ``(x, y, z) -> (-x, z, y)``), then
+   the up direction (pelvis to head) snapped to the nearest axis is turned to +z and the
+   hips' left-right line turned about z so the character faces +y, pelvis at the origin.
+5. Rest pose (the toolkit's T-pose convention): upper arms and forearms more than
+   ``ARM_ELEVATION_LIMIT`` above or below horizontal (an A-pose) are raised or lowered to
+   that limit by a turn about the forward axis (in the coronal plane); thighs and shins
+   more than ``LEG_TILT_LIMIT`` from vertical are brought to it. The mesh follows by linear blend skinning with the 24-joint weights. A file already
+   in the toolkit's convention (a crowdstudy export) passes through unchanged.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import math
+from pathlib import Path
+
+import numpy as np
+
+from crowdstudy.body.rotations import axis_angle_to_matrix
+from crowdstudy.body.skeleton import JOINT_INDEX, JOINT_NAMES, NUM_JOINTS, PARENTS, forward_kinematics
+from crowdstudy.errors import InvalidInputError
+from crowdstudy.gltf.export import Z_UP_TO_Y_UP
+from crowdstudy.gltf.glb import GltfFile, node_local_matrix, read_gltf
+from crowdstudy.gltf.names import VRM_BONES, match_names
+
+__all__ = ["GltfCharacter", "read_character", "load_gltf_body", "RECORD_FIELDS", "ARM_ELEVATION_LIMIT",
+           "LEG_TILT_LIMIT", "OPTIONAL_JOINTS"]
+
+#: Fields a ``{"model": "gltf"}`` body record may hold.
+RECORD_FIELDS = ("model", "path", "skin", "height", "sex")
+#: Largest angle (radians) of an upper arm or forearm above/below horizontal in the rest pose.
+ARM_ELEVATION_LIMIT = math.radians(5.0)
+#: Largest angle (radians) of a thigh or shin from vertical in the rest pose.
+LEG_TILT_LIMIT = math.radians(10.0)
+#: Joints that may be missing from a file (placed from their neighbours).
+OPTIONAL_JOINTS = ("spine3", "left_collar", "right_collar", "left_hand", "right_hand", "left_foot", "right_foot")
+
+
+@dataclasses.dataclass
+class GltfCharacter:
+    """A character read from a glTF file, in the toolkit's rest frame (metres, Z up,
+    facing +y, pelvis at the origin, T-pose).
+
+    Attributes:
+        vertices: (V, 3) float64; faces: (F, 3) int32; weights: (V, 24) float32 (rows sum to 1).
+        joints: (24, 3) float64 rest joint positions.
+        uv: (V, 2) float32, origin bottom-left, or None; texture: (H, W, 3) uint8 or None.
+        joint_map: {file node name: our joint}; unmapped: {file node name: our joint that
+            takes its weights}; synthesized: joints placed from their neighbours.
+        convention: the naming convention found ("mixamo", "vrm", ...).
+        sha256: of the file's bytes.
+    """
+
+    vertices: np.ndarray
+    faces: np.ndarray
+    weights: np.ndarray
+    joints: np.ndarray
+    uv: np.ndarray | None
+    texture: np.ndarray | None
+    joint_map: dict
+    unmapped: dict
+    synthesized: list
+    convention: str
+    sha256: str
+
+    @property
+    def height(self) -> float:
+        return float(self.vertices[:, 2].max() - self.vertices[:, 2].min())
+
+
+def _parents(doc: dict) -> np.ndarray:
+    nodes = doc.get("nodes", [])
+    parent = np.full(len(nodes), -1, dtype=np.int64)
+    for i, node in enumerate(nodes):
+        for c in node.get("children", []):
+            parent[c] = i
+    return parent
+
+
+def _world_matrices(doc: dict, parent: np.ndarray) -> np.ndarray:
+    nodes = doc.get("nodes", [])
+    local = [node_local_matrix(n) for n in nodes]
+    world: list[np.ndarray | None] = [None] * len(nodes)
+
+    def get(i: int) -> np.ndarray:
+        chain = []
+        while i >= 0 and world[i] is None:
+            chain.append(i)
+            i = int(parent[i])
+        m = np.eye(4) if i < 0 else world[i]
+        for k in reversed(chain):
+            m = m @ local[k]
+            world[k] = m
+        return m
+
+    return np.stack([get(i) for i in range(len(nodes))]) if nodes else np.zeros((0, 4, 4))
+
+
+def _vrm_map(doc: dict) -> dict[int, str]:
+    ext = doc.get("extensions", {})
+    out: dict[int, str] = {}
+    if "VRMC_vrm" in ext:  # VRM 1.0
+        for bone, item in ext["VRMC_vrm"].get("humanoid", {}).get("humanBones", {}).items():
+            if bone in VRM_BONES and "node" in item:
+                out[int(item["node"])] = VRM_BONES[bone]
+    elif "VRM" in ext:  # VRM 0.x
+        for item in ext["VRM"].get("humanoid", {}).get("humanBones", []):
+            if item.get("bone") in VRM_BONES and "node" in item:
+                out[int(item["node"])] = VRM_BONES[item["bone"]]
+    return out
+
+
+def _rotation_between(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Smallest rotation (3, 3) taking direction a to direction b."""
+    a = a / np.linalg.norm(a)
+    b = b / np.linalg.norm(b)
+    axis = np.cross(a, b)
+    s = np.linalg.norm(axis)
+    if s < 1e-12:
+        return np.eye(3)
+    return axis_angle_to_matrix(axis / s * math.atan2(s, float(np.dot(a, b))))
+
+
+def _rest_fix(d: np.ndarray, kind: str) -> np.ndarray:
+    """(3, 3) world rotation bringing bone direction d into the rest-pose limits (identity
+    when within them). Arms turn about the forward axis y (in the coronal plane, so the
+    bones below keep their forward offsets); legs by the smallest rotation."""
+    u = d / np.linalg.norm(d)
+    if kind == "arm":
+        horiz = abs(u[0])
+        elev = math.atan2(u[2], horiz)
+        if abs(elev) <= ARM_ELEVATION_LIMIT or horiz < 1e-9:
+            return np.eye(3)
+        delta = math.copysign(ARM_ELEVATION_LIMIT, elev) - elev
+        theta = delta if u[0] < 0 else -delta
+        return axis_angle_to_matrix(np.array([0.0, theta, 0.0]))
+    tilt = math.acos(max(-1.0, min(1.0, -u[2])))
+    if tilt <= LEG_TILT_LIMIT:
+        return np.eye(3)
+    horiz = math.hypot(u[0], u[1])
+    h = (u[0] / horiz, u[1] / horiz) if horiz > 1e-9 else (0.0, 0.0)
+    target = np.array([h[0] * math.sin(LEG_TILT_LIMIT), h[1] * math.sin(LEG_TILT_LIMIT), -math.cos(LEG_TILT_LIMIT)])
+    return _rotation_between(u, target)
+
+
+#: Bones straightened into the rest convention: (joint, child joint, kind).
+_STRAIGHTEN = tuple((f"{s}_{a}", f"{s}_{b}", kind) for s in ("left", "right")
+                    for a, b, kind in (("hip", "knee", "leg"), ("knee", "ankle", "leg"),
+                                       ("shoulder", "elbow", "arm"), ("elbow", "wrist", "arm")))
+
+
+def _synthesize(pos: dict[str, np.ndarray], missing: list[str]) -> None:
+    """Place optional joints from their neighbours (file axes, after the up/facing fix)."""
+    for name in missing:
+        side = name.split("_", 1)[0]
+        if name == "spine3":
+            pos[name] = 0.5 * (pos["spine2"] + pos["neck"])
+        elif name.endswith("_collar"):
+            pos[name] = pos["spine3"] + 0.4 * (pos[f"{side}_shoulder"] - pos["spine3"])
+        elif name.endswith("_hand"):
+            pos[name] = pos[f"{side}_wrist"] + 0.3 * (pos[f"{side}_wrist"] - pos[f"{side}_elbow"])
+        elif name.endswith("_foot"):
+            shin = np.linalg.norm(pos[f"{side}_knee"] - pos[f"{side}_ankle"])
+            pos[name] = pos[f"{side}_ankle"] + shin * np.array([0.0, 0.3, -0.12])
+
+
+def read_character(path: str | Path, *, skin: int = 0, height: float | None = None) -> GltfCharacter:
+    """Read skin ``skin`` of a glTF file as a :class:`GltfCharacter` (see the module docstring).
+
+    Raises InvalidInputError naming the file and what is missing (no skin, a joint without a
+    counterpart, a hierarchy that does not match the 24-joint tree).
+    """
+    path = Path(path)
+    gltf = read_gltf(path)
+    doc = gltf.doc
+    skins = doc.get("skins", [])
+    if not skins:
+        raise InvalidInputError(f"glTF file {path}: no skin (a rigged character needs a skinned mesh)")
+    if not isinstance(skin, (int, np.integer)) or not 0 <= skin < len(skins):
+        raise InvalidInputError(f"skin: expected an index in 0..{len(skins) - 1} for {path}, got {skin!r}")
+    nodes = doc.get("nodes", [])
+    parent = _parents(doc)
+    world = _world_matrices(doc, parent)
+    skin_joints = [int(j) for j in skins[skin]["joints"]]
+    joint_set = set(skin_joints)
+    names = {j: str(nodes[j].get("name", f"node{j}")) for j in skin_joints}
+    node_map = _vrm_map(doc)
+    node_map = {k: v for k, v in node_map.items() if k in joint_set}
+    convention = "vrm-extension" if len(node_map) >= 15 else ""
+    if not convention:
+        convention, node_map = match_names(names)
+    found = set(node_map.values())
+    missing = [j for j in JOINT_NAMES if j not in found]
+    required = [j for j in missing if j not in OPTIONAL_JOINTS]
+    if required:
+        raise InvalidInputError(
+            f"glTF file {path}: skin {skin} has no joint for {', '.join(required)} (best naming match: "
+            f"{convention or 'none'}; joint names seen: {', '.join(list(names.values())[:12])}...)")
+
+    # --- weights of the 24 joints (nearest mapped ancestor) --------------------------
+    def mapped_ancestor(node: int) -> str:
+        k = node
+        while k >= 0:
+            if k in node_map:
+                return node_map[k]
+            k = int(parent[k])
+        return "pelvis"
+
+    unmapped = {names[j]: mapped_ancestor(j) for j in skin_joints if j not in node_map}
+    _check_hierarchy(path, node_map, parent, found)
+
+    # --- geometry in the bind pose ------------------------------------------------
+    # Bind-space vertices and joints (inverse bind matrices) are carried to the file's
+    # world by A = J_r IBM_r of the skin's pelvis joint r, so a default pose that differs
+    # from the bind pose (an animated file) does not deform the character. Every skin whose
+    # joints all belong to the chosen skeleton is merged (Blender and Ready Player Me write
+    # one skin per mesh over the same bones).
+    pelvis_node = next(k for k, val in node_map.items() if val == "pelvis")
+    per_skin = {}
+    for s_idx, sk in enumerate(skins):
+        sj = [int(j) for j in sk["joints"]]
+        if s_idx != skin and not set(sj) <= joint_set:
+            continue
+        ibm = (gltf.accessor(sk["inverseBindMatrices"]).astype(np.float64)
+               if "inverseBindMatrices" in sk else np.tile(np.eye(4), (len(sj), 1, 1)))
+        if len(ibm) != len(sj):
+            raise InvalidInputError(
+                f"glTF file {path}: skin {s_idx} has {len(sj)} joints but {len(ibm)} inverse bind matrices")
+        r = sj.index(pelvis_node) if pelvis_node in sj else 0
+        to_world = world[sj[r]] @ ibm[r]
+        per_skin[s_idx] = (to_world, np.array([JOINT_INDEX[mapped_ancestor(j)] for j in sj]), ibm, sj)
+    verts, faces, weights, uvs, images = [], [], [], [], []
+    offset = 0
+    for node in nodes:
+        if "mesh" not in node or node.get("skin") not in per_skin:
+            continue
+        to_world, target = per_skin[node["skin"]][:2]
+        for prim in doc["meshes"][node["mesh"]]["primitives"]:
+            if prim.get("mode", 4) != 4:
+                continue
+            attrs = prim["attributes"]
+            if "JOINTS_0" not in attrs or "WEIGHTS_0" not in attrs:
+                raise InvalidInputError(f"glTF file {path}: mesh {node['mesh']} has no JOINTS_0/WEIGHTS_0")
+            p = gltf.accessor(attrs["POSITION"]).astype(np.float64)
+            wsum = np.zeros((len(p), NUM_JOINTS))
+            k = 0
+            while f"JOINTS_{k}" in attrs:
+                ji = gltf.accessor(attrs[f"JOINTS_{k}"]).astype(np.int64)
+                wi = gltf.accessor(attrs[f"WEIGHTS_{k}"]).astype(np.float64)
+                if ji.max(initial=0) >= len(target):
+                    raise InvalidInputError(f"glTF file {path}: JOINTS_{k} refers past the skin's {len(target)} joints")
+                for c in range(ji.shape[1]):
+                    np.add.at(wsum, (np.arange(len(p)), target[ji[:, c]]), wi[:, c])
+                k += 1
+            total = wsum.sum(axis=1, keepdims=True)
+            if np.any(total <= 0):
+                raise InvalidInputError(f"glTF file {path}: vertices of mesh {node['mesh']} without skin weights")
+            verts.append(p @ to_world[:3, :3].T + to_world[:3, 3])
+            weights.append(wsum / total)
+            idx = (gltf.accessor(prim["indices"]).astype(np.int64) if "indices" in prim
+                   else np.arange(len(p)))
+            faces.append(idx.reshape(-1, 3) + offset)
+            offset += len(p)
+            uvs.append(gltf.accessor(attrs["TEXCOORD_0"]).astype(np.float64) if "TEXCOORD_0" in attrs else None)
+            images.append(_base_color_image(doc, prim))
+    if not verts:
+        raise InvalidInputError(f"glTF file {path}: no triangle mesh bound to skin {skin}")
+    v = np.concatenate(verts)
+    f = np.concatenate(faces).astype(np.int32)
+    w = np.concatenate(weights)
+
+    # --- joints, axes, facing -----------------------------------------------------
+    conv = Z_UP_TO_Y_UP.T  # glTF -> toolkit
+    v = v @ conv.T
+    to_world, _, ibm, sj = per_skin[skin]
+    bind = to_world @ np.linalg.inv(ibm)  # (K, 4, 4) joints at bind time, file world
+    pos = {name: conv @ bind[sj.index(node)][:3, 3] for node, name in node_map.items()}
+    _synthesize(pos, [j for j in JOINT_NAMES if j in missing and j not in ("left_foot", "right_foot")])
+    frame = _upright_frame(pos)
+    pelvis = pos["pelvis"].copy()
+    v = (v - pelvis) @ frame.T
+    pos = {k: frame @ (p - pelvis) for k, p in pos.items()}
+    _synthesize(pos, [j for j in ("left_foot", "right_foot") if j in missing])
+    joints = np.stack([pos[j] for j in JOINT_NAMES])
+
+    # --- rest pose: arms near horizontal, legs near vertical -----------------------
+    local = np.tile(np.eye(3), (NUM_JOINTS, 1, 1))
+    for jname, child, kind in _STRAIGHTEN:
+        j, c = JOINT_INDEX[jname], JOINT_INDEX[child]
+        glob, p = forward_kinematics(joints, local, np.zeros(3), rotations_are_matrices=True)
+        d = p[c] - p[j]
+        fix = _rest_fix(d, kind)
+        par = glob[int(PARENTS[j])]
+        local[j] = par.T @ fix @ par @ local[j]
+    glob, new_joints = forward_kinematics(joints, local, np.zeros(3), rotations_are_matrices=True)
+    lbs = np.zeros((NUM_JOINTS, 3, 4))
+    lbs[:, :, :3] = glob
+    lbs[:, :, 3] = new_joints - np.einsum("jab,jb->ja", glob, joints)
+    blended = np.einsum("vj,jab->vab", w, lbs)
+    v = np.einsum("vab,vb->va", blended[:, :, :3], v) + blended[:, :, 3]
+    if height is not None:
+        scale = float(height) / float(v[:, 2].max() - v[:, 2].min())
+        v, new_joints = v * scale, new_joints * scale
+
+    uv, texture = _merge_uv(path, gltf, uvs, images)
+    return GltfCharacter(vertices=v, faces=f, weights=w.astype(np.float32), joints=new_joints, uv=uv,
+                         texture=texture, joint_map={names[k]: val for k, val in node_map.items()},
+                         unmapped=unmapped, synthesized=[j for j in missing], convention=convention,
+                         sha256=hashlib.sha256(path.read_bytes()).hexdigest())
+
+
+def _check_hierarchy(path: Path, node_map: dict[int, str], parent: np.ndarray, found: set[str]) -> None:
+    """Each mapped joint's nearest mapped ancestor in the file must be its nearest present
+    ancestor in the 24-joint tree."""
+    bad = []
+    for node, ours in node_map.items():
+        j = JOINT_INDEX[ours]
+        expect = int(PARENTS[j])
+        while expect >= 0 and JOINT_NAMES[expect] not in found:
+            expect = int(PARENTS[expect])
+        k = int(parent[node])
+        while k >= 0 and k not in node_map:
+            k = int(parent[k])
+        got = node_map.get(k) if k >= 0 else None
+        want = JOINT_NAMES[expect] if expect >= 0 else None
+        if got != want:
+            bad.append(f"{ours} (under {got}, expected under {want})")
+    if bad:
+        raise InvalidInputError(f"glTF file {path}: joint hierarchy does not match the 24-joint skeleton: "
+                                + "; ".join(bad))
+
+
+def _upright_frame(pos: dict[str, np.ndarray]) -> np.ndarray:
+    """(3, 3) rotation: pelvis->head snapped to the nearest axis becomes +z, then a turn
+    about z sends the hips' right->left direction to -x (the character faces +y)."""
+    up = pos["head"] - pos["pelvis"]
+    k = int(np.argmax(np.abs(up)))
+    snap = np.zeros(3)
+    snap[k] = math.copysign(1.0, up[k])
+    if snap[2] == 1.0:
+        first = np.eye(3)
+    elif snap[2] == -1.0:
+        first = np.diag([1.0, -1.0, -1.0])
+    else:
+        first = _rotation_between(snap, np.array([0.0, 0.0, 1.0]))
+        first = np.round(first)  # an exact axis permutation
+    left = first @ (pos["left_hip"] - pos["right_hip"])
+    if math.hypot(left[0], left[1]) < 1e-9:
+        raise InvalidInputError("glTF character: the hips have no left-right extent (cannot tell its facing)")
+    turn = math.remainder(math.pi - math.atan2(left[1], left[0]), 2.0 * math.pi)
+    c, s = math.cos(turn), math.sin(turn)
+    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]]) @ first
+
+
+def _base_color_image(doc: dict, prim: dict):
+    mat_idx = prim.get("material")
+    if mat_idx is None:
+        return None
+    info = doc["materials"][mat_idx].get("pbrMetallicRoughness", {}).get("baseColorTexture")
+    if info is None:
+        return None
+    return doc["textures"][info["index"]].get("source")
+
+
+def _merge_uv(path: Path, gltf: GltfFile, uvs: list, images: list):
+    """One UV set and one texture when every primitive shares the same base-colour image."""
+    if any(u is None for u in uvs) or len(set(images)) != 1 or images[0] is None:
+        return None, None
+    import io
+
+    from PIL import Image
+
+    try:
+        img = Image.open(io.BytesIO(gltf.image_bytes(images[0]))).convert("RGB")
+    except OSError as exc:
+        raise InvalidInputError(f"glTF file {path}: cannot decode image {images[0]} ({exc})") from None
+    uv = np.concatenate(uvs)
+    return np.stack([uv[:, 0], 1.0 - uv[:, 1]], axis=1).astype(np.float32), np.asarray(img, dtype=np.uint8)
+
+
+def load_gltf_body(record: dict):
+    """The :class:`~crowdstudy.body.model.Body` of a ``{"model": "gltf"}`` record."""
+    from crowdstudy.body.model import Body, check_fields
+
+    check_fields(record, "gltf", RECORD_FIELDS)
+    path = record.get("path")
+    if not isinstance(path, str) or not path:
+        raise InvalidInputError(f"body record field 'path': expected a glTF file path, got {path!r}")
+    skin = record.get("skin", 0)
+    if isinstance(skin, bool) or not isinstance(skin, int):
+        raise InvalidInputError(f"body record field 'skin': expected an integer index, got {skin!r}")
+    height = record.get("height")
+    if height is not None:
+        try:
+            height = float(height)
+        except (TypeError, ValueError):
+            raise InvalidInputError(f"body record field 'height': expected a number, got {height!r}") from None
+        if not 0.3 <= height <= 2.5:
+            raise InvalidInputError(f"body record field 'height': expected 0.3 to 2.5 m, got {height}")
+    ch = read_character(path, skin=skin, height=height)
+    extra = {}
+    names = {f.name for f in dataclasses.fields(Body)}
+    if "uv" in names and ch.uv is not None:
+        extra = {"uv": ch.uv, "texture": ch.texture}
+    return Body(record=dict(record), rest_joints=ch.joints, rest_vertices=ch.vertices, faces=ch.faces,
+                weights=ch.weights, pelvis_height=float(-ch.vertices[:, 2].min()),
+                template_key=f"gltf-{ch.sha256[:16]}-{skin}", **extra)
