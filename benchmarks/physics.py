@@ -5,9 +5,12 @@
 * the CG implementations on the same assembled 60-character system (fused single-launch
   PCG with the per-character tree preconditioner or 6x6 block Jacobi, scipy CG on a BSR
   matrix, warp.optim.linear.cg on a warp.sparse BSR matrix);
-* side by side, the same capsule characters as a MuJoCo model (free root + ball joints,
-  capsule geoms, soft weld constraints to mocap bodies following the animation) on the same
-  scene: ms per step and per simulated 1/60 s, residual capsule overlap, tracking error.
+* side by side (``--mujoco`` alone), the same characters as a MuJoCo model (free root +
+  ball joints; the same capsules plus mesh skin and contact margin for inter-body and wall
+  contacts, the same self pairs, ground and walls; the same settle and interpolated targets,
+  through soft welds to mocap bodies) on concert D5 and corridor D5: ms per step and per
+  simulated 1/60 s (CPU and wall), mesh and capsule overlap as a fraction of the Baseline's,
+  tracking error and jerk, for 3 MuJoCo tunings (``MUJOCO_SETTINGS``).
 """
 
 from __future__ import annotations
@@ -80,7 +83,7 @@ def time_steps(anim, steps: int, device: str = "cpu") -> dict:
         f = 1 + (s // sub) % (anim.n_frames - 1)
         corr.control.advance(f - 1, f, ((s % sub) + 1) / sub)
         marks = [mark()]
-        corr.pipeline.collide(corr.states[0], corr.contacts)
+        corr.pipeline.collide(corr.states[0], corr.contacts, corr.control)
         marks.append(mark())
         corr.solver.assemble(corr.states[0], corr.control, corr.contacts, corr.dt)
         marks.append(mark())
@@ -113,10 +116,10 @@ def compare_cg(anim, repeat: int = 10) -> list[dict]:
     for s in range(10):     # get into a contact-rich state
         f = 1 + s // 2
         corr.control.advance(f - 1, f, (s % 2 + 1) / 2)
-        corr.pipeline.collide(corr.states[0], corr.contacts)
+        corr.pipeline.collide(corr.states[0], corr.contacts, corr.control)
         corr.solver.step(corr.states[0], corr.states[1], corr.control, corr.contacts, corr.dt)
         corr.states.reverse()
-    corr.pipeline.collide(corr.states[0], corr.contacts)
+    corr.pipeline.collide(corr.states[0], corr.contacts, corr.control)
     corr.solver.assemble(corr.states[0], corr.control, corr.contacts, corr.dt)
     rows = []
     for name, solver, precond in (("fused PCG, tree precond", "fused", "character"),
@@ -140,130 +143,454 @@ def compare_cg(anim, repeat: int = 10) -> list[dict]:
     return rows
 
 
-def mujoco_peer(anim, frames: int, substeps: int = 2):
-    """The same capsule characters in MuJoCo: a free root and ball joints per character,
-    capsule geoms (density 1000), each bone welded softly (solref 0.05 s) to a mocap body that
-    follows the animation (interpolated like ours), ``substeps`` steps per frame.
+# --- MuJoCo peer ----------------------------------------------------------------------------
+#
+# The same characters as a MuJoCo model, built from the SAME crowdstudy Model as Ours
+# (ModelBuilder + capsule_skin at PhysicsConfig.mesh_skin_percentile):
+#
+# * per bone two capsules on the same segment: a "core" of the bare radius (density ->
+#   the same masses and inertias; ground contacts and self contacts, like ours) and a
+#   "hull" of radius + mesh skin with geom margin = contact_margin (inter-body and wall
+#   contacts, like ours). A MuJoCo contact of two geoms is active below
+#   max(margin1, margin2) = contact_margin, the distance the constraint holds: exactly our
+#   depth r_a + skin_a + r_b + skin_b + margin - distance (the margin counted once per pair;
+#   inflating both radii by the margin would count it twice, and walls once).
+# * contype/conaffinity: hull 1/1, core 2/0, ground plane 0/2 (cores only), walls 0/1
+#   (hulls only); every body pair of one character is <exclude>d from the dynamic pairs, and
+#   the self contacts are explicit <pair>s of core geoms, exactly Model.intra_pairs (not
+#   parent-child, not touching in the T-pose).
+# * targets: each bone is welded (soft equality) to a mocap body placed at every MuJoCo step
+#   at the same interpolated target as ours (nlerp of the joint rotations and lerp of the
+#   root between two frames, then forward kinematics: targets_kernel).
+# * settle: config.settle_time simulated on frame 0, targets frozen, before frame 0 is read.
+# * walls: crowdstudy.physics.collision.static_walls_from_meta, as thin boxes; in periodic
+#   scenes (the corridor) the walls are stretched over the whole run and every character has
+#   two kinematic images at +-L (mocap bodies with its hulls, moved to the simulated pose
+#   every step): MuJoCo has no periodic boundary, the images stand in for our minimum image.
+# * output: the joint rotations R_parent^T R_child (root global) and the pelvis joint
+#   position, by :func:`rigid_to_animation`, the numpy twin of project_kernel.
 
-    Returns ``(anim, timing)``: the simulated CrowdAnimation and cpu/wall ms per mj_step.
+MUJOCO_SETTINGS = {
+    # name: MuJoCo steps per 30 fps frame, weld solref (timeconst, dampratio), contact solref,
+    # solimp (welds and contacts), joint damping (N m s/rad)
+    "weld0.05": dict(substeps=2, weld_solref=(0.05, 1.0), contact_solref=(0.0334, 1.0),
+                     solimp=(0.9, 0.95, 0.001), joint_damping=1.0),
+    "weld0.1-stiffcontact": dict(substeps=2, weld_solref=(0.1, 1.0), contact_solref=(0.0334, 1.0),
+                                 solimp=(0.95, 0.99, 0.001), joint_damping=1.0),
+    "weld0.05-dt1/120": dict(substeps=4, weld_solref=(0.05, 1.0), contact_solref=(0.0167, 1.0),
+                             solimp=(0.95, 0.99, 0.001), joint_damping=1.0),
+}
+
+
+def _quat_mul(a, b):
+    """Hamilton product of scalar-last quaternions (..., 4)."""
+    ax, ay, az, aw = np.moveaxis(a, -1, 0)
+    bx, by, bz, bw = np.moveaxis(b, -1, 0)
+    return np.stack([aw * bx + ax * bw + ay * bz - az * by, aw * by - ax * bz + ay * bw + az * bx,
+                     aw * bz + ax * by - ay * bx + az * bw, aw * bw - ax * bx - ay * by - az * bz], -1)
+
+
+def _quat_rotate(q, v):
+    vq = np.concatenate([v, np.zeros(v.shape[:-1] + (1,))], -1)
+    conj = q * np.array([-1.0, -1.0, -1.0, 1.0])
+    return _quat_mul(_quat_mul(q, vq), conj)[..., :3]
+
+
+def interpolated_targets(anim_q, anim_root, rests, f0: int, f1: int, alpha: float):
+    """The target pose of ``targets_kernel`` in numpy (float64).
+
+    anim_q (F, N, J, 4) joint rotations (scalar-last; root global), anim_root (F, N, 3) m,
+    rests (N, J, 3) m. Local rotations nlerp (short arc) and the root lerps between frames
+    f0 and f1 at ``alpha``; returns ``(global rotations (N, J, 4), joint positions (N, J, 3))``.
     """
-    import mujoco
+    from crowdstudy.body.skeleton import PARENTS
 
-    from scipy.spatial.transform import Rotation
-
-    from crowdstudy.body.rotations import matrix_to_axis_angle, matrix_to_quaternion
-    from crowdstudy.body.skeleton import PARENTS, forward_kinematics
-    from crowdstudy.physics.corrector import load_bodies
-
-    bodies = load_bodies(anim.bodies)
-    n, nj = anim.n_characters, len(PARENTS)
-    parts = ['<mujoco><option timestep="%g" gravity="0 0 -9.81" integrator="implicitfast"/>' % (1 / (anim.fps * substeps)),
-             '<default><geom density="1000" condim="1" solref="0.01 1"/></default><worldbody>',
-             '<geom type="plane" size="50 50 0.1"/>']
-
-    def body_xml(i, j, rest, caps):
+    a, b = anim_q[f0], anim_q[f1]
+    s = np.where(np.sum(a * b, -1, keepdims=True) < 0.0, -1.0, 1.0)
+    local = (1.0 - alpha) * a + s * alpha * b
+    local /= np.linalg.norm(local, axis=-1, keepdims=True)
+    glob = np.empty_like(local)
+    pos = np.empty(local.shape[:-1] + (3,))
+    glob[:, 0] = local[:, 0]
+    pos[:, 0] = (1.0 - alpha) * anim_root[f0] + alpha * anim_root[f1]
+    for j in range(1, len(PARENTS)):
         p = PARENTS[j]
-        pos = anim.root_translation[0, i] if p < 0 else rest[j] - rest[p]
-        s, e = caps.start[j] - rest[j], caps.end[j] - rest[j]
-        if np.linalg.norm(e - s) < 1e-4:
-            e = s + np.array([0, 0, 1e-3])
-        joint = '<freejoint/>' if p < 0 else '<joint type="ball" damping="1" armature="0.01"/>'
-        kids = "".join(body_xml(i, c, rest, caps) for c in range(nj) if PARENTS[c] == j)
-        return (f'<body name="c{i}b{j}" pos="{pos[0]:.5f} {pos[1]:.5f} {pos[2]:.5f}">{joint}'
-                f'<geom type="capsule" fromto="{s[0]:.5f} {s[1]:.5f} {s[2]:.5f} {e[0]:.5f} {e[1]:.5f} {e[2]:.5f}" '
-                f'size="{caps.radius[j]:.4f}"/>{kids}</body>')
-
-    for i, b in enumerate(bodies):
-        parts.append(body_xml(i, 0, np.asarray(b.rest_joints), b.capsules))
-    for i in range(n):
-        for j in range(nj):
-            parts.append(f'<body name="m{i}b{j}" mocap="true"/>')
-    parts.append('</worldbody><equality>')
-    for i in range(n):
-        for j in range(nj):
-            parts.append(f'<weld body1="m{i}b{j}" body2="c{i}b{j}" relpose="0 0 0 1 0 0 0" solref="0.05 1"/>')
-    parts.append('</equality></mujoco>')
-    model = mujoco.MjModel.from_xml_string("".join(parts))
-    data = mujoco.MjData(model)
-    bid = np.array([[model.body(f"c{i}b{j}").id for j in range(nj)] for i in range(n)])
-    mocap = np.array([[model.body(f"m{i}b{j}").mocapid[0] for j in range(nj)] for i in range(n)])
-    rests = np.stack([np.asarray(b.rest_joints) for b in bodies])
-
-    def targets(f0, f1, a):
-        root = (1 - a) * anim.root_translation[f0] + a * anim.root_translation[f1]
-        rot = anim.joint_rotations[f1] if a > 0.5 else anim.joint_rotations[f0]
-        glob, pos = forward_kinematics(rests, rot, root)
-        return pos, glob
-
-    pos, glob = targets(0, 0, 0.0)
-    data.mocap_pos[mocap.ravel()] = pos.reshape(-1, 3)
-    q = matrix_to_quaternion(glob).reshape(-1, 4)
-    data.mocap_quat[mocap.ravel()] = q[:, [3, 0, 1, 2]]
-    mujoco.mj_forward(model, data)
-    out_rot = np.zeros((frames, n, nj, 3))
-    out_root = np.zeros((frames, n, 3))
-    step_times = []
-
-    def read(f):
-        xq = data.xquat[bid.ravel()][:, [1, 2, 3, 0]]
-        G = Rotation.from_quat(xq).as_matrix().reshape(n, nj, 3, 3)
-        loc = G.copy()
-        loc[:, 1:] = np.einsum("nkji,nkjl->nkil", G[:, PARENTS[1:]], G[:, 1:])
-        out_rot[f] = matrix_to_axis_angle(loc)
-        out_root[f] = data.xpos[bid[:, 0]]
-
-    read(0)
-    for f in range(1, frames):
-        for s in range(substeps):
-            pos, glob = targets(f - 1, f, (s + 1) / substeps)
-            data.mocap_pos[mocap.ravel()] = pos.reshape(-1, 3)
-            data.mocap_quat[mocap.ravel()] = matrix_to_quaternion(glob).reshape(-1, 4)[:, [3, 0, 1, 2]]
-            t0, c0 = time.perf_counter(), time.thread_time()
-            mujoco.mj_step(model, data)
-            step_times.append((1000 * (time.perf_counter() - t0), 1000 * (time.thread_time() - c0)))
-        read(f)
-    wall = statistics.median(t[0] for t in step_times)
-    cpu = statistics.median(t[1] for t in step_times)
-    res = anim.frames(0, frames).replace(root_translation=out_root, joint_rotations=out_rot, meta={"method": "MuJoCo"})
-    return res, {"cpu_ms_per_step": cpu, "wall_ms_per_step": wall, "steps_per_60th": substeps * anim.fps / 60.0}
+        glob[:, j] = _quat_mul(glob[:, p], local[:, j])
+        pos[:, j] = pos[:, p] + _quat_rotate(glob[:, p], rests[:, j] - rests[:, p])
+    return glob, pos
 
 
-def foot_metrics(anim, reference) -> dict:
-    """Feet: mean |height - the animation's| (cm) of the foot joints, and foot skate: mean
-    horizontal foot speed (cm/s) over the frames where the animation's foot is planted
-    (height < 10 cm and speed < 10 cm/s), for ``anim`` and ``reference``."""
-    from crowdstudy.body.skeleton import forward_kinematics
-    from crowdstudy.physics.corrector import load_bodies
+def rigid_to_animation(glob_q, root_pos):
+    """Bone world rotations (..., J, 4) scalar-last and pelvis joint positions (..., 3) ->
+    ``(joint_rotations (..., J, 3) axis-angle, root (..., 3))``: root global, the others
+    R_parent^T R_child, as ``project_kernel`` writes Ours."""
+    from crowdstudy.body.rotations import quaternion_to_axis_angle
+    from crowdstudy.body.skeleton import PARENTS
 
-    rest = np.stack([np.asarray(b.rest_joints) for b in load_bodies(anim.bodies)])
-    feet = [7, 8, 10, 11]
-    _, pa = forward_kinematics(rest[None], anim.joint_rotations, anim.root_translation)
-    _, pr = forward_kinematics(rest[None], reference.joint_rotations, reference.root_translation)
-    pa, pr = pa[:, :, feet], pr[:, :, feet]
-    height = 100 * np.abs(pa[..., 2] - pr[..., 2]).mean()
-    va = np.linalg.norm(np.diff(pa[..., :2], axis=0), axis=-1) * anim.fps
-    vr = np.linalg.norm(np.diff(pr[..., :2], axis=0), axis=-1) * anim.fps
-    planted = (pr[1:, ..., 2] < pr[..., 2].min() + 0.1) & (vr < 0.1)
-    return {"foot_height_err_cm": float(height), "foot_skate_cm_s": float(100 * va[planted].mean()),
-            "foot_skate_reference_cm_s": float(100 * vr[planted].mean())}
+    q = np.asarray(glob_q, np.float64)
+    q = q / np.linalg.norm(q, axis=-1, keepdims=True)
+    local = q.copy()
+    conj = q[..., PARENTS[1:], :] * np.array([-1.0, -1.0, -1.0, 1.0])
+    local[..., 1:, :] = _quat_mul(conj, q[..., 1:, :])
+    return quaternion_to_axis_angle(local), np.asarray(root_pos, np.float64).copy()
+
+
+class MujocoScene:
+    """The MuJoCo model of a crowd (see the notes above) and the bookkeeping to drive it.
+
+    Attributes: ``model``/``data`` (MjModel/MjData), ``cs_model`` (crowdstudy Model used for
+    the geometry), ``body_id`` (N, J) simulated bodies, ``mocap_id`` (N, J) target mocap
+    slots, ``ghost_mocap`` (K, N, J) image mocap slots, ``ghost_shift`` (K,) m along x,
+    ``hull_geom``/``core_geom`` (N, J) geom ids, ``dt`` s, ``substeps`` per frame.
+    """
+
+    def __init__(self, anim, config=None, setting: str | dict = "weld0.05"):
+        import mujoco
+
+        from crowdstudy.body.skeleton import PARENTS
+        from crowdstudy.physics.collision import static_walls_from_meta
+        from crowdstudy.physics.config import PhysicsConfig
+        from crowdstudy.physics.corrector import load_bodies
+        from crowdstudy.physics.model import ModelBuilder, capsule_skin
+
+        self.mujoco = mujoco
+        self.anim = anim
+        self.config = config = config or PhysicsConfig()
+        self.setting = st = dict(MUJOCO_SETTINGS[setting] if isinstance(setting, str) else setting)
+        bodies = load_bodies(anim.bodies)
+        builder = ModelBuilder()
+        for b in bodies:
+            builder.add_character(b.rest_joints, b.capsules, capsule_skin(b, config.mesh_skin_percentile))
+        cm = self.cs_model = builder.finalize(density=config.density, device="cpu")
+        n, nj = cm.n_characters, cm.n_joints
+        self.n, self.nj = n, nj
+        self.rests = np.asarray(cm.rest_joints, np.float64)
+        self.substeps = int(st["substeps"])
+        self.dt = 1.0 / (anim.fps * self.substeps)
+        from crowdstudy.body.rotations import axis_angle_to_quaternion
+
+        self.anim_q = axis_angle_to_quaternion(anim.joint_rotations)
+        self.anim_root = np.asarray(anim.root_translation, np.float64)
+        period = anim.periodic_length
+        self.ghost_shift = np.array([-period, period]) if period else np.zeros(0)
+        margin = float(config.contact_margin)
+        p0 = (cm.cap_p0 + cm.body_com_rest).reshape(n, nj, 3)    # capsule ends in the rest frame
+        p1 = (cm.cap_p1 + cm.body_com_rest).reshape(n, nj, 3)
+        rad = cm.cap_radius.reshape(n, nj)
+        hull = (cm.cap_radius + cm.cap_skin).reshape(n, nj)
+        sr = lambda v: f'{v[0]:g} {v[1]:g}'                     # noqa: E731
+        si = " ".join(f"{v:g}" for v in st["solimp"])
+        g = -float(config.gravity)
+        parts = [f'<mujoco><option timestep="{self.dt:.10g}" gravity="0 0 {g:g}" integrator="implicitfast"/>',
+                 '<size memory="1G"/>',
+                 f'<default><geom condim="1" solref="{sr(st["contact_solref"])}" solimp="{si}"/>'
+                 f'<default class="core"><geom contype="2" conaffinity="0" density="{config.density:g}" group="1"/>'
+                 '</default>'
+                 f'<default class="hull"><geom contype="1" conaffinity="1" density="0" margin="{margin:g}" '
+                 'group="2"/></default></default><worldbody>',
+                 '<geom name="ground" type="plane" size="0 0 0.1" contype="0" conaffinity="2"/>']
+        walls = np.asarray(static_walls_from_meta(anim.meta), np.float64).reshape(-1, 2, 2)
+        x_lo = float(self.anim_root[..., 0].min()) - 3.0
+        x_hi = float(self.anim_root[..., 0].max()) + 3.0
+        for w, ((x0, y0), (x1, y1)) in enumerate(walls):
+            if period and abs(y1 - y0) < 1e-9:          # periodic: cover the whole (unwrapped) run
+                x0, x1 = min(x0, x1, x_lo), max(x0, x1, x_hi)
+            c = 0.5 * np.array([x0 + x1, y0 + y1])
+            half = 0.5 * float(np.hypot(x1 - x0, y1 - y0))
+            ang = float(np.arctan2(y1 - y0, x1 - x0))
+            parts.append(f'<geom name="wall{w}" type="box" pos="{c[0]:.5f} {c[1]:.5f} 1.1" euler="0 0 {ang:.6f}" '
+                         f'size="{half:.5f} 0.0005 1.1" contype="0" conaffinity="1"/>')
+
+        def seg(i, j):
+            s, e = p0[i, j] - self.rests[i, j], p1[i, j] - self.rests[i, j]
+            if np.linalg.norm(e - s) < 1e-4:
+                e = s + np.array([0.0, 0.0, 1e-4])
+            return f'fromto="{s[0]:.6f} {s[1]:.6f} {s[2]:.6f} {e[0]:.6f} {e[1]:.6f} {e[2]:.6f}"'
+
+        jd = float(st["joint_damping"])
+
+        def body_xml(i, j):
+            p = PARENTS[j]
+            pos = self.anim_root[0, i] if p < 0 else self.rests[i, j] - self.rests[i, p]
+            joint = '<freejoint/>' if p < 0 else f'<joint type="ball" damping="{jd:g}" armature="0.01"/>'
+            kids = "".join(body_xml(i, c) for c in range(nj) if PARENTS[c] == j)
+            return (f'<body name="c{i}b{j}" pos="{pos[0]:.6f} {pos[1]:.6f} {pos[2]:.6f}">{joint}'
+                    f'<geom name="core{i}_{j}" class="core" type="capsule" {seg(i, j)} size="{rad[i, j]:.9g}"/>'
+                    f'<geom name="hull{i}_{j}" class="hull" type="capsule" {seg(i, j)} size="{hull[i, j]:.9g}"/>'
+                    f'{kids}</body>')
+
+        for i in range(n):
+            parts.append(body_xml(i, 0))
+        for i in range(n):
+            for j in range(nj):
+                parts.append(f'<body name="m{i}b{j}" mocap="true"/>')
+        for k in range(len(self.ghost_shift)):
+            for i in range(n):
+                for j in range(nj):
+                    parts.append(f'<body name="g{k}c{i}b{j}" mocap="true"><geom class="hull" contype="0" conaffinity="1" type="capsule" '
+                                 f'{seg(i, j)} size="{hull[i, j]:.9g}"/></body>')
+        parts.append('</worldbody><contact>')
+        for a, b in cm.intra_pairs:
+            ia, ja, ib, jb = a // nj, a % nj, b // nj, b % nj
+            parts.append(f'<pair geom1="core{ia}_{ja}" geom2="core{ib}_{jb}" condim="1" '
+                         f'solref="{sr(st["contact_solref"])}" solimp="{si}"/>')
+        for i in range(n):
+            for a in range(nj):
+                for b in range(a + 1, nj):
+                    parts.append(f'<exclude body1="c{i}b{a}" body2="c{i}b{b}"/>')
+        parts.append('</contact><equality>')
+        for i in range(n):
+            for j in range(nj):
+                parts.append(f'<weld body1="m{i}b{j}" body2="c{i}b{j}" relpose="0 0 0 1 0 0 0" '
+                             f'solref="{sr(st["weld_solref"])}" solimp="{si}"/>')
+        parts.append('</equality></mujoco>')
+        self.xml = "".join(parts)
+        self.model = model = mujoco.MjModel.from_xml_string(self.xml)
+        self.data = mujoco.MjData(model)
+        name = lambda kind, s: mujoco.mj_name2id(model, kind, s)  # noqa: E731
+        B, G = mujoco.mjtObj.mjOBJ_BODY, mujoco.mjtObj.mjOBJ_GEOM
+        self.body_id = np.array([[name(B, f"c{i}b{j}") for j in range(nj)] for i in range(n)])
+        self.mocap_id = np.array([[model.body_mocapid[name(B, f"m{i}b{j}")] for j in range(nj)] for i in range(n)])
+        self.ghost_mocap = np.array([[[model.body_mocapid[name(B, f"g{k}c{i}b{j}")] for j in range(nj)]
+                                      for i in range(n)] for k in range(len(self.ghost_shift))], dtype=np.int64)
+        self.hull_geom = np.array([[name(G, f"hull{i}_{j}") for j in range(nj)] for i in range(n)])
+        self.core_geom = np.array([[name(G, f"core{i}_{j}") for j in range(nj)] for i in range(n)])
+        self.place(0)
+
+    # -- driving ---------------------------------------------------------------------------
+    def set_targets(self, f0: int, f1: int, alpha: float) -> None:
+        glob, pos = interpolated_targets(self.anim_q, self.anim_root, self.rests, f0, f1, alpha)
+        self.target_glob, self.target_pos = glob, pos
+        self.data.mocap_pos[self.mocap_id.ravel()] = pos.reshape(-1, 3)
+        self.data.mocap_quat[self.mocap_id.ravel()] = glob.reshape(-1, 4)[:, [3, 0, 1, 2]]
+
+    def place(self, frame: int) -> None:
+        """Every body at the animation's frame ``frame``, at rest (like ``reset_to_frame``)."""
+        m, d = self.model, self.data
+        self.mujoco.mj_resetData(m, d)
+        self.set_targets(frame, frame, 0.0)
+        local = self.anim_q[frame]
+        for i in range(self.n):
+            for j in range(self.nj):
+                jid = m.body_jntadr[self.body_id[i, j]]
+                adr = m.jnt_qposadr[jid]
+                if j == 0:
+                    d.qpos[adr:adr + 3] = self.anim_root[frame, i]
+                    d.qpos[adr + 3:adr + 7] = local[i, 0][[3, 0, 1, 2]]
+                else:
+                    d.qpos[adr:adr + 4] = local[i, j][[3, 0, 1, 2]]
+        self.mujoco.mj_forward(m, d)
+        self._move_ghosts()
+
+    def _move_ghosts(self) -> None:
+        if not len(self.ghost_shift):
+            return
+        d = self.data
+        xpos = d.xpos[self.body_id.ravel()]
+        xquat = d.xquat[self.body_id.ravel()]
+        for k, shift in enumerate(self.ghost_shift):
+            d.mocap_pos[self.ghost_mocap[k].ravel()] = xpos + np.array([shift, 0.0, 0.0])
+            d.mocap_quat[self.ghost_mocap[k].ravel()] = xquat
+
+    def step(self) -> tuple[float, float]:
+        """One mj_step (images moved first); returns its (wall ms, thread CPU ms)."""
+        self._move_ghosts()
+        t0, c0 = time.perf_counter(), time.thread_time()
+        self.mujoco.mj_step(self.model, self.data)
+        return 1000 * (time.perf_counter() - t0), 1000 * (time.thread_time() - c0)
+
+    def read(self):
+        """The current pose as ``(joint_rotations (N, J, 3), root (N, 3))``."""
+        xq = self.data.xquat[self.body_id.ravel()][:, [1, 2, 3, 0]].reshape(self.n, self.nj, 4)
+        return rigid_to_animation(xq, self.data.xpos[self.body_id[:, 0]])
+
+    # -- what the test compares with ours --------------------------------------------------
+    def inter_body_radius(self) -> np.ndarray:
+        """(N, J) m: hull radius + margin, the distance inter-body contacts hold per capsule
+        side (ours: cap_radius + cap_skin, + contact_margin once per pair)."""
+        return self.model.geom_size[self.hull_geom, 0] + self.model.geom_margin[self.hull_geom]
+
+    def self_pairs(self) -> np.ndarray:
+        """(P, 2) global body indices (i * J + j) of the same-character pairs that can touch."""
+        m, nj = self.model, self.nj
+        body_index = {int(b): k for k, b in enumerate(self.body_id.ravel())}
+        pairs = set()
+        for g1, g2 in zip(m.pair_geom1, m.pair_geom2):
+            a, b = body_index[int(m.geom_bodyid[g1])], body_index[int(m.geom_bodyid[g2])]
+            if a // nj == b // nj:
+                pairs.add((min(a, b), max(a, b)))
+        excluded = {(int(s) >> 16, int(s) & 0xFFFF) for s in m.exclude_signature}
+        for i in range(self.n):           # dynamic (contype/conaffinity) pairs not excluded
+            ids = self.body_id[i]
+            for a in range(nj):
+                for b in range(a + 1, nj):
+                    ba, bb = int(ids[a]), int(ids[b])
+                    key = (min(ba, bb), max(ba, bb))
+                    parent_child = m.body_parentid[ba] == bb or m.body_parentid[bb] == ba
+                    if key in excluded or parent_child:
+                        continue
+                    if _geoms_filter(m, ba, bb):
+                        pairs.add((i * nj + a, i * nj + b))
+        return np.array(sorted(pairs), np.int64).reshape(-1, 2)
+
+
+def _geoms_filter(m, ba: int, bb: int) -> bool:
+    """Whether any geoms of bodies ba and bb pass MuJoCo's contype/conaffinity filter."""
+    ga = range(m.body_geomadr[ba], m.body_geomadr[ba] + m.body_geomnum[ba])
+    gb = range(m.body_geomadr[bb], m.body_geomadr[bb] + m.body_geomnum[bb])
+    return any((m.geom_contype[x] & m.geom_conaffinity[y]) or (m.geom_contype[y] & m.geom_conaffinity[x])
+               for x in ga for y in gb)
+
+
+def mujoco_peer(anim, config=None, setting: str | dict = "weld0.05", *, settle: bool = True):
+    """Simulate ``anim``'s targets in MuJoCo (:class:`MujocoScene`): settle on frame 0, then
+    ``substeps`` steps per frame at the interpolated targets.
+
+    Returns ``(anim, timing)``: the simulated CrowdAnimation (meta method "MuJoCo") and
+    median cpu/wall ms per mj_step, the step (s) and steps per simulated 1/60 s.
+    """
+    scene = MujocoScene(anim, config, setting)
+    t_frames = anim.n_frames
+    out_rot = np.zeros(anim.joint_rotations.shape)
+    out_root = np.zeros(anim.root_translation.shape)
+    if settle:
+        for _ in range(int(round(scene.config.settle_time / scene.dt))):
+            scene.set_targets(0, 0, 0.0)
+            scene.step()
+    out_rot[0], out_root[0] = scene.read()
+    times = []
+    unstable = False
+    for f in range(1, t_frames):
+        for s in range(1, scene.substeps + 1):
+            scene.set_targets(f - 1, f, s / scene.substeps)
+            times.append(scene.step())
+        out_rot[f], out_root[f] = scene.read()
+        if not np.all(np.isfinite(out_root[f])):
+            unstable = True
+            out_rot[f:], out_root[f:] = anim.joint_rotations[f:], anim.root_translation[f:]
+            break
+    res = anim.replace(root_translation=out_root, joint_rotations=out_rot, meta={"method": "MuJoCo"})
+    timing = {"cpu_ms_per_step": statistics.median(t[1] for t in times),
+              "wall_ms_per_step": statistics.median(t[0] for t in times),
+              "dt": scene.dt, "steps_per_60th": scene.substeps * anim.fps / 60.0, "unstable": unstable,
+              "nbody": int(scene.model.nbody), "ngeom": int(scene.model.ngeom),
+              "contacts": float(scene.data.ncon)}
+    return res, timing
+
+
+def _mujoco_scene(kind: str, duration: float):
+    from crowdstudy.design import load_design
+    from crowdstudy.motion.baseline import build_baseline
+
+    return build_baseline(load_design(), "stationary" if kind == "concert" else "walking", "D5", duration=duration)
+
+
+def compare_mujoco(duration: float = 4.0, scenes=("concert", "corridor"), settings=None,
+                   frame_stride: int = 10, steps: int = 200) -> list[dict]:
+    """Ours and MuJoCo (each setting) side by side on the D5 scenes, ``duration`` s each:
+    cost per step and per simulated 1/60 s, mesh/capsule overlap as a fraction of the
+    Baseline's (every ``frame_stride``-th frame), tracking error (cm), jerk ratio."""
+    from crowdstudy.metrics import mean_jerk, overlap_volume, tracking_error
+    from crowdstudy.physics.corrector import correct
+
+    settings = list(settings or MUJOCO_SETTINGS)
+    rows = []
+    for kind in scenes:
+        base = _mujoco_scene(kind, duration)
+        frames = np.arange(0, base.n_frames, frame_stride)
+        ov_base = {g: overlap_volume(base, geometry=g, frames=frames).mean for g in ("mesh", "capsule")}
+        jerk_base = mean_jerk(base)
+        ours = correct(base, progress=False, device="cpu")
+        t = time_steps(base, min(steps, 2 * (base.n_frames - 1)))
+        runs = [("Ours", "crowdstudy (Warp CPU)", ours,
+                 {"cpu_ms_per_step": t["total_cpu_ms"], "wall_ms_per_step": t["total_wall_ms"],
+                  "dt": 1.0 / 60.0, "steps_per_60th": 1.0})]
+        for name in settings:
+            mj, mj_t = mujoco_peer(base, setting=name)
+            runs.append(("MuJoCo", name, mj, mj_t))
+        for method, setting, a, tm in runs:
+            row = {"scene": f"{kind} D5", "method": method, "setting": setting,
+                   "characters": base.n_characters, "frames": base.n_frames,
+                   "dt_ms": 1000 * tm["dt"],
+                   "cpu_ms_per_step": tm["cpu_ms_per_step"], "wall_ms_per_step": tm["wall_ms_per_step"],
+                   "cpu_ms_per_60th": tm["cpu_ms_per_step"] * tm["steps_per_60th"],
+                   "wall_ms_per_60th": tm["wall_ms_per_step"] * tm["steps_per_60th"]}
+            for g in ("mesh", "capsule"):
+                row[f"{g}_overlap_vs_baseline"] = overlap_volume(a, geometry=g, frames=frames).mean / max(ov_base[g], 1e-12)
+            row["tracking_cm"] = tracking_error(a, base)
+            row["jerk_vs_baseline"] = mean_jerk(a) / max(jerk_base, 1e-12)
+            if tm.get("unstable"):
+                row["setting"] += " (UNSTABLE)"
+            rows.append(row)
+            print(format_table([row]), flush=True)
+        _mark_best(rows[-len(runs):])
+        rows.append({"scene": f"{kind} D5", "method": "Baseline", "setting": "input",
+                     "characters": base.n_characters, "frames": base.n_frames,
+                     "mesh_overlap_vs_baseline": 1.0, "capsule_overlap_vs_baseline": 1.0,
+                     "tracking_cm": 0.0, "jerk_vs_baseline": 1.0,
+                     "mesh_baseline_m3": ov_base["mesh"], "capsule_baseline_m3": ov_base["capsule"]})
+    return rows
+
+
+def _mark_best(rows: list[dict], tracking_slack: float = 1.25) -> None:
+    """Cost ratios to Ours (rows[0]) and ``best`` = "*" on the MuJoCo setting with the least
+    mesh overlap among those tracking comparably (within ``tracking_slack`` x Ours' error)."""
+    ref = rows[0]
+    for r in rows:
+        r["x_ours_cpu_per_60th"] = r["cpu_ms_per_60th"] / max(ref["cpu_ms_per_60th"], 1e-12)
+        r["best"] = ""
+    ok = [r for r in rows[1:] if r["tracking_cm"] <= tracking_slack * ref["tracking_cm"]
+          and "UNSTABLE" not in r["setting"]]
+    if ok:
+        min(ok, key=lambda r: r["mesh_overlap_vs_baseline"])["best"] = "*"
+
+
+MUJOCO_COLUMNS = ["scene", "method", "setting", "dt_ms", "cpu_ms_per_step", "wall_ms_per_step", "cpu_ms_per_60th",
+                  "wall_ms_per_60th", "x_ours_cpu_per_60th", "mesh_overlap_vs_baseline",
+                  "capsule_overlap_vs_baseline", "tracking_cm", "jerk_vs_baseline", "best"]
+
+
+#: the smoothness bars of a corrected stimulus (Ours against its Baseline, same cell)
+BAR_TEXT = {"jerk": "mean jerk <= 1.3x", "hf": "HF share <= 1.5x", "speed": "max joint speed <= +0.5 m/s",
+            "pelvis": "pelvis accel p99 <= 2x + 0.5 m/s^2", "slide": "planted-foot slide p99 <= 5 cm/s",
+            "overlap": "mesh overlap <= 5 %", "tracking": "tracking <= 1.5 cm (D1) .. 5 cm (D5)",
+            "seam": "seam <= 1.5x median step (concert)"}
+
+
+def bar_checks(row: dict, level_index: int, n_levels: int) -> dict:
+    """Pass/fail of each bar for one measured cell (``row`` from :func:`measure_bars`)."""
+    track_bar = 1.5 + (5.0 - 1.5) * level_index / max(n_levels - 1, 1)
+    checks = {"jerk": row["jerk_ratio"] <= 1.3,
+              "hf": row["hf_share_ours"] <= 1.5 * row["hf_share_baseline"],
+              "speed": row["max_joint_speed_ours"] <= row["max_joint_speed_baseline"] + 0.5,
+              "pelvis": row["pelvis_p99_ours"] <= 2.0 * row["pelvis_p99_baseline"] + 0.5,
+              "slide": row["foot_slide_p99_ours"] <= 0.05,
+              "overlap": row["mesh_ratio"] <= 0.05,
+              "tracking": row["tracking_cm"] <= track_bar}
+    if row["stage"] == "stationary":
+        checks["seam"] = max(row["seam_ratio_baseline"], row["seam_ratio_ours"]) <= 1.5
+    return checks
 
 
 def measure_bars(duration: float, frame_stride: int = 10) -> list[dict]:
-    """Overlap (mesh and capsule, m^3 per character) and tracking error (cm) of Baseline vs
-    Ours on every (stage, density) cell of the study, ``duration`` seconds each."""
+    """Every (stage, density) cell of the study, ``duration`` seconds each: overlap (mesh and
+    capsule, m^3 per character, every ``frame_stride``-th frame), tracking error (cm) and the
+    smoothness of Ours against its Baseline (:func:`crowdstudy.metrics.smoothness`), with the
+    bars (:data:`BAR_TEXT`) checked per cell (``bars_failed`` lists the failed ones)."""
     from crowdstudy.design import load_design
-    from crowdstudy.metrics.overlap import overlap_volume
-    from crowdstudy.metrics.tracking import tracking_error
+    from crowdstudy.metrics import overlap_volume, smoothness, tracking_error
     from crowdstudy.motion.baseline import build_baseline
     from crowdstudy.physics.corrector import correct
 
     design = load_design()
+    levels = list(design.densities)
     rows = []
     for stage in ("stationary", "walking"):
-        for level in design.densities:
+        for li, level in enumerate(levels):
             base = build_baseline(design, stage, level, duration=duration)
             t0 = time.perf_counter()
-            ours = correct(base, progress=False)
+            run_timings: dict = {}
+            ours = correct(base, progress=False, timings=run_timings)
             wall = time.perf_counter() - t0
             frames = np.arange(0, base.n_frames, frame_stride)
             row = {"stage": stage, "level": level, "characters": base.n_characters, "frames": base.n_frames}
@@ -274,22 +601,45 @@ def measure_bars(duration: float, frame_stride: int = 10) -> list[dict]:
                 row[f"{geom}_ours_m3"] = oo
                 row[f"{geom}_ratio"] = oo / max(ob, 1e-12)
             row["tracking_cm"] = tracking_error(ours, base)
-            row.update(foot_metrics(ours, base))
+            sb, so = smoothness(base, base).as_dict(), smoothness(ours, base).as_dict()
+            for key, name in (("jerk_m_s3", "jerk"), ("hf_share", "hf_share"), ("max_joint_speed_m_s", "max_joint_speed"),
+                              ("pelvis_accel_p99_m_s2", "pelvis_p99"), ("foot_slide_p99_m_s", "foot_slide_p99"),
+                              ("seam_ratio", "seam_ratio")):
+                row[f"{name}_baseline"], row[f"{name}_ours"] = sb[key], so[key]
+            row["jerk_ratio"] = so["jerk_m_s3"] / sb["jerk_m_s3"]
+            row["foot_slide_over_5cm_s_ours"] = so["foot_slide_fraction_over_5cm_s"]
+            checks = bar_checks(row, li, len(levels))
+            row["bars_failed"] = ",".join(k for k, ok in checks.items() if not ok) or "-"
             row["correct_wall_s"] = wall
-            row["ms_per_step_wall"] = ours.meta["physics"]["ms_per_step"]
+            row["ms_per_step_wall"] = run_timings["ms_per_step"]     # the clip's steps only
             rows.append(row)
             print(format_table([row]), flush=True)
+    return rows
+
+
+def _run_mujoco(args) -> list[dict]:
+    unknown = set(args.mujoco_settings.split(",")) - set(MUJOCO_SETTINGS)
+    if unknown:
+        raise SystemExit(f"--mujoco-settings: unknown {sorted(unknown)}; expected some of {list(MUJOCO_SETTINGS)}")
+    rows = compare_mujoco(args.mujoco_duration, scenes=tuple(args.mujoco_scenes.split(",")),
+                          settings=args.mujoco_settings.split(","), steps=args.steps)
+    print(format_table(rows, MUJOCO_COLUMNS), flush=True)
     return rows
 
 
 def main(argv: list[str]) -> int:
     parser = argparse.ArgumentParser(prog="crowdstudy bench physics")
     parser.add_argument("--steps", type=int, default=200, help="steps timed per scene")
-    parser.add_argument("--peer-frames", type=int, default=60, help="frames simulated for the MuJoCo comparison")
     parser.add_argument("--sizes", default="20,60,200")
     parser.add_argument("--no-peer", action="store_true")
     parser.add_argument("--cpu-only", action="store_true", help="skip the CUDA rows even when a GPU is present")
-    parser.add_argument("--peer-substeps", type=int, default=2, help="MuJoCo steps per 30 fps frame (2: 1/60 s)")
+    parser.add_argument("--mujoco", action="store_true",
+                        help="only the side-by-side comparison with MuJoCo (concert D5 and corridor D5)")
+    parser.add_argument("--mujoco-duration", type=float, default=4.0, metavar="SECONDS",
+                        help="seconds of each scene simulated for the MuJoCo comparison (20 = the full clips)")
+    parser.add_argument("--mujoco-settings", default=",".join(MUJOCO_SETTINGS),
+                        help=f"MuJoCo tunings to run, comma-separated among {', '.join(MUJOCO_SETTINGS)}")
+    parser.add_argument("--mujoco-scenes", default="concert,corridor", help="D5 scenes: concert, corridor")
     parser.add_argument("--bars", type=float, default=0.0, metavar="SECONDS",
                         help="also measure overlap/tracking on every study cell for SECONDS (20 = the full clips)")
     parser.add_argument("--bars-only", action="store_true", help="only the --bars measurement")
@@ -299,7 +649,12 @@ def main(argv: list[str]) -> int:
         path = write_report("physics_bars", bars, seed=None)
         print(f"wrote {path}", file=sys.stderr)
         return 0
-    duration = max(args.steps / 60.0 + 0.5, args.peer_frames / 30.0 + 0.2)
+    if args.mujoco:
+        peer_rows = _run_mujoco(args)
+        path = write_report("physics_mujoco", peer_rows, seed=None)
+        print(f"wrote {path}", file=sys.stderr)
+        return 0
+    duration = args.steps / 60.0 + 0.5
     d1, d5 = _scene("D1", duration), _scene("D5", duration)
     from crowdstudy.warp_runtime import get_warp
 
@@ -316,34 +671,7 @@ def main(argv: list[str]) -> int:
             print(format_table([rows[-1]]), flush=True)
     cg_rows = compare_cg(d5)
     print(format_table(cg_rows), flush=True)
-    peer_rows = []
-    if not args.no_peer:
-        from crowdstudy.metrics.overlap import overlap_volume
-        from crowdstudy.metrics.tracking import tracking_error
-        from crowdstudy.physics.corrector import correct
-
-        base = d5.frames(0, args.peer_frames)
-        ours = correct(base, progress=False, device="cpu")
-        ours_t = time_steps(base, min(args.steps, 2 * (args.peer_frames - 1)))
-        mj, mj_t = mujoco_peer(base, args.peer_frames, substeps=args.peer_substeps)
-        sel = np.arange(args.peer_frames // 2, args.peer_frames, 5)
-        ov_base = overlap_volume(base, geometry="capsule", frames=sel).mean
-        timing = {"Ours": {"cpu_ms_per_step": ours_t["total_cpu_ms"], "wall_ms_per_step": ours_t["total_wall_ms"],
-                           "steps_per_60th": 1.0}, "MuJoCo": mj_t}
-        for name, a in (("Ours", ours), ("MuJoCo", mj)):
-            ov = overlap_volume(a, geometry="capsule", frames=sel).mean
-            t = timing[name]
-            peer_rows.append({"method": name, "cpu_ms_per_step": t["cpu_ms_per_step"],
-                              "wall_ms_per_step": t["wall_ms_per_step"],
-                              "cpu_ms_per_sim_1_60s": t["cpu_ms_per_step"] * t["steps_per_60th"],
-                              "overlap_capsule_m3": ov, "overlap_vs_baseline": ov / max(ov_base, 1e-12),
-                              "tracking_cm": tracking_error(a, base)})
-        for r in peer_rows:
-            r["x_ours_cpu_per_sim_time"] = r["cpu_ms_per_sim_1_60s"] / max(peer_rows[0]["cpu_ms_per_sim_1_60s"], 1e-12)
-        peer_rows.append({"method": "Baseline", "overlap_capsule_m3": ov_base, "overlap_vs_baseline": 1.0,
-                          "tracking_cm": 0.0})
-        print(format_table(peer_rows[:2]), flush=True)
-        print(f"Baseline capsule overlap: {ov_base:.4g} m^3 per character", flush=True)
+    peer_rows = [] if args.no_peer else _run_mujoco(args)
     bars = measure_bars(args.bars) if args.bars > 0 else []
     path = write_report("physics", rows, seed=None, cg=cg_rows, peer=peer_rows, bars=bars)
     print(f"wrote {path}", file=sys.stderr)

@@ -8,6 +8,10 @@ package or the source tree. The folder is, in order of precedence:
 3. ``~/.cache/crowdstudy``.
 
 Each kind of cached data lives in its own sub-folder, created on first use.
+
+:func:`check_output_path` checks, before a long run, that an output file can be written;
+:func:`timings_path` names the JSON sidecar that holds a run's timings (run-dependent values
+never go into the output file itself: same input, same bytes).
 """
 
 from __future__ import annotations
@@ -15,7 +19,9 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
-__all__ = ["cache_root", "cache_dir"]
+from crowdstudy.errors import InvalidInputError
+
+__all__ = ["cache_root", "cache_dir", "check_output_path", "timings_path"]
 
 
 def cache_root() -> Path:
@@ -36,3 +42,30 @@ def cache_dir(kind: str) -> Path:
     path = cache_root() / kind
     path.mkdir(parents=True, exist_ok=True)
     return path
+
+
+def check_output_path(path: str | Path, what: str = "out") -> Path:
+    """Create the parent folder of the output file ``path`` and check it is writable (and
+    that ``path`` is not a folder); return ``path``. Errors name ``what`` (the argument)
+    and the path, so a long run can fail at once instead of at the end."""
+    path = Path(path)
+    folder = path.parent
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise InvalidInputError(f"{what}: cannot create the output folder {str(folder)!r} ({exc.strerror}); "
+                                "choose a writable location") from None
+    if not os.access(folder, os.W_OK | os.X_OK):
+        raise InvalidInputError(f"{what}: the output folder {str(folder)!r} is not writable; "
+                                "fix its permissions or choose another location")
+    if path.exists() and path.is_dir():
+        raise InvalidInputError(f"{what}: {str(path)!r} is a folder, expected a file path")
+    return path
+
+
+def timings_path(output: str | Path) -> Path:
+    """The timings sidecar of an output file: ``NAME.timings.json`` beside ``NAME.npz``
+    (the suffix replaced, like the stimulus set's ``NAME.metrics.json``)."""
+    output = Path(output)
+    return output.with_name(output.stem + ".timings.json") if output.suffix else \
+        output.with_name(output.name + ".timings.json")

@@ -64,8 +64,15 @@ def _save_npz(path: Path, arrays: dict[str, np.ndarray], meta: dict) -> Path:
             info.compress_type = zipfile.ZIP_DEFLATED
             zf.writestr(info, arr_buf.getvalue())
     tmp = path.with_suffix(path.suffix + ".tmp")
-    tmp.write_bytes(buf.getvalue())
-    tmp.replace(path)
+    try:
+        tmp.write_bytes(buf.getvalue())
+        tmp.replace(path)
+    except BaseException:
+        try:
+            tmp.unlink(missing_ok=True)      # never leave a partial .tmp behind
+        except OSError:
+            pass
+        raise
     return path
 
 

@@ -117,10 +117,15 @@ def test_environment_points_push_away_from_walls():
 
 
 def test_static_walls_from_meta():
-    corridor = static_walls_from_meta({"scenario": "corridor", "periodic": {"axis": 0, "length": 4.5}})
-    assert corridor.shape == (2, 2, 2) and sorted(corridor[:, 0, 1]) == [-1.0, 1.0]
-    stage = static_walls_from_meta({"scenario": "concert"})
-    assert stage.shape == (1, 2, 2) and stage[0, 0, 1] == pytest.approx(2.5)
+    walls = [[[-1.0, -1.0], [5.5, -1.0]], [[-1.0, 1.0], [5.5, 1.0]]]
+    corridor = static_walls_from_meta({"scenario": "corridor", "periodic": {"axis": 0, "length": 4.5},
+                                       "obstacles": walls})
+    assert corridor.shape == (2, 2, 2) and np.array_equal(corridor, walls)
     assert static_walls_from_meta({}).shape == (0, 2, 2)
+    assert static_walls_from_meta({"scenario": "concert", "obstacles": []}).shape == (0, 2, 2)
+    # a concert/corridor file without its geometry (older version): never a default design's walls
+    for scenario in ("concert", "corridor"):
+        with pytest.raises(ValueError, match=r"meta\['obstacles'\].*regenerate"):
+            static_walls_from_meta({"scenario": scenario, "periodic": {"axis": 0, "length": 4.5}})
     with pytest.raises(ValueError, match="obstacles"):
         static_walls_from_meta({"obstacles": [[1, 2, 3]]})

@@ -24,7 +24,11 @@ def concert_layout(design, level: str, seed) -> Crowd:
         Crowd with positions (1, N, 2) metres, radius (N,) from
         :func:`~crowdstudy.layout.discs.disc_radius`, headings (1, N) radians, region the
         floor rectangle (4, 2), meta {scenario, density_level, density, n_characters, seed,
-        margin, min_distance, target_distance, provenance}.
+        margin, min_distance, target_distance, provenance} and the scene's static geometry
+        (what later stages read instead of a design): ``floor`` {width, depth} m,
+        ``stage_distance`` m, ``stage_front`` the y (m) of the stage front
+        (``floor_depth / 2 + stage_distance``), and ``obstacles`` [[[x0, y0], [x1, y1]]] m,
+        the stage front as one wall segment from x = -floor_width to +floor_width.
     """
     if level not in design.densities:
         raise InvalidInputError(f"level: unknown density level {level!r}; "
@@ -34,10 +38,15 @@ def concert_layout(design, level: str, seed) -> Crowd:
     margin = float(design.scenarios["concert"]["margin"])
     layout = poisson_disk((design.floor_width, design.floor_depth), n, seed=seed, margin=margin)
     seed_value = layout.seed
+    width, depth = float(design.floor_width), float(design.floor_depth)
+    stage_distance = float(design.scenarios["concert"]["stage_distance"])
+    stage_front = depth / 2 + stage_distance
     return Crowd(
         positions=layout.points[None], radius=np.full(n, disc_radius(density)), fps=float(design.fps),
         headings=np.full((1, n), np.pi / 2), region=layout.region,
         meta={"scenario": "concert", "density_level": level, "density": density, "n_characters": n,
               "seed": seed_value, "margin": margin, "min_distance": layout.min_distance,
               "target_distance": layout.target_distance, "area": layout.area,
+              "floor": {"width": width, "depth": depth}, "stage_distance": stage_distance,
+              "stage_front": stage_front, "obstacles": [[[-width, stage_front], [width, stage_front]]],
               "provenance": provenance(seed_value, stage="layout")})

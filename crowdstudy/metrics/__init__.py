@@ -1,9 +1,28 @@
 """Measurements of crowd animations: inter-character overlap volume (body meshes or
-capsules), tracking error, jerk and intra-body penetration; ``crowdstudy metrics``."""
+capsules), tracking error, smoothness (jerk, high-frequency energy, speed spikes, pelvis
+acceleration, foot sliding, loop seams) and intra-body penetration; ``crowdstudy metrics``."""
 
 from crowdstudy.metrics.overlap import OverlapResult, frame_indices, overlap_volume
+from crowdstudy.metrics.smoothness import (
+    FootSlide,
+    PeakSpeed,
+    SeamJump,
+    SmoothnessResult,
+    foot_slide,
+    high_frequency_share,
+    joint_jerk,
+    mean_jerk,
+    peak_joint_speed,
+    pelvis_acceleration_p99,
+    seam_jump,
+    smoothness,
+    smoothness_from_positions,
+    smoothness_ratios,
+)
 from crowdstudy.metrics.summary import summarize
-from crowdstudy.metrics.tracking import IntraPenetrationResult, intra_penetration, mean_jerk, tracking_error
+from crowdstudy.metrics.tracking import IntraPenetrationResult, intra_penetration, tracking_error
 
 __all__ = ["OverlapResult", "overlap_volume", "frame_indices", "tracking_error", "mean_jerk",
-           "intra_penetration", "IntraPenetrationResult", "summarize"]
+           "intra_penetration", "IntraPenetrationResult", "summarize", "smoothness", "smoothness_from_positions",
+           "smoothness_ratios", "SmoothnessResult", "joint_jerk", "high_frequency_share", "peak_joint_speed",
+           "pelvis_acceleration_p99", "foot_slide", "seam_jump", "PeakSpeed", "FootSlide", "SeamJump"]

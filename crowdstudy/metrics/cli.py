@@ -1,6 +1,10 @@
-"""``crowdstudy metrics FILE.npz [--reference BASELINE.npz]``: overlap, jerk, tracking.
+"""``crowdstudy metrics FILE.npz [--reference BASELINE.npz]``: overlap, smoothness, tracking.
 
-Prints a small table; ``--json out.json`` also writes the numbers with provenance. Overlap
+Prints a small table; ``--json out.json`` also writes the numbers (per-character smoothness
+included) with provenance; ``--per-character`` also prints a per-character smoothness
+table. With ``--reference`` each smoothness row shows the reference's value and the ratio
+(jerk, high-frequency share, pelvis acceleration: Ours / reference) or the difference
+(largest joint speed, foot slide p99: Ours - reference, m/s). Overlap
 is measured on sampled frames (``--frames auto``: every 10th frame of clips longer than
 100 frames, e.g. 60 of the 600 frames of a 20 s clip at 30 fps), which the output states.
 """
@@ -31,6 +35,8 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--device", default=None,
                         help="mesh crossings on 'cpu' / 'cuda:0' (Warp) or 'numpy' (default: CUDA when present)")
     parser.add_argument("--json", type=Path, default=None, help="also write the results as JSON here")
+    parser.add_argument("--per-character", action="store_true",
+                        help="also print a table of the smoothness of each character")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
 
 
@@ -59,17 +65,85 @@ def _table(summary: dict) -> str:
                 ratio = summary.get(f"overlap_{geometry}_ratio")
                 text += f"  (reference {ref:.3f} L, ratio {ratio:.3f})" if ratio is not None else f"  (reference {ref:.3f} L)"
             rows.append((f"overlap {geometry}", text))
-    if "jerk_m_s3" in summary:
-        text = f"{summary['jerk_m_s3']:.1f} m/s^3"
-        if "reference_jerk_m_s3" in summary:
-            text += f"  (reference {summary['reference_jerk_m_s3']:.1f})"
-        rows.append(("mean jerk", text))
+    rows.extend(_smoothness_rows(summary))
     rows.append(("intra-body penetration", f"{summary['intra_penetration_cm']:.2f} cm mean deepest "
                                            f"({100 * summary['intra_penetration_fraction']:.1f} % of samples)"))
     if "tracking_error_cm" in summary:
         rows.append(("tracking error", f"{summary['tracking_error_cm']:.2f} cm"))
     width = max(len(k) for k, _ in rows)
     return "\n".join(f"{k.ljust(width)}  {v}" for k, v in rows)
+
+
+def _fmt(value, spec: str, scale: float = 1.0) -> str:
+    return "-" if value is None else format(scale * value, spec)
+
+
+def _compare(summary: dict, key: str, spec: str, *, scale: float = 1.0, ratio: str | None = None,
+             diff: str | None = None, unit: str = "", ref_unit: str = "") -> str:
+    """``  (reference R, ratio Q)`` / ``(reference R, +D unit)`` when the summary has a reference."""
+    ref_key = f"reference_{key}"
+    if ref_key not in summary:
+        return ""
+    text = f"  (reference {_fmt(summary[ref_key], spec, scale)}{ref_unit}"
+    if ratio is not None:
+        text += f", ratio {_fmt(summary.get(ratio), '.3f')}"
+    if diff is not None:
+        text += f", {_fmt(summary.get(diff), '+.3f')}{unit}"
+    return text + ")"
+
+
+def _smoothness_rows(summary: dict) -> list[tuple[str, str]]:
+    if "jerk_m_s3" not in summary:
+        return []
+    from crowdstudy.body.skeleton import JOINT_NAMES
+
+    s = summary
+    joint = s.get("max_joint_speed_joint")
+    joint_name = JOINT_NAMES[joint] if joint is not None and 0 <= joint < len(JOINT_NAMES) else f"joint {joint}"
+    rows = [("mean jerk", f"{_fmt(s['jerk_m_s3'], '.1f')} m/s^3" + _compare(s, "jerk_m_s3", ".1f", ratio="jerk_ratio")),
+            (f"HF share > {s.get('hf_cutoff_hz', 6.0):g} Hz", f"{_fmt(s['hf_share'], '.2f', 100)} %"
+             + _compare(s, "hf_share", ".2f", scale=100, ratio="hf_share_ratio", ref_unit=" %")),
+            ("max joint speed", f"{_fmt(s['max_joint_speed_m_s'], '.2f')} m/s (frame {s['max_joint_speed_frame']}, "
+                                f"character {s['max_joint_speed_character']}, {joint_name})"
+             + _compare(s, "max_joint_speed_m_s", ".2f", diff="max_joint_speed_diff_m_s", unit=" m/s")),
+            ("pelvis accel p99", f"{_fmt(s['pelvis_accel_p99_m_s2'], '.2f')} m/s^2"
+             + _compare(s, "pelvis_accel_p99_m_s2", ".2f", ratio="pelvis_accel_p99_ratio")),
+            ("foot slide p99", f"{_fmt(s['foot_slide_p99_m_s'], '.3f')} m/s, "
+                               f"{_fmt(s['foot_slide_fraction_over_5cm_s'], '.1f', 100)} % > 5 cm/s "
+                               f"of {s['foot_planted_samples']} planted"
+             + _compare(s, "foot_slide_p99_m_s", ".3f", diff="foot_slide_p99_diff_m_s", unit=" m/s")),
+            ("loop seam jump", f"ratio {_fmt(s['seam_ratio'], '.2f')} (seam {_fmt(s['seam_jump_m'], '.2f', 100)} cm, "
+                               f"step {_fmt(s['seam_frame_step_m'], '.2f', 100)} cm, worst character "
+                               f"{_fmt(s['seam_ratio_max_character'], '.2f')})"
+             + _compare(s, "seam_ratio", ".2f"))]
+    return rows
+
+
+def _per_character_table(summary: dict) -> str:
+    """One row per character: the smoothness lists of the summary (and jerk / HF ratios
+    against the reference when it has one)."""
+    per = summary.get("smoothness_per_character")
+    if not per:
+        return "no per-character smoothness (fewer than 4 frames)"
+    ref = summary.get("reference_smoothness_per_character")
+    cols = [("jerk m/s^3", "jerk_m_s3", ".1f", 1.0), ("HF %", "hf_share", ".2f", 100.0),
+            ("max speed m/s", "max_joint_speed_m_s", ".2f", 1.0),
+            ("pelvis p99 m/s^2", "pelvis_accel_p99_m_s2", ".2f", 1.0),
+            ("slide p99 m/s", "foot_slide_p99_m_s", ".3f", 1.0), ("planted", "foot_planted_samples", "d", 1),
+            ("seam ratio", "seam_ratio", ".2f", 1.0)]
+    header = ["character"] + [c[0] for c in cols]
+    if ref:
+        header += ["jerk ratio", "HF ratio"]
+    lines = []
+    for i in range(len(per["jerk_m_s3"])):
+        row = [str(i)] + [_fmt(per[key][i], spec, scale) for _, key, spec, scale in cols]
+        if ref:
+            for key in ("jerk_m_s3", "hf_share"):
+                a, b = per[key][i], ref[key][i]
+                row.append(_fmt(a / b, ".3f") if a is not None and b else "-")
+        lines.append(row)
+    widths = [max(len(r[k]) for r in [header] + lines) for k in range(len(header))]
+    return "\n".join("  ".join(cell.rjust(w) for cell, w in zip(r, widths)) for r in [header] + lines)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -82,7 +156,7 @@ def run(args: argparse.Namespace) -> int:
     geometries = ("mesh", "capsule") if args.geometry == "both" else (args.geometry,)
     frames = _parse_frames(args.frames)
     summary = summarize(anim, reference, resolution=args.resolution, frames=frames, geometries=geometries,
-                        device=args.device, progress=not args.no_progress)
+                        device=args.device, progress=not args.no_progress, per_character=True)
     step = summary.get("frame_step")
     if summary.get("frames_measured", summary["frames"]) < summary["frames"]:
         how = f"one frame in {step}" if step else "selected frames"
@@ -90,6 +164,9 @@ def run(args: argparse.Namespace) -> int:
               "--frames all for every frame", file=sys.stderr)
     print(f"{args.file}  [{summary.get('method') or 'unknown method'}]")
     print(_table(summary))
+    if args.per_character:
+        print()
+        print(_per_character_table(summary))
     if args.json is not None:
         seed = anim.meta.get("seed")
         record = {"file": str(args.file), "reference": None if args.reference is None else str(args.reference),

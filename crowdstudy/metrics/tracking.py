@@ -1,12 +1,13 @@
-"""Motion-quality metrics: tracking error, jerk and intra-body penetration.
+"""Motion-quality metrics: tracking error and intra-body penetration.
 
 * :func:`tracking_error`: how far the corrected animation strays from its input (mean
   joint-position deviation, cm), with each character's own ``rest_joints``.
-* :func:`mean_jerk`: smoothness, the mean norm of the third time derivative of joint
-  positions (m/s^3), by third finite differences.
 * :func:`intra_penetration`: how deep a character's own bone capsules sink into each other,
   over pairs that do not already touch in the rest pose (adjacent bones are skipped, as
   the physics layer skips them).
+
+Smoothness (``mean_jerk``, high-frequency energy, speed spikes, foot sliding, loop seams)
+is measured in :mod:`crowdstudy.metrics.smoothness`.
 """
 
 from __future__ import annotations
@@ -20,7 +21,7 @@ from crowdstudy.body.capsules import segment_distance
 from crowdstudy.errors import InvalidInputError
 from crowdstudy.metrics.overlap import capsules_world, frame_indices, resolve_bodies
 
-__all__ = ["joint_positions", "tracking_error", "mean_jerk", "intra_penetration", "IntraPenetrationResult",
+__all__ = ["joint_positions", "tracking_error", "intra_penetration", "IntraPenetrationResult",
            "intra_pairs"]
 
 _FRAME_CHUNK = 64
@@ -78,27 +79,6 @@ def tracking_error(anim, reference, *, bodies: Sequence | None = None) -> float:
         total += float(dist.sum())
         count += dist.size
     return 100.0 * total / count
-
-
-def mean_jerk(anim, *, bodies: Sequence | None = None) -> float:
-    """Mean norm of the joint jerk (third derivative of joint positions), m/s^3.
-
-    Third finite differences of the world joint positions times ``fps^3``, averaged over
-    frames, characters and joints. Needs at least 4 frames.
-    """
-    if anim.n_frames < 4:
-        raise InvalidInputError(f"anim: mean_jerk needs at least 4 frames, got {anim.n_frames}")
-    body_objs = resolve_bodies(anim, bodies)
-    total = 0.0
-    count = 0
-    for c0 in range(0, anim.n_frames - 3, _FRAME_CHUNK):
-        chunk = np.arange(c0, min(c0 + _FRAME_CHUNK + 3, anim.n_frames))
-        pos = joint_positions(anim, bodies=body_objs, frames=chunk)
-        jerk = np.diff(pos, n=3, axis=0) * anim.fps ** 3
-        norm = np.linalg.norm(jerk, axis=-1)
-        total += float(norm.sum())
-        count += norm.size
-    return total / count
 
 
 def intra_pairs(body, *, parents: np.ndarray | None = None) -> np.ndarray:

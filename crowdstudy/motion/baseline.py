@@ -27,7 +27,8 @@ from crowdstudy.motion.quaternions import quat_about_z, quat_multiply
 from crowdstudy.provenance import provenance
 from crowdstudy.scene import Crowd, CrowdAnimation
 
-__all__ = ["build_baseline", "animate_stationary", "animate_walking", "body_scales", "gait_blend", "plant_legs"]
+__all__ = ["build_baseline", "animate_stationary", "animate_walking", "body_scales", "gait_blend", "plant_legs",
+           "loop_cycles", "MAX_LOOP_TEMPO_CHANGE", "LOOP_DISSOLVE_SECONDS"]
 
 #: Standard deviation of the random yaw around facing the stage (rad, about 8 degrees).
 YAW_JITTER_SD = 0.14
@@ -39,6 +40,14 @@ _MIN_STRIDE_FACTOR = 0.5
 _FADE_END = 0.8
 #: Speeds below this (m/s) keep the previous facing direction.
 _TURN_SPEED = 0.15
+#: Largest tempo change (fraction) a dance clip may take so that a whole number of its
+#: loops fills the animation (DESIGN.md: concert stimuli are exactly periodic); the 15
+#: shipped clips need at most 11.1 % at 20 s / 30 fps. Beyond it the clip keeps its own
+#: length and the animation is not periodic (short test durations).
+MAX_LOOP_TEMPO_CHANGE = 0.12
+#: Seconds of extra corridor animation past the stimulus duration, cross-dissolved into the
+#: video's first frames so the loop seam is not seen as a jump (``meta["loop"]`` "dissolve").
+LOOP_DISSOLVE_SECONDS = 0.5
 
 
 def _rng(seed, stream: int) -> np.random.Generator:
@@ -201,6 +210,21 @@ def _check_timing(duration, fps) -> tuple[float, int]:
     return fps, max(1, int(round(duration * fps)))
 
 
+def loop_cycles(natural_frames: float, n_frames: int, max_change: float = MAX_LOOP_TEMPO_CHANGE) -> int:
+    """Whole loops of a clip of ``natural_frames`` frames that fill ``n_frames`` frames with
+    the smallest tempo change (log ratio), or 0 when that change exceeds ``max_change``
+    (e.g. an animation shorter than about one loop). The loop then lasts ``n_frames / k``
+    frames (a divisor of ``n_frames`` whenever one is nearest) at tempo ``natural_frames * k / n_frames``."""
+    ratio = float(n_frames) / float(natural_frames)
+    best = 0
+    for k in {max(1, int(np.floor(ratio))), max(1, int(np.ceil(ratio)))}:
+        if best == 0 or abs(np.log(ratio / k)) < abs(np.log(ratio / best)) or \
+                (abs(np.log(ratio / k)) == abs(np.log(ratio / best)) and k < best):
+            best = k
+    tempo = natural_frames * best / n_frames
+    return best if abs(tempo - 1.0) <= max_change + 1e-12 else 0
+
+
 def animate_stationary(crowd: Crowd, *, duration: float = 20.0, fps: float = 30.0, seed=0,
                        bodies: list[dict] | None = None, clip_names: list[str] | None = None,
                        yaw_jitter: float = YAW_JITTER_SD, meta: dict | None = None) -> CrowdAnimation:
@@ -216,10 +240,18 @@ def animate_stationary(crowd: Crowd, *, duration: float = 20.0, fps: float = 30.
         clip_names: dance clips to deal from (default all 15).
         yaw_jitter: standard deviation (rad) of the random yaw around that facing.
 
+    Each clip plays a whole number ``k`` of loops in the T frames (:func:`loop_cycles`:
+    time-warped by at most :data:`MAX_LOOP_TEMPO_CHANGE`), so the animation is exactly
+    periodic with period T: frame T would equal frame 0 and the step T-1 -> 0 is an
+    ordinary frame step (the videos loop). When some clip cannot (T shorter than about
+    one loop), that clip keeps its natural length and the animation is not periodic.
+
     Returns:
         CrowdAnimation with root_translation (T, N, 3) m and joint_rotations (T, N, 24, 3);
         ``clips[i] = {"kind": "dance", "clips": [name], "weights": [1.0], "phase": s,
-        "yaw": rad, "scale": leg scale}``.
+        "yaw": rad, "scale": leg scale, "tempo": played / natural speed, "loop_frames":
+        frames per loop (T / k when periodic)}``; ``meta["loop"] = {"mode": "periodic",
+        "frames": T}`` or ``{"mode": "none"}``.
     """
     if not isinstance(crowd, Crowd):
         raise InvalidInputError(f"crowd: expected a Crowd, got {type(crowd).__name__}")
@@ -242,19 +274,29 @@ def animate_stationary(crowd: Crowd, *, duration: float = 20.0, fps: float = 30.
     rot = np.empty((n_frames, n, len(JOINT_NAMES), 3))
     root = np.empty((n_frames, n, 3))
     tempo = np.ones(n)
+    loop_frames = np.ones(n)
+    periodic = True
     frames = np.arange(n_frames)
     for k, clip in enumerate(clips):
         members = np.flatnonzero(choice == k)
         if members.size == 0:
             continue
-        # One loop on the output frame grid (the tempo changes by under 1 % to fit whole
-        # frames); every character is then a pure gather from that table.
-        n_loop = max(4, int(round(clip.duration * fps)))
-        tempo[members] = clip.duration * fps / n_loop
+        # A whole number of loops in the T frames (time-warped to fit: frame T would be
+        # frame 0), sampled on a table of n_loop phases advanced `step` entries per frame;
+        # every character is then a pure gather from that table.
+        cycles = loop_cycles(clip.duration * fps, n_frames)
+        if cycles:
+            g = int(np.gcd(n_frames, cycles))
+            n_loop, step = n_frames // g, cycles // g                           # n_loop / step = T / cycles
+        else:                                      # shorter than a loop: the natural length
+            periodic = False
+            n_loop, step = max(4, int(round(clip.duration * fps))), 1
+        tempo[members] = clip.duration * fps * step / n_loop
+        loop_frames[members] = n_loop / step
         quat_table, root_table = clip.loop_table(n_loop)
         aa_table = quaternion_to_axis_angle(quat_table)
         start = np.floor(phase[members] / clip.duration * n_loop).astype(np.int64)
-        idx = (start[None, :] + frames[:, None]) % n_loop                       # (T, M)
+        idx = (start[None, :] + step * frames[:, None]) % n_loop                # (T, M)
         rot[:, members] = aa_table[idx]
         y = np.broadcast_to(yaw[members], idx.shape)
         q0 = quat_multiply(quat_about_z(y), quat_table[idx, 0])
@@ -267,13 +309,16 @@ def animate_stationary(crowd: Crowd, *, duration: float = 20.0, fps: float = 30.
         phase[members] = start * clip.duration / n_loop
     rot = plant_legs(rot, root, rest, scale, ankle_height)
     records = tuple({"kind": "dance", "clips": [names[c]], "weights": [1.0], "phase": float(ph),
-                     "yaw": float(y), "scale": float(s), "tempo": float(tp)}
-                    for c, ph, y, s, tp in zip(choice, phase, yaw, scale, tempo))
+                     "yaw": float(y), "scale": float(s), "tempo": float(tp), "loop_frames": float(lf)}
+                    for c, ph, y, s, tp, lf in zip(choice, phase, yaw, scale, tempo, loop_frames))
     out_meta = {"method": "Baseline", "scenario": crowd.meta.get("scenario", "concert"),
                 "provenance": provenance(seed if not isinstance(seed, np.random.Generator) else None)}
+    out_meta.update({k: crowd.meta[k] for k in ("floor", "stage_distance", "stage_front", "obstacles")
+                     if k in crowd.meta})     # the scene's static geometry, for the later stages
     out_meta.update(meta or {})
+    loop = {"mode": "periodic", "frames": int(n_frames)} if periodic else {"mode": "none"}
     return CrowdAnimation(joint_names=JOINT_NAMES, parents=PARENTS, root_translation=root, joint_rotations=rot,
-                          fps=fps, bodies=tuple(bodies), clips=records, meta=out_meta)
+                          fps=fps, bodies=tuple(bodies), clips=records, meta={"loop": loop, **out_meta})
 
 
 def gait_blend(speed: np.ndarray, clip_speeds: np.ndarray) -> np.ndarray:
@@ -321,7 +366,7 @@ def _headings(vel: np.ndarray, speed: np.ndarray, initial: np.ndarray, fps: floa
 
 def animate_walking(crowd: Crowd, *, fps: float | None = None, seed=0, bodies: list[dict] | None = None,
                     facing: str = "auto", velocity_smoothing: float = 0.12, heading_smoothing: float = 0.25,
-                    meta: dict | None = None) -> CrowdAnimation:
+                    dissolve_frames: int = 0, meta: dict | None = None) -> CrowdAnimation:
     """Walking characters along the trajectories of ``crowd``.
 
     Args:
@@ -337,11 +382,15 @@ def animate_walking(crowd: Crowd, *, fps: float | None = None, seed=0, bodies: l
         velocity_smoothing, heading_smoothing: Gaussian smoothing (s) of the speed used to
             pick the clips and of the facing direction ("motion"; "crowd" headings are
             smoothed over a third of it).
+        dissolve_frames: D > 0 when the crowd's last D frames lie past the video: the
+            video is the first T = n_frames - D frames and its seam is a cross-dissolve
+            of frames T..T+D-1 into its first D frames (``render_video``).
 
     Returns:
         CrowdAnimation; ``clips[i] = {"kind": "walk", "clips": [4 names], "weights":
         time-averaged blend weights, "phase": initial gait phase (0..1), "scale",
-        "mean_speed"}``; ``meta["periodic"]`` copied from the crowd.
+        "mean_speed"}``; ``meta["periodic"]`` copied from the crowd; ``meta["loop"] =
+        {"mode": "dissolve", "frames": D, "video_frames": T}`` (``{"mode": "none"}`` when D = 0).
     """
     from scipy.ndimage import gaussian_filter1d
 
@@ -354,6 +403,10 @@ def animate_walking(crowd: Crowd, *, fps: float | None = None, seed=0, bodies: l
         raise InvalidInputError(f"fps: expected a positive frame rate, got {fps!r}")
     pos = crowd.positions if fps_out == crowd.fps else _resample_track(crowd.positions, crowd.fps, fps_out)
     n_frames, n = pos.shape[:2]
+    if isinstance(dissolve_frames, bool) or not isinstance(dissolve_frames, (int, np.integer)) \
+            or not 0 <= dissolve_frames <= n_frames // 2:
+        raise InvalidInputError(f"dissolve_frames: expected an integer in [0, {n_frames // 2}] (at most half of "
+                                f"the {n_frames} frames), got {dissolve_frames!r}")
     rng = _rng(seed, 2)
     phase0 = rng.uniform(0.0, 1.0, n)
     bodies = _bodies(n, seed, bodies)
@@ -430,13 +483,17 @@ def animate_walking(crowd: Crowd, *, fps: float | None = None, seed=0, bodies: l
                 "provenance": provenance(seed if not isinstance(seed, np.random.Generator) else None)}
     if crowd.meta.get("periodic"):
         out_meta["periodic"] = dict(crowd.meta["periodic"])
+    out_meta.update({k: crowd.meta[k] for k in ("floor", "corridor_width", "corridor_length", "obstacles")
+                     if k in crowd.meta})     # the scene's static geometry, for the later stages
     out_meta.update(meta or {})
+    loop = {"mode": "dissolve", "frames": int(dissolve_frames), "video_frames": int(n_frames - dissolve_frames)} \
+        if dissolve_frames else {"mode": "none"}
     return CrowdAnimation(joint_names=JOINT_NAMES, parents=PARENTS, root_translation=root, joint_rotations=rot,
-                          fps=fps_out, bodies=tuple(bodies), clips=records, meta=out_meta)
+                          fps=fps_out, bodies=tuple(bodies), clips=records, meta={"loop": loop, **out_meta})
 
 
 def build_baseline(design, stage, level: str, *, duration: float | None = None, fps: float | None = None,
-                   seed: int | None = None) -> CrowdAnimation:
+                   seed: int | None = None, dissolve: float | None = None) -> CrowdAnimation:
     """The Baseline animation of one (stage, density) cell of a study design.
 
     Args:
@@ -445,10 +502,16 @@ def build_baseline(design, stage, level: str, *, duration: float | None = None, 
         level: density level, e.g. "D3".
         duration, fps: default the design's video duration and frame rate.
         seed: default the design's seed of the cell (``design.cell_seed``).
+        dissolve: corridor only, seconds of animation generated past ``duration`` for the
+            video's loop cross-dissolve (default :data:`LOOP_DISSOLVE_SECONDS`; 0 = none).
+
+    The concert is exactly periodic over ``duration`` (``meta["loop"]["mode"] ==
+    "periodic"``); the corridor has T + D frames (T = duration * fps, D = dissolve * fps,
+    at most T / 2) and ``meta["loop"] = {"mode": "dissolve", "frames": D, "video_frames": T}``.
 
     Returns:
         CrowdAnimation with meta {stage, stage_number, scenario, density_level, density,
-        n_characters, seed, method "Baseline", provenance, periodic (corridor)}.
+        n_characters, seed, method "Baseline", provenance, loop, periodic (corridor)}.
     """
     from crowdstudy.design import StudyDesign, load_design
 
@@ -472,6 +535,12 @@ def build_baseline(design, stage, level: str, *, duration: float | None = None, 
     if st.scenario == "corridor":
         from crowdstudy.navigation import corridor_crowd
 
-        crowd = corridor_crowd(design, level, seed, duration=duration, fps=fps)
-        return animate_walking(crowd, fps=fps, seed=seed, meta=meta)
+        dissolve = LOOP_DISSOLVE_SECONDS if dissolve is None else float(dissolve)
+        if not np.isfinite(dissolve) or dissolve < 0:
+            raise InvalidInputError(f"dissolve: expected a non-negative number of seconds, got {dissolve!r}")
+        fps, n_video = _check_timing(duration, fps)
+        n_dissolve = min(int(round(dissolve * fps)), n_video // 2)
+        # the navigation runs D frames past the video: they are dissolved into its start
+        crowd = corridor_crowd(design, level, seed, duration=(n_video + n_dissolve) / fps, fps=fps)
+        return animate_walking(crowd, fps=fps, seed=seed, dissolve_frames=n_dissolve, meta=meta)
     raise InvalidInputError(f"stage {st.key!r}: scenario {st.scenario!r} has no Baseline animation")

@@ -170,7 +170,11 @@ def corridor_crowd(design, level: str, seed, *, duration: float | None = None, f
     Returns:
         Crowd: positions (T, N, 2) unwrapped metres, velocities (T, N, 2) m/s, headings
         (T, N) radians, radius (N,) m, obstacles (2, 2, 2) the walls of the section,
-        region (4, 2) the section, meta (see module doc) with ``periodic``.
+        region (4, 2) the section, meta (see module doc) with ``periodic`` and the scene's
+        static geometry: ``floor`` {width: length, depth: width} m (the section),
+        ``corridor_width``, ``corridor_length`` (= the period) m, and ``obstacles`` the
+        wall segments [[[x0, y0], [x1, y1]], ...] m exactly as ORCA saw them (the section's
+        walls extended by one period on each side).
     """
     if level not in design.densities:
         raise InvalidInputError(f"level: unknown density level {level!r}; "
@@ -267,6 +271,9 @@ def corridor_crowd(design, level: str, seed, *, duration: float | None = None, f
         "radius": radius, "simulated_radius": r_sim, "preferred_speed": v_mean, "speed_factor": factor,
         "preferred_speeds": speeds.tolist(), "warm_up": float(warm_up), "substeps": substeps,
         "orca": dataclasses.asdict(orca), "periodic": {"axis": 0, "length": length},
+        # the scene's static geometry, read by later stages instead of a design
+        "floor": {"width": length, "depth": width}, "corridor_width": width, "corridor_length": length,
+        "obstacles": walls_sim.tolist(),
         "provenance": provenance(seed_value, stage="navigation"),
     }
     return Crowd(positions=positions, radius=np.full(n, radius), fps=fps, velocities=velocities, headings=headings,

@@ -124,21 +124,31 @@ def collision_kernels():
 
     @wp.kernel
     def ground_kernel(x: wp.array(dtype=wp.vec3), p0w: wp.array(dtype=wp.vec3), p1w: wp.array(dtype=wp.vec3),
-                      cap_radius: wp.array(dtype=float), spec: float, k: float,
+                      cap_radius: wp.array(dtype=float), relative: int, p0t: wp.array(dtype=wp.vec3),
+                      p1t: wp.array(dtype=wp.vec3), band: float, spec: float, k: float,
                       count: wp.array(dtype=wp.int32), capacity: int,
                       c_a: wp.array(dtype=wp.int32), c_b: wp.array(dtype=wp.int32), c_n: wp.array(dtype=wp.vec3),
                       c_depth: wp.array(dtype=float), c_la: wp.array(dtype=wp.vec3), c_lb: wp.array(dtype=wp.vec3),
                       c_k: wp.array(dtype=float), c_kind: wp.array(dtype=wp.int32)):
-        """Both end spheres of each capsule (thread) against the floor z = 0."""
+        """Both end spheres of each capsule (thread) against the floor z = 0.
+
+        With ``relative`` only the depth beyond the TARGET pose's own counts (p0t, p1t: the
+        capsule in the animation's target pose): depth - max(depth_target + band, 0), so an
+        animation whose foot dips into the floor is not pushed out of it, and the target pose
+        itself lies outside the penalty's activation band (m)."""
         b = wp.tid()
         up = wp.vec3(0.0, 0.0, 1.0)
         zero = wp.vec3(0.0, 0.0, 0.0)
         r = cap_radius[b]
         for e in range(2):
             p = p0w[b]
+            pt = p0t[b]
             if e == 1:
                 p = p1w[b]
+                pt = p1t[b]
             depth = r - p[2]
+            if relative != 0:
+                depth = depth - wp.max(r - pt[2] + band, 0.0)
             if depth > -spec:
                 push_contact(count, capacity, b, -1, up, depth, p - x[b], zero, k, 0,
                              c_a, c_b, c_n, c_depth, c_la, c_lb, c_k, c_kind)
@@ -232,13 +242,18 @@ def collision_kernels():
 
     @wp.kernel
     def intra_kernel(x: wp.array(dtype=wp.vec3), p0w: wp.array(dtype=wp.vec3), p1w: wp.array(dtype=wp.vec3),
-                     cap_radius: wp.array(dtype=float), pairs: wp.array2d(dtype=wp.int32), spec: float, k: float,
+                     cap_radius: wp.array(dtype=float), pairs: wp.array2d(dtype=wp.int32), relative: int,
+                     p0t: wp.array(dtype=wp.vec3), p1t: wp.array(dtype=wp.vec3), band: float, spec: float, k: float,
                      count: wp.array(dtype=wp.int32), capacity: int,
                      c_a: wp.array(dtype=wp.int32), c_b: wp.array(dtype=wp.int32),
                      c_n: wp.array(dtype=wp.vec3), c_depth: wp.array(dtype=float),
                      c_la: wp.array(dtype=wp.vec3), c_lb: wp.array(dtype=wp.vec3),
                      c_k: wp.array(dtype=float), c_kind: wp.array(dtype=wp.int32)):
-        """One intra-body capsule pair per thread: bounding spheres, then exact distance."""
+        """One intra-body capsule pair per thread: bounding spheres, then exact distance.
+
+        With ``relative``, pairs that interpenetrate in the animation's TARGET pose (p0t,
+        p1t) push only with the depth beyond the target's own: depth - max(depth_target +
+        band, 0) (m), so the physics does not fight the animation's own self-overlap."""
         t = wp.tid()
         ba = pairs[t, 0]
         bb = pairs[t, 1]
@@ -257,6 +272,10 @@ def collision_kernels():
         d = pa - pb
         dist = wp.length(d)
         depth = ra + rb - dist
+        if relative != 0:
+            st_t = segment_params(p0t[ba], p1t[ba], p0t[bb], p1t[bb])
+            dt_ = (p0t[ba] + st_t[0] * (p1t[ba] - p0t[ba])) - (p0t[bb] + st_t[1] * (p1t[bb] - p0t[bb]))
+            depth = depth - wp.max(ra + rb - wp.length(dt_) + band, 0.0)
         if depth > -spec and dist > 1.0e-6:
             push_contact(count, capacity, ba, bb, d / dist, depth, pa - x[ba], pb - x[bb], k, 3,
                          c_a, c_b, c_n, c_depth, c_la, c_lb, c_k, c_kind)
@@ -352,33 +371,38 @@ def sample_static_walls(walls: np.ndarray, *, height: float = 2.2, spacing: floa
 
 
 def static_walls_from_meta(meta: dict) -> np.ndarray:
-    """(M, 2, 2) wall segments (m) of a scene: ``meta["obstacles"]`` when present, else the
-    corridor walls (y = +-width/2) or the concert stage front (y = depth/2 + stage_distance)
-    from the meta's scenario and the default study design."""
-    if "obstacles" in meta:
-        walls = np.asarray(meta["obstacles"], np.float64)
-        if walls.size == 0:
-            return np.zeros((0, 2, 2))
-        if walls.ndim != 3 or walls.shape[1:] != (2, 2):
-            raise InvalidInputError(f"meta['obstacles']: expected (M, 2, 2) wall segments, got shape {walls.shape}")
-        return walls
-    scenario = meta.get("scenario")
-    if scenario not in ("corridor", "concert"):
-        return np.zeros((0, 2, 2))
-    from crowdstudy.design import load_design
+    """(M, 2, 2) wall segments (m) of a scene, from ``meta["obstacles"]``: the walls the
+    stage that made the crowd wrote there (the concert's stage front, the corridor walls
+    exactly as its navigation saw them); an empty list means no walls. Nothing is taken
+    from a study design.
 
-    design = load_design()
-    scen = design.scenarios.get(scenario)
-    params = dict(getattr(scen, "params", {}) or {})
-    if scenario == "corridor":
-        width = float(meta.get("corridor_width", params.get("width", 2.0)))
-        per = meta.get("periodic") or {}
-        length = float(per.get("length", params.get("length", 4.5)))
-        return np.array([[[-1.0, -width / 2], [length + 1.0, -width / 2]],
-                         [[-1.0, width / 2], [length + 1.0, width / 2]]])
-    y = float(design.floor_depth) / 2 + float(params.get("stage_distance", 1.0))
-    half = float(design.floor_width)
-    return np.array([[[-half, y], [half, y]]])
+    A concert or corridor animation without ``meta["obstacles"]`` (a file written by an
+    older version) is an error: its walls are unknown. A scene of any other scenario (or
+    none) without the key has no walls.
+    """
+    if not isinstance(meta, dict):
+        raise InvalidInputError(f"meta: expected a dict, got {type(meta).__name__}")
+    if "obstacles" not in meta:
+        scenario = meta.get("scenario")
+        if scenario in ("concert", "corridor"):
+            raise InvalidInputError(
+                f"meta['obstacles']: missing from this {scenario} animation, so its walls are unknown "
+                "(written by an older crowdstudy?); regenerate it (crowdstudy layout/navigate, then "
+                "crowdstudy animate, or crowdstudy.motion.build_baseline), or set meta['obstacles'] to "
+                "its wall segments [[[x0, y0], [x1, y1]], ...] in metres ([] for none)")
+        return np.zeros((0, 2, 2))
+    try:
+        walls = np.asarray(meta["obstacles"], np.float64)
+    except (TypeError, ValueError):
+        raise InvalidInputError("meta['obstacles']: expected (M, 2, 2) wall segments "
+                                "[[[x0, y0], [x1, y1]], ...] in metres") from None
+    if walls.size == 0:
+        return np.zeros((0, 2, 2))
+    if walls.ndim != 3 or walls.shape[1:] != (2, 2):
+        raise InvalidInputError(f"meta['obstacles']: expected (M, 2, 2) wall segments, got shape {walls.shape}")
+    if not np.all(np.isfinite(walls)):
+        raise InvalidInputError("meta['obstacles']: wall end points must be finite numbers (m)")
+    return walls
 
 
 @dataclasses.dataclass(eq=False)
@@ -454,6 +478,11 @@ class CollisionPipeline:
         self.p1w = wp.zeros(nb, dtype=wp.vec3, device=dev)
         self.char_lo = wp.zeros(n, dtype=wp.vec3, device=dev)
         self.char_hi = wp.zeros(n, dtype=wp.vec3, device=dev)
+        # the capsules in the target pose (target-relative ground and self contacts)
+        self.p0t = wp.zeros(nb, dtype=wp.vec3, device=dev)
+        self.p1t = wp.zeros(nb, dtype=wp.vec3, device=dev)
+        self.t_lo = wp.zeros(n, dtype=wp.vec3, device=dev)
+        self.t_hi = wp.zeros(n, dtype=wp.vec3, device=dev)
         self.pair_capacity = max(16 * n, 64)
         self.pair_count = wp.zeros(1, dtype=wp.int32, device=dev)
         self.pair_i = wp.zeros(self.pair_capacity, dtype=wp.int32, device=dev)
@@ -473,8 +502,12 @@ class CollisionPipeline:
     def default_capacity(self) -> int:
         return int(self.config.max_contacts_per_character) * self.model.n_characters + 2 * self.model.n_bodies
 
-    def collide(self, state, contacts: Contacts) -> None:
-        """Fill ``contacts`` from ``state`` (positions/orientations at the start of the step)."""
+    def collide(self, state, contacts: Contacts, control=None) -> None:
+        """Fill ``contacts`` from ``state`` (positions/orientations at the start of the step).
+
+        ``control`` (:class:`~crowdstudy.physics.state.Control`, advanced to this step): with
+        ``config.target_relative_self_contacts``, ground and intra-body contacts count only
+        the depth beyond the target pose's own (see ``intra_kernel``)."""
         k, wp, m, cfg = self.k, self.k.wp, self.model, self.config
         dev = m.device
         W = m.wp
@@ -486,9 +519,15 @@ class CollisionPipeline:
         wp.launch(k.capsules_world_kernel, n, [state.x, state.q, W["cap_p0"], W["cap_p1"], W["cap_radius"],
                                                W["cap_skin"], nj, margin + spec, self.p0w, self.p1w, self.char_lo, self.char_hi],
                   device=dev)
+        relative = int(bool(cfg.target_relative_self_contacts) and control is not None)
+        if relative:
+            wp.launch(k.capsules_world_kernel, n, [control.t_x, control.t_glob, W["cap_p0"], W["cap_p1"],
+                                                   W["cap_radius"], W["cap_skin"], nj, 0.0, self.p0t, self.p1t,
+                                                   self.t_lo, self.t_hi], device=dev)
+        band = float(cfg.contact_activation)
         if cfg.ground_stiffness > 0:
-            wp.launch(k.ground_kernel, nb, [state.x, self.p0w, self.p1w, W["cap_radius"], spec,
-                                            float(cfg.ground_stiffness), *out], device=dev)
+            wp.launch(k.ground_kernel, nb, [state.x, self.p0w, self.p1w, W["cap_radius"], relative, self.p0t,
+                                            self.p1t, band, spec, float(cfg.ground_stiffness), *out], device=dev)
         if self.bvh is not None and self.static_enabled and cfg.environment_stiffness > 0:
             wp.launch(k.environment_kernel, nb, [state.x, self.p0w, self.p1w, W["cap_radius"], W["cap_skin"],
                                                  W["body_char"],
@@ -513,4 +552,5 @@ class CollisionPipeline:
         n_intra = W["intra_pairs"].shape[0]
         if cfg.intra_body and n_intra and cfg.intra_stiffness > 0:
             wp.launch(k.intra_kernel, n_intra, [state.x, self.p0w, self.p1w, W["cap_radius"], W["intra_pairs"],
-                                                spec, float(cfg.intra_stiffness), *out], device=dev)
+                                                relative, self.p0t, self.p1t, band, spec,
+                                                float(cfg.intra_stiffness), *out], device=dev)

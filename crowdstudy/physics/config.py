@@ -96,12 +96,43 @@ class PhysicsConfig:
         speculative_distance: m; capsule pairs closer than this are kept as (inactive)
             contacts; the solver linearises their depth to the predicted state, so fast
             limbs are stopped before they penetrate.
+        contact_activation: m, width of the band over which a contact's penalty stiffness
+            ramps from 0 to its full value as the (predicted) depth goes from
+            -contact_activation to 0: a C2 penalty (``contact_assemble_kernel`` in
+            :mod:`crowdstudy.physics.linear`), so contacts do not switch on and off from step
+            to step (0: the plain (k/2) depth^2 on positive depths).
+        target_relative_self_contacts: ground and intra-body contacts push only with the
+            depth beyond the animation's target pose's own (plus ``contact_activation``): a
+            clip whose own capsules interpenetrate, or whose feet dip into the floor, is not
+            fought by the physics. Inter-body and environment contacts are absolute.
+        feedforward: the inertial prediction continues the animation's own acceleration
+            (``predict_kernel``), and gravity is taken as balanced by the animation (not
+            applied): with no contact the output reproduces its input, and the physics
+            answers contacts and the PD terms only. False: the paper's plain prediction
+            x + h v with gravity.
+        damping_reference_dt: s, the step h0 at which the damping coefficients of the
+            d/(2 h^2) form (Eq. 4 and the translational dampers) are quoted: the solver uses
+            d h / h0, so the damping force (d / h0 times the velocity difference) is the
+            same whatever the step (the paper's d = 0.006 is at h0 = 1/60 s).
         mesh_skin_percentile: per-capsule skin added for inter-body and environment
             contacts: this percentile of how far the bone's mesh vertices reach outside its
             capsule (crowdstudy.physics.model.capsule_skin); 0 = bare capsules.
         intra_body: handle intra-body collisions (pairs touching in the T-pose and
             parent-child pairs are always skipped).
         environment_spacing: spacing of the point samples on static objects, m.
+        loop_warmup: s; a periodic input (``meta["loop"]["mode"] == "periodic"``) is
+            simulated from this long before its first frame (the loop's end), so the
+            output's first frame is a settled one ...
+        loop_blend: s; ... and this long past its last frame, the continuation cross-faded
+            into the output's first frames: the corrected loop is periodic too
+            (:func:`crowdstudy.physics.finish.close_loop`).
+        output_smoothing: s, standard deviation of the zero-phase Gaussian low-pass of the
+            output's DEVIATION from its input (joint rotations relative to the input's and
+            the root offset; :func:`crowdstudy.physics.finish.smooth_deviation`); 0 = off.
+            Measured overlaps and tracking are of the filtered output.
+        foot_lock: hold the output's ankles still while the input's are planted (two-bone
+            leg IK, :func:`crowdstudy.physics.finish.lock_planted_feet`).
+        foot_lock_speed: m/s, the input's ankle counts as planted below this speed.
         settle_time: s simulated on the first frame, the target frozen, before the clip
             starts (so the corrected clip starts without the Baseline's overlaps); 0 starts
             from the Baseline's first pose.
@@ -136,9 +167,18 @@ class PhysicsConfig:
     environment_stiffness: float = 2.0e4
     contact_margin: float = 0.005
     speculative_distance: float = 0.02
+    contact_activation: float = 0.005
+    target_relative_self_contacts: bool = True
+    feedforward: bool = True
+    damping_reference_dt: float = 1.0 / 60.0
     mesh_skin_percentile: float = 90.0
     intra_body: bool = True
     environment_spacing: float = 0.04
+    loop_warmup: float = 1.0
+    loop_blend: float = 0.5
+    output_smoothing: float = 0.1
+    foot_lock: bool = True
+    foot_lock_speed: float = 0.02
     settle_time: float = 0.5
     cg_tolerance: float = 1e-4
     cg_max_iterations: int = 60
@@ -158,7 +198,7 @@ class PhysicsConfig:
             if not num == num or num < 0 or num == float("inf"):
                 raise InvalidInputError(f"PhysicsConfig.{field.name}: expected a finite value >= 0, got {value!r}")
         for name in ("dt", "density", "cg_tolerance", "cg_max_iterations", "max_contacts_per_character",
-                     "environment_spacing", "joint_stiffness", "foot_planted_speed"):
+                     "environment_spacing", "joint_stiffness", "foot_planted_speed", "damping_reference_dt"):
             if float(getattr(self, name)) <= 0:
                 raise InvalidInputError(f"PhysicsConfig.{name}: expected a positive value, got {getattr(self, name)!r}")
 

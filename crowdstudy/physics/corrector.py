@@ -17,6 +17,7 @@ from crowdstudy.errors import InvalidInputError
 from crowdstudy.physics.collision import (CollisionPipeline, Contacts, sample_static_walls,
                                           static_walls_from_meta)
 from crowdstudy.physics.config import PhysicsConfig
+from crowdstudy.physics.finish import close_loop, lock_planted_feet, smooth_deviation
 from crowdstudy.physics.model import ModelBuilder, capsule_skin
 from crowdstudy.physics.solver import Solver
 from crowdstudy.physics.state import Control, State
@@ -122,7 +123,7 @@ class CrowdCorrector:
         seconds = self.config.settle_time if seconds is None else float(seconds)
         for _ in range(int(round(seconds / self.dt))):
             self.control.advance(frame, frame, 0.0)
-            self.pipeline.collide(self.states[0], self.contacts)
+            self.pipeline.collide(self.states[0], self.contacts, self.control)
             self.solver.step(self.states[0], self.states[1], self.control, self.contacts, self.dt)
             self.states.reverse()
 
@@ -131,7 +132,7 @@ class CrowdCorrector:
         for s in range(1, self.substeps + 1):
             self.control.advance(f0, f1, s / self.substeps)
             t0 = time.perf_counter()
-            self.pipeline.collide(self.states[0], self.contacts)
+            self.pipeline.collide(self.states[0], self.contacts, self.control)
             if self.profile:
                 wp.synchronize_device(self.model.device)
                 self.timings["detection"] += time.perf_counter() - t0
@@ -168,7 +169,7 @@ class CrowdCorrector:
 
 
 def correct(anim, config: PhysicsConfig | None = None, *, device: str | None = None, progress: bool = True,
-            bodies=None, linear_solver: str | None = None):
+            bodies=None, linear_solver: str | None = None, timings: dict | None = None):
     """Resolve the collisions of a whole animation (Baseline -> Ours).
 
     Args:
@@ -178,12 +179,25 @@ def correct(anim, config: PhysicsConfig | None = None, *, device: str | None = N
         progress: tqdm bar on stderr.
         bodies: N body models (default: ``crowdstudy.body.load_body`` of ``anim.bodies``).
         linear_solver: see :class:`~crowdstudy.physics.solver.Solver`.
+        timings: a dict to fill with this run's timings (they are never written into the
+            animation, so the same input gives the same bytes): ``setup_seconds`` (model
+            build and upload), ``settle_seconds`` (placement and the settle steps),
+            ``simulate_seconds`` (the clip's simulation steps), ``wall_seconds`` (settle,
+            clip, projection and readback), ``steps``, ``timed_steps`` and ``ms_per_step``
+            (``simulate_seconds`` over the timed steps: the clip's steps only, not the settle
+            steps, the projection or the readback; when there is no settle step, the first
+            frame, which launches (and may compile) the kernels, is left out; None when no
+            step was timed).
 
     Returns:
         A new CrowdAnimation with the same bodies/clips, the corrected ``root_translation``
         (T, N, 3) m and ``joint_rotations`` (T, N, J, 3) rad, and meta ``method = "Ours"``,
-        ``physics`` (config, steps, timings, CG iterations, contact counts).
+        ``physics`` (config, device, linear solver, steps, substeps, dt, CG iterations,
+        contact counts, dropped pairs, static points; deterministic values only).
     """
+    if timings is not None and not isinstance(timings, dict):
+        raise InvalidInputError(f"timings: expected a dict to fill (or None), got {type(timings).__name__}")
+    t_setup = time.perf_counter()
     from crowdstudy.body.skeleton import PARENTS
     from crowdstudy.provenance import provenance
     from crowdstudy.scene import CrowdAnimation
@@ -199,10 +213,19 @@ def correct(anim, config: PhysicsConfig | None = None, *, device: str | None = N
     period = anim.periodic_length
     walls = static_walls_from_meta(anim.meta)
     points = sample_static_walls(walls, spacing=config.environment_spacing, period=period) if len(walls) else None
-    t_frames = anim.n_frames
+    n_out = anim.n_frames
+    looped = (anim.meta.get("loop") or {}).get("mode") == "periodic" and n_out > 2
+    warmup = blend = 0
+    if looped:
+        # a periodic clip: simulate from `warmup` frames before its start (the end of the
+        # loop), through the period, and `blend` frames on, to close the loop (finish.close_loop)
+        warmup = min(int(round(config.loop_warmup * anim.fps)), n_out)
+        blend = min(int(round(config.loop_blend * anim.fps)), n_out - 1)
+    schedule = np.concatenate([np.arange(n_out - warmup, n_out), np.arange(n_out), np.arange(blend)])
+    t_frames = len(schedule)
     corr = CrowdCorrector(bodies, config=config, device=device, fps=anim.fps, periodic_length=period,
                           static_points=points, linear_solver=linear_solver, n_frames=t_frames, profile=False)
-    corr.control.set_frames(anim.joint_rotations, anim.root_translation, start=0)
+    corr.control.set_frames(anim.joint_rotations[schedule], anim.root_translation[schedule], start=0)
     wp = corr.solver.wp
     m = corr.model
     out_rot = wp.zeros((t_frames, m.n_bodies), dtype=wp.vec3, device=m.device)
@@ -210,6 +233,9 @@ def correct(anim, config: PhysicsConfig | None = None, *, device: str | None = N
     t_start = time.perf_counter()
     corr.reset_to_frame(0)
     corr.settle(frame=0)
+    wp.synchronize_device(m.device)
+    t_settled = time.perf_counter()
+    frame_seconds = []
     corr.project(out_rot, out_root, 0)
     bar = None
     if progress:
@@ -217,7 +243,10 @@ def correct(anim, config: PhysicsConfig | None = None, *, device: str | None = N
 
         bar = tqdm(total=t_frames - 1, desc="correct", unit="frame", leave=False)
     for f in range(1, t_frames):
+        t0 = time.perf_counter()
         corr._advance_between(f - 1, f)
+        wp.synchronize_device(m.device)
+        frame_seconds.append(time.perf_counter() - t0)
         corr.project(out_rot, out_root, f)
         if bar is not None:
             bar.update(1)
@@ -225,17 +254,32 @@ def correct(anim, config: PhysicsConfig | None = None, *, device: str | None = N
         bar.close()
     rot = out_rot.numpy().reshape(t_frames, m.n_characters, m.n_joints, 3).astype(np.float64)
     root = out_root.numpy().astype(np.float64)
+    if looped:
+        rot, root = close_loop(rot, root, n_out, warmup, blend)
+    rot, root = smooth_deviation(rot, root, anim.joint_rotations, anim.root_translation,
+                                 config.output_smoothing * anim.fps, periodic=looped)
+    if config.foot_lock:
+        rest = np.stack([np.asarray(b.rest_joints, np.float64) for b in bodies])
+        rot = lock_planted_feet(rot, root, anim.joint_rotations, anim.root_translation, rest, anim.fps,
+                                planted_speed=config.foot_lock_speed, periodic=looped)
     wall = time.perf_counter() - t_start
+    if timings is not None:
+        timed = frame_seconds if round(config.settle_time / corr.dt) > 0 else frame_seconds[1:]
+        timed_steps = len(timed) * corr.substeps
+        timings.update({"setup_seconds": t_start - t_setup, "settle_seconds": t_settled - t_start,
+                        "simulate_seconds": float(sum(frame_seconds)), "wall_seconds": wall, "steps": corr.steps,
+                        "timed_steps": timed_steps,
+                        "ms_per_step": 1000.0 * sum(timed) / timed_steps if timed_steps else None})
     iters = np.asarray(corr.cg_iterations) if corr.cg_iterations else np.zeros(1)
     physics_meta = {"config": config.as_dict(), "device": m.device, "linear_solver": corr.solver.linear_solver,
                     "steps": corr.steps, "substeps_per_frame": corr.substeps, "dt": corr.dt,
-                    "wall_seconds": wall, "ms_per_step": 1000.0 * wall / max(corr.steps, 1),
                     "cg_iterations_mean": float(iters.mean()), "cg_iterations_max": int(iters.max()),
                     "static_points": corr.pipeline.n_static_points,
                     "contacts_mean": float(np.mean(corr.contact_counts)) if corr.contact_counts else 0.0,
                     "contacts_max": int(max(corr.contact_counts, default=0)),
                     "contacts_dropped_steps": int(sum(c > corr.contacts.capacity for c in corr.contact_counts)),
-                    "pairs_dropped": int(corr.pipeline.dropped_pairs)}
+                    "pairs_dropped": int(corr.pipeline.dropped_pairs),
+                    "loop": {"periodic": bool(looped), "warmup_frames": warmup, "blend_frames": blend}}
     meta = {"method": "Ours", "physics": physics_meta, "baseline_method": anim.meta.get("method"),
             "baseline_provenance": anim.meta.get("provenance"),
             "provenance": provenance(anim.meta.get("seed"), stage="physics")}

@@ -95,12 +95,31 @@ def kernels():
 
     @wp.kernel
     def predict_kernel(x: wp.array(dtype=wp.vec3), q: wp.array(dtype=wp.quat), v: wp.array(dtype=wp.vec3),
-                       w: wp.array(dtype=wp.vec3), h: float,
+                       w: wp.array(dtype=wp.vec3), h: float, feedforward: int,
+                       t_x: wp.array(dtype=wp.vec3), t_x_old: wp.array(dtype=wp.vec3),
+                       t_x_older: wp.array(dtype=wp.vec3), t_glob: wp.array(dtype=wp.quat),
+                       t_glob_old: wp.array(dtype=wp.quat), t_glob_older: wp.array(dtype=wp.quat),
                        x_pred: wp.array(dtype=wp.vec3), q_pred: wp.array(dtype=wp.quat)):
-        """Inertial prediction x~ = x + h v (m), R~ = exp(h [w]x) R (w in rad/s, world frame)."""
+        """Inertial prediction x~ = x + h v (m), R~ = exp(h [w]x) R (w in rad/s, world frame).
+
+        With ``feedforward`` the prediction also continues the ANIMATION's own acceleration:
+        x~ += x^(t+h) - 2 x^(t) + x^(t-h) (m) and R~ = (D^ D^_prev^T) exp(h [w]x) R, with
+        D^ = R^(t+h) R^(t)^T and D^_prev = R^(t) R^(t-h)^T the animation's world rotation
+        increments over this step and the previous one. A body that follows its target
+        exactly is then predicted exactly at the next target, so the step only corrects
+        deviations (the animation's accelerations, and its support against gravity, are fed
+        forward; the physics answers contacts and the PD terms alone).
+        """
         b = wp.tid()
-        x_pred[b] = x[b] + h * v[b]
-        q_pred[b] = wp.normalize(quat_exp(h * w[b]) * q[b])
+        xp = x[b] + h * v[b]
+        qp = quat_exp(h * w[b]) * q[b]
+        if feedforward != 0:
+            xp = xp + (t_x[b] - t_x_old[b]) - (t_x_old[b] - t_x_older[b])
+            d_now = t_glob[b] * wp.quat_inverse(t_glob_old[b])
+            d_prev = t_glob_old[b] * wp.quat_inverse(t_glob_older[b])
+            qp = d_now * wp.quat_inverse(d_prev) * qp
+        x_pred[b] = xp
+        q_pred[b] = wp.normalize(qp)
 
     @wp.func
     def control_gradient(rp: wp.mat33, rc: wp.mat33, target: wp.mat33, damp_ref: wp.mat33, k: float,
@@ -137,19 +156,23 @@ def kernels():
             anchor_parent: wp.array(dtype=wp.vec3), anchor_child: wp.array(dtype=wp.vec3),
             body_k: wp.array(dtype=float), body_d: wp.array(dtype=float),
             body_kt: wp.array(dtype=float), body_dt: wp.array(dtype=float),
-            h: float, gravity: float, k_joint: float,
+            h: float, gravity: float, k_joint: float, damp_scale: float,
             grad_t: wp.array(dtype=wp.vec3), grad_r: wp.array(dtype=wp.vec3),
             hess_a: wp.array(dtype=wp.mat33), hess_b: wp.array(dtype=wp.mat33), hess_c: wp.array(dtype=wp.mat33),
             lever_p: wp.array(dtype=wp.vec3), lever_c: wp.array(dtype=wp.vec3), ctrl_c: wp.array(dtype=float)):
         """Gradient (N, N m) and diagonal Hessian block of every body at the predicted state.
 
         Terms: inertia (zero gradient at the prediction; blocks m/h^2 I and R I_body R^T / h^2),
-        gravity m g z, soft ball joints k_j/2 |x_p + R_p a_p - x_b - R_b a_b|^2 (Gauss-Newton),
+        gravity m g z (pass 0 with the feed-forward prediction), soft ball joints k_j/2 |x_p + R_p a_p - x_b - R_b a_b|^2 (Gauss-Newton),
         PD control of Eq. 4 (root: absolute rotation; others: parent-relative) and the
         translational PD of bodies with body_kt/body_dt > 0 (root; feet when enabled).
         Also stores, per body with a parent, the world lever arms of its joint on the parent
         (lever_p) and on itself (lever_c), and the control coupling 2 (k + d/h^2) (ctrl_c),
         used by the matrix-free off-diagonal products.
+
+        ``damp_scale`` = h / h0 multiplies every damping coefficient of the d/(2 h^2) form
+        (Eq. 4 and the translational dampers), so that the damping force (d / h0) times the
+        velocity difference does not change with the step h (d is quoted at h0 = 1/60 s).
         """
         b = wp.tid()
         inv_h2 = 1.0 / (h * h)
@@ -163,9 +186,9 @@ def kernels():
         jw = rb * body_J[b] * wp.transpose(rb)
         c = (wp.trace(jw) * inv_h2) * eye - inv_h2 * jw
         k = body_k[b]
-        dh2 = body_d[b] * inv_h2
+        dh2 = body_d[b] * damp_scale * inv_h2
         kt = body_kt[b]
-        dth2 = body_dt[b] * inv_h2
+        dth2 = body_dt[b] * damp_scale * inv_h2
         if kt > 0.0 or dth2 > 0.0:
             # absolute translation PD (root; feet when enabled): kt/2 |x - x^|^2 + dt/(2h^2) |dx - dx^|^2
             gt += kt * (x[b] - t_x[b]) + dth2 * ((x[b] - x_old[b]) - (t_x[b] - t_x_old[b]))
@@ -211,7 +234,7 @@ def kernels():
                 bb += -k_joint * sk
                 c += -k_joint * (sk * sk)
                 kc = body_k[ch]
-                dc = body_d[ch] * inv_h2
+                dc = body_d[ch] * damp_scale * inv_h2
                 gr -= joint_control_terms(ch, b, q, q_old, t_rel, t_rel_old, kc, dc)
                 c += (2.0 * (kc + dc)) * eye
         grad_t[b] = gt
@@ -267,6 +290,7 @@ def kernels():
                            t_x_old: wp.array(dtype=wp.vec3), offset: wp.array(dtype=wp.vec3),
                            weight: wp.array(dtype=float), stepping: wp.array(dtype=wp.int32),
                            body_kt: wp.array(dtype=float), body_dt: wp.array(dtype=float), h: float,
+                           damp_scale: float,
                            planted_speed: float, k_anchor: float, c_anchor: float, max_force: float,
                            release_distance: float, rejoin_distance: float,
                            grad_t: wp.array(dtype=wp.vec3), hess_a: wp.array(dtype=wp.mat33)):
@@ -320,7 +344,7 @@ def kernels():
             ch = c_anchor / h
             g = w * (k_anchor * e + ch * dv)
             # the anchor replaces the foot's horizontal coupling to the animation (body_kt, body_dt)
-            dth2 = body_dt[b] / (h * h)
+            dth2 = body_dt[b] * damp_scale / (h * h)
             ea = x_pred[b] - t_x[b]
             g = g - w * (body_kt[b] * ea + dth2 * dv)
             grad_t[b] = grad_t[b] + wp.vec3(g[0], g[1], 0.0)

@@ -36,16 +36,23 @@ def solver_kernels():
                                 c_n: wp.array(dtype=wp.vec3), c_depth: wp.array(dtype=float),
                                 c_la: wp.array(dtype=wp.vec3), c_lb: wp.array(dtype=wp.vec3),
                                 c_k: wp.array(dtype=float), c_kind: wp.array(dtype=wp.int32), friction: float,
-                                v: wp.array(dtype=wp.vec3), w: wp.array(dtype=wp.vec3), h: float,
+                                activation: float, v: wp.array(dtype=wp.vec3), w: wp.array(dtype=wp.vec3), h: float,
                                 grad_t: wp.array(dtype=wp.vec3), grad_r: wp.array(dtype=wp.vec3),
                                 hess_a: wp.array(dtype=wp.mat33), hess_b: wp.array(dtype=wp.mat33),
                                 hess_c: wp.array(dtype=wp.mat33),
                                 u_at: wp.array(dtype=wp.vec3), u_ar: wp.array(dtype=wp.vec3),
                                 u_bt: wp.array(dtype=wp.vec3), u_br: wp.array(dtype=wp.vec3),
                                 k_eff: wp.array(dtype=float)):
-        """Penalty (k/2) depth^2 of one contact (thread). depth(q) is linear in the increments
+        """Penalty of one contact (thread) on its depth d (m). d(q) is linear in the increments
         with gradient u_a = -(n, l_a x n), u_b = (n, l_b x n); linearised to the prediction
-        (q_t + h v); only positive predicted depths act. Gradient k depth u, Hessian k u u^T.
+        (q_t + h v). Gradient phi'(d) u, Gauss-Newton Hessian phi''(d) u u^T.
+
+        With ``activation`` e = 0, phi = (k/2) d^2 for d > 0 (only positive predicted depths
+        act): its stiffness jumps from 0 to k as a contact starts, so a contact predicted just
+        apart is ignored for a step and then pushes at full stiffness, and touching limbs
+        chatter. With e > 0 (m) the penalty is C2 in d: phi = k (d + e)^3 / (6 e) for
+        -e < d < 0 (the stiffness ramps from 0 to k over the last e of approach), and
+        phi = k/2 d^2 + k e/2 d + k e^2/6 for d >= 0 (force k (d + e/2), stiffness k).
 
         Ground contacts (kind 0) also get viscous friction: (c/(2h)) |P_t dp|^2, dp the
         contact point's displacement over the step and P_t the tangent projector, i.e. a
@@ -64,16 +71,24 @@ def solver_kernels():
         depth = c_depth[i] + h * (wp.dot(at, v[a]) + wp.dot(ar, w[a]))
         if b >= 0:
             depth += h * (wp.dot(bt, v[b]) + wp.dot(br, w[b]))
-        k = c_k[i]
-        if depth <= 0.0:
+        k_c = c_k[i]
+        if depth <= -activation or (activation <= 0.0 and depth <= 0.0):
             k_eff[i] = 0.0
             return
+        f = k_c * depth
+        k = k_c
+        if activation > 0.0:
+            if depth < 0.0:
+                s = depth + activation
+                f = k_c * s * s / (2.0 * activation)
+                k = k_c * s / activation
+            else:
+                f = k_c * (depth + 0.5 * activation)
         k_eff[i] = k
         u_at[i] = at
         u_ar[i] = ar
         u_bt[i] = bt
         u_br[i] = br
-        f = k * depth
         wp.atomic_add(grad_t, a, f * at)
         wp.atomic_add(grad_r, a, f * ar)
         wp.atomic_add(hess_a, a, k * wp.outer(at, at))

@@ -147,18 +147,24 @@ class Solver:
         wp, kb, ks, m, cfg = self.wp, self.kb, self.ks, self.model, self.config
         W, dev, nb = m.wp, m.device, m.n_bodies
         self._contact_buffers(contacts.capacity)
-        wp.launch(kb.predict_kernel, nb, [state_in.x, state_in.q, state_in.v, state_in.w, float(dt),
-                                          self.x_pred, self.q_pred], device=dev)
+        ff = bool(cfg.feedforward)
+        damp_scale = float(dt) / float(cfg.damping_reference_dt)
+        wp.launch(kb.predict_kernel, nb, [state_in.x, state_in.q, state_in.v, state_in.w, float(dt), int(ff),
+                                          control.t_x, control.t_x_old, control.t_x_older, control.t_glob,
+                                          control.t_glob_old, control.t_glob_older, self.x_pred, self.q_pred],
+                  device=dev)
         wp.launch(kb.assemble_bodies_kernel, nb,
                   [self.x_pred, self.q_pred, state_in.x, state_in.q, control.t_rel, control.t_rel_old,
                    control.t_x, control.t_x_old, W["body_mass"], W["body_J"], W["body_parent"],
                    W["body_children"], W["anchor_parent"], W["anchor_child"], self.body_k, self.body_d,
-                   self.body_kt, self.body_dt, float(dt), float(cfg.gravity), float(cfg.joint_stiffness), self.grad_t, self.grad_r, self.hess_a, self.hess_b, self.hess_c,
+                   self.body_kt, self.body_dt, float(dt), 0.0 if ff else float(cfg.gravity),
+                   float(cfg.joint_stiffness), damp_scale, self.grad_t, self.grad_r, self.hess_a, self.hess_b, self.hess_c,
                    self.lever_p, self.lever_c, self.ctrl_c], device=dev)
         if cfg.foot_anchor_stiffness > 0 and self.feet_index.shape[0]:
             wp.launch(kb.foot_anchor_kernel, self.feet_index.shape[0],
                       [self.feet_index, self.x_pred, state_in.x, control.t_x, control.t_x_old, self.foot_offset,
-                       self.foot_weight, self.foot_stepping, self.body_kt, self.body_dt, float(dt), float(cfg.foot_planted_speed),
+                       self.foot_weight, self.foot_stepping, self.body_kt, self.body_dt, float(dt), damp_scale,
+                       float(cfg.foot_planted_speed),
                        float(cfg.foot_anchor_stiffness), float(cfg.foot_anchor_damping),
                        float(cfg.foot_anchor_max_force), float(cfg.foot_release_distance),
                        float(cfg.foot_rejoin_distance), self.grad_t, self.hess_a],
@@ -167,7 +173,7 @@ class Solver:
             wp.launch(ks.contact_assemble_kernel, contacts.capacity,
                       [contacts.count, contacts.capacity, contacts.body_a, contacts.body_b, contacts.normal,
                        contacts.depth, contacts.lever_a, contacts.lever_b, contacts.stiffness, contacts.kind,
-                       float(cfg.ground_friction), state_in.v,
+                       float(cfg.ground_friction), float(cfg.contact_activation), state_in.v,
                        state_in.w, float(dt), self.grad_t, self.grad_r, self.hess_a, self.hess_b, self.hess_c,
                        self.u_at, self.u_ar, self.u_bt, self.u_br, self.k_eff], device=dev)
 

@@ -41,7 +41,9 @@ class Control:
     positions (m). :meth:`advance` moves the current target to "old" and computes the new one
     at ``(1 - alpha) * frame f0 + alpha * frame f1`` (nlerp of rotations, lerp of the root):
     ``t_rel`` (B,) quat, ``t_glob`` (B,) quat world rotations, ``t_x`` (B,) vec3 centres of
-    mass; ``t_rel_old`` and ``t_x_old`` the previous step's.
+    mass; ``t_rel_old``, ``t_glob_old`` and ``t_x_old`` the previous step's, and
+    ``t_glob_older``, ``t_x_older`` the one before (the solver's feed-forward prediction
+    continues the animation's own motion: its velocity change over the last two steps).
     """
 
     def __init__(self, model, n_frames: int = 2):
@@ -59,6 +61,8 @@ class Control:
         self.t_rel_old = wp.zeros(nb, dtype=wp.quat, device=dev)
         self.t_glob_old = wp.zeros(nb, dtype=wp.quat, device=dev)
         self.t_x_old = wp.zeros(nb, dtype=wp.vec3, device=dev)
+        self.t_glob_older = wp.zeros(nb, dtype=wp.quat, device=dev)
+        self.t_x_older = wp.zeros(nb, dtype=wp.vec3, device=dev)
 
     def set_frames(self, joint_rotations: np.ndarray, root_translation: np.ndarray, start: int = 0) -> None:
         """Upload frames: joint_rotations (F, N, J, 3) axis-angle rad, root_translation (F, N, 3) m."""
@@ -79,10 +83,11 @@ class Control:
         self.anim_root[start:start + f].assign(wp.array(root.astype(np.float32), dtype=wp.vec3, device=m.device))
 
     def advance(self, f0: int, f1: int, alpha: float) -> None:
-        """Shift the current target to "old" and compute the target between frames f0 and f1."""
+        """Shift the targets (current -> old -> older) and compute the target between frames
+        f0 and f1."""
         self.t_rel, self.t_rel_old = self.t_rel_old, self.t_rel
-        self.t_glob, self.t_glob_old = self.t_glob_old, self.t_glob
-        self.t_x, self.t_x_old = self.t_x_old, self.t_x
+        self.t_glob, self.t_glob_old, self.t_glob_older = self.t_glob_older, self.t_glob, self.t_glob_old
+        self.t_x, self.t_x_old, self.t_x_older = self.t_x_older, self.t_x, self.t_x_old
         m = self.model
         self.k.wp.launch(self.k.targets_kernel, m.n_characters,
                          [self.anim_q, self.anim_root, int(f0), int(f1), float(alpha), m.n_joints,
@@ -90,8 +95,10 @@ class Control:
                           self.t_rel, self.t_glob, self.t_x], device=m.device)
 
     def hold(self) -> None:
-        """Make the previous target equal to the current one (no animation velocity)."""
+        """Make the previous targets equal to the current one (no animation velocity)."""
         self.t_rel_old.assign(self.t_rel)
-        self.t_glob_old.assign(self.t_glob)
-        self.t_x_old.assign(self.t_x)
+        for old in (self.t_glob_old, self.t_glob_older):
+            old.assign(self.t_glob)
+        for old in (self.t_x_old, self.t_x_older):
+            old.assign(self.t_x)
 

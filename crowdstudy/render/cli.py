@@ -50,7 +50,8 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--width", type=int, help="pixels (default the design's, 1920)")
     parser.add_argument("--height", type=int, help="pixels (default the design's, 1080)")
     parser.add_argument("--fps", type=float, help="frames per second (default the design's, 30)")
-    parser.add_argument("--duration", type=float, help="seconds (default the whole animation)")
+    parser.add_argument("--duration", type=float, help="seconds (default the whole animation; a corridor's video "
+                        "length, its extra frames dissolved into the loop seam)")
     parser.add_argument("--msaa", type=int, default=4, help="anti-aliasing samples per pixel (0 = off)")
     parser.add_argument("--no-shadows", action="store_true", help="skip the shadow map")
     parser.add_argument("--colors-from", help="Baseline .npz whose frame-0 positions decide the clothing colours "

@@ -80,7 +80,8 @@ def animation_job(job: dict) -> dict:
 
     ``job``: design, stage (key), level, seed, duration, fps, metric_frames, and either
     ``out_dir`` (write the files there) or ``return_bytes`` (return them, for Dask).
-    Returns {"files": {name: path or bytes}, "metrics": {method: {...}}}.
+    Returns {"files": {name: path or bytes}, "metrics": {method: {...}}, "timings": {"Ours": {...}}};
+    the files include ``<cell>-Ours.timings.json`` (see :func:`crowdstudy.physics.correct`).
     """
     from crowdstudy.motion import build_baseline
     from crowdstudy.physics import correct
@@ -88,8 +89,9 @@ def animation_job(job: dict) -> dict:
     design = job["design"]
     base = build_baseline(design, job["stage"], job["level"], duration=job["duration"], fps=job["fps"],
                           seed=job["seed"])
-    ours = correct(base, progress=False)
-    out: dict = {"files": {}, "metrics": {}}
+    timings: dict = {}
+    ours = correct(base, progress=False, timings=timings)
+    out: dict = {"files": {}, "metrics": {}, "timings": {"Ours": timings}}
     for method, anim in (("Baseline", base), ("Ours", ours)):
         out["metrics"][method] = _overlap_metrics(anim, job["metric_frames"])
         name = f"{job['cell']}-{method}.npz"
@@ -98,6 +100,16 @@ def animation_job(job: dict) -> dict:
                 out["files"][name] = Path(anim.save(Path(tmp) / name)).read_bytes()
         else:
             out["files"][name] = str(anim.save(Path(job["out_dir"]) / name))
+    # the physics timings: a sidecar beside the Ours file (run-dependent, so never inside it)
+    from crowdstudy.paths import timings_path
+
+    name = timings_path(f"{job['cell']}-Ours.npz").name
+    text = json.dumps({"device": ours.meta["physics"]["device"], **timings}, indent=2, sort_keys=True) + "\n"
+    if job.get("return_bytes"):
+        out["files"][name] = text.encode()
+    else:
+        (Path(job["out_dir"]) / name).write_text(text)
+        out["files"][name] = str(Path(job["out_dir"]) / name)
     return out
 
 
@@ -249,7 +261,10 @@ def _cached_animation(path: Path, seed: int, n_frames: int, fps: float) -> bool:
         anim = CrowdAnimation.load(path)
     except (ValueError, OSError):
         return False
-    return anim.n_frames == n_frames and abs(anim.fps - fps) < 1e-9 and int(anim.meta.get("seed", -1)) == seed
+    from crowdstudy.render.video import video_frame_count
+    # a "dissolve" loop (the corridor) holds its seam's extra frames past the video's n_frames
+    return video_frame_count(anim) == n_frames and abs(anim.fps - fps) < 1e-9 \
+        and int(anim.meta.get("seed", -1)) == seed
 
 
 # -- the builder -------------------------------------------------------------------------

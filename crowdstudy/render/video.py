@@ -6,10 +6,18 @@ handed to a writer thread that feeds ffmpeg's stdin while the next frame renders
 queue of two frames). OpenGL rows come bottom-up; ffmpeg's ``vflip`` filter turns them over, so
 Python never copies a frame. The video is written to ``NAME.part.mp4`` and renamed when
 ffmpeg succeeds, so an interrupted run never leaves a truncated file under the final name.
+
+Loops: an animation with ``meta["loop"] = {"mode": "dissolve", "frames": D, "video_frames":
+T}`` (the corridor) is longer than its video. The video has T frames; its first D frames are
+cross-dissolves of frame i (weight (i + 1) / (D + 1)) with frame T + i (the rest), blended in
+linear light (:func:`blend_frames`) before encoding, so the loop seam T-1 -> 0 continues the
+motion T-1 -> T and fades into the clip by frame D. Those D later frames are rendered first
+and held in memory (15 frames at 0.5 s, 30 fps). "periodic" or no loop renders as is.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 import os
 import queue
@@ -23,7 +31,8 @@ import numpy as np
 
 from crowdstudy.errors import InvalidInputError, MissingDependencyError
 
-__all__ = ["find_ffmpeg", "VideoWriter", "render_video", "sha256_file", "check_output_path", "probe_video"]
+__all__ = ["find_ffmpeg", "VideoWriter", "render_video", "sha256_file", "check_output_path", "probe_video",
+           "FramePlan", "blend_frames", "video_frame_count"]
 
 
 def find_ffmpeg() -> str:
@@ -47,21 +56,8 @@ def sha256_file(path: str | Path) -> str:
     return h.hexdigest()
 
 
-def check_output_path(path: str | Path, what: str = "out") -> Path:
-    """Create the parent folder of ``path`` and check it is writable; return ``path``."""
-    path = Path(path)
-    folder = path.parent
-    try:
-        folder.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise InvalidInputError(f"{what}: cannot create the output folder {str(folder)!r} ({exc.strerror}); "
-                                "choose a writable location") from None
-    if not os.access(folder, os.W_OK | os.X_OK):
-        raise InvalidInputError(f"{what}: the output folder {str(folder)!r} is not writable; "
-                                "fix its permissions or choose another location")
-    if path.exists() and path.is_dir():
-        raise InvalidInputError(f"{what}: {str(path)!r} is a folder, expected a file path")
-    return path
+# check_output_path lives in crowdstudy.paths (shared with the physics CLI); re-exported here
+from crowdstudy.paths import check_output_path  # noqa: E402
 
 
 class VideoWriter:
@@ -163,16 +159,80 @@ def probe_video(path: str | Path) -> dict:
             "height": int(info["height"]), "frames": int(info["nb_read_frames"]), "rate": info.get("r_frame_rate")}
 
 
-def _frame_plan(anim, duration: float | None, fps: float) -> np.ndarray:
+@dataclasses.dataclass(frozen=True)
+class FramePlan:
+    """What each video frame shows: animation frame ``source[i]``, blended (when
+    ``partner[i] >= 0``) with animation frame ``partner[i]``: ``weight[i] * source +
+    (1 - weight[i]) * partner`` in linear light."""
+    source: np.ndarray      # (F,) int
+    partner: np.ndarray     # (F,) int, -1 = no blend
+    weight: np.ndarray      # (F,) float, weight of source (1 without a blend)
+
+    def __len__(self) -> int:
+        return len(self.source)
+
+    @property
+    def n_blended(self) -> int:
+        return int(np.count_nonzero(self.partner >= 0))
+
+
+def _loop(anim) -> dict:
+    loop = anim.meta.get("loop") if isinstance(anim.meta, dict) else None
+    return loop if isinstance(loop, dict) else {}
+
+
+def video_frame_count(anim) -> int:
+    """Frames of the animation its video shows: ``meta["loop"]["video_frames"]`` for a
+    "dissolve" loop (the frames after it feed the seam's cross-dissolve), else all."""
+    loop = _loop(anim)
+    if loop.get("mode") == "dissolve":
+        return int(loop["video_frames"])
+    return anim.n_frames
+
+
+def _frame_plan(anim, duration: float | None, fps: float) -> FramePlan:
+    video_frames = video_frame_count(anim)
     if duration is None:
-        duration = anim.duration
+        duration = video_frames / anim.fps
     if not np.isfinite(duration) or duration <= 0:
         raise InvalidInputError(f"duration: expected a positive number of seconds, got {duration!r}")
     if duration > anim.duration + 0.5 / anim.fps:
         raise InvalidInputError(f"duration: {duration:g} s is longer than the animation ({anim.duration:g} s, "
                                 f"{anim.n_frames} frames at {anim.fps:g} fps)")
     n = max(1, int(round(duration * fps)))
-    return np.minimum(np.round(np.arange(n) * anim.fps / fps).astype(int), anim.n_frames - 1)
+    source = np.minimum(np.round(np.arange(n) * anim.fps / fps).astype(int), anim.n_frames - 1)
+    partner = np.full(n, -1, dtype=int)
+    weight = np.ones(n)
+    loop = _loop(anim)
+    if loop.get("mode") == "dissolve" and int(loop.get("frames", 0)) > 0:
+        # the video spans `span` animation frames: its seam continues into frame `span`,
+        # and frames span + i dissolve into the video's first frames
+        span = int(round(n * anim.fps / fps))
+        d = min(int(round(int(loop["frames"]) * fps / anim.fps)), n // 2)
+        d = min(d, int(np.count_nonzero(source[:d] + span < anim.n_frames)))
+        i = np.arange(d)
+        partner[:d] = source[:d] + span
+        weight[:d] = (i + 1) / (d + 1)
+    return FramePlan(source=source, partner=partner, weight=weight)
+
+
+#: the renderer's display encoding (display.glsl: sqrt of the tone-mapped colour): code
+#: value v in 0..255 <-> linear light (v / 255) ** 2
+_TO_LINEAR = (np.arange(256, dtype=np.float32) / 255.0) ** 2
+
+
+def blend_frames(a, b, weight: float):
+    """``weight * a + (1 - weight) * b`` of two RGB frames (uint8 arrays of any shape, or raw
+    bytes) in linear light, rounded once to uint8; returns the type of ``a``."""
+    as_bytes = not isinstance(a, np.ndarray)
+    x = np.frombuffer(a, np.uint8) if as_bytes else np.asarray(a, np.uint8)
+    y = np.frombuffer(b, np.uint8) if not isinstance(b, np.ndarray) else np.asarray(b, np.uint8)
+    if x.shape != y.shape:
+        raise InvalidInputError(f"blend_frames: frames differ in size ({x.shape} vs {y.shape})")
+    w = float(weight)
+    lin = _TO_LINEAR[x] * np.float32(w) + _TO_LINEAR[y] * np.float32(1.0 - w)
+    out = np.clip(np.sqrt(lin) * 255.0 + 0.5, 0, 255).astype(np.uint8)
+    return out.tobytes() if as_bytes else out.reshape(np.shape(a))
 
 
 def render_video(anim, viewpoint, out_path, *, width: int | None = None, height: int | None = None,
@@ -186,7 +246,8 @@ def render_video(anim, viewpoint, out_path, *, width: int | None = None, height:
         viewpoint: "V1".."V4", a design Viewpoint, or a :class:`~crowdstudy.render.camera.Camera`.
         out_path: the .mp4 to write (folders are created).
         width, height, fps: default the design's video settings (1920x1080, 30 fps).
-        duration: seconds (default the whole animation); frames are resampled from the
+        duration: seconds (default the whole animation, or its ``video_frames`` for a
+            "dissolve" loop, see the module doc); frames are resampled from the
             animation's rate to ``fps`` (nearest frame).
         overlap_view: paint interpenetrations red (paper Fig. 5); the red fraction of every
             frame is returned.
@@ -197,7 +258,8 @@ def render_video(anim, viewpoint, out_path, *, width: int | None = None, height:
             when rendering its corrected version.
     Returns:
         dict: path, frames, width, height, fps, duration, sha256, seconds, seconds_per_frame,
-        red_fraction (list, per measured frame), mean_red_fraction (or None).
+        red_fraction (list, per measured frame), mean_red_fraction (or None),
+        dissolve_frames (video frames blended at the loop seam, 0 unless a "dissolve" loop).
     """
     from tqdm import tqdm
 
@@ -220,21 +282,37 @@ def render_video(anim, viewpoint, out_path, *, width: int | None = None, height:
         renderer.set_view(viewpoint)
         writer = VideoWriter(out_path, width, height, fps, crf=crf, preset=preset, bottom_up=not overlap_view)
         try:
-            bar = tqdm(plan, desc=out_path.name, unit="frame", disable=not progress, leave=False)
+            bar = tqdm(range(len(plan)), desc=out_path.name, unit="frame", disable=not progress, leave=False)
+            # the seam's dissolve partners (frames past the video) first, held in memory
             if overlap_view:
-                for src in bar:
-                    frame = renderer.overlap(int(src))
+                later = {int(k): renderer.overlap(int(k)).image for k in plan.partner[plan.partner >= 0]}
+                for i in bar:
+                    frame = renderer.overlap(int(plan.source[i]))
                     red.append(frame.red_fraction)
-                    writer.write(frame.image)
+                    image = frame.image if plan.partner[i] < 0 else \
+                        blend_frames(frame.image, later[int(plan.partner[i])], plan.weight[i])
+                    writer.write(image)
             else:
+                later = {int(k): renderer.render_raw(int(k)) for k in plan.partner[plan.partner >= 0]}
                 # two pixel-pack buffers: frame k is read back while frame k+1 renders
                 pbos = [renderer.ctx.buffer(reserve=width * height * 3) for _ in range(2)]
                 try:
-                    for i, src in enumerate(bar):
-                        renderer.render_into(int(src), pbos[i % 2])
-                        if i > 0:
-                            writer.write(pbos[(i - 1) % 2].read())
-                    writer.write(pbos[(len(plan) - 1) % 2].read())
+                    pending = None
+                    for i in bar:
+                        src = int(plan.source[i])
+                        if plan.partner[i] >= 0:           # a dissolve frame: rendered synchronously
+                            if pending is not None:
+                                writer.write(pbos[pending].read())
+                                pending = None
+                            writer.write(blend_frames(renderer.render_raw(src), later[int(plan.partner[i])],
+                                                      plan.weight[i]))
+                            continue
+                        renderer.render_into(src, pbos[i % 2])
+                        if pending is not None:
+                            writer.write(pbos[pending].read())
+                        pending = i % 2
+                    if pending is not None:
+                        writer.write(pbos[pending].read())
                 finally:
                     for pbo in pbos:
                         pbo.release()
@@ -243,10 +321,10 @@ def render_video(anim, viewpoint, out_path, *, width: int | None = None, height:
             writer.abort()
             raise
         if not overlap_view and red_sample_frames > 0:
-            for src in plan[np.linspace(0, len(plan) - 1, min(red_sample_frames, len(plan))).round().astype(int)]:
+            for src in plan.source[np.linspace(0, len(plan) - 1, min(red_sample_frames, len(plan))).round().astype(int)]:
                 red.append(renderer.overlap(int(src)).red_fraction)
     seconds = time.perf_counter() - t0
     return {"path": str(out_path), "frames": int(len(plan)), "width": width, "height": height, "fps": fps,
             "duration": len(plan) / fps, "sha256": sha256_file(out_path), "seconds": seconds,
             "seconds_per_frame": seconds / len(plan), "red_fraction": red,
-            "mean_red_fraction": float(np.mean(red)) if red else None}
+            "mean_red_fraction": float(np.mean(red)) if red else None, "dissolve_frames": plan.n_blended}

@@ -1,0 +1,128 @@
+"""The MuJoCo peer of ``crowdstudy bench physics`` is set up like Ours (benchmarks/physics.py):
+same inter-body geometry (radius + mesh skin + margin), same self pairs, same interpolated
+targets, and the same conversion back to a CrowdAnimation."""
+
+from __future__ import annotations
+
+import importlib.util
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+mujoco = pytest.importorskip("mujoco", reason="mujoco is not installed (pip install -e .[peers])")
+
+N_FRAMES = 10
+
+
+@pytest.fixture(scope="module")
+def bench():
+    path = Path(__file__).resolve().parents[1] / "benchmarks" / "physics.py"
+    spec = importlib.util.spec_from_file_location("crowdstudy_benchmarks_physics_test", path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def _tiny(kind: str, chars=(0, 1, 2), spread: float = 0.0):
+    from crowdstudy.design import load_design
+    from crowdstudy.motion.baseline import build_baseline
+
+    stage = "stationary" if kind == "concert" else "walking"
+    anim = build_baseline(load_design(), stage, "D1", duration=N_FRAMES / 30.0)
+    sel = list(chars)
+    root = anim.root_translation[:N_FRAMES, sel].copy()
+    root[..., 0] += spread * np.arange(len(sel))      # spread > 0: characters far apart
+    return anim.replace(root_translation=root, joint_rotations=anim.joint_rotations[:N_FRAMES, sel],
+                        bodies=tuple(anim.bodies[i] for i in sel), clips=tuple(anim.clips[i] for i in sel))
+
+
+def _ours(anim):
+    from crowdstudy.physics.corrector import CrowdCorrector, load_bodies
+
+    corr = CrowdCorrector(load_bodies(anim.bodies), fps=anim.fps, n_frames=anim.n_frames, device="cpu")
+    corr.control.set_frames(anim.joint_rotations, anim.root_translation)
+    return corr
+
+
+@pytest.mark.parametrize("kind", ["concert", "corridor"])
+def test_same_geometry_and_self_pairs(bench, kind):
+    anim = _tiny(kind)
+    scene = bench.MujocoScene(anim)
+    corr = _ours(anim)
+    m, cfg = corr.model, corr.config
+    n, nj = anim.n_characters, anim.n_joints
+    # inter-body (hull) capsules: radius + mesh skin, plus the contact margin, body by body
+    ours = (m.cap_radius + m.cap_skin + cfg.contact_margin).reshape(n, nj)
+    np.testing.assert_allclose(scene.inter_body_radius(), ours, atol=1e-7)
+    assert np.all(m.cap_skin.reshape(n, nj).max(1) > 0)          # the skin is really there
+    np.testing.assert_allclose(scene.model.geom_margin[scene.hull_geom], cfg.contact_margin)
+    # ground and self contacts on the bare capsule, no margin; masses from the bare capsule
+    np.testing.assert_allclose(scene.model.geom_size[scene.core_geom, 0], m.cap_radius.reshape(n, nj), atol=1e-7)
+    assert np.all(scene.model.geom_margin[scene.core_geom] == 0)
+    np.testing.assert_allclose(scene.model.body_mass[scene.body_id], m.body_mass.reshape(n, nj), rtol=2e-3)
+    # self pairs that may collide: exactly our intra-body pair list
+    intra = np.sort(m.intra_pairs, 1)
+    intra = intra[np.lexsort((intra[:, 1], intra[:, 0]))]
+    assert len(intra) > 0
+    np.testing.assert_array_equal(scene.self_pairs(), intra)
+    # walls (concert stage front, corridor walls) are there; the corridor gets periodic images
+    walls = [i for i in range(scene.model.ngeom) if (mujoco.mj_id2name(scene.model, mujoco.mjtObj.mjOBJ_GEOM, i)
+                                                      or "").startswith("wall")]
+    assert len(walls) == (2 if kind == "corridor" else 1)
+    assert len(scene.ghost_shift) == (2 if kind == "corridor" else 0)
+
+
+def test_half_step_targets_equal_ours(bench):
+    from crowdstudy.body.rotations import quaternion_to_matrix
+
+    anim = _tiny("corridor")
+    scene = bench.MujocoScene(anim)
+    corr = _ours(anim)
+    m = corr.model
+    n, nj = anim.n_characters, anim.n_joints
+    for f0, f1 in ((3, 4), (8, 9)):
+        scene.set_targets(f0, f1, 0.5)
+        corr.control.advance(f0, f1, 0.5)
+        q_mj = scene.data.mocap_quat[scene.mocap_id.ravel()][:, [1, 2, 3, 0]]
+        q_ours = corr.control.t_glob.numpy().astype(np.float64)
+        sign = np.where(np.sum(q_mj * q_ours, 1, keepdims=True) < 0, -1.0, 1.0)
+        np.testing.assert_allclose(q_mj, sign * q_ours, atol=1e-6)
+        # ours stores centres of mass; the joint is x + R anchor_child
+        x = corr.control.t_x.numpy().astype(np.float64)
+        joint = x + np.einsum("bij,bj->bi", quaternion_to_matrix(q_ours), m.anchor_child)
+        np.testing.assert_allclose(scene.data.mocap_pos[scene.mocap_id.ravel()], joint, atol=1e-6)
+    assert q_mj.shape == (n * nj, 4)
+
+
+def test_conversion_back_same_as_ours_and_tracks(bench):
+    from crowdstudy.metrics import tracking_error
+
+    anim = _tiny("concert", spread=3.0)
+    # the numpy conversion equals project_kernel on our rigid state
+    corr = _ours(anim)
+    corr.reset_to_frame(5)
+    wp = corr.solver.wp
+    rot = wp.zeros((1, corr.model.n_bodies), dtype=wp.vec3, device="cpu")
+    root = wp.zeros((1, anim.n_characters), dtype=wp.vec3, device="cpu")
+    corr.project(rot, root, 0)
+    q = corr.state.q.numpy().astype(np.float64).reshape(anim.n_characters, anim.n_joints, 4)
+    x = corr.state.x.numpy().astype(np.float64)
+    from crowdstudy.body.rotations import quaternion_to_matrix
+
+    pelvis = (x + np.einsum("bij,bj->bi", quaternion_to_matrix(q.reshape(-1, 4)), corr.model.anchor_child))
+    r_np, root_np = bench.rigid_to_animation(q, pelvis.reshape(anim.n_characters, anim.n_joints, 3)[:, 0])
+    np.testing.assert_allclose(r_np.reshape(-1, 3), rot.numpy()[0], atol=2e-5)
+    np.testing.assert_allclose(root_np, root.numpy()[0], atol=2e-6)
+    # an unperturbed MuJoCo run (characters 3 m apart) converted back tracks its input
+    scene = bench.MujocoScene(anim)
+    r0, root0 = scene.read()
+    np.testing.assert_allclose(root0, anim.root_translation[0], atol=1e-9)
+    assert tracking_error(anim.replace(joint_rotations=np.repeat(r0[None], N_FRAMES, 0),
+                                       root_translation=np.repeat(root0[None], N_FRAMES, 0)),
+                          anim.replace(joint_rotations=np.repeat(anim.joint_rotations[:1], N_FRAMES, 0),
+                                       root_translation=np.repeat(anim.root_translation[:1], N_FRAMES, 0))) < 1e-6
+    mj, timing = bench.mujoco_peer(anim)
+    assert not timing["unstable"] and timing["steps_per_60th"] == 1.0
+    assert mj.meta["method"] == "MuJoCo" and mj.n_frames == anim.n_frames
+    assert tracking_error(mj, anim) < 3.0

@@ -1,0 +1,227 @@
+"""The causes of jitter removed in the physics, and the output stage (issue: Ours as smooth as
+its animation): the C2 contact activation band, target-relative self and ground contacts,
+the feed-forward prediction, damping independent of the step, loop closing, the deviation
+low-pass and the planted-foot hold."""
+
+import numpy as np
+import pytest
+
+from crowdstudy.physics import CrowdCorrector, PhysicsConfig
+from crowdstudy.physics.finish import close_loop, lock_planted_feet, planted_runs, smooth_deviation
+
+
+@pytest.fixture(scope="module")
+def bodies():
+    from crowdstudy.body.shapes import sample_bodies
+    from crowdstudy.physics.corrector import load_bodies
+
+    return load_bodies(sample_bodies(2, 11))
+
+
+def _joints(body, rot, root):
+    from crowdstudy.body.skeleton import forward_kinematics
+
+    return forward_kinematics(body.rest_joints, rot, root)[1]
+
+
+def _single_contact_gradient(depth: float, activation: float, k: float = 3.0e4):
+    """Gradient (N) on body 0 and k_eff of one environment contact of the given depth."""
+    from crowdstudy.physics import ModelBuilder, Solver, State
+    from crowdstudy.physics.collision import KIND_ENVIRONMENT, Contacts
+    from crowdstudy.physics.state import Control
+    from crowdstudy.warp_runtime import get_warp
+
+    from tests.test_physics_energies import fixture_body
+
+    wp = get_warp()
+    builder = ModelBuilder()
+    builder.add_character(*vars(fixture_body()).values())
+    model = builder.finalize(device="cpu")
+    cfg = PhysicsConfig(contact_activation=activation)
+    control = Control(model)
+    control.set_frames(np.zeros((1, 24, 3)), np.array([[0.0, 0.0, 1.0]]))
+    control.advance(0, 0, 0.0)
+    control.hold()
+    state = State(model)
+    state.x.assign(control.t_x)
+    state.q.assign(control.t_glob)
+    solver = Solver(model, cfg)
+    empty = Contacts.allocate(0, "cpu")
+    solver.assemble(state, control, empty, cfg.dt)
+    g0 = solver.grad_t.numpy()[0].astype(float)
+    c = Contacts.allocate(1, "cpu")
+    c.count.assign(wp.array([1], dtype=wp.int32))
+    c.body_a.assign(wp.array([0], dtype=wp.int32))
+    c.body_b.assign(wp.array([-1], dtype=wp.int32))
+    c.normal.assign(wp.array([[0.0, 0.0, 1.0]], dtype=wp.vec3))
+    c.depth.assign(wp.array([depth], dtype=wp.float32))
+    c.stiffness.assign(wp.array([k], dtype=wp.float32))
+    c.kind.assign(wp.array([KIND_ENVIRONMENT], dtype=wp.int32))
+    solver.assemble(state, control, c, cfg.dt)
+    g1 = solver.grad_t.numpy()[0].astype(float)
+    return g1 - g0, float(solver.k_eff.numpy()[0])
+
+
+def test_contact_activation_band_is_c2():
+    k, e = 3.0e4, 0.005
+    # gradient along u = -n: -phi'(d) on z; stiffness phi''(d)
+    cases = {-0.006: (0.0, 0.0), -0.0025: (k * 0.0025 ** 2 / (2 * e), k * 0.5), 0.0: (k * e / 2, k),
+             0.01: (k * (0.01 + e / 2), k)}
+    for depth, (force, stiff) in cases.items():
+        g, k_eff = _single_contact_gradient(depth, e, k)
+        assert g[2] == pytest.approx(-force, rel=1e-4, abs=1e-3), depth
+        assert k_eff == pytest.approx(stiff, rel=1e-4, abs=1e-3), depth
+    # continuity of the force across the band's ends and at contact
+    forces = [-_single_contact_gradient(d, e, k)[0][2] for d in (-e - 1e-4, -e + 1e-4, -1e-4, 1e-4)]
+    assert forces[1] - forces[0] < 0.05 and forces[3] - forces[2] < k * 3e-4      # k (1e-4)^2 / (2 e) = 0.03 N
+    # without the band a contact predicted apart does nothing and then pushes at full stiffness
+    assert _single_contact_gradient(-0.0025, 0.0, k) == (pytest.approx(np.zeros(3)), 0.0)
+
+
+def _folded_arm():
+    rot = np.zeros((1, 24, 3))
+    rot[0, 16] = [0.0, 0.0, -1.2]          # left arm down ...
+    rot[0, 18] = [0.0, -2.4, 0.0]          # ... forearm folded through the trunk (7.9 cm deep)
+    return rot
+
+
+def test_self_overlap_of_the_animation_is_not_fought(bodies):
+    body = bodies[:1]
+    root = np.array([[0.0, 0.0, body[0].pelvis_height]])
+    rot = _folded_arm()
+    errors = {}
+    for relative in (True, False):
+        corr = CrowdCorrector(body, device="cpu", config=PhysicsConfig(target_relative_self_contacts=relative))
+        corr.reset(rot, root)
+        for _ in range(20):
+            out_rot, out_root = corr.step(rot, root)
+        errors[relative] = np.abs(_joints(body[0], out_rot[0], out_root[0])
+                                  - _joints(body[0], rot[0], root[0])).max()
+    assert errors[True] < 0.002            # the folded arm stays where the animation puts it
+    assert errors[False] > 0.008           # the absolute self contact pushes it out of the trunk
+
+
+def _moving_pose(n_frames: int, fps: float, body):
+    t = np.arange(n_frames) / fps
+    rot = np.zeros((n_frames, 1, 24, 3))
+    rot[:, 0, 16, 2] = -1.2 + 0.5 * np.sin(2 * np.pi * 1.3 * t)     # arm swings
+    rot[:, 0, 17, 2] = 1.2 + 0.5 * np.sin(2 * np.pi * 1.1 * t)
+    rot[:, 0, 0, 2] = 0.6 * np.sin(2 * np.pi * 0.4 * t)            # turning
+    rot[:, 0, 12, 0] = 0.3 * np.sin(2 * np.pi * 0.9 * t)           # nodding
+    root = np.zeros((n_frames, 1, 3))
+    root[:, 0, 0] = 0.5 * np.sin(2 * np.pi * 0.5 * t)              # swaying 0.5 m
+    root[:, 0, 2] = body.pelvis_height + 0.1 + 0.03 * np.sin(2 * np.pi * 2 * t)   # off the floor
+    return rot, root
+
+
+def test_feedforward_reproduces_an_animation_without_contacts(bodies):
+    body = bodies[:1]
+    fps = 30.0
+    rot, root = _moving_pose(45, fps, body[0])
+    worst = {}
+    for ff in (True, False):
+        corr = CrowdCorrector(body, device="cpu", fps=fps, config=PhysicsConfig(feedforward=ff))
+        corr.reset(rot[0], root[0])
+        err = 0.0
+        for f in range(1, len(rot)):
+            out_rot, out_root = corr.step(rot[f], root[f])
+            err = max(err, np.abs(_joints(body[0], out_rot[0], out_root[0]) - _joints(body[0], rot[f, 0], root[f, 0])).max())
+        worst[ff] = err
+    assert worst[True] < 0.002             # follows the moving animation exactly
+    assert worst[False] > 0.01             # the plain prediction lags and sags
+
+
+def _release_curve(dt: float):
+    """Distance (m) of a body displaced 0.1 m from its (still) target, released, over 0.4 s."""
+    from crowdstudy.body.shapes import sample_bodies
+    from crowdstudy.physics.corrector import load_bodies
+
+    body = load_bodies(sample_bodies(1, 3))
+    corr = CrowdCorrector(body, device="cpu", fps=30.0, config=PhysicsConfig(dt=dt, feedforward=True,
+                                                                              foot_anchor_stiffness=0.0,
+                                                                              ground_stiffness=0.0))
+    rot = np.zeros((1, 24, 3))
+    root = np.array([[0.0, 0.0, body[0].pelvis_height + 0.2]])
+    corr.reset(rot, root)
+    wp = corr.solver.wp
+    x = corr.state.x.numpy()
+    corr.state.x.assign(wp.array(x + np.array([0.1, 0.0, 0.0], np.float32), dtype=wp.vec3))   # pushed 10 cm
+    out = []
+    for _ in range(12):
+        _, r = corr.step(rot, root)
+        out.append(np.linalg.norm(r[0] - root[0]))
+    return np.array(out)
+
+
+def test_damping_does_not_change_with_the_step():
+    a, b = _release_curve(1.0 / 60.0), _release_curve(1.0 / 120.0)
+    assert a[0] < 0.1 and a[-1] < a[0]
+    # the same recovery whatever the step (without the h / h0 scaling, d / h doubles at 1/120 s)
+    np.testing.assert_allclose(a, b, atol=0.15 * a[0])
+
+
+def test_close_loop_continues_the_last_frame():
+    rng = np.random.default_rng(0)
+    n, warm, blend = 20, 5, 6
+    rot = rng.normal(scale=0.1, size=(warm + n + blend, 2, 24, 3))
+    root = np.cumsum(rng.normal(scale=0.01, size=(warm + n + blend, 2, 3)), axis=0)
+    out_rot, out_root = close_loop(rot, root, n, warm, blend)
+    assert out_rot.shape == (n, 2, 24, 3)
+    # frame 0 is (almost) the continuation of the last frame, frame `blend` the clip's own
+    np.testing.assert_allclose(out_root[blend:], root[warm + blend:warm + n])
+    w0 = 1.0 - (10 * (1 / 7) ** 3 - 15 * (1 / 7) ** 4 + 6 * (1 / 7) ** 5)
+    np.testing.assert_allclose(out_root[0], w0 * root[warm + n] + (1 - w0) * root[warm], rtol=1e-12)
+    with pytest.raises(ValueError):
+        close_loop(rot[:-1], root[:-1], n, warm, blend)
+
+
+def test_smooth_deviation_keeps_the_input_and_removes_spikes():
+    rng = np.random.default_rng(1)
+    t = np.arange(90) / 30.0
+    ref_rot = np.zeros((90, 1, 24, 3))
+    ref_rot[:, 0, 18, 1] = 0.6 * np.sin(2 * np.pi * 9.0 * t)        # fast motion of the input itself
+    ref_root = rng.normal(scale=0.01, size=(90, 1, 3))
+    # a constant deviation passes unchanged, the input's own 9 Hz motion too
+    rot = ref_rot.copy()
+    rot[:, 0, 5, 0] += 0.2
+    root = ref_root + [0.05, 0.0, 0.0]
+    out_rot, out_root = smooth_deviation(rot, root, ref_rot, ref_root, 3.0)
+    np.testing.assert_allclose(out_rot, rot, atol=1e-9)
+    np.testing.assert_allclose(out_root, root, atol=1e-12)
+    # a one-frame spike of the deviation is spread out
+    root2 = root.copy()
+    root2[40, 0, 1] += 0.06
+    out_rot, out_root = smooth_deviation(rot, root2, ref_rot, ref_root, 3.0)
+    assert abs(out_root[40, 0, 1] - root[40, 0, 1]) < 0.06 / 5
+    # circular for loops: the seam frames get the spike's tail from the other end
+    root3 = root.copy()
+    root3[0, 0, 1] += 0.06
+    _, wrapped = smooth_deviation(rot, root3, ref_rot, ref_root, 3.0, periodic=True)
+    assert wrapped[-1, 0, 1] - root[-1, 0, 1] > 1e-3
+    assert smooth_deviation(rot, root3, ref_rot, ref_root, 0.0)[1] is root3
+
+
+def test_planted_runs_wrap_in_periodic_masks():
+    mask = np.array([1, 1, 0, 0, 1, 1, 1, 0, 1], bool)
+    assert planted_runs(mask) == [(0, 2), (4, 7), (8, 9)]
+    assert planted_runs(mask, periodic=True) == [(4, 7), (8, 11)]
+    assert planted_runs(np.ones(5, bool), periodic=True) == [(0, 5)]
+    assert planted_runs(np.zeros(5, bool)) == []
+
+
+def test_pushed_character_keeps_its_planted_feet(bodies):
+    body = bodies[0]
+    n = 40
+    ref_rot = np.zeros((n, 1, 24, 3))
+    ref_root = np.tile([[0.0, 0.0, body.pelvis_height - 0.01]], (n, 1, 1))
+    # the output: the same pose, the body pushed 5 cm sideways over the clip: the feet slide
+    root = ref_root.copy()
+    root[:, 0, 0] += np.linspace(0.0, 0.05, n)
+    before = _joints(body, ref_rot[:, 0], root[:, 0])
+    out = lock_planted_feet(ref_rot, root, ref_rot, ref_root, body.rest_joints[None], 30.0)
+    after = _joints(body, out[:, 0], root[:, 0])
+    for ankle in (7, 8):
+        assert np.ptp(before[:, ankle, 0]) > 0.045
+        assert np.ptp(after[:, ankle, 0]) < 1e-3                        # held still
+        assert np.abs(after[:, ankle, 2] - before[:, ankle, 2]).max() < 1e-3
+    assert np.abs(after[:, 15] - before[:, 15]).max() < 1e-9            # the upper body is untouched
