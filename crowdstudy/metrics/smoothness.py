@@ -542,7 +542,9 @@ def smoothness(anim, reference=None, *, bodies: Sequence | None = None, cutoff_h
             planted-foot mask comes from it. None = from ``anim`` itself.
         bodies: optional body objects overriding ``load_body`` (shared with the reference).
         cutoff_hz: high-frequency cutoff, Hz (6).
-        planted_speed: reference horizontal foot speed below which a foot is planted, m/s (0.1).
+        planted_speed: reference horizontal foot speed below which a foot is planted, m/s
+            (0.02: a foot its animation holds still; the Baseline's locked feet move under
+            2 cm/s).
         planted_height: height above the foot joint's lowest height within which it is
             planted, metres (0.03).
     """

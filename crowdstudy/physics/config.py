@@ -101,6 +101,12 @@ class PhysicsConfig:
             -contact_activation to 0: a C2 penalty (``contact_assemble_kernel`` in
             :mod:`crowdstudy.physics.linear`), so contacts do not switch on and off from step
             to step (0: the plain (k/2) depth^2 on positive depths).
+        contact_release_distance: m; an inter-body contact lets go gradually of a limb
+            held farther than this from where its animation puts it relative to its
+            character's root (centres of mass), fully at ``contact_release_distance +
+            contact_release_width`` (``contact_assemble_kernel``): a limb pinned behind a
+            neighbour slides through instead of whipping back later.
+        contact_release_width: m, see ``contact_release_distance``; 0 = never let go.
         target_relative_self_contacts: ground and intra-body contacts push only with the
             depth beyond the animation's target pose's own (plus ``contact_activation``): a
             clip whose own capsules interpenetrate, or whose feet dip into the floor, is not
@@ -130,6 +136,13 @@ class PhysicsConfig:
             output's DEVIATION from its input (joint rotations relative to the input's and
             the root offset; :func:`crowdstudy.physics.finish.smooth_deviation`); 0 = off.
             Measured overlaps and tracking are of the filtered output.
+        output_smoothing_root: s, the same for the root's offset (whole-body pushes: the
+            pelvis acceleration), which may be smoothed more than the joints (limbs clearing
+            neighbours).
+        output_hold: before the low-pass each deviation component is held at its largest
+            magnitude within +-``output_hold`` kernel widths (a dilation), so the low-pass
+            does not shave the separation a contact needed: the correction eases in a little
+            before a contact and out after it (0 = a plain low-pass).
         foot_lock: hold the output's ankles still while the input's are planted (two-bone
             leg IK, :func:`crowdstudy.physics.finish.lock_planted_feet`).
         foot_lock_speed: m/s, the input's ankle counts as planted below this speed.
@@ -168,6 +181,8 @@ class PhysicsConfig:
     contact_margin: float = 0.005
     speculative_distance: float = 0.02
     contact_activation: float = 0.005
+    contact_release_distance: float = 0.15
+    contact_release_width: float = 0.15
     target_relative_self_contacts: bool = True
     feedforward: bool = True
     damping_reference_dt: float = 1.0 / 60.0
@@ -176,7 +191,9 @@ class PhysicsConfig:
     environment_spacing: float = 0.04
     loop_warmup: float = 1.0
     loop_blend: float = 0.5
-    output_smoothing: float = 0.1
+    output_smoothing: float = 0.08
+    output_smoothing_root: float = 0.13
+    output_hold: float = 1.0
     foot_lock: bool = True
     foot_lock_speed: float = 0.02
     settle_time: float = 0.5

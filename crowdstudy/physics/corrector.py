@@ -257,7 +257,8 @@ def correct(anim, config: PhysicsConfig | None = None, *, device: str | None = N
     if looped:
         rot, root = close_loop(rot, root, n_out, warmup, blend)
     rot, root = smooth_deviation(rot, root, anim.joint_rotations, anim.root_translation,
-                                 config.output_smoothing * anim.fps, periodic=looped)
+                                 config.output_smoothing * anim.fps, periodic=looped,
+                                 root_sigma_frames=config.output_smoothing_root * anim.fps, hold=config.output_hold)
     if config.foot_lock:
         rest = np.stack([np.asarray(b.rest_joints, np.float64) for b in bodies])
         rot = lock_planted_feet(rot, root, anim.joint_rotations, anim.root_translation, rest, anim.fps,

@@ -7,14 +7,17 @@ of every character. Three steps turn it into the "Ours" animation, each on plain
   was simulated past one period; the first frames of the output are cross-faded from the
   continuation of the last frame, so frame T-1 -> frame 0 continues the motion.
 * :func:`smooth_deviation`: a zero-phase Gaussian low-pass (``PhysicsConfig.output_smoothing``
-  seconds) of the DEVIATION from the input animation (joint rotations relative to the
-  input's, ``R = R^ exp([delta]x)``, and the root offset), never of the animation itself,
-  so the input's own motion keeps every detail; circular for periodic clips. The residual
-  overlap is measured after it (``crowdstudy bench physics --bars``).
-* :func:`lock_planted_feet`: while the input's ankle is planted, the output's ankle is held
-  at one place (its mean over the stance) by two-bone IK of the leg, the offset faded in and
-  out over a few frames of the swing: a pushed character keeps its feet where they stand
-  instead of sliding them.
+  seconds, ``output_smoothing_root`` for the root) of the DEVIATION from the input
+  animation (joint rotations relative to the input's, ``R = R^ exp([delta]x)``, and the
+  root offset), never of the animation itself, so the input's own motion keeps every
+  detail; each deviation is first held at its peak over +-``output_hold`` kernel widths, so
+  the separation a contact needed is kept while the correction eases in and out around it;
+  circular for periodic clips. The residual overlap is measured after this stage
+  (``crowdstudy bench physics --bars``).
+* :func:`lock_planted_feet`: while the input's foot is planted, the output's ankle (or, in a
+  heel rise, the ball of the foot) is held at one place by two-bone IK of the leg, the
+  offset faded in and out over the two swing frames nearest the contact: a pushed
+  character keeps its feet where they stand instead of sliding them.
 """
 
 from __future__ import annotations
@@ -30,6 +33,9 @@ from crowdstudy.motion.quaternions import quat_blend, quat_conjugate, quat_multi
 
 __all__ = ["close_loop", "smooth_deviation", "lock_planted_feet", "planted_runs"]
 
+#: a held leg's reach is compressed smoothly beyond this fraction of the leg's length
+#: (:func:`_soft_reach`: no knee pops near full extension)
+SOFT_REACH = 0.97
 LEGS = tuple(tuple(JOINT_INDEX[f"{side}_{name}"] for name in ("hip", "knee", "ankle")) for side in ("left", "right"))
 
 
@@ -65,8 +71,20 @@ def close_loop(rot: np.ndarray, root: np.ndarray, n_frames: int, warmup: int, bl
     return out_rot, out_root
 
 
+def _hold_peaks(x: np.ndarray, half_width: int, mode: str) -> np.ndarray:
+    """Each sample replaced by the sample of largest magnitude (with its sign) within
+    +-``half_width`` frames along axis 0: a morphological dilation of |x| that keeps signs."""
+    from scipy.ndimage import maximum_filter1d, minimum_filter1d
+
+    size = 2 * half_width + 1
+    hi = maximum_filter1d(x, size, axis=0, mode=mode)
+    lo = minimum_filter1d(x, size, axis=0, mode=mode)
+    return np.where(np.abs(hi) >= np.abs(lo), hi, lo)
+
+
 def smooth_deviation(rot: np.ndarray, root: np.ndarray, ref_rot: np.ndarray, ref_root: np.ndarray,
-                     sigma_frames: float, *, periodic: bool = False):
+                     sigma_frames: float, *, periodic: bool = False, root_sigma_frames: float | None = None,
+                     hold: float = 0.0):
     """Low-pass the deviation of (rot, root) from (ref_rot, ref_root) along time.
 
     Args:
@@ -74,22 +92,36 @@ def smooth_deviation(rot: np.ndarray, root: np.ndarray, ref_rot: np.ndarray, ref
         root, ref_root: (T, N, 3) m.
         sigma_frames: standard deviation of the Gaussian kernel, frames (0: unchanged).
         periodic: the clip loops (frame T follows frame T-1): filter circularly.
+        root_sigma_frames: the root offset's own kernel width (frames; None = sigma_frames).
+        hold: before the low-pass, each deviation component is held at its largest
+            magnitude within +-``hold * sigma`` frames (:func:`_hold_peaks`), so the low-pass
+            does not shave the deviation a contact needed: the correction starts a little
+            before the contact and ends a little after it instead of being flattened.
 
     Returns:
         ``(rot, root)`` with ``R = R^ exp([g * delta]x)`` and ``root = root^ + g * (root -
         root^)``, g the Gaussian and delta = log(R^^T R) per joint.
     """
-    if sigma_frames < 0:
-        raise InvalidInputError(f"sigma_frames: expected >= 0, got {sigma_frames!r}")
-    if sigma_frames == 0 or rot.shape[0] < 2:
+    root_sigma = sigma_frames if root_sigma_frames is None else root_sigma_frames
+    if sigma_frames < 0 or root_sigma < 0:
+        raise InvalidInputError(f"sigma_frames, root_sigma_frames: expected >= 0, got {sigma_frames!r}, "
+                                f"{root_sigma_frames!r}")
+    if (sigma_frames == 0 and root_sigma == 0) or rot.shape[0] < 2:
         return rot, root
     from scipy.ndimage import gaussian_filter1d
 
     mode = "wrap" if periodic else "nearest"
     q_ref = axis_angle_to_quaternion(ref_rot)
     delta = quaternion_to_axis_angle(quat_multiply(quat_conjugate(q_ref), axis_angle_to_quaternion(rot)))
-    delta = gaussian_filter1d(delta, sigma_frames, axis=0, mode=mode)
-    offset = gaussian_filter1d(root - ref_root, sigma_frames, axis=0, mode=mode)
+    if sigma_frames > 0:
+        if hold > 0:
+            delta = _hold_peaks(delta, int(round(hold * sigma_frames)), mode)
+        delta = gaussian_filter1d(delta, sigma_frames, axis=0, mode=mode)
+    offset = root - ref_root
+    if root_sigma > 0:
+        if hold > 0:
+            offset = _hold_peaks(offset, int(round(hold * root_sigma)), mode)
+        offset = gaussian_filter1d(offset, root_sigma, axis=0, mode=mode)
     out = quaternion_to_axis_angle(quat_multiply(q_ref, axis_angle_to_quaternion(delta)))
     return out, ref_root + offset
 
@@ -110,61 +142,132 @@ def planted_runs(mask: np.ndarray, *, periodic: bool = False) -> list[tuple[int,
     return [(int(a + shift), int(b + shift)) for a, b in zip(starts, stops)]
 
 
-def _ankle_offsets(ankle: np.ndarray, ref_ankle: np.ndarray, fps: float, planted_speed: float,
-                   planted_height: float, fade: int, periodic: bool) -> np.ndarray:
-    """(T, 2) horizontal offsets that hold one ankle at its mean position over each stance of
-    the reference (speed below ``planted_speed`` m/s, height within ``planted_height`` m of
-    its lowest), faded out over ``fade`` frames on both sides of the stance, and (T,) the
-    hold's weight (1 in the stance)."""
+def _planted_frames(ref_joint: np.ndarray, fps: float, planted_speed: float, planted_height: float,
+                    periodic: bool) -> np.ndarray:
+    """(T,) frames at which a reference joint (T, 3) is planted.
+
+    A STEP t -> t + 1 is planted when slow (below ``planted_speed`` m/s horizontally) and
+    low (mean height of its two frames within ``planted_height`` m of the joint's lowest),
+    as :func:`crowdstudy.metrics.smoothness.foot_slide` counts steps; a frame is planted
+    when a step on either side of it is, so no planted step has a free end."""
+    nxt = np.roll(ref_joint, -1, axis=0)
+    speed = np.linalg.norm(nxt[:, :2] - ref_joint[:, :2], axis=1) * fps
+    height = 0.5 * (nxt[:, 2] + ref_joint[:, 2])
+    step = (speed < planted_speed) & (height <= ref_joint[:, 2].min() + planted_height)
+    if not periodic:
+        step[-1] = False                       # no step from the last frame to the first
+    return step | np.roll(step, 1)
+
+
+def _foot_hold(ankle: np.ndarray, ref_ankle: np.ndarray, ankle_planted: np.ndarray, toe_planted: np.ndarray,
+               toe_arm: np.ndarray, fade: int, periodic: bool):
+    """Ankle targets that hold one foot of one character on the floor.
+
+    Args:
+        ankle: (T, 3) the output's ankle, m.
+        ref_ankle: (T, 3) the reference's ankle, m.
+        ankle_planted, toe_planted: (T,) the reference's ankle / ball of the foot planted.
+        toe_arm: (T, 3) the reference foot's world orientation applied to the rest offset
+            ankle -> ball, m (where the ball is, seen from the ankle, in the reference).
+        fade: frames over which a hold fades in and out on both sides of a contact (never
+            into another contact).
+
+    One contact is a run of frames where the ankle or the ball is planted. Its ankle
+    frames hold the ankle where the output's ankle is farthest from the reference's over
+    them (the placement the correction needed most, e.g. clear of a neighbour's foot); its
+    heel-rise
+    frames (the ball planted, the ankle not) hold the ball where the held ankle put it (at
+    the nearest ankle frame) and place the ankle from it with the reference's foot
+    orientation, so the foot rolls over the ball; a contact with no ankle frame holds the
+    ball likewise where the output's ankle is farthest from the reference's. Outside contacts the pulls fade (quintic smoothstep), averaged
+    where two fades meet.
+
+    Returns:
+        ``(pull (T, 2) m, weight (T,))``: horizontal offsets to add to the output's ankle,
+        and the hold's weight (1 in a contact).
+    """
     n = len(ankle)
-    vel = np.gradient(ref_ankle[:, :2], axis=0) * fps
-    if periodic:
-        vel = 0.5 * (np.roll(ref_ankle[:, :2], -1, 0) - np.roll(ref_ankle[:, :2], 1, 0)) * fps
-    low = ref_ankle[:, 2] <= ref_ankle[:, 2].min() + planted_height
-    mask = (np.linalg.norm(vel, axis=1) < planted_speed) & low
-    offset = np.zeros((n, 2))
-    weight = np.zeros(n)
-    for start, stop in planted_runs(mask, periodic=periodic):
+    pull = np.zeros((n, 2))
+    wsum = np.zeros(n)
+    fades = 1.0 - smoothstep5(np.arange(1, fade + 1) / (fade + 1.0))
+    contact = ankle_planted | toe_planted
+    for start, stop in planted_runs(contact, periodic=periodic):
         idx = np.arange(start, stop) % n
-        lock = ankle[idx, :2].mean(axis=0)
-        offset[idx] = lock - ankle[idx, :2]
-        weight[idx] = 1.0
+        flat = ankle_planted[idx]
+        goal = np.empty((len(idx), 2))
+        if flat.any():
+            held = idx[flat]
+            far = held[np.argmax(np.linalg.norm(ankle[held, :2] - ref_ankle[held, :2], axis=1))]
+            lock = ankle[far, :2]
+            goal[flat] = lock
+            flat_at = np.flatnonzero(flat)
+            for k in np.flatnonzero(~flat):                      # heel rise (or before a flat phase)
+                near = idx[flat_at[np.argmin(np.abs(flat_at - k))]]
+                ball = lock + toe_arm[near, :2]
+                goal[k] = ball - toe_arm[idx[k], :2]
+        else:
+            far = idx[np.argmax(np.linalg.norm(ankle[idx, :2] - ref_ankle[idx, :2], axis=1))]
+            ball = ankle[far, :2] + toe_arm[far, :2]
+            goal[:] = ball - toe_arm[idx, :2]
+        pull[idx] += goal - ankle[idx, :2]
+        wsum[idx] += 1.0
         if stop - start >= n:
             continue
-        for side, edge in ((-1, start), (1, stop - 1)):
-            for k in range(1, fade + 1):
-                t = edge + side * k
-                if not periodic and not 0 <= t < n:
-                    break
-                t %= n
-                w = 1.0 - smoothstep5(np.array(k / (fade + 1.0)))
-                if w > weight[t]:
-                    weight[t] = float(w)
-                    offset[t] = w * (lock - ankle[t, :2])
-    return offset, weight
+        for side, edge, g in ((-1, start, goal[0]), (1, stop - 1, goal[-1])):
+            t = edge + side * np.arange(1, fade + 1)
+            keep = slice(None) if periodic else (t >= 0) & (t < n)
+            t, w = t[keep] % n, fades[keep]
+            free = ~contact[t]                 # a fade never reaches into another contact
+            t, w = t[free], w[free]
+            np.add.at(pull, t, w[:, None] * (g - ankle[t, :2]))
+            np.add.at(wsum, t, w)
+    return pull / np.maximum(wsum, 1.0)[:, None], np.minimum(wsum, 1.0)
+
+
+def _soft_reach(hip: np.ndarray, ankle: np.ndarray, target: np.ndarray, length: np.ndarray) -> np.ndarray:
+    """Ankle goals (M, 3) for the leg IK: ``target`` with its hip distance changed only by
+    the soft-clamped change from the output's own ankle.
+
+    Near full extension a small change of the ankle's distance from the hip swings the knee
+    far (the pops of a hard-clamped two-bone IK). Distances beyond ``SOFT_REACH * length``
+    are compressed exponentially towards ``length``, s(d), and the goal's distance is
+    d0 + s(d) - s(d0) (d0 the output's own ankle distance, d the target's): a leg whose
+    ankle is not moved keeps its pose exactly, a straight standing leg stays straight.
+    """
+    lo, hi = SOFT_REACH * length, 0.999 * length
+
+    def soft(d):
+        over = np.maximum(d - lo, 0.0)
+        return np.where(d > lo, lo + (hi - lo) * (1.0 - np.exp(-over / (hi - lo))), d)
+
+    d0 = np.linalg.norm(ankle - hip, axis=-1)
+    v = target - hip
+    d = np.linalg.norm(v, axis=-1)
+    new = np.maximum(d0 + soft(d) - soft(d0), 1e-6)
+    return hip + v * (new / np.maximum(d, 1e-9))[:, None]
 
 
 def lock_planted_feet(rot: np.ndarray, root: np.ndarray, ref_rot: np.ndarray, ref_root: np.ndarray,
                       rest_joints: np.ndarray, fps: float, *, planted_speed: float = 0.02,
-                      planted_height: float = 0.03, fade_frames: int = 4, periodic: bool = False) -> np.ndarray:
+                      planted_height: float = 0.03, fade_frames: int = 2, periodic: bool = False) -> np.ndarray:
     """Hold the output's feet still while the reference's are planted (two-bone leg IK).
 
-    The ankle is held while the reference's ankle is planted; while only the ball of the foot
-    is (heel rise), the ankle goes where the held ball and the reference's foot orientation
-    put it.
+    While the reference's ankle is planted the output's ankle is held still; while only the
+    ball of the foot is (heel rise), the ball is held and the foot rolls over it as in the
+    reference (see ``_foot_hold``); a held foot takes the reference's world orientation.
 
     Args:
         rot, ref_rot: (T, N, 24, 3) axis-angle rad; root, ref_root: (T, N, 3) m.
         rest_joints: (N, 24, 3) m, each character's rest joints.
         fps: frame rate, Hz.
-        planted_speed: m/s, the reference's ankle counts as planted below this horizontal
-            speed (and within ``planted_height`` m of its lowest height).
-        fade_frames: frames of the swing over which the hold fades in and out.
-        periodic: the clip loops (stances may wrap around the seam).
+        planted_speed: m/s, a reference joint (ankle, ball) counts as planted below this
+            horizontal speed (and within ``planted_height`` m of its lowest height).
+        fade_frames: frames of the swing over which a hold fades in and out.
+        periodic: the clip loops (contacts may wrap around the seam).
 
     Returns:
-        (T, N, 24, 3) joint rotations with new hip, knee and ankle rotations (the foot keeps
-        its global orientation); the ankle's height is the output's own.
+        (T, N, 24, 3) joint rotations with new hip, knee and ankle rotations; the ankle's
+        height is the output's own.
     """
     rest = np.asarray(rest_joints, np.float64)
     glob, pos = forward_kinematics(rest[None], rot, root, parents=PARENTS)
@@ -173,25 +276,15 @@ def lock_planted_feet(rot: np.ndarray, root: np.ndarray, ref_rot: np.ndarray, re
     n_chars = rot.shape[1]
     for hip, knee, ankle in LEGS:
         toe = ankle + 3                                  # the ball of the foot (left_foot / right_foot)
+        toe_arm = np.einsum("tnab,nb->tna", ref_glob[:, :, ankle], rest[:, toe] - rest[:, ankle])
         target = pos[:, :, ankle].copy()
-        toe_target = pos[:, :, toe].copy()
         weight = np.zeros(target.shape[:2])
-        toe_weight = np.zeros(target.shape[:2])
         for i in range(n_chars):
-            offset, weight[:, i] = _ankle_offsets(pos[:, i, ankle], ref_pos[:, i, ankle], fps, planted_speed,
-                                                  planted_height, fade_frames, periodic)
-            target[:, i, :2] += offset
-            offset, toe_weight[:, i] = _ankle_offsets(pos[:, i, toe], ref_pos[:, i, toe], fps, planted_speed,
-                                                      planted_height, fade_frames, periodic)
-            toe_target[:, i, :2] += offset
-        # heel rise (the ball planted, the ankle not): put the ankle where the held ball and the
-        # input's foot orientation want it
-        toe_only = toe_weight > weight
-        from_toe = toe_target - np.einsum("tnab,nb->tna", ref_glob[:, :, ankle], rest[:, toe] - rest[:, ankle])
-        blend_toe = pos[:, :, ankle] + toe_weight[..., None] * (from_toe - pos[:, :, ankle])
-        blend_toe[..., 2] = pos[:, :, ankle, 2]
-        target = np.where(toe_only[..., None], blend_toe, target)
-        weight = np.maximum(weight, toe_weight)
+            flat = _planted_frames(ref_pos[:, i, ankle], fps, planted_speed, planted_height, periodic)
+            ball = _planted_frames(ref_pos[:, i, toe], fps, planted_speed, planted_height, periodic)
+            pull, weight[:, i] = _foot_hold(pos[:, i, ankle], ref_pos[:, i, ankle], flat, ball, toe_arm[:, i],
+                                            fade_frames, periodic)
+            target[:, i, :2] += pull
         moved = weight > 0                                                          # (T, N)
         if not moved.any():
             continue
@@ -199,16 +292,19 @@ def lock_planted_feet(rot: np.ndarray, root: np.ndarray, ref_rot: np.ndarray, re
         pole = (2.0 * pos[t_idx, c_idx, knee] - pos[t_idx, c_idx, hip] - pos[t_idx, c_idx, ankle]
                 + 0.02 * glob[t_idx, c_idx, hip][:, :, 1])
         pelvis = glob[t_idx, c_idx, 0]
-        loc_a, loc_b, glob_b = two_bone_ik(pos[t_idx, c_idx, hip], target[t_idx, c_idx], pole, pelvis,
+        hip_pos = pos[t_idx, c_idx, hip]
+        goal = _soft_reach(hip_pos, pos[t_idx, c_idx, ankle], target[t_idx, c_idx],
+                           np.linalg.norm(rest[c_idx, knee] - rest[c_idx, hip], axis=-1)
+                           + np.linalg.norm(rest[c_idx, ankle] - rest[c_idx, knee], axis=-1))
+        loc_a, loc_b, glob_b = two_bone_ik(hip_pos, goal, pole, pelvis,
                                            rest[c_idx, hip], rest[c_idx, knee], rest[c_idx, ankle],
                                            np.array([0.0, 1.0, 0.0]))
         out[t_idx, c_idx, hip] = matrix_to_axis_angle(loc_a)
         out[t_idx, c_idx, knee] = matrix_to_axis_angle(loc_b)
-        # the planted foot keeps the input's world orientation (it does not turn on the floor)
+        # the held foot takes the reference's world orientation (it does not turn on the floor)
         w = weight[t_idx, c_idx]
         foot = quat_blend(matrix_to_quaternion(glob[t_idx, c_idx, ankle]),
                           matrix_to_quaternion(ref_glob[t_idx, c_idx, ankle]), w)
         ankle_local = np.swapaxes(glob_b, -1, -2) @ quaternion_to_matrix(foot)
         out[t_idx, c_idx, ankle] = matrix_to_axis_angle(ankle_local)
     return out
-

@@ -36,7 +36,9 @@ def solver_kernels():
                                 c_n: wp.array(dtype=wp.vec3), c_depth: wp.array(dtype=float),
                                 c_la: wp.array(dtype=wp.vec3), c_lb: wp.array(dtype=wp.vec3),
                                 c_k: wp.array(dtype=float), c_kind: wp.array(dtype=wp.int32), friction: float,
-                                activation: float, v: wp.array(dtype=wp.vec3), w: wp.array(dtype=wp.vec3), h: float,
+                                activation: float, release0: float, release_width: float, n_joints: int,
+                                x: wp.array(dtype=wp.vec3), t_x: wp.array(dtype=wp.vec3),
+                                v: wp.array(dtype=wp.vec3), w: wp.array(dtype=wp.vec3), h: float,
                                 grad_t: wp.array(dtype=wp.vec3), grad_r: wp.array(dtype=wp.vec3),
                                 hess_a: wp.array(dtype=wp.mat33), hess_b: wp.array(dtype=wp.mat33),
                                 hess_c: wp.array(dtype=wp.mat33),
@@ -53,6 +55,14 @@ def solver_kernels():
         chatter. With e > 0 (m) the penalty is C2 in d: phi = k (d + e)^3 / (6 e) for
         -e < d < 0 (the stiffness ramps from 0 to k over the last e of approach), and
         phi = k/2 d^2 + k e/2 d + k e^2/6 for d >= 0 (force k (d + e/2), stiffness k).
+
+        Release (inter-body contacts, ``release_width`` > 0): a limb held farther than
+        ``release0`` m from where its animation puts it RELATIVE to its character's root
+        (dev = |(x - x^) - (x_root - x^_root)|, centres of mass) lets go of the contact
+        gradually: phi is scaled by clamp(1 - (dev - release0) / release_width, 0, 1) of the
+        farther of the two bodies, so a hand caught behind a neighbour while its animation
+        swings on slides through instead of staying pinned and whipping back; a character
+        pushed as a whole keeps its contacts.
 
         Ground contacts (kind 0) also get viscous friction: (c/(2h)) |P_t dp|^2, dp the
         contact point's displacement over the step and P_t the tangent projector, i.e. a
@@ -72,7 +82,13 @@ def solver_kernels():
         if b >= 0:
             depth += h * (wp.dot(bt, v[b]) + wp.dot(br, w[b]))
         k_c = c_k[i]
-        if depth <= -activation or (activation <= 0.0 and depth <= 0.0):
+        if release_width > 0.0 and c_kind[i] == 2 and b >= 0:
+            ra = (a / n_joints) * n_joints
+            rb = (b / n_joints) * n_joints
+            dev = wp.max(wp.length((x[a] - t_x[a]) - (x[ra] - t_x[ra])),
+                         wp.length((x[b] - t_x[b]) - (x[rb] - t_x[rb])))
+            k_c = k_c * wp.clamp(1.0 - (dev - release0) / release_width, 0.0, 1.0)
+        if k_c <= 0.0 or depth <= -activation or (activation <= 0.0 and depth <= 0.0):
             k_eff[i] = 0.0
             return
         f = k_c * depth

@@ -173,7 +173,10 @@ class Solver:
             wp.launch(ks.contact_assemble_kernel, contacts.capacity,
                       [contacts.count, contacts.capacity, contacts.body_a, contacts.body_b, contacts.normal,
                        contacts.depth, contacts.lever_a, contacts.lever_b, contacts.stiffness, contacts.kind,
-                       float(cfg.ground_friction), float(cfg.contact_activation), state_in.v,
+                       float(cfg.ground_friction), float(cfg.contact_activation),
+                       float(cfg.contact_release_distance), float(cfg.contact_release_width), m.n_joints,
+                       state_in.x, control.t_x,
+                       state_in.v,
                        state_in.w, float(dt), self.grad_t, self.grad_r, self.hess_a, self.hess_b, self.hess_c,
                        self.u_at, self.u_ar, self.u_bt, self.u_br, self.k_eff], device=dev)
 
