@@ -103,6 +103,17 @@ def test_corridor_baseline_has_dissolve_frames(design):
     np.testing.assert_allclose(none.root_translation[:n_video - 20], anim.root_translation[:n_video - 20], atol=1e-9)
 
 
+def test_dissolve_clips_have_no_joint_space_seam(design):
+    from crowdstudy.metrics import smoothness
+
+    anim = build_baseline(design, "walking", "D1", duration=4.0)
+    assert np.isnan(smoothness(anim).seam_ratio)          # measured in pixels instead
+    assert smoothness(anim).as_dict()["seam_ratio"] is None
+    # without the dissolve the joint-space seam is measured, and the crowd jumps
+    none = build_baseline(design, "walking", "D1", duration=4.0, dissolve=0)
+    assert smoothness(none).seam_ratio > 10
+
+
 def _walkers(n_frames: int, d: int, fps: float = 30.0):
     anim = crowd_animation(grid_positions(6, extent=(4.5, 2.0), margin=0.5), n_frames=n_frames, fps=fps,
                            scenario="corridor", period=4.5, velocity=(1.2, 0.0))

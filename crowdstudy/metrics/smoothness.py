@@ -33,6 +33,8 @@ import numpy as np
 
 from crowdstudy.body.skeleton import JOINT_INDEX
 from crowdstudy.errors import InvalidInputError
+from crowdstudy.metrics.overlap import resolve_bodies
+from crowdstudy.metrics.tracking import check_reference, joint_positions
 
 __all__ = ["FOOT_JOINTS", "SLIDE_THRESHOLD_M_S", "PeakSpeed", "FootSlide", "SeamJump", "SmoothnessResult",
            "joint_jerk", "high_frequency_share", "peak_joint_speed", "pelvis_acceleration_p99", "foot_slide",
@@ -344,8 +346,6 @@ def seam_jump(pos: Any, *, periodic_length: float | None = None) -> SeamJump:
 # --------------------------------------------------------------------- on animations
 def _joint_positions(anim, body_objs: Sequence) -> np.ndarray:
     """(T, N, J, 3) world joint positions of every frame, computed in frame chunks."""
-    from crowdstudy.metrics.tracking import joint_positions
-
     out = np.empty((anim.n_frames, anim.n_characters, anim.n_joints, 3))
     for c0 in range(0, anim.n_frames, _FRAME_CHUNK):
         chunk = np.arange(c0, min(c0 + _FRAME_CHUNK, anim.n_frames))
@@ -365,9 +365,6 @@ def mean_jerk(anim, *, bodies: Sequence | None = None) -> float:
     frames, characters and joints (:func:`joint_jerk` on the animation's forward
     kinematics, minimum image along x in periodic scenes). Needs at least 4 frames.
     """
-    from crowdstudy.metrics.overlap import resolve_bodies
-    from crowdstudy.metrics.tracking import joint_positions
-
     _check_animation(anim, "anim")
     if anim.n_frames < 4:
         raise InvalidInputError(f"anim: mean_jerk needs at least 4 frames, got {anim.n_frames}")
@@ -534,7 +531,9 @@ def smoothness(anim, reference=None, *, bodies: Sequence | None = None, cutoff_h
 
     Joint positions come from forward kinematics with each character's rest joints; the
     pelvis acceleration from ``root_translation``; periodic scenes use the minimum image
-    along x.
+    along x. A corridor clip that loops by a cross-dissolve (``meta["loop"]["mode"] ==
+    "dissolve"``) has no joint-space seam (NaN; its seam is measured in pixels by
+    :mod:`crowdstudy.render.seam`).
 
     Args:
         anim: the animation to measure (e.g. "Ours"); at least 4 frames.
@@ -548,8 +547,6 @@ def smoothness(anim, reference=None, *, bodies: Sequence | None = None, cutoff_h
         planted_height: height above the foot joint's lowest height within which it is
             planted, metres (0.03).
     """
-    from crowdstudy.metrics.overlap import resolve_bodies
-
     _check_animation(anim, "anim")
     if anim.n_frames < 4:
         raise InvalidInputError(f"anim: smoothness needs at least 4 frames, got {anim.n_frames}")
@@ -557,15 +554,21 @@ def smoothness(anim, reference=None, *, bodies: Sequence | None = None, cutoff_h
     ref_pos = None
     if reference is not None:
         _check_animation(reference, "reference")
-        if reference.root_translation.shape != anim.root_translation.shape or reference.n_joints != anim.n_joints:
-            raise InvalidInputError(
-                f"reference: expected the same (frames, characters, joints) as anim "
-                f"{anim.root_translation.shape[:2] + (anim.n_joints,)}, got "
-                f"{reference.root_translation.shape[:2] + (reference.n_joints,)}")
+        check_reference(anim, reference)
         ref_pos = _joint_positions(reference, body_objs)
-    return smoothness_from_positions(_joint_positions(anim, body_objs), anim.root_translation, anim.fps,
-                                     reference_pos=ref_pos, periodic_length=anim.periodic_length,
-                                     cutoff_hz=cutoff_hz, planted_speed=planted_speed, planted_height=planted_height)
+    pos = _joint_positions(anim, body_objs)
+    result = smoothness_from_positions(pos, anim.root_translation, anim.fps,
+                                       reference_pos=ref_pos, periodic_length=anim.periodic_length,
+                                       cutoff_hz=cutoff_hz, planted_speed=planted_speed, planted_height=planted_height)
+    if (anim.meta.get("loop") or {}).get("mode") == "dissolve":
+        # the video loops by a cross-dissolve of frames [T, T + D) into its first frames
+        # (crowdstudy.render.video): a fading ghost, not a joint trajectory, so its seam is
+        # measured in pixels (crowdstudy.render.seam), not here
+        nan = float("nan")
+        result = dataclasses.replace(result, seam_jump_m=nan, seam_frame_step_m=nan, seam_ratio=nan,
+                                     seam_ratio_per_character=np.full(anim.n_characters, nan),
+                                     seam_ratio_max_character=nan)
+    return result
 
 
 def smoothness_ratios(result: SmoothnessResult, reference_result: SmoothnessResult) -> dict:

@@ -21,7 +21,7 @@ from crowdstudy.body.capsules import segment_distance
 from crowdstudy.errors import InvalidInputError
 from crowdstudy.metrics.overlap import capsules_world, frame_indices, resolve_bodies
 
-__all__ = ["joint_positions", "tracking_error", "intra_penetration", "IntraPenetrationResult",
+__all__ = ["joint_positions", "check_reference", "tracking_error", "intra_penetration", "IntraPenetrationResult",
            "intra_pairs"]
 
 _FRAME_CHUNK = 64
@@ -46,6 +46,15 @@ def joint_positions(anim, *, bodies: Sequence | None = None, frames: Any = None)
     return pos
 
 
+def check_reference(anim, reference) -> None:
+    """Raise unless ``reference`` has the same (frames, characters, joints) as ``anim``."""
+    if reference.root_translation.shape != anim.root_translation.shape or reference.n_joints != anim.n_joints:
+        raise InvalidInputError(
+            f"reference: expected the same (frames, characters, joints) as anim "
+            f"{anim.root_translation.shape[:2] + (anim.n_joints,)}, got "
+            f"{reference.root_translation.shape[:2] + (reference.n_joints,)}")
+
+
 def tracking_error(anim, reference, *, bodies: Sequence | None = None) -> float:
     """Mean joint-position deviation of ``anim`` from ``reference`` (its input), cm.
 
@@ -60,11 +69,7 @@ def tracking_error(anim, reference, *, bodies: Sequence | None = None) -> float:
     for name, value in (("anim", anim), ("reference", reference)):
         if not hasattr(value, "joint_rotations"):
             raise TypeError(f"{name}: expected a CrowdAnimation, got {type(value).__name__}")
-    if reference.root_translation.shape != anim.root_translation.shape or reference.n_joints != anim.n_joints:
-        raise InvalidInputError(
-            f"reference: expected the same (frames, characters, joints) as anim "
-            f"{anim.root_translation.shape[:2] + (anim.n_joints,)}, got "
-            f"{reference.root_translation.shape[:2] + (reference.n_joints,)}")
+    check_reference(anim, reference)
     body_objs = resolve_bodies(anim, bodies)
     total = 0.0
     count = 0

@@ -29,7 +29,7 @@ def parse_vector(text: str, name: str):
 def save_png(image, path: Path) -> Path:
     """Write an (H, W, 3) uint8 image as PNG."""
     from PIL import Image
-    from crowdstudy.render.video import check_output_path
+    from crowdstudy.paths import check_output_path
     check_output_path(path)
     Image.fromarray(image).save(path)
     return path

@@ -18,6 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from crowdstudy.errors import InvalidInputError
+from crowdstudy.render.video import find_ffmpeg, probe_video
 
 __all__ = ["decode_video", "seam_change", "measure_seam"]
 
@@ -25,8 +26,6 @@ __all__ = ["decode_video", "seam_change", "measure_seam"]
 def decode_video(path: str | Path, *, width: int | None = None, height: int | None = None) -> np.ndarray:
     """(F, H, W, 3) uint8 frames of a video, top row first; scaled to ``width`` x ``height``
     when given (area filter; give both, or one and -2 is used for the other)."""
-    from crowdstudy.render.video import find_ffmpeg, probe_video
-
     path = Path(path)
     if not path.is_file():
         raise InvalidInputError(f"path: video {str(path)!r} does not exist")

@@ -286,7 +286,7 @@ def build_stimuli(design, out_dir, *, preset: str = "full", scheduler: str | Non
         The manifest dict (also written to ``out_dir/manifest.json`` and ``.csv``).
     """
     from crowdstudy.design import StudyDesign, load_design
-    from crowdstudy.render.video import check_output_path
+    from crowdstudy.paths import check_output_path
 
     if not isinstance(design, StudyDesign):
         design = load_design(design)

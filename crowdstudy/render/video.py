@@ -30,8 +30,9 @@ from pathlib import Path
 import numpy as np
 
 from crowdstudy.errors import InvalidInputError, MissingDependencyError
+from crowdstudy.paths import check_output_path
 
-__all__ = ["find_ffmpeg", "VideoWriter", "render_video", "sha256_file", "check_output_path", "probe_video",
+__all__ = ["find_ffmpeg", "VideoWriter", "render_video", "sha256_file", "probe_video",
            "FramePlan", "blend_frames", "video_frame_count"]
 
 
@@ -54,10 +55,6 @@ def sha256_file(path: str | Path) -> str:
         for block in iter(lambda: fh.read(1 << 20), b""):
             h.update(block)
     return h.hexdigest()
-
-
-# check_output_path lives in crowdstudy.paths (shared with the physics CLI); re-exported here
-from crowdstudy.paths import check_output_path  # noqa: E402
 
 
 class VideoWriter:
