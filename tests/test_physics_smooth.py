@@ -131,7 +131,7 @@ def test_feedforward_reproduces_an_animation_without_contacts(bodies):
     assert worst[False] > 0.01             # the plain prediction lags and sags
 
 
-def _release_curve(dt: float):
+def _release_curve(dt: float, **config):
     """Distance (m) of a body displaced 0.1 m from its (still) target, released, over 0.4 s."""
     from crowdstudy.body.shapes import sample_bodies
     from crowdstudy.physics.corrector import load_bodies
@@ -139,7 +139,7 @@ def _release_curve(dt: float):
     body = load_bodies(sample_bodies(1, 3))
     corr = CrowdCorrector(body, device="cpu", fps=30.0, config=PhysicsConfig(dt=dt, feedforward=True,
                                                                               foot_anchor_stiffness=0.0,
-                                                                              ground_stiffness=0.0))
+                                                                              ground_stiffness=0.0, **config))
     rot = np.zeros((1, 24, 3))
     root = np.array([[0.0, 0.0, body[0].pelvis_height + 0.2]])
     corr.reset(rot, root)
@@ -158,6 +158,11 @@ def test_damping_does_not_change_with_the_step():
     assert a[0] < 0.1 and a[-1] < a[0]
     # the same recovery whatever the step (without the h / h0 scaling, d / h doubles at 1/120 s)
     np.testing.assert_allclose(a, b, atol=0.15 * a[0])
+
+
+def test_pose_springs_pull_a_displaced_body_back_in_world_space():
+    plain, posed = _release_curve(1.0 / 60.0), _release_curve(1.0 / 60.0, pose_translation_stiffness=3000.0)
+    assert posed[3] < 0.8 * plain[3]           # the world-space springs add to the root's
 
 
 def test_close_loop_continues_the_last_frame():

@@ -60,6 +60,11 @@ class PhysicsConfig:
         feet_translation_stiffness: absolute translation spring (N/m) of each foot body
             (ankle and toe bones) towards the animation, like the root's; 0 = off.
         feet_translation_damping_scale: its damper is ``damping * this`` (J s^2/m^2).
+        pose_translation_stiffness: absolute translation spring (N/m) of every other body
+            (trunk, head, arms, legs) towards where the animation puts it in the world, like
+            the root's and feet's: with it a pushed limb returns in world space, not only
+            through its joint's rotation spring; 0 = off (the paper: joint rotations only).
+        pose_translation_damping_scale: its damper is ``damping * this`` (J s^2/m^2).
         joint_stiffness: soft ball joints, N/m: k_j/2 |anchor seen from parent - anchor
             seen from child|^2. The output drops the joints' stretch (forward kinematics of
             the rotations), so a soft joint shows as sliding feet: 6e5 (rather than 2e5)
@@ -166,6 +171,8 @@ class PhysicsConfig:
     root_translation_damping_scale: float = 4.25e3
     feet_translation_stiffness: float = 5.0e3
     feet_translation_damping_scale: float = 300.0
+    pose_translation_stiffness: float = 0.0
+    pose_translation_damping_scale: float = 0.0
     joint_stiffness: float = 6.0e5
     contact_stiffness: float = 3.0e4
     intra_stiffness: float = 1.0e4

@@ -107,9 +107,10 @@ class Solver:
         root = model.body_parent < 0
         feet = np.isin(model.body_joint, FEET_TRANSLATION_JOINTS)
         kt = np.where(root, config.root_translation_stiffness,
-                      np.where(feet, config.feet_translation_stiffness, 0.0))
+                      np.where(feet, config.feet_translation_stiffness, config.pose_translation_stiffness))
         dtr = config.damping * np.where(root, config.root_translation_damping_scale,
-                                        np.where(feet, config.feet_translation_damping_scale, 0.0))
+                                        np.where(feet, config.feet_translation_damping_scale,
+                                                 config.pose_translation_damping_scale))
         self.body_kt = wp.array(kt.astype(np.float32), dtype=wp.float32, device=dev)
         self.body_dt = wp.array(dtr.astype(np.float32), dtype=wp.float32, device=dev)
         self.feet_index = wp.array(np.nonzero(feet)[0].astype(np.int32), dtype=wp.int32, device=dev)
