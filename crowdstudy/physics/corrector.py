@@ -189,6 +189,12 @@ def correct(anim, config: PhysicsConfig | None = None, *, device: str | None = N
             frame, which launches (and may compile) the kernels, is left out; None when no
             step was timed).
 
+    The simulated poses go through the output stage (:mod:`crowdstudy.physics.finish`): a
+    periodic input (``meta["loop"]["mode"] == "periodic"``) is simulated from
+    ``config.loop_warmup`` before its start to ``config.loop_blend`` past its end and the
+    loop closed; the deviation from the input is low-passed (held at its peaks first); planted
+    feet are held.
+
     Returns:
         A new CrowdAnimation with the same bodies/clips, the corrected ``root_translation``
         (T, N, 3) m and ``joint_rotations`` (T, N, J, 3) rad, and meta ``method = "Ours"``,
