@@ -231,6 +231,27 @@ def test_planted_runs_wrap_in_periodic_masks():
     assert planted_runs(np.zeros(5, bool)) == []
 
 
+def test_swing_carries_the_hold_offset_smoothly():
+    from crowdstudy.physics.finish import _foot_hold
+
+    n = 40
+    ref = np.zeros((n, 3))
+    ref[10:20, 0] = np.linspace(0.0, 0.5, 12)[1:-1]          # a 0.5 m step between two stances
+    ref[20:, 0] = 0.5
+    ref[10:20, 2] = 0.05
+    out = ref.copy()
+    out[:, 1] += np.linspace(0.0, 0.06, n)                   # the correction drifts the foot sideways
+    planted = np.ones(n, bool)
+    planted[10:20] = False
+    pull, weight = _foot_hold(out, ref, planted, np.zeros(n, bool), np.zeros((n, 3)), 2, False)
+    held = out[:, :2] + pull
+    assert np.ptp(held[:10], axis=0).max() < 1e-12 and np.ptp(held[20:], axis=0).max() < 1e-12
+    # in the swing the foot keeps its own path, displaced smoothly (no drag back to the hold)
+    assert np.abs(np.diff(held[:, 1], 2)).max() < 0.01
+    assert np.abs(np.diff(held[8:22, 0], 2)).max() <= np.abs(np.diff(out[8:22, 0], 2)).max() + 1e-9
+    assert np.all(weight == 1.0)
+
+
 def test_pushed_character_keeps_its_planted_feet(bodies):
     body = bodies[0]
     n = 40

@@ -16,8 +16,8 @@ of every character. Three steps turn it into the "Ours" animation, each on plain
   (``crowdstudy bench physics --bars``).
 * :func:`lock_planted_feet`: while the input's foot is planted, the output's ankle (or, in a
   heel rise, the ball of the foot) is held at one place by two-bone IK of the leg, the
-  offset faded in and out over the two swing frames nearest the contact: a pushed
-  character keeps its feet where they stand instead of sliding them.
+  offset carried smoothly through the swing to the next contact: a pushed character keeps
+  its feet where they stand instead of sliding them.
 """
 
 from __future__ import annotations
@@ -169,29 +169,35 @@ def _foot_hold(ankle: np.ndarray, ref_ankle: np.ndarray, ankle_planted: np.ndarr
         ankle_planted, toe_planted: (T,) the reference's ankle / ball of the foot planted.
         toe_arm: (T, 3) the reference foot's world orientation applied to the rest offset
             ankle -> ball, m (where the ball is, seen from the ankle, in the reference).
-        fade: frames over which a hold fades in and out on both sides of a contact (never
-            into another contact).
+        fade: frames over which the offset eases in before the first contact and out after
+            the last (clips that do not loop).
 
     One contact is a run of frames where the ankle or the ball is planted. Its ankle
     frames hold the ankle where the output's ankle is farthest from the reference's over
     them (the placement the correction needed most, e.g. clear of a neighbour's foot); its
-    heel-rise
-    frames (the ball planted, the ankle not) hold the ball where the held ankle put it (at
+    heel-rise frames (the ball planted, the ankle not) hold the ball where the held ankle put it (at
     the nearest ankle frame) and place the ankle from it with the reference's foot
     orientation, so the foot rolls over the ball; a contact with no ankle frame holds the
-    ball likewise where the output's ankle is farthest from the reference's. Outside contacts the pulls fade (quintic smoothstep), averaged
-    where two fades meet.
+    ball likewise where the output's ankle is farthest from the reference's. Between two
+    contacts (a swing) the offset goes over from the end of the one to the start of the
+    next along a quintic smoothstep: the foot keeps its own swing path, displaced smoothly,
+    so its velocity stays continuous (fading towards the held place instead drags the
+    swinging foot back and shows as high-frequency knee and ankle motion). In a clip that
+    does not loop the offset eases in from zero before the first contact and out after the
+    last, over ``fade`` frames.
 
     Returns:
         ``(pull (T, 2) m, weight (T,))``: horizontal offsets to add to the output's ankle,
-        and the hold's weight (1 in a contact).
+        and the weight with which the foot takes the reference's orientation (1, except
+        where the hold eases in or out at the ends of a clip that does not loop).
     """
     n = len(ankle)
     pull = np.zeros((n, 2))
-    wsum = np.zeros(n)
-    fades = 1.0 - smoothstep5(np.arange(1, fade + 1) / (fade + 1.0))
+    weight = np.zeros(n)
     contact = ankle_planted | toe_planted
-    for start, stop in planted_runs(contact, periodic=periodic):
+    runs = planted_runs(contact, periodic=periodic)
+    ends = []                                   # (start, stop, offset at the start, offset at the end)
+    for start, stop in runs:
         idx = np.arange(start, stop) % n
         flat = ankle_planted[idx]
         goal = np.empty((len(idx), 2))
@@ -209,19 +215,32 @@ def _foot_hold(ankle: np.ndarray, ref_ankle: np.ndarray, ankle_planted: np.ndarr
             far = idx[np.argmax(np.linalg.norm(ankle[idx, :2] - ref_ankle[idx, :2], axis=1))]
             ball = ankle[far, :2] + toe_arm[far, :2]
             goal[:] = ball - toe_arm[idx, :2]
-        pull[idx] += goal - ankle[idx, :2]
-        wsum[idx] += 1.0
-        if stop - start >= n:
+        pull[idx] = goal - ankle[idx, :2]
+        weight[idx] = 1.0
+        ends.append((start, stop, pull[idx[0]].copy(), pull[idx[-1]].copy()))
+    if not ends or ends[0][1] - ends[0][0] >= n:
+        return pull, weight
+    # swings: the OFFSET (not the held place) goes over from the end of one contact to the
+    # start of the next along a quintic smoothstep, so the foot keeps its own swing path and
+    # its velocity stays continuous; before the first / after the last contact of a clip that
+    # does not loop, the offset eases in from / out to zero
+    # (start, stop, offset there, offset at the end, hold weight at the start / end)
+    gaps = [(ends[k][1], ends[k + 1][0], ends[k][3], ends[k + 1][2], 1.0, 1.0) for k in range(len(ends) - 1)]
+    if periodic:
+        gaps.append((ends[-1][1], ends[0][0] + n, ends[-1][3], ends[0][2], 1.0, 1.0))
+    else:
+        gaps.append((ends[-1][1], n + fade, ends[-1][3], np.zeros(2), 1.0, 0.0))
+        gaps.insert(0, (-fade, ends[0][0], np.zeros(2), ends[0][2], 0.0, 1.0))
+    for g0, g1, off0, off1, w0, w1 in gaps:
+        t = np.arange(g0, g1)
+        if not len(t):
             continue
-        for side, edge, g in ((-1, start, goal[0]), (1, stop - 1, goal[-1])):
-            t = edge + side * np.arange(1, fade + 1)
-            keep = slice(None) if periodic else (t >= 0) & (t < n)
-            t, w = t[keep] % n, fades[keep]
-            free = ~contact[t]                 # a fade never reaches into another contact
-            t, w = t[free], w[free]
-            np.add.at(pull, t, w[:, None] * (g - ankle[t, :2]))
-            np.add.at(wsum, t, w)
-    return pull / np.maximum(wsum, 1.0)[:, None], np.minimum(wsum, 1.0)
+        s = smoothstep5((t - g0 + 1.0) / (g1 - g0 + 1.0))
+        keep = slice(None) if periodic else (t >= 0) & (t < n)
+        t, s = t[keep] % n, s[keep]
+        pull[t] = (1.0 - s)[:, None] * off0 + s[:, None] * off1
+        weight[t] = (1.0 - s) * w0 + s * w1
+    return pull, weight
 
 
 def _soft_reach(hip: np.ndarray, ankle: np.ndarray, target: np.ndarray, length: np.ndarray) -> np.ndarray:
@@ -262,7 +281,8 @@ def lock_planted_feet(rot: np.ndarray, root: np.ndarray, ref_rot: np.ndarray, re
         fps: frame rate, Hz.
         planted_speed: m/s, a reference joint (ankle, ball) counts as planted below this
             horizontal speed (and within ``planted_height`` m of its lowest height).
-        fade_frames: frames of the swing over which a hold fades in and out.
+        fade_frames: frames over which the hold eases in at a clip's start and out at its end
+            (between contacts the offset is carried through the swing).
         periodic: the clip loops (contacts may wrap around the seam).
 
     Returns:
