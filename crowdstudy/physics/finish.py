@@ -16,7 +16,7 @@ of every character. Three steps turn it into the "Ours" animation, each on plain
   (``crowdstudy bench physics --bars``).
 * :func:`lock_planted_feet`: while the input's foot is planted, the output's ankle (or, in a
   heel rise, the ball of the foot) is held at one place by two-bone IK of the leg, the
-  offset carried smoothly through the swing to the next contact: a pushed character keeps
+  offset handed smoothly through the swing to the next contact: a pushed character keeps
   its feet where they stand instead of sliding them.
 """
 
@@ -36,6 +36,9 @@ __all__ = ["close_loop", "smooth_deviation", "lock_planted_feet", "planted_runs"
 #: a held leg's reach is compressed smoothly beyond this fraction of the leg's length
 #: (:func:`_soft_reach`: no knee pops near full extension)
 SOFT_REACH = 0.97
+#: how far a swinging foot returns to its own corrected path mid-swing (0: the hold's offset
+#: is carried straight through the swing; 1: it is zero mid-swing), :func:`_foot_hold`
+SWING_RETURN = 1.0
 LEGS = tuple(tuple(JOINT_INDEX[f"{side}_{name}"] for name in ("hip", "knee", "ankle")) for side in ("left", "right"))
 
 
@@ -180,9 +183,11 @@ def _foot_hold(ankle: np.ndarray, ref_ankle: np.ndarray, ankle_planted: np.ndarr
     orientation, so the foot rolls over the ball; a contact with no ankle frame holds the
     ball likewise where the output's ankle is farthest from the reference's. Between two
     contacts (a swing) the offset goes over from the end of the one to the start of the
-    next along a quintic smoothstep: the foot keeps its own swing path, displaced smoothly,
-    so its velocity stays continuous (fading towards the held place instead drags the
-    swinging foot back and shows as high-frequency knee and ankle motion). In a clip that
+    next along a quintic smoothstep, and returns to zero mid-swing (``SWING_RETURN``): the
+    foot keeps its own corrected swing path, displaced smoothly, so its velocity stays
+    continuous (fading towards the held place instead drags the swinging foot back and
+    shows as high-frequency knee and ankle motion; carrying the offset straight through
+    pushes swinging legs into the neighbours' the physics kept them clear of). In a clip that
     does not loop the offset eases in from zero before the first contact and out after the
     last, over ``fade`` frames.
 
@@ -238,7 +243,10 @@ def _foot_hold(ankle: np.ndarray, ref_ankle: np.ndarray, ankle_planted: np.ndarr
         s = smoothstep5((t - g0 + 1.0) / (g1 - g0 + 1.0))
         keep = slice(None) if periodic else (t >= 0) & (t < n)
         t, s = t[keep] % n, s[keep]
-        pull[t] = (1.0 - s)[:, None] * off0 + s[:, None] * off1
+        # ... and mid-swing returns to the foot's own (corrected) path, where the physics
+        # kept it clear of the neighbours' legs
+        back = (1.0 - SWING_RETURN * 4.0 * s * (1.0 - s))[:, None]
+        pull[t] = back * ((1.0 - s)[:, None] * off0 + s[:, None] * off1)
         weight[t] = (1.0 - s) * w0 + s * w1
     return pull, weight
 
