@@ -36,9 +36,9 @@ __all__ = ["close_loop", "smooth_deviation", "lock_planted_feet", "planted_runs"
 #: a held leg's reach is compressed smoothly beyond this fraction of the leg's length
 #: (:func:`_soft_reach`: no knee pops near full extension)
 SOFT_REACH = 0.97
-#: how far a swinging foot returns to its own corrected path mid-swing (0: the hold's offset
-#: is carried straight through the swing; 1: it is zero mid-swing), :func:`_foot_hold`
-SWING_RETURN = 1.0
+#: the fraction of a swing at each end over which a held foot's offset eases out to / in
+#: from the foot's own corrected path (:func:`_foot_hold`)
+SWING_EASE = 0.25
 LEGS = tuple(tuple(JOINT_INDEX[f"{side}_{name}"] for name in ("hip", "knee", "ankle")) for side in ("left", "right"))
 
 
@@ -183,8 +183,9 @@ def _foot_hold(ankle: np.ndarray, ref_ankle: np.ndarray, ankle_planted: np.ndarr
     orientation, so the foot rolls over the ball; a contact with no ankle frame holds the
     ball likewise where the output's ankle is farthest from the reference's. Between two
     contacts (a swing) the offset goes over from the end of the one to the start of the
-    next along a quintic smoothstep, and returns to zero mid-swing (``SWING_RETURN``): the
-    foot keeps its own corrected swing path, displaced smoothly, so its velocity stays
+    next along a quintic smoothstep, eased out to zero over the first and in over the last
+    ``SWING_EASE`` of the swing: the foot keeps its own corrected swing path, displaced
+    smoothly near the contacts, so its velocity stays
     continuous (fading towards the held place instead drags the swinging foot back and
     shows as high-frequency knee and ankle motion; carrying the offset straight through
     pushes swinging legs into the neighbours' the physics kept them clear of). In a clip that
@@ -240,13 +241,14 @@ def _foot_hold(ankle: np.ndarray, ref_ankle: np.ndarray, ankle_planted: np.ndarr
         t = np.arange(g0, g1)
         if not len(t):
             continue
-        s = smoothstep5((t - g0 + 1.0) / (g1 - g0 + 1.0))
+        u = (t - g0 + 1.0) / (g1 - g0 + 1.0)
+        s = smoothstep5(u)
         keep = slice(None) if periodic else (t >= 0) & (t < n)
-        t, s = t[keep] % n, s[keep]
-        # ... and mid-swing returns to the foot's own (corrected) path, where the physics
-        # kept it clear of the neighbours' legs
-        back = (1.0 - SWING_RETURN * 4.0 * s * (1.0 - s))[:, None]
-        pull[t] = back * ((1.0 - s)[:, None] * off0 + s[:, None] * off1)
+        t, u, s = t[keep] % n, u[keep], s[keep]
+        # ... and eases back to the foot's own (corrected) path over the first and last
+        # SWING_EASE of the swing: the physics kept the swinging leg clear of the neighbours'
+        back = 1.0 - smoothstep5(np.clip(np.minimum(u, 1.0 - u) / SWING_EASE, 0.0, 1.0))
+        pull[t] = back[:, None] * ((1.0 - s)[:, None] * off0 + s[:, None] * off1)
         weight[t] = (1.0 - s) * w0 + s * w1
     return pull, weight
 
