@@ -248,7 +248,7 @@ def test_swing_carries_the_hold_offset_smoothly():
     assert np.ptp(held[:10], axis=0).max() < 1e-12 and np.ptp(held[20:], axis=0).max() < 1e-12
     # in the swing the foot keeps its own path, displaced smoothly (no drag back to the hold),
     # and is on it mid-swing
-    assert np.abs(np.diff(held[:, 1], 2)).max() < 0.01
+    assert np.abs(np.diff(held[:, 1], 2)).max() < 0.02                     # 3 cm eased over ~3 frames
     assert np.abs(np.diff(held[8:22, 0], 2)).max() <= np.abs(np.diff(out[8:22, 0], 2)).max() + 1e-9
     assert np.abs(pull[14:16]).max() < 0.05 * np.abs(pull).max()
     assert np.all(weight == 1.0)
