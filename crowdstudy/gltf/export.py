@@ -43,6 +43,7 @@ from crowdstudy.body.rotations import axis_angle_to_quaternion
 from crowdstudy.body.skeleton import JOINT_NAMES, NUM_JOINTS, PARENTS
 from crowdstudy.errors import InvalidInputError
 from crowdstudy.gltf.glb import ARRAY_BUFFER, ELEMENT_ARRAY_BUFFER, GltfBuilder
+from crowdstudy.render.bodies import region_scores, vertex_normals
 
 __all__ = ["export_gltf", "build_gltf", "Z_UP_TO_Y_UP", "WORLD_ROTATION", "character_prefix",
            "add_skinned_mesh", "encode_png"]
@@ -72,14 +73,10 @@ def encode_png(image: np.ndarray) -> bytes:
 
 
 def _normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
-    v = np.asarray(vertices, dtype=np.float64)
-    f = np.asarray(faces, dtype=np.int64)
-    fn = np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]])
-    n = np.zeros_like(v)
-    for k in range(3):
-        np.add.at(n, f[:, k], fn)
-    length = np.linalg.norm(n, axis=1, keepdims=True)
-    n = np.where(length < 1e-12, (0.0, 0.0, 1.0), n / np.where(length < 1e-12, 1.0, length))
+    """Unit vertex normals for glTF (which requires unit length): the renderer's area-weighted
+    normals, with +z for vertices no face gives a normal."""
+    n = vertex_normals(vertices, faces)
+    n[np.linalg.norm(n, axis=1) < 0.5] = (0.0, 0.0, 1.0)
     return n.astype(np.float32)
 
 
@@ -153,7 +150,6 @@ def _continuous(quats: np.ndarray) -> np.ndarray:
 def _vertex_colors(anim, bodies) -> list[np.ndarray]:
     """Per-vertex linear RGB of each body: the renderer's colour regions and palette
     (the same seed and frame-0 positions as ``crowdstudy render``)."""
-    from crowdstudy.render.bodies import region_scores
     from crowdstudy.render.palette import assign_colors
 
     seed = int(anim.meta.get("seed", 0))
