@@ -646,7 +646,8 @@ def main(argv: list[str]) -> int:
     args = parser.parse_args(argv)
     if args.bars_only:
         bars = measure_bars(args.bars or 20.0)
-        path = write_report("physics_bars", bars, seed=None)
+        print("bars: " + "; ".join(BAR_TEXT.values()), flush=True)
+        path = write_report("physics_bars", bars, seed=None, bar_text=BAR_TEXT)
         print(f"wrote {path}", file=sys.stderr)
         return 0
     if args.mujoco:
@@ -673,6 +674,6 @@ def main(argv: list[str]) -> int:
     print(format_table(cg_rows), flush=True)
     peer_rows = [] if args.no_peer else _run_mujoco(args)
     bars = measure_bars(args.bars) if args.bars > 0 else []
-    path = write_report("physics", rows, seed=None, cg=cg_rows, peer=peer_rows, bars=bars)
+    path = write_report("physics", rows, seed=None, cg=cg_rows, peer=peer_rows, bars=bars, bar_text=BAR_TEXT)
     print(f"wrote {path}", file=sys.stderr)
     return 0
