@@ -7,7 +7,7 @@ export WARP_CACHE_PATH := $(CURDIR)/build/warp-cache
 export MPLBACKEND := Agg
 export PYTHONUNBUFFERED := 1
 
-.PHONY: setup demo test test-fast figures bench clean
+.PHONY: setup demo test test-fast figures bench constraints clean
 
 setup:
 	@bash scripts/setup.sh
@@ -26,6 +26,10 @@ figures: setup
 
 bench: setup
 	$(VENV)/bin/crowdstudy bench all
+
+# Re-resolve the newest allowed versions into constraints.txt (then `make test`, commit it).
+constraints:
+	@bash scripts/update_constraints.sh
 
 clean:
 	rm -rf build demo_out paper_figs/out paper_figs/cache

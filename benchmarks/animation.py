@@ -58,12 +58,14 @@ def _walking_crowd(n: int, duration: float, fps: float, seed: int):
 
 def _naive_stationary(crowd, duration, fps, seed, bodies):
     """Per-frame, per-character loop (the peer)."""
-    from crowdstudy.motion import list_clips, load_clip
-    from crowdstudy.motion.baseline import body_scales
+    from crowdstudy.motion import list_clips
+    from crowdstudy.motion.baseline import DEFAULT_TEMPO, body_scales
+    from crowdstudy.motion.mocap_library import dance_loop
     from crowdstudy.body.rotations import quaternion_to_axis_angle
     from crowdstudy.motion.quaternions import quat_about_z, quat_multiply
 
-    names = list_clips("dance")
+    names = list_clips("dance", default_only=True)
+    loops = {name: dance_loop(name, DEFAULT_TEMPO, fps, duration) for name in names}   # the same loops as ours
     rng = np.random.default_rng(seed)
     n = crowd.n_agents
     choice = rng.integers(len(names), size=n)
@@ -75,7 +77,7 @@ def _naive_stationary(crowd, duration, fps, seed, bodies):
     root = np.empty((n_frames, n, 3))
     for f in range(n_frames):
         for i in range(n):
-            clip = load_clip(names[choice[i]])
+            clip = loops[names[choice[i]]]
             q, r = clip.sample_quaternions(np.array(f / fps + phase[i]))
             q = q.copy()
             q[0] = quat_multiply(quat_about_z(np.array(yaw[i])), q[0])

@@ -42,7 +42,7 @@ def _scene(n: int, seed: int = 0):
     design = load_design()
     if n == design.n_characters("D5"):
         return build_baseline(design, "stationary", "D5", duration=1.0), "build_baseline stationary D5"
-    from crowdstudy.body.model import load_body
+    from crowdstudy.body import load_body
     from crowdstudy.body.skeleton import JOINT_NAMES, PARENTS
     from crowdstudy.scene import CrowdAnimation
 

@@ -18,9 +18,12 @@ from pathlib import Path
 from typing import Callable
 
 from crowdstudy.errors import InvalidInputError
+from crowdstudy.paths import check_output_path
 from crowdstudy.provenance import provenance, repository_root
+from crowdstudy.tables import format_table
 
-__all__ = ["configure", "run", "measure", "write_report", "format_table", "benchmarks_dir", "available"]
+__all__ = ["configure", "run", "measure", "write_report", "report_path", "format_table", "benchmarks_dir",
+           "available"]
 
 
 def benchmarks_dir() -> Path:
@@ -44,28 +47,15 @@ def measure(fn: Callable[[], object], *, repeat: int = 20, warmup: int = 2) -> d
     return {"median": statistics.median(times), "min": min(times), "max": max(times), "n": repeat}
 
 
-def format_table(rows: list[dict], columns: list[str] | None = None) -> str:
-    """A plain-text table of dict rows (floats with 4 significant digits)."""
-    if not rows:
-        return "(no rows)"
-    columns = columns or list(rows[0])
-
-    def fmt(v):
-        if isinstance(v, float):
-            return f"{v:.4g}"
-        return str(v)
-
-    cells = [[fmt(r.get(c, "")) for c in columns] for r in rows]
-    widths = [max(len(c), *(len(row[i]) for row in cells)) for i, c in enumerate(columns)]
-    line = "  ".join(c.rjust(w) for c, w in zip(columns, widths))
-    sep = "  ".join("-" * w for w in widths)
-    body = ["  ".join(v.rjust(w) for v, w in zip(row, widths)) for row in cells]
-    return "\n".join([line, sep, *body])
+def report_path(name: str) -> Path:
+    """Where :func:`write_report` saves benchmark ``name`` by default: ``build/bench/NAME.json``
+    under the working directory (never inside the installed package)."""
+    return Path.cwd() / "build" / "bench" / f"{name}.json"
 
 
 def write_report(name: str, rows: list[dict], *, out: Path | None = None, seed: int | None = None, **extra) -> Path:
     """Save a benchmark table with provenance to ``build/bench/NAME.json`` (or ``out``)."""
-    out = Path(out) if out else repository_root() / "build" / "bench" / f"{name}.json"
+    out = Path(out) if out else report_path(name)
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(json.dumps({"benchmark": name, "rows": rows, "provenance": provenance(seed), **extra},
                               indent=2, default=float))
@@ -90,7 +80,10 @@ def configure(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     names = available() if args.name == "all" else [args.name]
     status = 0
+    modules = {name: _load(name) for name in names}
+    for name in names:  # before any benchmark runs: a report that cannot be written fails at once
+        check_output_path(report_path(name), f"benchmark {name} report")
     for name in names:
         print(f"== benchmark {name} ==", flush=True)
-        status |= int(_load(name).main(list(args.bench_args)) or 0)
+        status |= int(modules[name].main(list(args.bench_args)) or 0)
     return status

@@ -6,8 +6,12 @@ Each subcommand lives in the stage that owns it, as a module with two functions:
     def run(args: argparse.Namespace) -> int                 # do the work, return an exit code
 
 Only the chosen subcommand's module is imported, so ``crowdstudy --help`` stays fast.
-Errors raised on bad input (:class:`~crowdstudy.errors.CrowdstudyError`, ``ValueError``,
-``FileNotFoundError``) are printed as one line naming what is wrong, with exit code 2.
+The project's own errors (:class:`~crowdstudy.errors.CrowdstudyError`: bad input, a
+missing system component) are printed as one line naming what is wrong, with exit code 2.
+Anything else is a bug or an unexpected failure: it propagates with its traceback (exit
+code 1), so a numpy or pandas ``ValueError`` is never mistaken for a user error. Sub-commands
+check their output paths (:func:`crowdstudy.paths.check_output_path`,
+:func:`crowdstudy.paths.check_output_dir`) before the long work starts.
 """
 
 from __future__ import annotations
@@ -26,6 +30,7 @@ COMMANDS: tuple[tuple[str, str, str], ...] = (
     ("layout", "crowdstudy.layout.cli", "Place characters in a region as a Poisson-disk set (stationary crowds)."),
     ("navigate", "crowdstudy.navigation.cli", "Walk a crowd with ORCA (corridor scenario) and write its trajectories."),
     ("animate", "crowdstudy.motion.cli", "Turn layouts or trajectories into the Baseline full-body crowd animation."),
+    ("motion", "crowdstudy.motion.cli_library", "The motion-capture clip library: list, rebuild from BVH, measure."),
     ("correct", "crowdstudy.physics.cli", "Resolve character collisions with the physics layer (Baseline -> Ours)."),
     ("metrics", "crowdstudy.metrics.cli", "Measure overlap volume, tracking error and smoothness of an animation."),
     ("render", "crowdstudy.render.cli", "Render an animation to an MP4 video or a PNG frame (headless EGL)."),
@@ -73,7 +78,7 @@ def main(argv: list[str] | None = None) -> int:
         return 0 if not argv else 2
     try:
         return int(args._run(args) or 0)
-    except (CrowdstudyError, ValueError, FileNotFoundError, NotADirectoryError, PermissionError) as exc:
+    except CrowdstudyError as exc:
         print(f"crowdstudy {args.command}: error: {exc}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:

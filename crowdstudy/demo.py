@@ -36,6 +36,9 @@ def configure(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from crowdstudy.paths import check_output_dir
+
+    check_output_dir(args.out, "--out")
     run_demo(out=args.out, design=args.design, density=args.density, duration=args.duration,
              participants=args.participants, seed=args.seed, study=not args.skip_study)
     return 0
@@ -51,7 +54,7 @@ class _Steps:
 
 
 def _table(rows: list[dict], columns: list[str]) -> str:
-    from crowdstudy.bench import format_table
+    from crowdstudy.tables import format_table
 
     return format_table(rows, columns)
 
@@ -174,7 +177,7 @@ def run_demo(*, out: Path = Path("demo_out"), design=None, density: str = "D5", 
     for name, path in outputs.items():
         print(f"  {name:<32} {path}")
     print("\nThe full study (1920x1080, 20 s videos, real participants):\n"
-          "  crowdstudy stimuli --design stimuli/study.toml --out stimuli/videos      # 60 videos (+ --scheduler for Dask)\n"
+          "  crowdstudy stimuli --out stimuli/videos                                    # 60 videos (+ --design FILE, --scheduler)\n"
           "  crowdstudy serve --stimuli stimuli/videos --db sqlite:///study.db          # participants open the printed URL\n"
           "  crowdstudy export --db sqlite:///study.db --out responses.csv --demographics demographics.csv\n"
           "  crowdstudy analyze responses.csv --out analysis_out")

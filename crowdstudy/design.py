@@ -1,4 +1,5 @@
-"""The study design (``stimuli/study.toml``): loading, validation and the stimulus list.
+"""The study design (``crowdstudy/study/study.toml``, the paper's; ``stimuli/study.toml`` in a
+checkout links to it): loading, validation and the stimulus list.
 
 >>> design = load_design()                      # the paper's design shipped with the toolkit
 >>> design.n_characters("D5")
@@ -18,7 +19,7 @@ from pathlib import Path
 from typing import Any
 
 from crowdstudy.errors import InvalidInputError
-from crowdstudy.provenance import repository_root
+from crowdstudy.package_data import resource_path
 
 __all__ = [
     "StudyDesign", "Stage", "Viewpoint", "Scenario", "Item", "Stimulus",
@@ -147,8 +148,8 @@ class StudyDesign:
 
 
 def default_design_path() -> Path:
-    """``stimuli/study.toml`` of the source tree."""
-    return repository_root() / "stimuli" / "study.toml"
+    """The paper's design shipped in the package (``crowdstudy/study/study.toml``)."""
+    return resource_path("crowdstudy.study", "study.toml")
 
 
 class _Reader:
@@ -302,7 +303,8 @@ def parse_design(raw: dict, source: str = "<memory>") -> StudyDesign:
             sc_t.fail(sname, f"is not a known scenario ({', '.join(_SCENARIOS)})")
         r = sc_t.table_(sname)
         if sname == "concert":
-            params = {"stage_distance": r.number("stage_distance", lo=0), "margin": r.number("margin", lo=0)}
+            params = {"stage_distance": r.number("stage_distance", lo=0), "margin": r.number("margin", lo=0),
+                      "tempo": r.number("tempo", lo=40.0, hi=240.0, default=120.0)}
             if 2 * params["margin"] >= min(width, depth):
                 r.fail("margin", "leaves no room inside the floor area")
         else:
@@ -310,6 +312,9 @@ def parse_design(raw: dict, source: str = "<memory>") -> StudyDesign:
                       "direction": r.get("direction", str),
                       "preferred_speed": r.number("preferred_speed", lo=0, lo_open=True, hi=5.0),
                       "preferred_speed_sd": r.number("preferred_speed_sd", lo=0)}
+        params["motion"] = r.get("motion", str, "mocap")
+        if params["motion"] not in ("mocap", "procedural"):
+            r.fail("motion", f"must be 'mocap' (motion capture) or 'procedural', got {params['motion']!r}")
             if params["direction"] not in ("unidirectional", "bidirectional"):
                 r.fail("direction", f"must be 'unidirectional' or 'bidirectional', got {params['direction']!r}")
         r.close()

@@ -9,7 +9,8 @@ package or the source tree. The folder is, in order of precedence:
 
 Each kind of cached data lives in its own sub-folder, created on first use.
 
-:func:`check_output_path` checks, before a long run, that an output file can be written;
+:func:`check_output_path` checks, before a long run, that an output file can be written
+(:func:`check_output_dir` the same for an output folder);
 :func:`timings_path` names the JSON sidecar that holds a run's timings (run-dependent values
 never go into the output file itself: same input, same bytes).
 """
@@ -21,7 +22,7 @@ from pathlib import Path
 
 from crowdstudy.errors import InvalidInputError
 
-__all__ = ["cache_root", "cache_dir", "check_output_path", "timings_path"]
+__all__ = ["cache_root", "cache_dir", "check_output_path", "check_output_dir", "timings_path"]
 
 
 def cache_root() -> Path:
@@ -60,6 +61,23 @@ def check_output_path(path: str | Path, what: str = "out") -> Path:
                                 "fix its permissions or choose another location")
     if path.exists() and path.is_dir():
         raise InvalidInputError(f"{what}: {str(path)!r} is a folder, expected a file path")
+    return path
+
+
+def check_output_dir(path: str | Path, what: str = "out") -> Path:
+    """Create the output folder ``path`` (and its parents) and check it is a writable folder
+    (not a file); return ``path``. Errors name ``what`` (the argument) and the path."""
+    path = Path(path)
+    if path.exists() and not path.is_dir():
+        raise InvalidInputError(f"{what}: {str(path)!r} is a file, expected a folder")
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise InvalidInputError(f"{what}: cannot create the output folder {str(path)!r} ({exc.strerror}); "
+                                "choose a writable location") from None
+    if not os.access(path, os.W_OK | os.X_OK):
+        raise InvalidInputError(f"{what}: the output folder {str(path)!r} is not writable; "
+                                "fix its permissions or choose another location")
     return path
 
 

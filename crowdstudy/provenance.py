@@ -16,15 +16,21 @@ _TRACKED_PACKAGES = ("crowdstudy", "numpy", "scipy", "pandas", "warp-lang", "mod
 
 
 def repository_root() -> Path:
-    """The source tree the package was imported from (the folder holding ``crowdstudy/``)."""
+    """The folder holding the imported ``crowdstudy/``: the source tree of a checkout, or
+    site-packages for an installed wheel. Only optional things use it (the git SHA, the
+    benchmark scripts of a checkout); the package's own files are read with
+    :mod:`importlib.resources` (:mod:`crowdstudy.package_data`)."""
     return Path(__file__).resolve().parent.parent
 
 
 @functools.lru_cache(maxsize=1)
 def git_sha() -> str:
     """The git commit of the source tree, with ``-dirty`` when it has local changes;
-    ``"unknown"`` outside a git checkout."""
+    ``"unknown"`` outside a git checkout of crowdstudy (an installed wheel: its
+    site-packages may lie inside some other repository)."""
     root = repository_root()
+    if not (root / "pyproject.toml").is_file():
+        return "unknown"
     try:
         sha = subprocess.run(["git", "rev-parse", "HEAD"], cwd=root, capture_output=True,
                              text=True, timeout=5, check=True).stdout.strip()

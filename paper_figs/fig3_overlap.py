@@ -108,6 +108,7 @@ def plot(rows: list[dict], path: Path, config: dict) -> None:
     apply_style()
     fig, axes = plt.subplots(1, 2, figsize=(7.2, 2.9), sharey=False)
     titles = {"stationary": "Stationary (concert)", "walking": "Walking (corridor)"}
+    series = []  # the plotted numbers, for the JSON sidecar
     for ax, stage in zip(axes, STAGES):
         for method in ("Baseline", "Ours"):
             sel = sorted((r for r in rows if r["stage"] == stage and r["method"] == method),
@@ -121,6 +122,10 @@ def plot(rows: list[dict], path: Path, config: dict) -> None:
             ax.errorbar(x, y, yerr=sd, color=colour, marker="o", ms=4, capsize=2, label=f"{method} (mesh)")
             yc = [float(r["overlap_capsule_litres"]) for r in sel]
             ax.plot(x, yc, color=colour, ls="--", lw=1.0, alpha=0.7, label=f"{method} (capsules)")
+            series.append({"stage": stage, "method": method, "density_level": [r["density_level"] for r in sel],
+                           "density": x, "characters": [int(r["characters"]) for r in sel],
+                           "overlap_mesh_litres": y, "overlap_mesh_sd_litres": sd, "overlap_capsule_litres": yc,
+                           "tracking_error_cm": [float(r["tracking_error_cm"]) for r in sel]})
         ax.set_title(titles[stage])
         ax.set_xlabel("density (characters / m$^2$)")
         ax.set_ylim(bottom=0)
@@ -129,7 +134,7 @@ def plot(rows: list[dict], path: Path, config: dict) -> None:
     res_cm = 100 * config["resolution"]
     fig.suptitle(f"Per-character body volume inside other characters (mesh grid {res_cm:g} cm, "
                  f"frames {config['frames']}; bars: SD over frames)", fontsize=9, y=1.04)
-    save_figure(fig, path, configuration=config, rows=len(rows))
+    save_figure(fig, path, configuration=config, rows=len(rows), series=series)
     plt.close(fig)
 
 

@@ -57,7 +57,9 @@ def main(argv=None) -> int:
     ax.set_ylabel("pelvis position along y (m)")
     ax.set_title("Damping of the PD control: recovery after a collision")
     ax.legend(loc="upper left", fontsize=7.5)
-    save_figure(fig, out_path("fig4_damping", args), metrics=data["metrics"], dampings=dampings)
+    save_figure(fig, out_path("fig4_damping", args), metrics=data["metrics"], dampings=dampings,
+                series={"time": data["time"], "target": target.tolist(), "release_time": data["release_time"],
+                        "position": data["position"]})
     return 0
 
 

@@ -75,7 +75,7 @@ def main(argv=None) -> int:
                 spine.set_linewidth(1.5)
             ax.set_title(f"{level} ({anim.n_characters} characters), {method}: "
                          f"{100 * res.crowd_fraction:.1f}% of crowd pixels overlap", fontsize=8)
-            info["panels"].append({"level": level, "method": method, "frame": frame,
+            info["panels"].append({"level": level, "method": method, "frame": frame, "characters": anim.n_characters,
                                    "red_fraction": res.red_fraction, "crowd_fraction": res.crowd_fraction})
     fig.suptitle("Overlapping body volumes (red), Baseline vs Ours, per density", fontsize=10)
     fig.tight_layout()

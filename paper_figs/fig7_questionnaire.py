@@ -25,7 +25,7 @@ CHROMIUM_ARGS = ["--no-sandbox", "--headless", "--disable-gpu", "--disable-backg
                  "--disable-component-update", "--disable-sync", "--no-first-run"]
 
 
-def screenshot(url: str, out: Path, *, width: int, height: int, video_timeout_ms: float) -> None:
+def screenshot(url: str, out: Path, *, width: int, height: int, video_timeout_ms: float) -> dict:
     from playwright.sync_api import sync_playwright
     with sync_playwright() as pw:
         browser = pw.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS)
@@ -50,8 +50,29 @@ def screenshot(url: str, out: Path, *, width: int, height: int, video_timeout_ms
             page.wait_for_function("document.querySelector('.cs-video').currentTime > 0.3", timeout=video_timeout_ms)
             out.parent.mkdir(parents=True, exist_ok=True)
             page.screenshot(path=str(out), full_page=False)
+            return page.evaluate(PAGE_STATE)
         finally:
             browser.close()
+
+
+#: What the screenshot shows, read from the page (written to the figure's JSON sidecar):
+#: boxes [left, top, width, height] in CSS pixels, the checked answer of each item.
+PAGE_STATE = """() => {
+  const box = (e) => { const b = e.getBoundingClientRect(); return [b.left, b.top, b.width, b.height]; };
+  const video = document.querySelector('.cs-video');
+  const answers = {};
+  for (const input of document.querySelectorAll('.cs-likert input[type=radio]')) {
+    if (!(input.name in answers)) answers[input.name] = null;
+    if (input.checked) answers[input.name] = Number(input.value);
+  }
+  return {video: box(video), questions: box(document.querySelector('.cs-questions')),
+          statements: [...document.querySelectorAll('.cs-statement')].map((e) => e.textContent.trim()),
+          answers, video_time: video.currentTime, video_paused: video.paused, video_loop: video.loop,
+          video_size: [video.videoWidth, video.videoHeight],
+          next_disabled: document.querySelector('.cs-next').disabled,
+          progress: (document.querySelector('.cs-progress') || {}).textContent || '',
+          viewport: [window.innerWidth, window.innerHeight]};
+}"""
 
 
 def _render_crowd_clips(stim: Path, size: tuple[int, int]) -> None:
@@ -103,7 +124,13 @@ def main(argv: list[str] | None = None) -> int:
                 _render_crowd_clips(stim, size)
         serve_args = ["--stimuli", str(stim), "--db", f"sqlite:///{tmp}/fig7.db"]
         with LocalServer(serve_args) as srv:
-            screenshot(srv.url, args.out, width=width, height=height, video_timeout_ms=90_000)
+            state = screenshot(srv.url, args.out, width=width, height=height, video_timeout_ms=90_000)
+    import json
+
+    from crowdstudy.provenance import provenance
+
+    args.out.with_suffix(".json").write_text(json.dumps({"figure": args.out.name, "page": state,
+                                                         "provenance": provenance(None)}, indent=1, default=str))
     print(f"fig7: wrote {args.out}")
     return 0
 

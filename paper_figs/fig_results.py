@@ -11,6 +11,7 @@ a real study.
 
 from __future__ import annotations
 
+import json
 import shutil
 import sys
 from pathlib import Path
@@ -25,6 +26,7 @@ def main(argv=None) -> int:
                        seed=dict(type=int, default=2024, help="seed of the simulated participants"))
     apply_style()
     from crowdstudy.design import load_design
+    from crowdstudy.provenance import provenance
     from crowdstudy.stats.pipeline import analyze
     from crowdstudy.stats.synthetic import simulate_responses
 
@@ -34,6 +36,7 @@ def main(argv=None) -> int:
         responses = simulate_responses(design, n, seed=args.seed)
         note = f" - SIMULATED participants (n = {n})"
     else:
+        n = None
         responses = args.responses
         note = ""
     work = cache_path("results_quick" if args.quick else "results")
@@ -46,6 +49,17 @@ def main(argv=None) -> int:
         suffix = "_quick" if args.quick else ""
         target = out_path(f"fig_results_stage{stage.number}_{stage.scenario}{suffix}")
         shutil.copyfile(produced[0], target)
+        # sidecar: the plotted numbers (method_figure's .json), the ANOVA behind the stars, provenance
+        plotted = json.loads(produced[0].with_suffix(".json").read_text())
+        anova = {comp: {row.Source: {"F": row.F, "ddof1": row.ddof1, "ddof2": row.ddof2, "p_unc": row.p_unc,
+                                     "p": row.p, "np2": row.np2}
+                        for row in result.results[(stage.number, comp)].anova.itertuples()}
+                 for comp in design.composites if (stage.number, comp) in result.results}
+        target.with_suffix(".json").write_text(json.dumps(
+            {**plotted, "figure": target.name, "stage": stage.number, "scenario": stage.scenario,
+             "responses": "simulated" if args.responses is None else str(args.responses), "participants": n,
+             "seed": args.seed if args.responses is None else None, "provenance": provenance(args.seed),
+             "anova": anova}, indent=1, default=float))
         written.append(target)
         print(f"wrote {target}")
     summary = work / "summary.md"

@@ -39,22 +39,32 @@ if [ ! -x .venv/bin/python ]; then
     echo "[setup] creating .venv"
     python3 -m venv .venv
 fi
-if [ ! -f "$STAMP_DIR/pip" ] || [ pyproject.toml -nt "$STAMP_DIR/pip" ]; then
+# constraints.txt pins every dependency to the versions tested together (README: "Pinned
+# versions" says how to upgrade it); a change to it or to pyproject.toml re-runs pip.
+if [ ! -f "$STAMP_DIR/pip" ] || [ pyproject.toml -nt "$STAMP_DIR/pip" ] || \
+   { [ -f constraints.txt ] && [ constraints.txt -nt "$STAMP_DIR/pip" ]; }; then
     echo "[setup] installing Python dependencies into .venv (first time takes a few minutes)"
     .venv/bin/python -m pip install -q --upgrade pip
-    .venv/bin/python -m pip install -q -e ".[all]"
+    if [ -f constraints.txt ]; then
+        .venv/bin/python -m pip install -q -c constraints.txt -e ".[all]"
+    else
+        .venv/bin/python -m pip install -q -e ".[all]"
+    fi
     touch "$STAMP_DIR/pip"
 fi
 
 # --- Web front end (jsPsych from npm) ------------------------------------------
-if [ -f ui/package.json ]; then
-    if [ ! -d ui/node_modules ] || [ ui/package.json -nt "$STAMP_DIR/npm" ] || \
-       { [ -f ui/package-lock.json ] && [ ui/package-lock.json -nt "$STAMP_DIR/npm" ]; }; then
+# It lives in the package (crowdstudy/study/ui) so that wheels ship it; pyproject.toml's
+# package-data picks the files of node_modules the page loads.
+UI=crowdstudy/study/ui
+if [ -f $UI/package.json ]; then
+    if [ ! -d $UI/node_modules ] || [ $UI/package.json -nt "$STAMP_DIR/npm" ] || \
+       { [ -f $UI/package-lock.json ] && [ $UI/package-lock.json -nt "$STAMP_DIR/npm" ]; }; then
         echo "[setup] installing the questionnaire's npm packages"
-        if [ -f ui/package-lock.json ]; then
-            (cd ui && npm ci --no-audit --no-fund --loglevel=error)
+        if [ -f $UI/package-lock.json ]; then
+            (cd $UI && npm ci --no-audit --no-fund --loglevel=error)
         else
-            (cd ui && npm install --no-audit --no-fund --loglevel=error)
+            (cd $UI && npm install --no-audit --no-fund --loglevel=error)
         fi
         touch "$STAMP_DIR/npm"
     fi

@@ -38,17 +38,22 @@ def test_stationary_crowd_dances_in_place_facing_the_stage(dancers):
     assert anim.root_translation.shape == (120, n, 3) and anim.joint_rotations.shape == (120, n, 24, 3)
     assert anim.joint_names == JOINT_NAMES and anim.meta["method"] == "Baseline"
     # each character stays on its Poisson-disk spot
+    # (the feet stay within 12 cm of it; the Twist's hips swing up to 22 cm over the feet)
     drift = np.linalg.norm(anim.root_translation[..., :2] - crowd.positions[0][None], axis=-1)
-    assert drift.max() < 0.15
+    assert drift.max() < 0.25 and np.percentile(drift, 90) < 0.12
     # facing +y with a small jitter: the pelvis forward axis
     forward = axis_angle_to_matrix(anim.joint_rotations[:, :, 0])[..., :2, 1]
     yaw = np.arctan2(-forward[..., 0], forward[..., 1])
-    assert np.abs(yaw).max() < np.radians(45) and 0.02 < np.abs(yaw.mean(0)).mean() < np.radians(20)
+    # (the motion-captured dances turn by up to 50 degrees on their spot, plus the 20-degree jitter)
+    assert np.abs(yaw).max() < np.radians(75) and 0.02 < np.abs(yaw.mean(0)).mean() < np.radians(20)
     # the clips: a dance each, dealt evenly, random phases
     names = [c["clips"][0] for c in anim.clips]
-    assert set(names) <= set(list_clips("dance")) and len(set(names)) == 15
+    default = list_clips("dance", default_only=True)
+    assert set(names) == set(default) and len(default) == 7
     assert all(c["kind"] == "dance" and c["weights"] == [1.0] for c in anim.clips)
-    assert len({round(c["phase"], 3) for c in anim.clips}) == n
+    # each dancer differs from its neighbours: clip, whole-beat offset, mirroring, amplitude
+    assert len({(c["clips"][0], c["beat_offset"], c["mirrored"], round(c["amplitude"], 4)) for c in anim.clips}) == n
+    assert len({c["beat_offset"] for c in anim.clips}) > 2
     # bodies from sample_bodies(N, seed)
     assert list(anim.bodies) == sample_bodies(n, 7)
 
@@ -58,10 +63,14 @@ def test_stationary_feet_on_the_floor_without_skating(dancers):
     pos = joint_positions(anim)
     ankle_h = _ankle_heights(anim.bodies)
     lowest = pos[:, :, [J["left_ankle"], J["right_ankle"]], 2].min(axis=(0, 2))
-    assert np.abs(lowest - ankle_h).max() < 5e-3                      # soles on z = 0, every body
+    # soles on z = 0, every body: the lowest ankle is the body's own ankle height (within
+    # 1.5 cm: a motion-captured dancer may stay on its toes or heels for the whole 4 s)
+    assert np.abs(lowest - ankle_h).max() < 0.015
     assert pos[..., 2].min() > 0.0
     skate = foot_skate(anim)
-    assert skate.size > 2 * crowd.n_agents and skate.max() < 0.02
+    # planted feet are held (motion capture: measured p95 1.7 cm, max 6.2 cm, a toe rolling
+    # about its held ankle while the heel rises in groove_steps)
+    assert skate.size > 2 * crowd.n_agents and np.percentile(skate, 95) < 0.02 and skate.max() < 0.08
 
 
 def test_stationary_is_deterministic(dancers):
@@ -108,8 +117,8 @@ def test_walking_follows_the_trajectories(walkers):
 def test_walking_feet_do_not_skate(walkers):
     crowd, anim = walkers
     skate = foot_skate(anim)
-    # every foot lands at least once per second of walking
-    assert skate.size >= 4 * crowd.n_agents * 6
+    # every foot lands at least once per 1.2 s of walking (captured cadences: 73-129 steps/min)
+    assert skate.size >= 4 * crowd.n_agents * 5
     assert skate.max() < 0.02
     # the gait phase follows the distance walked: about one stride per cycle
     pos = joint_positions(anim)

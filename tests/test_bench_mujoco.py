@@ -29,7 +29,10 @@ def _tiny(kind: str, chars=(0, 1, 2), spread: float = 0.0):
     from crowdstudy.motion.baseline import build_baseline
 
     stage = "stationary" if kind == "concert" else "walking"
-    anim = build_baseline(load_design(), stage, "D1", duration=N_FRAMES / 30.0)
+    design = load_design()
+    for sc in design.scenarios.values():          # the bars below were set on the procedural motion
+        sc.params["motion"] = "procedural"
+    anim = build_baseline(design, stage, "D1", duration=N_FRAMES / 30.0)
     sel = list(chars)
     root = anim.root_translation[:N_FRAMES, sel].copy()
     root[..., 0] += spread * np.arange(len(sel))      # spread > 0: characters far apart

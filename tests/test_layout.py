@@ -1,6 +1,8 @@
 """Poisson-disk layouts and the concert crowd (crowdstudy.layout)."""
 
 import math
+import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -11,6 +13,9 @@ from crowdstudy.design import load_design
 from crowdstudy.errors import InvalidInputError
 from crowdstudy.layout import concert_layout, disc_radius, poisson_disk
 from crowdstudy.scene import Crowd
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from figure_fixtures import plotted_discs  # noqa: E402
 
 
 @pytest.fixture(scope="module")
@@ -138,13 +143,33 @@ def test_disc_radius_fits_the_densest_cell():
         disc_radius(0.0)
 
 
-def test_layout_cli(tmp_path, capsys):
+def test_layout_cli(tmp_path, capsys, saved_figures):
     out = tmp_path / "layout.npz"
     assert cli_main(["layout", "--all", "--seed", "1", "--out", str(out), "--plot", str(tmp_path / "l.png")]) == 0
-    for level in ("D1", "D5"):
-        crowd = Crowd.load(tmp_path / f"layout-{level}.npz")
-        assert crowd.meta["density_level"] == level
-    assert (tmp_path / "l.png").stat().st_size > 10_000
+    crowds = {}
+    for level in ("D1", "D2", "D3", "D4", "D5"):
+        crowds[level] = Crowd.load(tmp_path / f"layout-{level}.npz")
+        assert crowds[level].meta["density_level"] == level
+    # the plot draws each saved layout: one panel per level, a disc of the crowd's radius
+    # at every character's position (read back from the figure's artists)
+    assert (tmp_path / "l.png").is_file() and len(saved_figures) == 1
+    panels = [ax for ax in saved_figures[0].axes if plotted_discs(ax)[0].size]
+    assert len(panels) == 5
+    counts = []
+    for ax, (level, crowd) in zip(panels, crowds.items()):
+        centres, radii = plotted_discs(ax)
+        pos = crowd.positions[0]
+        counts.append(len(centres))
+        assert len(centres) == crowd.n_agents and ax.get_title().startswith(f"{level}: {crowd.n_agents} chars")
+        order = lambda p: np.lexsort((p[:, 1], p[:, 0]))
+        np.testing.assert_allclose(centres[order(centres)], pos[order(pos)], atol=1e-6)
+        np.testing.assert_allclose(radii, crowd.radius[0], rtol=1e-3)
+        x0, x1 = ax.get_xlim()
+        y0, y1 = ax.get_ylim()
+        assert x0 <= pos[:, 0].min() and pos[:, 0].max() <= x1 and y0 <= pos[:, 1].min() and pos[:, 1].max() <= y1
+    assert counts == sorted(counts) and counts[0] < counts[-1]              # more characters at higher density
+    radii = [plotted_discs(ax)[1][0] for ax in panels]
+    assert radii == sorted(radii, reverse=True)                              # smaller discs when denser
     assert "D5" in capsys.readouterr().out
     assert cli_main(["layout", "--density", "D9", "--out", str(out)]) == 2
     assert "--density" in capsys.readouterr().err

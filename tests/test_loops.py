@@ -18,6 +18,7 @@ from crowdstudy.design import load_design  # noqa: E402
 from crowdstudy.metrics.tracking import joint_positions  # noqa: E402
 from crowdstudy.motion import baseline as baseline_mod  # noqa: E402
 from crowdstudy.motion.baseline import LOOP_DISSOLVE_SECONDS, MAX_LOOP_TEMPO_CHANGE, build_baseline  # noqa: E402
+from crowdstudy.motion.mocap_library import MAX_TEMPO_RATIO  # noqa: E402
 from crowdstudy.render.seam import seam_change  # noqa: E402
 from crowdstudy.render.video import _frame_plan, blend_frames, video_frame_count  # noqa: E402
 
@@ -57,7 +58,10 @@ def test_concert_baseline_is_periodic(design, concert):
     for rec in concert.clips:
         cycles = n_frames / rec["loop_frames"]
         assert abs(cycles - round(cycles)) < 1e-9 and round(cycles) >= 1      # the loop divides T
-        assert abs(rec["tempo"] - 1.0) <= MAX_LOOP_TEMPO_CHANGE
+        # motion capture: the take time-warped onto the beat, loops of whole bars (4 beats)
+        assert abs(np.log(rec["tempo"])) <= np.log(MAX_TEMPO_RATIO) + 1e-9
+        beat = design.fps * 60.0 / design.scenarios["concert"]["tempo"]
+        assert rec["loop_frames"] % (4 * beat) == 0 and 0 <= rec["beat_offset"] < rec["loop_frames"] / beat
 
 
 def test_every_clip_loop_divides_the_stimulus(design):
@@ -65,7 +69,7 @@ def test_every_clip_loop_divides_the_stimulus(design):
 
     n_frames = int(round(design.duration * design.fps))
     worst = 0.0
-    for name in list_clips("dance"):
+    for name in list_clips("dance", "procedural"):
         natural = load_clip(name).duration * design.fps
         k = baseline_mod.loop_cycles(natural, n_frames)
         assert k >= 1, name
@@ -75,14 +79,36 @@ def test_every_clip_loop_divides_the_stimulus(design):
 
 
 def test_broken_loop_fails_the_check(design, monkeypatch):
-    # the old rounding (each clip at its natural length in frames) does not divide T
+    # procedural clips: the old rounding (each clip at its natural length in frames) does not divide T
     monkeypatch.setattr(baseline_mod, "loop_cycles", lambda natural, n, max_change=0: 0)
+    monkeypatch.setitem(design.scenarios["concert"].params, "motion", "procedural")
     broken = build_baseline(design, "stationary", "D1")
     assert broken.meta["loop"] == {"mode": "none"}
     assert not _seam_ok(broken)
 
 
-def test_short_concert_keeps_natural_length(design):
+def test_broken_mocap_loop_fails_the_check(design, monkeypatch):
+    # motion capture: loops a few frames shorter than whole bars no longer divide T
+    from crowdstudy.motion import mocap_library
+
+    real = mocap_library._loop_lengths
+    monkeypatch.setattr(mocap_library, "_loop_lengths", lambda bars, bar, room: [x - 7 for x in real(bars, bar, room)])
+    mocap_library.dance_loop.cache_clear()
+    try:
+        broken = build_baseline(design, "stationary", "D1")
+    finally:
+        mocap_library.dance_loop.cache_clear()
+    assert broken.meta["loop"] == {"mode": "none"}
+    assert not _seam_ok(broken)
+
+
+def test_short_concert_keeps_natural_length(design, monkeypatch):
+    # 1 s holds half a bar: the mocap loops stay whole bars, the animation is not periodic
+    short = build_baseline(design, "stationary", "D1", duration=1.0)
+    assert short.meta["loop"]["mode"] == "none"
+    bar = 4 * design.fps * 60.0 / design.scenarios["concert"]["tempo"]
+    assert all(rec["loop_frames"] % bar == 0 for rec in short.clips)
+    monkeypatch.setitem(design.scenarios["concert"].params, "motion", "procedural")
     short = build_baseline(design, "stationary", "D1", duration=1.0)
     assert short.meta["loop"]["mode"] == "none"
     assert all(abs(rec["tempo"] - 1.0) < 0.01 for rec in short.clips)

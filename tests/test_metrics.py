@@ -21,6 +21,7 @@ from crowdstudy.metrics import (
     summarize,
     tracking_error,
 )
+from crowdstudy.metrics.overlap import capsules_world
 from crowdstudy.scene import CrowdAnimation
 
 trimesh = pytest.importorskip("trimesh")
@@ -372,13 +373,84 @@ def real_animation(n_frames=3, gap=0.15, meta=None):
     return CrowdAnimation(JOINT_NAMES, PARENTS, roots, rot, 30.0, records, [{}, {}], meta or {}), bodies
 
 
-def test_real_bodies_mesh_and_capsule_overlap_agree_in_size():
+def _x_line_crossings(tri, y, z):
+    """Sorted x of the crossings of each line {(t, y_k, z_k)} with a triangle soup (brute force)."""
+    a, b, c = tri[:, 0], tri[:, 1], tri[:, 2]
+    d = (b[:, 1] - a[:, 1]) * (c[:, 2] - a[:, 2]) - (c[:, 1] - a[:, 1]) * (b[:, 2] - a[:, 2])
+    ok = d != 0
+    a, b, c, d = a[ok], b[ok], c[ok], d[ok]
+    out = []
+    for y0, z0 in zip(y, z):
+        u = ((b[:, 1] - y0) * (c[:, 2] - z0) - (c[:, 1] - y0) * (b[:, 2] - z0)) / d
+        v = ((c[:, 1] - y0) * (a[:, 2] - z0) - (a[:, 1] - y0) * (c[:, 2] - z0)) / d
+        hit = (u >= 0) & (v >= 0) & (u + v <= 1)
+        out.append(np.sort(u[hit] * a[hit, 0] + v[hit] * b[hit, 0] + (1 - u[hit] - v[hit]) * c[hit, 0]))
+    return out
+
+
+def _brute_mesh_intersection(tri_a, tri_b, lo, hi, h):
+    """Volume of A n B (two closed meshes) on lines along x (the metric's columns run along z),
+    a grid of side h over (y, z) offset from any 2 cm grid; inside by the even-odd rule."""
+    ys, zs = np.arange(lo[1] + 0.37 * h, hi[1], h), np.arange(lo[2] + 0.61 * h, hi[2], h)
+    y, z = (m.ravel() for m in np.meshgrid(ys, zs, indexing="ij"))
+    total = 0.0
+    for xa, xb in zip(_x_line_crossings(tri_a, y, z), _x_line_crossings(tri_b, y, z)):
+        assert len(xa) % 2 == 0 and len(xb) % 2 == 0
+        for a0, a1 in xa.reshape(-1, 2):
+            for b0, b1 in xb.reshape(-1, 2):
+                total += max(0.0, min(a1, b1) - max(a0, b0))
+    return total * h * h
+
+
+def _brute_capsule_intersection(caps_a, caps_b, h):
+    """Volume of (union of capsules A) n (union of capsules B) by point sampling on a 3-D grid."""
+    def blocks(caps):
+        s, e, r = caps
+        return np.minimum(s, e) - r[:, None], np.maximum(s, e) + r[:, None]
+
+    (la, ha), (lb, hb) = blocks(caps_a), blocks(caps_b)
+    lo, hi = np.maximum(la.min(0), lb.min(0)), np.minimum(ha.max(0), hb.max(0))
+    axes = [np.arange(l + 0.43 * h, u, h) for l, u in zip(lo, hi)]
+    shape = tuple(len(ax) for ax in axes)
+    inside = []
+    for s, e, r in (caps_a, caps_b):
+        mask = np.zeros(shape, bool)
+        for j in np.flatnonzero(r > 0):
+            sl = tuple(slice(np.searchsorted(ax, min(s[j, k], e[j, k]) - r[j]),
+                             np.searchsorted(ax, max(s[j, k], e[j, k]) + r[j])) for k, ax in enumerate(axes))
+            p = np.stack(np.meshgrid(*(ax[q] for ax, q in zip(axes, sl)), indexing="ij"), -1)
+            ab = e[j] - s[j]
+            t = np.clip(((p - s[j]) @ ab) / max(ab @ ab, 1e-18), 0.0, 1.0)
+            mask[sl] |= np.linalg.norm(p - (s[j] + t[..., None] * ab), axis=-1) < r[j]
+        inside.append(mask)
+    return float((inside[0] & inside[1]).sum()) * h ** 3
+
+
+def test_real_bodies_mesh_and_capsule_overlap_match_a_brute_force_reference():
+    """Two real bodies, one 15 cm behind the other: each body's volume inside the other is
+    their intersection volume, computed here independently of crowdstudy.metrics.columns:
+    meshes by even-odd crossings along x-lines (1 cm apart), capsules by sampling points on
+    a 6 mm 3-D grid (point-segment distances). Measured: mesh 7.53 L (metric, 2 cm) against
+    7.42 L (reference, 1 cm) and 7.36 L (reference, 5 mm); capsules 4.31 L against 4.27 L
+    (6 mm grid; 4.29 L at 5 mm, 4.15 L at 1 cm). The metric's documented error at 2 cm is 3.5 % at worst (the
+    lens prism of test_overlap_is_invariant_to_rotation_about_z); the bar, 4 %, adds the
+    reference's own discretisation (< 1 % between its two resolutions above)."""
     anim, bodies = real_animation(n_frames=1)
     mesh = overlap_volume(anim, geometry="mesh", frames=[0])
     caps = overlap_volume(anim, geometry="capsule", frames=[0])
     assert mesh.dropped_columns == 0
-    assert 0.002 < mesh.mean < 0.04  # litres of torso inside each other, less than a body
-    assert 0.3 < caps.mean / mesh.mean < 3.0  # proxies, not the same shape: same order only
+    verts = [np.asarray(b.pose(anim.joint_rotations[0, i], anim.root_translation[0, i])[0], float)
+             for i, b in enumerate(bodies)]
+    tris = [v[np.asarray(b.faces)] for v, b in zip(verts, bodies)]
+    lo = np.maximum(verts[0].min(0), verts[1].min(0))
+    hi = np.minimum(verts[0].max(0), verts[1].max(0))
+    ref_mesh = _brute_mesh_intersection(tris[0], tris[1], lo, hi, 0.01)
+    world = [capsules_world(b, anim.joint_rotations[:, i], anim.root_translation[:, i]) for i, b in enumerate(bodies)]
+    ref_caps = _brute_capsule_intersection(*[(s[0], e[0], r) for s, e, r in world], 0.006)
+    assert ref_mesh > 0.004 and ref_caps > 0.002            # a real collision of two torsos
+    # A inside B and B inside A are the same intersection: both characters carry it
+    np.testing.assert_allclose(mesh.per_character[0], ref_mesh, rtol=0.04)
+    np.testing.assert_allclose(caps.per_character[0], ref_caps, rtol=0.04)
     far, _ = real_animation(n_frames=1, gap=1.0)
     assert overlap_volume(far, geometry="mesh").mean == 0.0
     assert overlap_volume(far, geometry="capsule").mean == 0.0

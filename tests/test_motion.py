@@ -13,7 +13,7 @@ from crowdstudy.motion import MotionClip, list_clips, load_clip, seam_discontinu
 from crowdstudy.motion.dance import DANCES, DanceSpec, generate_dance
 from crowdstudy.motion.rig import ANKLE_HEIGHT, FOOT_HEIGHT
 
-ALL = list_clips()
+ALL = list_clips(source="procedural")
 
 # Largest rotation (degrees) of each joint relative to its parent: generous bounds of the
 # adult range of motion (the pelvis row is its tilt from upright, checked separately).
@@ -26,7 +26,7 @@ def _limit(name: str) -> float:
 
 
 def test_inventory_15_dances_4_walks():
-    dances, walks = list_clips("dance"), list_clips("walk")
+    dances, walks = list_clips("dance", "procedural"), list_clips("walk", "procedural")
     assert len(dances) == 15 and len(set(dances)) == 15
     assert len(walks) == 4
     speeds = [load_clip(w).speed for w in walks]
@@ -38,7 +38,7 @@ def test_inventory_15_dances_4_walks():
     with pytest.raises(InvalidInputError, match="unknown clip"):
         load_clip("moonwalk")
     with pytest.raises(InvalidInputError, match="kind"):
-        list_clips("running")
+        list_clips("running", "procedural")
 
 
 def _descriptor(clip):
@@ -143,7 +143,7 @@ def test_jumps_leave_the_floor():
     assert ankles.min(axis=1).max() > ANKLE_HEIGHT + 0.03
 
 
-@pytest.mark.parametrize("name", list_clips("walk"))
+@pytest.mark.parametrize("name", list_clips("walk", "procedural"))
 def test_walk_feet_planted_and_alternating(name):
     clip = load_clip(name)
     t = np.arange(clip.n_frames) / clip.fps
@@ -159,8 +159,18 @@ def test_walk_feet_planted_and_alternating(name):
     # the feet alternate: each is flat while the other swings, half a cycle apart
     shift = np.argmax([np.sum(stances[0] == np.roll(stances[1], k)) for k in range(clip.n_frames)])
     assert abs(shift / clip.n_frames - 0.5) < 0.03
-    # stride: the ankle advances one stride per cycle
-    assert clip.meta["stride_length"] == pytest.approx(clip.speed * clip.duration, rel=1e-9)
+    # stride, measured on the feet: where the left foot is planted in two successive cycles
+    # (the loop played twice along its travel) lies one stride apart
+    t2 = np.arange(2 * clip.n_frames) / clip.fps
+    rot2 = np.concatenate([clip.joint_rotations] * 2)
+    root2 = np.concatenate([clip.root_translation] * 2) + clip.travel(t2)
+    from crowdstudy.body.skeleton import DEFAULT_REST_JOINTS, forward_kinematics
+
+    left = forward_kinematics(DEFAULT_REST_JOINTS, rot2, root2)[1][:, JOINT_INDEX["left_ankle"]]
+    flat2 = np.concatenate([stances[0]] * 2)
+    first = left[:clip.n_frames - 1][flat2[:clip.n_frames - 1]][:, 1].mean()
+    second = left[clip.n_frames:2 * clip.n_frames - 1][flat2[clip.n_frames - 1:2 * clip.n_frames - 2]][:, 1].mean()
+    assert second - first == pytest.approx(clip.meta["stride_length"], rel=0.01)
 
 
 def test_sample_interpolates_and_wraps():

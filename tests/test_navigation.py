@@ -1,6 +1,8 @@
 """ORCA simulator, corridor scenario, plots and the pyrvo comparison (crowdstudy.navigation)."""
 
 import math
+import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -11,6 +13,9 @@ from crowdstudy.errors import InvalidInputError
 from crowdstudy.navigation import (MAX_TURN_RATE, ORCAParams, ORCASimulator, corridor_crowd, smooth_headings,
                                    speed_factor, trajectory_summary)
 from crowdstudy.scene import Crowd
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from figure_fixtures import plotted_discs  # noqa: E402
 
 
 @pytest.fixture(scope="module")
@@ -176,16 +181,47 @@ def test_smooth_headings_bound_the_turn_rate_and_handle_wrap():
     np.testing.assert_allclose(h[:, 2], 1.0)
 
 
-def test_plot_layouts_and_trajectories(corridor_d5, design, tmp_path):
+def test_plot_layouts_and_trajectories(corridor_d5, design, tmp_path, saved_figures):
+    from matplotlib.colors import to_rgba
+
     from crowdstudy.layout import concert_layout
     from crowdstudy.navigation.plot import plot_layouts_and_trajectories
 
     layouts = [concert_layout(design, level, 1) for level in design.densities]
-    path = plot_layouts_and_trajectories(layouts, corridor_d5.replace(positions=corridor_d5.positions[::4],
-                                                                       velocities=corridor_d5.velocities[::4],
-                                                                       headings=corridor_d5.headings[::4]),
-                                         tmp_path / "fig.png")
-    assert path.stat().st_size > 20_000
+    walk = corridor_d5.replace(positions=corridor_d5.positions[::4], velocities=corridor_d5.velocities[::4],
+                               headings=corridor_d5.headings[::4])
+    path = plot_layouts_and_trajectories(layouts, walk, tmp_path / "fig.png")
+    assert path.is_file() and len(saved_figures) == 1
+    axes = saved_figures[0].axes
+    assert len(axes) == len(layouts) + 1
+    # top row: each layout's discs where its characters stand
+    for ax, crowd in zip(axes, layouts):
+        centres, radii = plotted_discs(ax)
+        order = lambda p: np.lexsort((p[:, 1], p[:, 0]))
+        np.testing.assert_allclose(centres[order(centres)], crowd.positions[0][order(crowd.positions[0])], atol=1e-6)
+        np.testing.assert_allclose(radii, crowd.radius, rtol=1e-3)
+    # bottom: every agent's path, wrapped into the periodic section [x0, x0 + L), walls in black
+    ax = axes[-1]
+    length = walk.periodic_length
+    x0 = float(walk.region[:, 0].min())
+    wrapped = walk.positions.copy()
+    wrapped[..., 0] = x0 + np.mod(wrapped[..., 0] - x0, length)
+    walls = [ln for ln in ax.lines if to_rgba(ln.get_color()) == to_rgba("k")]
+    paths = [ln for ln in ax.lines if ln not in walls]
+    assert len(walls) == len(walk.obstacles)
+    for ln, seg in zip(walls, walk.obstacles):
+        np.testing.assert_allclose(np.c_[ln.get_xdata(), ln.get_ydata()], seg)
+    points = np.concatenate([np.c_[ln.get_xdata(), ln.get_ydata()] for ln in paths])
+    assert len(paths) >= walk.n_agents
+    assert points.shape == (walk.n_frames * walk.n_agents, 2)              # each sample drawn once
+    assert points[:, 0].min() >= x0 and points[:, 0].max() < x0 + length
+    expected = wrapped.reshape(-1, 2)
+    np.testing.assert_allclose(points[np.lexsort(points.T[::-1])], expected[np.lexsort(expected.T[::-1])], atol=1e-9)
+    for ln in paths:                                                        # no segment jumps across the seam
+        assert np.abs(np.diff(ln.get_xdata())).max(initial=0.0) < length / 2
+    centres, _ = plotted_discs(ax)                                          # the final discs
+    last = wrapped[-1]
+    np.testing.assert_allclose(centres[np.lexsort(centres.T[::-1])], last[np.lexsort(last.T[::-1])], atol=1e-6)
     with pytest.raises(InvalidInputError, match=r"^layouts"):
         plot_layouts_and_trajectories([], None, tmp_path / "empty.png")
 

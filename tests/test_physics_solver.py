@@ -136,15 +136,37 @@ def _tiny_anim(records, bodies, n_frames=8):
                           meta={"method": "Baseline", "seed": 1})
 
 
-def test_correct_returns_ours_with_same_layout(records, bodies):
+def test_correct_removes_the_overlap_of_the_same_scene_and_keeps_the_layout(records, bodies):
+    """Three characters 30 cm apart (their capsules interpenetrate in every frame): the
+    correction removes the overlap, measured independently of the solver by
+    ``crowdstudy.metrics.overlap_volume`` on the same scene, and stays near the animation.
+
+    Measured (sample_bodies(4, 11), 8 frames, 2 cm grid): Baseline 2.83 L (capsules) and
+    3.16 L (meshes) per character in every frame, Ours 0.0 L in every frame; the largest
+    root drift 6.1 cm (1.1 cm vertically), the tracking error 5.6 cm, the closest pelvis
+    pair 29.2 -> 34.3 cm apart. The bars leave margin: at least 20x less overlap in every
+    frame, drift < 10 cm (< 3 cm vertically), tracking < 8 cm, the closest pair farther apart."""
+    from crowdstudy.metrics import overlap_volume, tracking_error
+
     anim = _tiny_anim(records, bodies)
     out = correct(anim, progress=False, device="cpu")
     assert out.meta["method"] == "Ours" and out.meta["physics"]["steps"] == 2 * (anim.n_frames - 1)
     assert out.root_translation.shape == anim.root_translation.shape
     assert out.joint_rotations.shape == anim.joint_rotations.shape
     assert out.bodies == anim.bodies and out.clips == anim.clips
-    assert np.abs(out.root_translation[0] - anim.root_translation[0]).max() < 0.15   # settled first frame
-    assert np.abs(out.root_translation - anim.root_translation).max() < 0.15
+    for geometry in ("capsule", "mesh"):
+        base = overlap_volume(anim, geometry=geometry).per_frame
+        ours = overlap_volume(out, geometry=geometry).per_frame
+        assert base.min() > 1e-3, (geometry, base)                 # > 1 L per character: a real collision
+        assert np.all(ours <= base / 20), (geometry, base, ours)    # every frame, not just on average
+    # the correction pushes the characters apart, it does not teleport them
+    drift = np.abs(out.root_translation - anim.root_translation)
+    assert drift.max() < 0.10
+    assert drift[..., 2].max() < 0.03                               # horizontal separation, not lifting
+    assert tracking_error(out, anim) < 8.0
+    pelvis = lambda a: np.linalg.norm(a.root_translation[:, :, None, :2] - a.root_translation[:, None, :, :2], axis=-1)
+    iu = np.triu_indices(anim.n_characters, 1)
+    assert np.all(pelvis(out)[:, iu[0], iu[1]].min(axis=1) > pelvis(anim)[:, iu[0], iu[1]].min(axis=1))
 
 
 def test_cli_correct_round_trip(tmp_path, records, bodies):
@@ -230,12 +252,14 @@ def _planted_foot_speed(anim, reference):
 @pytest.mark.slow
 def test_real_walking_scene_keeps_planted_feet_planted():
     """Corridor D1, 2 s: the corrected feet slide < 3 cm/s while the Baseline's are planted
-    (without the stance anchor they slide about 7 cm/s; the Baseline itself about 0.6)."""
+    (measured 1.7 cm/s; without the stance anchor they slide about 7 cm/s). The Baseline
+    itself: 1.3 cm/s with the motion-captured walks (0.6 with the procedural ones): the loose
+    mask, within 10 cm of the floor and under 10 cm/s, includes the heel and toe roll."""
     from crowdstudy.design import load_design
     from crowdstudy.motion.baseline import build_baseline
 
     base = build_baseline(load_design(), "walking", "D1", duration=2.0)
     ours = correct(base, progress=False)
     skate, reference = _planted_foot_speed(ours, base)
-    assert reference < 1.0
+    assert reference < 2.0
     assert skate < 3.0

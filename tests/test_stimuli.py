@@ -1,4 +1,4 @@
-"""Stimulus-set builder: manifest, resume by hash, local processes and a Dask cluster.
+"""Stimulus-set builder: manifest, resume by digest and hash, local processes and a Dask cluster.
 
 The cell animations are pre-seeded with mannequin crowds (tests/render_fixtures.py) so the
 test exercises the builder and the renderer, not motion synthesis and physics.
@@ -18,7 +18,9 @@ from render_fixtures import crowd_animation, grid_positions, mannequin_loader  #
 
 from crowdstudy.design import default_design_path, load_design  # noqa: E402
 from crowdstudy.errors import InvalidInputError  # noqa: E402
-from crowdstudy.render.stimuli import MANIFEST_COLUMNS, build_stimuli  # noqa: E402
+from crowdstudy.render import stimuli as stimuli_module  # noqa: E402
+from crowdstudy.render.stimuli import (MANIFEST_COLUMNS, animation_digest, animation_record, build_stimuli,  # noqa: E402
+                                       preset_settings)
 
 
 @pytest.fixture(scope="module")
@@ -34,24 +36,39 @@ def tiny_design(tmp_path_factory):
     return load_design(path)
 
 
-def _seed_animations(design, out: Path) -> None:
+def _mannequin_cell(design, st, method: str, shift: float = 0.0):
+    """A mannequin crowd standing in for the (stage, D1) cell's animation of ``method``, and
+    its overlap volume: the Baseline has two overlapping characters, Ours none."""
+    n_frames = int(round(2.0 * design.fps))  # the quick preset: 2 s
+    extent = (3.0, 3.0) if st.scenario == "concert" else (4.5, 2.0)
+    pos = grid_positions(design.n_characters("D1"), extent=extent, margin=0.5)
+    kw = {"scenario": st.scenario, "seed": design.cell_seed(st, "D1"), "n_frames": n_frames, "fps": design.fps}
+    if st.scenario == "corridor":
+        kw.update(period=4.5, velocity=(1.2, 0.0))
+    if method == "Baseline":
+        pos = pos.copy()
+        pos[1] = pos[0] + [0.1, 0.05]
+        return crowd_animation(pos, **kw), 0.004
+    return crowd_animation(pos + [shift, 0.0], **kw), 0.0002
+
+
+def _stimulus_of(design, st, method):
+    return next(s for s in design.stimuli() if s.stage == st.number and s.method == method)
+
+
+def _seed_animations(design, out: Path, physics=None) -> None:
+    """Pre-seed the cell animations as the animation stage would have written them (with the
+    digest a resumed build checks), so the tests skip motion synthesis and physics."""
     folder = out / "animations"
     folder.mkdir(parents=True, exist_ok=True)
-    n_frames = int(round(2.0 * design.fps))  # the quick preset: 2 s
+    settings = preset_settings(design, "quick")
     for st in design.stages:
-        seed = design.cell_seed(st, "D1")
-        n = design.n_characters("D1")
-        extent = (3.0, 3.0) if st.scenario == "concert" else (4.5, 2.0)
-        pos = grid_positions(n, extent=extent, margin=0.5)
-        kw = {"scenario": st.scenario, "seed": seed, "n_frames": n_frames, "fps": design.fps}
-        if st.scenario == "corridor":
-            kw.update(period=4.5, velocity=(1.2, 0.0))
-        overlapping = pos.copy()
-        overlapping[1] = overlapping[0] + [0.1, 0.05]
-        for method, p, vol in (("Baseline", overlapping, 0.004), ("Ours", pos, 0.0002)):
-            crowd_animation(p, **kw).save(folder / f"S{st.number}-D1-{method}.npz")
-            (folder / f"S{st.number}-D1-{method}.metrics.json").write_text(
-                json.dumps({"overlap_mesh": vol, "overlap_capsule": 2 * vol}))
+        for method in ("Baseline", "Ours"):
+            anim, vol = _mannequin_cell(design, st, method)
+            path = anim.save(folder / f"S{st.number}-D1-{method}.npz")
+            digest = animation_digest(design, _stimulus_of(design, st, method), settings, physics=physics)
+            record = animation_record(path, digest, {"overlap_mesh": vol, "overlap_capsule": 2 * vol})
+            (folder / f"S{st.number}-D1-{method}.metrics.json").write_text(json.dumps(record))
 
 
 def test_build_manifest_and_resume(tiny_design, tmp_path):
@@ -85,6 +102,68 @@ def test_build_manifest_and_resume(tiny_design, tmp_path):
     assert {r["stimulus_id"]: r["sha256"] for r in third["stimuli"]} == {r["stimulus_id"]: r["sha256"] for r in rows}
     changed = [f for f, t in stamps.items() if (out / f).stat().st_mtime_ns != t]
     assert changed == [by_id["S2-D1-V4-Ours"]["file"]]
+
+
+def test_resume_remakes_exactly_what_a_change_affects(tiny_design, tmp_path, monkeypatch):
+    """A changed physics configuration re-makes the Ours animations and videos only; a
+    changed viewpoint only its videos; a changed render setting every video, no animation."""
+    import dataclasses
+
+    from crowdstudy.physics.config import PhysicsConfig
+
+    out = tmp_path / "set"
+    _seed_animations(tiny_design, out)
+    kw = {"preset": "quick", "workers": 0, "progress": False, "body_loader": mannequin_loader}
+    first = {r["stimulus_id"]: r for r in build_stimuli(tiny_design, out, **kw)["stimuli"]}
+    assert all(len(r["digest"]) == 64 for r in first.values())
+    assert len({r["digest"] for r in first.values()}) == len(first)
+
+    def stamps():
+        return {sid: (out / r["file"]).stat().st_mtime_ns for sid, r in first.items()}
+
+    jobs = []
+
+    def fake_animation_job(job):  # the animation stage without motion synthesis and physics
+        jobs.append((job["cell"], list(job["methods"])))
+        st = tiny_design.stage(job["stage"])
+        res = {"files": {}, "metrics": {}, "timings": {}}
+        for method in job["methods"]:
+            anim, vol = _mannequin_cell(tiny_design, st, method, shift=0.3)
+            res["files"][f"{job['cell']}-{method}.npz"] = str(anim.save(Path(job["out_dir"]) /
+                                                                       f"{job['cell']}-{method}.npz"))
+            res["metrics"][method] = {"overlap_mesh": vol, "overlap_capsule": 2 * vol}
+        return res
+
+    monkeypatch.setattr(stimuli_module, "animation_job", fake_animation_job)
+    before = stamps()
+    physics = PhysicsConfig().replace(damping=0.007)
+    second = {r["stimulus_id"]: r for r in build_stimuli(tiny_design, out, physics=physics, **kw)["stimuli"]}
+    assert sorted(jobs) == [("S1-D1", ["Ours"]), ("S2-D1", ["Ours"])]
+    remade = {sid for sid, t in stamps().items() if t != before[sid]}
+    assert remade == {sid for sid in first if sid.endswith("-Ours")}
+    for sid, r in second.items():
+        assert (r["digest"] != first[sid]["digest"]) == sid.endswith("-Ours")
+        assert (r["sha256"] != first[sid]["sha256"]) == sid.endswith("-Ours")  # the shifted Ours crowd
+
+    # the same settings again: nothing to do
+    jobs.clear()
+    before = stamps()
+    third = build_stimuli(tiny_design, out, physics=physics, **kw)["stimuli"]
+    assert jobs == [] and stamps() == before and {r["stimulus_id"]: r for r in third} == second
+
+    # one viewpoint moved: its videos only, no animation
+    moved = dataclasses.replace(tiny_design, viewpoints={
+        **tiny_design.viewpoints, "V1": dataclasses.replace(tiny_design.viewpoints["V1"], elevation=20.0)})
+    build_stimuli(moved, out, physics=physics, **kw)
+    assert jobs == []
+    remade = {sid for sid, t in stamps().items() if t != before[sid]}
+    assert remade == {"S1-D1-V1-Baseline", "S1-D1-V1-Ours"}
+
+    # a render setting (encoder quality): every video, no animation
+    before = stamps()
+    monkeypatch.setitem(stimuli_module.PRESETS, "quick", {**stimuli_module.PRESETS["quick"], "crf": 30})
+    build_stimuli(moved, out, physics=physics, **kw)
+    assert jobs == [] and all(t != before[sid] for sid, t in stamps().items())
 
 
 @pytest.mark.slow

@@ -34,8 +34,9 @@ def _answers_for(k: int) -> dict:
 def small_study(tmp_path_factory):
     if not Path(CHROMIUM).exists():
         pytest.skip("Debian chromium is not installed")
-    if not (ROOT / "ui" / "node_modules" / "jspsych").is_dir():
-        pytest.skip("ui/node_modules missing (run make setup)")
+    from crowdstudy.study.server import default_ui_dir
+    if not (default_ui_dir() / "node_modules" / "jspsych").is_dir():
+        pytest.skip("crowdstudy/study/ui/node_modules missing (run make setup)")
     tmp = tmp_path_factory.mktemp("study_e2e")
     design = write_small_design(tmp / "small.toml")
     write_fake_stimuli(tmp / "stim", design, n_files=2, seconds=1.0)

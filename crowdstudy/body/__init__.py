@@ -4,7 +4,8 @@ Heavy parts (mesh generation, SMPL loading) run on first use, not on import.
 """
 
 from crowdstudy.body.capsules import Capsules, capsule_mesh_iou, posed_capsules
-from crowdstudy.body.model import Body, load_body, pose_bodies
+from crowdstudy.body.loading import load_body
+from crowdstudy.body.model import Body, pose_bodies
 from crowdstudy.body.shapes import sample_bodies
 from crowdstudy.body.skinning import CrowdSkinner
 from crowdstudy.body.skeleton import (

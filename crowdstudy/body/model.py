@@ -1,14 +1,5 @@
-"""One interface for every body model: ``Body`` (a shaped, skinned character) and
-``load_body(record)``.
-
-A body record is a plain dict (``CrowdAnimation.bodies`` stores them):
-
-* ``{"model": "open", "sex": "female"|"male", "height": 1.68, "shape": [build, proportion]}``
-  the generated open model (``crowdstudy.body.open_model``); ``shape`` may be omitted
-  (zeros) or shorter than 2 (padded with zeros).
-* ``{"model": "smpl", "path": "SMPL_FEMALE.pkl", "betas": [...], "sex": ...}`` a
-  user-supplied SMPL file (``crowdstudy.body.smpl``); ``shape`` is accepted for ``betas``.
-  ``height`` is informative only (SMPL's stature follows from the betas).
+"""One interface for every body model: ``Body``, a shaped, skinned character (the body
+models build it from a record: :mod:`crowdstudy.body.loading`).
 
 Posing (linear blend skinning): with ``G_j``, ``p_j`` the global rotation and position of
 joint j from forward kinematics, ``M_j = [[G_j, p_j - G_j rest_j], [0, 1]]`` and
@@ -17,8 +8,6 @@ joint j from forward kinematics, ``M_j = [[G_j, p_j - G_j rest_j], [0, 1]]`` and
 
 from __future__ import annotations
 
-import functools
-import json
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -27,7 +16,7 @@ from crowdstudy.body.rotations import axis_angle_to_matrix
 from crowdstudy.body.skeleton import NUM_JOINTS, forward_kinematics
 from crowdstudy.errors import InvalidInputError
 
-__all__ = ["Body", "load_body", "body_key", "pose_bodies", "skinning_matrices", "check_fields", "META_FIELDS"]
+__all__ = ["Body", "pose_bodies", "skinning_matrices", "check_fields", "META_FIELDS"]
 
 
 def skinning_matrices(rest_joints: np.ndarray, joint_rotations: np.ndarray,
@@ -259,52 +248,6 @@ def pose_bodies(bodies: list[Body], joint_rotations: np.ndarray, root_translatio
     return out  # type: ignore[return-value]
 
 
-# ---------------------------------------------------------------------- loading
-
-def body_key(record: dict) -> str:
-    """A canonical string for a record (the cache key of :func:`load_body`)."""
-    if not isinstance(record, dict):
-        raise InvalidInputError(f"body record: expected a dict, got {type(record).__name__}")
-    try:
-        return json.dumps(record, sort_keys=True, default=_json_default)
-    except TypeError as exc:
-        raise InvalidInputError(f"body record: fields must be plain values ({exc})") from None
-
-
-def _json_default(obj):
-    if isinstance(obj, np.ndarray):
-        return obj.tolist()
-    if isinstance(obj, np.generic):
-        return obj.item()
-    return str(obj)
-
-
-def load_body(record: dict) -> Body:
-    """The :class:`Body` of a body record (cached on the record's content).
-
-    Raises InvalidInputError naming the bad field (``model``, ``sex``, ``height``,
-    ``shape``/``betas``, ``path``).
-    """
-    return _load_cached(body_key(record))
-
-
-@functools.lru_cache(maxsize=512)
-def _load_cached(key: str) -> Body:
-    record = json.loads(key)
-    model = record.get("model", "open")
-    if model == "open":
-        return _load_open(record)
-    if model == "smpl":
-        from crowdstudy.body.smpl import load_smpl_body
-
-        return load_smpl_body(record)
-    if model == "gltf":
-        from crowdstudy.gltf.character import load_gltf_body
-
-        return load_gltf_body(record)
-    raise InvalidInputError(f"body record field 'model': expected 'open', 'smpl' or 'gltf', got {model!r}")
-
-
 #: Record fields any model accepts and ignores (labels for people and renderers).
 META_FIELDS = ("name", "id", "seed", "label", "color", "colour")
 
@@ -316,50 +259,3 @@ def check_fields(record: dict, model: str, fields: tuple[str, ...]) -> None:
         raise InvalidInputError(
             f"body record: unknown field(s) {', '.join(sorted(unknown))} for model {model!r} "
             f"(expected {', '.join(fields)})")
-
-
-def _float_field(record: dict, name: str, lo: float, hi: float) -> float:
-    val = record.get(name)
-    try:
-        out = float(val)
-    except (TypeError, ValueError):
-        raise InvalidInputError(f"body record field {name!r}: expected a number, got {val!r}") from None
-    if not (lo <= out <= hi):
-        raise InvalidInputError(f"body record field {name!r}: expected {lo} to {hi}, got {out}")
-    return out
-
-
-def _shape_field(record: dict, name: str, n_max: int, limit: float = 5.0) -> np.ndarray:
-    raw = record.get(name, [])
-    try:
-        arr = np.asarray(raw if raw is not None else [], dtype=np.float64).reshape(-1)
-    except (TypeError, ValueError):
-        raise InvalidInputError(f"body record field {name!r}: expected a list of numbers, got {raw!r}") from None
-    if len(arr) > n_max:
-        raise InvalidInputError(f"body record field {name!r}: expected at most {n_max} values, got {len(arr)}")
-    if not np.all(np.isfinite(arr)) or np.any(np.abs(arr) > limit):
-        raise InvalidInputError(f"body record field {name!r}: values must be finite and within +-{limit}")
-    return np.pad(arr, (0, n_max - len(arr)))
-
-
-def _load_open(record: dict) -> Body:
-    from crowdstudy.body.open_model import OPEN_SHAPE_NAMES, TEMPLATE_HEIGHTS, open_model
-
-    sex = record.get("sex")
-    if sex not in ("female", "male"):
-        raise InvalidInputError(f"body record field 'sex': expected 'female' or 'male', got {sex!r}")
-    height = _float_field(record, "height", 1.2, 2.2) if "height" in record else TEMPLATE_HEIGHTS[sex]
-    shape = _shape_field(record, "shape", len(OPEN_SHAPE_NAMES), limit=3.0)
-    check_fields(record, "open", ("model", "sex", "height", "shape"))
-    model = open_model(sex)
-    verts, joints = model.shaped(shape, height)
-    return Body(record=dict(record), rest_joints=joints, rest_vertices=verts, faces=model.faces,
-                weights=model.weights, pelvis_height=float(-verts[:, 2].min()),
-                template_key=f"open-{sex}-v{_version()}")
-
-
-def _version() -> int:
-    from crowdstudy.body.open_model import OPEN_MODEL_VERSION
-
-    return OPEN_MODEL_VERSION
-

@@ -158,12 +158,41 @@ def _side_map(table: dict[str, str], prefix: str = "") -> dict[str, str]:
 BVH_NAME_MAPS: dict[str, dict[str, str]] = {
     "cmu": {"Hips": "pelvis", "LowerBack": "spine1", "Spine": "spine2", "Spine1": "spine3",
             "Neck": "neck", "Head": "head", **_side_map(_CMU_SIDE)},
+    "daz": {"hip": "pelvis", "abdomen": "spine1", "chest": "spine2", "neck": "neck", "head": "head",
+            **{f"{c}{bvh}": f"{side}_{ours}" for c, side in (("l", "left"), ("r", "right"))
+               for bvh, ours in {"Thigh": "hip", "Shin": "knee", "Foot": "ankle", "Collar": "collar",
+                                 "Shldr": "shoulder", "ForeArm": "elbow", "Hand": "wrist", "Mid1": "hand"}.items()}},
     "mixamo": {"mixamorig:Hips": "pelvis", "mixamorig:Spine": "spine1",
                "mixamorig:Spine1": "spine2", "mixamorig:Spine2": "spine3",
                "mixamorig:Neck": "neck", "mixamorig:Head": "head",
                **_side_map(_MIXAMO_SIDE, "mixamorig:")},
 }
-__all__ += ["BVH_NAME_MAPS", "bvh_name_map"]
+#: Joints a naming lacks, derived from the ones it has: ``{convention: {joint: (anchor BVH
+#: joint, end BVH joint or None for the anchor's end site, fraction)}}``. A derived joint
+#: rotates with its anchor (its local rotation is then the identity) and rests at
+#: ``anchor + fraction * (end - anchor)``. The Daz-friendly CMU skeleton (B. Hahne's BVH
+#: release: ``hip, abdomen, chest, neck, head, lButtock, lThigh, lShin, lFoot, lCollar,
+#: lShldr, lForeArm, lHand`` and fingers) has two spine joints and no toes: ``spine3`` sits
+#: halfway up the chest, the toe joint at the foot's end site.
+BVH_DERIVED_JOINTS: dict[str, dict[str, tuple[str, str | None, float]]] = {
+    "daz": {"spine3": ("chest", "neck", 0.5), "left_foot": ("lFoot", None, 1.0),
+            "right_foot": ("rFoot", None, 1.0)},
+}
+__all__ += ["BVH_NAME_MAPS", "BVH_DERIVED_JOINTS", "bvh_name_map", "bvh_convention"]
+
+
+def bvh_convention(bvh_joint_names) -> str:
+    """The naming (a key of :data:`BVH_NAME_MAPS`) that matches most of the joint names."""
+    names = set(bvh_joint_names)
+
+    def score(conv: str) -> int:
+        table = BVH_NAME_MAPS[conv]
+        if conv == "mixamo":
+            keys = {"mixamorig:" + (n.split(":", 1)[1] if ":" in n else n) for n in names}
+            return len(keys & set(table))
+        return len(names & set(table))
+
+    return max(BVH_NAME_MAPS, key=score)
 
 
 def bvh_name_map(bvh_joint_names, convention: str | None = None) -> dict[str, str]:
@@ -171,12 +200,13 @@ def bvh_name_map(bvh_joint_names, convention: str | None = None) -> dict[str, st
 
     Args:
         bvh_joint_names: the joint names of the file (any iterable of str).
-        convention: ``"cmu"``, ``"mixamo"`` or None to pick the one that matches most names.
-            Mixamo names are matched with any ``mixamorig*:`` namespace prefix or none.
+        convention: ``"cmu"``, ``"daz"``, ``"mixamo"`` or None to pick the one that matches
+            most names. Mixamo names are matched with any ``mixamorig*:`` namespace prefix or none.
 
     Returns:
-        Only the entries for names present in the file. Raises InvalidInputError naming
-        the missing joints when the file lacks one of the 24 joints' counterparts.
+        Only the entries for names present in the file; joints the naming derives
+        (:data:`BVH_DERIVED_JOINTS`) are not in it. Raises InvalidInputError naming the
+        missing joints when the file lacks one of the 24 joints' counterparts.
     """
     names = list(bvh_joint_names)
     if convention is not None and convention not in BVH_NAME_MAPS:
@@ -198,8 +228,11 @@ def bvh_name_map(bvh_joint_names, convention: str | None = None) -> dict[str, st
         return {n: table[n] for n in names if n in table}
 
     convs = [convention] if convention else list(BVH_NAME_MAPS)
-    best = max((candidates(c) for c in convs), key=len)
-    missing = sorted(set(JOINT_NAMES) - set(best.values()))
+    conv = max(convs, key=lambda c: len(candidates(c)))
+    best = candidates(conv)
+    derived = {j for j, (anchor, end, _) in BVH_DERIVED_JOINTS.get(conv, {}).items()
+               if anchor in names and (end is None or end in names)}
+    missing = sorted(set(JOINT_NAMES) - set(best.values()) - derived)
     if missing:
         raise InvalidInputError(
             f"BVH joint names: no counterpart for joints {', '.join(missing)} "

@@ -34,6 +34,7 @@ from pathlib import Path
 
 import numpy as np
 
+from crowdstudy.body.model import Body, check_fields
 from crowdstudy.body.skeleton import NUM_JOINTS, PARENTS
 from crowdstudy.errors import InvalidInputError
 
@@ -283,8 +284,6 @@ def betas_for_height(model: SmplModel, height: float, betas) -> np.ndarray:
 
 def load_smpl_body(record: dict):
     """A ``Body`` from an SMPL record ``{"model": "smpl", "path", "betas" (or "shape")}``."""
-    from crowdstudy.body.model import Body, check_fields
-
     check_fields(record, "smpl", ("model", "path", "betas", "shape", "sex", "height"))
     path = record.get("path")
     if not isinstance(path, str) or not path:

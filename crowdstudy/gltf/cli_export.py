@@ -20,13 +20,13 @@ def configure(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from crowdstudy.gltf.export import export_gltf
+    from crowdstudy.paths import check_output_path
     from crowdstudy.scene import CrowdAnimation
 
     out = Path(args.output)
     if out.suffix.lower() != ".glb":
         raise InvalidInputError(f"output: expected a .glb file name, got {args.output!r}")
-    if not out.parent.exists() and str(out.parent) not in ("", "."):
-        out.parent.mkdir(parents=True, exist_ok=True)
+    check_output_path(out, "output")
     anim = CrowdAnimation.load(args.input)
     if args.start or args.stop is not None:
         anim = anim.frames(args.start, args.stop)

@@ -19,21 +19,22 @@ def configure(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from crowdstudy.body.model import load_body
+    from crowdstudy.body import load_body
+    from crowdstudy.paths import check_output_path
 
     out = Path(args.out)
     if out.suffix.lower() != ".json":
         raise InvalidInputError(f"--out: expected a .json file name, got {args.out!r}")
+    check_output_path(out, "--out")
     record = {"model": "gltf", "path": str(Path(args.input).resolve()), "skin": args.skin}
     if args.height is not None:
         record["height"] = args.height
     if args.sex:
         record["sex"] = args.sex
-    from crowdstudy.gltf.character import read_character
+    from crowdstudy.body.gltf_model import read_character
 
     ch = read_character(record["path"], skin=args.skin, height=args.height)
     body = load_body(record)
-    out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(json.dumps(record, indent=2, sort_keys=True) + "\n")
     print(f"{args.input}: naming convention {ch.convention}, {body.n_vertices} vertices, "
           f"{len(body.faces)} faces, stature {body.height:.3f} m, texture: {'yes' if ch.texture is not None else 'no'}")

@@ -42,15 +42,14 @@ import numpy as np
 from crowdstudy.body.rotations import axis_angle_to_quaternion
 from crowdstudy.body.skeleton import JOINT_NAMES, NUM_JOINTS, PARENTS
 from crowdstudy.errors import InvalidInputError
-from crowdstudy.gltf.glb import ARRAY_BUFFER, ELEMENT_ARRAY_BUFFER, GltfBuilder
+from crowdstudy.glb import ARRAY_BUFFER, ELEMENT_ARRAY_BUFFER, Z_UP_TO_Y_UP, GltfBuilder
 from crowdstudy.render.bodies import region_scores, vertex_normals
 
 __all__ = ["export_gltf", "build_gltf", "Z_UP_TO_Y_UP", "WORLD_ROTATION", "character_prefix",
            "add_skinned_mesh", "encode_png"]
 
-#: (3, 3) rotation taking toolkit (Z-up, faces +y) coordinates to glTF (Y-up, faces +Z).
-Z_UP_TO_Y_UP = np.array([[-1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, 1.0, 0.0]])
-#: The same rotation as the quaternion ``(x, y, z, w)`` of the ``crowdstudy_world`` node.
+#: ``Z_UP_TO_Y_UP`` (:mod:`crowdstudy.glb`) as the quaternion ``(x, y, z, w)`` of the
+#: ``crowdstudy_world`` node.
 WORLD_ROTATION = (0.0, math.sqrt(0.5), math.sqrt(0.5), 0.0)
 WORLD_NODE = "crowdstudy_world"
 
@@ -181,7 +180,7 @@ def build_gltf(anim, *, bodies=None, colors: bool = True, progress: bool = False
         raise InvalidInputError("anim.joint_names: glTF export needs the 24-joint skeleton of crowdstudy.body.skeleton")
     n, t = anim.n_characters, anim.n_frames
     if bodies is None:
-        from crowdstudy.body.model import load_body
+        from crowdstudy.body import load_body
 
         bodies = [load_body(rec) for rec in anim.bodies]
     bodies = list(bodies)

@@ -24,6 +24,7 @@ def run(args: argparse.Namespace) -> int:
     from crowdstudy.design import load_design
     from crowdstudy.errors import InvalidInputError
     from crowdstudy.layout.concert import concert_layout
+    from crowdstudy.paths import check_output_path
 
     design = load_design(args.design)
     levels = list(design.densities) if args.all else [args.density]
@@ -35,18 +36,24 @@ def run(args: argparse.Namespace) -> int:
         raise InvalidInputError(f"--seed: expected a non-negative integer, got {args.seed}")
     stage = design.stage("stationary")
     out = Path(args.out)
+    paths = {level: out.with_name(f"{out.stem}-{level}{out.suffix or '.npz'}") if args.all else out
+             for level in levels}
+    for path in paths.values():
+        check_output_path(path, "--out")
+    if args.plot:
+        check_output_path(args.plot, "--plot")
     crowds = []
     print(f"{'level':>5} {'chars':>5} {'min dist (m)':>12} {'bound (m)':>9}  file")
     for level in levels:
         seed = design.cell_seed(stage, level) if args.seed is None else args.seed
         crowd = concert_layout(design, level, seed)
-        path = out.with_name(f"{out.stem}-{level}{out.suffix or '.npz'}") if args.all else out
+        path = paths[level]
         crowd.save(path)
         crowds.append(crowd)
         m = crowd.meta
         print(f"{level:>5} {crowd.n_agents:>5} {m['min_distance']:>12.3f} {m['target_distance']:>9.3f}  {path}")
     if args.plot:
-        from crowdstudy.navigation.plot import plot_layouts_and_trajectories
+        from crowdstudy.layout.plot import plot_layouts
 
-        print(f"plot: {plot_layouts_and_trajectories(crowds, None, args.plot)}")
+        print(f"plot: {plot_layouts(crowds, args.plot)}")
     return 0

@@ -148,9 +148,12 @@ def _per_character_table(summary: dict) -> str:
 
 def run(args: argparse.Namespace) -> int:
     from crowdstudy.metrics.summary import summarize
+    from crowdstudy.paths import check_output_path
     from crowdstudy.provenance import provenance
     from crowdstudy.scene import CrowdAnimation
 
+    if args.json is not None:
+        check_output_path(args.json, "--json")
     anim = CrowdAnimation.load(args.file)
     reference = CrowdAnimation.load(args.reference) if args.reference is not None else None
     geometries = ("mesh", "capsule") if args.geometry == "both" else (args.geometry,)
@@ -171,7 +174,6 @@ def run(args: argparse.Namespace) -> int:
         seed = anim.meta.get("seed")
         record = {"file": str(args.file), "reference": None if args.reference is None else str(args.reference),
                   "metrics": summary, "provenance": provenance(seed if isinstance(seed, int) else None)}
-        args.json.parent.mkdir(parents=True, exist_ok=True)
         args.json.write_text(json.dumps(record, indent=2, default=float))
         print(f"wrote {args.json}")
     return 0

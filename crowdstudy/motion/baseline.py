@@ -19,15 +19,20 @@ from __future__ import annotations
 
 import numpy as np
 
-from crowdstudy.body.rotations import quaternion_to_axis_angle
+from crowdstudy.body import load_body
+from crowdstudy.body.rotations import axis_angle_to_quaternion, quaternion_to_axis_angle
 from crowdstudy.body.skeleton import DEFAULT_PELVIS_HEIGHT, JOINT_INDEX, JOINT_NAMES, PARENTS
 from crowdstudy.errors import InvalidInputError
+from crowdstudy.motion.clip import MotionClip
+from crowdstudy.motion.legs import plant_legs
 from crowdstudy.motion.library import list_clips, load_clip, walk_clips
-from crowdstudy.motion.quaternions import quat_about_z, quat_multiply
+from crowdstudy.motion.mocap_library import dance_loop, idle_loop
+from crowdstudy.motion.selfcontact import clear_hands
+from crowdstudy.motion.quaternions import mirror_pose, quat_about_z, quat_conjugate, quat_multiply
 from crowdstudy.provenance import provenance
 from crowdstudy.scene import Crowd, CrowdAnimation
 
-__all__ = ["build_baseline", "animate_stationary", "animate_walking", "body_scales", "gait_blend", "plant_legs",
+__all__ = ["build_baseline", "animate_stationary", "animate_walking", "body_scales", "gait_blend",
            "loop_cycles", "MAX_LOOP_TEMPO_CHANGE", "LOOP_DISSOLVE_SECONDS"]
 
 #: Standard deviation of the random yaw around facing the stage (rad, about 8 degrees).
@@ -36,8 +41,6 @@ YAW_JITTER_SD = 0.14
 _GAIT_SAMPLES = 512
 #: Shortest stride, as a fraction of the slowest clip's, used below the slowest clip's speed.
 _MIN_STRIDE_FACTOR = 0.5
-#: Fraction of the swing over which a foot-lock offset fades out.
-_FADE_END = 0.8
 #: Speeds below this (m/s) keep the previous facing direction.
 _TURN_SPEED = 0.15
 #: Largest tempo change (fraction) a dance clip may take so that a whole number of its
@@ -45,6 +48,13 @@ _TURN_SPEED = 0.15
 #: shipped clips need at most 11.1 % at 20 s / 30 fps. Beyond it the clip keeps its own
 #: length and the animation is not periodic (short test durations).
 MAX_LOOP_TEMPO_CHANGE = 0.12
+#: The concert's default tempo (bpm; the design's ``[scenarios.concert] tempo``).
+DEFAULT_TEMPO = 120.0
+#: Default range of the per-dancer scale of upper-body movement.
+AMPLITUDE_RANGE = (0.85, 1.15)
+#: Joints whose movement ``amplitude`` scales: spine, neck, head, collars and arms.
+_UPPER_BODY = np.array([JOINT_INDEX[n] for n in JOINT_NAMES if n.startswith(("spine", "neck", "head")) or
+                        n.split("_", 1)[-1] in ("collar", "shoulder", "elbow", "wrist", "hand")])
 #: Seconds of extra corridor animation past the stimulus duration, cross-dissolved into the
 #: video's first frames so the loop seam is not seen as a jump (``meta["loop"]`` "dissolve").
 LOOP_DISSOLVE_SECONDS = 0.5
@@ -65,112 +75,11 @@ def body_scales(bodies: list[dict]) -> np.ndarray:
 
 def _body_geometry(bodies: list[dict]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Rest joints (N, 24, 3), leg scales (N,) and ankle heights above the soles (N,)."""
-    from crowdstudy.body import load_body
-
     loaded = [load_body(rec) for rec in bodies]
     rest = np.stack([b.rest_joints for b in loaded])
     pelvis = np.array([b.pelvis_height for b in loaded], dtype=np.float64)
     ankle = pelvis + 0.5 * (rest[:, JOINT_INDEX["left_ankle"], 2] + rest[:, JOINT_INDEX["right_ankle"], 2])
     return rest, pelvis / DEFAULT_PELVIS_HEIGHT, ankle
-
-
-def _segment_starts(mask: np.ndarray, wrapped: np.ndarray) -> np.ndarray:
-    """(T, N) index of the first frame of the current run of ``mask`` (-1 outside runs); a
-    run also restarts where ``wrapped`` (a new gait cycle) is set."""
-    frames = np.arange(mask.shape[0])[:, None]
-    prev = np.concatenate([np.zeros((1,) + mask.shape[1:], bool), mask[:-1]], axis=0)
-    start = mask & (~prev | wrapped)
-    idx = np.maximum.accumulate(np.where(start, frames, -1), axis=0)
-    return np.where(mask, idx, -1)
-
-
-def _lock_offsets(ankle: np.ndarray, ball: np.ndarray, foot_phase: np.ndarray, flat_end: float,
-                  stance_end: float) -> np.ndarray:
-    """(T, N, 3) horizontal corrections of an ankle target that pin the foot on the floor.
-
-    ankle, ball: (T, N, 3) the clip's ankle and ball-of-foot positions; foot_phase: (T, N)
-    phase since this foot's heel strike. While flat (``phase < flat_end``) the ankle is
-    held where the stance began; then, while the heel rises (until ``stance_end``), the
-    ball of the foot is held; the offset left at toe-off fades out (quintic smoothstep)
-    before the heel comes down (by 80 % of the swing). Without it, a clip blend that changes under a planted foot
-    (speed changes) makes the foot slide.
-    """
-    from crowdstudy.motion.posing import smoothstep5
-
-    cols = np.arange(ankle.shape[1])[None, :]
-    wrapped = np.concatenate([np.zeros((1,) + foot_phase.shape[1:], bool), foot_phase[1:] < foot_phase[:-1]], 0)
-    flat = foot_phase < flat_end
-    roll = (foot_phase >= flat_end) & (foot_phase < stance_end)
-    offset = np.zeros(ankle.shape)
-    start = _segment_starts(flat, wrapped)
-    offset[..., :2] = np.where((start >= 0)[..., None], ankle[np.maximum(start, 0), cols, :2] - ankle[..., :2], 0.0)
-    # heel rise: hold the ball where it was (with the flat-phase offset it had then)
-    flat_start = start
-    start = _segment_starts(roll, wrapped)
-    s0 = np.maximum(start, 0)
-    before = np.maximum(s0 - 1, 0)
-    was_flat = flat[before, cols] & (start > 0)
-    held = ankle[np.maximum(flat_start[before, cols], 0), cols, :2] - ankle[s0, cols, :2]   # flat offset at s0
-    ball_lock = ball[s0, cols, :2] + np.where(was_flat[..., None], held, 0.0)
-    offset[..., :2] = np.where((start >= 0)[..., None], ball_lock - ball[..., :2], offset[..., :2])
-    # swing: carry the last stance offset, fading out by the next heel strike
-    frames = np.arange(ankle.shape[0])[:, None]
-    last = np.maximum.accumulate(np.where(flat | roll, frames, -1), axis=0)
-    fade = 1.0 - smoothstep5((foot_phase - stance_end) / (_FADE_END * (1.0 - stance_end)))
-    swing = ~(flat | roll) & (last >= 0)
-    return np.where(swing[..., None], offset[np.maximum(last, 0), cols] * fade[..., None], offset)
-
-
-def plant_legs(joint_rotations: np.ndarray, root_translation: np.ndarray, rest_joints: np.ndarray,
-               scale: np.ndarray, ankle_height: np.ndarray, foot_phase: np.ndarray | None = None,
-               flat_end: float = 0.0, stance_end: float = 0.0) -> np.ndarray:
-    """Re-solve the legs so each body puts its ankles where the clip put them.
-
-    The clips are authored on :data:`DEFAULT_REST_JOINTS`; a body with other proportions
-    posed with the same rotations would lift, sink or slide its feet. The wanted ankle
-    positions are those of the authoring skeleton scaled by ``scale`` (with the ankle
-    height above the floor corrected to the body's own), reached by analytic two-bone IK
-    on the body's thigh and shank; the feet keep the clip's global orientation.
-
-    Args:
-        joint_rotations: (T, N, 24, 3) axis-angle; root_translation: (T, N, 3) metres.
-        rest_joints: (N, 24, 3) metres; scale: (N,); ankle_height: (N,) metres.
-        foot_phase: optional (T, N, 2) phase since each foot's (left, right) heel strike;
-            with it the ankles are also pinned while ``foot_phase < flat_end`` (the clip
-            blend changing under a planted foot would otherwise make it slide): the ankle
-            while ``foot_phase < flat_end``, the ball of the foot until ``stance_end``.
-
-    Returns:
-        (T, N, 24, 3) joint rotations with new hip, knee and ankle rotations.
-    """
-    from crowdstudy.body.rotations import axis_angle_to_matrix, matrix_to_axis_angle
-    from crowdstudy.motion.posing import two_bone_ik
-    from crowdstudy.motion.rig import ANKLE_HEIGHT, REST
-
-    out = np.array(joint_rotations, dtype=np.float64, copy=True)
-    s = scale[None, :, None]
-    pelvis = axis_angle_to_matrix(out[:, :, 0])
-    for k, side in enumerate(("left", "right")):
-        hip, knee, ankle = (JOINT_INDEX[f"{side}_{n}"] for n in ("hip", "knee", "ankle"))
-        r_hip, r_knee, r_ankle = (axis_angle_to_matrix(out[:, :, j]) for j in (hip, knee, ankle))
-        g_hip = pelvis @ r_hip
-        g_knee = g_hip @ r_knee
-        g_ankle = g_knee @ r_ankle
-        hip_pos = root_translation + s * np.einsum("tnab,b->tna", pelvis, REST[hip])
-        knee_pos = hip_pos + s * np.einsum("tnab,b->tna", g_hip, REST[knee] - REST[hip])
-        ankle_pos = knee_pos + s * np.einsum("tnab,b->tna", g_knee, REST[ankle] - REST[knee])
-        ankle_pos[..., 2] += ankle_height[None, :] - scale[None, :] * ANKLE_HEIGHT
-        if foot_phase is not None:
-            ball_pos = ankle_pos + s * np.einsum("tnab,b->tna", g_ankle, REST[ankle + 3] - REST[ankle])
-            ankle_pos += _lock_offsets(ankle_pos, ball_pos, foot_phase[..., k], flat_end, stance_end)
-        pole = 2.0 * knee_pos - hip_pos - ankle_pos + 0.02 * g_hip[..., :, 1]
-        body_hip = root_translation + np.einsum("tnab,nb->tna", pelvis, rest_joints[:, hip] - rest_joints[:, 0])
-        loc_a, loc_b, glob_b = two_bone_ik(body_hip, ankle_pos, pole, pelvis, rest_joints[:, hip],
-                                           rest_joints[:, knee], rest_joints[:, ankle], np.array([0.0, 1.0, 0.0]))
-        out[:, :, hip] = matrix_to_axis_angle(loc_a)
-        out[:, :, knee] = matrix_to_axis_angle(loc_b)
-        out[:, :, ankle] = matrix_to_axis_angle(np.swapaxes(glob_b, -1, -2) @ g_ankle)
-    return out
 
 
 def _bodies(n: int, seed, bodies):
@@ -227,45 +136,77 @@ def loop_cycles(natural_frames: float, n_frames: int, max_change: float = MAX_LO
 
 def animate_stationary(crowd: Crowd, *, duration: float = 20.0, fps: float = 30.0, seed=0,
                        bodies: list[dict] | None = None, clip_names: list[str] | None = None,
-                       yaw_jitter: float = YAW_JITTER_SD, meta: dict | None = None) -> CrowdAnimation:
+                       yaw_jitter: float = YAW_JITTER_SD, tempo: float | None = DEFAULT_TEMPO, mirror: float = 0.5,
+                       amplitude: tuple[float, float] = AMPLITUDE_RANGE, clear_self_contact: bool = True,
+                       meta: dict | None = None) -> CrowdAnimation:
     """A dancing crowd on the layout ``crowd`` (its first frame).
 
     Args:
         crowd: positions (T, N, 2) metres; frame 0 gives each character's spot and, when
             the crowd has headings, its facing (default +y, the stage).
         duration, fps: length (s) and frame rate of the animation.
-        seed: int or Generator for clip choice, phase and yaw; also seeds
-            ``sample_bodies`` when ``bodies`` is None.
+        seed: int or Generator for clip choice, phase, mirroring, amplitude and yaw; also
+            seeds ``sample_bodies`` when ``bodies`` is None.
         bodies: N body records (default ``sample_bodies(N, seed)``).
-        clip_names: dance clips to deal from (default all 15).
+        clip_names: dance clips to deal from (default the motion-captured dances of the
+            default concert, :func:`~crowdstudy.motion.library.list_clips`); procedural
+            clip names (``list_clips("dance", source="procedural")``) work too.
         yaw_jitter: standard deviation (rad) of the random yaw around that facing.
+        tempo: the music's beat (bpm) for motion-captured dances: each take is time-warped
+            so its bounce falls on the beats and loops over whole bars
+            (:func:`~crowdstudy.motion.mocap_library.dance_loop`); each dancer starts on a
+            random whole beat of its loop, so neighbours differ but share the beat. None
+            plays every take at its own tempo from a random frame (no shared beat: the
+            "before" of :func:`~crowdstudy.motion.beat.bounce_phase`).
+        mirror: probability that a dancer plays its clip mirrored left <-> right.
+        amplitude: (low, high) range of a per-dancer scale of the upper body's movement
+            around the clip's mean pose (legs and pelvis untouched, feet stay planted).
+        clear_self_contact: move each character's hands out of its own torso and head
+            (:func:`~crowdstudy.motion.selfcontact.clear_hands`: a performer's hands on the
+            hips end up inside a wider body).
 
-    Each clip plays a whole number ``k`` of loops in the T frames (:func:`loop_cycles`:
-    time-warped by at most :data:`MAX_LOOP_TEMPO_CHANGE`), so the animation is exactly
-    periodic with period T: frame T would equal frame 0 and the step T-1 -> 0 is an
-    ordinary frame step (the videos loop). When some clip cannot (T shorter than about
-    one loop), that clip keeps its natural length and the animation is not periodic.
+    Motion-captured loops last whole bars that divide the animation when it holds whole
+    bars (then it is exactly periodic). Procedural clips play a whole number ``k`` of loops
+    in the T frames (:func:`loop_cycles`: time-warped by at most
+    :data:`MAX_LOOP_TEMPO_CHANGE`). Either way the animation is exactly periodic with period
+    T when every clip's loop divides T: frame T would equal frame 0 and the step T-1 -> 0
+    is an ordinary frame step (the videos loop).
 
     Returns:
         CrowdAnimation with root_translation (T, N, 3) m and joint_rotations (T, N, 24, 3);
         ``clips[i] = {"kind": "dance", "clips": [name], "weights": [1.0], "phase": s,
         "yaw": rad, "scale": leg scale, "tempo": played / natural speed, "loop_frames":
-        frames per loop (T / k when periodic)}``; ``meta["loop"] = {"mode": "periodic",
-        "frames": T}`` or ``{"mode": "none"}``.
+        frames per loop, "mirrored": bool, "amplitude": upper-body scale, "beat_offset":
+        whole beats into the loop (motion capture)}``; ``meta["loop"] = {"mode":
+        "periodic", "frames": T}`` or ``{"mode": "none"}``; ``meta["tempo"]`` (bpm).
     """
     if not isinstance(crowd, Crowd):
         raise InvalidInputError(f"crowd: expected a Crowd, got {type(crowd).__name__}")
     fps, n_frames = _check_timing(duration, fps)
+    lo_amp, hi_amp = (float(a) for a in amplitude)
+    if not (0.0 < lo_amp <= hi_amp <= 2.0):
+        raise InvalidInputError(f"amplitude: expected 0 < low <= high <= 2, got {amplitude!r}")
+    if not 0.0 <= float(mirror) <= 1.0:
+        raise InvalidInputError(f"mirror: expected a probability in [0, 1], got {mirror!r}")
     n = crowd.n_agents
-    names = list(clip_names) if clip_names is not None else list_clips("dance")
+    names = list(clip_names) if clip_names is not None else list_clips("dance", default_only=True)
     if not names:
         raise InvalidInputError("clip_names: expected at least one dance clip")
-    clips = [load_clip(name) for name in names]
+    clips = []
+    for name in names:
+        clip = load_clip(name)
+        if clip.meta.get("mocap"):
+            clip = idle_loop(name, fps, n_frames) if clip.meta.get("idle") or tempo is None else \
+                dance_loop(name, float(tempo), fps, n_frames / fps)
+        clips.append(clip)
     rng = _rng(seed, 1)
     choice = rng.permutation(np.resize(np.arange(len(clips)), n))
     phase = rng.uniform(0.0, 1.0, n) * np.array([clips[c].duration for c in choice])
     yaw = np.clip(rng.normal(0.0, yaw_jitter, n), -2.5 * yaw_jitter, 2.5 * yaw_jitter) if yaw_jitter > 0 \
         else np.zeros(n)
+    mirrored = rng.uniform(0.0, 1.0, n) < float(mirror)
+    amp = rng.uniform(lo_amp, hi_amp, n)
+    beat_offset = np.full(n, -1, dtype=np.int64)
     if crowd.headings is not None:                 # face the crowd's headings (the stage: +y)
         yaw = yaw + crowd.headings[0] - np.pi / 2
     bodies = _bodies(n, seed, bodies)
@@ -273,7 +214,7 @@ def animate_stationary(crowd: Crowd, *, duration: float = 20.0, fps: float = 30.
     xy = crowd.positions[0]
     rot = np.empty((n_frames, n, len(JOINT_NAMES), 3))
     root = np.empty((n_frames, n, 3))
-    tempo = np.ones(n)
+    tempo_ratio = np.ones(n)
     loop_frames = np.ones(n)
     periodic = True
     frames = np.arange(n_frames)
@@ -281,37 +222,56 @@ def animate_stationary(crowd: Crowd, *, duration: float = 20.0, fps: float = 30.
         members = np.flatnonzero(choice == k)
         if members.size == 0:
             continue
-        # A whole number of loops in the T frames (time-warped to fit: frame T would be
-        # frame 0), sampled on a table of n_loop phases advanced `step` entries per frame;
-        # every character is then a pure gather from that table.
-        cycles = loop_cycles(clip.duration * fps, n_frames)
-        if cycles:
-            g = int(np.gcd(n_frames, cycles))
-            n_loop, step = n_frames // g, cycles // g                           # n_loop / step = T / cycles
-        else:                                      # shorter than a loop: the natural length
-            periodic = False
-            n_loop, step = max(4, int(round(clip.duration * fps))), 1
-        tempo[members] = clip.duration * fps * step / n_loop
+        if clip.meta.get("mocap"):
+            # a loop of whole frames (whole bars for dances), each dancer from its own beat
+            n_loop, step = clip.n_frames, 1
+            periodic &= n_frames % n_loop == 0
+            tempo_ratio[members] = clip.meta.get("tempo_ratio", 1.0)
+            bf = int(clip.meta.get("beat_frames", 1))
+            start = bf * rng.integers(0, max(1, n_loop // bf), members.size)
+            if "beat_frames" in clip.meta:
+                beat_offset[members] = start // bf
+        else:
+            # A whole number of loops in the T frames (time-warped to fit: frame T would be
+            # frame 0), sampled on a table of n_loop phases advanced `step` entries per frame.
+            cycles = loop_cycles(clip.duration * fps, n_frames)
+            if cycles:
+                g = int(np.gcd(n_frames, cycles))
+                n_loop, step = n_frames // g, cycles // g                       # n_loop / step = T / cycles
+            else:                                  # shorter than a loop: the natural length
+                periodic = False
+                n_loop, step = max(4, int(round(clip.duration * fps))), 1
+            tempo_ratio[members] = clip.duration * fps * step / n_loop
+            start = np.floor(phase[members] / clip.duration * n_loop).astype(np.int64)
         loop_frames[members] = n_loop / step
         quat_table, root_table = clip.loop_table(n_loop)
-        aa_table = quaternion_to_axis_angle(quat_table)
-        start = np.floor(phase[members] / clip.duration * n_loop).astype(np.int64)
         idx = (start[None, :] + step * frames[:, None]) % n_loop                # (T, M)
-        rot[:, members] = aa_table[idx]
+        quat = quat_table[idx]                                                  # (T, M, 24, 4)
+        local = root_table[idx]
+        flip = mirrored[members]
+        if flip.any():
+            quat[:, flip], local[:, flip] = mirror_pose(quat[:, flip], local[:, flip])
+        quat = _scale_upper_body(quat, quat_table, amp[members])
+        rot[:, members] = quaternion_to_axis_angle(quat)
         y = np.broadcast_to(yaw[members], idx.shape)
-        q0 = quat_multiply(quat_about_z(y), quat_table[idx, 0])
+        q0 = quat_multiply(quat_about_z(y), quat[..., 0, :])
         rot[:, members, 0] = quaternion_to_axis_angle(q0)
-        local = root_table[idx] * scale[members][None, :, None]
+        local = local * scale[members][None, :, None]
         c, s_ = np.cos(y), np.sin(y)
         root[:, members, 0] = xy[members, 0] + c * local[..., 0] - s_ * local[..., 1]
         root[:, members, 1] = xy[members, 1] + s_ * local[..., 0] + c * local[..., 1]
         root[:, members, 2] = local[..., 2]
         phase[members] = start * clip.duration / n_loop
     rot = plant_legs(rot, root, rest, scale, ankle_height)
+    if clear_self_contact:                     # hands out of each character's own (wider) body
+        rot = clear_hands(rot, root, [load_body(b) for b in bodies], fps)
     records = tuple({"kind": "dance", "clips": [names[c]], "weights": [1.0], "phase": float(ph),
-                     "yaw": float(y), "scale": float(s), "tempo": float(tp), "loop_frames": float(lf)}
-                    for c, ph, y, s, tp, lf in zip(choice, phase, yaw, scale, tempo, loop_frames))
+                     "yaw": float(y), "scale": float(s), "tempo": float(tp), "loop_frames": float(lf),
+                     "mirrored": bool(mi), "amplitude": float(am), "beat_offset": int(bo)}
+                    for c, ph, y, s, tp, lf, mi, am, bo in zip(choice, phase, yaw, scale, tempo_ratio, loop_frames,
+                                                              mirrored, amp, beat_offset))
     out_meta = {"method": "Baseline", "scenario": crowd.meta.get("scenario", "concert"),
+                "tempo": None if tempo is None else float(tempo),
                 "provenance": provenance(seed if not isinstance(seed, np.random.Generator) else None)}
     out_meta.update({k: crowd.meta[k] for k in ("floor", "stage_distance", "stage_front", "obstacles")
                      if k in crowd.meta})     # the scene's static geometry, for the later stages
@@ -319,6 +279,63 @@ def animate_stationary(crowd: Crowd, *, duration: float = 20.0, fps: float = 30.
     loop = {"mode": "periodic", "frames": int(n_frames)} if periodic else {"mode": "none"}
     return CrowdAnimation(joint_names=JOINT_NAMES, parents=PARENTS, root_translation=root, joint_rotations=rot,
                           fps=fps, bodies=tuple(bodies), clips=records, meta={"loop": loop, **out_meta})
+
+
+def _scale_upper_body(quat: np.ndarray, table: np.ndarray, amp: np.ndarray) -> np.ndarray:
+    """(T, M, 24, 4) poses whose upper-body joints move ``amp`` (M,) times as far from the
+    loop's mean pose (per joint, the normalised mean of ``table`` (S, 24, 4))."""
+    if np.allclose(amp, 1.0):
+        return quat
+    mean = np.sum(table * np.where(np.sum(table * table[:1], -1, keepdims=True) < 0, -1.0, 1.0), axis=0)
+    mean /= np.linalg.norm(mean, axis=-1, keepdims=True)                     # (24, 4)
+    out = quat.copy()
+    j = _UPPER_BODY
+    rel = quat_multiply(quat_conjugate(mean[j]), quat[..., j, :])
+    aa = quaternion_to_axis_angle(rel) * amp[None, :, None, None]
+    out[..., j, :] = quat_multiply(mean[j], axis_angle_to_quaternion(aa))
+    return out
+
+
+def _check_walks(walks) -> list[MotionClip]:
+    """The walking clips sorted by speed, checked for what :func:`animate_walking` needs."""
+    walks = sorted(walks, key=lambda c: c.speed if c.speed is not None else -1.0)
+    if len(walks) < 2:
+        raise InvalidInputError(f"walks: expected at least 2 walking clips, got {len(walks)}")
+    for c in walks:
+        if not isinstance(c, MotionClip) or not c.loop or c.speed is None or "stride_length" not in c.meta:
+            raise InvalidInputError(f"walks: clip {getattr(c, 'name', c)!r} is not a looping walking clip with a "
+                                    "speed and meta 'stride_length'")
+    speeds = [c.speed for c in walks]
+    if len(set(speeds)) != len(speeds):
+        raise InvalidInputError(f"walks: clip speeds must differ, got {speeds}")
+    return walks
+
+
+def _contact_table(walks: list[MotionClip]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(K, 2) arrays of the walking clips' foot-lock timing, left and right foot, in gait
+    cycles: the phase where each foot's lock starts (its heel strike less ``lock_lead``,
+    given as an offset from the nominal 0 / 0.5 so clips blend across phase 0), and the
+    durations from there to the end of the flat foot and to the end of the stance
+    (toe-off plus ``lock_lag``).
+
+    ``meta["contacts"] = {"left": {"strike", "flat_end", "toe_off"}, "right": {...}}`` are
+    gait phases in [0, 1); a clip without it gets those of the procedural walks
+    (:mod:`crowdstudy.motion.walk`).
+    """
+    from crowdstudy.motion.walk import procedural_contacts
+
+    default = procedural_contacts()
+    out = np.zeros((3, len(walks), 2))
+    for i, c in enumerate(walks):
+        src = c.meta if "contacts" in c.meta else default
+        lead, lag = float(src.get("lock_lead", 0.0)), float(src.get("lock_lag", 0.0))
+        for k, (side, nominal) in enumerate((("left", 0.0), ("right", 0.5))):
+            ev = src["contacts"][side]
+            strike = float(ev["strike"])
+            out[0, i, k] = nominal + np.mod(strike - nominal + 0.5, 1.0) - 0.5 - lead
+            out[1, i, k] = np.mod(float(ev["flat_end"]) - strike, 1.0) + lead
+            out[2, i, k] = np.mod(float(ev["toe_off"]) - strike, 1.0) + lag + lead
+    return out[0], out[1], out[2]
 
 
 def gait_blend(speed: np.ndarray, clip_speeds: np.ndarray) -> np.ndarray:
@@ -366,7 +383,8 @@ def _headings(vel: np.ndarray, speed: np.ndarray, initial: np.ndarray, fps: floa
 
 def animate_walking(crowd: Crowd, *, fps: float | None = None, seed=0, bodies: list[dict] | None = None,
                     facing: str = "auto", velocity_smoothing: float = 0.12, heading_smoothing: float = 0.25,
-                    dissolve_frames: int = 0, meta: dict | None = None) -> CrowdAnimation:
+                    dissolve_frames: int = 0, meta: dict | None = None,
+                    walks: list[MotionClip] | None = None) -> CrowdAnimation:
     """Walking characters along the trajectories of ``crowd``.
 
     Args:
@@ -385,6 +403,12 @@ def animate_walking(crowd: Crowd, *, fps: float | None = None, seed=0, bodies: l
         dissolve_frames: D > 0 when the crowd's last D frames lie past the video: the
             video is the first T = n_frames - D frames and its seam is a cross-dissolve
             of frames T..T+D-1 into its first D frames (``render_video``).
+        walks: the in-place looping walking clips to blend (default
+            :func:`~crowdstudy.motion.library.walk_clips`), at least 2 of different
+            ``speed``; each with meta ``stride_length`` (m per gait cycle), optionally
+            ``cycles`` (gait cycles in the loop, default 1; phase 0 of every cycle = the
+            left heel strike), ``contacts`` (see :func:`_contact_table`), ``lock_lead``
+            and ``lock_lag``.
 
     Returns:
         CrowdAnimation; ``clips[i] = {"kind": "walk", "clips": [4 names], "weights":
@@ -430,7 +454,7 @@ def animate_walking(crowd: Crowd, *, fps: float | None = None, seed=0, bodies: l
         initial = crowd.headings[0] if crowd.headings is not None else np.full(n, np.pi / 2)
         heading = _headings(vel, speed, initial, fps_out, heading_smoothing)
 
-    walks = walk_clips()
+    walks = _check_walks(walk_clips() if walks is None else walks)
     clip_speeds = np.array([c.speed for c in walks])
     strides = np.array([c.meta["stride_length"] for c in walks])
     weights = gait_blend(speed / scale, clip_speeds)                        # (T, N, K)
@@ -450,13 +474,15 @@ def animate_walking(crowd: Crowd, *, fps: float | None = None, seed=0, bodies: l
     root_tab = np.stack([r for _, r in tables])                             # (K, S, 3)
     lo = np.clip(np.argmax(weights > 0, axis=-1), 0, len(walks) - 2)
     w_hi = np.take_along_axis(weights, (lo + 1)[..., None], axis=-1)[..., 0]
-    u = np.mod(phase, 1.0) * _GAIT_SAMPLES
-    i0 = np.floor(u).astype(np.int64) % _GAIT_SAMPLES
-    i1 = (i0 + 1) % _GAIT_SAMPLES
-    f = u - np.floor(u)
-    terms = (((lo, i0), (1.0 - w_hi) * (1.0 - f)), ((lo, i1), (1.0 - w_hi) * f),
-             ((lo + 1, i0), w_hi * (1.0 - f)), ((lo + 1, i1), w_hi * f))
-    ref = quat_tab[lo, i0]
+    # a clip of c gait cycles spans c units of the gait phase (every cycle starts at a left heel strike)
+    cycles = np.array([float(c.meta.get("cycles", 1)) for c in walks])
+    terms = []
+    for k, w_k in ((lo, 1.0 - w_hi), (lo + 1, w_hi)):
+        u = np.mod(phase, cycles[k]) / cycles[k] * _GAIT_SAMPLES
+        i0 = np.floor(u).astype(np.int64) % _GAIT_SAMPLES
+        f = u - np.floor(u)
+        terms += [((k, i0), w_k * (1.0 - f)), ((k, (i0 + 1) % _GAIT_SAMPLES), w_k * f)]
+    ref = quat_tab[terms[0][0]]
     quat = np.zeros_like(ref)
     root_local = np.zeros((n_frames, n, 3))
     for n_term, ((k, i), w) in enumerate(terms):
@@ -467,15 +493,13 @@ def animate_walking(crowd: Crowd, *, fps: float | None = None, seed=0, bodies: l
         root_local += w[..., None] * root_tab[k, i]
     quat /= np.sqrt(np.einsum("...c,...c->...", quat, quat))[..., None]
     rot, root = _place(quat, root_local, heading - np.pi / 2, pos, np.broadcast_to(scale, (n_frames, n)))
-    from crowdstudy.motion.walk import DUTY_FACTOR, FLAT_STANCE_END, FOOT_PHASE_OFFSET, LANDING_HOVER, LIFT_OFF
-
-    # Foot locking holds each foot from the end of its swing's horizontal travel (it is
-    # then over its landing spot) through the flat stance, then the ball through the heel
-    # rise and the lift-off: foot phases are counted from that moment.
-    hover = LANDING_HOVER * (1.0 - DUTY_FACTOR)
-    foot_phase = np.stack([np.mod(phase - off + hover, 1.0) for off in FOOT_PHASE_OFFSET], axis=-1)
-    rot = plant_legs(rot, root, rest, scale, ankle_height, foot_phase, FLAT_STANCE_END + hover,
-                     DUTY_FACTOR + LIFT_OFF * (1.0 - DUTY_FACTOR) + hover)
+    # Foot locking holds each foot from its heel strike (less the clips' ``lock_lead``: a
+    # procedural foot is over its landing spot before it comes down) through the flat
+    # stance, then the ball through the heel rise and toe-off (plus ``lock_lag``); the
+    # contact timing of the clips (meta "contacts") is blended by the pose weights.
+    strike, flat_len, stance_len = (np.einsum("tnk,kf->tnf", weights, x) for x in _contact_table(walks))
+    foot_phase = np.mod(phase[..., None] - strike, 1.0)
+    rot = plant_legs(rot, root, rest, scale, ankle_height, foot_phase, flat_len, stance_len)
     records = tuple({"kind": "walk", "clips": [c.name for c in walks],
                      "weights": [float(x) for x in weights[:, i].mean(axis=0)], "phase": float(phase0[i]),
                      "scale": float(scale[i]), "mean_speed": float(speed[:, i].mean())} for i in range(n))
@@ -531,7 +555,10 @@ def build_baseline(design, stage, level: str, *, duration: float | None = None, 
         from crowdstudy.layout import concert_layout
 
         crowd = concert_layout(design, level, seed)
-        return animate_stationary(crowd, duration=duration, fps=fps, seed=seed, meta=meta)
+        sc = design.scenarios[st.scenario].params
+        names = list_clips("dance", "procedural") if sc.get("motion", "mocap") == "procedural" else None
+        return animate_stationary(crowd, duration=duration, fps=fps, seed=seed, clip_names=names,
+                                  tempo=sc.get("tempo", DEFAULT_TEMPO), meta=meta)
     if st.scenario == "corridor":
         from crowdstudy.navigation import corridor_crowd
 
@@ -542,5 +569,7 @@ def build_baseline(design, stage, level: str, *, duration: float | None = None, 
         n_dissolve = min(int(round(dissolve * fps)), n_video // 2)
         # the navigation runs D frames past the video: they are dissolved into its start
         crowd = corridor_crowd(design, level, seed, duration=(n_video + n_dissolve) / fps, fps=fps)
-        return animate_walking(crowd, fps=fps, seed=seed, dissolve_frames=n_dissolve, meta=meta)
+        sc = design.scenarios[st.scenario].params
+        walks = walk_clips("procedural") if sc.get("motion", "mocap") == "procedural" else None
+        return animate_walking(crowd, fps=fps, seed=seed, dissolve_frames=n_dissolve, walks=walks, meta=meta)
     raise InvalidInputError(f"stage {st.key!r}: scenario {st.scenario!r} has no Baseline animation")

@@ -127,13 +127,19 @@ def _number(tok: str, path, line: int, field: str) -> float:
 
 
 def parse_bvh(path: str | Path) -> BvhSkeleton:
-    """Read a BVH file (hierarchy and motion) without interpreting it."""
+    """Read a BVH file (``.bvh``, or gzipped ``.bvh.gz``: hierarchy and motion) without interpreting it."""
     path = Path(path)
     if not path.is_file():
         raise InvalidInputError(f"BVH file {str(path)!r} does not exist")
     try:
-        lines = path.read_text(encoding="utf-8", errors="strict").splitlines()
-    except UnicodeDecodeError as exc:
+        if path.suffix == ".gz":
+            import gzip
+
+            with gzip.open(path, "rt", encoding="utf-8", errors="strict") as fh:
+                lines = fh.read().splitlines()
+        else:
+            lines = path.read_text(encoding="utf-8", errors="strict").splitlines()
+    except (UnicodeDecodeError, OSError, EOFError) as exc:
         raise InvalidInputError(f"BVH file {path}: not a text file ({exc})") from None
     names, parents, offsets, channels, ends = [], [], [], [], []
     stack: list[int] = []
@@ -311,7 +317,8 @@ def load_bvh(path: str | Path, skeleton: str = "auto", *, rest_joints: np.ndarra
 
     Args:
         path: the ``.bvh`` file.
-        skeleton: "auto" (pick the naming that matches), "cmu" or "mixamo".
+        skeleton: "auto" (pick the naming that matches), "cmu", "daz" (B. Hahne's
+            Daz-friendly CMU release) or "mixamo".
         rest_joints: (24, 3) target skeleton for scaling and grounding (default the
             authoring skeleton).
         name: clip name (default the file stem).
@@ -321,13 +328,14 @@ def load_bvh(path: str | Path, skeleton: str = "auto", *, rest_joints: np.ndarra
         the source, naming, unit scale (metres per file unit) and frame count.
     """
     from crowdstudy.body.rotations import matrix_to_axis_angle
-    from crowdstudy.body.skeleton import bvh_name_map, forward_kinematics
+    from crowdstudy.body.skeleton import BVH_DERIVED_JOINTS, bvh_convention, bvh_name_map, forward_kinematics
 
-    if skeleton not in ("auto", "cmu", "mixamo"):
-        raise InvalidInputError(f"skeleton: expected 'auto', 'cmu' or 'mixamo', got {skeleton!r}")
+    if skeleton not in ("auto", "cmu", "daz", "mixamo"):
+        raise InvalidInputError(f"skeleton: expected 'auto', 'cmu', 'daz' or 'mixamo', got {skeleton!r}")
     bvh = parse_bvh(path)
+    convention = bvh_convention(bvh.names) if skeleton == "auto" else skeleton
     try:
-        mapping = bvh_name_map(bvh.names, None if skeleton == "auto" else skeleton)
+        mapping = bvh_name_map(bvh.names, convention)
     except InvalidInputError as exc:
         raise InvalidInputError(f"BVH file {path}: joint names: {exc}") from None
     index = {ours: bvh.names.index(theirs) for theirs, ours in mapping.items()}
@@ -336,7 +344,16 @@ def load_bvh(path: str | Path, skeleton: str = "auto", *, rest_joints: np.ndarra
         raise InvalidInputError(f"rest_joints: expected shape ({NUM_JOINTS}, 3), got {rest.shape}")
 
     rest_bvh = bvh.rest_positions()
-    at = {j: rest_bvh[index[j]] for j in JOINT_NAMES}
+    at = {j: rest_bvh[index[j]] for j in JOINT_NAMES if j in index}
+    for j, (anchor, end, fraction) in BVH_DERIVED_JOINTS.get(convention, {}).items():
+        if j in index:
+            continue
+        a = bvh.names.index(anchor)
+        end_pos = rest_bvh[a] + bvh.end_sites[a] if end is None else rest_bvh[bvh.names.index(end)]
+        if not np.all(np.isfinite(end_pos)):
+            raise InvalidInputError(f"BVH file {path}: joint {anchor!r} has no end site to place {j!r}")
+        index[j] = a                      # rotates with its anchor
+        at[j] = rest_bvh[a] + fraction * (end_pos - rest_bvh[a])
     # The file's axes, snapped to its coordinate axes (mocap frames are axis aligned; the
     # rest pose itself may lean a little).
     up = _snap(at["head"] - at["pelvis"])
@@ -380,8 +397,6 @@ def load_bvh(path: str | Path, skeleton: str = "auto", *, rest_joints: np.ndarra
     # Ground on a low percentile of the lower ankle (robust to a calibration frame).
     feet = float(np.percentile(joints[:, [JOINT_INDEX["left_ankle"], JOINT_INDEX["right_ankle"]], 2].min(axis=1), 5))
     root[:, 2] += ANKLE_HEIGHT * _leg_ratio(rest) - feet
-    convention = skeleton if skeleton != "auto" else (
-        "mixamo" if any(":" in n or n.startswith("mixamorig") for n in mapping) else "cmu")
     meta = {"source": str(path), "skeleton": convention, "unit_scale": unit, "frames": bvh.n_frames,
             "frame_time": bvh.frame_time}
     return MotionClip(name=name or Path(path).stem, kind="mocap", fps=1.0 / bvh.frame_time,

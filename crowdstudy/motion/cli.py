@@ -14,6 +14,7 @@ import sys
 from pathlib import Path
 
 from crowdstudy.errors import InvalidInputError
+from crowdstudy.paths import check_output_dir, check_output_path
 
 __all__ = ["configure", "run"]
 
@@ -22,7 +23,7 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("crowd", nargs="?", default=None,
                         help="a Crowd .npz (layout -> dancing crowd, trajectories -> walking crowd); "
                              "without it the cells of --design are animated")
-    parser.add_argument("--design", default=None, help="study design TOML (default stimuli/study.toml)")
+    parser.add_argument("--design", default=None, help="study design TOML (default: the paper's, shipped in the package)")
     parser.add_argument("--stage", default=None,
                         help="stationary | walking | all (or 1 | 2); required without a crowd file")
     parser.add_argument("--density", default="all", help="density level D1..D5 or 'all' (default all)")
@@ -42,6 +43,10 @@ def run(args: argparse.Namespace) -> int:
     from crowdstudy.design import load_design
 
     out = Path(args.out)
+    if out.suffix == ".npz":
+        check_output_path(out, "--out")
+    else:
+        check_output_dir(out, "--out")
     if args.crowd is not None:
         from crowdstudy.motion.baseline import animate_stationary, animate_walking
         from crowdstudy.scene import Crowd

@@ -1,20 +1,30 @@
-"""The clips shipped with the toolkit: 15 dances and 4 walks, generated on first use.
+"""The clips shipped with the toolkit: motion capture (the default) and procedural motion.
 
-The clips are produced deterministically by :mod:`crowdstudy.motion.dance` and
-:mod:`crowdstudy.motion.walk` (no data files, nothing downloaded) and cached for the
-life of the process.
+* ``source="mocap"`` (default): the CMU takes of :mod:`crowdstudy.motion.mocap_library`,
+  cleaned and stored in the package: 11 dances (10 in the default concert), 3 idles and 6
+  walking loops from 0.4 to 1.9 m/s;
+* ``source="procedural"``: 15 dances and 4 walks generated on first use by
+  :mod:`crowdstudy.motion.dance` and :mod:`crowdstudy.motion.walk` (no data files).
+
+Clip names are unique across both; :func:`load_clip` finds either (cached for the life of
+the process).
 """
 
 from __future__ import annotations
 
 import functools
+import hashlib
+from pathlib import Path
 
 from crowdstudy.errors import InvalidInputError
 from crowdstudy.motion.clip import MotionClip
+from crowdstudy.motion.mocap_library import load_mocap, mocap_names
 
-__all__ = ["list_clips", "load_clip", "walk_clips"]
+__all__ = ["SOURCES", "library_digest", "list_clips", "load_clip", "walk_clips"]
 
-_KINDS = ("dance", "walk")
+_KINDS = ("dance", "idle", "walk")
+#: Where clips come from: motion capture (default) or generated.
+SOURCES = ("mocap", "procedural")
 
 
 def _specs() -> dict[str, tuple[str, object]]:
@@ -26,30 +36,58 @@ def _specs() -> dict[str, tuple[str, object]]:
     return out
 
 
-def list_clips(kind: str | None = None) -> list[str]:
-    """Names of the shipped clips: ``kind`` "dance" (15), "walk" (4, slowest first) or None (all)."""
+def _check_source(source: str) -> None:
+    if source not in SOURCES:
+        raise InvalidInputError(f"source: expected one of {SOURCES}, got {source!r}")
+
+
+def list_clips(kind: str | None = None, source: str = "mocap", *, default_only: bool = False) -> list[str]:
+    """Names of the shipped clips of ``kind`` ("dance", "idle", "walk" or None for all) from
+    ``source``; ``default_only`` keeps the motion-captured takes of the default crowds
+    (e.g. the concert's 10 dances). Procedural: 15 dances and 4 walks (slowest first)."""
     if kind is not None and kind not in _KINDS:
         raise InvalidInputError(f"kind: expected one of {_KINDS} or None, got {kind!r}")
+    _check_source(source)
+    if source == "mocap":
+        return mocap_names(kind, default_only=default_only)
     return [name for name, (k, _) in _specs().items() if kind is None or k == kind]
 
 
 @functools.lru_cache(maxsize=None)
 def load_clip(name: str) -> MotionClip:
-    """The shipped clip called ``name`` (see :func:`list_clips`)."""
+    """The shipped clip called ``name`` (see :func:`list_clips`, either source)."""
     specs = _specs()
-    if name not in specs:
-        raise InvalidInputError(f"clip name: unknown clip {name!r}; expected one of {', '.join(specs)}")
-    kind, spec = specs[name]
-    if kind == "dance":
-        from crowdstudy.motion.dance import generate_dance
+    if name in specs:
+        kind, spec = specs[name]
+        if kind == "dance":
+            from crowdstudy.motion.dance import generate_dance
 
-        return generate_dance(spec)
-    from crowdstudy.motion.walk import generate_walk
+            return generate_dance(spec)
+        from crowdstudy.motion.walk import generate_walk
 
-    return generate_walk(spec)
+        return generate_walk(spec)
+    if name in mocap_names():
+        return load_mocap(name)
+    raise InvalidInputError(f"clip name: unknown clip {name!r}; expected one of "
+                            f"{', '.join(mocap_names() + list(specs))}")
 
 
-def walk_clips() -> list[MotionClip]:
-    """The 4 walking clips, slowest first."""
-    clips = [load_clip(n) for n in list_clips("walk")]
+def walk_clips(source: str = "mocap") -> list[MotionClip]:
+    """The walking clips of ``source``, slowest first (6 motion-captured loops or 4 procedural)."""
+    _check_source(source)
+    clips = [load_clip(n) for n in list_clips("walk", source)]
     return sorted(clips, key=lambda c: c.speed)
+
+
+@functools.lru_cache(maxsize=1)
+def library_digest() -> str:
+    """SHA-256 (hex) of everything that determines the shipped clips: the source of the
+    motion package and its data files. A stimulus manifest stores it, so any change of the
+    motion re-renders the videos made with it."""
+    root = Path(__file__).resolve().parent
+    h = hashlib.sha256()
+    for path in sorted(p for p in root.rglob("*") if p.is_file() and p.suffix in (".py", ".npz", ".json")):
+        h.update(path.relative_to(root).as_posix().encode())
+        h.update(b"\0")
+        h.update(path.read_bytes())
+    return h.hexdigest()

@@ -10,7 +10,11 @@ from __future__ import annotations
 
 import numpy as np
 
+from crowdstudy.body.skeleton import JOINT_INDEX, JOINT_NAMES
+
 __all__ = [
+    "MIRROR_JOINTS",
+    "mirror_pose",
     "quat_multiply",
     "quat_conjugate",
     "quat_align_signs",
@@ -77,3 +81,20 @@ def catmull_rom_weights(frac: np.ndarray) -> np.ndarray:
                      1.5 * u3 - 2.5 * u2 + 1.0,
                      -1.5 * u3 + 2.0 * u2 + 0.5 * u,
                      0.5 * u3 - 0.5 * u2], axis=-1)
+
+
+#: Joint index -> its mirror image (left <-> right), for :func:`mirror_pose`.
+MIRROR_JOINTS = np.array([JOINT_INDEX[n.replace("left_", "#").replace("right_", "left_").replace("#", "right_")]
+                          for n in JOINT_NAMES])
+
+
+def mirror_pose(quat: np.ndarray, root: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """A pose mirrored left <-> right across the character's sagittal plane (x -> -x):
+    quaternions (..., 24, 4) xyzw (joint 0 global, the others local) and root positions
+    (..., 3). A reflection M = diag(-1, 1, 1) turns a rotation R into M R M, i.e. the
+    quaternion (x, y, z, w) into (x, -y, -z, w), and each joint takes its mirror joint's."""
+    q = np.array(quat, dtype=np.float64, copy=True)[..., MIRROR_JOINTS, :]
+    q[..., 1:3] *= -1.0
+    r = np.array(root, dtype=np.float64, copy=True)
+    r[..., 0] *= -1.0
+    return q, r

@@ -20,7 +20,7 @@ from crowdstudy.body.skeleton import (DEFAULT_PELVIS_HEIGHT, DEFAULT_REST_JOINTS
 from crowdstudy.motion.posing import rot_y, two_bone_ik
 
 __all__ = ["PoseControls", "assemble_pose", "max_pelvis_height", "REST", "ANKLE_HEIGHT", "FOOT_HEIGHT",
-           "LEG_LENGTH", "ARM_REACH", "mirror_rotvec"]
+           "LEG_LENGTH", "ARM_REACH"]
 
 REST = np.array(DEFAULT_REST_JOINTS)
 _J = JOINT_INDEX
@@ -35,13 +35,6 @@ LEG_LENGTH = float(np.linalg.norm(REST[_J["left_knee"]] - REST[_J["left_hip"]])
 #: Upper arm + forearm length of the authoring skeleton (m).
 ARM_REACH = float(np.linalg.norm(REST[_J["left_elbow"]] - REST[_J["left_shoulder"]])
                   + np.linalg.norm(REST[_J["left_wrist"]] - REST[_J["left_elbow"]]))
-
-
-def mirror_rotvec(v: np.ndarray) -> np.ndarray:
-    """Mirror axis-angle rotations across the sagittal plane (x -> -x): (ax, ay, az) -> (ax, -ay, -az)."""
-    out = np.array(v, dtype=np.float64, copy=True)
-    out[..., 1:] *= -1.0
-    return out
 
 
 @dataclasses.dataclass

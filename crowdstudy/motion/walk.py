@@ -31,7 +31,7 @@ from crowdstudy.body.skeleton import JOINT_INDEX
 from crowdstudy.motion.rig import ANKLE_HEIGHT, REST, PoseControls, assemble_pose, max_pelvis_height
 
 __all__ = ["WalkSpec", "WALKS", "generate_walk", "DUTY_FACTOR", "FLAT_STANCE_END", "FOOT_PHASE_OFFSET",
-           "LANDING_HOVER", "LIFT_OFF"]
+           "LANDING_HOVER", "LIFT_OFF", "procedural_contacts"]
 
 #: Fraction of the gait cycle each foot is on the ground (same for every clip so blends
 #: of clips keep their contacts aligned).
@@ -47,6 +47,18 @@ LANDING_HOVER = 0.16
 LIFT_OFF = 0.06
 #: Gait phase of each foot's heel strike (left, right).
 FOOT_PHASE_OFFSET = (0.0, 0.5)
+
+
+def procedural_contacts() -> dict:
+    """The foot-contact timing shared by the procedural walks, in the form of the clips'
+    meta (gait phases in [0, 1), phase 0 = the left heel strike): ``contacts`` =
+    ``{"left": {"strike", "flat_end", "toe_off"}, "right": ...}``, ``lock_lead`` (the
+    foot is over its landing spot :data:`LANDING_HOVER` of the swing before the strike)
+    and ``lock_lag`` (it only lifts for :data:`LIFT_OFF` of the swing after toe-off)."""
+    contacts = {side: {"strike": off, "flat_end": (off + FLAT_STANCE_END) % 1.0, "toe_off": (off + DUTY_FACTOR) % 1.0}
+                for side, off in zip(("left", "right"), FOOT_PHASE_OFFSET)}
+    return {"contacts": contacts, "lock_lead": LANDING_HOVER * (1.0 - DUTY_FACTOR),
+            "lock_lag": LIFT_OFF * (1.0 - DUTY_FACTOR), "cycles": 1}
 
 
 @dataclasses.dataclass(frozen=True)
@@ -196,6 +208,6 @@ def generate_walk(spec: WalkSpec, fps: float = 60.0) -> MotionClip:
                             knee_pole=knee_pole, toe_bend=toe_bend)
     rot, root = assemble_pose(controls)
     meta = {"description": spec.description, "cadence": spec.cadence, "stride_length": stride,
-            "duty_factor": beta, "cycle": period}
+            "duty_factor": beta, "cycle": period, **procedural_contacts()}
     return MotionClip(name=spec.name, kind="walk", fps=fps, joint_rotations=rot, root_translation=root,
                       speed=v, loop=True, meta=meta)

@@ -25,6 +25,7 @@ def run(args: argparse.Namespace) -> int:
     from crowdstudy.design import load_design
     from crowdstudy.errors import InvalidInputError
     from crowdstudy.navigation.corridor import corridor_crowd, trajectory_summary
+    from crowdstudy.paths import check_output_path
 
     design = load_design(args.design)
     if args.density not in design.densities:
@@ -32,6 +33,9 @@ def run(args: argparse.Namespace) -> int:
                                 f"expected one of {', '.join(design.densities)}")
     if args.seed is not None and args.seed < 0:
         raise InvalidInputError(f"--seed: expected a non-negative integer, got {args.seed}")
+    check_output_path(args.out, "--out")
+    if args.plot:
+        check_output_path(args.plot, "--plot")
     seed = design.cell_seed(design.stage("walking"), args.density) if args.seed is None else args.seed
     crowd = corridor_crowd(design, args.density, seed, duration=args.duration, fps=args.fps,
                            direction="bidirectional" if args.bidirectional else None, device=args.device,

@@ -51,7 +51,7 @@ def recovery_metrics(time: np.ndarray, position: np.ndarray, target: float, rele
 
 
 def _default_body():
-    from crowdstudy.body.model import load_body
+    from crowdstudy.body import load_body
     from crowdstudy.body.shapes import sample_bodies
 
     return load_body(sample_bodies(2, 0)[1])

@@ -135,11 +135,6 @@ class Model:
     def n_bodies(self) -> int:
         return self.n_characters * self.n_joints
 
-    @property
-    def body_inertia(self) -> np.ndarray:
-        """(B, 3, 3) kg m^2 inertia tensors in the body frame, ``tr(J) Id - J``."""
-        return np.trace(self.body_J, axis1=1, axis2=2)[:, None, None] * np.eye(3) - self.body_J
-
 
 class ModelBuilder:
     """Collects characters (rest joints + capsules) and builds a :class:`Model`.

@@ -30,7 +30,7 @@ def save_png(image, path: Path) -> Path:
     """Write an (H, W, 3) uint8 image as PNG."""
     from PIL import Image
     from crowdstudy.paths import check_output_path
-    check_output_path(path)
+    check_output_path(path, "--out")
     Image.fromarray(image).save(path)
     return path
 
@@ -61,9 +61,11 @@ def configure(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from crowdstudy.design import load_design
+    from crowdstudy.paths import check_output_path
     from crowdstudy.render.camera import free_camera
     from crowdstudy.scene import CrowdAnimation
 
+    check_output_path(args.out, "--out")
     anim = CrowdAnimation.load(args.input)
     design = load_design(args.design)
     if (args.eye is None) != (args.target is None):

@@ -7,14 +7,43 @@ Steps (``build_stimuli``):
    cell's viewpoints, and its corrected version (``crowdstudy.physics.correct``) for
    "Ours". Cached in ``DIR/animations/S{stage}-{level}-{method}.npz`` with their overlap
    metrics (``crowdstudy.metrics.overlap_volume``, mesh and capsule, on every 10th frame)
-   in ``...-{method}.metrics.json``; a cached file is reused when it loads and matches the
-   preset's duration, frame rate and the cell's seed.
+   in ``...-{method}.metrics.json``, which also records the animation's digest
+   (:func:`animation_digest`) and the SHA-256 of the ``.npz``; a cached animation is reused
+   only when both match.
 2. **Videos** — ``DIR/videos/{stimulus_id}.mp4`` per stimulus, plus the mean red-pixel
    fraction of the overlap view on a few frames.
 3. **Manifest** — ``DIR/manifest.json`` and ``DIR/manifest.csv`` (columns of
    :data:`MANIFEST_COLUMNS`), rewritten after every finished video, so an interrupted run
-   resumes: a video whose file exists and whose SHA-256 and settings match its manifest
-   row is skipped.
+   resumes: a video is skipped only when its file exists, its SHA-256 matches its manifest
+   row and the row's ``digest`` (:func:`video_digest`) matches the current one.
+
+Digests (SHA-256 of a canonical JSON of their inputs, :func:`digest_inputs` lists them):
+
+* an animation's: the design cell (stage, scenario and its layout/navigation parameters,
+  floor, density level and value, character count, seed), the preset's duration, frame rate
+  and metric frames, the body model (``OPEN_MODEL_VERSION``, the scene file schema), the
+  motion library (``crowdstudy.motion.library.library_digest``) and the package version;
+  "Ours" adds the physics configuration (:class:`~crowdstudy.physics.PhysicsConfig`) and
+  the digest of the Baseline it corrects;
+* a video's: its animation's digest, the Baseline's (the clothing colours follow the
+  Baseline's frame-0 positions), the viewpoint (camera), the render settings (resolution,
+  duration, fps, anti-aliasing, encoder quality, red-pixel frames), the palette, the body
+  loader and the package version.
+
+So a change of physics configuration re-makes the "Ours" animations and videos only, a
+change of one viewpoint that viewpoint's videos, a change of render settings every video
+but no animation.
+
+Manifest format: ``manifest.json`` is an object with ``design`` (the design file),
+``preset``, ``provenance`` (:func:`crowdstudy.provenance.provenance`), ``stimuli`` (one row
+per video, in the design's order) and optionally ``practice: {"file": ...}`` (a practice
+clip, relative to the folder). Each row holds :data:`MANIFEST_COLUMNS`: the stimulus'
+metadata (``stimulus_id``, ``stage`` number, ``scenario``, ``density_level``, ``density``
+in characters per m^2, ``viewpoint``, ``method``, ``characters``, the cell's ``seed``), the
+video (``file``, relative to the folder, ``sha256``, ``duration`` s, ``fps``, ``width``,
+``height``), the cell animation's mean overlap volume (``overlap_mesh``, ``overlap_capsule``,
+m^3 per character), the overlap view's ``red_pixel_fraction``, ``software_version`` and the
+``digest`` above (null in stand-in sets). ``manifest.csv`` holds the same rows.
 
 Work runs in local worker processes (``workers``, spawned, each with its own EGL context)
 or on a Dask distributed cluster (``scheduler="tcp://HOST:PORT"``). Dask tasks are
@@ -25,6 +54,9 @@ workers need no shared file system.
 from __future__ import annotations
 
 import csv
+import dataclasses
+import functools
+import hashlib
 import io
 import json
 import os
@@ -33,11 +65,12 @@ from pathlib import Path
 
 from crowdstudy.errors import InvalidInputError
 
-__all__ = ["build_stimuli", "PRESETS", "MANIFEST_COLUMNS", "load_manifest", "animation_job", "video_job"]
+__all__ = ["build_stimuli", "PRESETS", "MANIFEST_COLUMNS", "load_manifest", "animation_job", "video_job",
+           "animation_digest", "video_digest", "digest_inputs", "animation_record", "preset_settings"]
 
 MANIFEST_COLUMNS = ("stimulus_id", "stage", "scenario", "density_level", "density", "viewpoint", "method",
                     "characters", "seed", "file", "sha256", "duration", "fps", "width", "height", "overlap_mesh",
-                    "overlap_capsule", "red_pixel_fraction", "software_version")
+                    "overlap_capsule", "red_pixel_fraction", "software_version", "digest")
 
 #: Render settings per preset; None = the design's value. "quick" keeps the design's
 #: character counts and only shrinks resolution and duration. x264 "faster" at crf 18
@@ -51,7 +84,8 @@ PRESETS = {
 }
 
 
-def _settings(design, preset: str) -> dict:
+def preset_settings(design, preset: str) -> dict:
+    """The render settings of ``preset`` for ``design`` (:data:`PRESETS`, None filled in)."""
     if preset not in PRESETS:
         raise InvalidInputError(f"preset: expected one of {', '.join(PRESETS)}, got {preset!r}")
     p = dict(PRESETS[preset])
@@ -68,6 +102,90 @@ def _software_version() -> str:
     return f"crowdstudy {__version__} ({git_sha()})"
 
 
+# -- digests: what determines an animation and a video ------------------------------------
+
+def _digest(value) -> str:
+    text = json.dumps(value, sort_keys=True, separators=(",", ":"), default=str)
+    return hashlib.sha256(text.encode()).hexdigest()
+
+
+def _physics_config(physics):
+    from crowdstudy.physics.config import PhysicsConfig
+    if physics is None:
+        return PhysicsConfig()
+    if isinstance(physics, dict):
+        return PhysicsConfig().replace(**physics)
+    if not isinstance(physics, PhysicsConfig):
+        raise InvalidInputError(f"physics: expected a PhysicsConfig or a dict of its fields, got {type(physics).__name__}")
+    return physics
+
+
+def _loader_name(body_loader) -> str:
+    if body_loader is None:
+        return "crowdstudy.body.load_body"
+    return f"{getattr(body_loader, '__module__', '?')}.{getattr(body_loader, '__qualname__', repr(body_loader))}"
+
+
+@functools.lru_cache(maxsize=1)
+def _shared_inputs() -> dict:
+    """Inputs every animation depends on: package, motion library, body model, file schema."""
+    from crowdstudy import __version__
+    from crowdstudy.body.open_model import OPEN_MODEL_VERSION
+    from crowdstudy.motion.library import library_digest
+    from crowdstudy.scene import SCHEMA_VERSION
+    return {"package": __version__, "motion_library": library_digest(),
+            "body_model": {"open_model_version": OPEN_MODEL_VERSION}, "scene_schema": SCHEMA_VERSION}
+
+
+def _palette_digest() -> str:
+    from crowdstudy.render import palette
+    return _digest([palette.REGIONS, palette.SKIN_TONES, palette.HAIR, palette.SHIRTS, palette.TROUSERS,
+                    palette.SHOES])
+
+
+def digest_inputs(design, stimulus, settings: dict, *, physics=None, method: str | None = None) -> dict:
+    """Everything that determines the animation of ``stimulus``'s cell and method (or
+    ``method``), as a JSON-able dict: the input of :func:`animation_digest`."""
+    method = method or stimulus.method
+    stage = design.stage(stimulus.stage_key)
+    cell = {"stage": stage.key, "stage_number": stage.number, "scenario": stage.scenario,
+            "scenario_params": dict(design.scenarios[stage.scenario].params) if stage.scenario in design.scenarios
+            else None,
+            "floor": [design.floor_width, design.floor_depth], "density_level": stimulus.density_level,
+            "density": stimulus.density, "characters": stimulus.n_characters, "seed": stimulus.seed}
+    out = {"cell": cell, "duration": settings["duration"], "fps": settings["fps"],
+           "metric_frames": settings["metric_frames"], "method": method, **_shared_inputs()}
+    if method != "Baseline":
+        out["physics"] = dataclasses.asdict(_physics_config(physics))
+        out["baseline"] = animation_digest(design, stimulus, settings, method="Baseline")
+    return out
+
+
+def animation_digest(design, stimulus, settings: dict, *, physics=None, method: str | None = None) -> str:
+    """SHA-256 of :func:`digest_inputs`: the key of a cached cell animation."""
+    return _digest(digest_inputs(design, stimulus, settings, physics=physics, method=method))
+
+
+def video_digest(design, stimulus, settings: dict, *, physics=None, body_loader=None) -> str:
+    """SHA-256 of everything that determines one stimulus video and its manifest row."""
+    from crowdstudy import __version__
+    render = {k: settings[k] for k in ("width", "height", "duration", "fps", "msaa", "crf", "x264_preset",
+                                       "red_frames")}
+    return _digest({"stimulus_id": stimulus.stimulus_id,
+                    "animation": animation_digest(design, stimulus, settings, physics=physics),
+                    "colours_from": animation_digest(design, stimulus, settings, method="Baseline"),
+                    "viewpoint": dataclasses.asdict(design.viewpoints[stimulus.viewpoint]),
+                    "render": render, "shadows": True, "palette": _palette_digest(),
+                    "body_loader": _loader_name(body_loader), "package": __version__})
+
+
+def animation_record(path: str | Path, digest: str, metrics: dict) -> dict:
+    """The ``.metrics.json`` record of the cached animation ``path``: its overlap metrics,
+    its digest and the SHA-256 of the file (what a resumed build checks)."""
+    from crowdstudy.render.video import sha256_file
+    return {**metrics, "animation_digest": digest, "animation_sha256": sha256_file(path)}
+
+
 # -- jobs (run in worker processes or on Dask workers) --------------------------------------
 
 def _limit_threads(workers: int) -> None:
@@ -78,21 +196,36 @@ def _limit_threads(workers: int) -> None:
 def animation_job(job: dict) -> dict:
     """Build one cell's Baseline and Ours animations and their overlap metrics.
 
-    ``job``: design, stage (key), level, seed, duration, fps, metric_frames, and either
-    ``out_dir`` (write the files there) or ``return_bytes`` (return them, for Dask).
+    ``job``: design, stage (key), level, seed, duration, fps, metric_frames, ``physics``
+    (the PhysicsConfig of "Ours"), ``methods`` (those to build, default both; without
+    "Baseline", the cached Baseline comes as ``baseline`` (a path) or ``baseline_bytes``),
+    and either ``out_dir`` (write the files there) or ``return_bytes`` (return them, for Dask).
     Returns {"files": {name: path or bytes}, "metrics": {method: {...}}, "timings": {"Ours": {...}}};
     the files include ``<cell>-Ours.timings.json`` (see :func:`crowdstudy.physics.correct`).
     """
     from crowdstudy.motion import build_baseline
     from crowdstudy.physics import correct
+    from crowdstudy.scene import CrowdAnimation
 
     design = job["design"]
-    base = build_baseline(design, job["stage"], job["level"], duration=job["duration"], fps=job["fps"],
-                          seed=job["seed"])
+    methods = tuple(job.get("methods") or ("Baseline", "Ours"))
+    if "Baseline" in methods:
+        base = build_baseline(design, job["stage"], job["level"], duration=job["duration"], fps=job["fps"],
+                              seed=job["seed"])
+    else:
+        with tempfile.TemporaryDirectory() as tmp:
+            src = job.get("baseline")
+            if src is None:
+                src = Path(tmp) / "baseline.npz"
+                src.write_bytes(job["baseline_bytes"])
+            base = CrowdAnimation.load(src)
+    built = [("Baseline", base)] if "Baseline" in methods else []
     timings: dict = {}
-    ours = correct(base, progress=False, timings=timings)
-    out: dict = {"files": {}, "metrics": {}, "timings": {"Ours": timings}}
-    for method, anim in (("Baseline", base), ("Ours", ours)):
+    if "Ours" in methods:
+        ours = correct(base, job.get("physics"), progress=False, timings=timings)
+        built.append(("Ours", ours))
+    out: dict = {"files": {}, "metrics": {}, "timings": {"Ours": timings} if "Ours" in methods else {}}
+    for method, anim in built:
         out["metrics"][method] = _overlap_metrics(anim, job["metric_frames"])
         name = f"{job['cell']}-{method}.npz"
         if job.get("return_bytes"):
@@ -100,6 +233,8 @@ def animation_job(job: dict) -> dict:
                 out["files"][name] = Path(anim.save(Path(tmp) / name)).read_bytes()
         else:
             out["files"][name] = str(anim.save(Path(job["out_dir"]) / name))
+    if "Ours" not in methods:
+        return out
     # the physics timings: a sidecar beside the Ours file (run-dependent, so never inside it)
     from crowdstudy.paths import timings_path
 
@@ -242,35 +377,32 @@ def _write_manifest(out_dir: Path, design, preset: str, rows: dict, order: list[
     return manifest
 
 
-def _video_done(out_dir: Path, row: dict | None, settings: dict) -> bool:
+def _video_done(out_dir: Path, row: dict | None, digest: str) -> bool:
+    """A manifest row is reused only when its digest is the current one and its file is intact."""
     from crowdstudy.render.video import sha256_file
-    if not row:
+    if not row or row.get("digest") != digest:
         return False
     path = out_dir / str(row.get("file", ""))
-    same = (row.get("width") == settings["width"] and row.get("height") == settings["height"]
-            and abs(float(row.get("duration") or 0) - settings["duration"]) < 1e-6
-            and abs(float(row.get("fps") or 0) - settings["fps"]) < 1e-6)
-    return same and path.is_file() and sha256_file(path) == row.get("sha256")
+    return path.is_file() and sha256_file(path) == row.get("sha256")
 
 
-def _cached_animation(path: Path, seed: int, n_frames: int, fps: float) -> bool:
-    from crowdstudy.scene import CrowdAnimation
-    if not path.is_file():
-        return False
+def _cached_animation(folder: Path, cell: str, method: str, digest: str) -> bool:
+    """The cached animation of (cell, method) is current: its record holds ``digest`` and
+    the SHA-256 of the ``.npz`` beside it."""
+    from crowdstudy.render.video import sha256_file
+    path, record = folder / f"{cell}-{method}.npz", folder / f"{cell}-{method}.metrics.json"
     try:
-        anim = CrowdAnimation.load(path)
-    except (ValueError, OSError):
+        data = json.loads(record.read_text())
+    except (OSError, json.JSONDecodeError):
         return False
-    from crowdstudy.render.video import video_frame_count
-    # a "dissolve" loop (the corridor) holds its seam's extra frames past the video's n_frames
-    return video_frame_count(anim) == n_frames and abs(anim.fps - fps) < 1e-9 \
-        and int(anim.meta.get("seed", -1)) == seed
+    return (isinstance(data, dict) and data.get("animation_digest") == digest and path.is_file()
+            and sha256_file(path) == data.get("animation_sha256"))
 
 
 # -- the builder -------------------------------------------------------------------------
 
 def build_stimuli(design, out_dir, *, preset: str = "full", scheduler: str | None = None, workers: int | None = None,
-                  progress: bool = True, body_loader=None) -> dict:
+                  progress: bool = True, body_loader=None, physics=None) -> dict:
     """Build (or finish) the stimulus set of a study design.
 
     Args:
@@ -282,6 +414,8 @@ def build_stimuli(design, out_dir, *, preset: str = "full", scheduler: str | Non
         workers: local worker processes (default: one per 4 CPUs, at least 1; 0 = run in
             this process).
         body_loader: record -> Body override (tests); default ``crowdstudy.body.load_body``.
+        physics: the :class:`~crowdstudy.physics.PhysicsConfig` (or a dict of its fields) of
+            "Ours"; None = the defaults.
     Returns:
         The manifest dict (also written to ``out_dir/manifest.json`` and ``.csv``).
     """
@@ -290,7 +424,8 @@ def build_stimuli(design, out_dir, *, preset: str = "full", scheduler: str | Non
 
     if not isinstance(design, StudyDesign):
         design = load_design(design)
-    settings = _settings(design, preset)
+    settings = preset_settings(design, preset)
+    physics = _physics_config(physics)
     out_dir = Path(out_dir)
     check_output_path(out_dir / "manifest.json", "out")
     (out_dir / "animations").mkdir(exist_ok=True)
@@ -303,7 +438,9 @@ def build_stimuli(design, out_dir, *, preset: str = "full", scheduler: str | Non
     order = [s.stimulus_id for s in stimuli]
     old = load_manifest(out_dir)
     rows = {r["stimulus_id"]: r for r in old["stimuli"]} if old and old.get("preset") == preset else {}
-    todo = [s for s in stimuli if not _video_done(out_dir, rows.get(s.stimulus_id), settings)]
+    digests = {s.stimulus_id: video_digest(design, s, settings, physics=physics, body_loader=body_loader)
+               for s in stimuli}
+    todo = [s for s in stimuli if not _video_done(out_dir, rows.get(s.stimulus_id), digests[s.stimulus_id])]
     rows = {sid: r for sid, r in rows.items() if sid in order and sid not in {s.stimulus_id for s in todo}}
     if progress:
         print(f"stimuli: {len(stimuli)} videos in the design, {len(stimuli) - len(todo)} already done, "
@@ -311,8 +448,9 @@ def build_stimuli(design, out_dir, *, preset: str = "full", scheduler: str | Non
               f"{settings['duration']:g} s at {settings['fps']:g} fps)", flush=True)
     runner = _Runner(scheduler, workers)
     try:
-        metrics = _build_animations(design, out_dir, settings, todo, runner, progress)
-        _render_videos(design, out_dir, preset, settings, todo, rows, order, metrics, runner, progress, body_loader)
+        metrics = _build_animations(design, out_dir, settings, todo, runner, progress, physics)
+        _render_videos(design, out_dir, preset, settings, todo, rows, order, metrics, runner, progress, body_loader,
+                       digests)
     finally:
         runner.close()
     return _write_manifest(out_dir, design, preset, rows, order)
@@ -322,40 +460,49 @@ def _cell_name(stim) -> str:
     return f"S{stim.stage}-{stim.density_level}"
 
 
-def _build_animations(design, out_dir: Path, settings, todo, runner: _Runner, progress: bool) -> dict:
+def _build_animations(design, out_dir: Path, settings, todo, runner: _Runner, progress: bool, physics) -> dict:
     from tqdm import tqdm
 
-    n_frames = max(1, int(round(settings["duration"] * settings["fps"])))
-    cells = {}
+    folder = out_dir / "animations"
+    cells: dict[str, tuple] = {}  # cell -> (a stimulus of it, methods its videos need)
     for s in todo:
-        cells.setdefault(_cell_name(s), s)
+        stim, need = cells.setdefault(_cell_name(s), (s, set()))
+        need.update({"Baseline", s.method})  # the Baseline: every video's clothing colours
+    keys = {(cell, m): animation_digest(design, s, settings, physics=physics, method=m)
+            for cell, (s, need) in cells.items() for m in need}
     jobs = []
-    for cell, s in cells.items():
-        ready = all(_cached_animation(out_dir / "animations" / f"{cell}-{m}.npz", s.seed, n_frames, settings["fps"])
-                    and (out_dir / "animations" / f"{cell}-{m}.metrics.json").is_file() for m in ("Baseline", "Ours"))
-        if not ready:
-            jobs.append({"cell": cell, "design": design, "stage": s.stage_key, "level": s.density_level,
-                         "seed": s.seed, "duration": settings["duration"], "fps": settings["fps"],
-                         "metric_frames": settings["metric_frames"], "out_dir": str(out_dir / "animations"),
-                         "return_bytes": runner.portable})
+    for cell, (s, need) in cells.items():
+        stale = sorted(m for m in need if not _cached_animation(folder, cell, m, keys[(cell, m)]))
+        if "Baseline" in stale:  # a new Baseline makes a new Ours
+            stale = sorted(need)
+        if not stale:
+            continue
+        job = {"cell": cell, "design": design, "stage": s.stage_key, "level": s.density_level,
+               "seed": s.seed, "duration": settings["duration"], "fps": settings["fps"], "physics": physics,
+               "metric_frames": settings["metric_frames"], "out_dir": str(folder), "methods": stale,
+               "return_bytes": runner.portable}
+        if "Baseline" not in stale:
+            if runner.portable:
+                job["baseline_bytes"] = (folder / f"{cell}-Baseline.npz").read_bytes()
+            else:
+                job["baseline"] = str(folder / f"{cell}-Baseline.npz")
+        jobs.append(job)
     bar = tqdm(total=len(jobs), desc="cell animations", unit="cell", disable=not progress or not jobs)
     for job, res in runner.run(animation_job, jobs):
         for name, content in res["files"].items():
             if isinstance(content, (bytes, bytearray)):
-                (out_dir / "animations" / name).write_bytes(content)
+                (folder / name).write_bytes(content)
         for method, values in res["metrics"].items():
-            (out_dir / "animations" / f"{job['cell']}-{method}.metrics.json").write_text(json.dumps(values, indent=2))
+            record = animation_record(folder / f"{job['cell']}-{method}.npz", keys[(job["cell"], method)], values)
+            (folder / f"{job['cell']}-{method}.metrics.json").write_text(json.dumps(record, indent=2))
         bar.update(1)
     bar.close()
-    metrics = {}
-    for cell in cells:
-        for m in ("Baseline", "Ours"):
-            metrics[(cell, m)] = json.loads((out_dir / "animations" / f"{cell}-{m}.metrics.json").read_text())
-    return metrics
+    return {(cell, m): json.loads((folder / f"{cell}-{m}.metrics.json").read_text())
+            for cell, (s, need) in cells.items() for m in need}
 
 
 def _render_videos(design, out_dir: Path, preset: str, settings, todo, rows: dict, order, metrics, runner: _Runner,
-                   progress: bool, body_loader) -> None:
+                   progress: bool, body_loader, digests: dict) -> None:
     from tqdm import tqdm
 
     from crowdstudy.render.video import sha256_file
@@ -399,7 +546,7 @@ def _render_videos(design, out_dir: Path, preset: str, settings, todo, rows: dic
             "sha256": digest, "duration": settings["duration"], "fps": settings["fps"], "width": settings["width"],
             "height": settings["height"], "overlap_mesh": m.get("overlap_mesh"),
             "overlap_capsule": m.get("overlap_capsule"), "red_pixel_fraction": res["mean_red_fraction"],
-            "software_version": version}
+            "software_version": version, "digest": digests[s["stimulus_id"]]}
         _write_manifest(out_dir, design, preset, rows, order)
         bar.update(1)
     bar.close()

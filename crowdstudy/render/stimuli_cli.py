@@ -19,15 +19,22 @@ def configure(parser: argparse.ArgumentParser) -> None:
                         help="full: the design's 1920x1080, 20 s; quick: 320x180, 2 s (same character counts)")
     parser.add_argument("--scheduler", help="Dask distributed scheduler address, tcp://HOST:PORT")
     parser.add_argument("--workers", type=int, help="local worker processes (default one per 4 CPUs; 0 = in process)")
+    parser.add_argument("--config", nargs="*", default=[], metavar="KEY=VALUE",
+                        help="physics parameters of Ours, as for `crowdstudy correct --config`; a change "
+                             "re-makes the Ours animations and videos on resume")
     parser.add_argument("--quiet", action="store_true", help="no progress bars")
 
 
 def run(args: argparse.Namespace) -> int:
     from crowdstudy.design import load_design
+    from crowdstudy.paths import check_output_dir
+    from crowdstudy.physics.config import PhysicsConfig
     from crowdstudy.render.stimuli import build_stimuli
 
+    check_output_dir(args.out, "--out")
     design = load_design(args.design)
+    physics = PhysicsConfig.from_strings(args.config)
     manifest = build_stimuli(design, args.out, preset=args.preset, scheduler=args.scheduler, workers=args.workers,
-                             progress=not args.quiet)
+                             progress=not args.quiet, physics=physics)
     print(f"stimuli: {len(manifest['stimuli'])} videos listed in {args.out}/manifest.json and manifest.csv")
     return 0

@@ -32,6 +32,7 @@ def configure(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from crowdstudy.design import load_design
+    from crowdstudy.paths import check_output_dir
     from crowdstudy.stats.pipeline import analyze
 
     path = Path(args.responses)
@@ -40,6 +41,7 @@ def run(args: argparse.Namespace) -> int:
     if not 0 < args.alpha < 1:
         raise InvalidInputError(f"--alpha must be in (0, 1), got {args.alpha}")
     design = load_design(args.design)
+    check_output_dir(args.out, "--out")
     correction = {"auto": "auto", "always": True, "never": False}[args.correction]
     result = analyze(path, design, args.out, correction=correction, alpha=args.alpha, effsize=args.effsize,
                      missing=args.missing, adjust=args.adjust, error=args.error_bars, stages=args.stage,

@@ -31,14 +31,17 @@ def configure(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from crowdstudy.bench import format_table
     from crowdstudy.design import load_design
+    from crowdstudy.paths import check_output_path
+    from crowdstudy.tables import format_table
     from crowdstudy.provenance import provenance
     from crowdstudy.stats.power import power_analysis
     from crowdstudy.stats.synthetic import ResponseModel
 
     if args.seed < 0:
         raise InvalidInputError(f"--seed must be >= 0, got {args.seed}")
+    if args.out:
+        check_output_path(args.out, "--out")
     design = load_design(args.design)
     extra = {k: getattr(args, k) for k in ("density_slope", "noise_sd", "participant_sd")
              if getattr(args, k) is not None}
@@ -53,7 +56,6 @@ def run(args: argparse.Namespace) -> int:
                        ["composite", "effect", "power", "mc_se", "ci_low", "ci_high", "n_significant", "sims"]))
     if args.out:
         out = Path(args.out)
-        out.parent.mkdir(parents=True, exist_ok=True)
         out.write_text(json.dumps({"table": result.table.to_dict("records"), "settings": result.settings,
                                    "provenance": provenance(args.seed)}, indent=2, default=str) + "\n")
         print(f"wrote {out}")

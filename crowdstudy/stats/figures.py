@@ -4,6 +4,7 @@ density (post hoc comparison of the methods within each Density x Viewpoint cell
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import numpy as np
@@ -28,7 +29,8 @@ def method_figure(panels: dict[str, tuple[CellMatrix, pd.DataFrame | None]], out
     "Method"), post hoc table of Method within Density x Viewpoint (columns Density,
     Viewpoint, p_adj) or None for no stars). ``density_values``: level -> characters/m^2
     for the tick labels. ``error``: "sd" (the paper's mean +- SD), "se" or "ci95".
-    Saved to ``out_path`` (extension picks the format).
+    Saved to ``out_path`` (extension picks the format); the plotted means, error bars and
+    stars go to ``out_path`` with the suffix ``.json``.
     """
     import matplotlib
     matplotlib.use("Agg", force=False)
@@ -49,6 +51,7 @@ def method_figure(panels: dict[str, tuple[CellMatrix, pd.DataFrame | None]], out
                              sharey=True, squeeze=False, layout="constrained")
     x = np.arange(len(dens))
     width = 0.08 * (len(methods) - 1)
+    plotted = {}  # the drawn numbers, written beside the figure (OUT.json)
     for r, (comp, (cm, ph)) in enumerate(panels.items()):
         n = cm.values.shape[0]
         shape = cm.shape if with_views else (cm.shape[0], 1, cm.shape[1])
@@ -68,6 +71,9 @@ def method_figure(panels: dict[str, tuple[CellMatrix, pd.DataFrame | None]], out
                             marker=_MARKERS.get(meth, "o"), ms=4, lw=1.3, capsize=2.5, label=str(meth))
             for d, lvl in enumerate(dens):
                 s = stars(pmap.get((str(lvl), str(vp)), np.nan))
+                plotted.setdefault(comp, []).extend(
+                    {"density": str(lvl), "viewpoint": str(vp), "method": str(meth), "mean": float(mean[d, c, m]),
+                     "error": float(err[d, c, m]), "stars": s} for m, meth in enumerate(methods))
                 if s:
                     top = float(np.max(mean[d, c, :] + err[d, c, :]))
                     ax.text(x[d], min(top + 0.12, ylim[1] - 0.05), s, ha="center", va="bottom", fontsize=9)
@@ -90,6 +96,7 @@ def method_figure(panels: dict[str, tuple[CellMatrix, pd.DataFrame | None]], out
     out.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(out, dpi=dpi, metadata={"Software": None} if out.suffix.lower() == ".png" else None)
     plt.close(fig)
+    out.with_suffix(".json").write_text(json.dumps({"figure": out.name, "error": error, "series": plotted}, indent=1))
     return out
 
 

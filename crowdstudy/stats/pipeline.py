@@ -17,6 +17,7 @@ Output folder layout (``out_dir``)::
         <COMP>_descriptives.{csv,md,tex}
         <COMP>_shapiro.csv, <COMP>_qq.png
         <COMP>_by_density.png      one composite; scores_by_density.png: all composites
+                                   (each with a .json of the plotted numbers)
 """
 
 from __future__ import annotations
@@ -111,7 +112,10 @@ def analyze(responses: pd.DataFrame | str | Path, design=None, out_dir: str | Pa
         path = Path(responses)
         if not path.is_file():
             raise InvalidInputError(f"responses file {str(path)!r} does not exist")
-        responses = pd.read_csv(path)
+        try:
+            responses = pd.read_csv(path)
+        except (pd.errors.EmptyDataError, pd.errors.ParserError, UnicodeDecodeError) as exc:
+            raise InvalidInputError(f"responses file {str(path)!r} is not a readable CSV file ({exc})") from None
     data = validate_responses(responses, design)
     comps = list(design.composites) if composites is None else list(composites)
     for c in comps:

@@ -32,7 +32,7 @@ from typing import Mapping
 import numpy as np
 
 from crowdstudy.errors import InvalidInputError
-from crowdstudy.study.export import RESPONSE_COLUMNS
+from crowdstudy.schema import RESPONSE_COLUMNS
 
 __all__ = ["ResponseModel", "simulate_responses", "ITEM_COLUMNS"]
 
@@ -217,7 +217,7 @@ def simulate_responses(design, n_participants: int, model: ResponseModel | None 
     independently shuffled order; ``trial_index`` counts over the whole schedule.
 
     Returns a pandas DataFrame in the responses.csv schema
-    (:data:`crowdstudy.study.export.RESPONSE_COLUMNS`), one
+    (:data:`crowdstudy.schema.RESPONSE_COLUMNS`), one
     row per trial, sorted by participant and trial_index; ``participant_id`` is
     ``"sim-001"``...; ``rt_ms`` float milliseconds; ``shown_at`` / ``answered_at`` ISO 8601
     UTC (deterministic, from a fixed epoch). Same seed -> identical frame.

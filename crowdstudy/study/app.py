@@ -133,7 +133,6 @@ class _Study:
             raise InvalidInputError(f"design {config.design.source}: the server stores items {', '.join(ITEM_IDS)}, "
                                     f"the design lists {', '.join(self.item_ids)}")
         self.by_stage = config.stimuli.by_stage()
-        self.stage_numbers = sorted(self.by_stage)
         self.seed = int(config.design.seed)
         self._schedules: dict[str, list[dict]] = {}
         self._public: dict[str, list[dict]] = {}

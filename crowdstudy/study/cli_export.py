@@ -14,7 +14,12 @@ def configure(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from crowdstudy.paths import check_output_path
     from crowdstudy.study.export import export_study
+
+    check_output_path(args.out, "--out")
+    if args.demographics:
+        check_output_path(args.demographics, "--demographics")
     summary = export_study(args.db, args.out, args.demographics)
     print(f"crowdstudy export: {summary['responses']} answers of {summary['participants']} participants -> "
           f"{', '.join(summary['files'])}")

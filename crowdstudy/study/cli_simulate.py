@@ -30,12 +30,15 @@ def run(args: argparse.Namespace) -> int:
     import os
 
     from crowdstudy.errors import InvalidInputError
+    from crowdstudy.paths import check_output_path
     from crowdstudy.provenance import provenance
     from crowdstudy.study.bots import run_simulation
     from crowdstudy.study.server import ADMIN_TOKEN_ENV
 
     if args.noise < 0:
         raise InvalidInputError(f"--noise must be >= 0, got {args.noise}")
+    if args.json:
+        check_output_path(args.json, "--json")
     admin_token = args.admin_token or os.environ.get(ADMIN_TOKEN_ENV)  # checked by the bots
     result = run_simulation(args.url, args.n, admin_token=admin_token, method_effect=args.method_effect,
                             noise_sd=args.noise, seed=args.seed,

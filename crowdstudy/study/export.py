@@ -1,4 +1,4 @@
-"""Export the study database to the CSV files the analysis reads (INTERFACES.md).
+"""Export the study database to the CSV files the analysis reads (formats: :mod:`crowdstudy.schema`).
 
 ``responses.csv``: one row per answered study trial (practice excluded), columns
 :data:`RESPONSE_COLUMNS`, sorted by participant then trial_index; Q1..Q6 are the raw
@@ -17,12 +17,10 @@ from typing import Iterable, Mapping, Sequence
 
 from crowdstudy.errors import InvalidInputError
 from crowdstudy.provenance import provenance
+from crowdstudy.schema import DEMOGRAPHIC_COLUMNS, RESPONSE_COLUMNS
 
 __all__ = ["RESPONSE_COLUMNS", "DEMOGRAPHIC_COLUMNS", "rows_to_csv", "export_study"]
 
-RESPONSE_COLUMNS = ("participant_id", "stage", "scenario", "trial_index", "stimulus_id", "density_level", "density",
-                    "viewpoint", "method", "Q1", "Q2", "Q3", "Q4", "Q5", "Q6", "rt_ms", "shown_at", "answered_at")
-DEMOGRAPHIC_COLUMNS = ("participant_id", "age", "gender", "started_at", "completed_at", "completion_code")
 
 
 def _cell(value) -> str:

@@ -1,7 +1,7 @@
 """A tiny stand-in stimulus folder (manifest + a few short H.264 clips) for tests and demos.
 
 The real stimuli come from ``crowdstudy stimuli``; this writes the same manifest layout
-(INTERFACES.md, "Stimulus manifest") with every stimulus of a design pointing at one of a
+(the manifest format of :mod:`crowdstudy.render.stimuli`) with every stimulus of a design pointing at one of a
 few test-pattern clips, so the questionnaire can run without rendering anything.
 """
 
@@ -65,7 +65,7 @@ def write_fake_stimuli(out_dir: str | Path, design: StudyDesign | str | Path | N
                      "method": stim.method, "characters": stim.n_characters, "seed": stim.seed, "file": rel,
                      "sha256": digest, "duration": float(seconds), "fps": fps, "width": width, "height": height,
                      "overlap_mesh": None, "overlap_capsule": None, "red_pixel_fraction": None,
-                     "software_version": "fake-stimuli"})
+                     "software_version": "fake-stimuli", "digest": None})
     manifest = {"design": str(design.source), "preset": "fake", "provenance": provenance(design.seed, fake=True),
                 "practice": {"file": "practice.mp4"}, "stimuli": rows}
     (out / "manifest.json").write_text(json.dumps(manifest, indent=1) + "\n", encoding="utf-8")

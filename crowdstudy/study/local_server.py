@@ -18,7 +18,6 @@ import urllib.request
 from pathlib import Path
 
 from crowdstudy.errors import InvalidInputError
-from crowdstudy.provenance import repository_root
 
 __all__ = ["LocalServer", "free_port", "write_small_design"]
 
@@ -53,12 +52,15 @@ class LocalServer:
     """``crowdstudy serve ARGS --host 127.0.0.1 --port <free>`` in a child process.
 
     args: the serve arguments (``--stimuli``, ``--db``, ...); ``admin_token`` is passed on
-    with ``--admin-token``. ``start()`` waits until ``/healthz`` answers; ``kill()`` sends
-    SIGKILL (no clean shutdown); ``restart()`` starts again on the same port.
+    with ``--admin-token``; the child runs in ``cwd`` (default: this process's working
+    directory, so relative paths in ``args`` mean the same to both). ``start()`` waits
+    until ``/healthz`` answers; ``kill()`` sends SIGKILL (no clean shutdown); ``restart()``
+    starts again on the same port.
     """
 
     def __init__(self, args: list[str], *, admin_token: str = "local-admin-token-0123456789",
-                 port: int | None = None, python: str | None = None, startup_timeout: float = 30.0):
+                 port: int | None = None, python: str | None = None, startup_timeout: float = 30.0,
+                 cwd: str | Path | None = None):
         if not isinstance(args, (list, tuple)) or not all(isinstance(a, str) for a in args):
             raise InvalidInputError("args must be a list of strings (crowdstudy serve arguments)")
         self.args = list(args)
@@ -66,6 +68,7 @@ class LocalServer:
         self.port = port or free_port()
         self.python = python or sys.executable
         self.startup_timeout = startup_timeout
+        self.cwd = cwd
         self.proc: subprocess.Popen | None = None
         self._log = None
 
@@ -80,7 +83,7 @@ class LocalServer:
         if self._log is not None:
             self._log.close()
         self._log = tempfile.TemporaryFile(mode="w+", encoding="utf-8")
-        self.proc = subprocess.Popen(cmd, cwd=repository_root(), env=env, stdout=self._log,
+        self.proc = subprocess.Popen(cmd, cwd=self.cwd, env=env, stdout=self._log,
                                      stderr=subprocess.STDOUT, text=True)
         deadline = time.monotonic() + self.startup_timeout
         while time.monotonic() < deadline:

@@ -9,7 +9,7 @@ from pathlib import Path
 
 from crowdstudy.design import default_design_path, load_design
 from crowdstudy.errors import InvalidInputError
-from crowdstudy.provenance import repository_root
+from crowdstudy.package_data import resource_path
 
 __all__ = ["build_config", "default_ui_dir", "ADMIN_TOKEN_ENV"]
 
@@ -17,8 +17,8 @@ ADMIN_TOKEN_ENV = "CROWDSTUDY_ADMIN_TOKEN"
 
 
 def default_ui_dir() -> Path:
-    """The ``ui/`` folder of the source tree."""
-    return repository_root() / "ui"
+    """The questionnaire's front end shipped in the package (``crowdstudy/study/ui``)."""
+    return resource_path("crowdstudy.study", "ui")
 
 
 def _design_path(stimuli_dir: Path, design) -> Path:
@@ -44,7 +44,7 @@ def build_config(stimuli: str | Path, *, design: str | Path | None = None, db: s
     design: the study TOML (default: the one recorded in the manifest, else stimuli/study.toml);
     db: SQLAlchemy URL (default ``sqlite:///study.db`` in the working directory);
     consent: Markdown file (default: ``consent.md`` beside the design, in the stimulus
-    folder, or the toolkit's ``stimuli/consent.md``); admin_token: default from the
+    folder, or the toolkit's ``crowdstudy/study/consent.md``); admin_token: default from the
     ``CROWDSTUDY_ADMIN_TOKEN`` environment variable, else random.
     """
     from crowdstudy.study.app import StudyConfig

@@ -1,9 +1,9 @@
 """The stimulus videos a study server shows: the design's stimuli matched to manifest rows.
 
-The render stage writes ``DIR/manifest.json`` (INTERFACES.md, "Stimulus manifest"); every
-stimulus of the design must have a row whose stage, scenario, density level, viewpoint and
-method agree with the design, and whose ``file`` is a relative path to an existing file
-inside ``DIR``. Video paths come only from here: the server never joins a request value
+The render stage writes ``DIR/manifest.json`` (format: :mod:`crowdstudy.render.stimuli`,
+"Manifest format"); every stimulus of the design must have a row whose stage, scenario,
+density level, viewpoint and method agree with the design, and whose ``file`` is a relative
+path to an existing file inside ``DIR``. Video paths come only from here: the server never joins a request value
 onto a path.
 
 A practice clip (shown once, before stage 1, answers flagged as practice) is, in order:

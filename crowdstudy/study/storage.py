@@ -33,7 +33,7 @@ from typing import Iterable, Mapping, Sequence
 
 from crowdstudy.errors import InvalidInputError
 
-__all__ = ["StudyStore", "ITEM_IDS", "PRACTICE_TRIAL_INDEX", "utc_now", "sqlite_url"]
+__all__ = ["StudyStore", "ITEM_IDS", "PRACTICE_TRIAL_INDEX", "utc_now"]
 
 ITEM_IDS = ("Q1", "Q2", "Q3", "Q4", "Q5", "Q6")
 PRACTICE_TRIAL_INDEX = -1
@@ -42,11 +42,6 @@ PRACTICE_TRIAL_INDEX = -1
 def utc_now() -> str:
     """Now as an ISO 8601 UTC string with milliseconds (``2026-01-08T09:00:00.123+00:00``)."""
     return _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="milliseconds")
-
-
-def sqlite_url(path) -> str:
-    """The SQLAlchemy URL of an SQLite file."""
-    return f"sqlite:///{path}"
 
 
 def _tables(metadata):

@@ -13,7 +13,7 @@ Steps (:func:`read_character`):
 1. The mesh and the joints are taken in the bind pose (the inverse bind matrices), carried
    to the file's world (glTF's Y-up metres) by ``J_r IBM_r`` of the skin's pelvis joint r
    (armature scale and rotation included; an animated default pose does not deform it).
-2. Joint names are mapped to the 24 joints (:mod:`crowdstudy.gltf.names`); a VRM file's
+2. Joint names are mapped to the 24 joints (:mod:`crowdstudy.body.joint_names`); a VRM file's
    humanoid table wins over names. Missing optional joints are placed from their
    neighbours: ``spine3`` half-way between ``spine2`` and ``neck``; a collar 40 % of the way
    from ``spine3`` to the shoulder; ``*_hand`` 0.3 of the forearm's length beyond the wrist;
@@ -40,15 +40,15 @@ from pathlib import Path
 
 import numpy as np
 
-from crowdstudy.body.rotations import axis_angle_to_matrix
+from crowdstudy.body.joint_names import VRM_BONES, match_names
+from crowdstudy.body.model import Body, check_fields
+from crowdstudy.body.rotations import axis_angle_to_matrix, quaternion_to_matrix
 from crowdstudy.body.skeleton import JOINT_INDEX, JOINT_NAMES, NUM_JOINTS, PARENTS, forward_kinematics
 from crowdstudy.errors import InvalidInputError
-from crowdstudy.gltf.export import Z_UP_TO_Y_UP
-from crowdstudy.gltf.glb import GltfFile, node_local_matrix, read_gltf
-from crowdstudy.gltf.names import VRM_BONES, match_names
+from crowdstudy.glb import Z_UP_TO_Y_UP, GltfFile, read_gltf
 
-__all__ = ["GltfCharacter", "read_character", "load_gltf_body", "RECORD_FIELDS", "ARM_ELEVATION_LIMIT",
-           "LEG_TILT_LIMIT", "OPTIONAL_JOINTS"]
+__all__ = ["GltfCharacter", "read_character", "load_gltf_body", "node_local_matrix", "RECORD_FIELDS",
+           "ARM_ELEVATION_LIMIT", "LEG_TILT_LIMIT", "OPTIONAL_JOINTS"]
 
 #: Fields a ``{"model": "gltf"}`` body record may hold.
 RECORD_FIELDS = ("model", "path", "skin", "height", "sex")
@@ -90,6 +90,17 @@ class GltfCharacter:
     @property
     def height(self) -> float:
         return float(self.vertices[:, 2].max() - self.vertices[:, 2].min())
+
+
+def node_local_matrix(node: dict) -> np.ndarray:
+    """(4, 4) float64 local transform of a glTF node (``matrix`` or T * R * S)."""
+    if "matrix" in node:
+        return np.asarray(node["matrix"], dtype=np.float64).reshape(4, 4).T
+    m = np.eye(4)
+    s = np.asarray(node.get("scale", (1.0, 1.0, 1.0)), dtype=np.float64)
+    m[:3, :3] = quaternion_to_matrix(np.asarray(node.get("rotation", (0.0, 0.0, 0.0, 1.0)), dtype=np.float64)) * s
+    m[:3, 3] = node.get("translation", (0.0, 0.0, 0.0))
+    return m
 
 
 def _parents(doc: dict) -> np.ndarray:
@@ -404,8 +415,6 @@ def _merge_uv(path: Path, gltf: GltfFile, uvs: list, images: list):
 
 def load_gltf_body(record: dict):
     """The :class:`~crowdstudy.body.model.Body` of a ``{"model": "gltf"}`` record."""
-    from crowdstudy.body.model import Body, check_fields
-
     check_fields(record, "gltf", RECORD_FIELDS)
     path = record.get("path")
     if not isinstance(path, str) or not path:
@@ -422,10 +431,6 @@ def load_gltf_body(record: dict):
         if not 0.3 <= height <= 2.5:
             raise InvalidInputError(f"body record field 'height': expected 0.3 to 2.5 m, got {height}")
     ch = read_character(path, skin=skin, height=height)
-    extra = {}
-    names = {f.name for f in dataclasses.fields(Body)}
-    if "uv" in names and ch.uv is not None:
-        extra = {"uv": ch.uv, "texture": ch.texture}
     return Body(record=dict(record), rest_joints=ch.joints, rest_vertices=ch.vertices, faces=ch.faces,
                 weights=ch.weights, pelvis_height=float(-ch.vertices[:, 2].min()),
-                template_key=f"gltf-{ch.sha256[:16]}-{skin}", **extra)
+                template_key=f"gltf-{ch.sha256[:16]}-{skin}")

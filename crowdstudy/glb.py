@@ -1,4 +1,6 @@
-"""A small binary glTF 2.0 (.glb) writer and reader on numpy arrays.
+"""A small binary glTF 2.0 (.glb) writer and reader on numpy arrays (the container format
+only: :mod:`crowdstudy.gltf.export` writes crowds with it, :mod:`crowdstudy.body.gltf_model`
+reads characters).
 
 Writer: :class:`GltfBuilder` collects the JSON document and one binary buffer; each
 ``accessor(...)`` call appends a 4-byte aligned buffer view. ``to_glb()`` gives the bytes
@@ -22,8 +24,12 @@ import numpy as np
 
 from crowdstudy.errors import InvalidInputError
 
-__all__ = ["GltfBuilder", "GltfFile", "read_gltf", "read_accessor", "node_local_matrix",
-           "COMPONENT_TYPES", "TYPE_SIZES"]
+__all__ = ["GltfBuilder", "GltfFile", "read_gltf", "read_accessor", "COMPONENT_TYPES", "TYPE_SIZES",
+           "Z_UP_TO_Y_UP"]
+
+#: (3, 3) rotation taking toolkit (Z-up, faces +y) coordinates to glTF (Y-up, faces +Z):
+#: (x, y, z) -> (-x, z, y).
+Z_UP_TO_Y_UP = np.array([[-1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, 1.0, 0.0]])
 
 GLB_MAGIC = 0x46546C67  # "glTF"
 CHUNK_JSON = 0x4E4F534A
@@ -255,16 +261,3 @@ def read_accessor(gltf: GltfFile, index: int) -> np.ndarray:
     if acc["type"] == "MAT3":
         return arr.reshape(count, 3, 3).transpose(0, 2, 1).copy()
     return arr[:, 0] if width == 1 else arr
-
-
-def node_local_matrix(node: dict) -> np.ndarray:
-    """(4, 4) float64 local transform of a glTF node (``matrix`` or T * R * S)."""
-    if "matrix" in node:
-        return np.asarray(node["matrix"], dtype=np.float64).reshape(4, 4).T
-    from crowdstudy.body.rotations import quaternion_to_matrix
-
-    m = np.eye(4)
-    s = np.asarray(node.get("scale", (1.0, 1.0, 1.0)), dtype=np.float64)
-    m[:3, :3] = quaternion_to_matrix(np.asarray(node.get("rotation", (0.0, 0.0, 0.0, 1.0)), dtype=np.float64)) * s
-    m[:3, 3] = node.get("translation", (0.0, 0.0, 0.0))
-    return m

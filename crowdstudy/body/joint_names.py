@@ -1,4 +1,5 @@
-"""Joint-name maps from common rigs to the toolkit's 24-joint skeleton.
+"""Joint-name maps from common rigs to the toolkit's 24-joint skeleton (the glTF character
+import, :mod:`crowdstudy.body.gltf_model`).
 
 | joint | crowdstudy export | Mixamo / Ready Player Me | VRM humanoid | VRoid (VRM 0.x nodes) | Blender Rigify metarig | CMU BVH |
 | --- | --- | --- | --- | --- | --- | --- |
