@@ -34,6 +34,7 @@ COMMANDS: tuple[tuple[str, str, str], ...] = (
     ("correct", "crowdstudy.physics.cli", "Resolve character collisions with the physics layer (Baseline -> Ours)."),
     ("metrics", "crowdstudy.metrics.cli", "Measure overlap volume, tracking error and smoothness of an animation."),
     ("render", "crowdstudy.render.cli", "Render an animation to an MP4 video or a PNG frame (headless EGL)."),
+    ("sheet", "crowdstudy.render.sheet_cli", "Contact sheets of characters or clips: 8 frames over 2 s, a row each."),
     ("export-gltf", "crowdstudy.gltf.cli_export", "Export an animation and its bodies to one binary glTF 2.0 (.glb) file."),
     ("import-gltf", "crowdstudy.gltf.cli_import", "Import a skinned glTF character (Mixamo, Blender, VRM...) as a body record."),
     ("stimuli", "crowdstudy.render.stimuli_cli", "Build the whole stimulus video set and its manifest from a study design."),

@@ -41,6 +41,9 @@ def test_output_folder_instead_of_file_fails_at_once(tmp_path, capsys):
         (["export", "--db", "sqlite:///" + str(tmp_path / "no.db"), "--out", str(tmp_path / "r.csv"),
           "--demographics", str(d)], "--demographics"),
         (["simulate-participants", "--url", "http://127.0.0.1:9", "--json", str(d)], "--json"),
+        (["animate", missing, "--out", str(d)], "--out"),
+        (["motion", "report", "--json", str(d)], "--json"),
+        (["sheet", missing, "--out", str(d)], "--out"),
     ]
     (tmp_path / "dir.glb").mkdir()
     (tmp_path / "dir.json").mkdir()
@@ -53,7 +56,8 @@ def test_output_file_instead_of_folder_fails_at_once(tmp_path, capsys):
     f = tmp_path / "a_file"
     f.write_text("x")
     (tmp_path / "responses.csv").write_text("participant\n")
-    for argv in (["stimuli", "--out", str(f)], ["demo", "--out", str(f)],
+    for argv in (["stimuli", "--out", str(f)], ["demo", "--out", str(f)], ["animate", "--stage", "all", "--out", str(f)],
+                 ["motion", "build-library", "--source", str(tmp_path), "--out", str(f)],
                  ["analyze", str(tmp_path / "responses.csv"), "--out", str(f)]):
         _one_line_error(capsys, argv, "--out", f, kind="file")
 

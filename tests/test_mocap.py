@@ -236,3 +236,38 @@ def test_hands_are_moved_out_of_a_wider_body():
     np.testing.assert_array_equal(fixed[:, :, legs], rot[:, :, legs])
     untouched = np.all(np.isclose(fixed, rot).all(axis=(2, 3)), axis=1)
     assert untouched.mean() > 0.2
+
+
+def test_calibration_frames_at_the_ends_are_cut(shared_dir):
+    from crowdstudy.motion.mocap import outlier_ends
+
+    raw = load_bvh(shared_dir / "data" / "mocap" / "cmu_113_21_idle_standing_still.bvh.gz")
+    start, end = outlier_ends(raw)
+    assert start == pytest.approx(1 / raw.fps) and end == pytest.approx(raw.duration)   # the first frame jumps
+    assert load_mocap("idle_still").meta["trim"][0] == pytest.approx(start)
+    clean = _periodic_clip(37, 300)
+    assert outlier_ends(clean) == (0.0, pytest.approx(clean.duration))
+    rot = np.array(clean.joint_rotations)
+    rot[-1, J["right_shoulder"], 2] += 1.0                       # a glitch in the last frame
+    glitch = MotionClip(name="g", kind="mocap", fps=30.0, joint_rotations=rot, root_translation=clean.root_translation,
+                        loop=False)
+    assert outlier_ends(glitch)[1] == pytest.approx((clean.n_frames - 2) / 30.0)
+
+
+def test_contact_sheet_shows_the_clip_in_every_tile(tmp_path):
+    from PIL import Image
+
+    from crowdstudy.render.sheets import clip_sheet
+
+    out = clip_sheet([load_clip("jumping_jacks"), load_clip("gait_fast")], tmp_path / "sheet.png", span=1.0,
+                     frames=4, width=96, height=128)
+    img = np.asarray(Image.open(out).convert("RGB")).astype(int)
+    assert img.shape == (2 * 128, 4 * 96, 3)
+    tiles = img.reshape(2, 128, 4, 96, 3).transpose(0, 2, 1, 3, 4)            # (row, col, H, W, 3)
+    background = np.median(img[:5].reshape(-1, 3), axis=0)                   # the sky above the heads
+    for row in tiles:
+        middle = [np.mean(np.abs(t[20:110, 38:58] - background).sum(-1) > 60) for t in row]
+        edges = [np.mean(np.abs(t[:10] - background).sum(-1) > 60) for t in row]
+        assert min(middle) > 0.2 and max(edges) < 0.05                      # a body in the middle of each tile
+    # the jumping jacks move: the tiles differ
+    assert np.abs(tiles[0, 0] - tiles[0, 2]).mean() > 1.0

@@ -5,7 +5,8 @@ wherever the performer faced, wanders around the capture volume and has feet tha
 little (marker noise, retargeting). For a dancer who must stay on its spot facing the
 stage, :func:`clean_take`:
 
-1. cuts the frames outside ``[trim_start, trim_end)`` (calibration poses, noisy ends);
+1. cuts the frames outside ``[trim_start, trim_end)`` (set per take) and the calibration or
+   glitch frames at either end (:func:`outlier_ends`: a frame step far above the take's own);
 2. turns the take so the performer faces +y on average (circular mean of the pelvis's
    heading) and removes the slow part of its wandering and turning: the pelvis's
    horizontal path and heading, Gaussian-smoothed over ``drift_sigma`` seconds, are
@@ -37,7 +38,7 @@ from crowdstudy.motion.clip import MotionClip
 from crowdstudy.motion.posing import rot_z, smoothstep5
 from crowdstudy.motion.rig import ANKLE_HEIGHT
 
-__all__ = ["clean_take", "face_forward", "remove_drift", "shrink_steps", "foot_contacts", "lock_feet",
+__all__ = ["clean_take", "outlier_ends", "face_forward", "remove_drift", "shrink_steps", "foot_contacts", "lock_feet",
            "lock_loop_feet", "MAX_EXCURSION"]
 
 _MIN_CONTACT = 0.12    # s, shortest contact kept
@@ -255,6 +256,22 @@ def lock_loop_feet(loop: MotionClip) -> MotionClip:
     return dataclasses.replace(loop, joint_rotations=locked.joint_rotations[n:2 * n])
 
 
+def outlier_ends(clip: MotionClip, *, window: float = 0.5, factor: float = 5.0) -> tuple[float, float]:
+    """``(start, end)`` seconds of ``clip`` without the calibration or glitch frames at its ends:
+    within the first / last ``window`` seconds, a frame step whose largest joint displacement
+    exceeds ``factor`` times the take's median (and 3 cm) cuts the take after / before it
+    (e.g. a hand that jumps 7 cm between the first two frames of a standing take)."""
+    pos = clip.joint_positions()
+    step = np.linalg.norm(np.diff(pos, axis=0), axis=-1).max(axis=1)              # (T-1,) m per frame
+    bad = step > max(factor * float(np.median(step)), 0.03)
+    k = max(1, int(round(window * clip.fps)))
+    head = np.flatnonzero(bad[:k])
+    tail = np.flatnonzero(bad[-k:])
+    first = int(head[-1]) + 1 if head.size else 0
+    last = len(step) - k + int(tail[0]) if tail.size else clip.n_frames - 1
+    return first / clip.fps, last / clip.fps
+
+
 def clean_take(clip: MotionClip, *, trim_start: float = 0.0, trim_end: float | None = None,
                drift_sigma: float | None = 1.5, max_excursion: float | None = MAX_EXCURSION, fps: float = 60.0,
                name: str | None = None) -> MotionClip:
@@ -267,8 +284,9 @@ def clean_take(clip: MotionClip, *, trim_start: float = 0.0, trim_end: float | N
     ``step_scale`` and ``contact_share`` (fraction of frames each foot is planted)."""
     if clip.loop:
         raise InvalidInputError(f"clean_take: expected a take (non-looping clip), got looping clip {clip.name!r}")
-    t0 = float(trim_start)
-    t1 = clip.duration if trim_end is None else min(float(trim_end), clip.duration)
+    auto0, auto1 = outlier_ends(clip)
+    t0 = max(float(trim_start), auto0)
+    t1 = min(clip.duration if trim_end is None else min(float(trim_end), clip.duration), auto1)
     if not 0.0 <= t0 < t1:
         raise InvalidInputError(f"clean_take: trim [{trim_start}, {trim_end}) s is empty for clip {clip.name!r} "
                                 f"of {clip.duration:.2f} s")

@@ -1,0 +1,100 @@
+"""Contact sheets: a row per character, 8 frames over 2 s, a camera that follows it.
+
+The way to look at motion (DESIGN.md, "What a stimulus must be"): :func:`animation_sheet`
+renders chosen characters of a crowd animation (Baseline beside Ours: call it on both with
+the same characters and frames), :func:`clip_sheet` renders shipped clips on a row of
+bodies (``crowdstudy sheet --clips twist,macarena``). The camera stands ``distance`` m in
+front of (or beside, ``side=True``) the character's pelvis at each frame and looks at it.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from crowdstudy.body import sample_bodies
+from crowdstudy.body.skeleton import JOINT_NAMES, PARENTS
+from crowdstudy.errors import InvalidInputError
+from crowdstudy.motion.clip import MotionClip
+from crowdstudy.render.camera import Camera
+from crowdstudy.render.renderer import CrowdRenderer
+from crowdstudy.scene import CrowdAnimation
+
+__all__ = ["animation_sheet", "clip_sheet", "clips_animation"]
+
+
+def clips_animation(clips: list[MotionClip], *, start: float = 0.0, span: float = 2.0, fps: float = 30.0,
+                    spacing: float = 1.3, seed: int = 3) -> CrowdAnimation:
+    """The clips side by side (``spacing`` m apart along x, facing +y, walks in place), ``span``
+    s from ``start``."""
+    n = len(clips)
+    if n == 0:
+        raise InvalidInputError("clips: expected at least one clip")
+    t = start + np.arange(int(round(span * fps)) + 1) / fps
+    rot = np.zeros((len(t), n, len(JOINT_NAMES), 3))
+    root = np.zeros((len(t), n, 3))
+    for i, clip in enumerate(clips):
+        rot[:, i], root[:, i] = clip.sample(t)            # walks in place: the camera follows anyway
+        root[:, i, 0] += i * spacing
+    return CrowdAnimation(joint_names=JOINT_NAMES, parents=PARENTS, root_translation=root, joint_rotations=rot,
+                          fps=fps, bodies=tuple(sample_bodies(n, seed)),
+                          clips=tuple({"kind": c.kind, "clips": [c.name]} for c in clips),
+                          meta={"scenario": "concert", "method": "Baseline"})
+
+
+def animation_sheet(anim: CrowdAnimation, out: str | Path, characters, *, start: float = 0.0, span: float = 2.0,
+                    frames: int = 8, side: bool = False, distance: float = 3.2, elevation: float | None = None,
+                    width: int = 240, height: int = 320, design=None) -> Path:
+    """A PNG contact sheet of ``characters`` (indices) of ``anim``: ``frames`` frames evenly
+    over ``span`` s from ``start`` s, one row per character. ``elevation`` (m above the
+    pelvis) defaults to 0.25 for one character and 1.4 in a crowd (over the heads of the
+    characters in between)."""
+    from PIL import Image
+
+    chars = [int(c) for c in characters]
+    bad = [c for c in chars if not 0 <= c < anim.n_characters]
+    if not chars or bad:
+        raise InvalidInputError(f"characters: expected indices in [0, {anim.n_characters}), got {list(characters)}")
+    first, last = int(round(start * anim.fps)), int(round((start + span) * anim.fps))
+    if first < 0 or last >= anim.n_frames:
+        raise InvalidInputError(f"start/span: {start:g} + {span:g} s is outside the animation's "
+                                f"{anim.n_frames / anim.fps:.2f} s")
+    picks = np.linspace(first, last, frames).round().astype(int)
+    if elevation is None:
+        elevation = 0.25 if anim.n_characters == 1 else 1.4
+    offset = np.array([distance, 0.0, elevation]) if side else np.array([0.0, distance, elevation])
+    sheet = Image.new("RGB", (width * frames, height * len(chars)))
+    with CrowdRenderer(anim, design=design, width=width, height=height, msaa=2, shadows=False) as r:
+        for row, c in enumerate(chars):
+            for col, f in enumerate(picks):
+                target = anim.root_translation[f, c].copy()
+                target[2] = 0.85
+                r.set_view(Camera(eye=tuple(target + offset), target=tuple(target), fov=40.0))
+                sheet.paste(Image.fromarray(r.render(int(f))), (col * width, row * height))
+    out = Path(out)
+    sheet.save(out)
+    return out
+
+
+def clip_sheet(clips: list[MotionClip], out: str | Path, *, start: float = 0.0, span: float = 2.0,
+               side: bool = False, **kwargs) -> Path:
+    """A contact sheet of shipped clips, one row per clip, each rendered alone (no other clip
+    in the way of a side view)."""
+    from PIL import Image
+
+    out = Path(out)
+    rows = []
+    for k, clip in enumerate(clips):
+        anim = clips_animation([clip], start=start, span=span, seed=3 + k)
+        part = out.with_name(f".{out.stem}.{k}.png")
+        animation_sheet(anim, part, [0], start=0.0, span=span, side=side, **kwargs)
+        rows.append(Image.open(part).copy())
+        part.unlink()
+    sheet = Image.new("RGB", (rows[0].width, sum(r.height for r in rows)))
+    y = 0
+    for r in rows:
+        sheet.paste(r, (0, y))
+        y += r.height
+    sheet.save(out)
+    return out
