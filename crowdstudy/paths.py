@@ -45,12 +45,8 @@ def cache_dir(kind: str) -> Path:
     return path
 
 
-def check_output_path(path: str | Path, what: str = "out") -> Path:
-    """Create the parent folder of the output file ``path`` and check it is writable (and
-    that ``path`` is not a folder); return ``path``. Errors name ``what`` (the argument)
-    and the path, so a long run can fail at once instead of at the end."""
-    path = Path(path)
-    folder = path.parent
+def _writable_folder(folder: Path, what: str) -> None:
+    """Create ``folder`` (and its parents) and check it is writable; errors name ``what``."""
     try:
         folder.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
@@ -59,6 +55,14 @@ def check_output_path(path: str | Path, what: str = "out") -> Path:
     if not os.access(folder, os.W_OK | os.X_OK):
         raise InvalidInputError(f"{what}: the output folder {str(folder)!r} is not writable; "
                                 "fix its permissions or choose another location")
+
+
+def check_output_path(path: str | Path, what: str = "out") -> Path:
+    """Create the parent folder of the output file ``path`` and check it is writable (and
+    that ``path`` is not a folder); return ``path``. Errors name ``what`` (the argument)
+    and the path, so a long run can fail at once instead of at the end."""
+    path = Path(path)
+    _writable_folder(path.parent, what)
     if path.exists() and path.is_dir():
         raise InvalidInputError(f"{what}: {str(path)!r} is a folder, expected a file path")
     return path
@@ -70,14 +74,7 @@ def check_output_dir(path: str | Path, what: str = "out") -> Path:
     path = Path(path)
     if path.exists() and not path.is_dir():
         raise InvalidInputError(f"{what}: {str(path)!r} is a file, expected a folder")
-    try:
-        path.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise InvalidInputError(f"{what}: cannot create the output folder {str(path)!r} ({exc.strerror}); "
-                                "choose a writable location") from None
-    if not os.access(path, os.W_OK | os.X_OK):
-        raise InvalidInputError(f"{what}: the output folder {str(path)!r} is not writable; "
-                                "fix its permissions or choose another location")
+    _writable_folder(path, what)
     return path
 
 

@@ -271,3 +271,21 @@ def test_contact_sheet_shows_the_clip_in_every_tile(tmp_path):
         assert min(middle) > 0.2 and max(edges) < 0.05                      # a body in the middle of each tile
     # the jumping jacks move: the tiles differ
     assert np.abs(tiles[0, 0] - tiles[0, 2]).mean() > 1.0
+
+
+def test_baseline_beside_ours_sheet_puts_the_reference_above(tmp_path):
+    from PIL import Image
+
+    from crowdstudy.render.sheets import animation_sheet, clips_animation
+
+    base = clips_animation([load_clip("cheer"), load_clip("twist")], span=1.0)
+    moved = base.replace(root_translation=base.root_translation + np.array([0.0, 0.0, 0.15]))   # "Ours": lifted 15 cm
+    both = animation_sheet(moved, tmp_path / "both.png", [1], span=1.0, frames=3, width=80, height=112, reference=base)
+    alone = animation_sheet(base, tmp_path / "base.png", [1], span=1.0, frames=3, width=80, height=112)
+    b = np.asarray(Image.open(both).convert("RGB")).astype(int)
+    a = np.asarray(Image.open(alone).convert("RGB")).astype(int)
+    assert b.shape == (2 * 112, 3 * 80, 3)
+    np.testing.assert_array_equal(b[:112], a)                 # the reference row, same cameras and colours
+    assert np.abs(b[112:] - a).mean() > 1.0                  # the lifted character looks different
+    with pytest.raises(InvalidInputError, match="reference"):
+        animation_sheet(moved, tmp_path / "x.png", [0], span=1.0, reference=clips_animation([load_clip("cheer")]))

@@ -5,6 +5,7 @@ Examples::
     crowdstudy sheet --clips twist,macarena,cheer --out build/sheets/dances.png
     crowdstudy sheet --clips gait_short_steps,gait_fast --side --out build/sheets/walks.png
     crowdstudy sheet S1-D5-Baseline.npz --characters 0,7,12 --start 4 --out build/sheets/baseline.png
+    crowdstudy sheet S1-D5-Ours.npz --reference S1-D5-Baseline.npz --characters 7 --out build/sheets/b_vs_o.png
 """
 
 from __future__ import annotations
@@ -25,6 +26,8 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--span", type=float, default=2.0, help="seconds covered by the 8 frames (default 2)")
     parser.add_argument("--frames", type=int, default=8, help="frames per row (default 8)")
     parser.add_argument("--side", action="store_true", help="view from the side (+x) instead of the front (+y)")
+    parser.add_argument("--reference", default=None,
+                        help="the Baseline of a corrected animation: each character gets a Baseline row above its own")
     parser.add_argument("--out", required=True, help="output PNG")
 
 
@@ -34,6 +37,8 @@ def run(args: argparse.Namespace) -> int:
     out = check_output_path(args.out, "--out")
     if (args.animation is None) == (args.clips is None):
         raise InvalidInputError("give an animation file or --clips, not both and not neither")
+    if args.reference is not None and args.animation is None:
+        raise InvalidInputError("--reference: needs an animation file (the corrected one) to compare with")
     if args.frames < 1:
         raise InvalidInputError(f"--frames: expected a positive number, got {args.frames}")
     if args.clips is not None:
@@ -49,7 +54,8 @@ def run(args: argparse.Namespace) -> int:
         except ValueError:
             raise InvalidInputError(f"--characters: expected comma-separated integers, got {args.characters!r}") from None
         anim = CrowdAnimation.load(args.animation)
+        ref = CrowdAnimation.load(args.reference) if args.reference else None
         path = animation_sheet(anim, out, chars, start=args.start, span=args.span, side=args.side,
-                               frames=args.frames)
+                               frames=args.frames, reference=ref)
     print(f"wrote {path}")
     return 0

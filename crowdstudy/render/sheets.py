@@ -45,11 +45,13 @@ def clips_animation(clips: list[MotionClip], *, start: float = 0.0, span: float 
 
 def animation_sheet(anim: CrowdAnimation, out: str | Path, characters, *, start: float = 0.0, span: float = 2.0,
                     frames: int = 8, side: bool = False, distance: float = 3.2, elevation: float | None = None,
-                    width: int = 240, height: int = 320, design=None) -> Path:
+                    width: int = 240, height: int = 320, design=None, reference: CrowdAnimation | None = None) -> Path:
     """A PNG contact sheet of ``characters`` (indices) of ``anim``: ``frames`` frames evenly
     over ``span`` s from ``start`` s, one row per character. ``elevation`` (m above the
     pelvis) defaults to 0.25 for one character and 1.4 in a crowd (over the heads of the
-    characters in between)."""
+    characters in between). With ``reference`` (the Baseline of a corrected ``anim``), each
+    character gets two rows, the reference above, seen from the same cameras (placed on
+    the reference's pelvis) and dressed in the same colours (the reference's)."""
     from PIL import Image
 
     chars = [int(c) for c in characters]
@@ -64,14 +66,24 @@ def animation_sheet(anim: CrowdAnimation, out: str | Path, characters, *, start:
     if elevation is None:
         elevation = 0.25 if anim.n_characters == 1 else 1.4
     offset = np.array([distance, 0.0, elevation]) if side else np.array([0.0, distance, elevation])
-    sheet = Image.new("RGB", (width * frames, height * len(chars)))
-    with CrowdRenderer(anim, design=design, width=width, height=height, msaa=2, shadows=False) as r:
-        for row, c in enumerate(chars):
-            for col, f in enumerate(picks):
-                target = anim.root_translation[f, c].copy()
-                target[2] = 0.85
-                r.set_view(Camera(eye=tuple(target + offset), target=tuple(target), fov=40.0))
-                sheet.paste(Image.fromarray(r.render(int(f))), (col * width, row * height))
+    if reference is not None and (reference.n_characters != anim.n_characters or reference.n_frames < anim.n_frames):
+        raise InvalidInputError(f"reference: expected an animation of the same {anim.n_characters} characters and "
+                                f"at least {anim.n_frames} frames, got {reference.n_characters} and "
+                                f"{reference.n_frames}")
+    layers = [reference, anim] if reference is not None else [anim]
+    colours = reference.root_translation[0, :, :2] if reference is not None else None
+    cams = reference if reference is not None else anim
+    sheet = Image.new("RGB", (width * frames, height * len(chars) * len(layers)))
+    for layer, a in enumerate(layers):
+        with CrowdRenderer(a, design=design, width=width, height=height, msaa=2, shadows=False,
+                           color_positions=colours) as r:
+            for row, c in enumerate(chars):
+                for col, f in enumerate(picks):
+                    target = cams.root_translation[f, c].copy()
+                    target[2] = 0.85
+                    r.set_view(Camera(eye=tuple(target + offset), target=tuple(target), fov=40.0))
+                    y = (row * len(layers) + layer) * height
+                    sheet.paste(Image.fromarray(r.render(int(f))), (col * width, y))
     out = Path(out)
     sheet.save(out)
     return out
