@@ -243,7 +243,7 @@ def test_swing_carries_the_hold_offset_smoothly():
     out[:, 1] += np.linspace(0.0, 0.06, n)                   # the correction drifts the foot sideways
     planted = np.ones(n, bool)
     planted[10:20] = False
-    pull, weight = _foot_hold(out, ref, planted, np.zeros(n, bool), np.zeros((n, 3)), 2, False)
+    pull, weight = _foot_hold(out, ref, planted, np.zeros(n, bool), np.zeros((n, 3)), False)
     held = out[:, :2] + pull
     assert np.ptp(held[:10], axis=0).max() < 1e-12 and np.ptp(held[20:], axis=0).max() < 1e-12
     # in the swing the foot keeps its own path, displaced smoothly (no drag back to the hold),
@@ -274,3 +274,39 @@ def test_pushed_character_keeps_its_planted_feet(bodies):
         # extension is soft-clamped (finish._soft_reach), which may lift the ankle by mm
         assert np.abs(after[:, ankle, 2] - before[:, ankle, 2]).max() < 3e-3
     assert np.abs(after[:, 15] - before[:, 15]).max() < 1e-9            # the upper body is untouched
+
+
+def test_the_last_swing_of_a_clip_does_not_snap():
+    from crowdstudy.physics.finish import _foot_hold
+
+    n = 40
+    ref = np.zeros((n, 3))
+    ref[12:24, 0] = np.linspace(0.0, 0.3, 14)[1:-1]          # a 12-frame swing between two stances ...
+    ref[24:, 0] = 0.3
+    ref[37:, 0] = 0.3 + np.linspace(0.0, 0.05, 4)[1:]        # ... and a swing cut by the clip's end
+    ref[12:24, 2] = ref[37:, 2] = 0.04
+    out = ref.copy()
+    out[:, 1] += np.linspace(0.08, 0.0, n)                   # the correction's sideways drift shrinks
+    planted = np.ones(n, bool)
+    planted[12:24] = planted[37:] = False
+    pull, weight = _foot_hold(out, ref, planted, np.zeros(n, bool), np.zeros((n, 3)), False)
+    off = np.linalg.norm(pull[36])
+    assert off > 0.02                                        # the last stance holds the foot 2+ cm off its path
+    # the 3 cut frames ease the offset out over a quarter of a whole swing: no single-frame jump
+    jumps = np.linalg.norm(np.diff(pull[36:], axis=0), axis=1)
+    assert jumps.max() <= 0.5 * off
+    assert np.all(weight == 1.0)
+
+
+def test_a_held_foot_does_not_stretch_a_straight_leg_further():
+    from crowdstudy.physics.finish import STRAIGHT_HOLD, _soft_reach
+
+    length = np.array([0.8, 0.8])
+    hip = np.zeros((2, 3))
+    own = np.array([[0.0, 0.0, -0.77], [0.0, 0.0, -0.6]])           # a nearly straight leg, a bent one
+    target = own + np.array([[0.0, 0.15, 0.0], [0.0, 0.05, 0.0]])  # the hold pulls them forward
+    goal = _soft_reach(hip, own, target, length)
+    d = np.linalg.norm(goal - hip, axis=1)
+    assert d[0] <= 0.77 + 0.01 * 0.8 + 1e-9                         # at most 1 % of the leg beyond its own
+    assert d[1] == pytest.approx(np.linalg.norm(target[1]))         # a bent leg reaches the target
+    assert STRAIGHT_HOLD * 0.8 > np.linalg.norm(target[1])

@@ -39,6 +39,9 @@ SOFT_REACH = 0.97
 #: the fraction of a swing at each end over which a held foot's offset eases out to / in
 #: from the foot's own corrected path (:func:`_foot_hold`)
 SWING_EASE = 0.25
+#: a held foot may stretch the leg freely up to this fraction of its length; beyond it no
+#: further than the output's own leg (:func:`_soft_reach`)
+STRAIGHT_HOLD = 0.95
 LEGS = tuple(tuple(JOINT_INDEX[f"{side}_{name}"] for name in ("hip", "knee", "ankle")) for side in ("left", "right"))
 
 
@@ -163,7 +166,7 @@ def _planted_frames(ref_joint: np.ndarray, fps: float, planted_speed: float, pla
 
 
 def _foot_hold(ankle: np.ndarray, ref_ankle: np.ndarray, ankle_planted: np.ndarray, toe_planted: np.ndarray,
-               toe_arm: np.ndarray, fade: int, periodic: bool):
+               toe_arm: np.ndarray, periodic: bool):
     """Ankle targets that hold one foot of one character on the floor.
 
     Args:
@@ -172,8 +175,6 @@ def _foot_hold(ankle: np.ndarray, ref_ankle: np.ndarray, ankle_planted: np.ndarr
         ankle_planted, toe_planted: (T,) the reference's ankle / ball of the foot planted.
         toe_arm: (T, 3) the reference foot's world orientation applied to the rest offset
             ankle -> ball, m (where the ball is, seen from the ankle, in the reference).
-        fade: frames over which the offset eases in before the first contact and out after
-            the last (clips that do not loop).
 
     One contact is a run of frames where the ankle or the ball is planted. Its ankle
     frames hold the ankle where the output's ankle is farthest from the reference's over
@@ -189,13 +190,13 @@ def _foot_hold(ankle: np.ndarray, ref_ankle: np.ndarray, ankle_planted: np.ndarr
     continuous (fading towards the held place instead drags the swinging foot back and
     shows as high-frequency knee and ankle motion; carrying the offset straight through
     pushes swinging legs into the neighbours' the physics kept them clear of). In a clip that
-    does not loop the offset eases in from zero before the first contact and out after the
-    last, over ``fade`` frames.
+    does not loop the swings cut by the clip's ends ease the offset in before the first
+    contact and out after the last over the ``SWING_EASE`` of a whole swing of that foot.
 
     Returns:
         ``(pull (T, 2) m, weight (T,))``: horizontal offsets to add to the output's ankle,
-        and the weight with which the foot takes the reference's orientation (1, except
-        where the hold eases in or out at the ends of a clip that does not loop).
+        and the weight with which the foot takes the reference's orientation (1 wherever a
+        foot has a contact in the clip).
     """
     n = len(ankle)
     pull = np.zeros((n, 2))
@@ -235,8 +236,19 @@ def _foot_hold(ankle: np.ndarray, ref_ankle: np.ndarray, ankle_planted: np.ndarr
     if periodic:
         gaps.append((ends[-1][1], ends[0][0] + n, ends[-1][3], ends[0][2], 1.0, 1.0))
     else:
-        gaps.append((ends[-1][1], n + fade, ends[-1][3], np.zeros(2), 1.0, 0.0))
-        gaps.insert(0, (-fade, ends[0][0], np.zeros(2), ends[0][2], 0.0, 1.0))
+        # before the first / after the last contact of a clip that does not loop, the swing
+        # is cut by the clip's end: the offset eases in / out over the SWING_EASE of a whole
+        # swing of this foot (the median one) and the foot is on its own path beyond
+        # (easing over the cut piece made the last swing snap; a corridor clip's last
+        # frames are dissolved into its first)
+        swings = [g1 - g0 for g0, g1, *_ in gaps]
+        ease = max(1.0, SWING_EASE * (float(np.median(swings)) if swings else 0.4 * n))
+        for t in range(ends[-1][1], n):
+            pull[t] = ends[-1][3] * (1.0 - smoothstep5((t - ends[-1][1] + 1.0) / (ease + 1.0)))
+            weight[t] = 1.0
+        for t in range(0, ends[0][0]):
+            pull[t] = ends[0][2] * (1.0 - smoothstep5((ends[0][0] - t) / (ease + 1.0)))
+            weight[t] = 1.0
     for g0, g1, off0, off1, w0, w1 in gaps:
         t = np.arange(g0, g1)
         if not len(t):
@@ -273,12 +285,15 @@ def _soft_reach(hip: np.ndarray, ankle: np.ndarray, target: np.ndarray, length: 
     v = target - hip
     d = np.linalg.norm(v, axis=-1)
     new = np.maximum(d0 + soft(d) - soft(d0), 1e-6)
+    # near full extension a hold may not straighten the leg further than the output's own
+    # leg (+1 % of its length): the foot gives way instead of the knee snapping back after
+    new = np.minimum(new, np.maximum(d0 + 0.01 * length, STRAIGHT_HOLD * length))
     return hip + v * (new / np.maximum(d, 1e-9))[:, None]
 
 
 def lock_planted_feet(rot: np.ndarray, root: np.ndarray, ref_rot: np.ndarray, ref_root: np.ndarray,
                       rest_joints: np.ndarray, fps: float, *, planted_speed: float = 0.02,
-                      planted_height: float = 0.03, fade_frames: int = 2, periodic: bool = False) -> np.ndarray:
+                      planted_height: float = 0.03, periodic: bool = False) -> np.ndarray:
     """Hold the output's feet still while the reference's are planted (two-bone leg IK).
 
     While the reference's ankle is planted the output's ankle is held still; while only the
@@ -291,8 +306,6 @@ def lock_planted_feet(rot: np.ndarray, root: np.ndarray, ref_rot: np.ndarray, re
         fps: frame rate, Hz.
         planted_speed: m/s, a reference joint (ankle, ball) counts as planted below this
             horizontal speed (and within ``planted_height`` m of its lowest height).
-        fade_frames: frames over which the hold eases in at a clip's start and out at its end
-            (between contacts the offset is carried through the swing).
         periodic: the clip loops (contacts may wrap around the seam).
 
     Returns:
@@ -313,7 +326,7 @@ def lock_planted_feet(rot: np.ndarray, root: np.ndarray, ref_rot: np.ndarray, re
             flat = _planted_frames(ref_pos[:, i, ankle], fps, planted_speed, planted_height, periodic)
             ball = _planted_frames(ref_pos[:, i, toe], fps, planted_speed, planted_height, periodic)
             pull, weight[:, i] = _foot_hold(pos[:, i, ankle], ref_pos[:, i, ankle], flat, ball, toe_arm[:, i],
-                                            fade_frames, periodic)
+                                            periodic)
             target[:, i, :2] += pull
         moved = weight > 0                                                          # (T, N)
         if not moved.any():
