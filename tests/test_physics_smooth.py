@@ -7,7 +7,8 @@ import numpy as np
 import pytest
 
 from crowdstudy.physics import CrowdCorrector, PhysicsConfig
-from crowdstudy.physics.finish import close_loop, lock_planted_feet, planted_runs, smooth_deviation
+from crowdstudy.motion.posing import planted_runs
+from crowdstudy.physics.finish import close_loop, lock_planted_feet, smooth_deviation
 
 
 @pytest.fixture(scope="module")

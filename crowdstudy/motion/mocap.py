@@ -35,11 +35,11 @@ from crowdstudy.body.skeleton import DEFAULT_REST_JOINTS, JOINT_INDEX, PARENTS, 
 from crowdstudy.errors import InvalidInputError
 from crowdstudy.motion.legs import plant_legs
 from crowdstudy.motion.clip import MotionClip
-from crowdstudy.motion.posing import rot_z, smoothstep5
+from crowdstudy.motion.posing import planted_runs, rot_z, smoothstep5
 from crowdstudy.motion.rig import ANKLE_HEIGHT
 
-__all__ = ["clean_take", "outlier_ends", "face_forward", "remove_drift", "shrink_steps", "foot_contacts", "lock_feet",
-           "lock_loop_feet", "MAX_EXCURSION"]
+__all__ = ["clean_take", "outlier_ends", "turn_about_z", "face_forward", "remove_drift", "shrink_steps",
+           "foot_contacts", "lock_feet", "lock_loop_feet", "MAX_EXCURSION"]
 
 _MIN_CONTACT = 0.12    # s, shortest contact kept
 _MAX_GAP = 0.08        # s, shorter gaps inside a contact are filled
@@ -54,14 +54,15 @@ def _headings(clip: MotionClip) -> np.ndarray:
     return np.unwrap(np.arctan2(-fwd[:, 0], fwd[:, 1]))
 
 
-def _turn(clip: MotionClip, yaw: np.ndarray, xy: np.ndarray, name: str | None = None) -> MotionClip:
-    """Rotate frame t of ``clip`` by ``-yaw[t]`` about z around the point ``xy[t]``, which
-    goes to the origin."""
-    rz = rot_z(-np.asarray(yaw, dtype=np.float64))
+def turn_about_z(clip: MotionClip, yaw, centre, name: str | None = None) -> MotionClip:
+    """``clip`` with frame t turned by ``yaw[t]`` rad about +z around the point ``centre[t]``
+    (m), which goes to the origin; ``yaw`` (T,) or a number, ``centre`` (T, 2) or (2,)."""
+    n = clip.n_frames
+    rz = rot_z(np.broadcast_to(np.asarray(yaw, dtype=np.float64), (n,)))
     rot = np.array(clip.joint_rotations, copy=True)
     rot[:, 0] = matrix_to_axis_angle(rz @ axis_angle_to_matrix(rot[:, 0]))
     root = np.array(clip.root_translation, copy=True)
-    root[:, :2] = np.einsum("tab,tb->ta", rz[:, :2, :2], root[:, :2] - xy)
+    root[:, :2] = np.einsum("tab,tb->ta", rz[:, :2, :2], root[:, :2] - np.asarray(centre, dtype=np.float64))
     return dataclasses.replace(clip, name=name or clip.name, joint_rotations=rot, root_translation=root)
 
 
@@ -69,8 +70,7 @@ def face_forward(clip: MotionClip) -> MotionClip:
     """``clip`` turned about z so its mean heading is +y, its mean pelvis position at x = y = 0."""
     h = _headings(clip)
     mean = float(np.angle(np.mean(np.exp(1j * h))))
-    xy = np.broadcast_to(clip.root_translation[:, :2].mean(axis=0), (clip.n_frames, 2))
-    return _turn(clip, np.full(clip.n_frames, mean), xy)
+    return turn_about_z(clip, -mean, clip.root_translation[:, :2].mean(axis=0))
 
 
 def remove_drift(clip: MotionClip, sigma: float) -> MotionClip:
@@ -82,14 +82,7 @@ def remove_drift(clip: MotionClip, sigma: float) -> MotionClip:
     h = _headings(clip)
     slow_h = gaussian_filter1d(h, s, mode="nearest")
     slow_xy = gaussian_filter1d(clip.root_translation[:, :2], s, axis=0, mode="nearest")
-    return _turn(clip, slow_h, slow_xy)
-
-
-def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
-    """[start, end) of the runs of True in a 1-D mask."""
-    m = np.concatenate([[False], mask, [False]])
-    d = np.diff(m.astype(np.int8))
-    return list(zip(np.flatnonzero(d == 1), np.flatnonzero(d == -1)))
+    return turn_about_z(clip, -slow_h, slow_xy)
 
 
 def foot_contacts(clip: MotionClip, *, height_tol: float = 0.035, speed_tol: float = 0.6) -> np.ndarray:
@@ -109,11 +102,11 @@ def foot_contacts(clip: MotionClip, *, height_tol: float = 0.035, speed_tol: flo
         low_t = np.percentile(toe[:, 2], 2)
         planted = ((ankle[:, 2] < low_a + height_tol) | (toe[:, 2] < low_t + 0.025)) & \
             (np.linalg.norm(vel, axis=1) < speed_tol)
-        gaps = _runs(~planted)
+        gaps = planted_runs(~planted)
         for a, b in gaps:
             if 0 < a and b < len(planted) and (b - a) < _MAX_GAP * clip.fps:
                 planted[a:b] = True
-        for a, b in _runs(planted):
+        for a, b in planted_runs(planted):
             if (b - a) < _MIN_CONTACT * clip.fps:
                 planted[a:b] = False
         out[:, k] = planted
@@ -125,7 +118,7 @@ def _held(values: np.ndarray, contacts: np.ndarray, fps: float) -> np.ndarray:
     faded out after lift-off over the swing (at most 0.3 s, quintic)."""
     n = len(values)
     off = np.zeros(values.shape)
-    runs = _runs(contacts)
+    runs = planted_runs(contacts)
     for r, (a, b) in enumerate(runs):
         off[a:b] = values[a] - values[a:b]
         nxt = runs[r + 1][0] if r + 1 < len(runs) else n
@@ -141,7 +134,7 @@ def _step_lift(offset: np.ndarray, contacts: np.ndarray) -> np.ndarray:
     sine bump of 40 % of the distance it travels (at most 4 cm), so the catch-up is a small
     step, not a slide (a take whose foot shuffles along the floor)."""
     lift = np.zeros(len(offset))
-    runs = _runs(contacts)
+    runs = planted_runs(contacts)
     for r, (a, b) in enumerate(runs):
         nxt = runs[r + 1][0] if r + 1 < len(runs) else len(offset)
         span = np.flatnonzero(np.linalg.norm(offset[b:nxt], axis=1) > 1e-9)
@@ -160,7 +153,7 @@ def _approach_lift(height: np.ndarray, contacts: np.ndarray, fps: float) -> np.n
     lift = np.zeros(len(height))
     floor = float(np.percentile(height, 2)) + 0.015
     ease = max(1, int(round(0.05 * fps)))
-    runs = _runs(contacts)
+    runs = planted_runs(contacts)
     for r, (a, _b) in enumerate(runs):
         prev = runs[r - 1][1] if r else 0
         j = np.arange(max(prev, a - int(round(0.25 * fps))), a)
@@ -196,7 +189,7 @@ def _contact_offsets(values: np.ndarray, contacts: np.ndarray) -> np.ndarray:
     """(T, D): the mean of ``values`` (T, D) over each contact, held through it, eased from
     one contact's value to the next over the swing between them (quintic)."""
     n = len(values)
-    runs = _runs(contacts)
+    runs = planted_runs(contacts)
     if not runs:
         return np.broadcast_to(values.mean(axis=0), values.shape).copy()
     held = [values[a:b].mean(axis=0) for a, b in runs]

@@ -43,7 +43,7 @@ from crowdstudy.body.rotations import quaternion_to_axis_angle
 from crowdstudy.body.skeleton import DEFAULT_REST_JOINTS, JOINT_INDEX
 from crowdstudy.errors import InvalidInputError
 from crowdstudy.motion.clip import MotionClip, seam_discontinuity
-from crowdstudy.motion.quaternions import quat_about_z, quat_multiply
+from crowdstudy.motion.mocap import turn_about_z
 
 __all__ = ["WALK_FILES", "FPS", "build_walk_loops", "build_walk_loop", "foot_events", "loop_foot_skate",
            "gait_report"]
@@ -156,16 +156,6 @@ def _level_floor(clip: MotionClip, events: dict) -> MotionClip:
     ground = np.percentile(z - slope * t, 20)                     # a low flat-foot ankle height, levelled
     root[:, 2] -= slope * frames + ground - ANKLE_HEIGHT
     return dataclasses.replace(clip, root_translation=root)
-
-
-def _turn(clip: MotionClip, yaw: float, origin: np.ndarray) -> MotionClip:
-    """``clip`` turned by ``yaw`` (rad, about +z) around ``origin`` (2,) (moved to x = y = 0)."""
-    quat = clip.quaternions.copy()
-    quat[:, 0] = quat_multiply(quat_about_z(np.full(clip.n_frames, yaw)), quat[:, 0])
-    c, s = np.cos(yaw), np.sin(yaw)
-    xy = clip.root_translation[:, :2] - origin
-    root = np.column_stack([c * xy[:, 0] - s * xy[:, 1], s * xy[:, 0] + c * xy[:, 1], clip.root_translation[:, 2]])
-    return dataclasses.replace(clip, joint_rotations=quaternion_to_axis_angle(quat), root_translation=root)
 
 
 def _world(clip: MotionClip, repeats: int = 1) -> tuple[np.ndarray, np.ndarray]:
@@ -366,7 +356,7 @@ def build_walk_loop(path: str | Path, *, fps: float = FPS, max_cycles: int = 2) 
     # turn the take so the loop's net displacement points along +y, then make it in place
     d = root[a + length, :2] - root[a, :2]
     speed = float(np.linalg.norm(d) / (length / fps))
-    turned = _turn(raw, float(np.pi / 2 - np.arctan2(d[1], d[0])), root[a, :2])
+    turned = turn_about_z(raw, float(np.pi / 2 - np.arctan2(d[1], d[0])), root[a, :2])
     rt = turned.root_translation.copy()
     rt[:, 1] -= speed * (np.arange(raw.n_frames) - a) / fps
     rt[:, :2] -= rt[a:a + length, :2].mean(axis=0)

@@ -1,7 +1,9 @@
-"""Building blocks for procedural clips: elementary rotations and analytic two-bone IK.
+"""Building blocks for clips: elementary rotations, analytic two-bone IK and time profiles.
 
 All functions are vectorised over a leading batch (frames). Rotation matrices act on
-column vectors; a joint's *local* rotation is relative to its parent's global frame.
+column vectors; a joint's *local* rotation is relative to its parent's global frame. The
+time-signal helpers (:func:`planted_runs`, :func:`hold_peaks`) serve the motion-capture
+cleaning and the physics output stage alike.
 """
 
 from __future__ import annotations
@@ -9,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 
 __all__ = ["rot_x", "rot_y", "rot_z", "yaw_roll_pitch", "hinge_frame", "two_bone_ik", "smoothstep5",
-           "lift_profile"]
+           "lift_profile", "planted_runs", "hold_peaks"]
 
 
 def _rot(axis: int, angle: np.ndarray) -> np.ndarray:
@@ -117,3 +119,30 @@ def lift_profile(u: np.ndarray) -> np.ndarray:
     """A bump on [0, 1]: ``sin^2(pi u)`` inside, zero outside; C1 at the ends."""
     u = np.asarray(u, dtype=np.float64)
     return np.where((u > 0) & (u < 1), np.sin(np.pi * np.clip(u, 0, 1)) ** 2, 0.0)
+
+
+def planted_runs(mask: np.ndarray, *, periodic: bool = False) -> list[tuple[int, int]]:
+    """Runs ``[start, stop)`` of True in a (T,) mask; for a periodic mask a run may wrap
+    (``stop > T``); a mask that is all True is one run ``(0, T)``."""
+    mask = np.asarray(mask, bool)
+    n = len(mask)
+    if not mask.any():
+        return []
+    if mask.all():
+        return [(0, n)]
+    shift = int(np.argmin(mask)) if periodic else 0        # start the scan on a free frame
+    m = np.roll(mask, -shift)
+    edges = np.diff(np.concatenate([[0], m.astype(np.int8), [0]]))
+    starts, stops = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)
+    return [(int(a + shift), int(b + shift)) for a, b in zip(starts, stops)]
+
+
+def hold_peaks(x: np.ndarray, half_width: int, mode: str) -> np.ndarray:
+    """Each sample replaced by the sample of largest magnitude (with its sign) within
+    +-``half_width`` frames along axis 0: a morphological dilation of |x| that keeps signs."""
+    from scipy.ndimage import maximum_filter1d, minimum_filter1d
+
+    size = 2 * half_width + 1
+    hi = maximum_filter1d(x, size, axis=0, mode=mode)
+    lo = minimum_filter1d(x, size, axis=0, mode=mode)
+    return np.where(np.abs(hi) >= np.abs(lo), hi, lo)

@@ -23,11 +23,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from crowdstudy.body.capsules import closest_points_on_segments, posed_capsules, segment_distance
+from crowdstudy.body.capsules import closest_points_on_segments, posed_capsules, segment_distance, touching_pairs
 from crowdstudy.body.rotations import (axis_angle_to_matrix, matrix_to_axis_angle, matrix_to_quaternion,
                                        quaternion_to_matrix)
-from crowdstudy.body.skeleton import JOINT_INDEX, JOINT_NAMES, NUM_JOINTS, PARENTS, forward_kinematics
-from crowdstudy.motion.posing import smoothstep5, two_bone_ik
+from crowdstudy.body.skeleton import JOINT_INDEX, JOINT_NAMES, NUM_JOINTS, forward_kinematics
+from crowdstudy.motion.posing import hold_peaks, smoothstep5, two_bone_ik
 
 __all__ = ["SLACK", "HAND_BONES", "BODY_BONES", "hand_penetration", "self_penetration", "clear_hands"]
 
@@ -84,8 +84,8 @@ def self_penetration(body, joint_rotations: np.ndarray, root_translation: np.nda
     """
     caps = body.capsules
     i, j = np.triu_indices(NUM_JOINTS, k=1)
-    rest_d = segment_distance(caps.start[i], caps.end[i], caps.start[j], caps.end[j])
-    keep = (PARENTS[j] != i) & (PARENTS[i] != j) & (rest_d > caps.radius[i] + caps.radius[j] + tolerance)
+    skip = {tuple(p) for p in touching_pairs(caps, margin=tolerance)}
+    keep = np.array([(a, b) not in skip for a, b in zip(i, j)])
     i, j = i[keep], j[keep]
     start, end = posed_capsules(body, joint_rotations, root_translation)
     dist = segment_distance(start[:, i], end[:, i], start[:, j], end[:, j])
@@ -102,12 +102,9 @@ def self_penetration(body, joint_rotations: np.ndarray, root_translation: np.nda
 def _smooth(push: np.ndarray, fps: float) -> np.ndarray:
     """Offsets (T, ..., 3) held around their peaks (per component, the value of largest
     magnitude within +-_HOLD) and Gaussian smoothed: on before contact, off after it."""
-    from scipy.ndimage import gaussian_filter1d, maximum_filter1d, minimum_filter1d
+    from scipy.ndimage import gaussian_filter1d
 
-    size = 2 * max(1, int(round(_HOLD * fps))) + 1
-    hi = maximum_filter1d(push, size, axis=0, mode="nearest")
-    lo = minimum_filter1d(push, size, axis=0, mode="nearest")
-    held = np.where(hi >= -lo, hi, lo)
+    held = hold_peaks(push, max(1, int(round(_HOLD * fps))), "nearest")
     return gaussian_filter1d(held, _SMOOTH * fps, axis=0, mode="nearest")
 
 

@@ -28,10 +28,10 @@ from crowdstudy.body.rotations import (axis_angle_to_quaternion, matrix_to_axis_
                                        quaternion_to_axis_angle, quaternion_to_matrix)
 from crowdstudy.body.skeleton import JOINT_INDEX, PARENTS, forward_kinematics
 from crowdstudy.errors import InvalidInputError
-from crowdstudy.motion.posing import smoothstep5, two_bone_ik
+from crowdstudy.motion.posing import hold_peaks, planted_runs, smoothstep5, two_bone_ik
 from crowdstudy.motion.quaternions import quat_blend, quat_conjugate, quat_multiply
 
-__all__ = ["close_loop", "smooth_deviation", "lock_planted_feet", "planted_runs"]
+__all__ = ["close_loop", "smooth_deviation", "lock_planted_feet"]
 
 #: a held leg's reach is compressed smoothly beyond this fraction of the leg's length
 #: (:func:`_soft_reach`: no knee pops near full extension)
@@ -77,17 +77,6 @@ def close_loop(rot: np.ndarray, root: np.ndarray, n_frames: int, warmup: int, bl
     return out_rot, out_root
 
 
-def _hold_peaks(x: np.ndarray, half_width: int, mode: str) -> np.ndarray:
-    """Each sample replaced by the sample of largest magnitude (with its sign) within
-    +-``half_width`` frames along axis 0: a morphological dilation of |x| that keeps signs."""
-    from scipy.ndimage import maximum_filter1d, minimum_filter1d
-
-    size = 2 * half_width + 1
-    hi = maximum_filter1d(x, size, axis=0, mode=mode)
-    lo = minimum_filter1d(x, size, axis=0, mode=mode)
-    return np.where(np.abs(hi) >= np.abs(lo), hi, lo)
-
-
 def smooth_deviation(rot: np.ndarray, root: np.ndarray, ref_rot: np.ndarray, ref_root: np.ndarray,
                      sigma_frames: float, *, periodic: bool = False, root_sigma_frames: float | None = None,
                      hold: float = 0.0):
@@ -100,7 +89,7 @@ def smooth_deviation(rot: np.ndarray, root: np.ndarray, ref_rot: np.ndarray, ref
         periodic: the clip loops (frame T follows frame T-1): filter circularly.
         root_sigma_frames: the root offset's own kernel width (frames; None = sigma_frames).
         hold: before the low-pass, each deviation component is held at its largest
-            magnitude within +-``hold * sigma`` frames (:func:`_hold_peaks`), so the low-pass
+            magnitude within +-``hold * sigma`` frames (:func:`hold_peaks`), so the low-pass
             does not shave the deviation a contact needed: the correction starts a little
             before the contact and ends a little after it instead of being flattened.
 
@@ -121,31 +110,15 @@ def smooth_deviation(rot: np.ndarray, root: np.ndarray, ref_rot: np.ndarray, ref
     delta = quaternion_to_axis_angle(quat_multiply(quat_conjugate(q_ref), axis_angle_to_quaternion(rot)))
     if sigma_frames > 0:
         if hold > 0:
-            delta = _hold_peaks(delta, int(round(hold * sigma_frames)), mode)
+            delta = hold_peaks(delta, int(round(hold * sigma_frames)), mode)
         delta = gaussian_filter1d(delta, sigma_frames, axis=0, mode=mode)
     offset = root - ref_root
     if root_sigma > 0:
         if hold > 0:
-            offset = _hold_peaks(offset, int(round(hold * root_sigma)), mode)
+            offset = hold_peaks(offset, int(round(hold * root_sigma)), mode)
         offset = gaussian_filter1d(offset, root_sigma, axis=0, mode=mode)
     out = quaternion_to_axis_angle(quat_multiply(q_ref, axis_angle_to_quaternion(delta)))
     return out, ref_root + offset
-
-
-def planted_runs(mask: np.ndarray, *, periodic: bool = False) -> list[tuple[int, int]]:
-    """Runs ``[start, stop)`` of True in a (T,) mask; for a periodic mask a run may wrap
-    (``stop > T``); a mask that is all True is one run ``(0, T)``."""
-    mask = np.asarray(mask, bool)
-    n = len(mask)
-    if not mask.any():
-        return []
-    if mask.all():
-        return [(0, n)]
-    shift = int(np.argmin(mask)) if periodic else 0        # start the scan on a free frame
-    m = np.roll(mask, -shift)
-    edges = np.diff(np.concatenate([[0], m.astype(np.int8), [0]]))
-    starts, stops = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)
-    return [(int(a + shift), int(b + shift)) for a, b in zip(starts, stops)]
 
 
 def _planted_frames(ref_joint: np.ndarray, fps: float, planted_speed: float, planted_height: float,
@@ -243,12 +216,11 @@ def _foot_hold(ankle: np.ndarray, ref_ankle: np.ndarray, ankle_planted: np.ndarr
         # frames are dissolved into its first)
         swings = [g1 - g0 for g0, g1, *_ in gaps]
         ease = max(1.0, SWING_EASE * (float(np.median(swings)) if swings else 0.4 * n))
-        for t in range(ends[-1][1], n):
-            pull[t] = ends[-1][3] * (1.0 - smoothstep5((t - ends[-1][1] + 1.0) / (ease + 1.0)))
-            weight[t] = 1.0
-        for t in range(0, ends[0][0]):
-            pull[t] = ends[0][2] * (1.0 - smoothstep5((ends[0][0] - t) / (ease + 1.0)))
-            weight[t] = 1.0
+        tail = np.arange(ends[-1][1], n)
+        pull[tail] = ends[-1][3] * (1.0 - smoothstep5((tail - ends[-1][1] + 1.0) / (ease + 1.0)))[:, None]
+        head = np.arange(0, ends[0][0])
+        pull[head] = ends[0][2] * (1.0 - smoothstep5((ends[0][0] - head) / (ease + 1.0)))[:, None]
+        weight[tail] = weight[head] = 1.0
     for g0, g1, off0, off1, w0, w1 in gaps:
         t = np.arange(g0, g1)
         if not len(t):

@@ -43,15 +43,10 @@ def clips_animation(clips: list[MotionClip], *, start: float = 0.0, span: float 
                           meta={"scenario": "concert", "method": "Baseline"})
 
 
-def animation_sheet(anim: CrowdAnimation, out: str | Path, characters, *, start: float = 0.0, span: float = 2.0,
-                    frames: int = 8, side: bool = False, distance: float = 3.2, elevation: float | None = None,
-                    width: int = 240, height: int = 320, design=None, reference: CrowdAnimation | None = None) -> Path:
-    """A PNG contact sheet of ``characters`` (indices) of ``anim``: ``frames`` frames evenly
-    over ``span`` s from ``start`` s, one row per character. ``elevation`` (m above the
-    pelvis) defaults to 0.25 for one character and 1.4 in a crowd (over the heads of the
-    characters in between). With ``reference`` (the Baseline of a corrected ``anim``), each
-    character gets two rows, the reference above, seen from the same cameras (placed on
-    the reference's pelvis) and dressed in the same colours (the reference's)."""
+def _sheet_image(anim: CrowdAnimation, characters, *, start: float, span: float, frames: int, side: bool,
+                 distance: float, elevation: float | None, width: int, height: int, design,
+                 reference: CrowdAnimation | None):
+    """The contact sheet of :func:`animation_sheet` as a PIL image."""
     from PIL import Image
 
     chars = [int(c) for c in characters]
@@ -84,29 +79,39 @@ def animation_sheet(anim: CrowdAnimation, out: str | Path, characters, *, start:
                     r.set_view(Camera(eye=tuple(target + offset), target=tuple(target), fov=40.0))
                     y = (row * len(layers) + layer) * height
                     sheet.paste(Image.fromarray(r.render(int(f))), (col * width, y))
+    return sheet
+
+
+def animation_sheet(anim: CrowdAnimation, out: str | Path, characters, *, start: float = 0.0, span: float = 2.0,
+                    frames: int = 8, side: bool = False, distance: float = 3.2, elevation: float | None = None,
+                    width: int = 240, height: int = 320, design=None, reference: CrowdAnimation | None = None) -> Path:
+    """A PNG contact sheet of ``characters`` (indices) of ``anim``: ``frames`` frames evenly
+    over ``span`` s from ``start`` s, one row per character. ``elevation`` (m above the
+    pelvis) defaults to 0.25 for one character and 1.4 in a crowd (over the heads of the
+    characters in between). With ``reference`` (the Baseline of a corrected ``anim``), each
+    character gets two rows, the reference above, seen from the same cameras (placed on
+    the reference's pelvis) and dressed in the same colours (the reference's)."""
     out = Path(out)
-    sheet.save(out)
+    _sheet_image(anim, characters, start=start, span=span, frames=frames, side=side, distance=distance,
+                 elevation=elevation, width=width, height=height, design=design, reference=reference).save(out)
     return out
 
 
 def clip_sheet(clips: list[MotionClip], out: str | Path, *, start: float = 0.0, span: float = 2.0,
-               side: bool = False, **kwargs) -> Path:
+               side: bool = False, frames: int = 8, distance: float = 3.2, elevation: float | None = None,
+               width: int = 240, height: int = 320, design=None) -> Path:
     """A contact sheet of shipped clips, one row per clip, each rendered alone (no other clip
     in the way of a side view)."""
     from PIL import Image
 
-    out = Path(out)
-    rows = []
-    for k, clip in enumerate(clips):
-        anim = clips_animation([clip], start=start, span=span, seed=3 + k)
-        part = out.with_name(f".{out.stem}.{k}.png")
-        animation_sheet(anim, part, [0], start=0.0, span=span, side=side, **kwargs)
-        rows.append(Image.open(part).copy())
-        part.unlink()
+    if not clips:
+        raise InvalidInputError("clips: expected at least one clip")
+    rows = [_sheet_image(clips_animation([clip], start=start, span=span, seed=3 + k), [0], start=0.0, span=span,
+                         frames=frames, side=side, distance=distance, elevation=elevation, width=width,
+                         height=height, design=design, reference=None) for k, clip in enumerate(clips)]
     sheet = Image.new("RGB", (rows[0].width, sum(r.height for r in rows)))
-    y = 0
-    for r in rows:
-        sheet.paste(r, (0, y))
-        y += r.height
+    for k, row in enumerate(rows):
+        sheet.paste(row, (0, k * row.height))
+    out = Path(out)
     sheet.save(out)
     return out

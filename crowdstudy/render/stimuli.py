@@ -205,7 +205,6 @@ def animation_job(job: dict) -> dict:
     """
     from crowdstudy.motion import build_baseline
     from crowdstudy.physics import correct
-    from crowdstudy.scene import CrowdAnimation
 
     design = job["design"]
     methods = tuple(job.get("methods") or ("Baseline", "Ours"))
@@ -213,12 +212,7 @@ def animation_job(job: dict) -> dict:
         base = build_baseline(design, job["stage"], job["level"], duration=job["duration"], fps=job["fps"],
                               seed=job["seed"])
     else:
-        with tempfile.TemporaryDirectory() as tmp:
-            src = job.get("baseline")
-            if src is None:
-                src = Path(tmp) / "baseline.npz"
-                src.write_bytes(job["baseline_bytes"])
-            base = CrowdAnimation.load(src)
+        base = _job_animation(job.get("baseline"), job.get("baseline_bytes"))
     built = [("Baseline", base)] if "Baseline" in methods else []
     timings: dict = {}
     if "Ours" in methods:
@@ -248,6 +242,19 @@ def animation_job(job: dict) -> dict:
     return out
 
 
+def _job_animation(path, data: bytes | None):
+    """The CrowdAnimation a job names: the file ``path``, or (for Dask workers, which may not
+    share the file system) the bytes ``data`` of one."""
+    from crowdstudy.scene import CrowdAnimation
+
+    if path is not None:
+        return CrowdAnimation.load(path)
+    with tempfile.TemporaryDirectory() as tmp:
+        src = Path(tmp) / "anim.npz"
+        src.write_bytes(data)
+        return CrowdAnimation.load(src)
+
+
 def _overlap_metrics(anim, frames) -> dict:
     from crowdstudy.metrics import overlap_volume
     res = {}
@@ -262,15 +269,10 @@ def video_job(job: dict) -> dict:
     ``animation`` (a path) or ``animation_bytes``; ``out`` (a path) unless
     ``return_bytes``. Returns render_video's dict (+ ``video_bytes`` for Dask)."""
     from crowdstudy.render.video import render_video
-    from crowdstudy.scene import CrowdAnimation
 
     s = job["settings"]
+    anim = _job_animation(job.get("animation"), job.get("animation_bytes"))
     with tempfile.TemporaryDirectory() as tmp:
-        src = job.get("animation")
-        if src is None:
-            src = Path(tmp) / "anim.npz"
-            src.write_bytes(job["animation_bytes"])
-        anim = CrowdAnimation.load(src)
         out = Path(tmp) / f"{job['stimulus_id']}.mp4" if job.get("return_bytes") else Path(job["out"])
         res = render_video(anim, job["viewpoint"], out, width=s["width"], height=s["height"], duration=s["duration"],
                            fps=s["fps"], msaa=s["msaa"], design=job["design"], progress=job.get("progress", False),
