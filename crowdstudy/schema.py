@@ -14,6 +14,17 @@ participant then ``trial_index``, columns :data:`RESPONSE_COLUMNS`:
 * ``rt_ms``: time from the video's start to the answer, milliseconds; ``shown_at`` and
   ``answered_at``: ISO 8601 timestamps (UTC, milliseconds).
 
+The study server's export appends :data:`RESPONSE_QUALITY_COLUMNS` (empty cells where not
+recorded): ``video_plays`` (complete plays of the looping video before the answer),
+``first_play_ms`` (ms from the trial's display to the first complete play), ``hidden_count``
+and ``hidden_ms`` (tab switches during the trial and ms hidden), ``fullscreen_exits``,
+``check_answer`` / ``check_value`` (the attention check's answer and the point it asked for).
+Readers select the columns they need by name.
+
+``participants.csv`` (``crowdstudy export``): one row per participant, ``participant``,
+``status``, ``excluded`` (0/1), ``exclusion_reason`` (``;``-separated rule names) and more
+(:data:`crowdstudy.study.quality.PARTICIPANT_COLUMNS`).
+
 ``demographics.csv``: one row per participant, columns :data:`DEMOGRAPHIC_COLUMNS`
 (``started_at`` and ``completed_at`` ISO 8601; empty cells for what was not given).
 
@@ -22,10 +33,12 @@ Empty cells are missing values; floats are written with ``repr`` (round-trip exa
 
 from __future__ import annotations
 
-__all__ = ["RESPONSE_COLUMNS", "DEMOGRAPHIC_COLUMNS", "ITEM_COLUMNS"]
+__all__ = ["RESPONSE_COLUMNS", "DEMOGRAPHIC_COLUMNS", "ITEM_COLUMNS", "RESPONSE_QUALITY_COLUMNS"]
 
 #: The questionnaire items' columns in the responses file.
 ITEM_COLUMNS = ("Q1", "Q2", "Q3", "Q4", "Q5", "Q6")
 RESPONSE_COLUMNS = ("participant_id", "stage", "scenario", "trial_index", "stimulus_id", "density_level", "density",
                     "viewpoint", "method", *ITEM_COLUMNS, "rt_ms", "shown_at", "answered_at")
+RESPONSE_QUALITY_COLUMNS = ("video_plays", "first_play_ms", "hidden_count", "hidden_ms", "fullscreen_exits",
+                            "check_answer", "check_value")
 DEMOGRAPHIC_COLUMNS = ("participant_id", "age", "gender", "started_at", "completed_at", "completion_code")

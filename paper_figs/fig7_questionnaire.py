@@ -47,7 +47,7 @@ def screenshot(url: str, out: Path, *, width: int, height: int, video_timeout_ms
             page.wait_for_selector(".cs-trial .cs-next")
             for q, v in (("Q1", 5), ("Q2", 2), ("Q3", 4), ("Q4", 3)):
                 page.check(f'input[name="{q}"][value="{v}"]')
-            page.wait_for_function("document.querySelector('.cs-video').currentTime > 0.3", timeout=video_timeout_ms)
+            page.wait_for_function("() => document.querySelector('.cs-video').currentTime > 0.3", timeout=video_timeout_ms)
             out.parent.mkdir(parents=True, exist_ok=True)
             page.screenshot(path=str(out), full_page=False)
             return page.evaluate(PAGE_STATE)

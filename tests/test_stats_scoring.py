@@ -115,10 +115,10 @@ def test_cell_means_average_repeated_trials(design, sim):
 @pytest.mark.parametrize("mutate, pattern", [
     (lambda d: d.drop(columns=["Q4"]), "missing column.*'Q4'"),
     (lambda d: d.drop(columns=["viewpoint"]), "missing column.*'viewpoint'"),
-    (lambda d: d.assign(Q3=d.Q3.astype(object).where(d.index != 3, "agree")), "'Q3' row 3 .*'agree'"),
-    (lambda d: d.assign(Q5=d.Q5.where(d.index != 10, 7)), "'Q5' row 10 .*expected an integer 1..6"),
-    (lambda d: d.assign(Q1=d.Q1.astype(float).where(d.index != 2, 2.5)), "'Q1' row 2"),
-    (lambda d: d.assign(method=d.method.where(d.index != 0, "Physics")), "'method' has unknown level 'Physics'"),
+    (lambda d: d.assign(Q3=d.Q3.astype(object).where(d.index != 3, "agree")), r"'Q3' row 4 \(participant 'sim-001'\) holds 'agree'"),
+    (lambda d: d.assign(Q5=d.Q5.where(d.index != 10, 7)), r"'Q5' row 11 .* holds 7; expected an integer 1..6"),
+    (lambda d: d.assign(Q1=d.Q1.astype(float).where(d.index != 2, 2.5)), r"'Q1' row 3 .* holds 2.5;"),
+    (lambda d: d.assign(method=d.method.where(d.index != 0, "Physics")), "'method' row 1 .*unknown level 'Physics'"),
     (lambda d: d.iloc[:0], "no rows"),
 ])
 def test_bad_responses(design, sim, mutate, pattern):

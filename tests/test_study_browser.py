@@ -49,6 +49,10 @@ def _answer_trial(page, answers: dict, timeout: float = 20000) -> str:
     progress = page.inner_text(".cs-progress")
     for q, v in answers.items():
         page.check(f'input[name="{q}"][value="{v}"]')
+    check = page.query_selector('tr[data-item="cs-check"] th')
+    if check is not None:  # an attention check: do what it asks
+        asked = re.search(r"choose \((\d+)\)", check.inner_text()).group(1)
+        page.check(f'input[name="cs-check"][value="{asked}"]')
     page.wait_for_selector(".cs-next:not([disabled])", timeout=timeout)  # needs one full play of the video
     page.click(".cs-next")
     return progress
@@ -172,7 +176,7 @@ def test_full_session_reload_and_server_crash(small_study):
                     "session": page.evaluate("JSON.stringify(crowdstudy.session)"),
                     "localStorage": page.evaluate("JSON.stringify(Object.assign({}, localStorage))"),
                     "debrief page": page.content()}
-            assert '"token"' in held["session"] and f"/videos/{PID}/" in held["jspsych data"]
+            assert '"token"' in held["session"] and "/media/" in held["jspsych data"]
             for where, text in [*held.items(), *snapshots]:
                 assert not _leaks(text, words), (where, _leaks(text, words))
 
@@ -210,11 +214,14 @@ def test_full_session_reload_and_server_crash(small_study):
     assert len(snapshots) == 8 and len(requests) > 30
     for url, body in requests:
         assert not _leaks(url, words) and not _leaks(body, words), (url, body)
-    videos = sorted({u.split("/videos/", 1)[1] for u, _ in requests if "/videos/" in u})
-    assert "practice" in videos and len(videos) == 9, videos  # the practice clip + 8 trial tokens
-    assert all(v == "practice" or re.fullmatch(rf"{PID}/[0-9a-f]{{20}}", v) for v in videos), videos
+    videos = sorted({u.split("/media/", 1)[1] for u, _ in requests if "/media/" in u})
+    assert len(videos) == 9, videos  # the practice clip + 8 trials, each under its opaque name
+    assert all(re.fullmatch(r"[0-9a-f]{32}\.mp4", v) for v in videos), videos
     posted = [json.loads(b) for u, b in requests if u.endswith("/responses") and b]
-    assert posted and all(set(b) == {"trial_index", "token", "answers", "rt_ms", "shown_at"} for b in posted)
+    quality = {"video_plays", "first_play_ms", "hidden_count", "hidden_ms", "fullscreen_exits"}
+    assert posted and all(set(b) - {"check"} == {"trial_index", "token", "answers", "rt_ms", "shown_at"} | quality
+                          for b in posted)
+    assert all(b["video_plays"] >= 1 and b["first_play_ms"] > 500 for b in posted)
     assert {b["token"] for b in posted} == {t["token"] for t in admin}
 
     out = tmp / "responses.csv"

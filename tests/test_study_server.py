@@ -2,6 +2,7 @@
 
 import csv
 import json
+import re
 import shutil
 import subprocess
 import sys
@@ -23,7 +24,8 @@ ROOT = Path(__file__).resolve().parent.parent
 TOKEN = "test-admin-token-0123456789abcdef"
 ANS = {f"Q{i}": 3 for i in range(1, 7)}
 
-pytestmark = pytest.mark.filterwarnings("ignore:Using `httpx` with `starlette.testclient`")
+pytestmark = [pytest.mark.filterwarnings("ignore:Using `httpx` with `starlette.testclient`"),
+              pytest.mark.filterwarnings("ignore:Setting per-request cookies")]
 
 
 @pytest.fixture(scope="module")
@@ -63,10 +65,17 @@ def _register(api, pid="P001", *, ready=True):
     return h, r.json()["state"]
 
 
-def _answer(api, pid, h, trial, answers=ANS, rt=1234.5):
-    return api.post(f"/api/participants/{pid}/responses", headers=h,
-                    json={"trial_index": trial["trial_index"], "token": trial["token"],
-                          "answers": answers, "rt_ms": rt})
+def check_answer(trial):
+    """The point an attention-check trial's extra statement asks for (parsed from its text)."""
+    import re
+    return int(re.search(r"choose \((\d+)\)", trial["check"]["text"]).group(1))
+
+
+def _answer(api, pid, h, trial, answers=ANS, rt=1234.5, **extra):
+    body = {"trial_index": trial["trial_index"], "token": trial["token"], "answers": answers, "rt_ms": rt, **extra}
+    if "check" in trial and "check" not in extra:
+        body["check"] = check_answer(trial)
+    return api.post(f"/api/participants/{pid}/responses", headers=h, json=body)
 
 
 ADMIN = {"Authorization": f"Bearer {TOKEN}"}
@@ -210,9 +219,12 @@ def test_rejects_token_of_another_trial(api):
 def test_rejects_unknown_participant_and_bad_ids(api):
     h, state = _register(api, "P_real")
     body = {"trial_index": 0, "token": state["trials"][0]["token"], "answers": ANS, "rt_ms": 1}
+    # an unknown id answers exactly like a wrong secret (no way to probe which ids exist)
     r = api.post("/api/participants/P_ghost/responses", json=body, headers=h)
-    assert r.status_code == 404 and "unknown participant" in r.json()["error"]
-    assert api.get("/api/participants/P_ghost", headers=h).status_code == 404
+    wrong = api.post("/api/participants/P_real/responses", json=body, headers={"X-Participant-Secret": "nope"})
+    assert r.status_code == wrong.status_code == 403 and r.json() == wrong.json()
+    assert api.get("/api/participants/P_ghost", headers=h).status_code == 403
+    assert api.get("/api/participants/P_ghost").status_code == api.get("/api/participants/P_real").status_code == 401
     for bad in ["", "a b", "x" * 65, "-lead", "p%2F..%2Fx", "é"]:
         r = api.post("/api/participants", json={"participant_id": bad})
         assert r.status_code == 400 and "participant_id" in r.json()["error"], bad
@@ -284,7 +296,7 @@ def test_participant_facing_responses_never_reveal_the_condition(api):
     reg = call("POST", "/api/participants", json={"participant_id": pid})
     h = {"X-Participant-Secret": reg.json()["secret"]}
     state = reg.json()["state"]
-    assert all(set(t) == {"trial_index", "stage", "token", "video_url"} for t in state["trials"])
+    assert all(set(t) - {"check"} == {"trial_index", "stage", "token", "video_url"} for t in state["trials"])
     assert len({t["token"] for t in state["trials"]}) == 60
     call("GET", "/api/study")
     call("POST", f"/api/participants/{pid}/consent", json={"consent": True}, headers=h)
@@ -292,6 +304,8 @@ def test_participant_facing_responses_never_reveal_the_condition(api):
     call("POST", f"/api/participants/{pid}/practice", json={"answers": ANS, "rt_ms": 10}, headers=h)
     trials = state["trials"]
     body = {"trial_index": 0, "token": trials[0]["token"], "answers": ANS, "rt_ms": 100}
+    if "check" in trials[0]:
+        body["check"] = check_answer(trials[0])
     assert call("POST", f"/api/participants/{pid}/responses", json=body, headers=h).status_code == 201
     assert call("POST", f"/api/participants/{pid}/responses", json=body, headers=h).status_code == 200
     assert call("POST", f"/api/participants/{pid}/responses", json={**body, "answers": {**ANS, "Q1": 1}},
@@ -301,9 +315,10 @@ def test_participant_facing_responses_never_reveal_the_condition(api):
         assert call("POST", f"/api/participants/{pid}/responses", json={**body, **patch}, headers=h).status_code in (
             409, 422)
     for t in trials[1:]:
+        extra = {"check": check_answer(t)} if "check" in t else {}
         assert call("POST", f"/api/participants/{pid}/responses", headers=h,
                     json={"trial_index": t["trial_index"], "token": t["token"], "answers": ANS,
-                          "rt_ms": 100}).status_code == 201
+                          "rt_ms": 100, **extra}).status_code == 201
     own = call("GET", f"/api/participants/{pid}/responses", headers=h).json()["responses"]
     assert [r["token"] for r in own] == [t["token"] for t in trials]
     call("GET", f"/api/participants/{pid}", headers=h)
@@ -338,8 +353,8 @@ def test_token_of_participant_a_is_rejected_for_b(api):
                      json={"trial_index": 0, "token": token, "answers": ANS, "rt_ms": 100})
         assert r.status_code == 422 and "not in this participant's schedule" in r.json()["error"]
     assert api.get("/api/participants/P_tokB/responses", headers=hb).json()["responses"] == []
-    # and A's video token does not open a video under B's id
-    assert api.get(f"/videos/P_tokB/{sa_['trials'][0]['token']}").status_code == 404
+    # a trial token is no video name
+    assert api.get(f"/media/{sa_['trials'][0]['token']}").status_code == 404
     assert api.get(sa_["trials"][0]["video_url"]).status_code == 200
     assert _answer(api, "P_tokB", hb, sb["trials"][0]).status_code == 201
 
@@ -409,25 +424,49 @@ def test_admin_resume_link_moves_the_session(api):
     assert reg.status_code == 200 and reg.json()["state"]["next_trial_index"] == 1
 
 
-@pytest.mark.parametrize("path", ["/admin", "/admin/progress.json", "/admin/metrics.json",
-                                  "/admin/export/responses.csv", "/admin/export/demographics.csv"])
+@pytest.mark.parametrize("path", ["/admin", "/admin/progress.json", "/admin/metrics.json", "/admin/study.json",
+                                  "/admin/participants.json", "/admin/export/responses.csv",
+                                  "/admin/export/demographics.csv", "/admin/export/participants.csv"])
 def test_admin_endpoints_need_the_token(api, path):
     assert api.get(path).status_code == 401
     assert api.get(path, headers={"Authorization": "Bearer wrong-token"}).status_code == 403
-    assert api.get(path + "?token=wrong").status_code == 403
     assert api.get(path, headers={"Authorization": f"Bearer {TOKEN}"}).status_code == 200
-    assert api.get(f"{path}?token={TOKEN}").status_code == 200
+    # never in the URL (logs, history): refused even when right
+    assert api.get(f"{path}?token={TOKEN}").status_code in (400, 401)
+    assert api.get(path, cookies={"crowdstudy_admin": "forged"}).status_code in (401, 403)
+
+
+def test_admin_login_cookie(api):
+    page = api.get("/admin")
+    assert page.status_code == 401 and 'name="token"' in page.text and TOKEN not in page.text
+    r = api.post("/admin/login", data={"token": "wrong-token-000000"}, follow_redirects=False)
+    assert r.status_code == 403 and "set-cookie" not in r.headers
+    r = api.post("/admin/login", data={"token": TOKEN}, follow_redirects=False)
+    assert r.status_code == 303 and r.headers["location"] == "/admin"
+    cookie = r.headers["set-cookie"]
+    assert "HttpOnly" in cookie and "SameSite=Strict" in cookie and "Path=/admin" in cookie and TOKEN not in cookie
+    value = cookie.split(";")[0].split("=", 1)[1]
+    jar = {"crowdstudy_admin": value}
+    page = api.get("/admin", cookies=jar)
+    assert page.status_code == 200 and "participants" in page.text and TOKEN not in page.text
+    assert api.get("/admin/export/responses.csv", cookies=jar).status_code == 200
+    # the cookie opens pages, not actions: a cross-site POST carrying it changes nothing
+    _register(api, "P_cookie", ready=False)
+    assert api.post("/admin/participants/P_cookie/resume-link", cookies=jar).status_code == 401
+    assert api.post("/admin/participants/P_cookie/withdraw", cookies=jar).status_code == 401
+    r = api.post("/admin/logout", cookies=jar, follow_redirects=False)
+    assert "Max-Age=0" in r.headers["set-cookie"]
 
 
 def test_admin_export_and_dashboard(api):
     h, state = _register(api, "P_exp")
     for t in state["trials"][:3]:
         _answer(api, "P_exp", h, t)
-    text = api.get(f"/admin/export/responses.csv?token={TOKEN}").text
+    text = api.get("/admin/export/responses.csv", headers=ADMIN).text
     rows = list(csv.DictReader(text.splitlines()))
-    assert list(rows[0]) == list(RESPONSE_COLUMNS) and len(rows) == 3
-    page = api.get(f"/admin?token={TOKEN}").text
-    assert "P_exp" in page and "3 / 60" in page
+    assert list(rows[0])[:len(RESPONSE_COLUMNS)] == list(RESPONSE_COLUMNS) and len(rows) == 3
+    page = api.get("/admin", headers=ADMIN).text
+    assert "P_exp" in page and "3 / 60" in page and "token=" not in page
     prog = api.get("/admin/progress.json", headers={"Authorization": f"Bearer {TOKEN}"}).json()
     assert prog["participants"][0]["answered"] == 3
 
@@ -436,20 +475,22 @@ def test_admin_export_and_dashboard(api):
 def test_videos_support_range_requests_and_never_paths(api, stim_dir):
     _, state = _register(api, "P_video", ready=False)
     t = state["trials"][0]
-    assert t["video_url"] == f"/videos/P_video/{t['token']}"
+    assert re.fullmatch(r"/media/[0-9a-f]{32}\.mp4", t["video_url"]), t["video_url"]
     r = api.get(t["video_url"], headers={"Range": "bytes=0-99"})
     assert r.status_code == 206 and len(r.content) == 100 and r.headers["content-range"].startswith("bytes 0-99/")
     assert r.headers["content-type"] == "video/mp4"
-    # the token resolves, through the schedule and the manifest, to that trial's own file
+    # an If-Range (no validator can match) gets the whole file, not a 500
+    r = api.get(t["video_url"], headers={"Range": "bytes=0-99", "If-Range": '"x"'})
+    assert r.status_code == 200
+    # the name resolves, through the media table, to that trial's own file
     sid = _admin_schedule(api, "P_video")[0]["stimulus_id"]
     rel = {m["stimulus_id"]: m["file"] for m in json.loads((stim_dir / "manifest.json").read_text())["stimuli"]}[sid]
     assert api.get(t["video_url"]).content == (stim_dir / rel).read_bytes()
-    full = api.get("/videos/practice")
+    full = api.get(state["practice"]["video_url"])
     assert full.status_code == 200 and full.content[4:8] == b"ftyp"
-    for bad in ["/videos/manifest.json", "/videos/..%2Fmanifest.json", "/videos/S1-D3-V2-Ours",
-                f"/videos/{sid}", "/videos/P_video/S1-D3-V2-Ours", f"/videos/P_video/{sid}",
-                "/videos/P_video/0123456789abcdef0123", f"/videos/P_ghost/{t['token']}",
-                f"/videos/P_video/{t['token']}x", f"/videos/..%2FP_video/{t['token']}"]:
+    for bad in ["/media/manifest.json", "/media/..%2Fmanifest.json", "/media/S1-D3-V2-Ours", f"/media/{sid}",
+                f"/media/{sid}.mp4", "/media/" + "0" * 32 + ".mp4", t["video_url"] + "x", "/media/practice",
+                "/videos/practice", f"/videos/P_video/{t['token']}"]:
         assert api.get(bad).status_code == 404, bad
     assert api.get("/lib/jspsych/dist/index.browser.min.js").status_code == 200
     assert api.get("/lib/jspsych/package.json").status_code == 404

@@ -12,6 +12,9 @@ Datasets (long format: subject, factor columns, y):
   Viewpoint V3/V4 x Method): QCR composite from crowdstudy's synthetic ResponseModel, so
   every factor of the interaction Viewpoint:Method has only two levels and scores are
   half-integers as in real Likert data.
+- likert_incomplete_5x2x2.csv: likert_5x2x2 with 32 of its 320 rows removed at random
+  (seed 21): most participants lack some cell, so the ANOVA would drop them and the mixed
+  model keeps them (robust_reference.R).
 """
 
 from pathlib import Path
@@ -70,8 +73,16 @@ def likert(seed=13, n=16):
     return out.sort_values(["subject", "Density", "Viewpoint", "Method"]).reset_index(drop=True)
 
 
+def incomplete(full: pd.DataFrame, seed=21, n_drop=32):
+    rng = np.random.default_rng(seed)
+    drop = np.sort(rng.choice(len(full), n_drop, replace=False))
+    return full.drop(full.index[drop]).reset_index(drop=True)
+
+
 def main():
-    for name, df in [("spherical_5x4x2", spherical()), ("violated_5x4x2", violated()), ("likert_5x2x2", likert())]:
+    lik = likert()
+    for name, df in [("spherical_5x4x2", spherical()), ("violated_5x4x2", violated()), ("likert_5x2x2", lik),
+                     ("likert_incomplete_5x2x2", incomplete(lik))]:
         df.to_csv(HERE / f"{name}.csv", index=False, float_format="%.17g")
         print(name, df.shape)
 

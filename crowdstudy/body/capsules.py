@@ -145,7 +145,15 @@ def fit_capsules(body, *, resolution: float = 0.02) -> Capsules:
         along = t[None, :] - np.clip(t[None, :], lo, hi)
         inside = np.count_nonzero(along**2 + radial[None, :] ** 2 <= r * r, axis=1)
         vol = (np.pi * r[:, 0] ** 2 * (hi - lo)[:, 0] + 4.0 / 3.0 * np.pi * r[:, 0] ** 3) / cell
-        iou = inside / (len(sel) + vol - inside)
+        # volume inside the body but owned by a neighbouring bone is not an error of the
+        # union: only the part outside the mesh is penalised
+        near = pts[np.all(np.abs(pts - center) <= (t_hi - t_lo) / 2 + radii[-1] + resolution, axis=1)]
+        rel_n = near - center
+        t_n = rel_n @ d
+        rad_n = np.linalg.norm(rel_n - t_n[:, None] * d, axis=1)
+        along_n = t_n[None, :] - np.clip(t_n[None, :], lo, hi)
+        in_body = np.count_nonzero(along_n**2 + rad_n[None, :] ** 2 <= r * r, axis=1)
+        iou = inside / (len(sel) + np.maximum(vol - in_body, 0.0))
         k = int(np.argmax(iou))
         r, lo, hi = float(r[k, 0]), float(lo[k, 0]), float(hi[k, 0])
         start[b] = center + lo * d

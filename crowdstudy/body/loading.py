@@ -3,6 +3,10 @@ every body model.
 
 A body record is a plain dict (``CrowdAnimation.bodies`` stores them):
 
+* ``{"model": "makehuman", "sex": "female"|"male", "height": 1.68, "age": 34, "weight": 0.5,
+  "muscle": 0.5, "proportions": 0.5, "race": [african, asian, caucasian]}`` the default
+  human body (``crowdstudy.body.makehuman``); every field but ``sex`` may be omitted
+  (height: the sex's mean; age 25; weight, muscle, proportions 0.5; race equal thirds).
 * ``{"model": "open", "sex": "female"|"male", "height": 1.68, "shape": [build, proportion]}``
   the generated open model (``crowdstudy.body.open_model``); ``shape`` may be omitted
   (zeros) or shorter than 2 (padded with zeros).
@@ -23,8 +27,10 @@ import json
 import numpy as np
 
 from crowdstudy.body.gltf_model import load_gltf_body
+from crowdstudy.body.makehuman import MH_FIELDS, makehuman_body
 from crowdstudy.body.model import Body, check_fields
 from crowdstudy.body.open_model import OPEN_MODEL_VERSION, OPEN_SHAPE_NAMES, TEMPLATE_HEIGHTS, open_model
+from crowdstudy.body.shapes import HEIGHT_STATS
 from crowdstudy.body.smpl import load_smpl_body
 from crowdstudy.errors import InvalidInputError
 
@@ -62,13 +68,15 @@ def load_body(record: dict) -> Body:
 def _load_cached(key: str) -> Body:
     record = json.loads(key)
     model = record.get("model", "open")
+    if model == "makehuman":
+        return _load_makehuman(record)
     if model == "open":
         return _load_open(record)
     if model == "smpl":
         return load_smpl_body(record)
     if model == "gltf":
         return load_gltf_body(record)
-    raise InvalidInputError(f"body record field 'model': expected 'open', 'smpl' or 'gltf', got {model!r}")
+    raise InvalidInputError(f"body record field 'model': expected 'makehuman', 'open', 'smpl' or 'gltf', got {model!r}")
 
 
 def _float_field(record: dict, name: str, lo: float, hi: float) -> float:
@@ -107,3 +115,21 @@ def _load_open(record: dict) -> Body:
     return Body(record=dict(record), rest_joints=joints, rest_vertices=verts, faces=model.faces,
                 weights=model.weights, pelvis_height=float(-verts[:, 2].min()),
                 template_key=f"open-{sex}-v{OPEN_MODEL_VERSION}")
+
+
+def _load_makehuman(record: dict) -> Body:
+    sex = record.get("sex")
+    if sex not in ("female", "male"):
+        raise InvalidInputError(f"body record field 'sex': expected 'female' or 'male', got {sex!r}")
+    check_fields(record, "makehuman", MH_FIELDS)
+    fields = {"sex": sex,
+              "height": _float_field(record, "height", 1.2, 2.2) if "height" in record else HEIGHT_STATS[sex][0],
+              "age": _float_field(record, "age", 11.0, 90.0) if "age" in record else 25.0}
+    for name in ("weight", "muscle", "proportions"):
+        fields[name] = _float_field(record, name, 0.0, 1.0) if name in record else 0.5
+    race = _shape_field(record, "race", 3, limit=1e6) if "race" in record else np.ones(3)
+    if len(record.get("race", [0, 0, 0])) != 3 or np.any(race < 0) or race.sum() <= 0:
+        raise InvalidInputError(f"body record field 'race': expected 3 non-negative weights (african, asian, "
+                                f"caucasian) with a positive sum, got {record.get('race')!r}")
+    fields["race"] = race
+    return makehuman_body(record, fields)

@@ -16,7 +16,7 @@ from crowdstudy.body.rotations import axis_angle_to_matrix
 from crowdstudy.body.skeleton import NUM_JOINTS, forward_kinematics
 from crowdstudy.errors import InvalidInputError
 
-__all__ = ["Body", "pose_bodies", "skinning_matrices", "check_fields", "META_FIELDS"]
+__all__ = ["Body", "Surface", "pose_bodies", "skinning_matrices", "check_fields", "META_FIELDS"]
 
 
 def skinning_matrices(rest_joints: np.ndarray, joint_rotations: np.ndarray,
@@ -36,6 +36,31 @@ def skinning_matrices(rest_joints: np.ndarray, joint_rotations: np.ndarray,
     return out
 
 
+@dataclass(frozen=True, eq=False)
+class Surface:
+    """A render surface split at texture seams (shared by every body of a template).
+
+    Attributes:
+        vertex: (R,) int32, the body vertex (row of ``rest_vertices``) of each render vertex.
+        uv: (R, 2) float32 texture coordinates, origin bottom-left.
+        faces: (F, 3) int32 triangles on render vertices (may include parts that are not in
+            the closed ``Body.faces``, e.g. eyeballs).
+        part: (R,) int8 material part: 0 skin/clothing texture, 1 eye.
+    """
+    vertex: np.ndarray
+    uv: np.ndarray
+    faces: np.ndarray
+    part: np.ndarray
+
+    def __post_init__(self):
+        r = len(self.vertex)
+        if self.uv.shape != (r, 2) or self.part.shape != (r,) or self.faces.ndim != 2 or self.faces.shape[1] != 3:
+            raise InvalidInputError(f"Surface: inconsistent shapes vertex {self.vertex.shape}, uv {self.uv.shape}, "
+                                    f"part {self.part.shape}, faces {self.faces.shape}")
+        for arr in (self.vertex, self.uv, self.faces, self.part):
+            arr.flags.writeable = False
+
+
 @dataclass(eq=False)
 class Body:
     """A shaped, skinned character in its rest frame (T-pose facing +y, left side at -x,
@@ -50,6 +75,8 @@ class Body:
         pelvis_height: float m, pelvis z standing in the rest pose with the soles on z = 0.
         template_key: bodies with the same key share ``faces``, vertex count and weights.
         posedirs: (V * 3, 207) float64 pose blendshapes (SMPL) in our frame, or None.
+        surface: a UV-split :class:`Surface` for textured rendering, or None (the renderer
+            then shades ``faces`` by body region).
     """
 
     record: dict
@@ -60,6 +87,7 @@ class Body:
     pelvis_height: float
     template_key: str
     posedirs: np.ndarray | None = None
+    surface: Surface | None = None
     _cache: dict = field(default_factory=dict, repr=False)
 
     def __post_init__(self):
@@ -75,6 +103,9 @@ class Body:
         if self.posedirs is not None and self.posedirs.shape != (v * 3, (NUM_JOINTS - 1) * 9):
             raise InvalidInputError(
                 f"Body.posedirs: expected shape ({v * 3}, {(NUM_JOINTS - 1) * 9}), got {self.posedirs.shape}")
+        if self.surface is not None and (len(self.surface.vertex) == 0 or int(self.surface.vertex.max()) >= v
+                                         or int(self.surface.vertex.min()) < 0):
+            raise InvalidInputError(f"Body.surface: render vertices must index the {v} rest vertices")
         for arr in (self.rest_joints, self.rest_vertices, self.faces, self.weights):
             arr.flags.writeable = False
 

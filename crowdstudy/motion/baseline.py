@@ -82,6 +82,12 @@ def _body_geometry(bodies: list[dict]) -> tuple[np.ndarray, np.ndarray, np.ndarr
     return rest, pelvis / DEFAULT_PELVIS_HEIGHT, ankle
 
 
+def _sampled(n: int, seed, model: str) -> list[dict]:
+    from crowdstudy.body import sample_bodies
+
+    return sample_bodies(n, seed, model=model)
+
+
 def _bodies(n: int, seed, bodies):
     if bodies is None:
         from crowdstudy.body import sample_bodies
@@ -517,7 +523,8 @@ def animate_walking(crowd: Crowd, *, fps: float | None = None, seed=0, bodies: l
 
 
 def build_baseline(design, stage, level: str, *, duration: float | None = None, fps: float | None = None,
-                   seed: int | None = None, dissolve: float | None = None) -> CrowdAnimation:
+                   seed: int | None = None, dissolve: float | None = None,
+                   body_model: str = "makehuman") -> CrowdAnimation:
     """The Baseline animation of one (stage, density) cell of a study design.
 
     Args:
@@ -528,6 +535,8 @@ def build_baseline(design, stage, level: str, *, duration: float | None = None, 
         seed: default the design's seed of the cell (``design.cell_seed``).
         dissolve: corridor only, seconds of animation generated past ``duration`` for the
             video's loop cross-dissolve (default :data:`LOOP_DISSOLVE_SECONDS`; 0 = none).
+        body_model: the bodies' model for ``sample_bodies`` ("makehuman", or "open" for the
+            generated mannequins).
 
     The concert is exactly periodic over ``duration`` (``meta["loop"]["mode"] ==
     "periodic"``); the corridor has T + D frames (T = duration * fps, D = dissolve * fps,
@@ -557,8 +566,9 @@ def build_baseline(design, stage, level: str, *, duration: float | None = None, 
         crowd = concert_layout(design, level, seed)
         sc = design.scenarios[st.scenario].params
         names = list_clips("dance", "procedural") if sc.get("motion", "mocap") == "procedural" else None
+        bodies = _sampled(crowd.n_agents, seed, body_model)
         return animate_stationary(crowd, duration=duration, fps=fps, seed=seed, clip_names=names,
-                                  tempo=sc.get("tempo", DEFAULT_TEMPO), meta=meta)
+                                  tempo=sc.get("tempo", DEFAULT_TEMPO), meta=meta, bodies=bodies)
     if st.scenario == "corridor":
         from crowdstudy.navigation import corridor_crowd
 
@@ -571,5 +581,6 @@ def build_baseline(design, stage, level: str, *, duration: float | None = None, 
         crowd = corridor_crowd(design, level, seed, duration=(n_video + n_dissolve) / fps, fps=fps)
         sc = design.scenarios[st.scenario].params
         walks = walk_clips("procedural") if sc.get("motion", "mocap") == "procedural" else None
-        return animate_walking(crowd, fps=fps, seed=seed, dissolve_frames=n_dissolve, walks=walks, meta=meta)
+        return animate_walking(crowd, fps=fps, seed=seed, dissolve_frames=n_dissolve, walks=walks, meta=meta,
+                               bodies=_sampled(crowd.n_agents, seed, body_model))
     raise InvalidInputError(f"stage {st.key!r}: scenario {st.scenario!r} has no Baseline animation")

@@ -107,7 +107,9 @@ def plant_legs(joint_rotations: np.ndarray, root_translation: np.ndarray, rest_j
         ankle_pos = knee_pos + s * np.einsum("tnab,b->tna", g_knee, REST[ankle] - REST[knee])
         ankle_pos[..., 2] += ankle_height[None, :] - scale[None, :] * ANKLE_HEIGHT
         if foot_phase is not None:
-            ball_pos = ankle_pos + s * np.einsum("tnab,b->tna", g_ankle, REST[ankle + 3] - REST[ankle])
+            # the body's own ball of the foot (its ankle-to-toe offset, not the authoring
+            # skeleton's): that is the point that must not slide while the heel rises
+            ball_pos = ankle_pos + np.einsum("tnab,nb->tna", g_ankle, rest_joints[:, ankle + 3] - rest_joints[:, ankle])
             fe, se = (np.broadcast_to(np.asarray(x, dtype=np.float64), foot_phase.shape)[..., k]
                       for x in (flat_end, stance_end))
             ankle_pos += _lock_offsets(ankle_pos, ball_pos, foot_phase[..., k], fe, se)

@@ -18,7 +18,11 @@ stage, :func:`clean_take`:
    height and the ankle nearly still, runs of at least 0.12 s) and holds a planted foot
    where its contact began, heading included; the offset left at lift-off fades out over the swing
    (quintic), and the legs are re-solved by analytic IK
-   (:func:`~crowdstudy.motion.legs.plant_legs`).
+   (:func:`~crowdstudy.motion.legs.plant_legs`);
+5. levels the gaze (:func:`level_head`): the captured performers hold their heads 12-33
+   degrees up on average (the capture skeleton's head bone is not the face's direction),
+   so a constant correction, shared by neck and head, brings the take's mean gaze to
+   :data:`GAZE_PITCH` relative to the chest (a crowd watching a stage looks ahead).
 
 Self-contact (hands inside a wider body) is measured and fixed per character at animation
 time, on its own body: :mod:`crowdstudy.motion.selfcontact`.
@@ -249,6 +253,29 @@ def lock_loop_feet(loop: MotionClip) -> MotionClip:
     return dataclasses.replace(loop, joint_rotations=locked.joint_rotations[n:2 * n])
 
 
+#: mean gaze pitch (degrees, negative = down) of a cleaned take, relative to the chest
+GAZE_PITCH = -4.0
+
+
+def _gaze_pitch(clip: MotionClip) -> np.ndarray:
+    """(T,) degrees: the face direction's elevation in the chest's (spine3) frame."""
+    glob, _ = forward_kinematics(DEFAULT_REST_JOINTS, clip.joint_rotations, clip.root_translation)
+    local = np.einsum("tba,tb->ta", glob[:, JOINT_INDEX["spine3"]], glob[:, JOINT_INDEX["head"]] @ np.array([0, 1.0, 0]))
+    return np.degrees(np.arctan2(local[:, 2], np.hypot(local[:, 0], local[:, 1])))
+
+
+def level_head(clip: MotionClip, pitch: float = GAZE_PITCH) -> MotionClip:
+    """The clip with a constant nod (half at the neck, half at the head, about their
+    lateral axes) that brings its mean gaze pitch relative to the chest to ``pitch`` degrees."""
+    delta = np.radians(float(np.mean(_gaze_pitch(clip))) - float(pitch))
+    fix = axis_angle_to_matrix(np.array([-0.5 * delta, 0.0, 0.0]))
+    rot = np.array(clip.joint_rotations, dtype=np.float64)
+    for j in ("neck", "head"):
+        k = JOINT_INDEX[j]
+        rot[:, k] = matrix_to_axis_angle(axis_angle_to_matrix(rot[:, k]) @ fix)
+    return dataclasses.replace(clip, joint_rotations=rot)
+
+
 def outlier_ends(clip: MotionClip, *, window: float = 0.5, factor: float = 5.0) -> tuple[float, float]:
     """``(start, end)`` seconds of ``clip`` without the calibration or glitch frames at its ends:
     within the first / last ``window`` seconds, a frame step whose largest joint displacement
@@ -296,7 +323,7 @@ def clean_take(clip: MotionClip, *, trim_start: float = 0.0, trim_end: float | N
         scale = min(1.0, float(max_excursion) / max(reach, 1e-9))
         take = shrink_steps(take, scale)
     contacts = foot_contacts(take)
-    take = lock_feet(take, contacts)
-    meta = {**clip.meta, "trim": [t0, t1], "drift_sigma": drift_sigma, "step_scale": scale,
+    take = level_head(lock_feet(take, contacts))
+    meta = {**clip.meta, "trim": [t0, t1], "drift_sigma": drift_sigma, "step_scale": scale, "gaze_pitch": GAZE_PITCH,
             "contact_share": [float(x) for x in contacts.mean(axis=0)]}
     return dataclasses.replace(take, meta=meta)

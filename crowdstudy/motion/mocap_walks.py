@@ -43,7 +43,7 @@ from crowdstudy.body.rotations import quaternion_to_axis_angle
 from crowdstudy.body.skeleton import DEFAULT_REST_JOINTS, JOINT_INDEX
 from crowdstudy.errors import InvalidInputError
 from crowdstudy.motion.clip import MotionClip, seam_discontinuity
-from crowdstudy.motion.mocap import turn_about_z
+from crowdstudy.motion.mocap import level_head, turn_about_z
 
 __all__ = ["WALK_FILES", "FPS", "build_walk_loops", "build_walk_loop", "foot_events", "loop_foot_skate",
            "gait_report"]
@@ -54,6 +54,9 @@ WALK_FILES = ("cmu_142_07_walk_slow_short_steps.bvh.gz", "cmu_139_28_walk_slow.b
               "cmu_132_20_walk_fast.bvh.gz")
 #: Working frame rate (frames/s); the loops keep about this rate with an exact period.
 FPS = 60.0
+#: mean gaze pitch of a walker relative to its chest, degrees: the captured walkers lean their
+#: chests 8-24 degrees forward, so a slightly raised head looks a little down the corridor
+WALK_GAZE_PITCH = 5.0
 #: Seam blend of the loops (s).
 BLEND_SECONDS = 0.2
 #: Half-width of the window matched at the loop's cut points (s).
@@ -385,7 +388,7 @@ def build_walk_loop(path: str | Path, *, fps: float = FPS, max_cycles: int = 2) 
     warped = _steady_pelvis(warped, cycles)
     pos3 = _world_positions(warped, 3)
     contacts = _loop_contacts(ev, n, cycles)
-    locked = _lock_feet(warped, pos3, ev)
+    locked = level_head(_lock_feet(warped, pos3, ev), WALK_GAZE_PITCH)
     cycle_s = loop.duration / cycles
     meta = {"description": f"CMU {trial} motion capture walk", "source": path.name, "trial": trial,
             "cadence": 120.0 / cycle_s, "stride_length": speed * cycle_s, "cycle": cycle_s, "cycles": cycles,

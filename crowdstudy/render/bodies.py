@@ -27,6 +27,10 @@ REGION_JOINTS = {
     5: (7, 8, 10, 11),                # shoes: ankles, feet
 }
 _HEAD = 15
+#: textured bodies (face, hands and feet in the geometry, not in colour regions) keep this
+#: many times the faces ``max_faces`` asks of a region-coloured mannequin (at 1080p: 6,000
+#: faces for characters over 600 px tall, 3,000 and 1,500 below; the full mesh has 27,000)
+SURFACE_FACE_SCALE = 2
 
 
 def default_body_loader(record: dict):
@@ -118,11 +122,12 @@ def _decimate(vertices: np.ndarray, faces: np.ndarray, max_faces: int):
 
 def _cluster_mean(values: np.ndarray, mapping: np.ndarray, n_out: int) -> np.ndarray:
     keep = mapping >= 0
-    out = np.zeros((n_out,) + values.shape[1:])
-    count = np.zeros(n_out)
-    np.add.at(out, mapping[keep], values[keep])
-    np.add.at(count, mapping[keep], 1.0)
-    return out / np.maximum(count, 1.0).reshape((-1,) + (1,) * (values.ndim - 1))
+    idx = mapping[keep]
+    vals = np.asarray(values, dtype=np.float64)[keep].reshape(int(keep.sum()), -1)
+    out = np.stack([np.bincount(idx, weights=vals[:, c], minlength=n_out) for c in range(vals.shape[1])], axis=1)
+    count = np.bincount(idx, minlength=n_out).astype(np.float64)
+    out /= np.maximum(count, 1.0)[:, None]
+    return out.reshape((n_out,) + np.shape(values)[1:])
 
 
 @dataclasses.dataclass
@@ -135,6 +140,8 @@ class BodyGroup:
         joints: (V, 4) int32 bone indices; weights: (V, 4) float32 (rows sum to 1).
         scores: (V, 6) float32 colour-region scores (see :func:`region_scores`).
         rest: (M, V, 2, 4) float32, rest position and rest normal of each member's vertices.
+        material: (V, 3) float32 texture coordinates and part (1 = eye) of textured groups.
+        textured: whether the group is drawn with per-character textures.
     """
     key: str
     members: np.ndarray
@@ -143,13 +150,16 @@ class BodyGroup:
     weights: np.ndarray
     scores: np.ndarray
     rest: np.ndarray
+    material: np.ndarray | None = None
+    textured: bool = False
 
     @property
     def n_vertices(self) -> int:
         return self.joints.shape[0]
 
 
-def group_bodies(bodies: list, *, max_faces: int | None = 8000) -> list[BodyGroup]:
+def group_bodies(bodies: list, *, max_faces: int | None = 8000,
+                 surface_scale: float = SURFACE_FACE_SCALE) -> list[BodyGroup]:
     """Group loaded bodies by template (and identical skinning weights).
 
     Args:
@@ -158,38 +168,165 @@ def group_bodies(bodies: list, *, max_faces: int | None = 8000) -> list[BodyGrou
             edge collapses of the first member, replayed on the topology) to about this
             many faces; every member's decimated vertex is the mean of the original
             vertices it merges, so shapes stay consistent. None keeps the full meshes.
+        surface_scale: textured bodies (a :class:`~crowdstudy.body.model.Surface`) keep
+            ``max_faces`` times this many faces.
     """
     groups: dict[tuple, dict] = {}
     for i, body in enumerate(bodies):
         for name in ("rest_vertices", "faces", "top_weights", "skinning_matrices", "rest_joints"):
             if not hasattr(body, name):
                 raise InvalidInputError(f"bodies[{i}]: body object lacks {name!r} (expected a crowdstudy.body.Body)")
-        faces = np.ascontiguousarray(body.faces, dtype=np.int64)
-        verts = np.asarray(body.rest_vertices, dtype=np.float64)
-        weights = _full_weights(body, len(verts))
-        key = (str(getattr(body, "template_key", "")), faces.shape, len(verts),
+        verts, faces, weights, uv, part, weld = _render_arrays(body)
+        key = (str(getattr(body, "template_key", "")), faces.shape, len(verts), uv is not None,
                hash(faces.tobytes()), hash(np.asarray(body.top_weights()[0]).tobytes()))
         if key not in groups:
-            dec = _decimation(verts, faces, max_faces)
-            if dec is None:
-                mapping, dec_faces, n_out = np.arange(len(verts)), faces, len(verts)
+            if uv is None:
+                dec = _decimation(verts, faces, max_faces)
+                if dec is None:
+                    mapping, dec_faces = np.arange(len(verts)), faces
+                else:
+                    dec_faces, mapping = dec
+                cluster, gather, new_uv = mapping, np.arange(int(mapping.max()) + 1), None
             else:
-                dec_faces, mapping = dec
-                n_out = int(mapping.max()) + 1
-            w = _cluster_mean(weights, mapping, n_out)
+                dec = _surface_decimation(verts, faces, weld, uv,
+                                          None if max_faces is None else int(max_faces * surface_scale))
+                if dec is None:
+                    dec_faces, cluster, gather, new_uv = faces, np.arange(len(verts)), np.arange(len(verts)), uv
+                else:
+                    dec_faces, cluster, gather, new_uv = dec
+            n_clusters = int(cluster.max()) + 1
+            n_out = len(gather)
+            w = _cluster_mean(weights, cluster, n_clusters)[gather]
             joints = np.argsort(-w, axis=1)[:, :4].astype(np.int32)
             vals = np.take_along_axis(w, joints, axis=1)
             vals = (vals / np.maximum(vals.sum(axis=1, keepdims=True), 1e-12)).astype(np.float32)
+            scores = (np.zeros((n_out, 6), np.float32) if uv is not None
+                      else _cluster_mean(region_scores(body), cluster, n_clusters)[gather].astype(np.float32))
+            material = np.zeros((n_out, 3), np.float32)
+            if uv is not None:
+                material[:, :2] = new_uv
+                material[:, 2] = _cluster_mean(part.astype(np.float64), cluster, n_clusters)[gather] > 0.5
             groups[key] = {"members": [], "faces": np.ascontiguousarray(dec_faces, dtype=np.uint32),
-                           "joints": joints, "weights": vals, "mapping": mapping, "n_out": n_out,
-                           "scores": _cluster_mean(region_scores(body), mapping, n_out).astype(np.float32), "rest": []}
+                           "joints": joints, "weights": vals, "cluster": cluster, "gather": gather,
+                           "n_clusters": n_clusters, "scores": scores, "material": material,
+                           "textured": uv is not None,
+                           "weld": None if uv is None else (weld if dec is None else gather), "rest": []}
         g = groups[key]
-        dec_verts = _cluster_mean(verts, g["mapping"], g["n_out"])
-        rest = np.zeros((g["n_out"], 2, 4), dtype=np.float32)
+        dec_verts = _cluster_mean(verts, g["cluster"], g["n_clusters"])[g["gather"]]
+        rest = np.zeros((len(g["gather"]), 2, 4), dtype=np.float32)
         rest[:, 0, :3] = dec_verts
         rest[:, 0, 3] = 1.0
-        rest[:, 1, :3] = vertex_normals(dec_verts, g["faces"])
+        rest[:, 1, :3] = _welded_normals(dec_verts, g["faces"], g["weld"]) if g["textured"] else \
+            vertex_normals(dec_verts, g["faces"])
         g["members"].append(i)
         g["rest"].append(rest)
     return [BodyGroup(key=key[0], members=np.asarray(g["members"]), faces=g["faces"], joints=g["joints"],
-                      weights=g["weights"], scores=g["scores"], rest=np.stack(g["rest"])) for key, g in groups.items()]
+                      weights=g["weights"], scores=g["scores"], rest=np.stack(g["rest"]), material=g["material"],
+                      textured=g["textured"]) for key, g in groups.items()]
+
+
+def _render_arrays(body):
+    """(vertices, faces, weights (V, 24), uv or None, part or None, weld or None) to draw.
+
+    A body with a :class:`~crowdstudy.body.model.Surface` is drawn on its UV-split render
+    vertices (``weld``: the body vertex of each, so normals stay smooth across seams)."""
+    verts = np.asarray(body.rest_vertices, dtype=np.float64)
+    weights = _full_weights(body, len(verts))
+    surface = getattr(body, "surface", None)
+    if surface is None:
+        return verts, np.ascontiguousarray(body.faces, dtype=np.int64), weights, None, None, None
+    weld = np.asarray(surface.vertex, dtype=np.int64)
+    return (verts[weld], np.ascontiguousarray(surface.faces, dtype=np.int64), weights[weld],
+            np.asarray(surface.uv), np.asarray(surface.part), weld)
+
+
+def _surface_decimation(verts: np.ndarray, faces: np.ndarray, weld: np.ndarray, uv: np.ndarray,
+                        max_faces: int | None):
+    """Decimate a UV-split surface without tearing its seams or mixing its charts.
+
+    The welded mesh (render vertices merged by ``weld``) is simplified; a new vertex is a
+    (welded cluster, UV chart) pair, charts being the connected components of the split
+    surface, with the mean texture coordinate of the cluster's members in that chart. A
+    face whose corners share no chart (it spans a seam after the collapses) takes the chart
+    of most of its corners; a corner without a vertex in that chart gets the texture
+    coordinate of the chart's nearest render vertex.
+
+    Returns ``(faces (F', 3), cluster (R,) render vertex -> welded cluster, gather (R',)
+    new vertex -> cluster, uv (R', 2))`` or None when no decimation is needed. Positions,
+    weights and normals are per cluster (``values[cluster]`` means, then ``[gather]``), so
+    the copies of a cluster on both sides of a seam coincide: no cracks. Cached."""
+    if max_faces is None or len(faces) <= max_faces:
+        return None
+    key = ("surface", hashlib.sha1(np.ascontiguousarray(faces, dtype=np.int64).tobytes()
+                                   + np.ascontiguousarray(weld, dtype=np.int64).tobytes()).hexdigest(), int(max_faces))
+    if key in _DECIMATIONS:
+        return _DECIMATIONS[key]
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+    from scipy.spatial import cKDTree
+
+    n_r = len(verts)
+    rows = np.repeat(np.arange(len(faces)), 3)
+    incidence = coo_matrix((np.ones(len(rows)), (faces.reshape(-1), rows)), shape=(n_r, len(faces))).tocsr()
+    _, chart = connected_components(incidence @ incidence.T, directed=False)
+    n_w = int(weld.max()) + 1
+    welded = np.zeros((n_w, 3))
+    welded[weld] = verts
+    dec = _decimation(welded, weld[faces], max_faces)
+    if dec is None:
+        return None
+    w_faces, w_map = dec
+    cluster = w_map[weld].astype(np.int64)
+    cluster[cluster < 0] = 0  # render vertices no face uses any more
+    n_charts = int(chart.max()) + 1
+    pair = cluster * n_charts + chart
+    keys, inverse = np.unique(pair, return_inverse=True)
+    uv_sum = np.zeros((len(keys), 2))
+    np.add.at(uv_sum, inverse, uv)
+    uv_new = list(uv_sum / np.bincount(inverse, minlength=len(keys))[:, None])
+    gather = list(keys // n_charts)
+    lookup = {int(k): i for i, k in enumerate(keys)}
+    charts_of: dict[int, set[int]] = {}
+    for k in keys:
+        charts_of.setdefault(int(k // n_charts), set()).add(int(k % n_charts))
+    centre = _cluster_mean(verts, cluster, int(cluster.max()) + 1)
+    trees: dict[int, tuple] = {}
+    out = np.empty((len(w_faces), 3), dtype=np.int64)
+    for f, corners in enumerate(np.asarray(w_faces, dtype=np.int64)):
+        sets = [charts_of[int(v)] for v in corners]
+        common = sets[0] & sets[1] & sets[2]
+        if common:
+            k = min(common)
+        else:
+            counts: dict[int, int] = {}
+            for st in sets:
+                for c in st:
+                    counts[c] = counts.get(c, 0) + 1
+            k = max(sorted(counts), key=lambda c: counts[c])
+        for j, v in enumerate(int(x) for x in corners):
+            code = v * n_charts + k
+            if code not in lookup:
+                if k not in trees:
+                    members = np.flatnonzero(chart == k)
+                    trees[k] = (cKDTree(verts[members]), members)
+                tree, members = trees[k]
+                nearest = members[tree.query(centre[v])[1]]
+                lookup[code] = len(gather)
+                gather.append(v)
+                uv_new.append(uv[nearest])
+            out[f, j] = lookup[code]
+    result = (out, cluster, np.asarray(gather, dtype=np.int64), np.asarray(uv_new, dtype=np.float32))
+    _DECIMATIONS[key] = result
+    return result
+
+
+def _welded_normals(vertices: np.ndarray, faces: np.ndarray, weld: np.ndarray) -> np.ndarray:
+    """Vertex normals summed over render vertices that share a body vertex (``weld``)."""
+    v = np.asarray(vertices, dtype=np.float64)
+    f = np.asarray(faces, dtype=np.int64)
+    fn = np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]])
+    m = int(weld.max()) + 1
+    at = weld[f].reshape(-1)
+    n = np.stack([np.bincount(at, weights=np.repeat(fn[:, c], 3), minlength=m) for c in range(3)], axis=1)[weld]
+    length = np.linalg.norm(n, axis=1, keepdims=True)
+    return n / np.where(length < 1e-12, 1.0, length)

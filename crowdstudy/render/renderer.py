@@ -10,6 +10,11 @@ Periodic scenes (the corridor): every character is wrapped into the visible sect
 [-L/2, L/2) along x and drawn at offsets k*L, k in -2..2 (instances outside the view
 frustum are culled), so the crowd looks continuous and nothing pops at the seams.
 
+The concert venue's cut-away elements (stage, hall fittings, about 290 audience figures;
+:mod:`crowdstudy.render.venue`) are drawn through an index buffer that ``set_view`` fills
+with the elements that stand neither between the camera and the crowd nor next to the
+camera, nearest first, lit per vertex.
+
 Levels of detail: characters less than 300 (150) pixels tall on screen are drawn with
 half (a quarter) of the faces; shadow casters always with the coarsest mesh.
 
@@ -31,11 +36,14 @@ from importlib import resources
 import numpy as np
 
 from crowdstudy.errors import InvalidInputError
-from crowdstudy.render.bodies import BodyGroup, default_body_loader, group_bodies
+from crowdstudy.render.appearance import assign_appearance, paint_textures, texture_size
+from crowdstudy.render.bodies import SURFACE_FACE_SCALE, BodyGroup, default_body_loader, group_bodies
 from crowdstudy.render.camera import Camera, frame_viewpoint, look_at
 from crowdstudy.render.context import get_context
+from crowdstudy.render.garments import dress_body
 from crowdstudy.render.palette import assign_colors
 from crowdstudy.render.scene import Environment, build_environment, split_floor
+from crowdstudy.render.venue import BOB_AMPLITUDE, visible_indices
 
 __all__ = ["CrowdRenderer", "render_frame", "resolve_camera", "scenario_of", "baseline_color_positions", "N_BONES"]
 
@@ -159,16 +167,8 @@ class CrowdRenderer:
         elif max_faces is not None and (not isinstance(max_faces, (int, np.integer)) or max_faces < 100):
             raise InvalidInputError(f"max_faces: expected 'auto', None or an integer >= 100, got {max_faces!r}")
         self.max_faces = max_faces
-        self.groups: list[BodyGroup] = group_bodies(self.bodies, max_faces=max_faces)
-        # levels of detail by on-screen size: a character under _LOD_PIXELS[k] pixels tall uses
-        # level k + 1 (half, then a quarter of the faces); shadow casters use the coarsest
-        if max_faces:
-            faces = sorted({max_faces, max(600, max_faces // 2), max(600, max_faces // 4)}, reverse=True)
-        else:
-            faces = [None, 3000, 1500]
-        bounds = [np.inf, *_LOD_PIXELS[:len(faces) - 1], 0.0]
-        self._lods = [(self.groups if k == 0 else group_bodies(self.bodies, max_faces=f), bounds[k + 1], bounds[k])
-                      for k, f in enumerate(faces)]
+        # what each character wears: painted once on its UVs (textured bodies), and the
+        # drawn surface dressed to match (cloth, shoes and hair with volume)
         n = anim.n_characters
         seed = int(anim.meta.get("seed", 0) if color_seed is None else color_seed)
         if color_positions is None:
@@ -177,12 +177,37 @@ class CrowdRenderer:
         if color_positions.shape != (n, 2):
             raise InvalidInputError(f"color_positions: expected shape ({n}, 2), got {color_positions.shape}")
         self.colors, _ = assign_colors(color_positions, seed, period=self.period)
+        self.looks = assign_appearance(list(anim.bodies), color_positions, seed, period=self.period)
+        prog_paint = _program(ctx, "paint.vert", "paint.frag")
+        try:
+            tex_albedo, codes = paint_textures(ctx, self.bodies, self.looks, prog_paint,
+                                               size=texture_size(self.height))
+            self.tex_albedo = own(tex_albedo)
+        finally:
+            prog_paint.release()
+        self.surface_codes = codes   # per character: what each render vertex shows (garments.CODES)
+        self.drawn_bodies = [b if c is None else _dressed(b, c, look) for b, c, look in zip(self.bodies, codes, self.looks)]
+        # textured bodies carry face, hands and feet in their geometry: twice the faces at
+        # 1080p, the mannequins' count in small previews
+        self.surface_scale = float(np.clip(SURFACE_FACE_SCALE * self.height / 1080, 1.0, SURFACE_FACE_SCALE))
+        self.groups: list[BodyGroup] = group_bodies(self.drawn_bodies, max_faces=max_faces,
+                                                    surface_scale=self.surface_scale)
+        # levels of detail by on-screen size: a character under _LOD_PIXELS[k] pixels tall uses
+        # level k + 1 (half, then a quarter of the faces); shadow casters use the coarsest
+        if max_faces:
+            faces = sorted({max_faces, max(600, max_faces // 2), max(600, max_faces // 4)}, reverse=True)
+        else:
+            faces = [None, 3000, 1500]
+        bounds = [np.inf, *_LOD_PIXELS[:len(faces) - 1], 0.0]
+        self._lods = [(self.groups if k == 0 else group_bodies(self.drawn_bodies, max_faces=f,
+                                                               surface_scale=self.surface_scale), bounds[k + 1], bounds[k])
+                      for k, f in enumerate(faces)]
         self.camera: Camera | None = None
         self._chunk_start, self._chunk = -1, None
         self._frame_loaded = -1
 
         # programs
-        self.prog_char = own(_program(ctx, "character.vert", "character.frag", lit_vertex=True))
+        self.prog_char = own(_program(ctx, "character.vert", "character.frag", lit_vertex=True, lit_fragment=True))
         self.prog_depth = own(_program(ctx, "character.vert", "depth.frag"))
         self.prog_static = own(_program(ctx, "static.vert", "static.frag", lit_fragment=True))
         self.prog_floor = own(_program(ctx, "static.vert", "static.frag", lit_fragment=True, defines=("FLOOR",)))
@@ -191,7 +216,11 @@ class CrowdRenderer:
         # lookup was half of the floor's cost)
         self.prog_floor_plain = own(_program(ctx, "static.vert", "static.frag", lit_fragment=True,
                                              defines=("FLOOR", "UNSHADOWED")))
-        self._lit_programs = (self.prog_char, self.prog_static, self.prog_floor, self.prog_floor_plain)
+        # the venue's cut-away elements (hundreds of small figures, out of the characters'
+        # shadows): lit per vertex, without the shadow lookup
+        self.prog_venue = own(_program(ctx, "static.vert", "static.frag", lit_vertex=True,
+                                       defines=("VERTEX_LIT", "UNSHADOWED")))
+        self._lit_programs = (self.prog_char, self.prog_static, self.prog_floor, self.prog_floor_plain, self.prog_venue)
         self.prog_id = own(_program(ctx, "character.vert", "id.frag"))
         self.prog_overlap = own(_program(ctx, "character.vert", "overlap.frag"))
         self._char_programs = (self.prog_char, self.prog_depth, self.prog_id, self.prog_overlap)
@@ -208,7 +237,8 @@ class CrowdRenderer:
         last = len(self._lods) - 1
         for g, lo, hi, coarse in ((g, lo, hi, k == last) for k, (groups, lo, hi) in enumerate(self._lods)
                                   for g in groups):
-            vbo = own(ctx.buffer(np.concatenate([g.joints.view(np.float32), g.weights, g.scores],
+            material = g.material if g.material is not None else np.zeros((g.n_vertices, 3), np.float32)
+            vbo = own(ctx.buffer(np.concatenate([g.joints.view(np.float32), g.weights, g.scores, material],
                                                 axis=1).astype(np.float32, copy=False).tobytes()))
             ibo = own(ctx.buffer(g.faces.astype(np.uint32).tobytes()))
             texels = g.rest.reshape(-1, 4)
@@ -221,8 +251,8 @@ class CrowdRenderer:
             inst = own(ctx.buffer(reserve=len(g.members) * len(_COPIES) * 12, dynamic=True))
             vaos = {}
             for prog in self._char_programs:
-                vaos[prog] = own(ctx.vertex_array(prog, [(vbo, "4i 4f 4f 2f", "in_joints", "in_weights", "in_scores_a",
-                                                      "in_scores_b"),
+                vaos[prog] = own(ctx.vertex_array(prog, [(vbo, "4i 4f 4f 2f 3f", "in_joints", "in_weights",
+                                                          "in_scores_a", "in_scores_b", "in_material"),
                                                      (inst, "1i 1i 1f /i", "in_char", "in_member", "in_shift")],
                                                   index_buffer=ibo, index_element_size=4, skip_errors=True))
             self._gl_groups.append({"group": g, "vbo": vbo, "ibo": ibo, "rest": tex_rest, "rest_width": rest_w,
@@ -243,18 +273,24 @@ class CrowdRenderer:
         # environment; the ground is split at the rectangle that can receive the characters'
         # shadows (see _shadow_receivers); the rest is drawn without the shadow lookup
         self._static = {}
-        parts = {"walls": (self.env.walls, self.prog_static), "stage": (self.env.stage, self.prog_static)}
+        parts = {"walls": (self.env.walls, self.prog_static), "cutaway": (self.env.cutaway.vertices, self.prog_venue)}
         if self.shadows:
             inner, outer = split_floor(self.env.opaque, self._shadow_receivers())
             parts["floor_shadowed"] = (inner, self.prog_floor)
             parts["floor_plain"] = (outer, self.prog_floor_plain)
         else:
             parts["floor_plain"] = (self.env.opaque, self.prog_floor_plain)
+        self._cut_ibo, self._cut_count = None, 0  # the cut-away elements this camera keeps (set_view)
         for name, (tris, prog) in parts.items():
             if len(tris):
                 buf = own(ctx.buffer(tris.astype("f4").tobytes()))
+                ibo = None
+                if name == "cutaway":
+                    ibo = self._cut_ibo = own(ctx.buffer(reserve=4 * max(1, len(self.env.cutaway.indices)),
+                                                         dynamic=True))
                 self._static[name] = own(ctx.vertex_array(prog, [(buf, "3f 3f 4f", "in_position", "in_normal",
-                                                                  "in_color")], skip_errors=True))
+                                                                  "in_color")], index_buffer=ibo,
+                                                          index_element_size=4, skip_errors=True))
 
         # colour targets
         size = (self.width, self.height)
@@ -279,16 +315,28 @@ class CrowdRenderer:
             _set(prog, "u_light_view_proj", _mat(self.light_vp))
             _set(prog, "u_shadow_texel", 1.0 / self.shadow_size)
             _set(prog, "u_shadow", 3)
+        pool = self.env.pool
+        for prog in (self.prog_static, self.prog_floor, self.prog_floor_plain, self.prog_venue):
+            _set(prog, "u_pool", tuple(pool[:4]) if pool else (0.0, 0.0, 0.0, 0.0))
+            _set(prog, "u_pool_fade", tuple(pool[4:]) if pool else (0.0, 1.0))
+            _set(prog, "u_bob_amplitude", BOB_AMPLITUDE)
         for prog in self._char_programs:
             _set(prog, "u_bones", 0)
             _set(prog, "u_rest", 1)
             _set(prog, "u_colors", 2)  # character.frag
+            _set(prog, "u_albedo", 4)
             _set(prog, "u_n_characters", n)
 
     # -- camera and geometry -------------------------------------------------------------
     def set_view(self, view) -> Camera:
         """Use a viewpoint id ("V1".."V4"), a design Viewpoint or a :class:`Camera`."""
         self.camera = resolve_camera(view, self.design, self.env.extent, self.width / self.height)
+        if self._cut_ibo is not None:  # the cutaway: drop the elements between this camera and the crowd
+            idx = visible_indices(self.env.cutaway, self.camera.eye, self.env.extent,
+                                  self.camera.view_projection(self.width / self.height))
+            if len(idx):
+                self._cut_ibo.write(idx.tobytes())
+            self._cut_count = len(idx)
         return self.camera
 
     def _light_view_proj(self) -> np.ndarray:
@@ -384,11 +432,13 @@ class CrowdRenderer:
         _set(prog, "u_view_proj", _mat(vp))
         self.tex_bones.use(0)
         self.tex_colors.use(2)
+        self.tex_albedo.use(4)
         for gl in self._gl_groups:
             if gl["count"] == 0:
                 continue
             gl["rest"].use(1)
             _set(prog, "u_rest_width", gl["rest_width"])
+            _set(prog, "u_textured", int(gl["group"].textured))
             _set(prog, "u_n_vertices", gl["group"].n_vertices)
             gl["vaos"][prog].render(instances=gl["count"])
 
@@ -439,8 +489,9 @@ class CrowdRenderer:
         self._draw_characters(self.prog_char, vp)
         self._cull_back_faces(False)
         self._draw_floor()
-        if "stage" in self._static and self.env.stage_front_y is not None and self.camera.eye[1] < self.env.stage_front_y:
-            self._static["stage"].render()
+        if self._cut_count:
+            _set(self.prog_venue, "u_beat", float(self._frame_loaded / self.anim.fps * self.env.beat_hz))
+            self._static["cutaway"].render(vertices=self._cut_count)
         if "walls" in self._static:
             self._cull_back_faces(True)
             self._static["walls"].render()
@@ -542,6 +593,22 @@ class CrowdRenderer:
 
     def __exit__(self, *exc):
         self.release()
+
+
+_DRESSED: dict = {}
+
+
+def _dressed(body, codes: np.ndarray, look):
+    """:func:`~crowdstudy.render.garments.dress_body`, memoised on the body's record, its
+    look and its codes (renderers of the same crowd share the dressed bodies)."""
+    import json
+
+    key = (json.dumps(body.record, sort_keys=True, default=str), look, codes.tobytes())
+    if key not in _DRESSED:
+        if len(_DRESSED) > 256:
+            _DRESSED.clear()
+        _DRESSED[key] = dress_body(body, codes, look.hair_volume)
+    return _DRESSED[key]
 
 
 def _display(linear) -> tuple[float, float, float]:

@@ -1,10 +1,19 @@
-"""The environment around the crowd: floor, the concert stage, the corridor walls.
+"""The environment around the crowd: floor, the concert venue, the corridor walls.
 
 Geometry is built as world-space triangle lists (positions, normals, linear-RGB colour
-plus a pattern id). Elements that would stand between a camera and the crowd area are left
-out (a cutaway): the stage is only drawn when the camera is in front of it (y below the
-stage's front edge), and the corridor walls are drawn with back-face culling so the near
-wall, seen from outside, disappears while the far wall stays.
+plus a pattern id, see :mod:`crowdstudy.render.venue`). Elements that would stand between
+a camera and the crowd area are left out (a cutaway): the concert's stage, hall fittings
+and surrounding audience are *cut-away elements* with bounding boxes, and the renderer
+drops those that meet a sight line from the camera to the crowd box or stand next to the
+camera (:func:`crowdstudy.render.venue.occluding`); walls are drawn with back-face culling
+so a wall seen from outside (the corridor's near wall) disappears while the far one stays.
+
+The concert: a 22 m x 21.5 m hall (walls 9 m high, house lights, exit doors), the stage
+beyond the area's +y edge (deck, LED wall, a truss of lamps aimed at the audience,
+speakers, a barrier) and about 290 low-detail standing figures around the area (darker:
+outside the pool of light that falls on the study's crowd; bobbing on the beat; packed
+near the area, thinning out towards the back), so every viewpoint sees a crowd in a hall
+rather than a block of people in a void.
 """
 
 from __future__ import annotations
@@ -14,8 +23,9 @@ import dataclasses
 import numpy as np
 
 from crowdstudy.render.palette import srgb_to_linear
+from crowdstudy.render.venue import Elements, audience, hall, stage
 
-__all__ = ["Environment", "build_environment", "box_triangles", "quad_triangles", "split_floor"]
+__all__ = ["Environment", "build_environment", "quad_triangles", "split_floor"]
 
 
 @dataclasses.dataclass
@@ -25,20 +35,25 @@ class Environment:
     Attributes:
         opaque: (K, 10) float32 rows ``x y z nx ny nz r g b pattern`` (3 rows per triangle);
             the horizontal ground only (drawn with the cheaper floor shader).
-        walls: same layout, drawn with back-face culling (normals point into the corridor).
-        stage: same layout, drawn only when the camera is in front of the stage.
-        stage_front_y: y of the stage's front edge (m), or None.
+        walls: same layout, drawn with back-face culling (normals point inwards).
+        cutaway: elements (stage, hall fittings, audience figures) each left out when it
+            stands between the camera and the crowd area.
         extent: (x extent, y extent) of the crowd area, metres.
         periodic_length: period along x (m) or None.
-        clear_color: linear RGB of the background.
+        clear_color: linear RGB of the background (and of the distance fog).
+        pool: the pool of light on the crowd: (x0, y0, x1, y1, fade, outside): static
+            geometry is fully lit inside the rectangle (m) and dims to the factor
+            ``outside`` over ``fade`` metres beyond it; None = uniform light.
+        beat_hz: bobbing frequency of the audience figures (beats per second).
     """
     opaque: np.ndarray
     walls: np.ndarray
-    stage: np.ndarray
-    stage_front_y: float | None
+    cutaway: Elements
     extent: tuple[float, float]
     periodic_length: float | None
     clear_color: tuple[float, float, float]
+    pool: tuple[float, float, float, float, float, float] | None = None
+    beat_hz: float = 0.0
 
 
 def _rows(points: np.ndarray, normal, color, pattern: float) -> np.ndarray:
@@ -66,26 +81,12 @@ def quad_triangles(corners: np.ndarray, color, pattern: float = 0.0, facing=None
     return _rows(c[[0, 1, 2, 0, 2, 3]], normal, color, pattern)
 
 
-def box_triangles(lo, hi, color) -> np.ndarray:
-    """An axis-aligned box from ``lo`` (3,) to ``hi`` (3,) with outward normals (no bottom face)."""
-    (x0, y0, z0), (x1, y1, z1) = lo, hi
-    faces = [
-        [(x0, y0, z1), (x1, y0, z1), (x1, y1, z1), (x0, y1, z1)],  # top
-        [(x0, y0, z0), (x1, y0, z0), (x1, y0, z1), (x0, y0, z1)],  # -y
-        [(x1, y1, z0), (x0, y1, z0), (x0, y1, z1), (x1, y1, z1)],  # +y
-        [(x0, y1, z0), (x0, y0, z0), (x0, y0, z1), (x0, y1, z1)],  # -x
-        [(x1, y0, z0), (x1, y1, z0), (x1, y1, z1), (x1, y0, z1)],  # +x
-    ]
-    return np.concatenate([quad_triangles(np.array(f), color) for f in faces])
-
-
 def _color(rgb) -> np.ndarray:
     return srgb_to_linear(np.asarray(rgb, dtype=np.float64))
 
 
 def build_environment(scenario: str, design) -> Environment:
     """The environment of ``scenario`` ("concert" or "corridor") for a study design."""
-    empty = np.zeros((0, 10), dtype=np.float32)
     if scenario == "corridor":
         params = design.scenarios["corridor"]
         length, width = float(params["length"]), float(params["width"])
@@ -111,33 +112,31 @@ def build_environment(scenario: str, design) -> Environment:
             walls.append(quad_triangles(np.array([(-span, y, 0), (span, y, 0), (span, y, 0.1), (-span, y, 0.1)]),
                                         skirt, facing=inward))
         return Environment(opaque=np.concatenate([floor, *outside]), walls=np.concatenate(walls),
-                           stage=empty, stage_front_y=None, extent=(length, width), periodic_length=length,
+                           cutaway=Elements.join([]), extent=(length, width), periodic_length=length,
                            clear_color=tuple(_color((205, 215, 228))))
     if scenario != "concert":
         from crowdstudy.errors import InvalidInputError
         raise InvalidInputError(f"scenario: expected 'concert' or 'corridor', got {scenario!r}")
     width, depth = float(design.floor_width), float(design.floor_depth)
-    params = design.scenarios["concert"] if "concert" in design.scenarios else {"stage_distance": 1.0}
-    front = depth / 2 + float(params["stage_distance"])
-    span = 40.0
-    floor = quad_triangles(np.array([(-span, -span, 0), (span, -span, 0), (span, span, 0), (-span, span, 0)]),
-                           _color((112, 112, 118)), 1.0)
-    stage_w, stage_d, stage_h = 10.0, 5.0, 0.9
-    stage = [box_triangles((-stage_w / 2, front, 0), (stage_w / 2, front + stage_d, stage_h), _color((45, 45, 52))),
-             box_triangles((-stage_w / 2, front + stage_d - 0.3, 0), (stage_w / 2, front + stage_d, 6.0),
-                           _color((30, 30, 40)))]
-    for sx in (-1, 1):  # loudspeaker stacks and truss towers at the sides
-        x0 = sx * (stage_w / 2 - 0.6)
-        stage.append(box_triangles((min(x0, x0 + sx * 0.9), front + 0.3, stage_h),
-                                   (max(x0, x0 + sx * 0.9), front + 1.1, stage_h + 1.6), _color((20, 20, 22))))
-        stage.append(box_triangles((sx * stage_w / 2 - 0.15, front + stage_d - 0.6, 0),
-                                   (sx * stage_w / 2 + 0.15, front + stage_d - 0.3, 6.0), _color((170, 170, 175))))
-    stage.append(box_triangles((-stage_w / 2, front + stage_d - 0.6, 5.7), (stage_w / 2, front + stage_d - 0.3, 6.0),
-                               _color((170, 170, 175))))
-    # a barrier in front of the stage
-    stage.append(box_triangles((-stage_w / 2, front - 0.35, 0), (stage_w / 2, front - 0.3, 1.1), _color((110, 110, 115))))
-    return Environment(opaque=floor, walls=empty, stage=np.concatenate(stage), stage_front_y=front - 0.35,
-                       extent=(width, depth), periodic_length=None, clear_color=tuple(_color((118, 126, 140))))
+    params = dict(design.scenarios["concert"].params) if "concert" in design.scenarios else {}
+    front = depth / 2 + float(params.get("stage_distance", 1.0))
+    tempo = float(params.get("tempo", 120.0))  # bpm
+    rect = (-11.0, -13.0, 11.0, front + 6.5)  # the hall: the stage (5 m deep) at its +y end
+    x0, y0, x1, y1 = rect
+    floor = quad_triangles(np.array([(x0, y0, 0), (x1, y0, 0), (x1, y1, 0), (x0, y1, 0)]), _color((112, 112, 118)), 1.0)
+    walls, fittings = hall(rect, 9.0)
+    # the audience: packed near the crowd area, thinning out towards the back of the hall
+    people = audience((width, depth), (x0 + 0.5, y0 + 3.0, x1 - 0.5, front), int(design.seed), near=3.0,
+                      spacing=(0.62, 0.95), stage_y=front - 0.45)
+    # the hall's walls are cut-away elements too (lit per vertex like the rest of the venue;
+    # a camera outside the hall does not see the crowd through a wall)
+    walls = Elements.join([walls[k:k + 6] for k in range(0, len(walls), 6)])
+    cut = Elements.concat([walls, stage(front), fittings, people])
+    # the stage lights' pool: the crowd area and the floor up to the stage, dimming outside
+    pool = (-width / 2 - 0.3, -depth / 2 - 0.3, width / 2 + 0.3, front, 1.6, 0.22)
+    return Environment(opaque=floor, walls=np.zeros((0, 10), np.float32), cutaway=cut, extent=(width, depth),
+                       periodic_length=None,
+                       clear_color=tuple(_color((52, 54, 64))), pool=pool, beat_hz=tempo / 60.0)
 
 
 def split_floor(triangles: np.ndarray, rect: tuple[float, float, float, float]) -> tuple[np.ndarray, np.ndarray]:

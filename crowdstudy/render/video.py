@@ -1,4 +1,4 @@
-"""MP4 videos: frames streamed from the renderer to ffmpeg (H.264, yuv420p, +faststart).
+"""MP4 videos: frames streamed from the renderer to ffmpeg (H.264, yuv420p BT.709 tagged, +faststart).
 
 Frames never accumulate in memory: each raw RGB frame is read back through two alternating
 pixel-pack buffers (asynchronous on GPUs: frame k is copied while frame k+1 renders) and
@@ -33,7 +33,13 @@ from crowdstudy.errors import InvalidInputError, MissingDependencyError
 from crowdstudy.paths import check_output_path
 
 __all__ = ["find_ffmpeg", "VideoWriter", "render_video", "sha256_file", "probe_video",
-           "FramePlan", "blend_frames", "video_frame_count"]
+           "FramePlan", "blend_frames", "video_frame_count", "BT709_SCALE", "BT709_TAGS"]
+
+
+#: ffmpeg filter converting rgb24 to yuv420p with the BT.709 matrix, limited range
+BT709_SCALE = "scale=out_color_matrix=bt709:out_range=tv,format=yuv420p"
+#: ffmpeg output options tagging the stream as BT.709 (matrix, primaries, transfer), limited range
+BT709_TAGS = ("-colorspace", "bt709", "-color_primaries", "bt709", "-color_trc", "bt709", "-color_range", "tv")
 
 
 def find_ffmpeg() -> str:
@@ -76,10 +82,14 @@ class VideoWriter:
         self.part = self.path.with_name(self.path.stem + ".part.mp4")
         self.frame_bytes = width * height * 3
         self.frames = 0
-        vf = ["-vf", "vflip"] if bottom_up else []
+        # RGB -> Y'CbCr with the BT.709 matrix in limited ("tv") range, and the stream tagged
+        # so (BT.709 primaries, transfer, matrix): players and browsers assume BT.709 for HD
+        # and decode these colours back; ffmpeg's default (BT.601, untagged) shifts them
+        vf = ",".join((["vflip"] if bottom_up else []) + [BT709_SCALE])
         cmd = [find_ffmpeg(), "-hide_banner", "-loglevel", "error", "-y", "-f", "rawvideo", "-pix_fmt", "rgb24",
-               "-s", f"{width}x{height}", "-framerate", f"{fps:g}", "-i", "pipe:0", *vf, "-c:v", "libx264",
-               "-preset", preset, "-crf", str(int(crf)), "-pix_fmt", "yuv420p", "-movflags", "+faststart",
+               "-s", f"{width}x{height}", "-framerate", f"{fps:g}", "-i", "pipe:0", "-vf", vf, "-c:v", "libx264",
+               "-preset", preset, "-crf", str(int(crf)), "-pix_fmt", "yuv420p", *BT709_TAGS,
+               "-movflags", "+faststart",
                "-threads", "2", "-fflags", "+bitexact", "-flags:v", "+bitexact", "-an", str(self.part)]
         self.proc = subprocess.Popen(cmd, stdin=subprocess.PIPE, stderr=subprocess.PIPE)
         self._queue: queue.Queue = queue.Queue(maxsize=2)
@@ -144,16 +154,21 @@ class VideoWriter:
 
 
 def probe_video(path: str | Path) -> dict:
-    """ffprobe of the first video stream: codec, pix_fmt, width, height, frames (decoded count)."""
+    """ffprobe of the first video stream: codec, pix_fmt, width, height, frames (decoded
+    count), rate, and the colour tags color_space, color_primaries, color_transfer,
+    color_range (ffprobe's names, e.g. "bt709" and "tv"; "unknown" or None when untagged)."""
     exe = shutil.which("ffprobe")
     if not exe:
         raise MissingDependencyError("ffprobe not found: `sudo apt-get install ffmpeg`")
     out = subprocess.run([exe, "-v", "error", "-select_streams", "v:0", "-count_frames", "-show_entries",
-                          "stream=codec_name,pix_fmt,width,height,nb_read_frames,r_frame_rate", "-of",
+                          "stream=codec_name,pix_fmt,width,height,nb_read_frames,r_frame_rate,"
+                          "color_space,color_primaries,color_transfer,color_range", "-of",
                           "default=noprint_wrappers=1", str(path)], capture_output=True, text=True, check=True).stdout
     info = dict(line.split("=", 1) for line in out.strip().splitlines() if "=" in line)
     return {"codec": info.get("codec_name"), "pix_fmt": info.get("pix_fmt"), "width": int(info["width"]),
-            "height": int(info["height"]), "frames": int(info["nb_read_frames"]), "rate": info.get("r_frame_rate")}
+            "height": int(info["height"]), "frames": int(info["nb_read_frames"]), "rate": info.get("r_frame_rate"),
+            "color_space": info.get("color_space"), "color_primaries": info.get("color_primaries"),
+            "color_transfer": info.get("color_transfer"), "color_range": info.get("color_range")}
 
 
 @dataclasses.dataclass(frozen=True)

@@ -7,11 +7,17 @@
   (matched to R's afex).
 - :mod:`~crowdstudy.stats.posthoc`: ``pairwise`` comparisons as emmeans' multivariate
   model, Tukey / Bonferroni / Holm.
+- :mod:`~crowdstudy.stats.effects`: confidence-interval critical values, d_z / g_av with
+  intervals; :mod:`~crowdstudy.stats.contrasts`: simple effects (emmeans' joint_tests) and
+  polynomial contrasts; :mod:`~crowdstudy.stats.robust`: mixed model (incomplete
+  participants kept) and rank tests of Method.
 - :mod:`~crowdstudy.stats.assumptions`: Shapiro-Wilk and Q-Q plots of residuals per cell.
 - :mod:`~crowdstudy.stats.report`, :mod:`~crowdstudy.stats.figures`,
   :mod:`~crowdstudy.stats.pipeline`: tables, APA text, paper-style figures, ``analyze``.
-- :mod:`~crowdstudy.stats.synthetic`, :mod:`~crowdstudy.stats.power`: simulated
-  participants and Monte-Carlo power.
+- :mod:`~crowdstudy.stats.inputs`: reading responses.csv, its sidecar and participants.csv.
+- :mod:`~crowdstudy.stats.synthetic`, :mod:`~crowdstudy.stats.power`,
+  :mod:`~crowdstudy.stats.pilot`: simulated participants, Monte-Carlo power, the
+  simulation model fitted to pilot responses.
 
 Each public name has one import path, its module (``from crowdstudy.stats.anova import
 rm_anova``); importing this package imports nothing heavy.

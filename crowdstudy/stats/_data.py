@@ -5,13 +5,28 @@ from __future__ import annotations
 
 import dataclasses
 import itertools
+import warnings
 
 import numpy as np
 import pandas as pd
 
 from crowdstudy.errors import InvalidInputError
 
-__all__ = ["CellMatrix", "cell_matrix", "factor_levels"]
+__all__ = ["CellMatrix", "cell_matrix", "factor_levels", "plain", "row_label"]
+
+
+def plain(value):
+    """A value as a user reads it: numpy scalars as Python numbers (``7``, not ``np.int64(7)``),
+    strings quoted, everything else via ``repr``."""
+    if isinstance(value, np.generic):
+        value = value.item()
+    return repr(value)
+
+
+def row_label(position: int) -> str:
+    """``"row N"`` with N 1-based (the first data row is row 1; in a CSV file with a header
+    it is on line N + 1)."""
+    return f"row {int(position) + 1}"
 
 
 @dataclasses.dataclass(frozen=True)
@@ -22,7 +37,7 @@ class CellMatrix:
     (the last factor varies fastest); ``subjects``: the kept subject ids; ``factors``:
     factor names; ``levels``: one tuple of levels per factor; ``dropped``: subjects removed
     by listwise deletion; ``aggregated``: True when some subject x cell had several rows
-    (averaged, as afex does).
+    (averaged, as afex does, with a warning unless asked not to).
     """
     values: np.ndarray
     subjects: tuple
@@ -83,7 +98,7 @@ def _wide_to_long(data: pd.DataFrame, within: list[str], subject: str | None) ->
 
 
 def cell_matrix(data: pd.DataFrame, dv: str | None, within, subject: str | None, *,
-                missing: str = "raise") -> CellMatrix:
+                missing: str = "raise", duplicates: str = "warn") -> CellMatrix:
     """Validate ``data`` and arrange it as a subject x cell matrix (see :class:`CellMatrix`).
 
     Long input: one row per observation with columns ``subject``, the ``within`` factors and
@@ -91,11 +106,16 @@ def cell_matrix(data: pd.DataFrame, dv: str | None, within, subject: str | None,
     cells (a MultiIndex whose level names are the factors, or ``within`` names them).
     ``missing="raise"`` rejects a subject without every cell (naming subject and cell);
     ``"drop"`` removes such subjects (listwise deletion; listed in ``.dropped``).
+    ``duplicates``: several rows for one subject x cell are averaged; ``"warn"`` (default)
+    says so with a ``UserWarning`` naming the first such subject and cell (as afex does),
+    ``"mean"`` averages silently, ``"raise"`` refuses with an error naming them.
     """
     if not isinstance(data, pd.DataFrame):
         raise InvalidInputError(f"data must be a pandas DataFrame, got {type(data).__name__}")
     if missing not in ("raise", "drop"):
         raise InvalidInputError(f"missing must be 'raise' or 'drop', got {missing!r}")
+    if duplicates not in ("warn", "mean", "raise"):
+        raise InvalidInputError(f"duplicates must be 'warn', 'mean' or 'raise', got {duplicates!r}")
     within = _as_list(within)
     if dv is None:
         data, dv, within, subject = _wide_to_long(data, within, subject)
@@ -113,18 +133,22 @@ def cell_matrix(data: pd.DataFrame, dv: str | None, within, subject: str | None,
         converted = pd.to_numeric(y, errors="coerce")
         bad = y[converted.isna() & y.notna()]
         if len(bad):
-            raise InvalidInputError(f"dv column {dv!r} must be numeric; row {bad.index[0]!r} holds {bad.iloc[0]!r}")
+            pos = int(np.flatnonzero((converted.isna() & y.notna()).to_numpy())[0])
+            raise InvalidInputError(f"dv column {dv!r} must be numeric; {row_label(pos)} holds {plain(bad.iloc[0])}")
         y = converted
     y = y.astype(float)
     if np.isinf(y).any():
-        raise InvalidInputError(f"dv column {dv!r} holds an infinite value (row {y.index[np.isinf(y)][0]!r})")
+        pos = int(np.flatnonzero(np.isinf(y.to_numpy()))[0])
+        raise InvalidInputError(f"dv column {dv!r} holds an infinite value ({row_label(pos)})")
     for col in [subject, *within]:
         if data[col].isna().any():
-            raise InvalidInputError(f"column {col!r} has a missing value (row {data.index[data[col].isna()][0]!r})")
+            pos = int(np.flatnonzero(data[col].isna().to_numpy())[0])
+            raise InvalidInputError(f"column {col!r} has a missing value ({row_label(pos)})")
     levels = [factor_levels(data[w]) for w in within]
     for w, lv in zip(within, levels):
         if len(lv) < 2:
-            raise InvalidInputError(f"within factor {w!r} has a single level {lv[0]!r}; a factor needs >= 2 levels")
+            raise InvalidInputError(f"within factor {w!r} has a single level {plain(lv[0])}; "
+                                    f"a factor needs >= 2 levels")
     frame = pd.DataFrame({"_s": data[subject].to_numpy(), "_y": y.to_numpy()})
     for i, w in enumerate(within):
         frame[f"_f{i}"] = data[w].to_numpy()
@@ -132,6 +156,15 @@ def cell_matrix(data: pd.DataFrame, dv: str | None, within, subject: str | None,
     grouped = frame.dropna(subset=["_y"]).groupby(keys, sort=False, observed=True)["_y"]
     counts = grouped.size()
     aggregated = bool((counts > 1).any())
+    if aggregated and duplicates != "mean":
+        many = counts[counts > 1]
+        key = many.index[0]
+        where = ", ".join(f"{w}={plain(c)}" for w, c in zip(within, key[1:]))
+        text = (f"subject {plain(key[0])} has {int(many.iloc[0])} {dv!r} values for the cell {where} "
+                f"({len(many)} subject x cell combination(s) with more than one row)")
+        if duplicates == "raise":
+            raise InvalidInputError(text + "; one value per subject and cell expected")
+        warnings.warn(text + "; averaged (as afex's fun_aggregate = mean)", UserWarning, stacklevel=3)
     means = grouped.mean()
     subjects = factor_levels(data[subject])
     cells = list(itertools.product(*levels))
@@ -144,9 +177,9 @@ def cell_matrix(data: pd.DataFrame, dv: str | None, within, subject: str | None,
         if missing == "raise":
             s = bad_rows[0]
             cell = cells[int(np.flatnonzero(holes[s])[0])]
-            where = ", ".join(f"{w}={c!r}" for w, c in zip(within, cell))
+            where = ", ".join(f"{w}={plain(c)}" for w, c in zip(within, cell))
             raise InvalidInputError(
-                f"subject {subjects[s]!r} has no {dv!r} value for the cell {where} "
+                f"subject {plain(subjects[s])} has no {dv!r} value for the cell {where} "
                 f"({len(bad_rows)} subject(s) lack some cell); pass missing='drop' (CLI: --missing drop) for listwise deletion")
         dropped = tuple(subjects[i] for i in bad_rows)
         keep = ~holes.any(axis=1)

@@ -104,6 +104,7 @@ def _table(cm: CellMatrix, correction: str, alpha: float) -> pd.DataFrame:
     shape = cm.shape
     mean_all = y.mean(axis=1)
     ss_subjects = float(((mean_all - mean_all.mean()) ** 2).sum() * c)
+    tiny = 1e-12 * float((y * y).sum())          # rounding level of the sums of squares
     rows = []
     for term in effect_terms(len(shape)):
         cmat = effect_contrasts(shape, term)
@@ -115,12 +116,17 @@ def _table(cm: CellMatrix, correction: str, alpha: float) -> pd.DataFrame:
         sspe = zc.T @ zc
         ss_err = float(np.trace(sspe))
         df1, df2 = float(p), float(p * (n - 1))
-        f_val = (ss / df1) / (ss_err / df2) if ss_err > 0 else np.inf
-        p_unc = float(_st.f.sf(f_val, df1, df2))
+        undefined = ss <= tiny and ss_err <= tiny       # 0/0: no variation at all
+        if undefined:
+            f_val = float("nan")
+        else:
+            f_val = (ss / df1) / (ss_err / df2) if ss_err > tiny else np.inf
+        p_unc = float(_st.f.sf(f_val, df1, df2)) if not undefined else float("nan")
         row = {"Source": ":".join(cm.factors[i] for i in term), "SS": ss, "ddof1": df1, "ddof2": df2,
-               "MS": ss / df1, "SS_error": ss_err, "MSE": ss_err / df2, "F": f_val, "p_unc": p_unc}
+               "MS": ss / df1, "SS_error": ss_err, "MSE": ss_err / df2, "F": f_val, "p_unc": p_unc,
+               "_undefined": undefined}
         if p > 1:
-            gg = float(np.trace(sspe) ** 2 / (p * np.sum(sspe * sspe))) if ss_err > 0 else 1.0 / p
+            gg = float(np.trace(sspe) ** 2 / (p * np.sum(sspe * sspe))) if ss_err > tiny else 1.0 / p
             hf = (n * p * gg - 2.0) / (p * (n - 1 - p * gg))
             w, chi2, fdf, p_sph = _mauchly(sspe, c, n - 1)
             hf_c = min(1.0, hf)
@@ -135,8 +141,8 @@ def _table(cm: CellMatrix, correction: str, alpha: float) -> pd.DataFrame:
         rows.append(row)
     errors_total = ss_subjects + sum(np.unique([r["SS_error"] for r in rows]))
     for row in rows:
-        row["np2"] = row["SS"] / (row["SS"] + row["SS_error"]) if row["SS"] + row["SS_error"] > 0 else np.nan
-        row["ng2"] = row["SS"] / (row["SS"] + errors_total) if row["SS"] + errors_total > 0 else np.nan
+        row["np2"] = row["SS"] / (row["SS"] + row["SS_error"]) if not row["_undefined"] else np.nan
+        row["ng2"] = row["SS"] / (row["SS"] + errors_total) if not row["_undefined"] else np.nan
         multi = row["ddof1"] > 1
         apply = multi and (correction == "always" or (correction == "auto" and not row["sphericity"]))
         row["correction_applied"] = bool(apply)
@@ -146,17 +152,20 @@ def _table(cm: CellMatrix, correction: str, alpha: float) -> pd.DataFrame:
         row["n_subjects"] = n
     table = pd.DataFrame(rows, columns=list(ANOVA_COLUMNS))
     table.attrs["ss_subjects"] = ss_subjects
+    table.attrs["undefined"] = [r["Source"] for r in rows if r["_undefined"]]
     return table
 
 
 def rm_anova(data: pd.DataFrame, dv: str | None, within, subject: str | None, *, correction="auto",
-             effsize: str = "np2", alpha: float = 0.05, missing: str = "raise") -> pd.DataFrame:
+             effsize: str = "np2", alpha: float = 0.05, missing: str = "raise",
+             duplicates: str = "warn") -> pd.DataFrame:
     """Repeated-measures ANOVA with any number of within-subject factors.
 
     Parameters
     ----------
     data: long DataFrame (one row per observation: ``subject``, the ``within`` columns,
-        ``dv``; several rows of one subject x cell are averaged, as afex does) or, with
+        ``dv``; several rows of one subject x cell are averaged, as afex does, with a
+        warning: see ``duplicates``) or, with
         ``dv=None``, wide (index = subjects, one column per cell; MultiIndex columns whose
         level names are the factors, or name them with ``within``).
     dv: column of the dependent variable (numeric); None for wide input.
@@ -171,6 +180,8 @@ def rm_anova(data: pd.DataFrame, dv: str | None, within, subject: str | None, *,
     missing: ``"raise"``: a subject without every cell is an error naming it and the cell;
         ``"drop"``: such subjects are removed (listwise deletion), listed in
         ``attrs["dropped_subjects"]`` and ``attrs["note"]``; ``n_subjects`` counts those kept.
+    duplicates: several rows for one subject x cell: ``"warn"`` (average them and warn,
+        as afex does), ``"mean"`` (average silently), ``"raise"`` (an error naming them).
 
     Returns
     -------
@@ -180,7 +191,10 @@ def rm_anova(data: pd.DataFrame, dv: str | None, within, subject: str | None, *,
     - ``SS``, ``ddof1``, ``MS``: effect sum of squares, numerator df, SS / ddof1.
     - ``ddof2``: denominator df, ddof1 * (n_subjects - 1).
     - ``SS_error``, ``MSE``: the effect x subject error term and its mean square.
-    - ``F``, ``p_unc``: F ratio and its uncorrected p.
+    - ``F``, ``p_unc``: F ratio and its uncorrected p. NaN (and np2 NaN) when the effect's
+      SS and its error SS are both ~0 (below 1e-12 of the data's sum of squares: e.g.
+      every score identical), where F is 0/0; ``attrs["undefined"]`` lists such effects
+      and ``attrs["note"]`` says so.
     - ``eps_GG``, ``eps_HF``: Greenhouse-Geisser and Huynh-Feldt epsilons (1 for 1-df
       effects; HF uncapped, as car prints it, so it may exceed 1).
     - ``ddof1_GG``, ``ddof2_GG``: GG-corrected dfs (as afex prints them with correction="GG").
@@ -197,14 +211,14 @@ def rm_anova(data: pd.DataFrame, dv: str | None, within, subject: str | None, *,
     - ``n_subjects``: subjects analysed.
 
     ``attrs``: factors, levels, correction, alpha, effsize, dropped_subjects, note,
-    aggregated, ss_subjects.
+    aggregated, ss_subjects, undefined.
     """
     if effsize not in ("np2", "ng2"):
         raise InvalidInputError(f"effsize must be 'np2' or 'ng2', got {effsize!r}")
     if not isinstance(alpha, (int, float)) or isinstance(alpha, bool) or not 0 < alpha < 1:
         raise InvalidInputError(f"alpha must be a number in (0, 1), got {alpha!r}")
     mode = _correction_mode(correction)
-    cm = cell_matrix(data, dv, within, subject, missing=missing)
+    cm = cell_matrix(data, dv, within, subject, missing=missing, duplicates=duplicates)
     return anova_from_cells(cm, correction=correction, effsize=effsize, alpha=alpha, _mode=mode)
 
 
@@ -213,10 +227,14 @@ def anova_from_cells(cm: CellMatrix, *, correction="auto", effsize: str = "np2",
     """:func:`rm_anova` on an already validated :class:`~crowdstudy.stats._data.CellMatrix`."""
     mode = _mode or _correction_mode(correction)
     table = _table(cm, mode, float(alpha))
-    note = ""
+    notes = []
     if cm.dropped:
-        note = (f"listwise deletion: {len(cm.dropped)} subject(s) without every cell removed "
-                f"({', '.join(map(str, cm.dropped))}); {len(cm.subjects)} analysed")
+        notes.append(f"listwise deletion: {len(cm.dropped)} subject(s) without every cell removed "
+                     f"({', '.join(map(str, cm.dropped))}); {len(cm.subjects)} analysed")
+    if table.attrs["undefined"]:
+        notes.append(f"F undefined (effect and error sums of squares both ~0: no variation in the scores) for "
+                     f"{', '.join(table.attrs['undefined'])}")
+    note = "; ".join(notes)
     table.attrs.update(factors=list(cm.factors), levels={f: list(lv) for f, lv in zip(cm.factors, cm.levels)},
                        correction={"auto": "auto", "always": True, "never": False}[mode], alpha=float(alpha),
                        effsize=effsize, dropped_subjects=list(cm.dropped), note=note, aggregated=cm.aggregated)

@@ -28,6 +28,13 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--stage", type=int, action="append", default=None,
                         help="analyse only this stage number (repeatable)")
     parser.add_argument("--no-figures", action="store_true", help="skip the figures (tables only)")
+    parser.add_argument("--participants", default=None,
+                        help="participants.csv of the study export (participant, excluded 0/1, exclusion_reason); "
+                             "excluded participants are dropped and counted per reason (default: participants.csv "
+                             "beside the responses file, when there is one)")
+    parser.add_argument("--stars", choices=("always", "omnibus"), default="always",
+                        help="figure stars for Method in every cell (always), or only where the ANOVA's Method "
+                             "effect or an interaction with Method is significant (omnibus)")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -45,7 +52,8 @@ def run(args: argparse.Namespace) -> int:
     correction = {"auto": "auto", "always": True, "never": False}[args.correction]
     result = analyze(path, design, args.out, correction=correction, alpha=args.alpha, effsize=args.effsize,
                      missing=args.missing, adjust=args.adjust, error=args.error_bars, stages=args.stage,
-                     figures=not args.no_figures, progress=True)
+                     figures=not args.no_figures, progress=True, participants=args.participants,
+                     stars=args.stars)
     print(result.summary)
     print(f"wrote {len(result.files)} files to {args.out}")
     return 0

@@ -1,6 +1,10 @@
 """Paper-style figure: composite score by density for each method, one panel per viewpoint,
 mean with error bars across participants and * / ** / *** for the Method effect at each
-density (post hoc comparison of the methods within each Density x Viewpoint cell)."""
+density (post hoc comparison of the methods within each Density x Viewpoint cell).
+
+The caption under the title says what the stars are (:func:`stars_caption`): which test,
+which adjustment, and whether they are drawn only where the omnibus ANOVA effect is
+significant; ``note`` (e.g. "SIMULATED data") is printed in red above the panels."""
 
 from __future__ import annotations
 
@@ -14,23 +18,46 @@ from crowdstudy.errors import InvalidInputError
 from crowdstudy.stats._data import CellMatrix
 from crowdstudy.stats.report import stars
 
-__all__ = ["method_figure"]
+__all__ = ["method_figure", "stars_caption"]
 
 _COLORS = {"Baseline": "#b03a2e", "Ours": "#1f618d"}
 _MARKERS = {"Baseline": "s", "Ours": "o"}
 
 
+def stars_caption(adjust: str, n_methods: int, *, rule: str = "always", gate: str = "") -> str:
+    """What the stars of :func:`method_figure` mean, for its caption.
+
+    ``adjust``: the post hoc adjustment of the per-cell comparisons; ``n_methods``: levels
+    of Method (with 2 the Tukey adjustment is the plain paired t test); ``rule``:
+    ``"always"`` or ``"omnibus"`` (stars only where the ANOVA effect(s) named by ``gate``,
+    joined by " or ", are significant)."""
+    if n_methods == 2:
+        test = "paired t test of the two methods in each density x viewpoint cell"
+        adj = "unadjusted: one contrast per cell, no correction across cells"
+    else:
+        test = f"paired comparisons of the {n_methods} methods in each density x viewpoint cell"
+        adj = f"{adjust}-adjusted within a cell, not across cells"
+    text = f"stars: {test} ({adj}); * p<.05, ** p<.01, *** p<.001"
+    if rule == "omnibus":
+        which = "an ANOVA effect involving Method" if " or " in gate else f"the ANOVA's {gate or 'Method'} effect"
+        text += f"; drawn only if {which} is significant"
+    return text
+
+
 def method_figure(panels: dict[str, tuple[CellMatrix, pd.DataFrame | None]], out_path: str | Path, *,
                   density_values: dict[str, float] | None = None, error: str = "sd", title: str | None = None,
-                  ylim: tuple[float, float] = (1.0, 6.0), dpi: int = 150) -> Path:
+                  ylim: tuple[float, float] = (1.0, 6.0), dpi: int = 150, caption: str | None = None,
+                  note: str = "") -> Path:
     """Draw composite scores by density, one row per composite and one column per viewpoint.
 
     ``panels``: composite name -> (cell matrix with factors ("Density", "Viewpoint",
     "Method"), post hoc table of Method within Density x Viewpoint (columns Density,
     Viewpoint, p_adj) or None for no stars). ``density_values``: level -> characters/m^2
     for the tick labels. ``error``: "sd" (the paper's mean +- SD), "se" or "ci95".
-    Saved to ``out_path`` (extension picks the format); the plotted means, error bars and
-    stars go to ``out_path`` with the suffix ``.json``.
+    ``caption``: the stars' explanation (default: the significance levels only; see
+    :func:`stars_caption`); ``note``: a warning line above the panels ("SIMULATED data").
+    Saved to ``out_path`` (extension picks the format); the plotted means, error bars,
+    stars, caption and note go to ``out_path`` with the suffix ``.json``.
     """
     import matplotlib
     matplotlib.use("Agg", force=False)
@@ -90,13 +117,17 @@ def method_figure(panels: dict[str, tuple[CellMatrix, pd.DataFrame | None]], out
                 ax.set_xlabel("density (characters/m$^2$)" if density_values else "density", fontsize=8)
     handles, labels = axes[0, 0].get_legend_handles_labels()
     fig.legend(handles, labels, loc="outside lower center", ncol=len(methods), fontsize=8, frameon=False)
-    note = {"sd": "mean +- SD", "se": "mean +- SE", "ci95": "mean +- 95% CI"}[error]
-    fig.suptitle((title + "\n" if title else "") + f"{note}; * p<.05, ** p<.01, *** p<.001 (Method)", fontsize=9)
+    bars = {"sd": "mean +- SD", "se": "mean +- SE", "ci95": "mean +- 95% CI"}[error]
+    caption = caption or "* p<.05, ** p<.01, *** p<.001 (Method)"
+    head = (f"{note}\n" if note else "") + (title + "\n" if title else "")
+    fig.suptitle(head + f"{bars}; {caption}", fontsize=8 if len(caption) > 70 else 9,
+                 color="#b03a2e" if note else "black", wrap=True)
     out = Path(out_path)
     out.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(out, dpi=dpi, metadata={"Software": None} if out.suffix.lower() == ".png" else None)
     plt.close(fig)
-    out.with_suffix(".json").write_text(json.dumps({"figure": out.name, "error": error, "series": plotted}, indent=1))
+    out.with_suffix(".json").write_text(json.dumps({"figure": out.name, "error": error, "caption": caption,
+                                                    "note": note, "series": plotted}, indent=1))
     return out
 
 

@@ -27,12 +27,14 @@ from scipy import stats as _st
 from crowdstudy.errors import InvalidInputError
 from crowdstudy.stats._data import CellMatrix, cell_matrix
 from crowdstudy.stats._tukey import studentized_range_sf
+from crowdstudy.stats.effects import critical_value, dz_interval, hedges_j
 
 __all__ = ["pairwise", "pairwise_from_cells", "adjust_pvalues", "tukey_p", "POSTHOC_COLUMNS"]
 
 #: Columns of :func:`pairwise`'s table (plus one column per ``by`` factor, after ``by_level``).
 POSTHOC_COLUMNS = ("factor", "by", "by_level", "A", "B", "contrast", "estimate", "SE", "df", "t",
-                   "p_unc", "p_adj", "adjust", "n_means", "n_contrasts")
+                   "p_unc", "p_adj", "adjust", "n_means", "n_contrasts", "lower_CL", "upper_CL", "ci_adjust",
+                   "dz", "dz_low", "dz_high", "g_av", "g_av_low", "g_av_high")
 
 _ADJUST = ("tukey", "bonferroni", "holm", "none")
 
@@ -44,13 +46,14 @@ def tukey_p(t, n_means: int, df: float) -> np.ndarray:
     if n_means < 2:
         raise InvalidInputError(f"n_means must be >= 2 for the studentized range, got {n_means}")
     if n_means == 2:      # the range of two means is |difference|: exactly the two-sided t test
-        return np.clip(2.0 * _st.t.sf(t, df), 0.0, 1.0)
-    if df >= 2:
-        return np.clip(studentized_range_sf(t.ravel() * np.sqrt(2.0), n_means, df).reshape(t.shape), 0.0, 1.0)
-    out = np.empty_like(t)
-    for i, val in np.ndenumerate(t):
-        out[i] = 1.0 if val == 0 else float(_st.studentized_range.sf(val * np.sqrt(2.0), n_means, df))
-    return np.clip(out, 0.0, 1.0)
+        out = 2.0 * _st.t.sf(t, df)
+    elif df >= 2:
+        out = studentized_range_sf(np.nan_to_num(t.ravel()) * np.sqrt(2.0), n_means, df).reshape(t.shape)
+    else:
+        out = np.empty_like(t)
+        for i, val in np.ndenumerate(t):
+            out[i] = 1.0 if val == 0 else float(_st.studentized_range.sf(val * np.sqrt(2.0), n_means, df))
+    return np.where(np.isnan(t), np.nan, np.clip(out, 0.0, 1.0))     # an undefined t stays undefined
 
 
 def adjust_pvalues(p, method: str, *, t=None, n_means: int | None = None, df: float | None = None) -> np.ndarray:
@@ -84,7 +87,8 @@ def _as_names(value, name: str) -> list[str]:
     return list(value)
 
 
-def pairwise_from_cells(cm: CellMatrix, factor: str, by=None, *, adjust: str = "tukey") -> pd.DataFrame:
+def pairwise_from_cells(cm: CellMatrix, factor: str, by=None, *, adjust: str = "tukey",
+                        level: float = 0.95) -> pd.DataFrame:
     """:func:`pairwise` on an already validated cell matrix."""
     by = _as_names(by, "by")
     if adjust not in _ADJUST:
@@ -117,30 +121,42 @@ def pairwise_from_cells(cm: CellMatrix, factor: str, by=None, *, adjust: str = "
         est = d.mean(axis=0)
         se = d.std(axis=0, ddof=1) / np.sqrt(n)
         with np.errstate(divide="ignore", invalid="ignore"):
-            t = np.where(se > 0, est / se, np.where(est == 0, 0.0, np.sign(est) * np.inf))
+            # a zero difference with zero spread is 0/0: t and p undefined (NaN), as in R
+            t = np.where(se > 0, est / se, np.where(est == 0, np.nan, np.sign(est) * np.inf))
         p_unc = 2.0 * _st.t.sf(np.abs(t), df)
         p_adj = adjust_pvalues(p_unc, adjust, t=t, n_means=k, df=df)
+        ci_adjust = "bonferroni" if adjust == "holm" else adjust
+        crit = critical_value(ci_adjust, level=level, df=df, n_means=k, n_contrasts=len(pairs))
+        sds = means.std(axis=0, ddof=1)
+        j_corr = hedges_j(df)
         for c, (i, j) in enumerate(pairs):
+            dz, dz_lo, dz_hi = dz_interval(d[:, c], level)
+            sd_av = 0.5 * (sds[i] + sds[j])
+            scale = j_corr * float(d[:, c].std(ddof=1)) / sd_av if sd_av > 0 else float("nan")
             row = {"factor": factor, "by": ",".join(by), "by_level": ",".join(map(str, blv)),
                    **{b: v for b, v in zip(by, blv)},
                    "A": levels[i], "B": levels[j], "contrast": f"{levels[i]} - {levels[j]}",
                    "estimate": float(est[c]), "SE": float(se[c]), "df": df, "t": float(t[c]),
                    "p_unc": float(p_unc[c]), "p_adj": float(p_adj[c]), "adjust": adjust,
-                   "n_means": k, "n_contrasts": len(pairs)}
+                   "n_means": k, "n_contrasts": len(pairs),
+                   "lower_CL": float(est[c] - crit * se[c]), "upper_CL": float(est[c] + crit * se[c]),
+                   "ci_adjust": ci_adjust, "dz": dz, "dz_low": dz_lo, "dz_high": dz_hi,
+                   "g_av": dz * scale, "g_av_low": dz_lo * scale, "g_av_high": dz_hi * scale}
             rows.append(row)
     cols = list(POSTHOC_COLUMNS[:3]) + by + list(POSTHOC_COLUMNS[3:])
     out = pd.DataFrame(rows, columns=cols)
-    out.attrs.update(n_subjects=n, dropped_subjects=list(cm.dropped))
+    out.attrs.update(n_subjects=n, dropped_subjects=list(cm.dropped), level=float(level))
     return out
 
 
 def pairwise(data: pd.DataFrame, dv: str | None, within, subject: str | None, *, factor: str | None = None,
-             by=None, adjust: str = "tukey", missing: str = "raise") -> pd.DataFrame:
+             by=None, adjust: str = "tukey", missing: str = "raise", duplicates: str = "warn",
+             level: float = 0.95) -> pd.DataFrame:
     """Pairwise comparisons of the levels of ``factor`` (within each ``by`` combination).
 
     Parameters
     ----------
-    data, dv, within, subject, missing: as :func:`crowdstudy.stats.anova.rm_anova`
+    data, dv, within, subject, missing, duplicates: as :func:`crowdstudy.stats.anova.rm_anova`
         (``within`` lists every within factor of the design, so marginal means average
         over the ones not compared, and missing cells are detected).
     factor: the compared factor; default: the single factor of ``within`` not in ``by``.
@@ -155,7 +171,13 @@ def pairwise(data: pd.DataFrame, dv: str | None, within, subject: str | None, *,
     ","); one column per by factor; ``A``, ``B``, ``contrast`` ("A - B", level order);
     ``estimate`` (mean of A - B, dv units); ``SE``; ``df`` (n_subjects - 1); ``t``;
     ``p_unc`` (two-sided, unadjusted); ``p_adj``; ``adjust``; ``n_means`` (levels of the
-    factor); ``n_contrasts`` (contrasts in the family).
+    factor); ``n_contrasts`` (contrasts in the family); ``lower_CL``, ``upper_CL``: the
+    ``level`` confidence interval of the estimate, adjusted for the family as emmeans'
+    ``confint`` adjusts it (``ci_adjust``: Tukey where the p is Tukey's; Bonferroni for
+    Holm, which has no interval); ``dz`` (mean / SD of the per-subject differences) with
+    its exact noncentral-t interval ``dz_low``, ``dz_high`` (unadjusted ``level``);
+    ``g_av`` (difference / mean of the two levels' SDs, times Hedges' J) with
+    ``g_av_low``, ``g_av_high`` (see :mod:`crowdstudy.stats.effects`).
     """
     names = _as_names(within, "within")
     by_names = _as_names(by, "by")
@@ -164,5 +186,5 @@ def pairwise(data: pd.DataFrame, dv: str | None, within, subject: str | None, *,
         if len(rest) != 1:
             raise InvalidInputError(f"factor is ambiguous: within factors not in by: {rest}; pass factor=...")
         factor = rest[0]
-    cm = cell_matrix(data, dv, names if names else within, subject, missing=missing)
-    return pairwise_from_cells(cm, factor, by_names, adjust=adjust)
+    cm = cell_matrix(data, dv, names if names else within, subject, missing=missing, duplicates=duplicates)
+    return pairwise_from_cells(cm, factor, by_names, adjust=adjust, level=level)

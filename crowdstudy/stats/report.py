@@ -13,8 +13,8 @@ import pandas as pd
 from crowdstudy.errors import InvalidInputError
 from crowdstudy.stats._data import CellMatrix
 
-__all__ = ["stars", "format_p", "apa_effect", "apa_summary", "descriptives_from_cells", "to_markdown",
-           "to_latex", "write_table"]
+__all__ = ["stars", "format_p", "apa_effect", "apa_summary", "contrast_text", "descriptives_from_cells",
+           "to_markdown", "to_latex", "write_table"]
 
 
 def stars(p: float) -> str:
@@ -72,6 +72,19 @@ def apa_summary(table: pd.DataFrame, *, alpha: float | None = None, effsize: str
             what = f"a significant {name} interaction" if kind == "interaction" else f"a significant main effect of {name}"
             out.append(f"{lead}{what}, {apa_effect(row, effsize)}.")
     return out
+
+
+def contrast_text(row: pd.Series | dict, level: float = 0.95) -> str:
+    """One pairwise contrast with its interval and effect sizes, e.g. ``Baseline - Ours =
+    -0.52, 95% CI [-0.83, -0.21] (tukey), t(11) = -3.70, p = .004, d_z = -1.07 [-1.78,
+    -0.33], g_av = -0.61 [-1.02, -0.19]`` (estimate and CI in dv units, d_z and g_av unitless)."""
+    pct = f"{100 * level:g}%"
+    text = (f"{row['contrast']} = {row['estimate']:.2f}, {pct} CI [{row['lower_CL']:.2f}, {row['upper_CL']:.2f}] "
+            f"({row['ci_adjust']}), t({_num(row['df'])}) = {row['t']:.2f}, {format_p(row['p_adj'])}")
+    if np.isfinite(row["dz"]):
+        text += (f", d_z = {row['dz']:.2f} [{row['dz_low']:.2f}, {row['dz_high']:.2f}], "
+                 f"g_av = {row['g_av']:.2f} [{row['g_av_low']:.2f}, {row['g_av_high']:.2f}]")
+    return text
 
 
 def descriptives_from_cells(cm: CellMatrix, value_name: str = "score") -> pd.DataFrame:

@@ -13,8 +13,9 @@ import numpy as np
 import pandas as pd
 
 from crowdstudy.errors import InvalidInputError
+from crowdstudy.stats._data import plain, row_label
 
-__all__ = ["validate_responses", "reverse_items", "item_reliability", "composite_scores", "cell_means",
+__all__ = ["validate_responses", "check_complete", "reverse_items", "item_reliability", "composite_scores", "cell_means",
            "FACTOR_COLUMNS", "REQUIRED_COLUMNS"]
 
 #: responses.csv column -> factor name used in the analysis tables.
@@ -30,11 +31,21 @@ def _design(design):
     return design
 
 
-def validate_responses(responses: pd.DataFrame, design=None) -> pd.DataFrame:
+def _where(out: pd.DataFrame, i: int) -> str:
+    """``row N (participant 'x')`` with N 1-based (row 1 = the first data row; in a CSV with
+    a header it is on line N + 1)."""
+    who = out["participant_id"].iloc[i] if "participant_id" in out.columns else None
+    return row_label(i) + (f" (participant {plain(who)})" if who is not None and not pd.isna(who) else "")
+
+
+def validate_responses(responses: pd.DataFrame, design=None, *, source: str = "responses") -> pd.DataFrame:
     """Check a responses table and return a clean copy (items as int, stage as int).
 
-    Raises InvalidInputError naming the missing column, or the column, row and participant
-    of a non-numeric / non-integer / out-of-range answer, or an unknown level.
+    Raises InvalidInputError, prefixed with ``source`` (the file name when read from one),
+    naming the missing column; or the column, 1-based row and participant of a
+    non-numeric / non-integer / out-of-range answer, an empty id, a stage number the
+    design does not define, a scenario that is not its stage's, or a density level,
+    viewpoint or method that is not one of that stage's levels in the design.
     """
     design = _design(design)
     if not isinstance(responses, pd.DataFrame):
@@ -42,38 +53,98 @@ def validate_responses(responses: pd.DataFrame, design=None) -> pd.DataFrame:
     items = [it.id for it in design.items]
     missing = [c for c in (*REQUIRED_COLUMNS, *items) if c not in responses.columns]
     if missing:
-        raise InvalidInputError(f"responses: missing column(s) {', '.join(map(repr, missing))}; "
-                                f"have {', '.join(map(str, responses.columns))}")
+        shown = ", ".join(map(str, responses.columns[:12])) + (" ..." if len(responses.columns) > 12 else "")
+        raise InvalidInputError(f"{source}: missing column(s) {', '.join(map(repr, missing))}; have {shown}")
     if len(responses) == 0:
-        raise InvalidInputError("responses: no rows")
+        raise InvalidInputError(f"{source}: no rows")
     out = responses.copy()
+    for col in ("participant_id", "scenario"):
+        if out[col].isna().any():
+            i = int(out[col].isna().to_numpy().nonzero()[0][0])
+            raise InvalidInputError(f"{source}: column {col!r} {row_label(i)} is empty")
     top = design.likert_points
     for col in items:
         raw = out[col]
         num = pd.to_numeric(raw, errors="coerce")
         bad = num.isna() | (num != np.round(num)) | (num < 1) | (num > top)
         if bad.any():
-            i = bad.to_numpy().nonzero()[0][0]
-            who = out["participant_id"].iloc[i]
-            raise InvalidInputError(f"responses: column {col!r} row {i} (participant {who!r}) holds "
-                                    f"{raw.iloc[i]!r}; expected an integer 1..{top}")
+            i = int(bad.to_numpy().nonzero()[0][0])
+            raise InvalidInputError(f"{source}: column {col!r} {_where(out, i)} holds {plain(raw.iloc[i])}; "
+                                    f"expected an integer 1..{top}")
         out[col] = num.astype(int)
     stage = pd.to_numeric(out["stage"], errors="coerce")
-    if stage.isna().any():
-        i = stage.isna().to_numpy().nonzero()[0][0]
-        raise InvalidInputError(f"responses: column 'stage' row {i} holds {out['stage'].iloc[i]!r}; expected 1, 2 ...")
+    bad = stage.isna() | (stage != np.round(stage))
+    if bad.any():
+        i = int(bad.to_numpy().nonzero()[0][0])
+        raise InvalidInputError(f"{source}: column 'stage' {_where(out, i)} holds {plain(out['stage'].iloc[i])}; "
+                                f"expected a stage number ({', '.join(str(st.number) for st in design.stages)})")
     out["stage"] = stage.astype(int)
-    for col, known in (("density_level", list(design.densities)), ("viewpoint", list(design.viewpoints)),
-                       ("method", list(design.methods))):
-        unknown = sorted(set(out[col].astype(str)) - set(known))
-        if unknown:
-            raise InvalidInputError(f"responses: column {col!r} has unknown level {unknown[0]!r}; "
-                                    f"the design ({design.source}) defines {', '.join(known)}")
-    for col in ("participant_id", "scenario"):
-        if out[col].isna().any():
-            i = out[col].isna().to_numpy().nonzero()[0][0]
-            raise InvalidInputError(f"responses: column {col!r} row {i} is empty")
+    stages = {st.number: st for st in design.stages}
+    unknown = ~out["stage"].isin(list(stages))
+    if unknown.any():
+        i = int(unknown.to_numpy().nonzero()[0][0])
+        raise InvalidInputError(f"{source}: column 'stage' {_where(out, i)} holds stage {int(out['stage'].iloc[i])}, "
+                                f"which the design ({design.source}) does not define; it defines "
+                                f"{', '.join(f'{st.number} ({st.scenario})' for st in design.stages)}")
+    for number, st in stages.items():
+        rows = (out["stage"] == number).to_numpy()
+        if not rows.any():
+            continue
+        sub = out[rows]
+        for col, known, what in (("scenario", [st.scenario], "scenario"),
+                                 ("density_level", list(design.densities), "density level"),
+                                 ("viewpoint", list(st.viewpoints), "viewpoint"),
+                                 ("method", list(design.methods), "method")):
+            off = ~sub[col].astype(str).isin(known)
+            if off.any():
+                j = int(off.to_numpy().nonzero()[0][0])
+                i = int(rows.nonzero()[0][j])
+                raise InvalidInputError(f"{source}: column {col!r} {_where(out, i)} has unknown level "
+                                        f"{plain(sub[col].iloc[j])}: stage {number} ({st.scenario}) of the design "
+                                        f"({design.source}) has the {what}(s) {', '.join(known)}")
     return out
+
+
+def check_complete(data: pd.DataFrame, design=None, *, source: str = "responses") -> None:
+    """What ``analyze`` needs beyond :func:`validate_responses` (whose output ``data`` is):
+
+    - every stage present has rows for every density level, viewpoint and method the
+      design gives it (a missing level would silently shrink the ANOVA's design);
+    - each participant answered each stimulus (stage x density x viewpoint x method) at
+      most once (the study shows each video once per participant; two answers would be
+      averaged silently).
+
+    Raises InvalidInputError naming the stage and missing level, or the participant, the
+    cell and the 1-based rows of a repeated answer (counted by the frame's integer index
+    when it has one, so rows of a filtered file keep their numbers).
+    """
+    design = _design(design)
+    for st in design.stages:
+        sub = data[data["stage"] == st.number]
+        if not len(sub):
+            continue
+        for col, known, what in (("density_level", list(design.densities), "density level"),
+                                 ("viewpoint", list(st.viewpoints), "viewpoint"),
+                                 ("method", list(design.methods), "method")):
+            absent = [lv for lv in known if lv not in set(sub[col].astype(str))]
+            if absent:
+                raise InvalidInputError(f"{source}: stage {st.number} ({st.scenario}) has no rows for the {what} "
+                                        f"{absent[0]!r} (the design {design.source} lists {', '.join(known)}); "
+                                        f"analyse a design without it or export the missing answers")
+    keys = ["participant_id", "stage", "density_level", "viewpoint", "method"]
+    dup = data.duplicated(keys, keep=False).to_numpy()
+    if dup.any():
+        first = int(dup.nonzero()[0][0])
+        row = data.iloc[first]
+        same = (data[keys] == row[keys]).all(axis=1).to_numpy().nonzero()[0]
+        if pd.api.types.is_integer_dtype(data.index):        # a filtered frame keeps the file's row numbers
+            same = data.index.to_numpy()[same]
+        n_cells = data[dup].groupby(keys).ngroups
+        raise InvalidInputError(
+            f"{source}: participant {plain(row['participant_id'])} answered stage {int(row['stage'])}, "
+            f"density_level {plain(row['density_level'])}, viewpoint {plain(row['viewpoint'])}, "
+            f"method {plain(row['method'])} {len(same)} times (rows {', '.join(str(i + 1) for i in same)}); each "
+            f"stimulus is shown once per participant ({n_cells} participant x stimulus combination(s) repeated)")
 
 
 def reverse_items(responses: pd.DataFrame, design=None) -> pd.DataFrame:

@@ -10,10 +10,15 @@ For one participant ``p`` and one stimulus, the latent score of composite ``c`` 
          - density_penalty * (density - reference_density)
          + [method == treated_method] * (effect_c(density) + participant_method_offset)
          + participant_offset[c]
+         + participant_density_slope * (density - reference_density)
+         + participant_viewpoint_offset[viewpoint]
     effect_c(d) = method_effect * composite_effects[c]
                   * max(0, 1 + density_slope * (reference_density - d))
 
-so with ``density_slope > 0`` the Method effect is larger at low density. Each item of the
+so with ``density_slope > 0`` the Method effect is larger at low density. The participant's
+random Density slope (SD ``participant_density_sd``) and random viewpoint offsets (SD
+``participant_viewpoint_sd``) make the covariance of the repeated measures non-spherical
+(they default to 0; when 0 they draw nothing, so older seeds give the same answers). Each item of the
 composite gets ``mu + N(0, noise_sd)`` independently, rounded to the nearest integer and
 clipped to ``1 .. likert_points``.
 
@@ -66,10 +71,14 @@ class ResponseModel:
     noise_sd: SD of the Gaussian noise of each item answer (points).
     participant_sd: SD of each participant's per-composite random offset (points).
     participant_method_sd: SD of each participant's random deviation of the Method effect.
+    participant_density_sd: SD of each participant's random slope over density (points per
+        character/m^2, shared by the composites): a random Density slope.
+    participant_viewpoint_sd: SD of each participant's random offset per viewpoint (points).
     scenario_offsets / viewpoint_offsets: additive shifts by scenario / viewpoint id.
     treated_method: the method that receives the effect ("Ours").
     likert_points: the scale's number of points (answers are clipped to 1..points).
     composites: composite -> item ids; reversed_items: items stored raw as ``points+1-Q'``.
+    viewpoint_ids: the viewpoints that get a random offset per participant.
     """
 
     method_effect: float = 1.0
@@ -81,20 +90,25 @@ class ResponseModel:
     noise_sd: float = 0.9
     participant_sd: float = 0.5
     participant_method_sd: float = 0.3
+    participant_density_sd: float = 0.0
+    participant_viewpoint_sd: float = 0.0
     scenario_offsets: Mapping[str, float] = dataclasses.field(default_factory=lambda: {"corridor": -0.2})
     viewpoint_offsets: Mapping[str, float] = dataclasses.field(default_factory=dict)
     treated_method: str = "Ours"
     likert_points: int = 6
     composites: Mapping[str, tuple[str, ...]] = dataclasses.field(default_factory=lambda: dict(_PAPER_COMPOSITES))
     reversed_items: tuple[str, ...] = _PAPER_REVERSED
+    viewpoint_ids: tuple[str, ...] = ("V1", "V2", "V3", "V4")
 
     def __post_init__(self):
         for name in ("method_effect", "density_slope", "reference_density", "density_penalty", "base_score",
-                     "noise_sd", "participant_sd", "participant_method_sd"):
+                     "noise_sd", "participant_sd", "participant_method_sd", "participant_density_sd",
+                     "participant_viewpoint_sd"):
             value = getattr(self, name)
             if not isinstance(value, (int, float)) or isinstance(value, bool) or not np.isfinite(value):
                 raise InvalidInputError(f"ResponseModel.{name} must be a finite number, got {value!r}")
-        for name in ("noise_sd", "participant_sd", "participant_method_sd"):
+        for name in ("noise_sd", "participant_sd", "participant_method_sd", "participant_density_sd",
+                     "participant_viewpoint_sd"):
             if getattr(self, name) < 0:
                 raise InvalidInputError(f"ResponseModel.{name} must be >= 0, got {getattr(self, name)!r}")
         if not isinstance(self.likert_points, int) or self.likert_points < 2:
@@ -110,16 +124,25 @@ class ResponseModel:
         kwargs.setdefault("composites", {k: tuple(v) for k, v in design.composites.items()})
         kwargs.setdefault("reversed_items", tuple(it.id for it in design.items if it.reverse))
         kwargs.setdefault("likert_points", int(design.likert_points))
+        kwargs.setdefault("viewpoint_ids", tuple(design.viewpoints))
         if "composite_effects" not in kwargs:
             defaults = _default_composite_effects()
             kwargs["composite_effects"] = {c: defaults.get(c, 1.0) for c in kwargs["composites"]}
         return cls(**kwargs)
 
     def draw_participant(self, rng: np.random.Generator) -> dict[str, float]:
-        """One participant's random offsets: ``{composite: offset, ..., "method": offset}``."""
+        """One participant's random offsets: ``{composite: offset, ..., "method": offset}``,
+        plus ``"density_slope"`` and ``"viewpoint:<id>"`` entries when their SDs are > 0
+        (drawn after the others, so a zero SD leaves the random stream unchanged)."""
         rng = _as_rng(rng)
         offsets = {c: float(rng.normal(0.0, self.participant_sd)) for c in self.composites}
         offsets["method"] = float(rng.normal(0.0, self.participant_method_sd))
+        if self.participant_density_sd > 0:
+            offsets["density_slope"] = float(rng.normal(0.0, self.participant_density_sd))
+        if self.participant_viewpoint_sd > 0:
+            views = sorted(set(self.viewpoint_offsets) | set(self.viewpoint_ids))
+            for v in views:
+                offsets[f"viewpoint:{v}"] = float(rng.normal(0.0, self.participant_viewpoint_sd))
         return offsets
 
     def method_effect_at(self, composite: str, density: float) -> float:
@@ -143,6 +166,8 @@ class ResponseModel:
                   - self.density_penalty * (density - self.reference_density))
         if isinstance(participant_offset, Mapping):
             p_method = float(participant_offset.get("method", 0.0))
+            common += (float(participant_offset.get("density_slope", 0.0)) * (density - self.reference_density)
+                       + float(participant_offset.get(f"viewpoint:{stimulus.get('viewpoint')}", 0.0)))
             p_comp = {c: float(participant_offset.get(c, 0.0)) for c in self.composites}
         else:
             p_method = 0.0

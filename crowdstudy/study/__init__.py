@@ -7,34 +7,49 @@ Running a study
     crowdstudy serve --stimuli stimuli/videos --db sqlite:///study.db \\
         --completion-code C1A2B3 --redirect-url "https://app.prolific.com/submissions/complete?cc=C1A2B3"
 
-prints the participant URL (``/?PROLIFIC_PID=...`` or ``/?participant=...``; without an id
-the page asks for one) and the admin token (set ``CROWDSTUDY_ADMIN_TOKEN`` to keep it
-fixed and out of the process list). ``/admin?token=...`` shows progress;
+prints the participant URL (``/?PROLIFIC_PID=...&STUDY_ID=...&SESSION_ID=...`` or
+``/?participant=...``; without an id the page asks for one) and the admin token (set
+``CROWDSTUDY_ADMIN_TOKEN`` to keep it fixed and out of the process list). ``/admin`` shows
+progress after a login with that token (a cookie; scripts send ``Authorization: Bearer``);
 ``crowdstudy export --db sqlite:///study.db --out responses.csv --demographics demographics.csv``
-writes the analysis input. The server binds 127.0.0.1; for an online study run it behind
-an HTTPS reverse proxy (``--host`` only when the proxy is on another machine), one
-process per database. ``crowdstudy simulate-participants --url ... --admin-token ... -n 10``
-runs bots through the same API (demo, load test, checking the analysis end to end).
+writes the analysis input and ``participants.csv`` (status, exclusion flags);
+``crowdstudy participants list|withdraw|audit`` manages participants. The server binds
+127.0.0.1; for an online study run it behind an HTTPS reverse proxy. ``--workers N`` runs N
+processes; several servers may share one PostgreSQL database (``--db postgresql+psycopg://...``),
+and ``--media-dir/--media-url`` hand the videos to nginx or a CDN.
+``crowdstudy simulate-participants --url ... --admin-token ... -n 10`` runs bots through the
+same API (demo, load test, checking the analysis end to end).
 
 Blinding
 --------
 Participants never learn a clip's condition: stimulus ids such as ``S1-D3-V2-Ours`` (density,
-viewpoint, method) appear in nothing the browser receives. The participant API, the page's
-data and the video URLs (``/videos/<participant_id>/<token>``) name each trial by its index,
-its stage and an opaque per-participant token, an HMAC of (the study's random secret stored
-in the database, participant id, stimulus id) (:mod:`crowdstudy.study.blinding`). An answer
-carries ``trial_index`` and ``token``; the server checks the token against that participant's
-schedule and stores the real stimulus id, so ``responses.csv`` keeps its schema. The token ->
-stimulus mapping is admin-only (``GET /admin/participants/<id>/schedule``, what the simulated
-participants answer from, and the exports).
+viewpoint, method) appear in nothing the browser receives. The participant API names each
+trial by its index, its stage and an opaque per-participant token, an HMAC of (the study's
+random secret stored in the database, participant id, stimulus id)
+(:mod:`crowdstudy.study.blinding`); videos have opaque per-deployment names and no file
+dates (:mod:`crowdstudy.study.media`); the trial order is shuffled with the same secret
+(:mod:`crowdstudy.study.schedule`), and the scoring metadata (reversed items, composites) is
+admin-only. An answer carries ``trial_index`` and ``token``; the server checks the token
+against that participant's schedule and stores the real stimulus id, so ``responses.csv``
+keeps its schema. The token -> stimulus mapping is admin-only
+(``GET /admin/participants/<id>/schedule``, what the simulated participants answer from, and
+the exports).
 
 Modules (import them directly; heavy dependencies load only there):
 
 - :mod:`crowdstudy.study.schedule`: per-participant randomised trial order.
 - :mod:`crowdstudy.study.blinding`: the opaque per-participant trial tokens.
 - :mod:`crowdstudy.study.stimulus_set`: the stimulus manifest the server reads.
-- :mod:`crowdstudy.study.storage`: SQLAlchemy Core tables (SQLite with WAL, group commit).
-- :mod:`crowdstudy.study.app`: the Starlette ASGI application (UI, videos, JSON API, admin).
+- :mod:`crowdstudy.study.storage`: SQLAlchemy Core tables (SQLite with WAL and group commit, PostgreSQL).
+- :mod:`crowdstudy.study.group_commit`: SQLite's one writer thread, one fsync per batch of writes.
+- :mod:`crowdstudy.study.app`: the Starlette ASGI application (routes: UI, videos, JSON API, admin).
+- :mod:`crowdstudy.study.session`: the participant API's logic (no per-process state).
+- :mod:`crowdstudy.study.webio`: bodies (JSON only, streamed cap), security headers, answer timing.
+- :mod:`crowdstudy.study.admin`: admin authentication (header or cookie, never the URL).
+- :mod:`crowdstudy.study.media`: videos under opaque names, published for a static server.
+- :mod:`crowdstudy.study.quality`: screen, fullscreen, attention checks; exclusion rules.
+- :mod:`crowdstudy.study.roster`: participant status, listing, withdrawal with an audit line.
+- :mod:`crowdstudy.study.pg_local`: a throwaway PostgreSQL cluster (tests, benchmark).
 - :mod:`crowdstudy.study.server`: a StudyConfig from the files (design, stimuli, consent, db).
 - :mod:`crowdstudy.study.consent`: the consent Markdown file as safe HTML.
 - :mod:`crowdstudy.study.export`: responses.csv / demographics.csv from a database.

@@ -6,10 +6,11 @@ trial of its schedule in order with answers drawn from
 (asyncio, one keep-alive connection each); every answer's round-trip latency is recorded, so the same code serves
 the demo, load tests and end-to-end checks of the server.
 
-Participants are blinded: their API names trials only by opaque tokens. A bot needs each
-trial's condition (density, method, ...) for the response model, so it reads its schedule
-from the admin endpoint ``GET /admin/participants/<id>/schedule`` with the admin token, a
-route real participants do not have; it answers through the participant API like a
+Participants are blinded: their API names trials only by opaque tokens and carries no
+scoring metadata. A bot needs each trial's condition (density, method, ...) and the items'
+reversal for the response model, so it reads its schedule from the admin endpoint
+``GET /admin/participants/<id>/schedule`` and the scoring from ``GET /admin/study.json``
+with the admin token, routes real participants do not have; it answers through the participant API like a
 browser does (``trial_index`` + ``token``).
 """
 
@@ -119,6 +120,8 @@ def _bot_rng(seed: int, index: int) -> np.random.Generator:
 
 
 def _model(study: dict, method_effect: float, noise_sd: float, **kwargs):
+    """The response model of ``study`` (the admin API's scoring metadata: items with their
+    reversal, composites, points; the participants' /api/study carries none of it)."""
     from crowdstudy.stats.synthetic import ResponseModel
     composites = {k: tuple(v) for k, v in study["composites"].items()}
     kwargs.setdefault("composite_effects", {c: e for c, e in ResponseModel().composite_effects.items()
@@ -145,7 +148,7 @@ async def _admin_schedule(conn: _Connection, pid: str, admin_token: str) -> dict
 
 
 async def _one_bot(client: _Connection, pid: str, model, rng: np.random.Generator, think_time: float, latencies: list,
-                   admin_token: str) -> int:
+                   admin_token: str, max_answers: int | None = None) -> int:
     reg = await _post(client, "/api/participants", None, {"participant_id": pid})
     secret, state = reg["secret"], reg["state"]
     conditions = await _admin_schedule(client, pid, admin_token)
@@ -160,7 +163,8 @@ async def _one_bot(client: _Connection, pid: str, model, rng: np.random.Generato
         ans = model.answer({"density": 4.44, "method": "practice", "scenario": "concert"}, offsets, rng)
         await _post(client, base + "/practice", secret, {"answers": ans, "rt_ms": 5000.0})
     n = 0
-    for trial in state["trials"][state["next_trial_index"]:]:
+    todo = state["trials"][state["next_trial_index"]:]
+    for trial in todo[:max_answers]:
         if think_time > 0:
             await asyncio.sleep(float(rng.uniform(0.0, 2.0 * think_time)))
         full = conditions.get(trial["trial_index"])
@@ -168,24 +172,29 @@ async def _one_bot(client: _Connection, pid: str, model, rng: np.random.Generato
             raise RuntimeError(f"trial {trial['trial_index']}: the admin schedule does not match the participant's")
         answers = model.answer(full, offsets, rng)
         rt = float(np.round(2000.0 + rng.lognormal(np.log(8000.0), 0.4), 1))
+        body = {"trial_index": trial["trial_index"], "token": trial["token"], "answers": answers, "rt_ms": rt,
+                "video_plays": 1, "first_play_ms": 20000.0, "hidden_count": 0, "hidden_ms": 0.0, "fullscreen_exits": 0}
+        if full.get("check_value") is not None:
+            body["check"] = int(full["check_value"])  # an attentive participant follows the instruction
         t0 = time.perf_counter()
-        await _post(client, base + "/responses", secret,
-                    {"trial_index": trial["trial_index"], "token": trial["token"], "answers": answers, "rt_ms": rt})
+        await _post(client, base + "/responses", secret, body)
         latencies.append((time.perf_counter() - t0) * 1000.0)
         n += 1
-    await _post(client, base + "/complete", secret, {})
+    if max_answers is None or max_answers >= len(todo):
+        await _post(client, base + "/complete", secret, {})
     return n
 
 
 async def simulate_participants(url: str, n: int, *, admin_token: str, method_effect: float = 1.0,
                                 noise_sd: float = 0.9, seed: int = 1, concurrency: int = 10, think_time: float = 0.0,
-                                prefix: str = "bot", timeout: float = 60.0, model_kwargs: dict | None = None
-                                ) -> SimulationResult:
+                                prefix: str = "bot", timeout: float = 60.0, model_kwargs: dict | None = None,
+                                max_answers: int | None = None) -> SimulationResult:
     """Run ``n`` bots against the server at ``url``, at most ``concurrency`` at once.
 
     admin_token: the server's admin token (the bots read their trials' conditions from the
     admin API; participants are blinded). think_time: mean pause before each answer (s;
-    uniform 0..2x), 0 = as fast as possible. Participant ids are
+    uniform 0..2x), 0 = as fast as possible. max_answers: stop each bot after that many answers
+    (without completing; benchmarks), None = the whole session. Participant ids are
     ``{prefix}-{seed}-{index:05d}``; the answers depend only on ``seed``.
     """
     for name, value in (("n", n), ("concurrency", concurrency), ("seed", seed)):
@@ -214,12 +223,15 @@ async def simulate_participants(url: str, n: int, *, admin_token: str, method_ef
     try:
         status, data = await probe.request("GET", "/admin/metrics.json", None, None,
                                            headers={"Authorization": f"Bearer {admin_token}"})
+        if status == 200:
+            status, data = await probe.request("GET", "/admin/study.json", None, None,
+                                               headers={"Authorization": f"Bearer {admin_token}"})
     finally:
         await probe.close()
     if status != 200:
         raise InvalidInputError(f"--admin-token: the server at {url} refused it ({status}: "
                                 f"{str(data.get('error', ''))[:100]})")
-    model = _model(study, method_effect, noise_sd, **(model_kwargs or {}))
+    model = _model(data, method_effect, noise_sd, **(model_kwargs or {}))
     gate = asyncio.Semaphore(concurrency)
     latencies: list[float] = []
     done: list[str] = []
@@ -232,7 +244,7 @@ async def simulate_participants(url: str, n: int, *, admin_token: str, method_ef
             conn = _Connection(host, port, timeout)
             try:
                 counts.append(await _one_bot(conn, pid, model, _bot_rng(seed, i), think_time, latencies,
-                                             admin_token))
+                                             admin_token, max_answers))
                 done.append(pid)
             except (RuntimeError, ConnectionError, OSError, asyncio.TimeoutError, ValueError) as exc:
                 errors.append(f"{pid}: {type(exc).__name__}: {exc}")

@@ -1,4 +1,4 @@
-"""``crowdstudy export``: responses.csv (and demographics.csv) from the study database."""
+"""``crowdstudy export``: responses.csv, participants.csv (and demographics.csv) from the study database."""
 
 from __future__ import annotations
 
@@ -11,6 +11,10 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--db", required=True, metavar="URL", help="SQLAlchemy URL of the study database")
     parser.add_argument("--out", required=True, metavar="CSV", help="responses CSV to write")
     parser.add_argument("--demographics", metavar="CSV", help="also write the demographics CSV here")
+    parser.add_argument("--participants", metavar="CSV",
+                        help="participants CSV with the exclusion flags (default: participants.csv beside --out)")
+    parser.add_argument("--online", metavar="TOML",
+                        help="the exclusion rules' file (default: the toolkit's crowdstudy/study/online.toml)")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -20,7 +24,9 @@ def run(args: argparse.Namespace) -> int:
     check_output_path(args.out, "--out")
     if args.demographics:
         check_output_path(args.demographics, "--demographics")
-    summary = export_study(args.db, args.out, args.demographics)
-    print(f"crowdstudy export: {summary['responses']} answers of {summary['participants']} participants -> "
-          f"{', '.join(summary['files'])}")
+    if args.participants:
+        check_output_path(args.participants, "--participants")
+    summary = export_study(args.db, args.out, args.demographics, participants=args.participants, online=args.online)
+    print(f"crowdstudy export: {summary['responses']} answers of {summary['participants']} participants "
+          f"({summary['excluded']} flagged for exclusion) -> {', '.join(summary['files'])}")
     return 0

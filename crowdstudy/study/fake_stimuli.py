@@ -22,11 +22,11 @@ _PATTERNS = ("testsrc", "testsrc2", "smptebars", "rgbtestsrc")
 
 
 def _encode(path: Path, pattern: str, width: int, height: int, seconds: float, fps: int) -> None:
-    from crowdstudy.render.video import find_ffmpeg
+    from crowdstudy.render.video import BT709_SCALE, BT709_TAGS, find_ffmpeg
 
     cmd = [find_ffmpeg(), "-loglevel", "error", "-y", "-f", "lavfi",
-           "-i", f"{pattern}=size={width}x{height}:rate={fps}:duration={seconds}",
-           "-c:v", "libx264", "-pix_fmt", "yuv420p", "-preset", "veryfast", "-movflags", "+faststart",
+           "-i", f"{pattern}=size={width}x{height}:rate={fps}:duration={seconds}", "-vf", BT709_SCALE,
+           "-c:v", "libx264", "-pix_fmt", "yuv420p", *BT709_TAGS, "-preset", "veryfast", "-movflags", "+faststart",
            "-bitexact", "-map_metadata", "-1", str(path)]
     subprocess.run(cmd, check=True, capture_output=True, timeout=60)
 

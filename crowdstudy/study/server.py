@@ -38,17 +38,22 @@ def _design_path(stimuli_dir: Path, design) -> Path:
 def build_config(stimuli: str | Path, *, design: str | Path | None = None, db: str | None = None,
                  consent: str | Path | None = None, practice: str | None = None, admin_token: str | None = None,
                  completion_code: str | None = None, redirect_url: str | None = None,
-                 ui_dir: str | Path | None = None):
+                 ui_dir: str | Path | None = None, online: str | Path | None = None,
+                 media_dir: str | Path | None = None, media_url: str | None = None):
     """A :class:`~crowdstudy.study.app.StudyConfig` from files.
 
     design: the study TOML (default: the one recorded in the manifest, else stimuli/study.toml);
     db: SQLAlchemy URL (default ``sqlite:///study.db`` in the working directory);
     consent: Markdown file (default: ``consent.md`` beside the design, in the stimulus
     folder, or the toolkit's ``crowdstudy/study/consent.md``); admin_token: default from the
-    ``CROWDSTUDY_ADMIN_TOKEN`` environment variable, else random.
+    ``CROWDSTUDY_ADMIN_TOKEN`` environment variable, else random; online: the data-quality
+    TOML (default ``online.toml`` beside the design, else the toolkit's); media_dir /
+    media_url: publish the videos there under opaque names / the URL prefix they are served
+    from (:mod:`crowdstudy.study.media`).
     """
     from crowdstudy.study.app import StudyConfig
     from crowdstudy.study.consent import find_consent_file, load_consent_html
+    from crowdstudy.study.quality import load_online_config
     from crowdstudy.study.stimulus_set import load_stimulus_set
     from crowdstudy.study.storage import StudyStore
 
@@ -64,7 +69,15 @@ def build_config(stimuli: str | Path, *, design: str | Path | None = None, db: s
         raise InvalidInputError(f"--redirect-url must be an http(s) URL, got {redirect_url!r}")
     if completion_code is not None and not (0 < len(completion_code) <= 128 and completion_code.isprintable()):
         raise InvalidInputError("--completion-code must be 1-128 printable characters")
+    if media_url is not None and not (media_url.startswith("/") and not media_url.startswith("//")
+                                      or media_url.startswith(("https://", "http://"))):
+        raise InvalidInputError(f"--media-url must be a path such as /media or an http(s) URL, got {media_url!r}")
+    if online is None and (Path(design_obj.source).parent / "online.toml").is_file():
+        online = Path(design_obj.source).parent / "online.toml"
+    online_cfg = load_online_config(online)
+    consent_html = load_consent_html(consent_file)
     store = StudyStore(db or "sqlite:///study.db")
-    return StudyConfig(design=design_obj, stimuli=stim, store=store, consent_html=load_consent_html(consent_file),
+    return StudyConfig(design=design_obj, stimuli=stim, store=store, consent_html=consent_html,
                        admin_token=token, ui_dir=Path(ui_dir) if ui_dir else default_ui_dir(),
-                       completion_code=completion_code, redirect_url=redirect_url)
+                       completion_code=completion_code, redirect_url=redirect_url, online=online_cfg,
+                       media_dir=Path(media_dir) if media_dir is not None else None, media_url=media_url)

@@ -13,13 +13,24 @@ Tables
 ------
 - ``stimuli``: the study's stimulus metadata (so the export needs only the database).
 - ``participants``: one row per participant: secret hash, consent / demographics /
-  practice / completion timestamps, age, gender, completion code.
-- ``schedule``: the participant's trial order, key (participant_id, trial_index).
+  practice / completion / screen-out / withdrawal timestamps, age, gender, completion code,
+  the crowdsourcing platform's ids (Prolific ``PROLIFIC_PID``, ``STUDY_ID``, ``SESSION_ID``).
+- ``schedule``: the participant's trial order, key (participant_id, trial_index);
+  ``check_value`` is set on the trials that carry an instructed-response attention check
+  (the scale point the check asks for).
 - ``responses``: one row per answer, UNIQUE (participant_id, trial_index); the practice
   answer is stored with ``practice = true`` and ``trial_index = -1``. Answers store the
-  real stimulus id (the participant only ever sees its token, :mod:`crowdstudy.study.blinding`).
+  real stimulus id (the participant only ever sees its token, :mod:`crowdstudy.study.blinding`)
+  and the trial's data-quality record (video plays, time to the first complete play, tab
+  switches and hidden time, fullscreen exits, the attention check's answer).
+- ``answer_conflicts``: answers refused because their trial already had a different one
+  (a second tab): kept for the record, never in the analysis.
+- ``audit_log``: one line per administrative action (withdrawal), with no answer data.
 - ``settings``: key/value pairs of the study; ``blinding_secret`` is the random key of the
-  participants' trial tokens (created once, so tokens survive server restarts).
+  participants' trial tokens, schedules and media names (created once, so they survive
+  server restarts and agree between server processes).
+
+Databases created by an earlier version gain the new (nullable) columns at start-up.
 
 Timestamps are ISO 8601 strings in UTC.
 """
@@ -28,15 +39,21 @@ from __future__ import annotations
 
 import datetime as _dt
 import math
-import threading
 from typing import Iterable, Mapping, Sequence
 
 from crowdstudy.errors import InvalidInputError
+from crowdstudy.study.group_commit import GroupCommitWriter
 
-__all__ = ["StudyStore", "ITEM_IDS", "PRACTICE_TRIAL_INDEX", "utc_now"]
+__all__ = ["StudyStore", "ITEM_IDS", "PRACTICE_TRIAL_INDEX", "QUALITY_FIELDS", "utc_now"]
 
 ITEM_IDS = ("Q1", "Q2", "Q3", "Q4", "Q5", "Q6")
 PRACTICE_TRIAL_INDEX = -1
+#: Per-answer data-quality fields (nullable): complete plays of the video before the answer;
+#: ms from the trial's display to the first complete play; times the page was hidden (tab
+#: switch, minimised window) during the trial and ms hidden; exits from fullscreen during the
+#: trial; the answer given to the trial's attention check (None: the trial had none).
+_SCHEMA_LOCK = 7_250_315  # PostgreSQL advisory lock key of the schema set-up
+QUALITY_FIELDS = ("video_plays", "first_play_ms", "hidden_count", "hidden_ms", "fullscreen_exits", "check_answer")
 
 
 def utc_now() -> str:
@@ -71,6 +88,12 @@ def _tables(metadata):
         sa.Column("practice_at", sa.String(40), nullable=True),
         sa.Column("completed_at", sa.String(40), nullable=True),
         sa.Column("completion_code", sa.String(128), nullable=True),
+        sa.Column("screened_out_at", sa.String(40), nullable=True),
+        sa.Column("screen_reason", sa.String(256), nullable=True),
+        sa.Column("withdrawn_at", sa.String(40), nullable=True),
+        sa.Column("prolific_pid", sa.String(64), nullable=True),
+        sa.Column("prolific_study_id", sa.String(64), nullable=True),
+        sa.Column("prolific_session_id", sa.String(64), nullable=True),
     )
     schedule = sa.Table(
         "schedule", metadata,
@@ -78,6 +101,7 @@ def _tables(metadata):
         sa.Column("trial_index", sa.Integer, primary_key=True),
         sa.Column("stage", sa.Integer, nullable=False),
         sa.Column("stimulus_id", sa.String(64), sa.ForeignKey("stimuli.stimulus_id"), nullable=False),
+        sa.Column("check_value", sa.SmallInteger, nullable=True),
     )
     responses = sa.Table(
         "responses", metadata,
@@ -91,95 +115,55 @@ def _tables(metadata):
         sa.Column("rt_ms", sa.Float, nullable=False),
         sa.Column("shown_at", sa.String(40), nullable=False),
         sa.Column("answered_at", sa.String(40), nullable=False),
+        sa.Column("video_plays", sa.Integer, nullable=True),
+        sa.Column("first_play_ms", sa.Float, nullable=True),
+        sa.Column("hidden_count", sa.Integer, nullable=True),
+        sa.Column("hidden_ms", sa.Float, nullable=True),
+        sa.Column("fullscreen_exits", sa.Integer, nullable=True),
+        sa.Column("check_answer", sa.SmallInteger, nullable=True),
         sa.UniqueConstraint("participant_id", "trial_index", name="uq_response_participant_trial"),
+    )
+    conflicts = sa.Table(
+        "answer_conflicts", metadata,
+        sa.Column("id", sa.Integer, primary_key=True, autoincrement=True),
+        sa.Column("participant_id", sa.String(64), nullable=False),
+        sa.Column("trial_index", sa.Integer, nullable=False),
+        sa.Column("stimulus_id", sa.String(64), nullable=False),
+        *[sa.Column(q, sa.SmallInteger, nullable=False) for q in ITEM_IDS],
+        sa.Column("rt_ms", sa.Float, nullable=False),
+        sa.Column("received_at", sa.String(40), nullable=False),
+    )
+    audit = sa.Table(
+        "audit_log", metadata,
+        sa.Column("id", sa.Integer, primary_key=True, autoincrement=True),
+        sa.Column("at", sa.String(40), nullable=False),
+        sa.Column("action", sa.String(32), nullable=False),
+        sa.Column("participant_id", sa.String(64), nullable=False),
+        sa.Column("detail", sa.String(512), nullable=False),
     )
     settings = sa.Table(
         "settings", metadata,
         sa.Column("key", sa.String(64), primary_key=True),
         sa.Column("value", sa.String(256), nullable=False),
     )
-    return stimuli, participants, schedule, responses, settings
+    return stimuli, participants, schedule, responses, conflicts, audit, settings
 
 
-class _GroupCommitWriter:
-    """One writer thread: write jobs that arrive together share one transaction and so one
-    fsync; each caller returns only after the commit that contains its job. If a job
-    raises, the batch rolls back and its jobs are re-run one transaction each, so one bad
-    job never loses another's write."""
-
-    _STOP = object()
-
-    def __init__(self, engine, max_batch: int = 256):
-        import queue
-        self.engine, self.max_batch = engine, max_batch
-        self.queue: "queue.SimpleQueue" = queue.SimpleQueue()
-        self.thread = threading.Thread(target=self._loop, name="crowdstudy-db-writer", daemon=True)
-        self.thread.start()
-
-    def submit(self, job):
-        """Run ``job(connection)`` in a committed transaction; return its result (or raise)."""
-        import concurrent.futures
-        if not self.thread.is_alive():
-            raise RuntimeError("the database writer is closed")
-        fut: concurrent.futures.Future = concurrent.futures.Future()
-        self.queue.put((job, fut))
-        return fut.result()
-
-    def close(self) -> None:
-        if self.thread.is_alive():
-            self.queue.put(self._STOP)
-            self.thread.join(timeout=10)
-
-    def _run_one(self, item) -> None:
-        job, fut = item
-        try:
-            with self.engine.begin() as conn:
-                res = job(conn)
-        except BaseException as exc:  # noqa: BLE001 - handed to the waiting caller
-            fut.set_exception(exc)
-        else:
-            fut.set_result(res)
-
-    def _run_batch(self, batch) -> None:
-        if len(batch) == 1:
-            self._run_one(batch[0])
-            return
-        results = []
-        try:
-            with self.engine.begin() as conn:
-                for job, _fut in batch:
-                    results.append(job(conn))
-        except Exception:  # noqa: BLE001 - isolate the failing job
-            for item in batch:
-                self._run_one(item)
-            return
-        for (_job, fut), res in zip(batch, results):
-            fut.set_result(res)
-
-    def _loop(self) -> None:
-        import queue
-        while True:
-            first = self.queue.get()
-            if first is self._STOP:
-                return
-            batch, stop = [first], False
-            while len(batch) < self.max_batch:
-                try:
-                    item = self.queue.get_nowait()
-                except queue.Empty:
-                    break
-                if item is self._STOP:
-                    stop = True
-                    break
-                batch.append(item)
-            try:
-                self._run_batch(batch)
-            except BaseException as exc:  # noqa: BLE001 - never leave a caller waiting
-                for _job, fut in batch:
-                    if not fut.done():
-                        fut.set_exception(exc)
-            if stop:
-                return
+def _add_missing_columns(conn, metadata) -> None:
+    """ALTER TABLE ... ADD COLUMN for the nullable columns a database of an earlier version
+    lacks (the column definitions are this module's constants, never request values)."""
+    import sqlalchemy as sa
+    from sqlalchemy.schema import CreateColumn
+    insp = sa.inspect(conn)
+    names = set(insp.get_table_names())
+    for table in metadata.sorted_tables:
+        if table.name not in names:
+            continue
+        have = {c["name"] for c in insp.get_columns(table.name)}
+        for col in table.columns:
+            if col.name not in have and col.nullable:
+                ddl = CreateColumn(col).compile(dialect=conn.dialect)
+                conn.execute(sa.text(f"ALTER TABLE {table.name} ADD COLUMN {ddl}"))
 
 
 class StudyStore:
@@ -211,6 +195,8 @@ class StudyStore:
                 kwargs["poolclass"] = StaticPool
             else:
                 kwargs.update(pool_size=8, max_overflow=32)
+        else:  # <= 20 connections per server process: 4 processes stay under PostgreSQL's default 100
+            kwargs.update(pool_size=5, max_overflow=15, pool_recycle=1800)
         try:
             self.engine = sa.create_engine(url, **kwargs)
         except (ModuleNotFoundError, sa.exc.NoSuchModuleError) as exc:
@@ -225,19 +211,25 @@ class StudyStore:
                 cur.execute("PRAGMA busy_timeout=30000")
                 cur.close()
         self.metadata = sa.MetaData()
-        self.stimuli, self.participants, self.schedule_t, self.responses, self.settings = _tables(self.metadata)
+        (self.stimuli, self.participants, self.schedule_t, self.responses, self.conflicts, self.audit,
+         self.settings) = _tables(self.metadata)
         try:
-            if create:
-                self.metadata.create_all(self.engine)
-            else:
+            if not create:
                 names = set(sa.inspect(self.engine).get_table_names())
-                absent = [t for t in self.metadata.tables if t not in names and t != "settings"]
+                absent = [t for t in ("stimuli", "participants", "schedule", "responses") if t not in names]
                 if absent:
                     raise InvalidInputError(f"--db {url!r}: not a crowdstudy database "
                                             f"(missing tables: {', '.join(absent)})")
-        except sa.exc.OperationalError as exc:
+            # new tables and columns of this version (a no-op on an up-to-date database); on
+            # PostgreSQL an advisory lock serialises the server processes starting together
+            with self.engine.begin() as conn:
+                if parsed.get_backend_name() == "postgresql":
+                    conn.execute(sa.select(sa.func.pg_advisory_xact_lock(_SCHEMA_LOCK)))
+                self.metadata.create_all(conn)
+                _add_missing_columns(conn, self.metadata)
+        except (sa.exc.OperationalError, sa.exc.ProgrammingError) as exc:
             raise InvalidInputError(f"--db {url!r}: cannot open the database ({exc.orig})") from None
-        self._writer = _GroupCommitWriter(self.engine) if self.is_sqlite else None
+        self._writer = GroupCommitWriter(self.engine) if self.is_sqlite else None
 
     # -- plumbing -------------------------------------------------------------------
     def _transact(self, job):
@@ -297,12 +289,22 @@ class StudyStore:
                         raise InvalidInputError(
                             f"--db {self.url}: stimulus {row['stimulus_id']} is stored with {c}={a!r} but the "
                             f"stimulus set says {b!r}; use a new database for a different study")
-        self._transact(job)
+        from sqlalchemy.exc import IntegrityError
+        try:
+            self._transact(job)
+        except IntegrityError:  # another server process inserted them at the same moment
+            self._transact(job)
 
     # -- participants -----------------------------------------------------------------
     def register(self, participant_id: str, secret_hash: str, schedule: Sequence, *, seed: int,
-                 user_agent: str | None = None) -> bool:
-        """Create a participant with its schedule (ScheduledTrial items). False if the id exists."""
+                 user_agent: str | None = None, platform: Mapping[str, str] | None = None,
+                 checks: Mapping[int, int] | None = None) -> bool:
+        """Create a participant with its schedule (ScheduledTrial items). False if the id exists.
+
+        platform: {"prolific_pid", "prolific_study_id", "prolific_session_id"} (each optional);
+        checks: {trial_index: the scale point its attention check asks for}.
+        """
+        platform, checks = dict(platform or {}), dict(checks or {})
         import sqlalchemy as sa
         from sqlalchemy.exc import IntegrityError
         p = self.participants
@@ -312,10 +314,10 @@ class StudyStore:
                 return False
             conn.execute(sa.insert(p).values(participant_id=participant_id, secret_hash=secret_hash,
                                              schedule_seed=int(seed), started_at=utc_now(),
-                                             user_agent=(user_agent or "")[:512]))
+                                             user_agent=(user_agent or "")[:512], **platform))
             conn.execute(sa.insert(self.schedule_t), [
                 {"participant_id": participant_id, "trial_index": t.trial_index, "stage": t.stage,
-                 "stimulus_id": t.stimulus_id} for t in schedule])
+                 "stimulus_id": t.stimulus_id, "check_value": checks.get(t.trial_index)} for t in schedule])
             return True
         try:
             return self._transact(job)
@@ -343,7 +345,7 @@ class StudyStore:
         """The participant's trials joined with stimulus metadata, by trial_index."""
         import sqlalchemy as sa
         s, st = self.schedule_t, self.stimuli
-        q = (sa.select(s.c.trial_index, s.c.stage, s.c.stimulus_id, st.c.scenario, st.c.density_level,
+        q = (sa.select(s.c.trial_index, s.c.stage, s.c.stimulus_id, s.c.check_value, st.c.scenario, st.c.density_level,
                        st.c.density, st.c.viewpoint, st.c.method, st.c.characters)
              .join(st, st.c.stimulus_id == s.c.stimulus_id)
              .where(s.c.participant_id == participant_id).order_by(s.c.trial_index))
@@ -377,50 +379,101 @@ class StudyStore:
         return self._update_once(participant_id, "demographics_at",
                                  {"age": int(age), "gender": gender, "demographics_at": utc_now()})
 
-    def set_practice_done(self, participant_id: str) -> dict:
-        return self._update_once(participant_id, "practice_at", {"practice_at": utc_now()})
-
     def set_completed(self, participant_id: str, completion_code: str | None) -> dict:
         return self._update_once(participant_id, "completed_at",
                                  {"completed_at": utc_now(), "completion_code": completion_code})
 
+    def set_screened_out(self, participant_id: str, reason: str, completion_code: str | None) -> dict:
+        """Mark a participant who failed the screen check before consent (kept: no answers)."""
+        return self._update_once(participant_id, "screened_out_at",
+                                 {"screened_out_at": utc_now(), "screen_reason": str(reason)[:256],
+                                  "completion_code": completion_code})
+
     # -- answers --------------------------------------------------------------------------
+    def _answer_values(self, participant_id, trial_index, stimulus_id, stage, answers, rt_ms, shown_at, practice,
+                       quality) -> dict:
+        answered_at = utc_now()
+        q = {k: (None if quality is None else quality.get(k)) for k in QUALITY_FIELDS}
+        return dict(participant_id=participant_id, trial_index=int(trial_index), practice=bool(practice),
+                    stimulus_id=stimulus_id, stage=int(stage), rt_ms=float(rt_ms), answered_at=answered_at,
+                    shown_at=shown_at or _minus_ms(answered_at, rt_ms), **{k: int(answers[k]) for k in ITEM_IDS}, **q)
+
     def record_answer(self, participant_id: str, trial_index: int, stimulus_id: str, stage: int,
                       answers: Mapping[str, int], rt_ms: float, shown_at: str | None, *,
-                      practice: bool = False) -> tuple[str, dict]:
-        """Store one answer, committed (and on SQLite fsynced) before returning.
+                      quality: Mapping | None = None) -> tuple[str, dict]:
+        """Store one study answer, committed (and on SQLite fsynced) before returning.
 
         Returns (status, row): "created"; "exists" (the same answer, i.e. the same stimulus,
         six values and rt_ms, was already stored: a resend); "conflict" (a different answer
-        is stored for this trial; the stored one is kept); "out_of_order" (an earlier trial
-        is unanswered; row = {"expected": index}). Study answers must arrive in trial order.
-        shown_at: ISO 8601 UTC from the client, or None for answered_at - rt_ms.
+        is stored for this trial; the stored one is kept and returned, the refused one goes to
+        ``answer_conflicts`` in the same transaction); "out_of_order" (an earlier trial is
+        unanswered; row = {"expected": index}). Study answers must arrive in trial order.
+        shown_at: ISO 8601 UTC from the client, or None for answered_at - rt_ms; quality:
+        {QUALITY_FIELDS name: value} (missing ones stored as NULL).
         """
         import sqlalchemy as sa
         from sqlalchemy.exc import IntegrityError
         r = self.responses
-        answered_at = utc_now()
-        values = dict(participant_id=participant_id, trial_index=int(trial_index), practice=bool(practice),
-                      stimulus_id=stimulus_id, stage=int(stage), rt_ms=float(rt_ms), answered_at=answered_at,
-                      shown_at=shown_at or _minus_ms(answered_at, rt_ms), **{q: int(answers[q]) for q in ITEM_IDS})
+        values = self._answer_values(participant_id, trial_index, stimulus_id, stage, answers, rt_ms, shown_at,
+                                     False, quality)
+
+        ti = int(trial_index)
 
         def job(conn):
-            old = conn.execute(sa.select(r).where(r.c.participant_id == participant_id,
-                                                  r.c.trial_index == trial_index)).first()
+            # one indexed read: this trial's stored answer and its predecessor's. Answers are
+            # only ever inserted after their predecessor, so "the previous trial is answered"
+            # means "every earlier trial is" (and no later one is).
+            near = {row.trial_index: row for row in conn.execute(sa.select(r).where(
+                r.c.participant_id == participant_id, r.c.practice.is_(False),
+                r.c.trial_index.in_([ti - 1, ti]) if ti > 0 else r.c.trial_index == ti))}
+            old = near.get(ti)
             if old is not None:
                 old = dict(old._mapping)
-                return ("exists" if _same_answer(old, values) else "conflict"), old
-            if not practice:
+                if _same_answer(old, values):
+                    return "exists", old
+                conn.execute(sa.insert(self.conflicts).values(
+                    participant_id=participant_id, trial_index=ti, stimulus_id=stimulus_id,
+                    rt_ms=values["rt_ms"], received_at=values["answered_at"], **{k: values[k] for k in ITEM_IDS}))
+                return "conflict", old
+            if ti > 0 and (ti - 1) not in near:
                 n = conn.execute(sa.select(sa.func.count()).select_from(r).where(
                     r.c.participant_id == participant_id, r.c.practice.is_(False))).scalar_one()
-                if trial_index != n:
-                    return "out_of_order", {"expected": int(n)}
+                return "out_of_order", {"expected": int(n)}
             conn.execute(sa.insert(r).values(**values))
             return "created", values
 
         try:
             return self._transact(job)
         except IntegrityError:  # a concurrent insert of the same key (non-SQLite): read it back
+            return self._transact(job)
+
+    def record_practice(self, participant_id: str, answers: Mapping[str, int], rt_ms: float,
+                        shown_at: str | None, quality: Mapping | None = None) -> tuple[str, dict]:
+        """Store the practice answer and mark the practice done in ONE transaction.
+
+        Returns ("created" | "exists", participant row). "exists": a practice answer was
+        already stored (this one is dropped: practice answers are not analysed); the practice
+        is then marked done if it was not (a database written by an earlier version, where a
+        crash could fall between the two), so a participant can always move on.
+        """
+        import sqlalchemy as sa
+        from sqlalchemy.exc import IntegrityError
+        r, p = self.responses, self.participants
+        values = self._answer_values(participant_id, PRACTICE_TRIAL_INDEX, "practice", 0, answers, rt_ms, shown_at,
+                                     True, quality)
+
+        def job(conn):
+            old = conn.execute(sa.select(r.c.id).where(r.c.participant_id == participant_id,
+                                                       r.c.trial_index == PRACTICE_TRIAL_INDEX)).first()
+            if old is None:
+                conn.execute(sa.insert(r).values(**values))
+            _mark_practice_done(conn, p, participant_id)
+            row = conn.execute(sa.select(p).where(p.c.participant_id == participant_id)).first()
+            return ("exists" if old is not None else "created"), dict(row._mapping)
+
+        try:
+            return self._transact(job)
+        except IntegrityError:  # sent twice at once (non-SQLite): the other one was stored
             return self._transact(job)
 
     # -- admin and export ------------------------------------------------------------------
@@ -432,7 +485,7 @@ class StudyStore:
         n_ans = (sa.select(r.c.participant_id, sa.func.count().label("n")).where(r.c.practice.is_(False))
                  .group_by(r.c.participant_id).subquery())
         q = (sa.select(p.c.participant_id, p.c.started_at, p.c.consented_at, p.c.demographics_at, p.c.practice_at,
-                       p.c.completed_at, sa.func.coalesce(n_ans.c.n, 0).label("answered"),
+                       p.c.completed_at, p.c.screened_out_at, p.c.withdrawn_at, sa.func.coalesce(n_ans.c.n, 0).label("answered"),
                        sa.func.coalesce(n_trials.c.n, 0).label("trials"))
              .outerjoin(n_ans, n_ans.c.participant_id == p.c.participant_id)
              .outerjoin(n_trials, n_trials.c.participant_id == p.c.participant_id)
@@ -442,13 +495,16 @@ class StudyStore:
 
     def response_rows(self, participant_id: str | None = None) -> list[dict]:
         """Answered study trials (practice excluded) joined with stimulus metadata, sorted by
-        participant and trial_index, in the responses.csv schema."""
+        participant and trial_index, in the responses.csv schema, plus QUALITY_FIELDS and the
+        trial's attention-check value ``check_value``."""
         import sqlalchemy as sa
-        r, st = self.responses, self.stimuli
+        r, st, s = self.responses, self.stimuli, self.schedule_t
         q = (sa.select(r.c.participant_id, r.c.stage, st.c.scenario, r.c.trial_index, r.c.stimulus_id,
                        st.c.density_level, st.c.density, st.c.viewpoint, st.c.method,
-                       *[r.c[q] for q in ITEM_IDS], r.c.rt_ms, r.c.shown_at, r.c.answered_at)
+                       *[r.c[q] for q in ITEM_IDS], r.c.rt_ms, r.c.shown_at, r.c.answered_at,
+                       *[r.c[q] for q in QUALITY_FIELDS], s.c.check_value)
              .join(st, st.c.stimulus_id == r.c.stimulus_id)
+             .outerjoin(s, sa.and_(s.c.participant_id == r.c.participant_id, s.c.trial_index == r.c.trial_index))
              .where(r.c.practice.is_(False)).order_by(r.c.participant_id, r.c.trial_index))
         if participant_id is not None:
             q = q.where(r.c.participant_id == participant_id)
@@ -463,6 +519,13 @@ class StudyStore:
                       p.c.completion_code).order_by(p.c.participant_id)
         with self.engine.connect() as conn:
             return [dict(x._mapping) for x in conn.execute(q)]
+
+
+def _mark_practice_done(conn, participants, participant_id: str) -> None:
+    import sqlalchemy as sa
+    p = participants
+    conn.execute(sa.update(p).where(p.c.participant_id == participant_id, p.c.practice_at.is_(None))
+                 .values(practice_at=utc_now()))
 
 
 def _same_answer(old: Mapping, new: Mapping) -> bool:

@@ -1,13 +1,29 @@
-// u_colors: RGBA32F, width 6 (colour regions), one row per character (linear RGB albedo).
+// Region-coloured bodies: u_colors, RGBA32F, width 6 (colour regions), one row per character
+// (linear RGB albedo), lit per vertex. Textured bodies: u_albedo, one sRGB layer per
+// character on the body's UVs, lit per pixel.
 uniform sampler2D u_colors;
+uniform sampler2DArray u_albedo;
+uniform int u_textured;
+in vec3 v_world;
+in vec3 v_normal;
 in vec4 v_scores_a;
 in vec2 v_scores_b;
+in vec3 v_material;
+in float v_shadow;
 in vec3 v_diffuse;
 in vec3 v_add;
 flat in int v_char;
 out vec4 f_color;
 
 void main() {
+    if (u_textured == 1) {
+        vec3 albedo = texture(u_albedo, vec3(v_material.xy, float(v_char))).rgb;
+        albedo = albedo * albedo;   // the layers store sqrt(linear): cheap, close to sRGB
+        vec3 diffuse, add;
+        light_terms_shadowed(v_world, v_normal, v_shadow, diffuse, add);
+        f_color = vec4(to_display(albedo * diffuse + add), 1.0);
+        return;
+    }
     // the region with the highest interpolated score: smooth collar, cuff, waist and hair lines
     int region = 0;
     float best = v_scores_a.x;

@@ -9,11 +9,13 @@ uniform int u_rest_width;
 uniform int u_n_vertices;
 uniform int u_n_characters;
 uniform mat4 u_view_proj;
+uniform int u_textured;   // 1: the group is drawn with per-character textures
 
 in ivec4 in_joints;
 in vec4 in_weights;
 in vec4 in_scores_a;   // colour-region scores: skin, hair, shirt, sleeve
 in vec2 in_scores_b;   //                       trousers, shoes
+in vec3 in_material;   // textured groups: texture coordinates, part (1 = eye)
 // per instance
 in int in_char;
 in int in_member;
@@ -27,6 +29,8 @@ out vec3 v_add;
 #endif
 out vec4 v_scores_a;
 out vec2 v_scores_b;
+out vec3 v_material;
+out float v_shadow;
 flat out int v_char;
 flat out int v_copy;
 flat out float v_shift;
@@ -52,8 +56,19 @@ void main() {
     v_normal = vec3(dot(r0.xyz, n), dot(r1.xyz, n), dot(r2.xyz, n));
     v_scores_a = in_scores_a;
     v_scores_b = in_scores_b;
+    v_material = in_material;
 #ifdef LIT
-    light_terms(world, v_normal, 4, v_diffuse, v_add);
+    if (u_textured == 1) {   // lit per pixel; only the shadow lookup per vertex
+        vec3 n = normalize(v_normal);
+        v_shadow = dot(n, u_light_dir) > -0.05 ? shadow_factor(world, n, 4) : 0.0;
+        v_diffuse = vec3(0.0);
+        v_add = vec3(0.0);
+    } else {
+        v_shadow = 1.0;
+        light_terms(world, v_normal, 4, v_diffuse, v_add);
+    }
+#else
+    v_shadow = 1.0;
 #endif
     v_char = in_char;
     v_shift = in_shift;

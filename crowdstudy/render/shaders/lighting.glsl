@@ -1,8 +1,9 @@
 // Soft lighting in linear RGB: a key light with a filtered shadow map, hemisphere ambient,
 // a faint rim and specular, distance fog; ACES-like tone curve, gamma 2 output.
-// light_terms() returns colour = albedo * diffuse + add, so characters evaluate it per
-// vertex (Gouraud; llvmpipe runs the fragment shader per MSAA sample, which makes
-// per-pixel lighting of the crowd 4x as expensive) and the floor per pixel.
+// light_terms() returns colour = albedo * diffuse + add. Textured characters evaluate it
+// per pixel with the shadow factor interpolated from the vertices (shadow_factor(), 4 taps
+// per vertex of a dense mesh: soft edges without 4 lookups per MSAA sample); the region-
+// coloured mannequins per vertex; the floor per pixel.
 uniform vec3 u_light_dir;        // unit vector towards the key light
 uniform vec3 u_light_color;
 uniform vec3 u_sky_color;
@@ -30,12 +31,11 @@ float shadow_factor(vec3 world, vec3 normal, int taps) {
                    texture(u_shadow, vec3(c.xy + vec2(-o, o), z)) + texture(u_shadow, vec3(c.xy + vec2(o, o), z)));
 }
 
-void light_terms(vec3 world, vec3 normal, int taps, out vec3 diffuse, out vec3 add) {
+void light_terms_shadowed(vec3 world, vec3 normal, float sh, out vec3 diffuse, out vec3 add) {
     vec3 n = normalize(normal);
     vec3 v = normalize(u_eye - world);
     if (dot(n, v) < 0.0) n = -n;   // thin or back-facing geometry: light the visible side
     float ndl = max(dot(n, u_light_dir), 0.0);
-    float sh = ndl > 0.0 ? shadow_factor(world, n, taps) : 0.0;
     vec3 ambient = mix(u_ground_color, u_sky_color, 0.5 + 0.5 * n.z);
     float rim = pow(1.0 - max(dot(n, v), 0.0), 3.0) * 0.12;
     vec3 h = normalize(u_light_dir + v);
@@ -43,6 +43,12 @@ void light_terms(vec3 world, vec3 normal, int taps, out vec3 diffuse, out vec3 a
     float fog = exp(-u_fog_density * length(u_eye - world));
     diffuse = (ambient + u_light_color * ndl * sh) * fog;
     add = (rim + spec) * u_light_color * fog + u_fog_color * (1.0 - fog);
+}
+
+void light_terms(vec3 world, vec3 normal, int taps, out vec3 diffuse, out vec3 add) {
+    vec3 n = normalize(normal);
+    float sh = dot(n, u_light_dir) > -0.05 ? shadow_factor(world, n, taps) : 0.0;
+    light_terms_shadowed(world, normal, sh, diffuse, add);
 }
 
 // The floor (normal +z, matte): the same terms without rim and specular.

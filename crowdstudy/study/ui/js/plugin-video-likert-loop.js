@@ -8,6 +8,11 @@
  * optional `save(data, notify)` function is awaited (it returns a Promise, e.g. the POST of
  * the answer with its retries) before the trial ends, so the next trial appears only once
  * the answer is stored. `preload` lists video URLs to download ahead (the next trial's).
+ * A save error stays under the video until the participant acts (answers again or clicks).
+ * `check` adds an instructed-response statement (attention check) at a given row position.
+ * The trial also records its data-quality measures: complete plays of the video, time to the
+ * first complete play, how often and how long the page was hidden (tab switches) and how
+ * often fullscreen was left.
  *
  * Loaded as a classic script after jsPsych's browser build: defines the global
  * `jsPsychVideoLikertLoop`.
@@ -42,9 +47,11 @@ var jsPsychVideoLikertLoop = (function (jspsych) {
       save: { type: ParameterType.FUNCTION, default: null },
       /** Width of the video in CSS pixels (0: fit the layout). */
       video_width: { type: ParameterType.INT, default: 0 },
+      /** Attention check {text, position}: one more statement, answered like the others, or null. */
+      check: { type: ParameterType.COMPLEX, default: null },
     },
     data: {
-      /** The video URL shown (crowdstudy passes opaque /videos/<participant>/<token> URLs, never stimulus ids). */
+      /** The video URL shown (crowdstudy passes opaque /media/<name>.mp4 URLs, never stimulus ids). */
       stimulus: { type: ParameterType.STRING },
       /** Answers keyed by item id, integers 1..points. */
       responses: { type: ParameterType.OBJECT },
@@ -58,6 +65,13 @@ var jsPsychVideoLikertLoop = (function (jspsych) {
       shown_at: { type: ParameterType.STRING },
       /** Whether the answer came from a preloaded (in-memory) copy of the video. */
       preloaded: { type: ParameterType.BOOL },
+      /** The attention check's answer (null without a check). */
+      check: { type: ParameterType.INT },
+      /** Times the page was hidden during the trial, and for how many milliseconds in all. */
+      hidden_count: { type: ParameterType.INT },
+      hidden_ms: { type: ParameterType.FLOAT },
+      /** Times fullscreen was left during the trial. */
+      fullscreen_exits: { type: ParameterType.INT },
     },
   };
 
@@ -98,7 +112,13 @@ var jsPsychVideoLikertLoop = (function (jspsych) {
       const src = cached && cached.objectUrl ? cached.objectUrl : trial.stimulus;
 
       const head = labels.map((l, k) => `<th scope="col">(${k + 1})<br>${escapeHtml(l)}</th>`).join("");
-      const rows = items.map((it) => {
+      const CHECK = "cs-check";
+      const shown = items.slice();
+      if (trial.check) {
+        const at = Math.max(0, Math.min(shown.length, trial.check.position | 0));
+        shown.splice(at, 0, { id: CHECK, text: trial.check.text });
+      }
+      const rows = shown.map((it) => {
         const cells = labels.map((l, k) => `<td><input type="radio" name="${escapeHtml(it.id)}" value="${k + 1}"` +
           ` aria-label="${escapeHtml(it.id)}: (${k + 1}) ${escapeHtml(l)}"></td>`).join("");
         return `<tr data-item="${escapeHtml(it.id)}"><th scope="row" class="cs-statement">${escapeHtml(it.text)}</th>${cells}</tr>`;
@@ -110,6 +130,7 @@ var jsPsychVideoLikertLoop = (function (jspsych) {
             <div class="cs-progress">${trial.progress_text || ""}</div>
             <video class="cs-video" muted autoplay playsinline disablepictureinpicture preload="auto"${width}></video>
             <div class="cs-video-status" aria-live="polite"></div>
+            <div class="cs-error" role="alert" hidden></div>
           </div>
           <form class="cs-questions" novalidate>
             <div class="cs-prompt">${trial.prompt}</div>
@@ -126,7 +147,21 @@ var jsPsychVideoLikertLoop = (function (jspsych) {
       const button = display_element.querySelector(".cs-next");
       const hint = display_element.querySelector(".cs-hint");
       const status = display_element.querySelector(".cs-video-status");
+      const errorBox = display_element.querySelector(".cs-error");
       let plays = 0, firstPlay = null, last = 0, saving = false;
+      // a save error stays until the participant acts on it (a click on the button)
+      const showError = (msg) => { errorBox.textContent = msg; errorBox.hidden = false; };
+      const clearError = () => { errorBox.hidden = true; errorBox.textContent = ""; };
+
+      // data quality: tab switches (page hidden) and fullscreen exits during this trial
+      let hiddenCount = 0, hiddenMs = 0, hiddenSince = document.hidden ? performance.now() : null, fsExits = 0;
+      const onVisibility = () => {
+        if (document.hidden) { hiddenCount += 1; hiddenSince = performance.now(); }
+        else if (hiddenSince !== null) { hiddenMs += performance.now() - hiddenSince; hiddenSince = null; }
+      };
+      const onFullscreen = () => { if (!document.fullscreenElement) fsExits += 1; };
+      document.addEventListener("visibilitychange", onVisibility);
+      document.addEventListener("fullscreenchange", onFullscreen);
 
       video.muted = true;
       video.defaultMuted = true;
@@ -156,11 +191,15 @@ var jsPsychVideoLikertLoop = (function (jspsych) {
       video.addEventListener("ended", () => { played(); video.currentTime = 0; tryPlay(); });
       video.addEventListener("error", () => { status.textContent = "The video could not be loaded; please reload the page."; });
 
+      const valueOf = (id) => {
+        const el = form.querySelector(`input[name="${CSS.escape(id)}"]:checked`);
+        return el ? parseInt(el.value, 10) : null;
+      };
       const answers = () => {
         const out = {};
         for (const it of items) {
-          const el = form.querySelector(`input[name="${CSS.escape(it.id)}"]:checked`);
-          if (el) out[it.id] = parseInt(el.value, 10);
+          const v = valueOf(it.id);
+          if (v !== null) out[it.id] = v;
         }
         return out;
       };
@@ -168,13 +207,14 @@ var jsPsychVideoLikertLoop = (function (jspsych) {
       function update() {
         if (saving) return;
         const a = answers();
-        const missing = items.filter((it) => !(it.id in a)).length;
+        if (trial.check && valueOf(CHECK) !== null) a[CHECK] = valueOf(CHECK);
+        const missing = shown.filter((it) => !(it.id in a)).length;
         const needVideo = trial.require_full_view && plays < 1;
         button.disabled = missing > 0 || needVideo;
         for (const row of form.querySelectorAll("tr[data-item]")) {
           row.classList.toggle("cs-answered", row.dataset.item in a);
         }
-        hint.textContent = missing > 0 ? `Please answer all ${items.length} statements (${missing} left).`
+        hint.textContent = missing > 0 ? `Please answer all ${shown.length} statements (${missing} left).`
           : needVideo ? "Please watch the video until the end at least once." : "";
       }
       form.addEventListener("change", update);
@@ -183,6 +223,8 @@ var jsPsychVideoLikertLoop = (function (jspsych) {
       for (const url of trial.preload || []) prefetch(url);
 
       const finish = (data) => {
+        document.removeEventListener("visibilitychange", onVisibility);
+        document.removeEventListener("fullscreenchange", onFullscreen);
         video.pause();
         video.removeAttribute("src");
         video.load();
@@ -196,10 +238,15 @@ var jsPsychVideoLikertLoop = (function (jspsych) {
       form.addEventListener("submit", async (ev) => {
         ev.preventDefault();
         if (button.disabled || saving) return;
+        clearError();
+        const now = performance.now();
         const data = {
-          stimulus: trial.stimulus, responses: answers(), rt: Math.round((performance.now() - t0) * 10) / 10,
+          stimulus: trial.stimulus, responses: answers(), rt: Math.round((now - t0) * 10) / 10,
           first_play_ms: firstPlay === null ? null : Math.round(firstPlay * 10) / 10, video_plays: plays,
-          shown_at: shownAt, preloaded: src !== trial.stimulus,
+          shown_at: shownAt, preloaded: src !== trial.stimulus, check: trial.check ? valueOf(CHECK) : null,
+          hidden_count: hiddenCount,
+          hidden_ms: Math.round((hiddenMs + (hiddenSince !== null ? now - hiddenSince : 0)) * 10) / 10,
+          fullscreen_exits: fsExits,
         };
         saving = true;
         button.disabled = true;
@@ -211,8 +258,9 @@ var jsPsychVideoLikertLoop = (function (jspsych) {
         } catch (err) {
           saving = false;
           for (const input of form.querySelectorAll("input")) input.disabled = false;
-          hint.textContent = "Your answer could not be saved: " + (err && err.message ? err.message : err) +
-            ". Please try again.";
+          hint.textContent = "";
+          showError("Your answer could not be saved: " + (err && err.message ? err.message : err) +
+            ". Please try again.");
           button.disabled = false;
         }
       });

@@ -1,12 +1,14 @@
 /*
  * crowdstudy session flow (jsPsych 8):
- * participant id -> consent -> demographics -> instructions + one practice trial ->
- * stage 1 (randomised per participant) -> break -> stage 2 -> debriefing.
+ * participant id -> screen check -> consent -> demographics -> instructions + one practice
+ * trial -> (fullscreen) stage 1 (randomised per participant) -> break -> stage 2 -> debriefing.
+ * A "Withdraw" button is always there after consent: it deletes the answers on the server.
+ * Prolific's PROLIFIC_PID, STUDY_ID and SESSION_ID URL parameters are sent at registration.
  *
  * The server holds the schedule and every answer; this page keeps only the participant id
  * and the session secret (localStorage), so a reload, a closed browser or a restarted server
  * resumes at the first unanswered trial. Participants are blinded: the page knows each trial
- * only by its index, its stage and an opaque token (the video URL is /videos/<id>/<token>),
+ * only by its index, its stage and an opaque token (the video has an opaque name too),
  * never by the stimulus id or its conditions; an answer is sent with the index and the token.
  * Each answer is POSTed when given and the next trial appears only once the server has
  * committed it; failed sends retry with exponential backoff while a notice tells the
@@ -18,7 +20,7 @@
   const ID_PARAMS = ["PROLIFIC_PID", "participant", "participant_id", "workerId", "PID", "pid", "SONA_ID", "id"];
   const ID_RE = /^[A-Za-z0-9][A-Za-z0-9_-]{0,63}$/;
   const S = { pid: null, secret: null, study: null, state: null, declined: false, demo: null,
-              breakShown: {}, completion: null };
+              breakShown: {}, completion: null, screenFailed: false };
 
   const storage = {
     get(k) { try { return window.localStorage.getItem(k); } catch (e) { return null; } },
@@ -31,6 +33,14 @@
   const noticeEl = () => document.getElementById("cs-notice");
   function showNotice(msg) { const n = noticeEl(); n.textContent = msg; n.hidden = false; }
   function hideNotice() { const n = noticeEl(); n.hidden = true; n.textContent = ""; }
+  /** A warning that stays until the participant clicks OK (not cleared by the retry notices). */
+  function showWarning(msg) {
+    document.getElementById("cs-warning-text").textContent = msg;
+    document.getElementById("cs-warning").hidden = false;
+  }
+  document.getElementById("cs-warning-ok").addEventListener("click", () => {
+    document.getElementById("cs-warning").hidden = true;
+  });
 
   class ApiError extends Error {
     constructor(status, message) { super(message); this.status = status; }
@@ -73,6 +83,17 @@
     q.delete("resume");
     const rest = q.toString();
     window.history.replaceState(null, "", window.location.pathname + (rest ? "?" + rest : ""));
+  }
+
+  /** Prolific's study and session ids (and the participant's), as the registration sends them. */
+  function platformFromUrl() {
+    const q = new URLSearchParams(window.location.search);
+    const out = {};
+    for (const k of ["PROLIFIC_PID", "STUDY_ID", "SESSION_ID"]) {
+      const v = (q.get(k) || "").trim();
+      if (/^[A-Za-z0-9_-]{1,64}$/.test(v)) out[k] = v;
+    }
+    return out;
   }
 
   function idFromUrl() {
@@ -131,8 +152,9 @@
       let reg;
       try {
         reg = await api("POST", "/api/participants", stored ? { participant_id: S.pid, secret: stored }
-                                                           : { participant_id: S.pid });
+                                                           : { participant_id: S.pid, platform: platformFromUrl() });
       } catch (err) {
+        if (err.status === 410) throw new Error("You have withdrawn from this study; your answers were deleted.");
         if (err.status === 409 || err.status === 403) {
           throw new Error("This participant ID has already started the study in another browser. " +
                           "Please continue there, or contact the researchers.");
@@ -144,6 +166,73 @@
       storage.set("crowdstudy:last", S.pid);
       S.state = reg.state;
     }));
+
+    // Screen check (before consent): the browser window must be large enough for the videos.
+    const screenOk = () => window.innerWidth >= S.study.screen.min_width && window.innerHeight >= S.study.screen.min_height;
+    timeline.push({
+      conditional_function: () => !S.state.consented && !S.state.screened_out && !screenOk(),
+      timeline: [{
+        timeline: [{
+          type: jsPsychHtmlButtonResponse,
+          stimulus: () => `<div class="cs-page cs-screen"><h2>Your browser window is too small</h2>
+            <p>This study shows videos that need a window of at least ${S.study.screen.min_width} x
+            ${S.study.screen.min_height} pixels; yours is ${window.innerWidth} x ${window.innerHeight}.</p>
+            <p>Please maximise the window (or use a larger screen) and click "Check again". If you cannot,
+            click "I cannot" to end here.</p></div>`,
+          choices: ["Check again", "I cannot"],
+          on_finish: (data) => { S.screenFailed = data.response === 1; },
+        }],
+        loop_function: () => !S.screenFailed && !screenOk(),
+      }, callAsync(async () => {
+        if (!S.screenFailed) return;
+        S.state = await api("POST", `/api/participants/${encodeURIComponent(S.pid)}/screen-out`,
+                            { width: window.innerWidth, height: window.innerHeight });
+      })],
+    });
+    timeline.push({
+      conditional_function: () => S.state.screened_out,
+      timeline: [{
+        type: jsPsychHtmlButtonResponse,
+        stimulus: () => `<div class="cs-page cs-debrief"><h2>Thank you</h2><p>This study cannot run in a window this
+          small, so it ends here.</p>` + (S.state.completion_code ? `<p>Your code: <span class="cs-code">` +
+          `${esc(S.state.completion_code)}</span></p>` : "") + "</div>",
+        choices: () => (S.state.redirect_url ? ["Return"] : []),
+        on_finish: () => { if (S.state.redirect_url) window.location.href = S.state.redirect_url; },
+      }, callAsync(async () => { abort("<p>The study has ended. You may close this page.</p>"); })],
+    });
+
+    // Fullscreen for the trials (requested on the "Start" click, or with the button beside
+    // "Withdraw" after a reload); leaving it is counted per trial by the trial plugin.
+    const enterFullscreen = () => {
+      const el = document.documentElement;
+      if (S.study.fullscreen && !document.fullscreenElement && el.requestFullscreen) el.requestFullscreen().catch(() => {});
+    };
+    const fsButton = document.getElementById("cs-fullscreen");
+    fsButton.hidden = !S.study.fullscreen;
+    fsButton.addEventListener("click", enterFullscreen);
+    document.addEventListener("fullscreenchange", () => { fsButton.disabled = !!document.fullscreenElement; });
+
+    // Withdrawal, possible at any time after consent: answers and demographics are deleted.
+    const bar = document.getElementById("cs-withdraw-bar");
+    const showWithdraw = () => { bar.hidden = false; };
+    document.getElementById("cs-withdraw").addEventListener("click", () => {
+      document.getElementById("cs-withdraw-confirm").hidden = false;
+    });
+    document.getElementById("cs-withdraw-no").addEventListener("click", () => {
+      document.getElementById("cs-withdraw-confirm").hidden = true;
+    });
+    document.getElementById("cs-withdraw-yes").addEventListener("click", async () => {
+      try {
+        const r = await api("POST", `/api/participants/${encodeURIComponent(S.pid)}/withdraw`, { confirm: true });
+        bar.hidden = true;
+        let html = "<h2>You have withdrawn</h2><p>Your answers and details were deleted. Thank you for your time.</p>";
+        if (r.completion_code) html += `<p>Your code: <span class="cs-code">${esc(r.completion_code)}</span></p>`;
+        if (document.fullscreenElement) document.exitFullscreen().catch(() => {});
+        abort(html);
+      } catch (err) {
+        showWarning("Withdrawal failed: " + (err.message || err) + ". Please try again.");
+      }
+    });
 
     // Informed consent.
     timeline.push({
@@ -161,6 +250,7 @@
         S.state = await api("POST", `/api/participants/${encodeURIComponent(S.pid)}/consent`, { consent: true });
       })],
     });
+    timeline.push(callAsync(async () => { showWithdraw(); }));
 
     // Demographics.
     const genderOptions = () => S.study.genders.map((g) => `<option value="${esc(g)}">${esc(g)}</option>`).join("");
@@ -219,16 +309,17 @@
         progress_text: "Practice video",
         preload: () => (cur() ? [cur().video_url] : []),
         save: (data) => api("POST", `/api/participants/${encodeURIComponent(S.pid)}/practice`,
-                            { answers: data.responses, rt_ms: data.rt, shown_at: data.shown_at }),
+                            { answers: data.responses, rt_ms: data.rt, shown_at: data.shown_at,
+                              video_plays: data.video_plays, first_play_ms: data.first_play_ms }),
         on_finish: () => { S.state.practice_done = true; },
       }, {
         type: jsPsychHtmlButtonResponse,
         stimulus: `<div class="cs-page"><h2>The study begins</h2><p>The practice is over. The videos of the
           study now follow.</p></div>`,
         choices: ["Start"],
+        on_finish: () => enterFullscreen(),  // a click: browsers grant fullscreen only on one
       }],
     });
-
     // Stage trials with a break screen between stages.
     const needsBreak = () => {
       const i = S.state.next_trial_index;
@@ -245,14 +336,21 @@
     async function saveAnswer(data) {
       const t = cur();
       const body = { trial_index: t.trial_index, token: t.token, answers: data.responses,
-                     rt_ms: data.rt, shown_at: data.shown_at };
+                     rt_ms: data.rt, shown_at: data.shown_at, video_plays: data.video_plays,
+                     first_play_ms: data.first_play_ms, hidden_count: data.hidden_count, hidden_ms: data.hidden_ms,
+                     fullscreen_exits: data.fullscreen_exits };
+      if (t.check) body.check = data.check;
       try {
         await api("POST", `/api/participants/${encodeURIComponent(S.pid)}/responses`, body);
         S.state.next_trial_index = t.trial_index + 1;
         S.state.n_answered += 1;
       } catch (err) {
         if (err.status !== 409) throw err;
-        await refreshState(); // stored earlier (another tab, a lost reply): continue where the server is
+        // answered meanwhile in another tab or window: say so, then continue where the server is
+        await refreshState();
+        showWarning("This video had already been answered in another tab or window, so the first answer is " +
+                    "kept (this one was recorded separately). Please use only one window; you continue at video " +
+                    (S.state.next_trial_index + 1) + ".");
       }
     }
     timeline.push({
@@ -279,6 +377,7 @@
           labels: () => likertParams().labels,
           progress_text: stagePosition,
           preload: () => (nextTrial() ? [nextTrial().video_url] : []),
+          check: () => cur().check || null,
           save: saveAnswer,
           data: { phase: "trial" },
         }],
@@ -289,6 +388,8 @@
     // Completion and debriefing.
     timeline.push(callAsync(async () => {
       S.completion = await api("POST", `/api/participants/${encodeURIComponent(S.pid)}/complete`, {});
+      bar.hidden = true;
+      if (document.fullscreenElement) document.exitFullscreen().catch(() => {});
     }));
     timeline.push({
       type: jsPsychHtmlButtonResponse,

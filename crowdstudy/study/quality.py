@@ -1,0 +1,184 @@
+"""Data-quality controls of the online study and the exclusion rules applied to its export.
+
+Configured in a TOML file (default: the toolkit's ``crowdstudy/study/online.toml``; ``crowdstudy
+serve --online FILE`` and ``crowdstudy export --online FILE`` for another), table ``[online]``:
+
+* ``min_width`` / ``min_height``: the smallest browser viewport (CSS pixels) the study runs
+  in; a smaller one sees a message before the consent page and, if it cannot enlarge the
+  window, is screened out (its platform code: ``codes.screened_out``).
+* ``fullscreen``: request fullscreen when the trials start; exits are counted per trial.
+* ``attention_checks``: how many trials carry an instructed-response statement ("please
+  choose (k) ..."), placed on trials drawn at random per participant (keyed with the study's
+  secret, so a participant cannot predict them), the asked-for point drawn at random too.
+* ``codes``: the crowdsourcing platform's completion codes for ``completed``,
+  ``screened_out`` and ``withdrawn`` participants (empty: none shown).
+
+Exclusion rules, table ``[online.exclude]`` (each optional; a rule that is absent or 0 is
+off). A participant is flagged when:
+
+* ``failed_attention_check``: more than ``max_failed_checks`` checks answered wrongly;
+* ``too_fast``: the median answer time is below ``min_median_rt_ms`` milliseconds;
+* ``straight_lining``: at least ``max_straightline_fraction`` of their trials have the same
+  raw answer on all six statements (three of which are reversed: a straight line there is
+  contradictory);
+* ``tab_switching``: the page was hidden on more than ``max_hidden_trials`` trials;
+* ``withdrawn`` / ``screened_out``: always (they have no analysable answers).
+
+``participants.csv`` (:data:`PARTICIPANT_COLUMNS`) lists every participant with ``excluded``
+(0/1) and ``exclusion_reason`` (the flagging rules' names joined by ``;``).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import hmac
+import random
+import statistics
+import tomllib
+from pathlib import Path
+from typing import Iterable, Mapping, Sequence
+
+from crowdstudy.errors import InvalidInputError
+from crowdstudy.package_data import resource_path
+
+__all__ = ["OnlineConfig", "load_online_config", "default_online_path", "draw_checks", "flag_participants",
+           "PARTICIPANT_COLUMNS", "RULES"]
+
+RULES = ("failed_attention_check", "too_fast", "straight_lining", "tab_switching")
+PARTICIPANT_COLUMNS = ("participant", "status", "excluded", "exclusion_reason", "started_at", "completed_at",
+                       "screened_out_at", "withdrawn_at", "completion_code", "prolific_pid", "prolific_study_id",
+                       "prolific_session_id", "answered", "trials", "median_rt_ms", "straightline_trials",
+                       "checks_failed", "checks_total", "hidden_trials", "fullscreen_exits")
+_CODE_KEYS = ("completed", "screened_out", "withdrawn")
+
+
+@dataclasses.dataclass(frozen=True)
+class OnlineConfig:
+    """The ``[online]`` table (see the module docstring); sizes in CSS pixels, times in ms."""
+    min_width: int = 1280
+    min_height: int = 720
+    fullscreen: bool = True
+    attention_checks: int = 2
+    codes: Mapping[str, str] = dataclasses.field(default_factory=dict)
+    max_failed_checks: int | None = 0
+    min_median_rt_ms: float | None = None
+    max_straightline_fraction: float | None = None
+    max_hidden_trials: int | None = None
+    source: str = "<defaults>"
+
+    def code(self, status: str) -> str | None:
+        """The platform code for ``status`` (completed / screened_out / withdrawn), or None."""
+        return self.codes.get(status) or None
+
+
+def default_online_path() -> Path:
+    """The toolkit's ``crowdstudy/study/online.toml``."""
+    return resource_path("crowdstudy.study", "online.toml")
+
+
+def _num(table: dict, key: str, where: str, *, integer: bool, lo: float, hi: float | None = None):
+    if key not in table:
+        return None
+    v = table[key]
+    ok = isinstance(v, int) if integer else isinstance(v, (int, float))
+    if isinstance(v, bool) or not ok or v < lo or (hi is not None and v > hi):
+        kind = "an integer" if integer else "a number"
+        raise InvalidInputError(f"{where}: {key} must be {kind} >= {lo}" + (f" and <= {hi}" if hi is not None else "")
+                                + f", got {v!r}")
+    return v
+
+
+def load_online_config(path: str | Path | None = None) -> OnlineConfig:
+    """Read and validate the ``[online]`` table of ``path`` (default: default_online_path())."""
+    path = Path(path) if path is not None else default_online_path()
+    if not path.is_file():
+        raise InvalidInputError(f"--online: file {str(path)!r} does not exist")
+    try:
+        raw = tomllib.loads(path.read_text(encoding="utf-8"))
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
+        raise InvalidInputError(f"{path}: not valid TOML ({exc})") from None
+    top = raw.get("online")
+    if not isinstance(top, dict):
+        raise InvalidInputError(f"{path}: missing the [online] table")
+    where = f"{path}: [online]"
+    known = {"min_width", "min_height", "fullscreen", "attention_checks", "codes", "exclude"}
+    for key in top:
+        if key not in known:
+            raise InvalidInputError(f"{where}: unknown key {key!r}")
+    fullscreen = top.get("fullscreen", True)
+    if not isinstance(fullscreen, bool):
+        raise InvalidInputError(f"{where}: fullscreen must be true or false")
+    codes = top.get("codes", {})
+    if not isinstance(codes, dict) or any(k not in _CODE_KEYS for k in codes) or any(
+            not isinstance(v, str) or len(v) > 128 or not v.isprintable() for v in codes.values()):
+        raise InvalidInputError(f"{where}: codes must map {', '.join(_CODE_KEYS)} to codes of <= 128 printable "
+                                "characters")
+    ex = top.get("exclude", {})
+    if not isinstance(ex, dict):
+        raise InvalidInputError(f"{where}: exclude must be a table")
+    ex_known = {"max_failed_checks", "min_median_rt_ms", "max_straightline_fraction", "max_hidden_trials"}
+    for key in ex:
+        if key not in ex_known:
+            raise InvalidInputError(f"{where}.exclude: unknown key {key!r}")
+    w = f"{where}.exclude"
+    return OnlineConfig(
+        min_width=_num(top, "min_width", where, integer=True, lo=0) or 0,
+        min_height=_num(top, "min_height", where, integer=True, lo=0) or 0,
+        fullscreen=fullscreen, attention_checks=_num(top, "attention_checks", where, integer=True, lo=0) or 0,
+        codes=dict(codes),
+        max_failed_checks=_num(ex, "max_failed_checks", w, integer=True, lo=0),
+        min_median_rt_ms=_num(ex, "min_median_rt_ms", w, integer=False, lo=0) or None,
+        max_straightline_fraction=_num(ex, "max_straightline_fraction", w, integer=False, lo=0, hi=1) or None,
+        max_hidden_trials=_num(ex, "max_hidden_trials", w, integer=True, lo=0),
+        source=str(path))
+
+
+def draw_checks(secret: str, participant_id: str, n_trials: int, n_checks: int, points: int) -> dict[int, int]:
+    """{trial_index: asked-for scale point} of a participant's attention checks: ``n_checks``
+    distinct trials (never the first: it teaches the page) and points 1..points, drawn from an HMAC of the study's secret (so the
+    same participant always gets the same checks, and nobody without the secret can predict
+    them)."""
+    digest = hmac.new(secret.encode("utf-8"), f"crowdstudy-checks\x00{participant_id}".encode(),
+                      hashlib.sha256).digest()
+    rng = random.Random(int.from_bytes(digest[:16], "big"))
+    chosen = sorted(rng.sample(range(1, n_trials), min(int(n_checks), max(n_trials - 1, 0))))
+    return {k: rng.randint(1, int(points)) for k in chosen}
+
+
+def flag_participants(people: Sequence[Mapping], responses: Iterable[Mapping], config: OnlineConfig,
+                      item_ids: Sequence[str]) -> list[dict]:
+    """participants.csv rows: each of ``people`` (rows of roster.list_participants) with the
+    per-participant quality summary and the exclusion flags of ``config``'s rules.
+
+    responses: rows of StudyStore.response_rows (with QUALITY_FIELDS and check_value).
+    """
+    by_pid: dict[str, list[Mapping]] = {}
+    for r in responses:
+        by_pid.setdefault(r["participant_id"], []).append(r)
+    out = []
+    for person in people:
+        rows = by_pid.get(person["participant"], [])
+        rts = [float(r["rt_ms"]) for r in rows]
+        median_rt = statistics.median(rts) if rts else None
+        straight = sum(1 for r in rows if len({int(r[q]) for q in item_ids}) == 1)
+        checks = [r for r in rows if r.get("check_value") is not None]
+        failed = sum(1 for r in checks if r.get("check_answer") is None or int(r["check_answer"]) != int(r["check_value"]))
+        hidden = sum(1 for r in rows if (r.get("hidden_count") or 0) > 0)
+        exits = sum(int(r.get("fullscreen_exits") or 0) for r in rows)
+        reasons = []
+        if person["status"] in ("withdrawn", "screened_out"):
+            reasons.append(person["status"])
+        if config.max_failed_checks is not None and checks and failed > config.max_failed_checks:
+            reasons.append("failed_attention_check")
+        if config.min_median_rt_ms and median_rt is not None and median_rt < config.min_median_rt_ms:
+            reasons.append("too_fast")
+        if config.max_straightline_fraction and rows and straight / len(rows) >= config.max_straightline_fraction:
+            reasons.append("straight_lining")
+        if config.max_hidden_trials is not None and hidden > config.max_hidden_trials:
+            reasons.append("tab_switching")
+        out.append({**{k: person.get(k) for k in PARTICIPANT_COLUMNS if k in person},
+                    "excluded": int(bool(reasons)), "exclusion_reason": ";".join(reasons),
+                    "median_rt_ms": median_rt, "straightline_trials": straight, "checks_failed": failed,
+                    "checks_total": len(checks), "hidden_trials": hidden, "fullscreen_exits": exits})
+    return out
