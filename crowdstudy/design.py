@@ -351,7 +351,7 @@ def parse_design(raw: dict, source: str = "<memory>") -> StudyDesign:
                 comp_t.fail(cname, f"names unknown item {m!r}")
         composites[cname] = tuple(members)
     comp_t.close()
-    top.close()
+    top.close(allowed_extra=("online",))   # the online study's controls: crowdstudy.study.quality
 
     return StudyDesign(name=name, seed=seed, floor_width=width, floor_depth=depth, densities=densities,
                        viewpoints=viewpoints, methods=methods, video_width=video_w, video_height=video_h,

@@ -120,3 +120,36 @@ def test_appearance_is_seeded_and_varied():
     assert {lk.legwear for lk in looks} >= {"trousers", "shorts"}
     assert len({lk.shirt for lk in looks}) >= 8
     assert any(lk.sleeve > 1 for lk in looks) and any(lk.sleeve < 0.2 for lk in looks)
+
+
+def test_periodic_copies_wear_other_characters_clothes():
+    """A corridor copy k of character i is dressed as character (i + 17 k) mod N."""
+    from crowdstudy.body.skeleton import JOINT_NAMES, PARENTS
+    from crowdstudy.render.camera import Camera
+    from crowdstudy.render.renderer import CrowdRenderer
+    from crowdstudy.scene import CrowdAnimation
+
+    recs = [dict(r, sex="male") for r in RECORDS]
+    bodies = [load_body(r) for r in recs]
+    # character 0 at x = -0.6, character 1 at x = +0.6 (outside the view); period 4 m
+    root = np.array([[[-0.6, 0.0, bodies[0].pelvis_height], [0.6, 0.0, bodies[1].pelvis_height]]] * 2)
+    anim = CrowdAnimation(joint_names=JOINT_NAMES, parents=PARENTS, root_translation=root,
+                          joint_rotations=np.zeros((2, 2, 24, 3)), fps=30.0, bodies=tuple(recs),
+                          clips=({"kind": "walk", "clips": ["x"]},) * 2,
+                          meta={"scenario": "corridor", "method": "Baseline", "seed": 4,
+                                "periodic": {"axis": 0, "length": 4.0}})
+    with CrowdRenderer(anim, width=320, height=240, msaa=0) as r:
+        looks = r.looks
+        seen = []
+        for x in (-0.6, 3.4):   # character 0 and its copy k = 1 (dressed as character 1)
+            cam = r.set_view(Camera(eye=(x, 2.5, 1.2), target=(x, 0.0, 1.1), fov=30.0))
+            img = r.render(0).astype(np.float64)
+            chest = np.array([x, 0.1, bodies[0].pelvis_height + bodies[0].rest_joints[J["spine3"], 2] - 0.05, 1.0])
+            clip = cam.view_projection(320 / 240) @ chest
+            col, row = (clip[:2] / clip[3] * 0.5 + 0.5) * (320, 240)
+            patch = img[240 - int(row) - 3:240 - int(row) + 3, int(col) - 3:int(col) + 3].reshape(-1, 3).mean(axis=0)
+            seen.append(patch / max(patch.max(), 1e-6))
+    for k, look in enumerate(looks):
+        hue = np.sqrt(np.asarray(look.shirt) / max(max(look.shirt), 1e-6))
+        assert np.abs(seen[k] - hue).max() < 0.3, (k, seen[k], hue)
+    assert looks[0].shirt != looks[1].shirt

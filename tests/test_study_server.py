@@ -20,6 +20,9 @@ from crowdstudy.study.fake_stimuli import write_fake_stimuli
 from crowdstudy.study.schedule import make_schedule
 from crowdstudy.study.stimulus_set import load_stimulus_set
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from study_fixtures import register  # noqa: E402
+
 ROOT = Path(__file__).resolve().parent.parent
 TOKEN = "test-admin-token-0123456789abcdef"
 ANS = {f"Q{i}": 3 for i in range(1, 7)}
@@ -52,17 +55,7 @@ def api(stim_dir, tmp_path):
 
 
 def _register(api, pid="P001", *, ready=True):
-    r = api.post("/api/participants", json={"participant_id": pid})
-    assert r.status_code == 201, r.text
-    secret = r.json()["secret"]
-    h = {"X-Participant-Secret": secret}
-    if ready:
-        assert api.post(f"/api/participants/{pid}/consent", json={"consent": True}, headers=h).status_code == 200
-        assert api.post(f"/api/participants/{pid}/demographics", json={"age": 30, "gender": "male"},
-                        headers=h).status_code == 200
-        assert api.post(f"/api/participants/{pid}/practice", json={"answers": ANS, "rt_ms": 10},
-                        headers=h).status_code == 201
-    return h, r.json()["state"]
+    return register(api, pid, ready=ready)
 
 
 def check_answer(trial):

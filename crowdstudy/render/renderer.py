@@ -326,6 +326,7 @@ class CrowdRenderer:
             _set(prog, "u_colors", 2)  # character.frag
             _set(prog, "u_albedo", 4)
             _set(prog, "u_n_characters", n)
+            _set(prog, "u_period", float(self.period or 0.0))
 
     # -- camera and geometry -------------------------------------------------------------
     def set_view(self, view) -> Camera:

@@ -14,7 +14,7 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--participants", metavar="CSV",
                         help="participants CSV with the exclusion flags (default: participants.csv beside --out)")
     parser.add_argument("--online", metavar="TOML",
-                        help="the exclusion rules' file (default: the toolkit's crowdstudy/study/online.toml)")
+                        help="the exclusion rules' file (default: the [online] table of the toolkit's study.toml)")
 
 
 def run(args: argparse.Namespace) -> int:

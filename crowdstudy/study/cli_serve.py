@@ -31,8 +31,8 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--consent", metavar="FILE", help="consent text (Markdown; default consent.md beside the design)")
     parser.add_argument("--practice", metavar="FILE", help="practice clip, relative to --stimuli")
     parser.add_argument("--online", metavar="TOML",
-                        help="data-quality controls and completion codes (default: online.toml beside the design, "
-                             "else the toolkit's)")
+                        help="data-quality controls and completion codes (default: the design's [online] table, "
+                             "online.toml beside it, else the toolkit's)")
     parser.add_argument("--completion-code", metavar="CODE", help="code shown on the debrief page (e.g. Prolific's)")
     parser.add_argument("--redirect-url", metavar="URL", help="where the debrief page sends the participant")
     parser.add_argument("--media-dir", metavar="DIR",

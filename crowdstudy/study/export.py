@@ -59,7 +59,7 @@ def export_study(db_url: str, out: str | Path, demographics: str | Path | None =
                  participants: str | Path | None = None, online: str | Path | None = None) -> dict:
     """Write responses.csv, participants.csv (default: beside ``out``) and, if asked,
     demographics.csv from the database at ``db_url``; online: the TOML file of the exclusion
-    rules (default: the toolkit's online.toml).
+    rules (default: the [online] table of the toolkit's study.toml).
 
     Returns {"responses": rows written, "participants": ..., "excluded": ..., "files": [paths]}.
     """

@@ -1,6 +1,6 @@
 """Data-quality controls of the online study and the exclusion rules applied to its export.
 
-Configured in a TOML file (default: the toolkit's ``crowdstudy/study/online.toml``; ``crowdstudy
+Configured in the design's ``[online]`` table (default: the toolkit's ``crowdstudy/study/study.toml``; ``crowdstudy
 serve --online FILE`` and ``crowdstudy export --online FILE`` for another), table ``[online]``:
 
 * ``min_width`` / ``min_height``: the smallest browser viewport (CSS pixels) the study runs
@@ -73,8 +73,9 @@ class OnlineConfig:
 
 
 def default_online_path() -> Path:
-    """The toolkit's ``crowdstudy/study/online.toml``."""
-    return resource_path("crowdstudy.study", "online.toml")
+    """The toolkit's design, ``crowdstudy/study/study.toml``, whose ``[online]`` table holds
+    the default controls."""
+    return resource_path("crowdstudy.study", "study.toml")
 
 
 def _num(table: dict, key: str, where: str, *, integer: bool, lo: float, hi: float | None = None):

@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import os
 import secrets
+import tomllib
 from pathlib import Path
 
 from crowdstudy.design import default_design_path, load_design
@@ -47,7 +48,8 @@ def build_config(stimuli: str | Path, *, design: str | Path | None = None, db: s
     consent: Markdown file (default: ``consent.md`` beside the design, in the stimulus
     folder, or the toolkit's ``crowdstudy/study/consent.md``); admin_token: default from the
     ``CROWDSTUDY_ADMIN_TOKEN`` environment variable, else random; online: the data-quality
-    TOML (default ``online.toml`` beside the design, else the toolkit's); media_dir /
+    TOML (default: the design's ``[online]`` table, else ``online.toml`` beside the design, else
+    the toolkit's defaults); media_dir /
     media_url: publish the videos there under opaque names / the URL prefix they are served
     from (:mod:`crowdstudy.study.media`).
     """
@@ -72,8 +74,12 @@ def build_config(stimuli: str | Path, *, design: str | Path | None = None, db: s
     if media_url is not None and not (media_url.startswith("/") and not media_url.startswith("//")
                                       or media_url.startswith(("https://", "http://"))):
         raise InvalidInputError(f"--media-url must be a path such as /media or an http(s) URL, got {media_url!r}")
-    if online is None and (Path(design_obj.source).parent / "online.toml").is_file():
-        online = Path(design_obj.source).parent / "online.toml"
+    if online is None:   # the design's own [online] table, else online.toml beside it, else the toolkit's
+        own = Path(design_obj.source)
+        if own.is_file() and "online" in tomllib.loads(own.read_text(encoding="utf-8")):
+            online = own
+        elif (own.parent / "online.toml").is_file():
+            online = own.parent / "online.toml"
     online_cfg = load_online_config(online)
     consent_html = load_consent_html(consent_file)
     store = StudyStore(db or "sqlite:///study.db")

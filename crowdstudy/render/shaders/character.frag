@@ -13,11 +13,12 @@ in float v_shadow;
 in vec3 v_diffuse;
 in vec3 v_add;
 flat in int v_char;
+flat in int v_layer;
 out vec4 f_color;
 
 void main() {
     if (u_textured == 1) {
-        vec3 albedo = texture(u_albedo, vec3(v_material.xy, float(v_char))).rgb;
+        vec3 albedo = texture(u_albedo, vec3(v_material.xy, float(v_layer))).rgb;
         albedo = albedo * albedo;   // the layers store sqrt(linear): cheap, close to sRGB
         vec3 diffuse, add;
         light_terms_shadowed(v_world, v_normal, v_shadow, diffuse, add);

@@ -8,6 +8,7 @@ uniform sampler2D u_rest;
 uniform int u_rest_width;
 uniform int u_n_vertices;
 uniform int u_n_characters;
+uniform float u_period;   // periodic scenes: the copy length (m), 0 otherwise
 uniform mat4 u_view_proj;
 uniform int u_textured;   // 1: the group is drawn with per-character textures
 
@@ -33,6 +34,7 @@ out vec3 v_material;
 out float v_shadow;
 flat out int v_char;
 flat out int v_copy;
+flat out int v_layer;     // the albedo layer: periodic copies wear other characters' clothes
 flat out float v_shift;
 
 vec4 rest_texel(int idx) {
@@ -73,5 +75,9 @@ void main() {
     v_char = in_char;
     v_shift = in_shift;
     v_copy = int(floor(in_shift * 1000.0 + 0.5));
+    // copy k of a periodic crowd is dressed as character (i + 17 k) mod N: the repeated
+    // crowd does not read as clones (the motion repeats, the people do not)
+    int k = u_period > 0.0 ? int(floor(in_shift / u_period + 0.5)) : 0;
+    v_layer = ((in_char + 17 * k) % u_n_characters + u_n_characters) % u_n_characters;
     gl_Position = u_view_proj * vec4(world, 1.0);
 }
