@@ -364,7 +364,7 @@ def hall(rect: tuple[float, float, float, float], height: float) -> tuple[np.nda
 
 
 def occluding(elements: Elements, eye, extent: tuple[float, float], *, height: float = 2.0, margin: float = 0.3,
-              near: float = 2.5) -> np.ndarray:
+              near: float = 3.5) -> np.ndarray:
     """(E,) bool: the elements a camera at ``eye`` must leave out (the cutaway): those whose
     bounding box meets a sight line from the eye to the crowd box (the area ``extent``
     grown by ``margin`` metres, from the floor to ``height``), sampled on a 7 x 7 x 4
