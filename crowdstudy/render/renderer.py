@@ -186,7 +186,11 @@ class CrowdRenderer:
         finally:
             prog_paint.release()
         self.surface_codes = codes   # per character: what each render vertex shows (garments.CODES)
-        self.drawn_bodies = [b if c is None else _dressed(b, c, look) for b, c, look in zip(self.bodies, codes, self.looks)]
+        # the dressing moves the surface by millimetres: below 540 px tall images it is under a
+        # pixel, and skipped
+        dress = self.height >= _DRESS_MIN_HEIGHT
+        self.drawn_bodies = [b if c is None or not dress else _dressed(b, c, look)
+                             for b, c, look in zip(self.bodies, codes, self.looks)]
         # textured bodies carry face, hands and feet in their geometry: twice the faces at
         # 1080p, the mannequins' count in small previews
         self.surface_scale = float(np.clip(SURFACE_FACE_SCALE * self.height / 1080, 1.0, SURFACE_FACE_SCALE))
@@ -597,6 +601,8 @@ class CrowdRenderer:
 
 
 _DRESSED: dict = {}
+#: image height (px) from which the characters' surfaces are dressed (cloth, shoes, hair volume)
+_DRESS_MIN_HEIGHT = 540
 
 
 def _dressed(body, codes: np.ndarray, look):
