@@ -23,7 +23,7 @@ from crowdstudy.package_data import resource_path
 
 __all__ = [
     "StudyDesign", "Stage", "Viewpoint", "Scenario", "Item", "Stimulus",
-    "load_design", "default_design_path",
+    "load_design", "default_design_path", "read_toml",
 ]
 
 _SCENARIOS = ("concert", "corridor")
@@ -111,6 +111,9 @@ class StudyDesign:
     items: tuple[Item, ...]
     composites: dict[str, tuple[str, ...]]
     source: str = "<memory>"
+    #: the design's ``[online]`` table as written (the online study's controls, validated by
+    #: ``crowdstudy.study.quality.online_config``), or None
+    online: dict | None = None
 
     @property
     def floor_area(self) -> float:
@@ -217,14 +220,19 @@ class _Reader:
 def load_design(path: str | Path | None = None) -> StudyDesign:
     """Load and validate a study design TOML file (default: the paper's design)."""
     path = Path(path) if path is not None else default_design_path()
-    source = str(path)
+    return parse_design(read_toml(path, f"study design file {str(path)!r} does not exist"), str(path))
+
+
+def read_toml(path: str | Path, missing: str) -> dict:
+    """The parsed TOML file ``path``; InvalidInputError ``missing`` when it is not a file, or
+    naming the file when it is not valid TOML."""
+    path = Path(path)
     if not path.is_file():
-        raise InvalidInputError(f"study design file {source!r} does not exist")
+        raise InvalidInputError(missing)
     try:
-        raw = tomllib.loads(path.read_text(encoding="utf-8"))
+        return tomllib.loads(path.read_text(encoding="utf-8"))
     except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
-        raise InvalidInputError(f"{source}: not valid TOML ({exc})") from None
-    return parse_design(raw, source)
+        raise InvalidInputError(f"{path}: not valid TOML ({exc})") from None
 
 
 def parse_design(raw: dict, source: str = "<memory>") -> StudyDesign:
@@ -357,4 +365,4 @@ def parse_design(raw: dict, source: str = "<memory>") -> StudyDesign:
                        viewpoints=viewpoints, methods=methods, video_width=video_w, video_height=video_h,
                        duration=duration, fps=fps, stages=tuple(sorted(stages, key=lambda s: s.number)),
                        scenarios=scenarios, likert_points=points, likert_labels=tuple(labels), items=tuple(items),
-                       composites=composites, source=source)
+                       composites=composites, source=source, online=raw.get("online"))

@@ -10,7 +10,7 @@ from crowdstudy.body import load_body
 from crowdstudy.body.skeleton import JOINT_INDEX as J
 from crowdstudy.render.appearance import RACE_SKIN, assign_appearance, fill_from_nearest, nearest_painted, skin_tone
 from crowdstudy.render.garments import CLOTH_LIFT, dress_body, vertex_codes
-from crowdstudy.render.palette import MIN_SKIN_DELTA_E, SHIRTS, SHOES, SKIN_TONES, TROUSERS, srgb_to_lab
+from crowdstudy.render.palette import MIN_SKIN_DELTA_E, SHIRTS, SHOES, SKIN_TONES, TROUSERS, assign_colors, srgb_to_lab
 
 pytestmark = pytest.mark.filterwarnings("ignore::DeprecationWarning")
 
@@ -116,9 +116,9 @@ def test_appearance_is_seeded_and_varied():
     recs = [{"model": "makehuman", "sex": s, "age": a, "race": [0.3, 0.3, 0.4]}
             for s, a in zip(["female", "male"] * 20, np.linspace(18, 70, 40))]
     pos = np.stack([np.arange(40) % 8, np.arange(40) // 8], axis=1) * 0.6
-    looks = assign_appearance(recs, pos, 3)
-    assert looks == assign_appearance(recs, pos, 3)
-    assert looks != assign_appearance(recs, pos, 4)
+    looks = assign_appearance(recs, assign_colors(pos, 3)[1], 3)
+    assert looks == assign_appearance(recs, assign_colors(pos, 3)[1], 3)
+    assert looks != assign_appearance(recs, assign_colors(pos, 4)[1], 4)
     assert {lk.legwear for lk in looks} >= {"trousers", "shorts"}
     assert len({lk.shirt for lk in looks}) >= 8
     assert any(lk.sleeve > 1 for lk in looks) and any(lk.sleeve < 0.2 for lk in looks)

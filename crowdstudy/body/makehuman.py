@@ -221,6 +221,7 @@ def makehuman_body(record: dict, fields: dict) -> Body:
                        for j in range(NUM_JOINTS)])
     if "weights" not in _TEMPLATE:
         _TEMPLATE["weights"] = _top4(a["weights"].astype(np.float64))
+        _TEMPLATE["weights32"] = _TEMPLATE["weights"].astype(np.float32)
     weights = _TEMPLATE["weights"]
     verts, joints = _t_pose(verts, joints, weights)
     verts = _curl_fingers(verts, joints, weights)
@@ -236,5 +237,5 @@ def makehuman_body(record: dict, fields: dict) -> Body:
     joints -= pelvis
     surface = template_surface()
     return Body(record=dict(record), rest_joints=joints, rest_vertices=verts, faces=_TEMPLATE["faces"],
-                weights=_TEMPLATE.setdefault("weights32", weights.astype(np.float32)), pelvis_height=float(pelvis[2]),
+                weights=_TEMPLATE["weights32"], pelvis_height=float(pelvis[2]),
                 template_key=f"makehuman-v{MH_MODEL_VERSION}", surface=surface)

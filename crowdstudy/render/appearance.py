@@ -23,13 +23,14 @@ from __future__ import annotations
 import collections
 import dataclasses
 import hashlib
-import json
 
 import numpy as np
 
+from crowdstudy.body.loading import body_key
+from crowdstudy.body.skeleton import JOINT_INDEX
 from crowdstudy.errors import InvalidInputError
 from crowdstudy.render.garments import surface_codes
-from crowdstudy.render.palette import HAIR, SHIRTS, SHOES, SKIN_TONES, TROUSERS, assign_colors, srgb_to_linear
+from crowdstudy.render.palette import HAIR, SHIRTS, SHOES, SKIN_TONES, TROUSERS, srgb_to_linear
 
 __all__ = ["Appearance", "assign_appearance", "paint_textures", "RACE_SKIN", "TEXTURE_SIZE", "skin_tone", "nearest_painted", "fill_from_nearest",
            "texture_size"]
@@ -95,12 +96,15 @@ def skin_tone(record: dict, rng: np.random.Generator, palette_index: int) -> np.
     return srgb_to_linear(np.clip(srgb, 0.0, 255.0))
 
 
-def assign_appearance(records: list[dict], positions: np.ndarray, seed: int, *,
-                      period: float | None = None) -> list[Appearance]:
-    """Appearances of N characters (see the module docstring); same inputs, same result."""
-    if len(records) != len(positions):
-        raise InvalidInputError(f"positions: expected {len(records)} rows (one per body), got {len(positions)}")
-    _, choice = assign_colors(positions, seed, period=period)
+def assign_appearance(records: list[dict], choice: np.ndarray, seed: int) -> list[Appearance]:
+    """Appearances of N characters (see the module docstring); same inputs, same result.
+
+    ``choice``: (N, 5) palette indices from :func:`~crowdstudy.render.palette.assign_colors`
+    (skin, hair, shirt, trousers, shoes; neighbours already differ)."""
+    choice = np.asarray(choice)
+    if choice.shape != (len(records), 5):
+        raise InvalidInputError(f"choice: expected shape ({len(records)}, 5) (assign_colors' palette indices), "
+                                f"got {choice.shape}")
     out = []
     for i, rec in enumerate(records):
         rng = np.random.default_rng([int(seed) & 0xFFFFFFFF, i, 7])
@@ -142,8 +146,7 @@ def assign_appearance(records: list[dict], positions: np.ndarray, seed: int, *,
 
 def _landmarks(body) -> dict:
     """Rest-pose positions the paint rules measure from."""
-    from crowdstudy.body.skeleton import JOINT_INDEX as J
-
+    J = JOINT_INDEX
     joints = np.asarray(body.rest_joints, dtype=np.float64)
     surf = body.surface
     verts = np.asarray(body.rest_vertices, dtype=np.float64)
@@ -212,7 +215,7 @@ def paint_textures(ctx, bodies: list, looks: list[Appearance], program, *, size:
             body, look = bodies[i], looks[i]
             surf = body.surface
             key = id(surf)
-            memo = (json.dumps(body.record, sort_keys=True, default=str), look, size)
+            memo = (body_key(body.record), look, size)
             if memo in _PAINTED:
                 filled, codes[i] = _PAINTED[memo]
                 _PAINTED.move_to_end(memo)

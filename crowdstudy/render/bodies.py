@@ -40,14 +40,19 @@ def default_body_loader(record: dict):
     return load_body(record)
 
 
-def vertex_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
-    """Area-weighted unit vertex normals. ``vertices`` (V, 3), ``faces`` (F, 3) -> (V, 3)."""
+def vertex_normals(vertices: np.ndarray, faces: np.ndarray, weld: np.ndarray | None = None) -> np.ndarray:
+    """Area-weighted unit vertex normals. ``vertices`` (V, 3), ``faces`` (F, 3) -> (V, 3).
+
+    ``weld`` (V,) optional: vertices with the same value (a UV-split surface's copies of one
+    point) share one normal, summed over all their faces, so shading is smooth across seams.
+    """
     v = np.asarray(vertices, dtype=np.float64)
     f = np.asarray(faces, dtype=np.int64)
     fn = np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]])
-    n = np.zeros_like(v)
-    for k in range(3):
-        np.add.at(n, f[:, k], fn)
+    key = np.arange(len(v)) if weld is None else np.asarray(weld, dtype=np.int64)
+    at = key[f.T.reshape(-1)]            # corner 0 of every face, then corner 1, then corner 2
+    m = int(key.max()) + 1 if len(key) else 0
+    n = np.stack([np.bincount(at, weights=np.tile(fn[:, c], 3), minlength=m) for c in range(3)], axis=1)[key]
     length = np.linalg.norm(n, axis=1, keepdims=True)
     return n / np.where(length < 1e-12, 1.0, length)
 
@@ -216,8 +221,7 @@ def group_bodies(bodies: list, *, max_faces: int | None = 8000,
         rest = np.zeros((len(g["gather"]), 2, 4), dtype=np.float32)
         rest[:, 0, :3] = dec_verts
         rest[:, 0, 3] = 1.0
-        rest[:, 1, :3] = _welded_normals(dec_verts, g["faces"], g["weld"]) if g["textured"] else \
-            vertex_normals(dec_verts, g["faces"])
+        rest[:, 1, :3] = vertex_normals(dec_verts, g["faces"], g["weld"])
         g["members"].append(i)
         g["rest"].append(rest)
     return [BodyGroup(key=key[0], members=np.asarray(g["members"]), faces=g["faces"], joints=g["joints"],
@@ -318,15 +322,3 @@ def _surface_decimation(verts: np.ndarray, faces: np.ndarray, weld: np.ndarray, 
     result = (out, cluster, np.asarray(gather, dtype=np.int64), np.asarray(uv_new, dtype=np.float32))
     _DECIMATIONS[key] = result
     return result
-
-
-def _welded_normals(vertices: np.ndarray, faces: np.ndarray, weld: np.ndarray) -> np.ndarray:
-    """Vertex normals summed over render vertices that share a body vertex (``weld``)."""
-    v = np.asarray(vertices, dtype=np.float64)
-    f = np.asarray(faces, dtype=np.int64)
-    fn = np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]])
-    m = int(weld.max()) + 1
-    at = weld[f].reshape(-1)
-    n = np.stack([np.bincount(at, weights=np.repeat(fn[:, c], 3), minlength=m) for c in range(3)], axis=1)[weld]
-    length = np.linalg.norm(n, axis=1, keepdims=True)
-    return n / np.where(length < 1e-12, 1.0, length)

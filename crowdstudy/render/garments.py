@@ -20,6 +20,7 @@ import hashlib
 import numpy as np
 
 from crowdstudy.errors import InvalidInputError
+from crowdstudy.render.bodies import vertex_normals
 
 __all__ = ["CODES", "CLOTH_LIFT", "SHOE_LIFT", "surface_codes", "vertex_codes", "dress_body", "neighbours"]
 
@@ -118,14 +119,6 @@ def _fuse(points: np.ndarray, mask: np.ndarray, radius: float, rounds: int) -> n
     return out
 
 
-def _normals(points: np.ndarray, faces: np.ndarray) -> np.ndarray:
-    f = np.asarray(faces, dtype=np.int64)
-    fn = np.cross(points[f[:, 1]] - points[f[:, 0]], points[f[:, 2]] - points[f[:, 0]])
-    at = f.reshape(-1)
-    n = np.stack([np.bincount(at, weights=np.repeat(fn[:, c], 3), minlength=len(points)) for c in range(3)], axis=1)
-    return n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-12)
-
-
 def dress_body(body, render_codes: np.ndarray, hair_volume: float):
     """A copy of ``body`` (a Body with a surface) whose rest vertices carry its clothes and
     hair (see the module docstring); ``hair_volume`` m, the scalp's lift under the hair."""
@@ -152,5 +145,5 @@ def dress_body(body, render_codes: np.ndarray, hair_volume: float):
     lift = np.where(cloth, CLOTH_LIFT, 0.0) + np.where(shoes, SHOE_LIFT, 0.0) + np.where(hair, float(hair_volume), 0.0)
     for _ in range(_TAPER):  # fade every lift out over a few rings (the hairline, hems, collar)
         lift = np.where(used, 0.5 * lift + 0.5 * np.minimum(lift, avg @ lift), lift)
-    out = out + _normals(out, faces) * lift[:, None]
+    out = out + vertex_normals(out, faces) * lift[:, None]
     return dataclasses.replace(body, rest_vertices=out, _cache={})

@@ -35,6 +35,7 @@ from importlib import resources
 
 import numpy as np
 
+from crowdstudy.body.loading import body_key
 from crowdstudy.errors import InvalidInputError
 from crowdstudy.render.appearance import assign_appearance, paint_textures, texture_size
 from crowdstudy.render.bodies import SURFACE_FACE_SCALE, BodyGroup, default_body_loader, group_bodies
@@ -176,8 +177,8 @@ class CrowdRenderer:
         color_positions = np.asarray(color_positions, dtype=np.float64)
         if color_positions.shape != (n, 2):
             raise InvalidInputError(f"color_positions: expected shape ({n}, 2), got {color_positions.shape}")
-        self.colors, _ = assign_colors(color_positions, seed, period=self.period)
-        self.looks = assign_appearance(list(anim.bodies), color_positions, seed, period=self.period)
+        self.colors, choice = assign_colors(color_positions, seed, period=self.period)
+        self.looks = assign_appearance(list(anim.bodies), choice, seed)
         prog_paint = _program(ctx, "paint.vert", "paint.frag")
         try:
             tex_albedo, codes = paint_textures(ctx, self.bodies, self.looks, prog_paint,
@@ -608,9 +609,7 @@ _DRESS_MIN_HEIGHT = 540
 def _dressed(body, codes: np.ndarray, look):
     """:func:`~crowdstudy.render.garments.dress_body`, memoised on the body's record, its
     look and its codes (renderers of the same crowd share the dressed bodies)."""
-    import json
-
-    key = (json.dumps(body.record, sort_keys=True, default=str), look, codes.tobytes())
+    key = (body_key(body.record), look, codes.tobytes())
     if key not in _DRESSED:
         if len(_DRESSED) > 256:
             _DRESSED.clear()

@@ -35,14 +35,14 @@ import hashlib
 import hmac
 import random
 import statistics
-import tomllib
 from pathlib import Path
 from typing import Iterable, Mapping, Sequence
 
+from crowdstudy.design import read_toml
 from crowdstudy.errors import InvalidInputError
 from crowdstudy.package_data import resource_path
 
-__all__ = ["OnlineConfig", "load_online_config", "default_online_path", "draw_checks", "flag_participants",
+__all__ = ["OnlineConfig", "load_online_config", "online_config", "default_online_path", "draw_checks", "flag_participants",
            "PARTICIPANT_COLUMNS", "RULES"]
 
 RULES = ("failed_attention_check", "too_fast", "straight_lining", "tab_switching")
@@ -93,16 +93,18 @@ def _num(table: dict, key: str, where: str, *, integer: bool, lo: float, hi: flo
 def load_online_config(path: str | Path | None = None) -> OnlineConfig:
     """Read and validate the ``[online]`` table of ``path`` (default: default_online_path())."""
     path = Path(path) if path is not None else default_online_path()
-    if not path.is_file():
-        raise InvalidInputError(f"--online: file {str(path)!r} does not exist")
-    try:
-        raw = tomllib.loads(path.read_text(encoding="utf-8"))
-    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
-        raise InvalidInputError(f"{path}: not valid TOML ({exc})") from None
-    top = raw.get("online")
+    top = read_toml(path, f"--online: file {str(path)!r} does not exist").get("online")
     if not isinstance(top, dict):
         raise InvalidInputError(f"{path}: missing the [online] table")
-    where = f"{path}: [online]"
+    return online_config(top, str(path))
+
+
+def online_config(top: dict, source: str) -> OnlineConfig:
+    """Validate the ``[online]`` table ``top`` of the file ``source`` (named in errors and
+    recorded in the config)."""
+    where = f"{source}: [online]"
+    if not isinstance(top, dict):
+        raise InvalidInputError(f"{where}: expected a table")
     known = {"min_width", "min_height", "fullscreen", "attention_checks", "codes", "exclude"}
     for key in top:
         if key not in known:
@@ -132,7 +134,7 @@ def load_online_config(path: str | Path | None = None) -> OnlineConfig:
         min_median_rt_ms=_num(ex, "min_median_rt_ms", w, integer=False, lo=0) or None,
         max_straightline_fraction=_num(ex, "max_straightline_fraction", w, integer=False, lo=0, hi=1) or None,
         max_hidden_trials=_num(ex, "max_hidden_trials", w, integer=True, lo=0),
-        source=str(path))
+        source=source)
 
 
 def draw_checks(secret: str, participant_id: str, n_trials: int, n_checks: int, points: int) -> dict[int, int]:

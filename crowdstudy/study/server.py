@@ -5,7 +5,6 @@ from __future__ import annotations
 import json
 import os
 import secrets
-import tomllib
 from pathlib import Path
 
 from crowdstudy.design import default_design_path, load_design
@@ -55,7 +54,7 @@ def build_config(stimuli: str | Path, *, design: str | Path | None = None, db: s
     """
     from crowdstudy.study.app import StudyConfig
     from crowdstudy.study.consent import find_consent_file, load_consent_html
-    from crowdstudy.study.quality import load_online_config
+    from crowdstudy.study.quality import load_online_config, online_config
     from crowdstudy.study.stimulus_set import load_stimulus_set
     from crowdstudy.study.storage import StudyStore
 
@@ -74,13 +73,15 @@ def build_config(stimuli: str | Path, *, design: str | Path | None = None, db: s
     if media_url is not None and not (media_url.startswith("/") and not media_url.startswith("//")
                                       or media_url.startswith(("https://", "http://"))):
         raise InvalidInputError(f"--media-url must be a path such as /media or an http(s) URL, got {media_url!r}")
-    if online is None:   # the design's own [online] table, else online.toml beside it, else the toolkit's
-        own = Path(design_obj.source)
-        if own.is_file() and "online" in tomllib.loads(own.read_text(encoding="utf-8")):
-            online = own
-        elif (own.parent / "online.toml").is_file():
-            online = own.parent / "online.toml"
-    online_cfg = load_online_config(online)
+    beside = Path(design_obj.source).parent / "online.toml"
+    if online is not None:
+        online_cfg = load_online_config(online)
+    elif design_obj.online is not None:   # the design's own [online] table
+        online_cfg = online_config(design_obj.online, design_obj.source)
+    elif beside.is_file():
+        online_cfg = load_online_config(beside)
+    else:
+        online_cfg = load_online_config()
     consent_html = load_consent_html(consent_file)
     store = StudyStore(db or "sqlite:///study.db")
     return StudyConfig(design=design_obj, stimuli=stim, store=store, consent_html=consent_html,
