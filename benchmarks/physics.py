@@ -1,7 +1,13 @@
 """``crowdstudy bench physics``: cost per step of the collision-correction physics.
 
+* the device rows (cpu; cuda:N when present, else "cuda: not present");
 * median ms per step (split detection / assembly / solve) over ``--steps`` steps for 20
   characters (D1), 60 (D5) and 200 (the D5 scene tiled on a larger floor);
+* ``--curve-only --sizes 20,60,200,1000,5000``: the cost curve (ms per simulated 1/60 s,
+  CPU and wall, memory per character) and its log-log figure
+  ``build/bench/physics_runtime.png``;
+* ``--stadium 1000,5000``: ``correct()`` on stadium crowds (``--stadium-level``,
+  ``--stadium-seconds``): time, peak memory per character, NaN/stability and the bars;
 * the CG implementations on the same assembled 60-character system (fused single-launch
   PCG with the per-character tree preconditioner or 6x6 block Jacobi, scipy CG on a BSR
   matrix, warp.optim.linear.cg on a warp.sparse BSR matrix);
@@ -16,6 +22,7 @@
 from __future__ import annotations
 
 import argparse
+import os
 import statistics
 import sys
 import time
@@ -107,7 +114,229 @@ def time_steps(anim, steps: int, device: str = "cpu") -> dict:
     out["total_wall_ms"] = statistics.median(wall["total"])
     out["total_wall_min_ms"] = min(wall["total"])
     out.update(cg_iterations=float(np.mean(cg)), contacts=float(np.mean(contacts)))
+    out["warp_mib"] = _warp_mib(corr)
     return out
+
+
+def _warp_mib(corr) -> float:
+    """MiB of all Warp arrays a corrector holds (model, states, control frames, contacts,
+    collision and solver buffers): the simulation's own memory, on its device."""
+    wp = corr.solver.wp
+    seen, total = set(), 0
+    holders = [corr, corr.pipeline, corr.solver, corr.control, corr.contacts, *corr.states, corr.model.wp]
+    if getattr(corr.pipeline, "_scratch", None) is not None:
+        holders.append(corr.pipeline._scratch)
+    for h in holders:
+        values = h.values() if isinstance(h, dict) else vars(h).values()
+        flat = []
+        for v in values:
+            flat.extend(v if isinstance(v, (list, tuple)) else [v])
+        for v in flat:
+            if isinstance(v, wp.array) and id(v) not in seen:
+                seen.add(id(v))
+                total += int(v.capacity)
+    return total / 2**20
+
+
+def _rss_mib(field: str = "VmRSS") -> float:
+    """Resident (``VmRSS``) or peak resident (``VmHWM``) memory of this process, MiB (Linux;
+    NaN elsewhere)."""
+    try:
+        with open("/proc/self/status") as fh:
+            for line in fh:
+                if line.startswith(field + ":"):
+                    return float(line.split()[1]) / 1024.0
+    except OSError:
+        pass
+    return float("nan")
+
+
+def device_rows(cpu_only: bool = False) -> list[dict]:
+    """One row per Warp device the benchmark can run on: ``cpu`` always, ``cuda:0`` with
+    its name when a CUDA device is present, else the row ``cuda: not present``."""
+    from crowdstudy.warp_runtime import get_warp, host_threads
+
+    wp = get_warp()
+    cpu = wp.get_device("cpu")
+    rows = [{"device": "cpu", "present": True, "name": getattr(cpu, "name", "cpu"),
+             "host_threads": host_threads()}]
+    if cpu_only:
+        rows.append({"device": "cuda", "present": False, "name": "skipped (--cpu-only)"})
+    elif wp.is_cuda_available():
+        for dev in wp.get_cuda_devices():
+            rows.append({"device": str(dev), "present": True, "name": dev.name, "host_threads": None})
+    else:
+        rows.append({"device": "cuda", "present": False, "name": "cuda: not present"})
+    for r in rows:
+        print(f"device {r['device']}: {r['name'] if r['present'] else r['name']}", flush=True)
+    return rows
+
+
+def cost_curve(sizes, steps: int, device: str = "cpu", base=None) -> list[dict]:
+    """ms per step (= per simulated 1/60 s at the study's 1/60 s step) against characters:
+    the D5 concert tiled on a grid of floors (:func:`_tile`) for each size; CPU (main
+    thread) and wall medians over ``steps`` steps, the phases, and memory: the Warp arrays
+    of the corrector (MiB, and KiB per character) and the resident growth of the process
+    (MiB; the allocator reuses what earlier sizes freed, so it undercounts after the first)."""
+    import gc
+
+    base = base if base is not None else _scene("D5", max(steps, 8) / 60.0 + 0.5)
+    rows = []
+    for n in sizes:
+        anim = base if n == base.n_characters else _tile(base, n)
+        gc.collect()
+        rss0 = _rss_mib()
+        r = time_steps(anim, steps, device=device)
+        grown = _rss_mib() - rss0
+        row = {"characters": n, "device": device, "steps": steps, "load": os.getloadavg()[0],
+               "cpu_ms_per_60th": r["total_cpu_ms"], "wall_ms_per_60th": r["total_wall_ms"],
+               "wall_min_ms": r["total_wall_min_ms"],
+               **{k: r[k] for k in r if k.endswith("_cpu_ms") and k != "total_cpu_ms"},
+               "cg_iterations": r["cg_iterations"], "contacts": r["contacts"],
+               "warp_mib": r["warp_mib"], "warp_kib_per_character": 1024.0 * r["warp_mib"] / n,
+               "rss_growth_mib": grown,
+               "peak_rss_mib": _rss_mib("VmHWM")}
+        rows.append(row)
+        print(format_table([row]), flush=True)
+        del anim
+    return rows
+
+
+def runtime_figure(rows: list[dict], path=None):
+    """ms per simulated 1/60 s against characters, log-log (PNG): CPU and wall time per
+    device, with the 40 ms bar at 1,000 characters and a linear-cost guide."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from crowdstudy.bench import report_path
+
+    path = report_path("physics_runtime").with_suffix(".png") if path is None else path
+    fig, ax = plt.subplots(figsize=(6.0, 4.2), dpi=120)
+    for dev in sorted({r["device"] for r in rows}):
+        sel = sorted((r for r in rows if r["device"] == dev), key=lambda r: r["characters"])
+        n = [r["characters"] for r in sel]
+        ax.loglog(n, [r["cpu_ms_per_60th"] for r in sel], "o-", label=f"{dev}: CPU time (main thread)")
+        ax.loglog(n, [r["wall_ms_per_60th"] for r in sel], "s--", label=f"{dev}: wall time")
+    ns = np.array(sorted({r["characters"] for r in rows}), float)
+    if len(ns):
+        ref = min(rows, key=lambda r: r["characters"])
+        ax.loglog(ns, ref["cpu_ms_per_60th"] * ns / ref["characters"], ":", color="grey", label="linear in N")
+    ax.plot([1000], [40.0], "r*", ms=12, label="bar: 40 ms at 1,000")
+    ax.set_xlabel("characters")
+    ax.set_ylabel("ms per simulated 1/60 s")
+    ax.set_title("crowdstudy physics step (Warp CPU)")
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize=7)
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path)
+    plt.close(fig)
+    return path
+
+
+def stadium_crowd(n: int, level: str, duration: float, seed: int = 1):
+    """The Baseline of a stadium concert: ``n`` characters at ``level``'s density
+    (:func:`~crowdstudy.layout.concert_layout` with ``n_characters``), animated as
+    ``crowdstudy animate layout.npz`` does."""
+    from crowdstudy.design import load_design
+    from crowdstudy.layout import concert_layout
+    from crowdstudy.motion.baseline import animate_stationary
+
+    design = load_design()
+    crowd = concert_layout(design, level, seed, n_characters=n)
+    meta = {k: crowd.meta[k] for k in ("density_level", "density", "n_characters")}
+    return animate_stationary(crowd, duration=duration, fps=design.fps, seed=seed,
+                              meta={**meta, "seed": seed, "stage": "stationary"})
+
+
+def _central_subset(anim, k: int):
+    """The ``k`` characters nearest the floor's centre (frame 0), in index order."""
+    d = np.linalg.norm(anim.root_translation[0, :, :2], axis=1)
+    idx = np.sort(np.argsort(d, kind="stable")[:k])
+    return idx
+
+
+def _select(anim, idx):
+    return anim.replace(root_translation=anim.root_translation[:, idx], joint_rotations=anim.joint_rotations[:, idx],
+                        bodies=tuple(anim.bodies[i] for i in idx), clips=tuple(anim.clips[i] for i in idx))
+
+
+class _BodyProxy:
+    """What the physics and the joint metrics read of a body: rest joints, capsules, and (for
+    the capsules' mesh skin, ``capsule_skin``) the rest vertices with a one-hot of each
+    vertex's dominant bone instead of the float skinning weights and the faces. The same
+    skin as the full body; about 0.7 MB instead of several MB per MakeHuman character."""
+
+    def __init__(self, body):
+        self.rest_joints = np.asarray(body.rest_joints, np.float64)
+        self.capsules = body.capsules
+        self.rest_vertices = np.asarray(body.rest_vertices, np.float64)
+        weights = np.asarray(body.weights)
+        dominant = weights.argmax(1)
+        self.weights = np.zeros(weights.shape, np.uint8)
+        self.weights[np.arange(len(dominant)), dominant] = 1
+
+
+def stadium_run(n: int, level: str = "D3", duration: float = 20.0, frame_stride: int = 10,
+                overlap_characters: int = 300, light_bodies: bool = False) -> dict:
+    """``correct()`` on a stadium crowd (:func:`stadium_crowd`): wall time, ms per step, peak
+    memory, NaN/stability, and the bars (:func:`bar_checks`) of Ours against its Baseline.
+
+    The mesh overlap is measured on every ``frame_stride``-th frame and on the
+    ``overlap_characters`` characters nearest the floor's centre (the overlap among them;
+    the full crowd's mesh overlap costs minutes per frame at 5,000); the smoothness and
+    tracking on every character and frame. ``light_bodies`` hands ``correct()`` and the
+    joint metrics :class:`_BodyProxy` objects (at 5,000 MakeHuman characters the full body
+    models alone would not fit in 24 GiB: ``correct()`` keeps every body for the run)."""
+    from crowdstudy.body import load_body
+    from crowdstudy.design import load_design
+    from crowdstudy.metrics import overlap_volume, smoothness, tracking_error
+    from crowdstudy.physics.corrector import correct
+
+    levels = list(load_design().densities)
+    rss0 = _rss_mib()
+    t0 = time.perf_counter()
+    base = stadium_crowd(n, level, duration)
+    t_anim = time.perf_counter() - t0
+    rss_base = _rss_mib()
+    timings: dict = {}
+    c0 = time.process_time()
+    t0 = time.perf_counter()
+    bodies = [_BodyProxy(load_body(rec)) for rec in base.bodies] if light_bodies else None
+    ours = correct(base, progress=False, device="cpu", timings=timings, bodies=bodies)
+    wall = time.perf_counter() - t0
+    cpu = time.process_time() - c0
+    peak = _rss_mib("VmHWM")
+    finite = bool(np.all(np.isfinite(ours.root_translation)) and np.all(np.isfinite(ours.joint_rotations)))
+    # stable: no body ran away from its animation (the largest root deviation, m)
+    max_dev = float(np.max(np.linalg.norm(ours.root_translation - base.root_translation, axis=-1)))
+    row = {"stage": "stationary", "level": level, "characters": n, "frames": base.n_frames, "seconds": duration,
+           "animate_s": t_anim, "correct_wall_s": wall, "correct_cpu_s": cpu,
+           "setup_s": timings.get("setup_seconds"), "ms_per_step_wall": timings.get("ms_per_step"),
+           "steps": timings.get("steps"), "finite": finite, "max_root_deviation_m": max_dev,
+           "baseline_rss_mib": rss_base - rss0, "peak_rss_mib": peak,
+           "peak_kib_per_character": 1024.0 * (peak - rss0) / n,
+           "bodies": "proxies (rest joints, capsules, vertices)" if light_bodies else "full body models"}
+    sub = _central_subset(base, min(overlap_characters, n))
+    frames = np.arange(0, base.n_frames, frame_stride)
+    for geom in ("mesh", "capsule"):
+        ob = overlap_volume(_select(base, sub), geometry=geom, frames=frames).mean
+        oo = overlap_volume(_select(ours, sub), geometry=geom, frames=frames).mean
+        row[f"{geom}_baseline_m3"], row[f"{geom}_ours_m3"], row[f"{geom}_ratio"] = ob, oo, oo / max(ob, 1e-12)
+    row["overlap_subset"] = f"{len(sub)} central characters, every {frame_stride}th frame"
+    row["tracking_cm"] = tracking_error(ours, base, bodies=bodies)
+    sb, so = smoothness(base, base, bodies=bodies).as_dict(), smoothness(ours, base, bodies=bodies).as_dict()
+    for key, name in (("jerk_m_s3", "jerk"), ("hf_share", "hf_share"), ("max_joint_speed_m_s", "max_joint_speed"),
+                      ("pelvis_accel_p99_m_s2", "pelvis_p99"), ("foot_slide_p99_m_s", "foot_slide_p99"),
+                      ("seam_ratio", "seam_ratio")):
+        row[f"{name}_baseline"], row[f"{name}_ours"] = sb[key], so[key]
+    row["jerk_ratio"] = so["jerk_m_s3"] / sb["jerk_m_s3"]
+    checks = bar_checks(row, levels.index(level), len(levels))
+    row["bars_failed"] = ",".join(k for k, ok in checks.items() if not ok) or "-"
+    print(format_table([row]), flush=True)
+    return row
 
 
 def compare_cg(anim, repeat: int = 10) -> list[dict]:
@@ -574,11 +803,12 @@ def bar_checks(row: dict, level_index: int, n_levels: int) -> dict:
 
 def measure_bars(duration: float, frame_stride: int = 10) -> list[dict]:
     """Every (stage, density) cell of the study, ``duration`` seconds each: overlap (mesh and
-    capsule, m^3 per character, every ``frame_stride``-th frame), tracking error (cm) and the
+    capsule, m^3 per character, every ``frame_stride``-th frame), tracking error (cm; with its
+    placement and motion parts, :func:`crowdstudy.metrics.tracking_parts`) and the
     smoothness of Ours against its Baseline (:func:`crowdstudy.metrics.smoothness`), with the
     bars (:data:`BAR_TEXT`) checked per cell (``bars_failed`` lists the failed ones)."""
     from crowdstudy.design import load_design
-    from crowdstudy.metrics import overlap_volume, smoothness, tracking_error
+    from crowdstudy.metrics import overlap_volume, smoothness, tracking_parts
     from crowdstudy.motion.baseline import build_baseline
     from crowdstudy.physics.corrector import correct
 
@@ -600,7 +830,9 @@ def measure_bars(duration: float, frame_stride: int = 10) -> list[dict]:
                 row[f"{geom}_baseline_m3"] = ob
                 row[f"{geom}_ours_m3"] = oo
                 row[f"{geom}_ratio"] = oo / max(ob, 1e-12)
-            row["tracking_cm"] = tracking_error(ours, base)
+            parts = tracking_parts(ours, base)
+            row["tracking_cm"] = parts.total_cm
+            row["tracking_placement_cm"], row["tracking_motion_cm"] = parts.placement_cm, parts.motion_cm
             sb, so = smoothness(base, base).as_dict(), smoothness(ours, base).as_dict()
             for key, name in (("jerk_m_s3", "jerk"), ("hf_share", "hf_share"), ("max_joint_speed_m_s", "max_joint_speed"),
                               ("pelvis_accel_p99_m_s2", "pelvis_p99"), ("foot_slide_p99_m_s", "foot_slide_p99"),
@@ -643,7 +875,39 @@ def main(argv: list[str]) -> int:
     parser.add_argument("--bars", type=float, default=0.0, metavar="SECONDS",
                         help="also measure overlap/tracking on every study cell for SECONDS (20 = the full clips)")
     parser.add_argument("--bars-only", action="store_true", help="only the --bars measurement")
+    parser.add_argument("--curve-only", action="store_true",
+                        help="only the cost curve over --sizes (and its figure), no CG comparison or peers")
+    parser.add_argument("--stadium", default="", metavar="N,N",
+                        help="only correct() on stadium crowds of these sizes (e.g. 1000,5000): time, memory, bars")
+    parser.add_argument("--stadium-level", default="D3", help="density level of the stadium crowds (default D3)")
+    parser.add_argument("--stadium-seconds", default="20", metavar="S[,S]",
+                        help="seconds simulated per stadium size (one value, or one per size)")
+    parser.add_argument("--light-bodies", action="store_true",
+                        help="stadium runs hand correct() body proxies without the meshes (needed at 5,000 "
+                             "MakeHuman characters in 24 GiB)")
     args = parser.parse_args(argv)
+    try:
+        sizes = [int(v) for v in args.sizes.split(",") if v.strip()]
+    except ValueError:
+        raise SystemExit(f"--sizes: expected comma-separated character counts, got {args.sizes!r}") from None
+    if not sizes or min(sizes) < 1:
+        raise SystemExit(f"--sizes: expected positive character counts, got {args.sizes!r}")
+    if args.stadium:
+        try:
+            counts = [int(v) for v in args.stadium.split(",")]
+            secs = [float(v) for v in args.stadium_seconds.split(",")]
+        except ValueError:
+            raise SystemExit("--stadium/--stadium-seconds: expected comma-separated numbers") from None
+        if len(secs) == 1:
+            secs = secs * len(counts)
+        if len(secs) != len(counts) or min(counts) < 1 or min(secs) <= 0:
+            raise SystemExit("--stadium-seconds: one positive value, or one per --stadium size")
+        devices = device_rows()      # the stadium runs are CPU runs; the rows say what else is there
+        rows = [stadium_run(n, args.stadium_level, s, light_bodies=args.light_bodies) for n, s in zip(counts, secs)]
+        print("bars: " + "; ".join(BAR_TEXT.values()), flush=True)
+        path = write_report("physics_stadium", rows, seed=None, devices=devices, bar_text=BAR_TEXT)
+        print(f"wrote {path}", file=sys.stderr)
+        return 0
     if args.bars_only:
         bars = measure_bars(args.bars or 20.0)
         print("bars: " + "; ".join(BAR_TEXT.values()), flush=True)
@@ -656,12 +920,21 @@ def main(argv: list[str]) -> int:
         print(f"wrote {path}", file=sys.stderr)
         return 0
     duration = args.steps / 60.0 + 0.5
+    devices = device_rows(cpu_only=args.cpu_only)
+    cuda = any(r["present"] and r["device"].startswith("cuda") for r in devices)
+    if args.curve_only:
+        d5 = _scene("D5", duration)
+        rows = cost_curve(sizes, args.steps, base=d5)
+        if cuda:
+            rows += cost_curve(sizes, args.steps, device="cuda:0", base=d5)
+        figure = runtime_figure(rows)
+        print(f"figure: {figure}", flush=True)
+        path = write_report("physics_curve", rows, seed=None, devices=devices, figure=str(figure))
+        print(f"wrote {path}", file=sys.stderr)
+        return 0
     d1, d5 = _scene("D1", duration), _scene("D5", duration)
-    from crowdstudy.warp_runtime import get_warp
-
-    cuda = get_warp().is_cuda_available() and not args.cpu_only
     rows = []
-    for n in (int(s) for s in args.sizes.split(",")):
+    for n in sizes:
         anim = d1 if n == d1.n_characters else d5 if n == d5.n_characters else _tile(d5, n)
         r = time_steps(anim, args.steps)
         rows.append({"characters": n, **r, "cpu_ms_per_character": r["total_cpu_ms"] / n})
@@ -674,6 +947,7 @@ def main(argv: list[str]) -> int:
     print(format_table(cg_rows), flush=True)
     peer_rows = [] if args.no_peer else _run_mujoco(args)
     bars = measure_bars(args.bars) if args.bars > 0 else []
-    path = write_report("physics", rows, seed=None, cg=cg_rows, peer=peer_rows, bars=bars, bar_text=BAR_TEXT)
+    path = write_report("physics", rows, seed=None, cg=cg_rows, peer=peer_rows, bars=bars, bar_text=BAR_TEXT,
+                        devices=devices)
     print(f"wrote {path}", file=sys.stderr)
     return 0

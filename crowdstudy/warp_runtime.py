@@ -9,10 +9,12 @@ from __future__ import annotations
 
 import functools
 import os
+import threading
+import time
 
 from crowdstudy.paths import cache_dir
 
-__all__ = ["get_warp", "resolve_device"]
+__all__ = ["get_warp", "resolve_device", "host_threads", "run_parallel"]
 
 
 @functools.lru_cache(maxsize=1)
@@ -46,3 +48,129 @@ def resolve_device(device: str | None = None) -> str:
 
         raise InvalidInputError(f"device {device!r} is not available ({exc}); use 'cpu' or 'cuda:0'") from None
     return device
+
+
+def host_threads() -> int:
+    """Host threads that Warp CPU launches may run on at once: ``CROWDSTUDY_THREADS`` when
+    set (1 switches the splitting off; 2 forces it on, see :func:`run_parallel`), else
+    min(2, the CPUs this process may use).
+
+    Warp runs a CPU launch's threads one after the other in the calling thread, but it
+    releases the GIL during the launch, so launches on disjoint data from two Python
+    threads use two cores."""
+    env = os.environ.get("CROWDSTUDY_THREADS")
+    if env:
+        try:
+            value = int(env)
+        except ValueError:
+            from crowdstudy.errors import InvalidInputError
+
+            raise InvalidInputError(f"CROWDSTUDY_THREADS: expected a positive integer, got {env!r}") from None
+        return max(1, value)
+    try:
+        cpus = len(os.sched_getaffinity(0))
+    except AttributeError:  # pragma: no cover - not Linux
+        cpus = os.cpu_count() or 1
+    return max(1, min(2, cpus))
+
+
+class _Worker:
+    """One persistent helper thread that runs a callable when asked (cheaper than a pool's
+    future per call: two Events)."""
+
+    def __init__(self):
+        self._go, self._done = threading.Event(), threading.Event()
+        self._fn = None
+        self._result = None
+        self._thread = threading.Thread(target=self._loop, name="crowdstudy-warp-cpu", daemon=True)
+        self._thread.start()
+
+    def _loop(self):
+        while True:
+            self._go.wait()
+            self._go.clear()
+            try:
+                self._result = (True, self._fn())
+            except BaseException as exc:  # handed back to the caller
+                self._result = (False, exc)
+            self._done.set()
+
+    def submit(self, fn) -> None:
+        self._done.clear()
+        self._fn = fn
+        self._go.set()
+
+    def result(self):
+        self._done.wait()
+        ok, value = self._result
+        self._fn = self._result = None
+        if not ok:
+            raise value
+        return value
+
+
+_local = threading.local()     # one helper thread per calling thread
+
+
+class _Policy:
+    """Whether two threads pay off here and now: on a machine whose other core is busy (a
+    shared machine) handing work to a second thread costs more than it saves. In parallel
+    mode the gain (CPU seconds of both halves over the wall time) is tracked; when it falls
+    under ``MIN_GAIN`` the calls run serially for ``SERIAL_CALLS`` calls, then parallel is
+    probed again. The callers split work so that the result is the same either way."""
+
+    MIN_GAIN = 1.1
+    SERIAL_CALLS = 400
+    PROBE_CALLS = 40
+
+    def __init__(self):
+        self.gain = 2.0
+        self.serial_left = 0
+        self.probe_left = 0
+
+    def parallel(self) -> bool:
+        if self.serial_left > 0:
+            self.serial_left -= 1
+            if self.serial_left == 0:
+                self.gain, self.probe_left = 2.0, self.PROBE_CALLS
+            return False
+        return True
+
+    def record(self, cpu: float, wall: float) -> None:
+        if wall <= 0.0:
+            return
+        self.gain = 0.8 * self.gain + 0.2 * (cpu / wall)
+        if self.probe_left > 0:
+            self.probe_left -= 1
+            if self.probe_left > 0:
+                return
+        if self.gain < self.MIN_GAIN:
+            self.serial_left = self.SERIAL_CALLS
+
+
+def run_parallel(first, second) -> tuple[float, float]:
+    """Run two independent callables, ``second`` on a helper thread when
+    :func:`host_threads` allows it and it pays off (see ``_Policy``), and wait for both.
+    Returns the CPU seconds each took (``time.thread_time``), for balancing the split."""
+    def timed(fn):
+        c0 = time.thread_time()
+        fn()
+        return time.thread_time() - c0
+
+    policy = getattr(_local, "policy", None)
+    if policy is None:
+        policy = _local.policy = _Policy()
+    forced = bool(os.environ.get("CROWDSTUDY_THREADS"))      # set: no second-guessing (benchmarks)
+    if host_threads() < 2 or not (forced or policy.parallel()):
+        return timed(first), timed(second)
+    worker = getattr(_local, "worker", None)
+    if worker is None:
+        worker = _local.worker = _Worker()
+    w0 = time.perf_counter()
+    worker.submit(lambda: timed(second))
+    try:
+        t_first = timed(first)
+    finally:
+        t_second = worker.result()
+    policy.record(t_first + t_second, time.perf_counter() - w0)
+    return t_first, t_second

@@ -173,3 +173,56 @@ def test_layout_cli(tmp_path, capsys, saved_figures):
     assert "D5" in capsys.readouterr().out
     assert cli_main(["layout", "--density", "D9", "--out", str(out)]) == 2
     assert "--density" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("level,n", [("D3", 1000), ("D5", 5000)])
+def test_stadium_layout_keeps_the_density(design, level, n):
+    crowd = concert_layout(design, level, 11, n_characters=n)
+    m = crowd.meta
+    width, depth = m["floor"]["width"], m["floor"]["depth"]
+    assert crowd.n_agents == n and m["n_characters"] == n
+    assert n / (width * depth) == pytest.approx(design.densities[level], rel=1e-9)
+    assert width / depth == pytest.approx(design.floor_width / design.floor_depth)
+    pos = crowd.positions[0]
+    margin = design.scenarios["concert"]["margin"]
+    assert np.all(np.abs(pos[:, 0]) <= width / 2 - margin + 1e-9)
+    assert np.all(np.abs(pos[:, 1]) <= depth / 2 - margin + 1e-9)
+    # the points fill the whole larger floor, not only its middle
+    assert pos[:, 0].max() - pos[:, 0].min() > 0.9 * (width - 2 * margin)
+    assert pos[:, 1].max() - pos[:, 1].min() > 0.9 * (depth - 2 * margin)
+    assert pdist(pos).min() >= m["target_distance"]
+    # the scene geometry later stages read: the stage front moves with the floor's front edge
+    assert m["stage_front"] == pytest.approx(depth / 2 + design.scenarios["concert"]["stage_distance"])
+    assert m["obstacles"] == [[[-width, m["stage_front"]], [width, m["stage_front"]]]]
+    assert crowd.radius[0] == pytest.approx(disc_radius(design.densities[level]))
+
+
+def test_stadium_layout_is_deterministic_and_default_unchanged(design):
+    a = concert_layout(design, "D2", 5, n_characters=300)
+    b = concert_layout(design, "D2", 5, n_characters=300)
+    np.testing.assert_array_equal(a.positions, b.positions)
+    assert not np.array_equal(a.positions, concert_layout(design, "D2", 6, n_characters=300).positions)
+    # n_characters equal to the design's count keeps the design's floor and points
+    d = concert_layout(design, "D2", 5)
+    e = concert_layout(design, "D2", 5, n_characters=design.n_characters("D2"))
+    assert d.meta["floor"] == pytest.approx(e.meta["floor"], rel=1e-3)
+    with pytest.raises(InvalidInputError, match="n_characters"):
+        concert_layout(design, "D2", 5, n_characters=0)
+
+
+def test_stadium_layout_cli_feeds_animate(tmp_path, capsys, design):
+    out = tmp_path / "stadium.npz"
+    assert cli_main(["layout", "--density", "D1", "--characters", "26", "--seed", "3", "--out", str(out)]) == 0
+    crowd = Crowd.load(out)
+    assert crowd.n_agents == 26 and crowd.meta["density_level"] == "D1"
+    assert " 26 " in capsys.readouterr().out
+    anim_path = tmp_path / "anim.npz"
+    assert cli_main(["animate", str(out), "--out", str(anim_path), "--duration", "0.1"]) == 0
+    from crowdstudy.scene import CrowdAnimation
+
+    anim = CrowdAnimation.load(anim_path)
+    assert anim.n_characters == 26
+    for key in ("floor", "stage_front", "obstacles"):
+        assert anim.meta[key] == crowd.meta[key]
+    assert cli_main(["layout", "--density", "D2", "--characters", "0", "--out", str(out)]) == 2
+    assert "--characters" in capsys.readouterr().err

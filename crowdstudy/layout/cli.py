@@ -1,4 +1,9 @@
-"""``crowdstudy layout``: Poisson-disk layouts of the concert crowd for one or all densities."""
+"""``crowdstudy layout``: Poisson-disk layouts of the concert crowd for one or all densities.
+
+``--characters N`` lays out a stadium crowd: N characters at the level's density on a
+proportionally larger floor (``crowdstudy layout --density D3 --characters 1000``), which
+``crowdstudy animate layout.npz`` then animates.
+"""
 
 from __future__ import annotations
 
@@ -13,6 +18,9 @@ def configure(parser: argparse.ArgumentParser) -> None:
     group = parser.add_mutually_exclusive_group()
     group.add_argument("--density", default="D3", help="density level, e.g. D3 (default D3)")
     group.add_argument("--all", action="store_true", help="lay out every density level of the design")
+    parser.add_argument("--characters", type=int, default=None, metavar="N",
+                        help="a stadium crowd: N characters on a floor scaled (aspect kept) to the level's "
+                             "density (default: the design's floor and its count for the level)")
     parser.add_argument("--seed", type=int, default=None,
                         help="random seed (default: the design's seed of the stationary stage's cell)")
     parser.add_argument("--out", default="build/layout/layout.npz",
@@ -32,6 +40,8 @@ def run(args: argparse.Namespace) -> int:
         if level not in design.densities:
             raise InvalidInputError(f"--density: unknown level {level!r}; "
                                     f"expected one of {', '.join(design.densities)}")
+    if args.characters is not None and args.characters < 1:
+        raise InvalidInputError(f"--characters: expected a positive number of characters, got {args.characters}")
     if args.seed is not None and args.seed < 0:
         raise InvalidInputError(f"--seed: expected a non-negative integer, got {args.seed}")
     stage = design.stage("stationary")
@@ -43,15 +53,16 @@ def run(args: argparse.Namespace) -> int:
     if args.plot:
         check_output_path(args.plot, "--plot")
     crowds = []
-    print(f"{'level':>5} {'chars':>5} {'min dist (m)':>12} {'bound (m)':>9}  file")
+    print(f"{'level':>5} {'chars':>5} {'floor (m)':>13} {'min dist (m)':>12} {'bound (m)':>9}  file")
     for level in levels:
         seed = design.cell_seed(stage, level) if args.seed is None else args.seed
-        crowd = concert_layout(design, level, seed)
+        crowd = concert_layout(design, level, seed, n_characters=args.characters)
         path = paths[level]
         crowd.save(path)
         crowds.append(crowd)
         m = crowd.meta
-        print(f"{level:>5} {crowd.n_agents:>5} {m['min_distance']:>12.3f} {m['target_distance']:>9.3f}  {path}")
+        floor = f"{m['floor']['width']:.2f}x{m['floor']['depth']:.2f}"
+        print(f"{level:>5} {crowd.n_agents:>5} {floor:>13} {m['min_distance']:>12.3f} {m['target_distance']:>9.3f}  {path}")
     if args.plot:
         from crowdstudy.layout.plot import plot_layouts
 

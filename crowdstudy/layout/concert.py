@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from crowdstudy.errors import InvalidInputError
@@ -10,15 +12,35 @@ from crowdstudy.layout.poisson import poisson_disk
 from crowdstudy.provenance import provenance
 from crowdstudy.scene import Crowd
 
-__all__ = ["concert_layout"]
+__all__ = ["concert_layout", "scaled_floor"]
 
 
-def concert_layout(design, level: str, seed) -> Crowd:
+def scaled_floor(design, level: str, n_characters: int) -> tuple[float, float]:
+    """(width, depth) in metres of the floor that holds ``n_characters`` at the density of
+    ``level``: the design's floor scaled by the same factor on both sides (its aspect ratio
+    kept) so that ``n_characters / (width * depth)`` is the level's characters per m^2."""
+    if level not in design.densities:
+        raise InvalidInputError(f"level: unknown density level {level!r}; "
+                                f"expected one of {', '.join(design.densities)}")
+    if isinstance(n_characters, bool) or not isinstance(n_characters, (int, np.integer)) or n_characters < 1:
+        raise InvalidInputError(f"n_characters: expected a positive integer, got {n_characters!r}")
+    density = float(design.densities[level])
+    scale = math.sqrt(int(n_characters) / (density * float(design.floor_area)))
+    return float(design.floor_width) * scale, float(design.floor_depth) * scale
+
+
+def concert_layout(design, level: str, seed, n_characters: int | None = None) -> Crowd:
     """The concert crowd of one density level as a one-frame :class:`Crowd`.
 
     ``design.n_characters(level)`` characters on the ``floor_width x floor_depth`` floor
     centred on the origin, ``design.scenarios["concert"]["margin"]`` metres from its edges,
     all facing the stage (+y, heading pi/2).
+
+    ``n_characters`` (a stadium crowd, e.g. 1,000 or 5,000) lays out that many characters
+    on a larger floor at the same density (characters per m^2 of the floor):
+    :func:`scaled_floor` gives its size; the margin, the stage distance and the disc radius
+    stay the design's. The stage front moves with the floor's front edge, and the meta
+    records the floor, stage front and wall actually used (later stages read them there).
 
     Returns:
         Crowd with positions (1, N, 2) metres, radius (N,) from
@@ -33,12 +55,16 @@ def concert_layout(design, level: str, seed) -> Crowd:
     if level not in design.densities:
         raise InvalidInputError(f"level: unknown density level {level!r}; "
                                 f"expected one of {', '.join(design.densities)}")
-    n = design.n_characters(level)
+    if n_characters is None:
+        n = design.n_characters(level)
+        width, depth = float(design.floor_width), float(design.floor_depth)
+    else:
+        width, depth = scaled_floor(design, level, n_characters)
+        n = int(n_characters)
     density = float(design.densities[level])
     margin = float(design.scenarios["concert"]["margin"])
-    layout = poisson_disk((design.floor_width, design.floor_depth), n, seed=seed, margin=margin)
+    layout = poisson_disk((width, depth), n, seed=seed, margin=margin)
     seed_value = layout.seed
-    width, depth = float(design.floor_width), float(design.floor_depth)
     stage_distance = float(design.scenarios["concert"]["stage_distance"])
     stage_front = depth / 2 + stage_distance
     return Crowd(

@@ -6,10 +6,17 @@ Pipeline (paper Sec. 3.4), every step on the state at the start of the step:
 2. ground: both sphere ends of every capsule against the plane z = 0;
 3. environment: static objects point-sampled into a ``wp.Bvh``; each capsule's AABB
    queries it (culled against the character AABB first);
-4. inter-body: character AABB pairs (minimum image along x in periodic scenes), then a
-   bounding-sphere test per capsule pair, then the exact segment-segment distance;
+4. inter-body: character AABB pairs (minimum image along x in periodic scenes; one thread
+   per character over the later ones, so the pairs come out in (i, j) order on the CPU),
+   then a bounding-sphere test per capsule pair (midpoints and half lengths computed once
+   per step with the world capsules), then the exact segment-segment distance;
 5. intra-body: the model's pair list (pairs touching in the T-pose and parent-child pairs
    are excluded), bounding-sphere test, exact distance.
+
+On the CPU with two host threads (:func:`~crowdstudy.warp_runtime.host_threads`) the
+narrow phase runs on two ranges of its threads at once, the second range and the intra-body
+pairs into a scratch buffer appended after the first: the same contacts in the same order
+as one thread.
 
 A contact stores body a, body b (-1 for static), the unit normal n from b to a, the signed
 depth ``delta = r_a + r_b + margin - distance`` (contacts are kept speculatively down to
@@ -28,11 +35,15 @@ import functools
 import numpy as np
 
 from crowdstudy.errors import InvalidInputError
+from crowdstudy.warp_runtime import host_threads, run_parallel
 
 __all__ = ["Contacts", "CollisionPipeline", "collision_kernels", "sample_static_walls", "static_walls_from_meta",
            "KIND_GROUND", "KIND_ENVIRONMENT", "KIND_INTER", "KIND_INTRA"]
 
 KIND_GROUND, KIND_ENVIRONMENT, KIND_INTER, KIND_INTRA = 0, 1, 2, 3
+
+#: narrow-phase plus intra-body threads below which detection stays on one host thread
+_MIN_SPLIT_THREADS = 20000
 
 
 @functools.lru_cache(maxsize=1)
@@ -104,8 +115,10 @@ def collision_kernels():
                               cap_radius: wp.array(dtype=float), cap_skin: wp.array(dtype=float),
                               n_joints: int, grow: float,
                               p0w: wp.array(dtype=wp.vec3), p1w: wp.array(dtype=wp.vec3),
-                              char_lo: wp.array(dtype=wp.vec3), char_hi: wp.array(dtype=wp.vec3)):
-        """World capsule end points (m) and one AABB per character (thread), grown by ``grow``."""
+                              char_lo: wp.array(dtype=wp.vec3), char_hi: wp.array(dtype=wp.vec3),
+                              centre: wp.array(dtype=wp.vec3), half: wp.array(dtype=float)):
+        """World capsule end points (m), their midpoints and half lengths (m: the bounding
+        spheres of the narrow phase) and one AABB per character (thread), grown by ``grow``."""
         i = wp.tid()
         lo = wp.vec3(1.0e9, 1.0e9, 1.0e9)
         hi = wp.vec3(-1.0e9, -1.0e9, -1.0e9)
@@ -115,6 +128,8 @@ def collision_kernels():
             a1 = x[b] + wp.quat_rotate(q[b], cap_p1[b])
             p0w[b] = a0
             p1w[b] = a1
+            centre[b] = 0.5 * (a0 + a1)
+            half[b] = 0.5 * wp.length(a1 - a0)
             r = cap_radius[b] + cap_skin[b] + grow
             rv = wp.vec3(r, r, r)
             lo = wp.min(lo, wp.min(a0, a1) - rv)
@@ -159,33 +174,39 @@ def collision_kernels():
                           pair_i: wp.array(dtype=wp.int32), pair_j: wp.array(dtype=wp.int32),
                           pair_shift: wp.array(dtype=float)):
         """Character AABB pairs (i < j) that overlap, with the x shift (m) bringing j next to
-        i under the minimum-image convention (``period`` > 0 in periodic scenes)."""
-        i, j = wp.tid()
-        if j <= i:
-            return
-        shift = float(0.0)
-        if period > 0.0:
-            ci = 0.5 * (char_lo[i][0] + char_hi[i][0])
-            cj = 0.5 * (char_lo[j][0] + char_hi[j][0])
-            shift = period * wp.round((ci - cj) / period)
-        sv = wp.vec3(shift, 0.0, 0.0)
-        lo_j = char_lo[j] + sv
-        hi_j = char_hi[j] + sv
+        i under the minimum-image convention (``period`` > 0 in periodic scenes).
+
+        One thread per character i looping over j > i: on the CPU the threads run in order,
+        so the pairs come out sorted by (i, j) (the contacts, and the sums the solver makes
+        of them, in a fixed order); an (n, n) launch did the same tests at a per-thread
+        cost that dominated at thousands of characters."""
+        i = wp.tid()
+        n = char_lo.shape[0]
         lo_i = char_lo[i]
         hi_i = char_hi[i]
-        if lo_i[0] > hi_j[0] or lo_j[0] > hi_i[0] or lo_i[1] > hi_j[1] or lo_j[1] > hi_i[1]:
-            return
-        if lo_i[2] > hi_j[2] or lo_j[2] > hi_i[2]:
-            return
-        idx = wp.atomic_add(pair_count, 0, 1)
-        if idx < pair_capacity:
-            pair_i[idx] = i
-            pair_j[idx] = j
-            pair_shift[idx] = shift
+        ci = 0.5 * (lo_i[0] + hi_i[0])
+        for j in range(i + 1, n):
+            shift = float(0.0)
+            if period > 0.0:
+                cj = 0.5 * (char_lo[j][0] + char_hi[j][0])
+                shift = period * wp.round((ci - cj) / period)
+            sv = wp.vec3(shift, 0.0, 0.0)
+            lo_j = char_lo[j] + sv
+            hi_j = char_hi[j] + sv
+            if lo_i[0] > hi_j[0] or lo_j[0] > hi_i[0] or lo_i[1] > hi_j[1] or lo_j[1] > hi_i[1]:
+                continue
+            if lo_i[2] > hi_j[2] or lo_j[2] > hi_i[2]:
+                continue
+            idx = wp.atomic_add(pair_count, 0, 1)
+            if idx < pair_capacity:
+                pair_i[idx] = i
+                pair_j[idx] = j
+                pair_shift[idx] = shift
 
     @wp.kernel
     def narrowphase_kernel(x: wp.array(dtype=wp.vec3), p0w: wp.array(dtype=wp.vec3), p1w: wp.array(dtype=wp.vec3),
                            cap_radius: wp.array(dtype=float), cap_skin: wp.array(dtype=float),
+                           centre: wp.array(dtype=wp.vec3), half: wp.array(dtype=float),
                            char_lo: wp.array(dtype=wp.vec3), char_hi: wp.array(dtype=wp.vec3), pair_i: wp.array(dtype=wp.int32),
                            pair_j: wp.array(dtype=wp.int32), pair_shift: wp.array(dtype=float),
                            n_joints: int, margin: float, spec: float, k: float,
@@ -193,10 +214,11 @@ def collision_kernels():
                            c_a: wp.array(dtype=wp.int32), c_b: wp.array(dtype=wp.int32),
                            c_n: wp.array(dtype=wp.vec3), c_depth: wp.array(dtype=float),
                            c_la: wp.array(dtype=wp.vec3), c_lb: wp.array(dtype=wp.vec3),
-                           c_k: wp.array(dtype=float), c_kind: wp.array(dtype=wp.int32)):
-        """Thread (pair, capsule of the first character): bounding sphere vs the other
-        character's AABB, then vs each of its capsules, then the exact segment distance."""
-        tid = wp.tid()
+                           c_k: wp.array(dtype=float), c_kind: wp.array(dtype=wp.int32), offset: int):
+        """Thread (pair, capsule of the first character; thread index + ``offset`` =
+        pair * J + capsule): bounding sphere vs the other character's AABB, then vs each of
+        its capsules, then the exact segment distance."""
+        tid = wp.tid() + offset
         p = tid / n_joints
         ja = tid - p * n_joints
         ia = pair_i[p]
@@ -206,8 +228,8 @@ def collision_kernels():
         a0 = p0w[ba]
         a1 = p1w[ba]
         ra = cap_radius[ba] + cap_skin[ba]
-        ca = 0.5 * (a0 + a1)
-        bound_a = 0.5 * wp.length(a1 - a0) + ra + margin + spec
+        ca = centre[ba]
+        bound_a = half[ba] + ra + margin + spec
         # sphere of capsule a against the AABB of character b (already grown)
         lo = char_lo[ib] + sv
         hi = char_hi[ib] + sv
@@ -216,13 +238,13 @@ def collision_kernels():
             return
         for jb in range(n_joints):
             bb = ib * n_joints + jb
-            b0 = p0w[bb] + sv
-            b1 = p1w[bb] + sv
             rb = cap_radius[bb] + cap_skin[bb]
-            cb = 0.5 * (b0 + b1)
-            reach = bound_a + 0.5 * wp.length(b1 - b0) + rb
+            cb = centre[bb] + sv
+            reach = bound_a + half[bb] + rb
             if wp.length_sq(cb - ca) > reach * reach:
                 continue
+            b0 = p0w[bb] + sv
+            b1 = p1w[bb] + sv
             st = segment_params(a0, a1, b0, b1)
             pa = a0 + st[0] * (a1 - a0)
             pb = b0 + st[1] * (b1 - b0)
@@ -242,7 +264,8 @@ def collision_kernels():
 
     @wp.kernel
     def intra_kernel(x: wp.array(dtype=wp.vec3), p0w: wp.array(dtype=wp.vec3), p1w: wp.array(dtype=wp.vec3),
-                     cap_radius: wp.array(dtype=float), pairs: wp.array2d(dtype=wp.int32), relative: int,
+                     cap_radius: wp.array(dtype=float), centre: wp.array(dtype=wp.vec3), half: wp.array(dtype=float),
+                     pairs: wp.array2d(dtype=wp.int32), relative: int,
                      p0t: wp.array(dtype=wp.vec3), p1t: wp.array(dtype=wp.vec3), band: float, spec: float, k: float,
                      count: wp.array(dtype=wp.int32), capacity: int,
                      c_a: wp.array(dtype=wp.int32), c_b: wp.array(dtype=wp.int32),
@@ -257,15 +280,15 @@ def collision_kernels():
         t = wp.tid()
         ba = pairs[t, 0]
         bb = pairs[t, 1]
+        ra = cap_radius[ba]
+        rb = cap_radius[bb]
+        reach = half[ba] + half[bb] + ra + rb + spec
+        if wp.length_sq(centre[ba] - centre[bb]) > reach * reach:
+            return
         a0 = p0w[ba]
         a1 = p1w[ba]
         b0 = p0w[bb]
         b1 = p1w[bb]
-        ra = cap_radius[ba]
-        rb = cap_radius[bb]
-        reach = 0.5 * wp.length(a1 - a0) + 0.5 * wp.length(b1 - b0) + ra + rb + spec
-        if wp.length_sq(0.5 * (a0 + a1) - 0.5 * (b0 + b1)) > reach * reach:
-            return
         st = segment_params(a0, a1, b0, b1)
         pa = a0 + st[0] * (a1 - a0)
         pb = b0 + st[1] * (b1 - b0)
@@ -476,6 +499,10 @@ class CollisionPipeline:
         self.speculative = float(config.speculative_distance)
         self.p0w = wp.zeros(nb, dtype=wp.vec3, device=dev)
         self.p1w = wp.zeros(nb, dtype=wp.vec3, device=dev)
+        self.centre = wp.zeros(nb, dtype=wp.vec3, device=dev)     # capsule midpoints (m)
+        self.half = wp.zeros(nb, dtype=wp.float32, device=dev)    # capsule half lengths (m)
+        self.centre_t = wp.zeros(nb, dtype=wp.vec3, device=dev)   # the same in the target pose
+        self.half_t = wp.zeros(nb, dtype=wp.float32, device=dev)
         self.char_lo = wp.zeros(n, dtype=wp.vec3, device=dev)
         self.char_hi = wp.zeros(n, dtype=wp.vec3, device=dev)
         # the capsules in the target pose (target-relative ground and self contacts)
@@ -498,6 +525,8 @@ class CollisionPipeline:
             self.env_lo = wp.vec3(*(pts.min(0) - 1e-3))
             self.env_hi = wp.vec3(*(pts.max(0) + 1e-3))
         self.n_static_points = 0 if pts is None else len(pts)
+        self._scratch = None      # the second host thread's contact buffer (CPU)
+        self._split = 0.75        # share of the narrow-phase threads run by the first host thread
 
     def default_capacity(self) -> int:
         return int(self.config.max_contacts_per_character) * self.model.n_characters + 2 * self.model.n_bodies
@@ -517,13 +546,14 @@ class CollisionPipeline:
         contacts.count.zero_()
         out = [contacts.count, contacts.capacity, *contacts.buffers()]
         wp.launch(k.capsules_world_kernel, n, [state.x, state.q, W["cap_p0"], W["cap_p1"], W["cap_radius"],
-                                               W["cap_skin"], nj, margin + spec, self.p0w, self.p1w, self.char_lo, self.char_hi],
+                                               W["cap_skin"], nj, margin + spec, self.p0w, self.p1w, self.char_lo, self.char_hi,
+                                               self.centre, self.half],
                   device=dev)
         relative = int(bool(cfg.target_relative_self_contacts) and control is not None)
         if relative:
             wp.launch(k.capsules_world_kernel, n, [control.t_x, control.t_glob, W["cap_p0"], W["cap_p1"],
                                                    W["cap_radius"], W["cap_skin"], nj, 0.0, self.p0t, self.p1t,
-                                                   self.t_lo, self.t_hi], device=dev)
+                                                   self.t_lo, self.t_hi, self.centre_t, self.half_t], device=dev)
         band = float(cfg.contact_activation)
         if cfg.ground_stiffness > 0:
             wp.launch(k.ground_kernel, nb, [state.x, self.p0w, self.p1w, W["cap_radius"], relative, self.p0t,
@@ -534,23 +564,64 @@ class CollisionPipeline:
                                                  self.char_lo, self.char_hi, self.bvh.id, self.points, self.env_lo,
                                                  self.env_hi, self.period, margin, spec,
                                                  float(cfg.environment_stiffness), *out], device=dev)
+        n_pairs = 0
         if n > 1 and cfg.contact_stiffness > 0:
             self.pair_count.zero_()
-            wp.launch(k.broadphase_kernel, (n, n), [self.char_lo, self.char_hi, self.period, self.pair_count,
-                                                    self.pair_capacity, self.pair_i, self.pair_j, self.pair_shift],
+            wp.launch(k.broadphase_kernel, n, [self.char_lo, self.char_hi, self.period, self.pair_count,
+                                               self.pair_capacity, self.pair_i, self.pair_j, self.pair_shift],
                       device=dev)
             n_pairs = int(self.pair_count.numpy()[0])
             if n_pairs > self.pair_capacity:
                 self.dropped_pairs += n_pairs - self.pair_capacity
                 n_pairs = self.pair_capacity
-            if n_pairs:
-                wp.launch(k.narrowphase_kernel, n_pairs * nj,
-                          [state.x, self.p0w, self.p1w, W["cap_radius"], W["cap_skin"], self.char_lo, self.char_hi,
-                           self.pair_i,
-                           self.pair_j, self.pair_shift, nj, margin, spec, float(cfg.contact_stiffness), *out],
-                          device=dev)
         n_intra = W["intra_pairs"].shape[0]
-        if cfg.intra_body and n_intra and cfg.intra_stiffness > 0:
-            wp.launch(k.intra_kernel, n_intra, [state.x, self.p0w, self.p1w, W["cap_radius"], W["intra_pairs"],
-                                                relative, self.p0t, self.p1t, band, spec,
-                                                float(cfg.intra_stiffness), *out], device=dev)
+        intra_on = bool(cfg.intra_body and n_intra and cfg.intra_stiffness > 0)
+
+        def narrow(buf, lo: int, hi: int) -> None:     # narrow-phase threads [lo, hi) into buf
+            if hi > lo:
+                wp.launch(k.narrowphase_kernel, hi - lo,
+                          [state.x, self.p0w, self.p1w, W["cap_radius"], W["cap_skin"], self.centre, self.half,
+                           self.char_lo, self.char_hi, self.pair_i, self.pair_j, self.pair_shift, nj, margin, spec,
+                           float(cfg.contact_stiffness), buf.count, buf.capacity, *buf.buffers(), int(lo)],
+                          device=dev)
+
+        def intra(buf) -> None:
+            if intra_on:
+                wp.launch(k.intra_kernel, n_intra, [state.x, self.p0w, self.p1w, W["cap_radius"], self.centre,
+                                                    self.half, W["intra_pairs"], relative, self.p0t, self.p1t,
+                                                    band, spec, float(cfg.intra_stiffness), buf.count,
+                                                    buf.capacity, *buf.buffers()], device=dev)
+
+        total = n_pairs * nj
+        if dev != "cpu" or host_threads() < 2 or total + n_intra < _MIN_SPLIT_THREADS:
+            narrow(contacts, 0, total)
+            intra(contacts)
+            return
+        # two host threads: the first runs the first `split` of the narrow-phase threads into
+        # `contacts`, the second the rest and the intra-body pairs into a scratch buffer,
+        # appended after: the same contacts in the same order as one thread (the order the
+        # solver sums them in), whatever the split, which only balances the two threads.
+        if self._scratch is None or self._scratch.capacity != contacts.capacity:
+            self._scratch = Contacts.allocate(contacts.capacity, dev)
+        scratch = self._scratch
+        scratch.count.zero_()
+        cut = min(max(int(round(self._split * n_pairs)), 0), n_pairs) * nj
+        t0, t1 = run_parallel(lambda: narrow(contacts, 0, cut), lambda: (narrow(scratch, cut, total), intra(scratch)))
+        self._balance(t0, t1, cut, total)
+        base = int(contacts.count.numpy()[0])
+        extra = int(scratch.count.numpy()[0])
+        n_copy = min(extra, scratch.capacity, contacts.capacity - base) if base < contacts.capacity else 0
+        if n_copy > 0:
+            for dst, src in zip(contacts.buffers(), scratch.buffers()):
+                wp.copy(dst, src, dest_offset=base, src_offset=0, count=n_copy)
+        contacts.count.fill_(base + extra)
+
+    def _balance(self, t0: float, t1: float, cut: int, total: int) -> None:
+        """Move the split of the narrow phase towards equal CPU time on both host threads
+        (``t0`` s for threads [0, cut), ``t1`` s for [cut, total) plus the intra pairs)."""
+        if cut <= 0 or total <= 0 or t0 <= 0.0:
+            return
+        per = t0 / cut                               # s per narrow-phase thread
+        rest = max(t1 - per * (total - cut), 0.0)    # the intra pairs
+        target = min(max((per * total + rest) / (2.0 * per * total), 0.05), 0.95)
+        self._split = 0.5 * self._split + 0.5 * target

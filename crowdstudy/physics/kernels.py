@@ -99,7 +99,7 @@ def kernels():
                        t_x: wp.array(dtype=wp.vec3), t_x_old: wp.array(dtype=wp.vec3),
                        t_x_older: wp.array(dtype=wp.vec3), t_glob: wp.array(dtype=wp.quat),
                        t_glob_old: wp.array(dtype=wp.quat), t_glob_older: wp.array(dtype=wp.quat),
-                       x_pred: wp.array(dtype=wp.vec3), q_pred: wp.array(dtype=wp.quat)):
+                       x_pred: wp.array(dtype=wp.vec3), q_pred: wp.array(dtype=wp.quat), offset: int):
         """Inertial prediction x~ = x + h v (m), R~ = exp(h [w]x) R (w in rad/s, world frame).
 
         With ``feedforward`` the prediction also continues the ANIMATION's own acceleration:
@@ -108,9 +108,10 @@ def kernels():
         increments over this step and the previous one. A body that follows its target
         exactly is then predicted exactly at the next target, so the step only corrects
         deviations (the animation's accelerations, and its support against gravity, are fed
-        forward; the physics answers contacts and the PD terms alone).
+        forward; the physics answers contacts and the PD terms alone). Body b = thread +
+        ``offset`` (a launch may cover a range of the bodies).
         """
-        b = wp.tid()
+        b = wp.tid() + offset
         xp = x[b] + h * v[b]
         qp = quat_exp(h * w[b]) * q[b]
         if feedforward != 0:
@@ -159,8 +160,10 @@ def kernels():
             h: float, gravity: float, k_joint: float, damp_scale: float,
             grad_t: wp.array(dtype=wp.vec3), grad_r: wp.array(dtype=wp.vec3),
             hess_a: wp.array(dtype=wp.mat33), hess_b: wp.array(dtype=wp.mat33), hess_c: wp.array(dtype=wp.mat33),
-            lever_p: wp.array(dtype=wp.vec3), lever_c: wp.array(dtype=wp.vec3), ctrl_c: wp.array(dtype=float)):
-        """Gradient (N, N m) and diagonal Hessian block of every body at the predicted state.
+            lever_p: wp.array(dtype=wp.vec3), lever_c: wp.array(dtype=wp.vec3), ctrl_c: wp.array(dtype=float),
+            offset: int):
+        """Gradient (N, N m) and diagonal Hessian block of every body (b = thread + ``offset``)
+        at the predicted state.
 
         Terms: inertia (zero gradient at the prediction; blocks m/h^2 I and R I_body R^T / h^2),
         gravity m g z (pass 0 with the feed-forward prediction), soft ball joints k_j/2 |x_p + R_p a_p - x_b - R_b a_b|^2 (Gauss-Newton),
@@ -174,7 +177,7 @@ def kernels():
         (Eq. 4 and the translational dampers), so that the damping force (d / h0) times the
         velocity difference does not change with the step h (d is quoted at h0 = 1/60 s).
         """
-        b = wp.tid()
+        b = wp.tid() + offset
         inv_h2 = 1.0 / (h * h)
         eye = wp.identity(n=3, dtype=float)
         m = body_mass[b]
@@ -248,9 +251,10 @@ def kernels():
                       x_old: wp.array(dtype=wp.vec3), q_old: wp.array(dtype=wp.quat),
                       dx: wp.array(dtype=wp.vec3), dw: wp.array(dtype=wp.vec3), h: float,
                       x_new: wp.array(dtype=wp.vec3), q_new: wp.array(dtype=wp.quat),
-                      v_new: wp.array(dtype=wp.vec3), w_new: wp.array(dtype=wp.vec3)):
-        """Apply the Newton increment; velocities (m/s, rad/s) from the change over h."""
-        b = wp.tid()
+                      v_new: wp.array(dtype=wp.vec3), w_new: wp.array(dtype=wp.vec3), offset: int):
+        """Apply the Newton increment; velocities (m/s, rad/s) from the change over h.
+        Body b = thread + ``offset``."""
+        b = wp.tid() + offset
         xn = x_pred[b] + dx[b]
         qn = wp.normalize(quat_exp(dw[b]) * q_pred[b])
         x_new[b] = xn

@@ -230,10 +230,12 @@ def solver_kernels():
                            lever_p: wp.array(dtype=wp.vec3), lever_c: wp.array(dtype=wp.vec3),
                            ctrl_c: wp.array(dtype=float), k_joint: float,
                            work: wp.array(dtype=wp.spatial_matrix), dinv: wp.array(dtype=wp.spatial_matrix),
-                           lmat: wp.array(dtype=wp.spatial_matrix), omat: wp.array(dtype=wp.spatial_matrix)):
-        """Exact block LDL^T of one character's (thread) 6J x 6J block (diagonal blocks plus
-        joint couplings, a tree): leaves are eliminated into their parents (parents[j] < j)."""
-        i = wp.tid()
+                           lmat: wp.array(dtype=wp.spatial_matrix), omat: wp.array(dtype=wp.spatial_matrix),
+                           offset: int):
+        """Exact block LDL^T of one character's (thread + ``offset``) 6J x 6J block (diagonal
+        blocks plus joint couplings, a tree): leaves are eliminated into their parents
+        (parents[j] < j)."""
+        i = wp.tid() + offset
         for j in range(n_joints):
             b = i * n_joints + j
             bm = hess_b[b]

@@ -16,6 +16,12 @@
    ``"body"`` the plain 6x6 block Jacobi (inverted diagonal blocks);
 4. update positions/orientations and velocities.
 
+On the CPU with two host threads (:func:`~crowdstudy.warp_runtime.host_threads`), the
+per-body and per-character kernels (prediction and body terms, the tree factorisation, the
+update) run on the two halves of the crowd at once; they write disjoint bodies, so the
+result is the same bits as one thread. The PCG stays one thread (its dot products are
+global).
+
 Linear solvers (``linear_solver``):
 
 * ``"fused"``: the whole PCG in ONE Warp kernel launch (a single thread loops over the
@@ -39,6 +45,8 @@ import time
 
 import numpy as np
 
+from crowdstudy.warp_runtime import host_threads, run_parallel
+
 from crowdstudy.errors import InvalidInputError
 from crowdstudy.physics.linear import bsr_from_triplets, solver_kernels
 from crowdstudy.physics.model import GROUP_FEET, GROUP_PELVIS
@@ -49,6 +57,9 @@ LINEAR_SOLVERS = ("fused", "warp", "scipy")
 #: joints whose bodies get the optional absolute translation PD (the feet: ankle and toe bodies)
 FEET_TRANSLATION_JOINTS = (7, 8, 10, 11)
 
+
+#: below this many characters per half the two-thread split costs more than it saves
+_MIN_CHARACTERS_PER_THREAD = 16
 
 class Solver:
     """Implicit-Euler solver (one Newton iteration per step) for a :class:`Model`.
@@ -146,21 +157,27 @@ class Solver:
     def assemble(self, state_in, control, contacts, dt: float) -> None:
         """Prediction, gradient and diagonal Hessian blocks (bodies, then contacts)."""
         wp, kb, ks, m, cfg = self.wp, self.kb, self.ks, self.model, self.config
-        W, dev, nb = m.wp, m.device, m.n_bodies
+        W, dev = m.wp, m.device
         self._contact_buffers(contacts.capacity)
         ff = bool(cfg.feedforward)
         damp_scale = float(dt) / float(cfg.damping_reference_dt)
-        wp.launch(kb.predict_kernel, nb, [state_in.x, state_in.q, state_in.v, state_in.w, float(dt), int(ff),
-                                          control.t_x, control.t_x_old, control.t_x_older, control.t_glob,
-                                          control.t_glob_old, control.t_glob_older, self.x_pred, self.q_pred],
-                  device=dev)
-        wp.launch(kb.assemble_bodies_kernel, nb,
-                  [self.x_pred, self.q_pred, state_in.x, state_in.q, control.t_rel, control.t_rel_old,
-                   control.t_x, control.t_x_old, W["body_mass"], W["body_J"], W["body_parent"],
-                   W["body_children"], W["anchor_parent"], W["anchor_child"], self.body_k, self.body_d,
-                   self.body_kt, self.body_dt, float(dt), 0.0 if ff else float(cfg.gravity),
-                   float(cfg.joint_stiffness), damp_scale, self.grad_t, self.grad_r, self.hess_a, self.hess_b, self.hess_c,
-                   self.lever_p, self.lever_c, self.ctrl_c], device=dev)
+        def bodies(lo: int, hi: int) -> None:    # prediction and body terms of bodies [lo, hi)
+            if hi <= lo:
+                return
+            wp.launch(kb.predict_kernel, hi - lo,
+                      [state_in.x, state_in.q, state_in.v, state_in.w, float(dt), int(ff), control.t_x,
+                       control.t_x_old, control.t_x_older, control.t_glob, control.t_glob_old, control.t_glob_older,
+                       self.x_pred, self.q_pred, int(lo)], device=dev)
+            wp.launch(kb.assemble_bodies_kernel, hi - lo,
+                      [self.x_pred, self.q_pred, state_in.x, state_in.q, control.t_rel, control.t_rel_old,
+                       control.t_x, control.t_x_old, W["body_mass"], W["body_J"], W["body_parent"],
+                       W["body_children"], W["anchor_parent"], W["anchor_child"], self.body_k, self.body_d,
+                       self.body_kt, self.body_dt, float(dt), 0.0 if ff else float(cfg.gravity),
+                       float(cfg.joint_stiffness), damp_scale, self.grad_t, self.grad_r, self.hess_a, self.hess_b,
+                       self.hess_c, self.lever_p, self.lever_c, self.ctrl_c, int(lo)], device=dev)
+
+        # the body terms of a body read its parent's prediction: split at a character boundary
+        self._split_characters(lambda c0, c1: bodies(c0 * m.n_joints, c1 * m.n_joints))
         if cfg.foot_anchor_stiffness > 0 and self.feet_index.shape[0]:
             wp.launch(kb.foot_anchor_kernel, self.feet_index.shape[0],
                       [self.feet_index, self.x_pred, state_in.x, control.t_x, control.t_x_old, self.foot_offset,
@@ -170,8 +187,11 @@ class Solver:
                        float(cfg.foot_anchor_max_force), float(cfg.foot_release_distance),
                        float(cfg.foot_rejoin_distance), self.grad_t, self.hess_a],
                       device=dev)
-        if contacts.capacity:
-            wp.launch(ks.contact_assemble_kernel, contacts.capacity,
+        # on the CPU the host reads the contact count for free: launch only the stored
+        # contacts (the kernel skips the rest); on CUDA the whole capacity (no host sync)
+        n_launch = contacts.capacity if m.device != "cpu" else contacts.n_active()
+        if n_launch:
+            wp.launch(ks.contact_assemble_kernel, n_launch,
                       [contacts.count, contacts.capacity, contacts.body_a, contacts.body_b, contacts.normal,
                        contacts.depth, contacts.lever_a, contacts.lever_b, contacts.stiffness, contacts.kind,
                        float(cfg.ground_friction), float(cfg.contact_activation),
@@ -231,12 +251,29 @@ class Solver:
                        self.u_bt, self.u_br, self.k_eff, self._rows, self._cols, self._vals], device=dev)
         return self._rows, self._cols, self._vals, self._rhs
 
+    def _split_characters(self, run) -> None:
+        """``run(c0, c1)`` on characters [c0, c1): on the CPU with two host threads the two
+        halves of the crowd at once (:func:`~crowdstudy.warp_runtime.run_parallel`; the
+        kernels split this way write disjoint bodies, so the result does not depend on the
+        split), else all of them in one call."""
+        n = self.model.n_characters
+        if self.model.device != "cpu" or n < 2 * _MIN_CHARACTERS_PER_THREAD or host_threads() < 2:
+            run(0, n)
+            return
+        half = n // 2
+        run_parallel(lambda: run(0, half), lambda: run(half, n))
+
     def _factor_tree(self) -> None:
         m, cfg = self.model, self.config
-        self.wp.launch(self.ks.tree_factor_kernel, m.n_characters,
-                       [m.n_joints, self.hess_a, self.hess_b, self.hess_c, m.wp["body_parent"], self.lever_p,
-                        self.lever_c, self.ctrl_c, float(cfg.joint_stiffness), self.tree_work, self.tree_dinv,
-                        self.tree_l, self.tree_o], device=m.device)
+
+        def factor(c0: int, c1: int) -> None:
+            if c1 > c0:
+                self.wp.launch(self.ks.tree_factor_kernel, c1 - c0,
+                               [m.n_joints, self.hess_a, self.hess_b, self.hess_c, m.wp["body_parent"],
+                                self.lever_p, self.lever_c, self.ctrl_c, float(cfg.joint_stiffness), self.tree_work,
+                                self.tree_dinv, self.tree_l, self.tree_o, int(c0)], device=m.device)
+
+        self._split_characters(factor)
 
     def _solve_warp(self, rows, cols, vals, rhs) -> None:
         import warp.optim.linear as wl
@@ -287,9 +324,15 @@ class Solver:
 
     def update(self, state_in, state_out, dt: float) -> None:
         wp, m = self.wp, self.model
-        wp.launch(self.kb.update_kernel, m.n_bodies, [self.x_pred, self.q_pred, state_in.x, state_in.q, self.dx,
-                                                      self.dw, float(dt), state_out.x, state_out.q, state_out.v,
-                                                      state_out.w], device=m.device)
+
+        def update(c0: int, c1: int) -> None:
+            lo, hi = c0 * m.n_joints, c1 * m.n_joints
+            if hi > lo:
+                wp.launch(self.kb.update_kernel, hi - lo, [self.x_pred, self.q_pred, state_in.x, state_in.q, self.dx,
+                                                           self.dw, float(dt), state_out.x, state_out.q, state_out.v,
+                                                           state_out.w, int(lo)], device=m.device)
+
+        self._split_characters(update)
 
     def step(self, state_in, state_out, control, contacts, dt: float | None = None) -> None:
         """Advance ``state_in`` by ``dt`` (s, default config.dt) into ``state_out``.

@@ -1,0 +1,94 @@
+"""The two-host-thread CPU path of the physics gives the same bits as one thread.
+
+The per-body and per-character kernels run on the two halves of the crowd and the narrow
+phase on two ranges of its threads (the second into a scratch buffer appended after the
+first), so the contacts come out in the same order and every state the same, whatever the
+split (``crowdstudy.warp_runtime.run_parallel``)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from crowdstudy.errors import InvalidInputError
+
+
+@pytest.fixture(scope="module")
+def concert():
+    from crowdstudy.design import load_design
+    from crowdstudy.motion.baseline import build_baseline
+
+    return build_baseline(load_design(), "stationary", "D5", duration=0.3, body_model="open")
+
+
+def _run(anim, monkeypatch, threads: str, steps: int = 8, capacity: int | None = None, split: float | None = None):
+    import crowdstudy.physics.collision as collision
+    import crowdstudy.physics.solver as solver
+    from crowdstudy.physics.corrector import CrowdCorrector, load_bodies
+    from crowdstudy.physics.collision import Contacts
+
+    monkeypatch.setenv("CROWDSTUDY_THREADS", threads)
+    monkeypatch.setattr(collision, "_MIN_SPLIT_THREADS", 0)       # split even this small scene
+    monkeypatch.setattr(solver, "_MIN_CHARACTERS_PER_THREAD", 1)
+    corr = CrowdCorrector(load_bodies(anim.bodies), fps=anim.fps, n_frames=anim.n_frames, device="cpu")
+    if capacity is not None:
+        corr.contacts = Contacts.allocate(capacity, "cpu")
+    if split is not None:
+        corr.pipeline._split = split
+        corr.pipeline._balance = lambda *a: None                 # keep this split
+    corr.control.set_frames(anim.joint_rotations, anim.root_translation)
+    corr.reset_to_frame(0)
+    contacts = []
+    for s in range(steps):
+        f = 1 + s // corr.substeps
+        corr.control.advance(f - 1, f, (s % corr.substeps + 1) / corr.substeps)
+        corr.pipeline.collide(corr.states[0], corr.contacts, corr.control)
+        contacts.append((int(corr.contacts.count.numpy()[0]), corr.contacts.to_numpy()))
+        corr.solver.step(corr.states[0], corr.states[1], corr.control, corr.contacts, corr.dt)
+        corr.states.reverse()
+    return corr.states[0].numpy(), contacts
+
+
+def _same(a, b):
+    (state_a, contacts_a), (state_b, contacts_b) = a, b
+    for key in ("x", "q", "v", "w"):
+        np.testing.assert_array_equal(state_a[key], state_b[key])
+    for (na, ca), (nb, cb) in zip(contacts_a, contacts_b):
+        assert na == nb
+        for key in ca:
+            np.testing.assert_array_equal(ca[key], cb[key])
+
+
+@pytest.mark.parametrize("split", [None, 0.1, 0.9])
+def test_two_host_threads_give_the_same_bits(concert, monkeypatch, split):
+    one = _run(concert, monkeypatch, "1")
+    two = _run(concert, monkeypatch, "2", split=split)
+    assert max(n for n, _ in one[1]) > 100           # the scene has contacts (inter-body among them)
+    assert any((c["kind"] == 2).any() for _, c in one[1])
+    _same(one, two)
+
+
+def test_overflowing_contacts_drop_the_same_surplus(concert, monkeypatch):
+    # a capacity below the contacts found: both paths keep the first `capacity` in the same
+    # order and report the same (overflowing) count
+    one = _run(concert, monkeypatch, "1", steps=3, capacity=300)
+    two = _run(concert, monkeypatch, "2", steps=3, capacity=300, split=0.5)
+    assert one[1][-1][0] > 300
+    _same(one, two)
+
+
+def test_host_threads_setting(monkeypatch):
+    from crowdstudy.warp_runtime import host_threads, run_parallel
+
+    monkeypatch.setenv("CROWDSTUDY_THREADS", "1")
+    assert host_threads() == 1
+    monkeypatch.setenv("CROWDSTUDY_THREADS", "2")
+    assert host_threads() == 2
+    out = []
+    t0, t1 = run_parallel(lambda: out.append("a"), lambda: out.append("b"))
+    assert sorted(out) == ["a", "b"] and t0 >= 0 and t1 >= 0
+    with pytest.raises(ZeroDivisionError):                # an error on the helper thread reaches the caller
+        run_parallel(lambda: None, lambda: 1 / 0)
+    monkeypatch.setenv("CROWDSTUDY_THREADS", "two")
+    with pytest.raises(InvalidInputError, match="CROWDSTUDY_THREADS"):
+        host_threads()
