@@ -134,7 +134,7 @@ def _floor_view(design, width, height):
     anim = anim.replace(root_translation=anim.root_translation + [0, 0, -50.0])
     with _renderer(anim, design, width=width, height=height, msaa=0, shadows=False) as r:
         r.set_view(free_camera((0.3, 8.0, 0.5), (0.0, -20.0, 0.35), 40.0))
-        r._cut_count = 0
+        r.set_cutaway([])
         return r.render(0).astype(np.float64)
 
 
@@ -181,8 +181,7 @@ def test_frustum_culling_of_the_venue_keeps_the_picture(design):
         culled = r._cut_count
         a = r.render(0).astype(int)
         every = visible_indices(r.env.cutaway, r.camera.eye, r.env.extent)
-        r._cut_ibo.write(every.tobytes())
-        r._cut_count = len(every)
+        r.set_cutaway(every)
         b = r.render(0).astype(int)
     assert culled < 0.7 * len(every)
     assert np.abs(a - b).max() <= 1

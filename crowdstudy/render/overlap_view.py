@@ -36,7 +36,8 @@ class OverlapFrame:
     """One overlap-view frame.
 
     Attributes:
-        image: (H, W, 3) uint8, the render, desaturated, with overlapping pixels in red.
+        image: (H, W, 3) uint8, the render, desaturated, with overlapping pixels in red
+            (None when only the mask was asked for).
         mask: (H, W) bool, the overlapping pixels.
         red_fraction: mask pixels / all pixels.
         crowd_fraction: mask pixels / pixels covered by characters (0 when none).
@@ -71,7 +72,8 @@ def capsules_from_skinning(bodies: list, skinning: np.ndarray) -> tuple[np.ndarr
 
 
 def _candidates(start, end, radius, period: float | None) -> np.ndarray:
-    """(N, K + 1) float32: count, then flat capsule ids (owner * 24 + bone) near each character."""
+    """(N, K + 1) float32: count, then flat capsule ids (owner * 24 + bone) near each
+    character, in increasing order."""
     n = start.shape[0]
     lo = np.minimum(start, end) - radius[..., None]
     hi = np.maximum(start, end) + radius[..., None]
@@ -91,7 +93,7 @@ def _candidates(start, end, radius, period: float | None) -> np.ndarray:
             keep = np.argsort(np.linalg.norm(mid - centre[a], axis=1))[:_MAX_CANDIDATES]
             owners, bones = owners[keep], bones[keep]
         out[a, 0] = len(owners)
-        out[a, 1:1 + len(owners)] = owners * 24 + bones
+        out[a, 1:1 + len(owners)] = np.sort(owners * 24 + bones)   # sorted: overlap.frag bisects by owner
     return out
 
 
@@ -119,12 +121,18 @@ class OverlapPass:
             prog[name].value = unit
         prog["u_period"].value = float(renderer.period or 0.0)
 
-    def run(self, frame: int, *, tolerance: float = 0.005) -> OverlapFrame:
+    def run(self, frame: int, *, tolerance: float = 0.005, image: bool = True) -> OverlapFrame:
+        """The overlap view of ``frame``; ``image`` False: only its mask and fractions (the
+        frame's normal look is not rendered; ``OverlapFrame.image`` is None)."""
         import moderngl
 
         r = self.r
-        raw = r.render_raw(frame)  # normal look; also loads the frame's bones and instances
-        image = np.frombuffer(raw, np.uint8).reshape(r.height, r.width, 3)[::-1].astype(np.float32)
+        if image:
+            raw = r.render_raw(frame)  # normal look; also loads the frame's bones and instances
+            picture = np.frombuffer(raw, np.uint8).reshape(r.height, r.width, 3)[::-1].astype(np.float32)
+        else:
+            r._load_frame(frame)
+            r._prepare(frame, upload=False)   # the camera's instances, as render_raw leaves them
         start, end, radius = capsules_from_skinning(r.bodies, r.skinning(frame))
         caps = np.zeros((start.shape[0], 24, 2, 4), np.float32)
         caps[:, :, 0, :3], caps[:, :, 0, 3] = start, radius
@@ -156,12 +164,15 @@ class OverlapPass:
         mask = mask.reshape(r.height, r.width)[::-1] > 127
         ids = np.frombuffer(self.fbo_ids.read(components=1, dtype="f4", alignment=1), np.float32)
         crowd_pixels = int(np.count_nonzero(ids > -0.5))
-        # desaturate the scene so no red shirt can be taken for an overlap, then paint red
-        luma = image @ np.array([0.299, 0.587, 0.114], np.float32)
-        image = 0.3 * image + 0.7 * (0.85 * luma[..., None] + 30.0)
-        image[mask] = 0.15 * image[mask] + 0.85 * RED
         n_red = int(np.count_nonzero(mask))
-        return OverlapFrame(image=np.clip(image, 0, 255).astype(np.uint8), mask=mask, red_fraction=n_red / mask.size,
+        out = None
+        if image:
+            # desaturate the scene so no red shirt can be taken for an overlap, then paint red
+            luma = picture @ np.array([0.299, 0.587, 0.114], np.float32)
+            picture = 0.3 * picture + 0.7 * (0.85 * luma[..., None] + 30.0)
+            picture[mask] = 0.15 * picture[mask] + 0.85 * RED
+            out = np.clip(picture, 0, 255).astype(np.uint8)
+        return OverlapFrame(image=out, mask=mask, red_fraction=n_red / mask.size,
                             crowd_fraction=n_red / crowd_pixels if crowd_pixels else 0.0)
 
     def release(self) -> None:

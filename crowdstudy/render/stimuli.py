@@ -65,19 +65,21 @@ from pathlib import Path
 
 from crowdstudy.errors import InvalidInputError
 
-__all__ = ["build_stimuli", "PRESETS", "MANIFEST_COLUMNS", "load_manifest", "animation_job", "video_job",
-           "animation_digest", "video_digest", "digest_inputs", "animation_record", "preset_settings"]
+__all__ = ["build_stimuli", "default_workers", "PRESETS", "MANIFEST_COLUMNS", "load_manifest", "animation_job",
+           "video_job", "animation_digest", "video_digest", "digest_inputs", "animation_record", "preset_settings"]
 
 MANIFEST_COLUMNS = ("stimulus_id", "stage", "scenario", "density_level", "density", "viewpoint", "method",
                     "characters", "seed", "file", "sha256", "duration", "fps", "width", "height", "overlap_mesh",
                     "overlap_capsule", "red_pixel_fraction", "software_version", "digest")
 
 #: Render settings per preset; None = the design's value. "quick" keeps the design's
-#: character counts and only shrinks resolution and duration. x264 "faster" at crf 18
-#: (measured on 1080p D5 concert frames: PSNR 45.9 dB, SSIM 0.993 against the raw frames,
-#: vs 46.2 dB / 0.993 for "medium") needs about 30% less encoder CPU than "medium".
+#: character counts and only shrinks resolution and duration. x264 "superfast" at crf 18:
+#: on 1080p D5 concert frames (V1) PSNR 44.9 dB against the lossless encode of the same
+#: 4:2:0 frames, vs 44.3 dB for "faster" and 43.6 dB for "veryfast", at half the encoder
+#: CPU time of "faster" (0.058 against 0.115 s per frame) and 1.4x its bytes (88 kB per
+#: frame, 2.1 Mbit/s); `crowdstudy bench render --set` measures it again.
 PRESETS = {
-    "full": {"width": None, "height": None, "duration": None, "msaa": 4, "crf": 18, "x264_preset": "faster",
+    "full": {"width": None, "height": None, "duration": None, "msaa": 4, "crf": 18, "x264_preset": "superfast",
              "red_frames": 10, "metric_frames": "every:10"},
     "quick": {"width": 320, "height": 180, "duration": 2.0, "msaa": 4, "crf": 23, "x264_preset": "veryfast",
               "red_frames": 3, "metric_frames": "every:10"},
@@ -197,6 +199,11 @@ def animation_record(path: str | Path, digest: str, metrics: dict) -> dict:
 
 
 # -- jobs (run in worker processes or on Dask workers) --------------------------------------
+
+def default_workers() -> int:
+    """Local worker processes of ``build_stimuli`` by default: one per 4 CPUs, at least 1."""
+    return max(1, (os.cpu_count() or 1) // 4)
+
 
 def _limit_threads(workers: int) -> None:
     cpus = os.cpu_count() or 1
@@ -443,7 +450,7 @@ def build_stimuli(design, out_dir, *, preset: str = "full", scheduler: str | Non
     (out_dir / "animations").mkdir(exist_ok=True)
     (out_dir / "videos").mkdir(exist_ok=True)
     if workers is None:
-        workers = max(1, (os.cpu_count() or 1) // 4)
+        workers = default_workers()
     if not isinstance(workers, int) or workers < 0:
         raise InvalidInputError(f"workers: expected an integer >= 0, got {workers!r}")
     stimuli = design.stimuli()

@@ -271,7 +271,12 @@ def render_video(anim, viewpoint, out_path, *, width: int | None = None, height:
     Returns:
         dict: path, frames, width, height, fps, duration, sha256, seconds, seconds_per_frame,
         red_fraction (list, per measured frame), mean_red_fraction (or None),
-        dissolve_frames (video frames blended at the loop seam, 0 unless a "dissolve" loop).
+        dissolve_frames (video frames blended at the loop seam, 0 unless a "dissolve" loop),
+        timings (wall and CPU seconds, ffmpeg's included, of the stages "setup" (characters
+        painted, dressed, simplified; camera; static layers drawn), "first_frame" (without
+        a dissolve: the first frame rendered, shaders compiled), "frames" (the rest rendered,
+        everything encoded) and "red" (the overlap view's samples): ``{stage}_wall_s``,
+        ``{stage}_cpu_s``).
     """
     from tqdm import tqdm
 
@@ -288,10 +293,13 @@ def render_video(anim, viewpoint, out_path, *, width: int | None = None, height:
     plan = _frame_plan(anim, duration, fps)
     out_path = check_output_path(out_path)
     t0 = time.perf_counter()
+    clock = _Clock()
     red: list[float] = []
     with CrowdRenderer(anim, design=design, width=width, height=height, msaa=msaa, shadows=shadows,
                        body_loader=body_loader, color_positions=color_positions) as renderer:
         renderer.set_view(viewpoint)
+        renderer.draw_layers()
+        clock.lap("setup")
         writer = VideoWriter(out_path, width, height, fps, crf=crf, preset=preset, bottom_up=not overlap_view)
         try:
             bar = tqdm(range(len(plan)), desc=out_path.name, unit="frame", disable=not progress, leave=False)
@@ -320,6 +328,8 @@ def render_video(anim, viewpoint, out_path, *, width: int | None = None, height:
                                                       plan.weight[i]))
                             continue
                         renderer.render_into(src, pbos[i % 2])
+                        if i == 0:
+                            clock.lap("first_frame")   # and the programs' first use (llvmpipe compiles them)
                         if pending is not None:
                             writer.write(pbos[pending].read())
                         pending = i % 2
@@ -332,11 +342,38 @@ def render_video(anim, viewpoint, out_path, *, width: int | None = None, height:
         except BaseException:
             writer.abort()
             raise
+        clock.lap("frames")
         if not overlap_view and red_sample_frames > 0:
             for src in plan.source[np.linspace(0, len(plan) - 1, min(red_sample_frames, len(plan))).round().astype(int)]:
-                red.append(renderer.overlap(int(src)).red_fraction)
+                red.append(renderer.overlap(int(src), image=False).red_fraction)
+        clock.lap("red")
     seconds = time.perf_counter() - t0
     return {"path": str(out_path), "frames": int(len(plan)), "width": width, "height": height, "fps": fps,
             "duration": len(plan) / fps, "sha256": sha256_file(out_path), "seconds": seconds,
             "seconds_per_frame": seconds / len(plan), "red_fraction": red,
-            "mean_red_fraction": float(np.mean(red)) if red else None, "dissolve_frames": plan.n_blended}
+            "mean_red_fraction": float(np.mean(red)) if red else None, "dissolve_frames": plan.n_blended,
+            "timings": clock.laps}
+
+
+class _Clock:
+    """Wall and CPU seconds of consecutive stages of a video: this process (every thread,
+    llvmpipe's included) plus its finished child processes (ffmpeg, counted when it exits)."""
+
+    def __init__(self):
+        self.laps: dict = {}
+        self._last = self._now()
+
+    @staticmethod
+    def _now() -> tuple[float, float]:
+        try:
+            import resource
+        except ImportError:   # not on Windows: the children's CPU time is not counted there
+            return time.perf_counter(), time.process_time()
+        child = resource.getrusage(resource.RUSAGE_CHILDREN)
+        return time.perf_counter(), time.process_time() + child.ru_utime + child.ru_stime
+
+    def lap(self, name: str) -> None:
+        now = self._now()
+        self.laps[f"{name}_wall_s"] = now[0] - self._last[0]
+        self.laps[f"{name}_cpu_s"] = now[1] - self._last[1]
+        self._last = now

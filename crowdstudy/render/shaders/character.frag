@@ -4,6 +4,15 @@
 uniform sampler2D u_colors;
 uniform sampler2DArray u_albedo;
 uniform int u_textured;
+// TEXTURED_ONLY / REGIONS_ONLY: a variant compiled for one kind of group (llvmpipe runs
+// both sides of a branch on a uniform, so the other kind's code would cost every sample)
+#if defined(TEXTURED_ONLY)
+#define IS_TEXTURED true
+#elif defined(REGIONS_ONLY)
+#define IS_TEXTURED false
+#else
+#define IS_TEXTURED (u_textured == 1)
+#endif
 in vec3 v_world;
 in vec3 v_normal;
 in vec4 v_scores_a;
@@ -17,7 +26,7 @@ flat in int v_layer;
 out vec4 f_color;
 
 void main() {
-    if (u_textured == 1) {
+    if (IS_TEXTURED) {
         vec3 albedo = texture(u_albedo, vec3(v_material.xy, float(v_layer))).rgb;
         albedo = albedo * albedo;   // the layers store sqrt(linear): cheap, close to sRGB
         vec3 diffuse, add;

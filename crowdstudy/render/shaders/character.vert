@@ -11,6 +11,15 @@ uniform int u_n_characters;
 uniform float u_period;   // periodic scenes: the copy length (m), 0 otherwise
 uniform mat4 u_view_proj;
 uniform int u_textured;   // 1: the group is drawn with per-character textures
+// TEXTURED_ONLY / REGIONS_ONLY: a variant compiled for one kind of group (llvmpipe runs
+// both sides of a branch on a uniform, so the other kind's code would cost every sample)
+#if defined(TEXTURED_ONLY)
+#define IS_TEXTURED true
+#elif defined(REGIONS_ONLY)
+#define IS_TEXTURED false
+#else
+#define IS_TEXTURED (u_textured == 1)
+#endif
 
 in ivec4 in_joints;
 in vec4 in_weights;
@@ -60,7 +69,7 @@ void main() {
     v_scores_b = in_scores_b;
     v_material = in_material;
 #ifdef LIT
-    if (u_textured == 1) {   // lit per pixel; only the shadow lookup per vertex
+    if (IS_TEXTURED) {   // lit per pixel; only the shadow lookup per vertex
         vec3 n = normalize(v_normal);
         v_shadow = dot(n, u_light_dir) > -0.05 ? shadow_factor(world, n, 4) : 0.0;
         v_diffuse = vec3(0.0);

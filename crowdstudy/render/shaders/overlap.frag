@@ -27,7 +27,23 @@ void main() {
     bool self_visible = (vis_char == v_char) && (int(vis.g + 0.5) == v_copy);
     vec3 p = v_world - vec3(v_shift, 0.0, 0.0);
     int count = int(texelFetch(u_candidates, ivec2(0, v_char), 0).r + 0.5);
-    for (int i = 0; i < count; ++i) {
+    int first = 0, last = count;
+#ifndef OVERLAP_SCAN_ALL
+    // a hidden fragment can only be marked by a capsule of the visible character: the
+    // candidates are sorted by id (owner * 24 + bone), so bisect to that owner's <= 24
+    // entries instead of scanning them all (the same capsules tested, the same mask)
+    if (!self_visible) {
+        int target = vis_char * 24;
+        int a = 0, b = count;
+        while (a < b) {
+            int m = (a + b) / 2;
+            if (int(texelFetch(u_candidates, ivec2(m + 1, v_char), 0).r + 0.5) < target) a = m + 1; else b = m;
+        }
+        first = a;
+        last = min(count, a + 24);
+    }
+#endif
+    for (int i = first; i < last; ++i) {
         int ci = int(texelFetch(u_candidates, ivec2(i + 1, v_char), 0).r + 0.5);
         int owner = ci / 24;
         if (!self_visible && owner != vis_char) continue;

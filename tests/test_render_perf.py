@@ -1,0 +1,178 @@
+"""The renderer's shortcuts keep the picture: static layers, per-kind shader variants, the
+level of detail by screen size, the mask-only overlap samples, the pipelined encoder."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+sys.path.insert(0, str(Path(__file__).parent))
+from render_fixtures import crowd_animation, grid_positions, mannequin_loader  # noqa: E402
+
+from crowdstudy.design import load_design  # noqa: E402
+
+W, H = 192, 108
+
+
+@pytest.fixture(scope="module")
+def design():
+    return load_design()
+
+
+def _renderer(anim, design, **kw):
+    from crowdstudy.render.renderer import CrowdRenderer
+    kw.setdefault("width", W)
+    kw.setdefault("height", H)
+    return CrowdRenderer(anim, design=design, body_loader=mannequin_loader, **kw)
+
+
+def test_lod_level_by_screen_size_is_monotone_and_deterministic():
+    from crowdstudy.render.renderer import lod_levels
+    pixels = np.linspace(2000.0, 1.0, 500)               # characters ever smaller on screen
+    levels = lod_levels(pixels)
+    assert np.all(np.diff(levels) >= 0), "a smaller character got a finer mesh"
+    assert levels[0] == 0 and levels[-1] == 2 and set(levels.tolist()) == {0, 1, 2}
+    assert lod_levels([600.0, 599.9, 300.0, 299.9]).tolist() == [0, 1, 1, 2]
+    assert np.array_equal(lod_levels(pixels[::-1])[::-1], levels)
+    assert lod_levels([10.0], n_levels=2).tolist() == [1] and lod_levels([10.0], n_levels=1).tolist() == [0]
+
+
+def test_renderer_draws_each_character_at_its_screen_size_level(design):
+    """A crowd seen from V1: the near characters use finer meshes than the far ones, and
+    every visible character is drawn exactly once."""
+    from crowdstudy.render.renderer import lod_levels
+    anim = crowd_animation(grid_positions(12, margin=0.45), n_frames=1)
+    with _renderer(anim, design, width=1920, height=1080, msaa=0, shadows=False, max_faces=1200) as r:
+        r.set_view("V1")
+        r._prepare(0)
+        by_level = {}
+        for gl in r._gl_groups:
+            by_level[gl["level"]] = by_level.get(gl["level"], 0) + gl["count"]
+        eye = np.asarray(r.camera.eye)
+        focal = r.height / (2.0 * np.tan(np.radians(r.camera.fov) / 2.0))
+        size = focal * 1.8 / np.linalg.norm(r.character_positions(0) - eye, axis=1)
+        expected = np.bincount(lod_levels(size, len(r._lods)), minlength=len(r._lods))
+    assert sum(by_level.values()) == anim.n_characters
+    assert [by_level.get(k, 0) for k in range(len(expected))] == expected.tolist()
+    assert len(np.flatnonzero(expected)) >= 2, "the scene should span two levels of detail"
+
+
+@pytest.mark.parametrize("view", ["V1", "V2", "V3", "V4"])
+def test_static_layers_give_the_per_frame_picture(design, view):
+    """Frames drawn over the static layers (one per beat phase of the audience) equal
+    frames drawn from scratch, over more than one beat; a handful of pixels may differ where
+    two surfaces meet at the same depth (drawn in another order)."""
+    anim = crowd_animation(grid_positions(10, margin=0.45), n_frames=20)
+    with _renderer(anim, design, msaa=4) as layered, _renderer(anim, design, msaa=4, static_layer=False) as plain:
+        for r in (layered, plain):
+            r.set_view(view)
+        assert layered._layer_phases() == 15 and "cut_figures" in layered._layer_parts
+        assert not plain._layer_parts
+        for f in (0, 7, 15, 19):
+            a, b = layered.render(f).astype(int), plain.render(f).astype(int)
+            diff = np.abs(a - b).max(axis=2)
+            assert np.mean(diff > 0) < 2e-3, f"frame {f}: {np.mean(diff > 0):.4f} of the pixels differ"
+            assert np.mean(diff > 2) < 1e-3
+        assert len(layered._layers) == len({f % 15 for f in (0, 7, 15, 19)})   # drawn on first use
+
+
+def test_static_layers_follow_the_camera_and_the_corridor_walls(design):
+    """set_view redraws the layers; in the corridor the walls, which the characters'
+    shadows reach, stay in the per-frame pass."""
+    anim = crowd_animation(grid_positions(6, extent=(4.0, 3.0), margin=0.45), n_frames=3, scenario="corridor",
+                           period=4.0, velocity=(1.0, 0.0))
+    with _renderer(anim, design) as layered, _renderer(anim, design, static_layer=False) as plain:
+        assert "walls" not in layered._layer_parts
+        for view in ("V3", "V4"):
+            for r in (layered, plain):
+                r.set_view(view)
+            for f in (0, 2):
+                diff = np.abs(layered.render(f).astype(int) - plain.render(f).astype(int)).max(axis=2)
+                assert np.mean(diff > 2) < 1e-3, f"{view} frame {f}"
+
+
+def test_draw_layers_draws_each_beat_phase_once(design):
+    anim = crowd_animation(grid_positions(4, margin=0.45), n_frames=2)
+    with _renderer(anim, design) as r:
+        with pytest.raises(Exception, match="set_view"):
+            r.draw_layers()
+        r.set_view("V2")
+        assert r.draw_layers() == 15
+        assert len(r._layers) == 15 and len(r._layers_drawn) == 15
+        before = r.render(1)
+        r.set_view("V2")                       # the same camera again: layers drawn anew
+        assert not r._layers_drawn
+        assert np.array_equal(r.render(1), before)
+        assert len(r._layers) == 15            # ... into the same framebuffers
+
+
+def test_shader_variants_equal_the_branching_program(design):
+    """The per-kind programs (textured / region-coloured) draw the same bytes as the one
+    program that branches on u_textured."""
+    anim = crowd_animation(grid_positions(8, margin=0.45), n_frames=1)
+    with _renderer(anim, design) as r:
+        r.set_view("V1")
+        a = r.render(0)
+        r._char_variants = {}
+        b = r.render(0)
+    assert np.array_equal(a, b)
+
+
+def test_overlap_mask_without_the_picture_is_the_same(design):
+    pos = np.array([[0.0, 0.0], [0.25, 0.0], [1.0, 1.0]])    # two interpenetrating characters
+    anim = crowd_animation(pos, n_frames=2)
+    with _renderer(anim, design) as r:
+        r.set_view("V3")
+        full = r.overlap(1)
+        r.render(0)                            # another frame's state in between
+        quick = r.overlap(1, image=False)
+    assert quick.image is None and full.image is not None
+    assert full.red_fraction > 0
+    assert np.array_equal(full.mask, quick.mask) and full.red_fraction == quick.red_fraction
+    assert full.crowd_fraction == quick.crowd_fraction
+
+
+def test_pipelined_encode_gives_the_serial_bytes(design, tmp_path):
+    """render_video (two pixel-pack buffers, a writer thread, ffmpeg in its own process)
+    writes the same file as rendering each frame and writing it in turn."""
+    from crowdstudy.render.video import VideoWriter, render_video, sha256_file
+    anim = crowd_animation(grid_positions(6, margin=0.45), n_frames=8)
+    res = render_video(anim, "V3", tmp_path / "pipelined.mp4", width=W, height=H, design=design, progress=False,
+                       body_loader=mannequin_loader, preset="superfast")
+    with _renderer(anim, design) as r:
+        r.set_view("V3")
+        writer = VideoWriter(tmp_path / "serial.mp4", W, H, 30.0, preset="superfast", crf=18)
+        for f in range(anim.n_frames):
+            writer.write(r.render_raw(f))
+        writer.close()
+    assert res["frames"] == 8
+    assert sha256_file(tmp_path / "pipelined.mp4") == sha256_file(tmp_path / "serial.mp4")
+    t = res["timings"]
+    assert {"setup_wall_s", "setup_cpu_s", "first_frame_cpu_s", "frames_cpu_s", "red_wall_s"} <= set(t)
+    assert all(v >= 0 for v in t.values())
+
+
+def test_overlap_bisection_marks_the_pixels_of_the_full_scan(design, monkeypatch):
+    """overlap.frag bisects a hidden fragment's sorted candidates to the visible character's
+    capsules; compiled to scan them all (OVERLAP_SCAN_ALL), it marks the same pixels."""
+    import crowdstudy.render.renderer as renderer_module
+    anim = crowd_animation(grid_positions(16, extent=(1.6, 1.6), margin=0.2, seed=3), n_frames=2)
+    masks = []
+    for scan_all in (False, True):
+        if scan_all:
+            compile_program = renderer_module._program
+
+            def with_define(ctx, vert, frag, **kw):
+                if frag == "overlap.frag":
+                    kw["defines"] = (*kw.get("defines", ()), "OVERLAP_SCAN_ALL")
+                return compile_program(ctx, vert, frag, **kw)
+            monkeypatch.setattr(renderer_module, "_program", with_define)
+        with _renderer(anim, design, width=384, height=216) as r:
+            r.set_view("V3")
+            masks.append([r.overlap(f, image=False).mask for f in (0, 1)])
+    for fast, full in zip(*masks):
+        assert full.mean() > 0.005, "the crowd should interpenetrate"
+        assert np.array_equal(fast, full)
