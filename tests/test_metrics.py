@@ -20,6 +20,7 @@ from crowdstudy.metrics import (
     overlap_volume,
     summarize,
     tracking_error,
+    tracking_parts,
 )
 from crowdstudy.metrics.overlap import capsules_world
 from crowdstudy.scene import CrowdAnimation
@@ -279,6 +280,30 @@ def test_tracking_error_equals_known_offset_and_checks_shapes():
         tracking_error(moved, ref.frames(0, 3), bodies=[body, body])
 
 
+def test_tracking_parts_split_a_constant_shift_from_the_motion():
+    rng = np.random.default_rng(4)
+    rot = rng.normal(scale=0.3, size=(8, 2, 24, 3))
+    roots = rng.normal(size=(8, 2, 3))
+    ref = animation(roots, rotations=rot)
+    body = articulated_body()
+    # character 0 stands 3 cm / 4 cm away all along (placement 5 cm, motion 0); character 1
+    # sways +-2 cm in x about its place (placement 0, motion 2 cm)
+    offset = np.zeros((8, 2, 3))
+    offset[:, 0] = [0.03, 0.04, 0.0]
+    offset[:, 1, 0] = 0.02 * np.where(np.arange(8) % 2 == 0, 1.0, -1.0)
+    parts = tracking_parts(animation(roots + offset, rotations=rot), ref, bodies=[body, body])
+    assert parts.placement_cm == pytest.approx(2.5, rel=1e-9)          # (5 + 0) / 2
+    assert parts.motion_cm == pytest.approx(1.0, rel=1e-9)             # (0 + 2) / 2
+    assert parts.total_cm == pytest.approx(3.5, rel=1e-9)
+    assert parts.total_cm == pytest.approx(tracking_error(animation(roots + offset, rotations=rot), ref,
+                                                          bodies=[body, body]), rel=1e-9)
+    np.testing.assert_allclose(parts.per_character_placement_cm, [5.0, 0.0], atol=1e-9)
+    np.testing.assert_allclose(parts.per_character_cm, [5.0, 2.0], rtol=1e-9)
+    # a vertical shift is motion, not placement (a dense crowd spreads out on the floor)
+    lifted = tracking_parts(animation(roots + [0.0, 0.0, 0.01], rotations=rot), ref, bodies=[body, body])
+    assert lifted.placement_cm == pytest.approx(0.0, abs=1e-9) and lifted.motion_cm == pytest.approx(1.0)
+
+
 def test_mean_jerk_of_cubic_motion():
     fps = 30.0
     t = np.arange(12) / fps
@@ -341,6 +366,8 @@ def test_summarize_and_cli(tmp_path, monkeypatch, capsys):
     assert out["frames_measured"] == 6
     assert out["overlap_capsule_ratio"] < 0.5
     assert out["tracking_error_cm"] == pytest.approx(10.0)
+    # the second character stands 20 cm off all along: all of it is placement
+    assert out["tracking_placement_cm"] == pytest.approx(10.0) and out["tracking_motion_cm"] == pytest.approx(0.0)
     assert out["overlap_mesh_litres"] == pytest.approx(1000 * out["overlap_mesh_m3"])
     json.dumps(out)
 
@@ -474,6 +501,7 @@ def test_cli_on_real_bodies(tmp_path, capsys):
     assert record["overlap_mesh_m3"] == 0.0 and record["reference_overlap_mesh_m3"] > 0.002
     assert record["overlap_mesh_ratio"] == 0.0
     assert record["tracking_error_cm"] == pytest.approx(25.0)  # half the characters moved 50 cm
+    assert record["tracking_placement_cm"] == pytest.approx(25.0) and record["tracking_motion_cm"] == pytest.approx(0.0)
     assert "overlap capsule" in capsys.readouterr().out
 
 

@@ -20,9 +20,10 @@ from crowdstudy.metrics.smoothness import (
     smoothness_ratios,
 )
 from crowdstudy.metrics.summary import summarize
-from crowdstudy.metrics.tracking import IntraPenetrationResult, intra_penetration, tracking_error
+from crowdstudy.metrics.tracking import (IntraPenetrationResult, TrackingParts, intra_penetration, tracking_error,
+                                        tracking_parts)
 
-__all__ = ["OverlapResult", "overlap_volume", "frame_indices", "tracking_error", "mean_jerk",
+__all__ = ["OverlapResult", "overlap_volume", "frame_indices", "tracking_error", "tracking_parts", "TrackingParts", "mean_jerk",
            "intra_penetration", "IntraPenetrationResult", "summarize", "smoothness", "smoothness_from_positions",
            "smoothness_ratios", "SmoothnessResult", "joint_jerk", "high_frequency_share", "peak_joint_speed",
            "pelvis_acceleration_p99", "foot_slide", "seam_jump", "PeakSpeed", "FootSlide", "SeamJump"]

@@ -69,7 +69,9 @@ def _table(summary: dict) -> str:
     rows.append(("intra-body penetration", f"{summary['intra_penetration_cm']:.2f} cm mean deepest "
                                            f"({100 * summary['intra_penetration_fraction']:.1f} % of samples)"))
     if "tracking_error_cm" in summary:
-        rows.append(("tracking error", f"{summary['tracking_error_cm']:.2f} cm"))
+        rows.append(("tracking error", f"{summary['tracking_error_cm']:.2f} cm (placement "
+                                       f"{summary['tracking_placement_cm']:.2f} cm, motion "
+                                       f"{summary['tracking_motion_cm']:.2f} cm)"))
     width = max(len(k) for k, _ in rows)
     return "\n".join(f"{k.ljust(width)}  {v}" for k, v in rows)
 

@@ -8,7 +8,7 @@ import numpy as np
 
 from crowdstudy.metrics.overlap import GEOMETRIES, overlap_volume, resolve_bodies
 from crowdstudy.metrics.smoothness import _joint_positions, smoothness_from_positions, smoothness_ratios
-from crowdstudy.metrics.tracking import intra_penetration, tracking_error
+from crowdstudy.metrics.tracking import intra_penetration, tracking_parts
 
 __all__ = ["summarize"]
 
@@ -40,6 +40,8 @@ def summarize(anim, reference=None, *, resolution: float = 0.02, frames: Any = "
         ``hf_share``, ``max_joint_speed_m_s``, ``pelvis_accel_p99_m_s2``,
         ``foot_slide_p99_m_s`` ..., ``seam_ratio``; the planted feet of ``anim`` are taken from
         the reference when given). With a reference also ``tracking_error_cm``,
+        ``tracking_placement_cm`` and ``tracking_motion_cm``
+        (:class:`~crowdstudy.metrics.tracking.TrackingParts`),
         ``reference_overlap_<geometry>_m3``, ``overlap_<geometry>_ratio`` (anim / reference),
         the reference's smoothness keys prefixed ``reference_`` and the keys of
         :func:`~crowdstudy.metrics.smoothness.smoothness_ratios` (``jerk_ratio`` ...).
@@ -86,5 +88,5 @@ def summarize(anim, reference=None, *, resolution: float = 0.02, frames: Any = "
     out["intra_penetration_cm"] = 100.0 * intra.mean_depth
     out["intra_penetration_fraction"] = intra.fraction
     if reference is not None:
-        out["tracking_error_cm"] = tracking_error(anim, reference, bodies=body_objs)
+        out.update(tracking_parts(anim, reference, bodies=body_objs).as_dict())
     return out
