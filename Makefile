@@ -15,11 +15,12 @@ setup:
 demo: setup
 	$(VENV)/bin/crowdstudy demo
 
+# pytest-xdist: one worker per CPU core, each test file on one worker (module fixtures once)
 test: setup
-	$(PY) -m pytest -q
+	$(PY) -m pytest -q -n auto --dist loadfile
 
 test-fast: setup
-	$(PY) -m pytest -q -m "not slow and not browser"
+	$(PY) -m pytest -q -n auto --dist loadfile -m "not slow and not browser"
 
 figures: setup
 	$(PY) paper_figs/make_all.py
