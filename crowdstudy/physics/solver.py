@@ -45,11 +45,10 @@ import time
 
 import numpy as np
 
-from crowdstudy.warp_runtime import host_threads, run_parallel
-
 from crowdstudy.errors import InvalidInputError
 from crowdstudy.physics.linear import bsr_from_triplets, solver_kernels
 from crowdstudy.physics.model import GROUP_FEET, GROUP_PELVIS
+from crowdstudy.warp_runtime import host_threads, run_parallel
 
 __all__ = ["Solver", "LINEAR_SOLVERS"]
 
@@ -60,6 +59,7 @@ FEET_TRANSLATION_JOINTS = (7, 8, 10, 11)
 
 #: below this many characters per half the two-thread split costs more than it saves
 _MIN_CHARACTERS_PER_THREAD = 16
+
 
 class Solver:
     """Implicit-Euler solver (one Newton iteration per step) for a :class:`Model`.
