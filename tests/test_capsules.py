@@ -6,8 +6,8 @@ import pytest
 import trimesh
 
 import crowdstudy.body as cb
-from crowdstudy.body.capsules import (Capsules, capsule_mesh_iou, capsule_occupancy, mesh_occupancy,
-                                      posed_capsules, segment_distance)
+from crowdstudy.body.capsules import (Capsules, cached_fit_capsules, capsule_mesh_iou, capsule_occupancy,
+                                      fit_capsules, fit_digest, mesh_occupancy, posed_capsules, segment_distance)
 from crowdstudy.body.skeleton import PARENTS, forward_kinematics
 from crowdstudy.errors import InvalidInputError
 
@@ -28,6 +28,41 @@ def test_capsule_union_fits_sampled_bodies_with_iou_over_075():
         assert caps.start.shape == caps.end.shape == (24, 3) and caps.radius.shape == (24,)
         assert np.all(caps.radius > 0.01) and np.all(caps.radius < 0.2)
     assert min(ious) >= 0.75, ious
+
+
+def test_cached_fit_is_the_fit_read_back_and_follows_the_body(tmp_path, monkeypatch):
+    import crowdstudy.body.capsules as capsules_module
+
+    body = cb.load_body({"model": "open", "sex": "female", "height": 1.62, "shape": [0.5, -0.5]})
+    direct = fit_capsules(body)
+    first = cached_fit_capsules(body, cache=tmp_path)
+    files = list(tmp_path.glob("*.npz"))
+    assert [f.stem for f in files] == [fit_digest(body)] and not list(tmp_path.glob("*.tmp"))
+    for name in ("start", "end", "radius"):
+        np.testing.assert_array_equal(getattr(first, name), getattr(direct, name))
+
+    def no_fit(*args, **kwargs):
+        raise AssertionError("fitted again although the cache holds this body")
+
+    monkeypatch.setattr(capsules_module, "fit_capsules", no_fit)
+    again = cached_fit_capsules(body, cache=tmp_path)
+    np.testing.assert_array_equal(again.radius, direct.radius)
+    monkeypatch.undo()
+    # a damaged file is fitted again and rewritten
+    files[0].write_bytes(b"not an npz")
+    np.testing.assert_array_equal(cached_fit_capsules(body, cache=tmp_path).start, direct.start)
+    with np.load(files[0]) as data:
+        np.testing.assert_array_equal(data["end"], direct.end)
+    # another body (one vertex moved 1 mm) or another grid is another key
+    from types import SimpleNamespace
+
+    verts = np.array(body.rest_vertices, dtype=np.float64)
+    verts[0, 2] += 1e-3
+    moved = SimpleNamespace(rest_vertices=verts, rest_joints=body.rest_joints, faces=body.faces, weights=body.weights)
+    same = SimpleNamespace(rest_vertices=body.rest_vertices, rest_joints=body.rest_joints, faces=body.faces,
+                           weights=body.weights)
+    assert fit_digest(same) == fit_digest(body) != fit_digest(moved)
+    assert fit_digest(body, 0.03) != fit_digest(body, 0.02)
 
 
 def test_mesh_occupancy_matches_analytic_volumes():

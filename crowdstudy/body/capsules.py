@@ -12,22 +12,35 @@ x) through their vertices' centroid. The radius is a robust percentile of the ve
 distances to the axis line and the segment spans the vertices' extent along the axis,
 less one radius at each end (the caps).
 
+:func:`cached_fit_capsules` keeps each fit in the cache folder (``<cache>/capsules``), keyed
+on a digest of what the fit reads (rest vertices, joints, faces, skinning weights, the grid
+resolution) and of this module's source, so a body is fitted once per machine and a change
+to the fit or to the body refits it.
+
 Fit quality: :func:`capsule_mesh_iou` voxelises the body mesh (ray parity) and the capsule
 union on the same grid and reports their volume intersection-over-union.
 """
 
 from __future__ import annotations
 
+import functools
+import hashlib
+import os
+import tempfile
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
 from crowdstudy.body.skeleton import NUM_JOINTS, PARENTS, forward_kinematics
 from crowdstudy.errors import InvalidInputError
+from crowdstudy.paths import cache_dir
 
 __all__ = [
     "Capsules",
     "fit_capsules",
+    "cached_fit_capsules",
+    "fit_digest",
     "touching_pairs",
     "posed_capsules",
     "closest_points_on_segments",
@@ -227,6 +240,49 @@ def segment_distance(p0: np.ndarray, p1: np.ndarray, q0: np.ndarray, q1: np.ndar
     """Closest distance between segments p0-p1 and q0-q1, all (..., 3) m -> (...,) m
     (see :func:`closest_points_on_segments`)."""
     return closest_points_on_segments(p0, p1, q0, q1)[2]
+
+
+@functools.lru_cache(maxsize=1)
+def _source_digest() -> bytes:
+    return hashlib.sha256(Path(__file__).read_bytes()).digest()
+
+
+def fit_digest(body, resolution: float = 0.02) -> str:
+    """Hex digest of everything :func:`fit_capsules` reads from ``body`` (rest vertices and
+    joints, faces, skinning weights), the grid ``resolution`` and this module's source."""
+    h = hashlib.sha256(_source_digest())
+    for arr, dtype in ((body.rest_vertices, np.float64), (body.rest_joints, np.float64), (body.faces, np.int64),
+                       (body.weights, np.float64)):
+        a = np.ascontiguousarray(np.asarray(arr, dtype=dtype))
+        h.update(repr(a.shape).encode())
+        h.update(a.tobytes())
+    h.update(repr(float(resolution)).encode())
+    return h.hexdigest()
+
+
+def cached_fit_capsules(body, *, resolution: float = 0.02, cache: Path | str | None = None) -> Capsules:
+    """:func:`fit_capsules`, kept in ``cache`` (default ``<cache>/capsules``, see
+    :mod:`crowdstudy.paths`) under :func:`fit_digest`: the same capsules, fitted once.
+
+    A cache file that cannot be read is fitted again and rewritten; the file is written
+    atomically (a temporary file renamed), so parallel processes may share the folder."""
+    folder = Path(cache) if cache is not None else cache_dir("capsules")
+    path = folder / f"{fit_digest(body, resolution)}.npz"
+    try:
+        with np.load(path) as data:
+            return Capsules(start=data["start"], end=data["end"], radius=data["radius"])
+    except (OSError, KeyError, ValueError, InvalidInputError):
+        pass
+    caps = fit_capsules(body, resolution=resolution)
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(dir=folder, suffix=".tmp")
+        with os.fdopen(fd, "wb") as fh:
+            np.savez(fh, start=caps.start, end=caps.end, radius=caps.radius)
+        os.replace(tmp, path)
+    except OSError:                      # a read-only cache: the fit is still returned
+        pass
+    return caps
 
 
 def touching_pairs(capsules: Capsules, margin: float = 0.005) -> np.ndarray:

@@ -136,11 +136,12 @@ class Body:
 
     @property
     def capsules(self):
-        """Capsule proxies (``crowdstudy.body.capsules.Capsules``), fitted on first use."""
+        """Capsule proxies (``crowdstudy.body.capsules.Capsules``), fitted on first use (and
+        kept in the cache folder: :func:`~crowdstudy.body.capsules.cached_fit_capsules`)."""
         if "capsules" not in self._cache:
-            from crowdstudy.body.capsules import fit_capsules
+            from crowdstudy.body.capsules import cached_fit_capsules
 
-            self._cache["capsules"] = fit_capsules(self)
+            self._cache["capsules"] = cached_fit_capsules(self)
         return self._cache["capsules"]
 
     def rest_touching_pairs(self) -> np.ndarray:
