@@ -127,6 +127,20 @@ def mannequin_loader(record: dict) -> Mannequin:
     return _CACHE[scale]
 
 
+#: the render tests' image size (tiny: fast on llvmpipe)
+W, H = 192, 108
+
+
+def mannequin_renderer(anim, design, **kw):
+    """A :class:`~crowdstudy.render.renderer.CrowdRenderer` of ``anim`` drawing the
+    mannequins, W x H unless ``width``/``height`` are given."""
+    from crowdstudy.render.renderer import CrowdRenderer
+
+    kw.setdefault("width", W)
+    kw.setdefault("height", H)
+    return CrowdRenderer(anim, design=design, body_loader=mannequin_loader, **kw)
+
+
 def crowd_animation(positions, *, n_frames: int = 4, fps: float = 30.0, scenario: str = "concert",
                     period: float | None = None, velocity=(0.0, 0.0), seed: int = 7, heights=None) -> CrowdAnimation:
     """Mannequins standing at ``positions`` (N, 2), facing +y, arms down, swaying a little."""

@@ -1,10 +1,27 @@
-"""Helpers of the study-server tests: an in-process server on a database and a participant
-walked to the trials."""
+"""Helpers of the study-server tests: an in-process server on a database, a participant
+walked to the trials, and the headless Chromium the browser tests drive."""
 
 from __future__ import annotations
 
 import re
 import warnings
+from pathlib import Path
+
+import pytest
+
+CHROMIUM = "/usr/bin/chromium"
+CHROMIUM_ARGS = ["--no-sandbox", "--headless", "--disable-gpu", "--disable-background-networking",
+                 "--disable-component-update", "--disable-sync", "--no-first-run"]
+
+
+def require_study_browser() -> None:
+    """Skip the calling test unless Debian's Chromium and the front end's npm packages
+    (``make setup``) are installed."""
+    if not Path(CHROMIUM).exists():
+        pytest.skip("Debian chromium is not installed")
+    from crowdstudy.study.server import default_ui_dir
+    if not (default_ui_dir() / "node_modules" / "jspsych").is_dir():
+        pytest.skip("crowdstudy/study/ui/node_modules missing (run make setup)")
 
 TOKEN = "test-admin-token-0123456789abcdef"
 ADMIN = {"Authorization": f"Bearer {TOKEN}"}

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from render_fixtures import crowd_animation, grid_positions, mannequin_loader  # noqa: E402
+from render_fixtures import crowd_animation, grid_positions, mannequin_loader, mannequin_renderer  # noqa: E402
 
 from crowdstudy.design import load_design  # noqa: E402
 from crowdstudy.metrics.tracking import joint_positions  # noqa: E402
@@ -180,7 +180,6 @@ def test_blend_is_linear_light_on_constant_frames():
 
 
 def test_dissolve_video_blends_its_first_frames(tmp_path):
-    from crowdstudy.render.renderer import CrowdRenderer
     from crowdstudy.render.video import find_ffmpeg, probe_video, render_video
 
     w, h, t, d = 192, 108, 12, 4
@@ -193,7 +192,7 @@ def test_dissolve_video_blends_its_first_frames(tmp_path):
     raw = subprocess.run([find_ffmpeg(), "-loglevel", "error", "-i", str(out), "-f", "rawvideo", "-pix_fmt", "rgb24",
                           "pipe:1"], capture_output=True, check=True).stdout
     video = np.frombuffer(raw, np.uint8).reshape(-1, h, w, 3).astype(int)
-    with CrowdRenderer(anim, design=design, width=w, height=h, body_loader=mannequin_loader) as r:
+    with mannequin_renderer(anim, design, width=w, height=h) as r:
         r.set_view("V4")
         frames = {k: r.render(k) for k in (0, 1, t, t + 1, d, t - 1)}
     for i in (0, 1):

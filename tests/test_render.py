@@ -11,13 +11,12 @@ import numpy as np
 import pytest
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from render_fixtures import crowd_animation, grid_positions, mannequin_loader  # noqa: E402
+from render_fixtures import W, H, crowd_animation, grid_positions, mannequin_loader, mannequin_renderer  # noqa: E402
 
 from crowdstudy.body.skeleton import JOINT_NAMES  # noqa: E402
 from crowdstudy.design import load_design  # noqa: E402
 from crowdstudy.errors import InvalidInputError, MissingDependencyError  # noqa: E402
 
-W, H = 192, 108
 
 
 @pytest.fixture(scope="module")
@@ -30,19 +29,12 @@ def concert():
     return crowd_animation(grid_positions(12, margin=0.45), n_frames=6)
 
 
-def _renderer(anim, design, **kw):
-    from crowdstudy.render.renderer import CrowdRenderer
-    kw.setdefault("width", W)
-    kw.setdefault("height", H)
-    return CrowdRenderer(anim, design=design, body_loader=mannequin_loader, **kw)
-
-
 @pytest.mark.parametrize("view", ["V1", "V2", "V3", "V4"])
 def test_frame_is_not_blank_and_frames_every_character(concert, design, view):
-    with _renderer(concert, design) as r:
+    with mannequin_renderer(concert, design) as r:
         cam = r.set_view(view)
         img = r.render(2)
-        empty = _renderer(concert.replace(root_translation=concert.root_translation + [0, 0, -50.0]), design)
+        empty = mannequin_renderer(concert.replace(root_translation=concert.root_translation + [0, 0, -50.0]), design)
         empty.set_view(view)
         background = empty.render(2)
         empty.release()
@@ -103,7 +95,6 @@ def test_known_scene_silhouettes_sit_where_the_bodies_project(design):
     the image) unchanged, median (155, 153, 161), all within 25 of it; the stage at the top
     (27, 51, 55)."""
     from crowdstudy.render.camera import Camera
-    from crowdstudy.render.renderer import CrowdRenderer
     from crowdstudy.render.scene import build_environment
 
     w, h = 192, 108
@@ -114,7 +105,7 @@ def test_known_scene_silhouettes_sit_where_the_bodies_project(design):
     eye, target, fov = (0.3, -4.5, 1.5), (0.0, 0.0, 0.9), 40.0
     images = []
     for a in (anim, anim.replace(root_translation=anim.root_translation + [0, 0, -50.0])):
-        with CrowdRenderer(a, design=design, width=w, height=h, body_loader=mannequin_loader, shadows=False) as r:
+        with mannequin_renderer(a, design, width=w, height=h, shadows=False) as r:
             r.set_view(Camera(eye=eye, target=target, fov=fov))
             images.append(r.render(0).astype(int))
     img, empty = images
@@ -174,7 +165,7 @@ def test_known_scene_silhouettes_sit_where_the_bodies_project(design):
 
 
 def test_animation_moves_and_is_deterministic(concert, design):
-    with _renderer(concert, design) as r:
+    with mannequin_renderer(concert, design) as r:
         r.set_view("V3")
         a, b, a2 = r.render(0), r.render(5), r.render(0)
     assert np.array_equal(a, a2)
@@ -200,10 +191,10 @@ def test_overlap_view_marks_forced_overlap(design):
     pos = grid_positions(6, margin=0.6)
     forced = pos.copy()
     forced[1] = forced[0] + [0.12, 0.04]                      # two bodies sharing the same space
-    with _renderer(crowd_animation(forced, n_frames=2), design, width=240, height=136) as r:
+    with mannequin_renderer(crowd_animation(forced, n_frames=2), design, width=240, height=136) as r:
         r.set_view("V1")
         hit = r.overlap(0)
-    with _renderer(crowd_animation(pos, n_frames=2), design, width=240, height=136) as r:
+    with mannequin_renderer(crowd_animation(pos, n_frames=2), design, width=240, height=136) as r:
         r.set_view("V1")
         clear = r.overlap(0)
     assert hit.red_fraction > 0.003
@@ -215,7 +206,7 @@ def test_overlap_view_marks_forced_overlap(design):
 def test_corridor_draws_periodic_copies(design):
     anim = crowd_animation(np.array([[2.1, 0.0], [-0.5, 0.3]]), n_frames=3, scenario="corridor", period=4.5,
                            velocity=(1.2, 0.0))
-    with _renderer(anim, design) as r:
+    with mannequin_renderer(anim, design) as r:
         r.set_view("V4")
         img = r.render(2)
         shifts = {round(float(s), 2) for gl in r._gl_groups for s in
@@ -243,7 +234,7 @@ def test_video_decodes_with_right_frames_and_size(concert, design, tmp_path):
     raw = subprocess.run([find_ffmpeg(), "-loglevel", "error", "-i", str(out), "-f", "rawvideo", "-pix_fmt", "rgb24",
                           "pipe:1"], capture_output=True, check=True).stdout
     decoded = np.frombuffer(raw, np.uint8).reshape(-1, H, W, 3).astype(int)
-    with _renderer(concert, design) as r:
+    with mannequin_renderer(concert, design) as r:
         r.set_view("V2")
         first, last = r.render(0).astype(int), r.render(concert.n_frames - 1).astype(int)
     assert np.abs(decoded[0] - first).mean() < 6 and np.abs(decoded[-1] - last).mean() < 6
@@ -264,7 +255,7 @@ def test_overlap_video_and_resampling(concert, design, tmp_path):
 def test_bad_inputs(concert, design, tmp_path):
     from crowdstudy.render.video import render_video
     with pytest.raises(InvalidInputError, match="viewpoint.*V9"):
-        with _renderer(concert, design) as r:
+        with mannequin_renderer(concert, design) as r:
             r.set_view("V9")
     blocker = tmp_path / "file"
     blocker.write_text("x")
@@ -336,15 +327,15 @@ def test_corrected_crowd_keeps_the_baseline_colours(design):
     base = crowd_animation(grid_positions(20, margin=0.3), n_frames=2)
     shift = np.random.default_rng(0).normal(0, 0.08, base.root_translation.shape) * [1, 1, 0]
     moved = base.replace(root_translation=base.root_translation + shift)
-    with _renderer(base, design) as a, _renderer(moved, design,
+    with mannequin_renderer(base, design) as a, mannequin_renderer(moved, design,
                                                  color_positions=base.root_translation[0, :, :2]) as b:
         assert np.array_equal(a.colors, b.colors)
     with pytest.raises(InvalidInputError, match="color_positions"):
-        _renderer(base, design, color_positions=np.zeros((3, 2)))
+        mannequin_renderer(base, design, color_positions=np.zeros((3, 2)))
 
 
 def test_level_of_detail_and_culling_keep_the_picture(concert, design):
-    with _renderer(concert, design, max_faces=None) as full, _renderer(concert, design, width=W, height=H) as lod:
+    with mannequin_renderer(concert, design, max_faces=None) as full, mannequin_renderer(concert, design, width=W, height=H) as lod:
         full.set_view("V3")
         lod.set_view("V3")
         a, b = full.render(1).astype(int), lod.render(1).astype(int)
@@ -352,7 +343,7 @@ def test_level_of_detail_and_culling_keep_the_picture(concert, design):
         assert full.groups[0].faces.shape[0] > 2 * lod.groups[0].faces.shape[0]
     assert np.abs(a - b).mean() < 6
     with pytest.raises(InvalidInputError, match="max_faces"):
-        _renderer(concert, design, max_faces=5)
+        mannequin_renderer(concert, design, max_faces=5)
 
 
 def test_floor_split_is_exact(concert, design, monkeypatch):
@@ -372,13 +363,13 @@ def test_floor_split_is_exact(concert, design, monkeypatch):
 
         assert area(inside) + area(outside) == pytest.approx(area(ground), rel=1e-6)
         assert inside[:, 0].min() >= -1.0 and inside[:, 0].max() <= 3.0 and inside[:, 1].max() <= 1.5
-    with _renderer(concert, design) as split:
+    with mannequin_renderer(concert, design) as split:
         split.set_view("V2")
         a = split.render(2).astype(int)
         x0, y0, x1, y1 = split._shadow_receivers()
         assert x1 - x0 < 12 and y1 - y0 < 12  # a few metres around the crowd, not the 80 m ground
     monkeypatch.setattr(CrowdRenderer, "_shadow_receivers", lambda self: (-1e3, -1e3, 1e3, 1e3))
-    with _renderer(concert, design) as whole:
+    with mannequin_renderer(concert, design) as whole:
         whole.set_view("V2")
         b = whole.render(2).astype(int)
     diff = np.abs(a - b).max(axis=2)

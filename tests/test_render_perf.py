@@ -10,23 +10,15 @@ import numpy as np
 import pytest
 
 sys.path.insert(0, str(Path(__file__).parent))
-from render_fixtures import crowd_animation, grid_positions, mannequin_loader  # noqa: E402
+from render_fixtures import W, H, crowd_animation, grid_positions, mannequin_loader, mannequin_renderer  # noqa: E402
 
 from crowdstudy.design import load_design  # noqa: E402
 
-W, H = 192, 108
 
 
 @pytest.fixture(scope="module")
 def design():
     return load_design()
-
-
-def _renderer(anim, design, **kw):
-    from crowdstudy.render.renderer import CrowdRenderer
-    kw.setdefault("width", W)
-    kw.setdefault("height", H)
-    return CrowdRenderer(anim, design=design, body_loader=mannequin_loader, **kw)
 
 
 def test_lod_level_by_screen_size_is_monotone_and_deterministic():
@@ -45,7 +37,7 @@ def test_renderer_draws_each_character_at_its_screen_size_level(design):
     every visible character is drawn exactly once."""
     from crowdstudy.render.renderer import lod_levels
     anim = crowd_animation(grid_positions(12, margin=0.45), n_frames=1)
-    with _renderer(anim, design, width=1920, height=1080, msaa=0, shadows=False, max_faces=1200) as r:
+    with mannequin_renderer(anim, design, width=1920, height=1080, msaa=0, shadows=False, max_faces=1200) as r:
         r.set_view("V1")
         r._prepare(0)
         by_level = {}
@@ -66,7 +58,7 @@ def test_static_layers_give_the_per_frame_picture(design, view):
     frames drawn from scratch, over more than one beat; a handful of pixels may differ where
     two surfaces meet at the same depth (drawn in another order)."""
     anim = crowd_animation(grid_positions(10, margin=0.45), n_frames=20)
-    with _renderer(anim, design, msaa=4) as layered, _renderer(anim, design, msaa=4, static_layer=False) as plain:
+    with mannequin_renderer(anim, design, msaa=4) as layered, mannequin_renderer(anim, design, msaa=4, static_layer=False) as plain:
         for r in (layered, plain):
             r.set_view(view)
         assert layered._layer_phases() == 15 and "cut_figures" in layered._layer_parts
@@ -84,7 +76,7 @@ def test_static_layers_follow_the_camera_and_the_corridor_walls(design):
     shadows reach, stay in the per-frame pass."""
     anim = crowd_animation(grid_positions(6, extent=(4.0, 3.0), margin=0.45), n_frames=3, scenario="corridor",
                            period=4.0, velocity=(1.0, 0.0))
-    with _renderer(anim, design) as layered, _renderer(anim, design, static_layer=False) as plain:
+    with mannequin_renderer(anim, design) as layered, mannequin_renderer(anim, design, static_layer=False) as plain:
         assert "walls" not in layered._layer_parts
         for view in ("V3", "V4"):
             for r in (layered, plain):
@@ -96,7 +88,7 @@ def test_static_layers_follow_the_camera_and_the_corridor_walls(design):
 
 def test_draw_layers_draws_each_beat_phase_once(design):
     anim = crowd_animation(grid_positions(4, margin=0.45), n_frames=2)
-    with _renderer(anim, design) as r:
+    with mannequin_renderer(anim, design) as r:
         with pytest.raises(Exception, match="set_view"):
             r.draw_layers()
         r.set_view("V2")
@@ -113,7 +105,7 @@ def test_shader_variants_equal_the_branching_program(design):
     """The per-kind programs (textured / region-coloured) draw the same bytes as the one
     program that branches on u_textured."""
     anim = crowd_animation(grid_positions(8, margin=0.45), n_frames=1)
-    with _renderer(anim, design) as r:
+    with mannequin_renderer(anim, design) as r:
         r.set_view("V1")
         a = r.render(0)
         r._char_variants = {}
@@ -124,7 +116,7 @@ def test_shader_variants_equal_the_branching_program(design):
 def test_overlap_mask_without_the_picture_is_the_same(design):
     pos = np.array([[0.0, 0.0], [0.25, 0.0], [1.0, 1.0]])    # two interpenetrating characters
     anim = crowd_animation(pos, n_frames=2)
-    with _renderer(anim, design) as r:
+    with mannequin_renderer(anim, design) as r:
         r.set_view("V3")
         full = r.overlap(1)
         r.render(0)                            # another frame's state in between
@@ -142,7 +134,7 @@ def test_pipelined_encode_gives_the_serial_bytes(design, tmp_path):
     anim = crowd_animation(grid_positions(6, margin=0.45), n_frames=8)
     res = render_video(anim, "V3", tmp_path / "pipelined.mp4", width=W, height=H, design=design, progress=False,
                        body_loader=mannequin_loader, preset="superfast")
-    with _renderer(anim, design) as r:
+    with mannequin_renderer(anim, design) as r:
         r.set_view("V3")
         writer = VideoWriter(tmp_path / "serial.mp4", W, H, 30.0, preset="superfast", crf=18)
         for f in range(anim.n_frames):
@@ -170,7 +162,7 @@ def test_overlap_bisection_marks_the_pixels_of_the_full_scan(design, monkeypatch
                     kw["defines"] = (*kw.get("defines", ()), "OVERLAP_SCAN_ALL")
                 return compile_program(ctx, vert, frag, **kw)
             monkeypatch.setattr(renderer_module, "_program", with_define)
-        with _renderer(anim, design, width=384, height=216) as r:
+        with mannequin_renderer(anim, design, width=384, height=216) as r:
             r.set_view("V3")
             masks.append([r.overlap(f, image=False).mask for f in (0, 1)])
     for fast, full in zip(*masks):

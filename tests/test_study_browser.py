@@ -14,12 +14,10 @@ import pytest
 
 from crowdstudy.study.fake_stimuli import write_fake_stimuli
 from crowdstudy.study.local_server import LocalServer, write_small_design
+from study_fixtures import CHROMIUM, CHROMIUM_ARGS, require_study_browser
 
 pytestmark = [pytest.mark.browser, pytest.mark.slow]
 
-CHROMIUM = "/usr/bin/chromium"
-CHROMIUM_ARGS = ["--no-sandbox", "--headless", "--disable-gpu", "--disable-background-networking",
-                 "--disable-component-update", "--disable-sync", "--no-first-run"]
 ROOT = Path(__file__).resolve().parent.parent
 PID = "E2E_browser-01"
 CODE = "CS-COMPLETE-42"
@@ -32,11 +30,7 @@ def _answers_for(k: int) -> dict:
 
 @pytest.fixture(scope="module")
 def small_study(tmp_path_factory):
-    if not Path(CHROMIUM).exists():
-        pytest.skip("Debian chromium is not installed")
-    from crowdstudy.study.server import default_ui_dir
-    if not (default_ui_dir() / "node_modules" / "jspsych").is_dir():
-        pytest.skip("crowdstudy/study/ui/node_modules missing (run make setup)")
+    require_study_browser()
     tmp = tmp_path_factory.mktemp("study_e2e")
     design = write_small_design(tmp / "small.toml")
     write_fake_stimuli(tmp / "stim", design, n_files=2, seconds=1.0)

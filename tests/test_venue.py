@@ -12,11 +12,10 @@ import numpy as np
 import pytest
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from render_fixtures import crowd_animation, grid_positions, mannequin_loader  # noqa: E402
+from render_fixtures import W, H, crowd_animation, grid_positions, mannequin_renderer  # noqa: E402
 
 from crowdstudy.design import load_design  # noqa: E402
 
-W, H = 192, 108
 
 
 @pytest.fixture(scope="module")
@@ -28,13 +27,6 @@ def design():
 def venue(design):
     from crowdstudy.render.scene import build_environment
     return build_environment("concert", design)
-
-
-def _renderer(anim, design, **kw):
-    from crowdstudy.render.renderer import CrowdRenderer
-    kw.setdefault("width", W)
-    kw.setdefault("height", H)
-    return CrowdRenderer(anim, design=design, body_loader=mannequin_loader, **kw)
 
 
 def _figures(env):
@@ -97,7 +89,7 @@ def test_venue_hides_no_character_and_fills_the_background(design, view):
     images = {}
     for name, a in (("crowd", anim), ("empty", away)):
         for bare in (False, True):
-            with _renderer(a, design) as r:
+            with mannequin_renderer(a, design) as r:
                 if bare:  # the same scene without the venue's cut-away elements
                     r.env = Environment(**{**r.env.__dict__, "cutaway": Elements.join([])})
                     r._cut_ibo = None
@@ -118,7 +110,7 @@ def test_venue_hides_no_character_and_fills_the_background(design, view):
 def test_audience_bobs_on_the_beat(design):
     anim = crowd_animation(grid_positions(4, margin=0.45), n_frames=16)   # 30 fps; 120 bpm: a beat is 15 frames
     anim = anim.replace(root_translation=anim.root_translation + [0, 0, -50.0])
-    with _renderer(anim, design, width=320, height=180) as r:
+    with mannequin_renderer(anim, design, width=320, height=180) as r:
         r.set_view("V1")
         a, half, beat = (r.render(f).astype(int) for f in (0, 7, 15))
     moved = np.abs(a - half).max(axis=2) > 8       # half a beat later the figures stand higher ...
@@ -132,7 +124,7 @@ def _floor_view(design, width, height):
     from crowdstudy.render.camera import free_camera
     anim = crowd_animation(np.array([[0.0, 0.0]]), n_frames=1)
     anim = anim.replace(root_translation=anim.root_translation + [0, 0, -50.0])
-    with _renderer(anim, design, width=width, height=height, msaa=0, shadows=False) as r:
+    with mannequin_renderer(anim, design, width=width, height=height, msaa=0, shadows=False) as r:
         r.set_view(free_camera((0.3, 8.0, 0.5), (0.0, -20.0, 0.35), 40.0))
         r.set_cutaway([])
         return r.render(0).astype(np.float64)
@@ -176,7 +168,7 @@ def test_frustum_culling_of_the_venue_keeps_the_picture(design):
     """The elements outside the camera's view are not submitted; the image is the same."""
     from crowdstudy.render.venue import visible_indices
     anim = crowd_animation(grid_positions(4, margin=0.45), n_frames=1)
-    with _renderer(anim, design) as r:
+    with mannequin_renderer(anim, design) as r:
         r.set_view("V4")
         culled = r._cut_count
         a = r.render(0).astype(int)
