@@ -14,15 +14,10 @@
 # Numbers are written with 17 significant digits.
 suppressPackageStartupMessages({library(afex); library(emmeans)})
 
-here <- "analysis/reference_r"
-fmt <- function(df) {
-  for (col in names(df)) if (is.numeric(df[[col]])) df[[col]] <- sprintf("%.17g", df[[col]])
-  df
-}
+source(file.path("analysis", "reference_r", "common.R"))
 
 reference <- function(name) {
-  d <- read.csv(file.path(here, paste0(name, ".csv")), stringsAsFactors = FALSE)
-  for (f in c("subject", "Density", "Viewpoint", "Method")) d[[f]] <- factor(d[[f]])
+  d <- read_input(name)
   fit <- aov_ez("subject", "y", d, within = c("Density", "Viewpoint", "Method"),
                 anova_table = list(correction = "GG", es = c("ges", "pes")))
   s <- summary(fit$Anova, multivariate = FALSE)
@@ -50,7 +45,7 @@ reference <- function(name) {
   out$pes <- gg[terms, "pes"]
   out$afex_none_p <- none[terms, "Pr(>F)"]
   out$afex_none_ges <- none[terms, "ges"]
-  write.csv(fmt(out), file.path(here, paste0("ref_", name, "_anova.csv")), row.names = FALSE)
+  write_ref(out, paste0(name, "_anova"))
 
   specs <- list(list(spec = ~ Density, factor = "Density", by = ""),
                 list(spec = ~ Viewpoint, factor = "Viewpoint", by = ""),
@@ -71,13 +66,9 @@ reference <- function(name) {
                                              stringsAsFactors = FALSE)
     }
   }
-  write.csv(fmt(do.call(rbind, rows)), file.path(here, paste0("ref_", name, "_posthoc.csv")), row.names = FALSE)
+  write_ref(do.call(rbind, rows), paste0(name, "_posthoc"))
   cat(name, "done\n")
 }
 
-for (name in c("spherical_5x4x2", "violated_5x4x2", "likert_5x2x2")) reference(name)
-versions <- data.frame(package = c("R", "afex", "car", "emmeans"),
-                       version = c(paste(R.version$major, R.version$minor, sep = "."),
-                                   as.character(packageVersion("afex")), as.character(packageVersion("car")),
-                                   as.character(packageVersion("emmeans"))))
-write.csv(versions, file.path(here, "ref_versions.csv"), row.names = FALSE)
+for (name in complete_datasets) reference(name)
+write_versions("versions", c("R", "afex", "car", "emmeans"))

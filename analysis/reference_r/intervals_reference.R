@@ -22,11 +22,7 @@
 suppressPackageStartupMessages({library(afex); library(emmeans); library(effectsize)})
 afex_options(emmeans_model = "multivariate")
 
-here <- "analysis/reference_r"
-fmt <- function(df) {
-  for (col in names(df)) if (is.numeric(df[[col]])) df[[col]] <- sprintf("%.17g", df[[col]])
-  df
-}
+source(file.path("analysis", "reference_r", "common.R"))
 by_value <- function(pr, by) {
   cols <- if (by == "") character(0) else strsplit(by, ",")[[1]]
   if (!length(cols)) return(rep("", nrow(pr)))
@@ -40,8 +36,7 @@ ncp_limit <- function(t, df, prob) {
 J <- function(df) exp(lgamma(df / 2) - 0.5 * log(df / 2) - lgamma((df - 1) / 2))
 
 reference <- function(name) {
-  d <- read.csv(file.path(here, paste0(name, ".csv")), stringsAsFactors = FALSE)
-  for (f in c("subject", "Density", "Viewpoint", "Method")) d[[f]] <- factor(d[[f]])
+  d <- read_input(name)
   fit <- aov_ez("subject", "y", d, within = c("Density", "Viewpoint", "Method"))
 
   specs <- list(list(spec = ~ Density, factor = "Density", by = ""),
@@ -61,7 +56,7 @@ reference <- function(name) {
                                              stringsAsFactors = FALSE)
     }
   }
-  write.csv(fmt(do.call(rbind, rows)), file.path(here, paste0("ref_", name, "_confint.csv")), row.names = FALSE)
+  write_ref(do.call(rbind, rows), paste0(name, "_confint"))
 
   # effect sizes from the per-subject marginal means
   es <- list()
@@ -93,7 +88,7 @@ reference <- function(name) {
   lv <- levels(d$Density)
   for (i in seq_along(lv)) for (j in seq_along(lv)) if (i < j)
     es[[length(es) + 1]] <- add_es("Density", "", lv[i], lv[j], d)
-  write.csv(fmt(do.call(rbind, es)), file.path(here, paste0("ref_", name, "_effsize.csv")), row.names = FALSE)
+  write_ref(do.call(rbind, es), paste0(name, "_effsize"))
 
   jt <- list()
   for (by in list(c("Density", "Viewpoint"), "Viewpoint", "Density")) {
@@ -105,7 +100,7 @@ reference <- function(name) {
                                        F_from_p = qf(j$p.value, j$df1, j$df2, lower.tail = FALSE),
                                        stringsAsFactors = FALSE)
   }
-  write.csv(fmt(do.call(rbind, jt)), file.path(here, paste0("ref_", name, "_joint.csv")), row.names = FALSE)
+  write_ref(do.call(rbind, jt), paste0(name, "_joint"))
 
   pl <- list()
   for (sp in list(list(spec = ~ Density, by = ""), list(spec = ~ Density | Method, by = "Method"))) {
@@ -123,13 +118,9 @@ reference <- function(name) {
                                        p = s$p.value, lower_CL = s$lower.CL, upper_CL = s$upper.CL,
                                        stringsAsFactors = FALSE)
   }
-  write.csv(fmt(do.call(rbind, pl)), file.path(here, paste0("ref_", name, "_poly.csv")), row.names = FALSE)
+  write_ref(do.call(rbind, pl), paste0(name, "_poly"))
   cat(name, "done\n")
 }
 
-for (name in c("spherical_5x4x2", "violated_5x4x2", "likert_5x2x2")) reference(name)
-write.csv(data.frame(package = c("R", "afex", "emmeans", "effectsize"),
-                     version = c(paste(R.version$major, R.version$minor, sep = "."),
-                                 as.character(packageVersion("afex")), as.character(packageVersion("emmeans")),
-                                 as.character(packageVersion("effectsize")))),
-          file.path(here, "ref_intervals_versions.csv"), row.names = FALSE)
+for (name in complete_datasets) reference(name)
+write_versions("intervals_versions", c("R", "afex", "emmeans", "effectsize"))

@@ -17,18 +17,9 @@
 suppressPackageStartupMessages({library(lme4); library(lmerTest)})
 options(contrasts = c("contr.sum", "contr.poly"))
 
-here <- "analysis/reference_r"
-fmt <- function(df) {
-  for (col in names(df)) if (is.numeric(df[[col]])) df[[col]] <- sprintf("%.17g", df[[col]])
-  df
-}
-read <- function(name) {
-  d <- read.csv(file.path(here, paste0(name, ".csv")), stringsAsFactors = FALSE)
-  for (f in c("subject", "Density", "Viewpoint", "Method")) d[[f]] <- factor(d[[f]])
-  d
-}
+source(file.path("analysis", "reference_r", "common.R"))
 
-d <- read("likert_incomplete_5x2x2")
+d <- read_input("likert_incomplete_5x2x2")
 m <- lmer(y ~ Density * Viewpoint * Method + (1 + Method | subject), d, REML = TRUE,
           control = lmerControl(optimizer = "bobyqa", optCtrl = list(rhoend = 1e-12, maxfun = 1e5)))
 co <- summary(m, ddf = "Satterthwaite")$coefficients
@@ -42,10 +33,10 @@ extra <- data.frame(term = c("var:participant (Intercept)", "var:participant Met
                                  vc$vcov[vc$var1 == "Method1" & is.na(vc$var2)],
                                  vc$vcov[!is.na(vc$var2)], sigma(m)^2, as.numeric(logLik(m)), nobs(m)),
                     SE = NA, df = NA, p = NA, stringsAsFactors = FALSE)
-write.csv(fmt(rbind(fixed, extra)), file.path(here, "ref_likert_incomplete_5x2x2_mixed.csv"), row.names = FALSE)
+write_ref(rbind(fixed, extra), "likert_incomplete_5x2x2_mixed")
 
 wil <- function(name) {
-  d <- read(name)
+  d <- read_input(name)
   w <- reshape(d, idvar = c("subject", "Density", "Viewpoint"), timevar = "Method", direction = "wide")
   w$diff <- w$y.Baseline - w$y.Ours
   rows <- list()
@@ -65,10 +56,8 @@ wil <- function(name) {
   }
   allm <- aggregate(diff ~ subject, data = w, FUN = mean)
   rows[[length(rows) + 1]] <- test(allm$diff, "all", "", "")
-  write.csv(fmt(do.call(rbind, rows)), file.path(here, paste0("ref_", name, "_wilcoxon.csv")), row.names = FALSE)
+  write_ref(do.call(rbind, rows), paste0(name, "_wilcoxon"))
 }
 for (name in c("spherical_5x4x2", "likert_5x2x2")) wil(name)
-write.csv(data.frame(package = c("lme4", "lmerTest"),
-                     version = c(as.character(packageVersion("lme4")), as.character(packageVersion("lmerTest")))),
-          file.path(here, "ref_robust_versions.csv"), row.names = FALSE)
+write_versions("robust_versions", c("lme4", "lmerTest"))
 cat("done\n")
