@@ -148,6 +148,13 @@ class PhysicsConfig:
             magnitude within +-``output_hold`` kernel widths (a dilation), so the low-pass
             does not shave the separation a contact needed: the correction eases in a little
             before a contact and out after it (0 = a plain low-pass).
+        speed_limit: the last step of the output stage
+            (:func:`crowdstudy.physics.speed_limit.limit_joint_speed`): where a joint of the
+            output moves faster than the input crowd's fastest joint plus
+            ``speed_limit_margin``, the correction of its upper-body chain is spread over
+            more frames (a limb that rejoins its animation after a contact does not outrun
+            every limb of the captured performance); the overlap is measured after it.
+        speed_limit_margin: m/s, see ``speed_limit``.
         foot_lock: hold the output's ankles still while the input's are planted (two-bone
             leg IK, :func:`crowdstudy.physics.finish.lock_planted_feet`).
         foot_lock_speed: m/s, the input's ankle counts as planted below this speed.
@@ -201,6 +208,8 @@ class PhysicsConfig:
     output_smoothing: float = 0.08
     output_smoothing_root: float = 0.13
     output_hold: float = 1.0
+    speed_limit: bool = True
+    speed_limit_margin: float = 0.3
     foot_lock: bool = True
     foot_lock_speed: float = 0.02
     settle_time: float = 0.5

@@ -20,6 +20,7 @@ from crowdstudy.physics.config import PhysicsConfig
 from crowdstudy.physics.finish import close_loop, lock_planted_feet, smooth_deviation
 from crowdstudy.physics.model import ModelBuilder, capsule_skin
 from crowdstudy.physics.solver import Solver
+from crowdstudy.physics.speed_limit import limit_joint_speed
 from crowdstudy.physics.state import Control, State
 
 __all__ = ["CrowdCorrector", "correct", "load_bodies"]
@@ -193,7 +194,9 @@ def correct(anim, config: PhysicsConfig | None = None, *, device: str | None = N
     periodic input (``meta["loop"]["mode"] == "periodic"``) is simulated from
     ``config.loop_warmup`` before its start to ``config.loop_blend`` past its end and the
     loop closed; the deviation from the input is low-passed (held at its peaks first); planted
-    feet are held.
+    feet are held; where a joint is left faster than the input crowd's fastest (plus
+    ``config.speed_limit_margin``) the correction there is re-timed
+    (:mod:`crowdstudy.physics.speed_limit`; its report in ``meta["physics"]["speed_limit"]``).
 
     Returns:
         A new CrowdAnimation with the same bodies/clips, the corrected ``root_translation``
@@ -265,10 +268,14 @@ def correct(anim, config: PhysicsConfig | None = None, *, device: str | None = N
     rot, root = smooth_deviation(rot, root, anim.joint_rotations, anim.root_translation,
                                  config.output_smoothing * anim.fps, periodic=looped,
                                  root_sigma_frames=config.output_smoothing_root * anim.fps, hold=config.output_hold)
+    rest = np.stack([np.asarray(b.rest_joints, np.float64) for b in bodies])
     if config.foot_lock:
-        rest = np.stack([np.asarray(b.rest_joints, np.float64) for b in bodies])
         rot = lock_planted_feet(rot, root, anim.joint_rotations, anim.root_translation, rest, anim.fps,
                                 planted_speed=config.foot_lock_speed, periodic=looped)
+    speed_report = None
+    if config.speed_limit:
+        rot, speed_report = limit_joint_speed(rot, root, anim.joint_rotations, anim.root_translation, rest, anim.fps,
+                                              margin=config.speed_limit_margin, periodic=looped)
     wall = time.perf_counter() - t_start
     if timings is not None:
         timed = frame_seconds if round(config.settle_time / corr.dt) > 0 else frame_seconds[1:]
@@ -286,7 +293,8 @@ def correct(anim, config: PhysicsConfig | None = None, *, device: str | None = N
                     "contacts_max": int(max(corr.contact_counts, default=0)),
                     "contacts_dropped_steps": int(sum(c > corr.contacts.capacity for c in corr.contact_counts)),
                     "pairs_dropped": int(corr.pipeline.dropped_pairs),
-                    "loop": {"periodic": bool(looped), "warmup_frames": warmup, "blend_frames": blend}}
+                    "loop": {"periodic": bool(looped), "warmup_frames": warmup, "blend_frames": blend},
+                    "speed_limit": speed_report.as_dict() if speed_report is not None else None}
     meta = {"method": "Ours", "physics": physics_meta, "baseline_method": anim.meta.get("method"),
             "baseline_provenance": anim.meta.get("provenance"),
             "provenance": provenance(anim.meta.get("seed"), stage="physics")}

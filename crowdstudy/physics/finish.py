@@ -31,7 +31,7 @@ from crowdstudy.errors import InvalidInputError
 from crowdstudy.motion.posing import hold_peaks, planted_runs, smoothstep5, two_bone_ik
 from crowdstudy.motion.quaternions import quat_blend, quat_conjugate, quat_multiply
 
-__all__ = ["close_loop", "smooth_deviation", "lock_planted_feet"]
+__all__ = ["close_loop", "smooth_deviation", "lock_planted_feet", "planted_frames"]
 
 #: a held leg's reach is compressed smoothly beyond this fraction of the leg's length
 #: (:func:`_soft_reach`: no knee pops near full extension)
@@ -121,7 +121,7 @@ def smooth_deviation(rot: np.ndarray, root: np.ndarray, ref_rot: np.ndarray, ref
     return out, ref_root + offset
 
 
-def _planted_frames(ref_joint: np.ndarray, fps: float, planted_speed: float, planted_height: float,
+def planted_frames(ref_joint: np.ndarray, fps: float, planted_speed: float, planted_height: float,
                     periodic: bool) -> np.ndarray:
     """(T,) frames at which a reference joint (T, 3) is planted.
 
@@ -295,8 +295,8 @@ def lock_planted_feet(rot: np.ndarray, root: np.ndarray, ref_rot: np.ndarray, re
         target = pos[:, :, ankle].copy()
         weight = np.zeros(target.shape[:2])
         for i in range(n_chars):
-            flat = _planted_frames(ref_pos[:, i, ankle], fps, planted_speed, planted_height, periodic)
-            ball = _planted_frames(ref_pos[:, i, toe], fps, planted_speed, planted_height, periodic)
+            flat = planted_frames(ref_pos[:, i, ankle], fps, planted_speed, planted_height, periodic)
+            ball = planted_frames(ref_pos[:, i, toe], fps, planted_speed, planted_height, periodic)
             pull, weight[:, i] = _foot_hold(pos[:, i, ankle], ref_pos[:, i, ankle], flat, ball, toe_arm[:, i],
                                             periodic)
             target[:, i, :2] += pull

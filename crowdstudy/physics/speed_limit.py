@@ -1,0 +1,219 @@
+"""The last step of the output stage: no joint faster than the Baseline crowd's fastest.
+
+A limb that a contact held back rejoins its animation after the contact, and the physics'
+stiff PD control brings it back within a few frames: for those frames the hand moves faster
+than any hand of the captured performance (concert D1: 7.3 m/s where the Baseline's fastest
+joint moves at 6.0 m/s). :func:`limit_joint_speed` finds the frames where a joint of the
+corrected animation moves faster than ``limit`` (by default the reference crowd's fastest
+joint plus ``margin``) and spreads the correction of that joint's upper-body chain over
+more frames there: the chain's deviation from the reference (``R = R^ exp([delta]x)`` per
+joint, as in :func:`crowdstudy.physics.finish.smooth_deviation`) is blended, in a smooth
+window around the fast frames, towards a Gaussian low-pass of itself, with a wider kernel
+each round until no joint is too fast (or ``max_rounds`` is reached). The reference's own
+motion is never slowed: only the deviation is re-timed, so a joint can only be slowed
+where the correction made it faster than its animation allows.
+
+The chain of an arm or the head runs up to spine2 (spine2, spine3, neck, head, collar,
+shoulder, elbow, wrist, hand); the root, pelvis and spine1 are never changed. A fast leg
+joint re-times its leg (hip, knee, ankle, ball) only on the frames where the reference's
+foot swings, so the feet held by :func:`~crowdstudy.physics.finish.lock_planted_feet`
+stay where they are (a held foot's offset handed back to the swing too quickly is what
+makes a leg fast). The overlap is measured after this step, like the rest of the output
+stage.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from crowdstudy.body.rotations import axis_angle_to_quaternion, quaternion_to_axis_angle
+from crowdstudy.body.skeleton import JOINT_INDEX, PARENTS, forward_kinematics
+from crowdstudy.errors import InvalidInputError
+from crowdstudy.motion.quaternions import quat_conjugate, quat_multiply
+from crowdstudy.physics.finish import planted_frames
+
+__all__ = ["SpeedLimitReport", "limit_joint_speed", "joint_speeds", "UPPER_CHAIN_STOP"]
+
+#: an upper-body chain is re-timed up to, not including, these joints (the root and the
+#: lower spine carry the legs and the held feet)
+UPPER_CHAIN_STOP = frozenset(JOINT_INDEX[n] for n in ("pelvis", "spine1"))
+#: hip, knee, ankle, ball of the foot, per side (left, right)
+_LEGS = tuple(tuple(JOINT_INDEX[f"{s}_{n}"] for n in ("hip", "knee", "ankle", "foot")) for s in ("left", "right"))
+
+
+@dataclass(frozen=True)
+class SpeedLimitReport:
+    """What :func:`limit_joint_speed` did.
+
+    Attributes:
+        limit_m_s: the speed limit, m/s.
+        fast_samples: (frame step, character, joint) samples above the limit before, count.
+        characters: indices of the characters whose chains were re-timed.
+        rounds: the most rounds any character needed.
+        max_speed_before_m_s, max_speed_after_m_s: the fastest joint of the output, m/s.
+        unresolved: samples still above the limit after (leg joints, or ``max_rounds``).
+    """
+
+    limit_m_s: float
+    fast_samples: int
+    characters: tuple[int, ...]
+    rounds: int
+    max_speed_before_m_s: float
+    max_speed_after_m_s: float
+    unresolved: int
+
+    def as_dict(self) -> dict:
+        return {"limit_m_s": self.limit_m_s, "fast_samples": self.fast_samples,
+                "characters": list(self.characters), "rounds": self.rounds,
+                "max_speed_before_m_s": self.max_speed_before_m_s,
+                "max_speed_after_m_s": self.max_speed_after_m_s, "unresolved": self.unresolved}
+
+
+def joint_speeds(pos: np.ndarray, fps: float, periodic: bool = False) -> np.ndarray:
+    """Per-step joint speeds, m/s: (T-1, ..., J) from positions (T, ..., J, 3) m; with
+    ``periodic`` the step from the last frame to the first is appended (T steps)."""
+    steps = np.diff(pos, axis=0)
+    if periodic:
+        steps = np.concatenate([steps, (pos[:1] - pos[-1:])], axis=0)
+    return np.linalg.norm(steps, axis=-1) * fps
+
+
+def _leg_side(joint: int) -> int:
+    """0 / 1 for a joint of the left / right leg (hip to foot), else -1."""
+    for side, leg in enumerate(_LEGS):
+        if joint in leg:
+            return side
+    return -1
+
+
+def _chain(joint: int) -> list[int]:
+    """The joints whose deviation a fast ``joint`` re-times: a leg joint's whole leg (hip,
+    knee, ankle, foot), otherwise ``joint`` and its ancestors up to (not including) the
+    pelvis group; [] for the pelvis and spine1."""
+    side = _leg_side(joint)
+    if side >= 0:
+        return list(_LEGS[side])
+    if joint in UPPER_CHAIN_STOP:
+        return []
+    out = []
+    j = joint
+    while j >= 0 and j not in UPPER_CHAIN_STOP:
+        out.append(j)
+        j = int(PARENTS[j])
+    return out
+
+
+def _window(fast_steps: np.ndarray, n_frames: int, width: float, periodic: bool) -> np.ndarray:
+    """(T,) blend weight in [0, 1]: 1 on the frames around each fast step, falling off as a
+    Gaussian of standard deviation ``width`` frames (circular distance when periodic)."""
+    t = np.arange(n_frames, dtype=np.float64)
+    w = np.zeros(n_frames)
+    for s in np.unique(fast_steps):
+        for centre in (s, s + 1):                       # a step s joins frames s and s + 1
+            d = np.abs(t - (centre % n_frames))
+            if periodic:
+                d = np.minimum(d, n_frames - d)
+            w = np.maximum(w, np.exp(-0.5 * (np.maximum(d - 1.0, 0.0) / width) ** 2))
+    return w
+
+
+def limit_joint_speed(rot: np.ndarray, root: np.ndarray, ref_rot: np.ndarray, ref_root: np.ndarray,
+                      rest_joints: np.ndarray, fps: float, *, margin: float = 0.3,
+                      limit: float | None = None, periodic: bool = False, sigma0: float = 1.0,
+                      growth: float = 1.5, max_rounds: int = 12, planted_speed: float = 0.02,
+                      planted_height: float = 0.03) -> tuple[np.ndarray, SpeedLimitReport]:
+    """Re-time the correction where it makes a joint faster than ``limit``.
+
+    Args:
+        rot, ref_rot: (T, N, 24, 3) axis-angle rad (the output and the reference it corrects).
+        root, ref_root: (T, N, 3) m (the root is not changed; it enters the speeds).
+        rest_joints: (N, 24, 3) m, each character's rest joints.
+        fps: frame rate, Hz.
+        margin: m/s above the reference crowd's fastest joint (any character, joint, frame)
+            that the output may reach; ignored when ``limit`` is given.
+        limit: m/s, an explicit limit.
+        periodic: the clip loops (the last-to-first step counts, windows wrap).
+        sigma0: frames, the first round's low-pass kernel; ``growth`` widens it each round.
+        max_rounds: rounds per character at most.
+        planted_speed, planted_height: m/s and m, when the reference's ankle or ball counts
+            as planted (:func:`~crowdstudy.physics.finish.planted_frames`): a leg is re-timed
+            only on the frames where neither is.
+
+    Returns:
+        ``(rot, report)``: new joint rotations (the input's where nothing was too fast) and a
+        :class:`SpeedLimitReport`.
+    """
+    rot = np.asarray(rot, np.float64)
+    ref_rot = np.asarray(ref_rot, np.float64)
+    root = np.asarray(root, np.float64)
+    ref_root = np.asarray(ref_root, np.float64)
+    if rot.shape != ref_rot.shape or rot.ndim != 4 or root.shape != rot.shape[:2] + (3,) \
+            or ref_root.shape != root.shape:
+        raise InvalidInputError(f"rot, ref_rot (T, N, J, 3) and root, ref_root (T, N, 3): got {rot.shape}, "
+                                f"{ref_rot.shape}, {root.shape}, {ref_root.shape}")
+    if fps <= 0 or margin < 0 or sigma0 <= 0 or growth <= 1.0 or max_rounds < 1:
+        raise InvalidInputError(f"fps > 0, margin >= 0, sigma0 > 0, growth > 1 and max_rounds >= 1 expected: got "
+                                f"{fps!r}, {margin!r}, {sigma0!r}, {growth!r}, {max_rounds!r}")
+    rest = np.asarray(rest_joints, np.float64)
+    n_frames = rot.shape[0]
+    _, ref_pos = forward_kinematics(rest[None], ref_rot, ref_root, parents=PARENTS)
+    if limit is None:
+        limit = float(joint_speeds(ref_pos, fps, periodic).max()) + float(margin)
+    _, pos = forward_kinematics(rest[None], rot, root, parents=PARENTS)
+    speed = joint_speeds(pos, fps, periodic)
+    before = float(speed.max()) if speed.size else 0.0
+    fast = speed > limit
+    n_fast = int(fast.sum())
+    out = rot.copy()
+    if not n_fast or n_frames < 3:
+        return out, SpeedLimitReport(float(limit), n_fast, (), 0, before, before, n_fast)
+    from scipy.ndimage import gaussian_filter1d
+
+    mode = "wrap" if periodic else "nearest"
+    q_ref = axis_angle_to_quaternion(ref_rot)
+    touched, most_rounds = [], 0
+    for c in np.unique(np.nonzero(fast)[1]):
+        q_ref_c = q_ref[:, c]
+        delta = quaternion_to_axis_angle(quat_multiply(quat_conjugate(q_ref_c), axis_angle_to_quaternion(out[:, c])))
+        # a leg is re-timed only while its foot swings: planted frames keep the foot hold
+        free = [~(planted_frames(ref_pos[:, c, leg[2]], fps, planted_speed, planted_height, periodic)
+                  | planted_frames(ref_pos[:, c, leg[3]], fps, planted_speed, planted_height, periodic))
+                for leg in _LEGS]
+        sigma, rounds = sigma0, 0
+        spd = speed[:, c]
+        while rounds < max_rounds:
+            steps, joints = np.nonzero(spd > limit)
+            if not steps.size:
+                break
+            rounds += 1
+            w = _window(steps, n_frames, 2.0 * sigma, periodic)
+            groups = {}                                   # chain joints by their window
+            for jt in np.unique(joints):
+                side = _leg_side(int(jt))
+                groups.setdefault(side, set()).update(_chain(int(jt)))
+            for side, chain in groups.items():
+                idx = sorted(chain)
+                if not idx:
+                    continue
+                wk = w if side < 0 else w * free[side]
+                frames = np.nonzero(wk > 0)[0]
+                if not frames.size:
+                    continue
+                low = gaussian_filter1d(delta[:, idx], sigma, axis=0, mode=mode)[frames]
+                blend = wk[frames, None, None]
+                delta[np.ix_(frames, idx)] = (1.0 - blend) * delta[np.ix_(frames, idx)] + blend * low
+                # only what was re-timed is written back (elsewhere the input, bit for bit)
+                q_new = quat_multiply(q_ref_c[np.ix_(frames, idx)], axis_angle_to_quaternion(delta[np.ix_(frames, idx)]))
+                out[frames[:, None], c, np.asarray(idx)[None, :]] = quaternion_to_axis_angle(q_new)
+            _, pc = forward_kinematics(rest[c][None], out[:, c], root[:, c], parents=PARENTS)
+            spd = joint_speeds(pc, fps, periodic)
+            sigma *= growth
+        if rounds:
+            touched.append(int(c))
+            most_rounds = max(most_rounds, rounds)
+            speed[:, c] = spd
+    after = float(speed.max())
+    return out, SpeedLimitReport(float(limit), n_fast, tuple(touched), most_rounds, before, after,
+                                 int((speed > limit).sum()))
