@@ -842,6 +842,8 @@ def measure_bars(duration: float, frame_stride: int = 10) -> list[dict]:
             row["foot_slide_over_5cm_s_ours"] = so["foot_slide_fraction_over_5cm_s"]
             checks = bar_checks(row, li, len(levels))
             row["bars_failed"] = ",".join(k for k, ok in checks.items() if not ok) or "-"
+            limited = (ours.meta.get("physics") or {}).get("speed_limit") or {}
+            row["speed_limited_characters"] = len(limited.get("characters", ()))   # re-timed by the speed limit
             row["correct_wall_s"] = wall
             row["ms_per_step_wall"] = run_timings["ms_per_step"]     # the clip's steps only
             rows.append(row)

@@ -116,3 +116,26 @@ def test_bad_arguments_are_named(rest):
         limit_joint_speed(ref_rot[:, :, :20], ref_root, ref_rot, ref_root, rest_joints, FPS)
     with pytest.raises(InvalidInputError, match="fps"):
         limit_joint_speed(ref_rot, ref_root, ref_rot, ref_root, rest_joints, 0.0)
+
+
+def test_the_limit_comes_from_the_reference_s_own_steps(rest):
+    rest_joints, height = rest
+    ref_rot, ref_root = _reference(height)
+    ref_rot = ref_rot.copy()
+    ref_rot[:, 0, R_SHOULDER, 1] = np.linspace(0.0, 1.2, N_FRAMES)       # a clip cut from a longer motion:
+    pos = forward_kinematics(rest_joints, ref_rot, ref_root)[1]          # its last frame is far from its first
+    within = float(joint_speeds(pos, FPS).max())
+    assert float(joint_speeds(pos, FPS, periodic=True).max()) > within + 5.0
+    _, report = limit_joint_speed(ref_rot, ref_root, ref_rot, ref_root, rest_joints, FPS, margin=0.3, periodic=True)
+    assert report.limit_m_s == pytest.approx(within + 0.3)
+
+
+def test_a_walker_that_wraps_around_the_corridor_is_not_fast(rest):
+    rest_joints, height = rest
+    ref_rot, ref_root = _reference(height)
+    root = ref_root.copy()
+    root[:, 0, 0] = (np.arange(N_FRAMES) * 0.04) % 1.0                   # 1.2 m/s along a 1 m periodic corridor
+    _, wrapped = limit_joint_speed(ref_rot, root, ref_rot, root, rest_joints, FPS, periodic_length=1.0)
+    assert wrapped.fast_samples == 0
+    _, naive = limit_joint_speed(ref_rot, root, ref_rot, root, rest_joints, FPS, limit=3.0)
+    assert naive.fast_samples > 0                                        # without the minimum image: jumps

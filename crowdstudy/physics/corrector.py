@@ -275,7 +275,8 @@ def correct(anim, config: PhysicsConfig | None = None, *, device: str | None = N
     speed_report = None
     if config.speed_limit:
         rot, speed_report = limit_joint_speed(rot, root, anim.joint_rotations, anim.root_translation, rest, anim.fps,
-                                              margin=config.speed_limit_margin, periodic=looped)
+                                              margin=config.speed_limit_margin, periodic=looped,
+                                              periodic_length=anim.periodic_length)
     wall = time.perf_counter() - t_start
     if timings is not None:
         timed = frame_seconds if round(config.settle_time / corr.dt) > 0 else frame_seconds[1:]

@@ -71,12 +71,17 @@ class SpeedLimitReport:
                 "max_speed_after_m_s": self.max_speed_after_m_s, "unresolved": self.unresolved}
 
 
-def joint_speeds(pos: np.ndarray, fps: float, periodic: bool = False) -> np.ndarray:
+def joint_speeds(pos: np.ndarray, fps: float, periodic: bool = False,
+                 periodic_length: float | None = None) -> np.ndarray:
     """Per-step joint speeds, m/s: (T-1, ..., J) from positions (T, ..., J, 3) m; with
-    ``periodic`` the step from the last frame to the first is appended (T steps)."""
+    ``periodic`` the step from the last frame to the first is appended (T steps); with
+    ``periodic_length`` (m) the steps' x components take the minimum image (a corridor
+    whose walkers wrap around), as :mod:`crowdstudy.metrics.smoothness` measures them."""
     steps = np.diff(pos, axis=0)
     if periodic:
         steps = np.concatenate([steps, (pos[:1] - pos[-1:])], axis=0)
+    if periodic_length is not None:
+        steps[..., 0] -= periodic_length * np.round(steps[..., 0] / periodic_length)
     return np.linalg.norm(steps, axis=-1) * fps
 
 
@@ -123,7 +128,7 @@ def limit_joint_speed(rot: np.ndarray, root: np.ndarray, ref_rot: np.ndarray, re
                       rest_joints: np.ndarray, fps: float, *, margin: float = 0.3,
                       limit: float | None = None, periodic: bool = False, sigma0: float = 1.0,
                       growth: float = 1.5, max_rounds: int = 12, planted_speed: float = 0.02,
-                      planted_height: float = 0.03) -> tuple[np.ndarray, SpeedLimitReport]:
+                      planted_height: float = 0.03, periodic_length: float | None = None) -> tuple[np.ndarray, SpeedLimitReport]:
     """Re-time the correction where it makes a joint faster than ``limit``.
 
     Args:
@@ -131,10 +136,12 @@ def limit_joint_speed(rot: np.ndarray, root: np.ndarray, ref_rot: np.ndarray, re
         root, ref_root: (T, N, 3) m (the root is not changed; it enters the speeds).
         rest_joints: (N, 24, 3) m, each character's rest joints.
         fps: frame rate, Hz.
-        margin: m/s above the reference crowd's fastest joint (any character, joint, frame)
-            that the output may reach; ignored when ``limit`` is given.
+        margin: m/s above the reference crowd's fastest joint (any character, joint, step
+            within the clip) that the output may reach; ignored when ``limit`` is given.
         limit: m/s, an explicit limit.
-        periodic: the clip loops (the last-to-first step counts, windows wrap).
+        periodic: the clip loops (the output's last-to-first step counts, windows wrap).
+        periodic_length: m, the scene's period along x (``CrowdAnimation.periodic_length``:
+            steps take the minimum image), or None.
         sigma0: frames, the first round's low-pass kernel; ``growth`` widens it each round.
         max_rounds: rounds per character at most.
         planted_speed, planted_height: m/s and m, when the reference's ankle or ball counts
@@ -160,9 +167,11 @@ def limit_joint_speed(rot: np.ndarray, root: np.ndarray, ref_rot: np.ndarray, re
     n_frames = rot.shape[0]
     _, ref_pos = forward_kinematics(rest[None], ref_rot, ref_root, parents=PARENTS)
     if limit is None:
-        limit = float(joint_speeds(ref_pos, fps, periodic).max()) + float(margin)
+        # the reference's own steps only: a clip cut from a longer loop need not meet its
+        # first frame smoothly, and its seam is no motion of the reference
+        limit = float(joint_speeds(ref_pos, fps, False, periodic_length).max()) + float(margin)
     _, pos = forward_kinematics(rest[None], rot, root, parents=PARENTS)
-    speed = joint_speeds(pos, fps, periodic)
+    speed = joint_speeds(pos, fps, periodic, periodic_length)
     before = float(speed.max()) if speed.size else 0.0
     fast = speed > limit
     n_fast = int(fast.sum())
@@ -187,28 +196,30 @@ def limit_joint_speed(rot: np.ndarray, root: np.ndarray, ref_rot: np.ndarray, re
             steps, joints = np.nonzero(spd > limit)
             if not steps.size:
                 break
-            rounds += 1
             w = _window(steps, n_frames, 2.0 * sigma, periodic)
             groups = {}                                   # chain joints by their window
             for jt in np.unique(joints):
                 side = _leg_side(int(jt))
                 groups.setdefault(side, set()).update(_chain(int(jt)))
+            moved = False
             for side, chain in groups.items():
                 idx = sorted(chain)
-                if not idx:
-                    continue
                 wk = w if side < 0 else w * free[side]
                 frames = np.nonzero(wk > 0)[0]
-                if not frames.size:
+                if not idx or not frames.size:
                     continue
+                moved = True
                 low = gaussian_filter1d(delta[:, idx], sigma, axis=0, mode=mode)[frames]
                 blend = wk[frames, None, None]
                 delta[np.ix_(frames, idx)] = (1.0 - blend) * delta[np.ix_(frames, idx)] + blend * low
                 # only what was re-timed is written back (elsewhere the input, bit for bit)
                 q_new = quat_multiply(q_ref_c[np.ix_(frames, idx)], axis_angle_to_quaternion(delta[np.ix_(frames, idx)]))
                 out[frames[:, None], c, np.asarray(idx)[None, :]] = quaternion_to_axis_angle(q_new)
+            if not moved:             # only the root, pelvis or spine1, or planted legs, are fast
+                break
+            rounds += 1
             _, pc = forward_kinematics(rest[c][None], out[:, c], root[:, c], parents=PARENTS)
-            spd = joint_speeds(pc, fps, periodic)
+            spd = joint_speeds(pc, fps, periodic, periodic_length)
             sigma *= growth
         if rounds:
             touched.append(int(c))
