@@ -6,7 +6,8 @@ import pytest
 
 from crowdstudy.body.skeleton import JOINT_INDEX, forward_kinematics
 from crowdstudy.errors import InvalidInputError
-from crowdstudy.physics.speed_limit import joint_speeds, limit_joint_speed
+from crowdstudy.metrics import joint_speeds
+from crowdstudy.physics.speed_limit import limit_joint_speed
 
 FPS = 30.0
 N_FRAMES = 60
@@ -39,7 +40,7 @@ def _reference(height: float, swing_leg: bool = False):
 
 def _max_speed(rest_joints, rot, root, periodic=False):
     pos = forward_kinematics(rest_joints, rot, root)[1]
-    return float(joint_speeds(pos, FPS, periodic).max())
+    return float(joint_speeds(pos, FPS, seam=periodic).max())
 
 
 def test_a_snapping_arm_is_slowed_to_the_limit_and_keeps_its_correction(rest):
@@ -125,7 +126,7 @@ def test_the_limit_comes_from_the_reference_s_own_steps(rest):
     ref_rot[:, 0, R_SHOULDER, 1] = np.linspace(0.0, 1.2, N_FRAMES)       # a clip cut from a longer motion:
     pos = forward_kinematics(rest_joints, ref_rot, ref_root)[1]          # its last frame is far from its first
     within = float(joint_speeds(pos, FPS).max())
-    assert float(joint_speeds(pos, FPS, periodic=True).max()) > within + 5.0
+    assert float(joint_speeds(pos, FPS, seam=True).max()) > within + 5.0
     _, report = limit_joint_speed(ref_rot, ref_root, ref_rot, ref_root, rest_joints, FPS, margin=0.3, periodic=True)
     assert report.limit_m_s == pytest.approx(within + 0.3)
 

@@ -11,6 +11,7 @@ from crowdstudy.metrics.smoothness import (
     foot_slide,
     high_frequency_share,
     joint_jerk,
+    joint_speeds,
     mean_jerk,
     peak_joint_speed,
     pelvis_acceleration_p99,
@@ -25,5 +26,5 @@ from crowdstudy.metrics.tracking import (IntraPenetrationResult, TrackingParts, 
 
 __all__ = ["OverlapResult", "overlap_volume", "frame_indices", "tracking_error", "tracking_parts", "TrackingParts", "mean_jerk",
            "intra_penetration", "IntraPenetrationResult", "summarize", "smoothness", "smoothness_from_positions",
-           "smoothness_ratios", "SmoothnessResult", "joint_jerk", "high_frequency_share", "peak_joint_speed",
+           "smoothness_ratios", "SmoothnessResult", "joint_jerk", "high_frequency_share", "joint_speeds", "peak_joint_speed",
            "pelvis_acceleration_p99", "foot_slide", "seam_jump", "PeakSpeed", "FootSlide", "SeamJump"]

@@ -37,7 +37,7 @@ from crowdstudy.metrics.overlap import resolve_bodies
 from crowdstudy.metrics.tracking import check_reference, joint_positions
 
 __all__ = ["FOOT_JOINTS", "SLIDE_THRESHOLD_M_S", "PeakSpeed", "FootSlide", "SeamJump", "SmoothnessResult",
-           "joint_jerk", "high_frequency_share", "peak_joint_speed", "pelvis_acceleration_p99", "foot_slide",
+           "joint_jerk", "high_frequency_share", "joint_speeds", "peak_joint_speed", "pelvis_acceleration_p99", "foot_slide",
            "seam_jump", "mean_jerk", "smoothness", "smoothness_from_positions", "smoothness_ratios"]
 
 #: Foot joints of the 24-joint SMPL-order skeleton: left/right ankle and left/right foot
@@ -182,6 +182,17 @@ class PeakSpeed:
     per_character: np.ndarray
 
 
+def joint_speeds(pos: np.ndarray, fps: float, *, periodic_length: float | None = None,
+                 seam: bool = False) -> np.ndarray:
+    """Single-frame joint speeds, m/s: (T-1, ..., J) from positions (T, ..., J, 3) m, the
+    steps taking the minimum image along x when ``periodic_length`` (m) is given; with
+    ``seam`` the step from the last frame to the first (a loop) is appended (T steps)."""
+    steps = _steps(pos, periodic_length)
+    if seam:
+        steps = np.concatenate([steps, _min_image(pos[:1] - pos[-1:], periodic_length)], axis=0)
+    return np.linalg.norm(steps, axis=-1) * fps
+
+
 def peak_joint_speed(pos: Any, fps: float, *, periodic_length: float | None = None) -> PeakSpeed:
     """The largest single-frame joint speed (m/s) and where it happened.
 
@@ -192,7 +203,7 @@ def peak_joint_speed(pos: Any, fps: float, *, periodic_length: float | None = No
     """
     pos = _positions(pos, "pos", 2)
     fps = _positive(fps, "fps")
-    speed = np.linalg.norm(_steps(pos, _length(periodic_length)), axis=-1) * fps  # (T-1, N, J)
+    speed = joint_speeds(pos, fps, periodic_length=_length(periodic_length))  # (T-1, N, J)
     t, i, j = np.unravel_index(int(np.argmax(speed)), speed.shape)
     return PeakSpeed(value=float(speed[t, i, j]), frame=int(t), character=int(i), joint=int(j),
                      per_character=speed.max(axis=(0, 2)))

@@ -31,10 +31,11 @@ import numpy as np
 from crowdstudy.body.rotations import axis_angle_to_quaternion, quaternion_to_axis_angle
 from crowdstudy.body.skeleton import JOINT_INDEX, PARENTS, forward_kinematics
 from crowdstudy.errors import InvalidInputError
+from crowdstudy.metrics import joint_speeds
 from crowdstudy.motion.quaternions import quat_conjugate, quat_multiply
 from crowdstudy.physics.finish import planted_frames
 
-__all__ = ["SpeedLimitReport", "limit_joint_speed", "joint_speeds", "UPPER_CHAIN_STOP"]
+__all__ = ["SpeedLimitReport", "limit_joint_speed", "UPPER_CHAIN_STOP"]
 
 #: an upper-body chain is re-timed up to, not including, these joints (the root and the
 #: lower spine carry the legs and the held feet)
@@ -71,20 +72,6 @@ class SpeedLimitReport:
                 "max_speed_after_m_s": self.max_speed_after_m_s, "unresolved": self.unresolved}
 
 
-def joint_speeds(pos: np.ndarray, fps: float, periodic: bool = False,
-                 periodic_length: float | None = None) -> np.ndarray:
-    """Per-step joint speeds, m/s: (T-1, ..., J) from positions (T, ..., J, 3) m; with
-    ``periodic`` the step from the last frame to the first is appended (T steps); with
-    ``periodic_length`` (m) the steps' x components take the minimum image (a corridor
-    whose walkers wrap around), as :mod:`crowdstudy.metrics.smoothness` measures them."""
-    steps = np.diff(pos, axis=0)
-    if periodic:
-        steps = np.concatenate([steps, (pos[:1] - pos[-1:])], axis=0)
-    if periodic_length is not None:
-        steps[..., 0] -= periodic_length * np.round(steps[..., 0] / periodic_length)
-    return np.linalg.norm(steps, axis=-1) * fps
-
-
 def _leg_side(joint: int) -> int:
     """0 / 1 for a joint of the left / right leg (hip to foot), else -1."""
     for side, leg in enumerate(_LEGS):
@@ -100,8 +87,6 @@ def _chain(joint: int) -> list[int]:
     side = _leg_side(joint)
     if side >= 0:
         return list(_LEGS[side])
-    if joint in UPPER_CHAIN_STOP:
-        return []
     out = []
     j = joint
     while j >= 0 and j not in UPPER_CHAIN_STOP:
@@ -141,7 +126,7 @@ def limit_joint_speed(rot: np.ndarray, root: np.ndarray, ref_rot: np.ndarray, re
         limit: m/s, an explicit limit.
         periodic: the clip loops (the output's last-to-first step counts, windows wrap).
         periodic_length: m, the scene's period along x (``CrowdAnimation.periodic_length``:
-            steps take the minimum image), or None.
+            steps take the minimum image, as the smoothness metrics measure them), or None.
         sigma0: frames, the first round's low-pass kernel; ``growth`` widens it each round.
         max_rounds: rounds per character at most.
         planted_speed, planted_height: m/s and m, when the reference's ankle or ball counts
@@ -169,9 +154,9 @@ def limit_joint_speed(rot: np.ndarray, root: np.ndarray, ref_rot: np.ndarray, re
     if limit is None:
         # the reference's own steps only: a clip cut from a longer loop need not meet its
         # first frame smoothly, and its seam is no motion of the reference
-        limit = float(joint_speeds(ref_pos, fps, False, periodic_length).max()) + float(margin)
+        limit = float(joint_speeds(ref_pos, fps, periodic_length=periodic_length).max()) + float(margin)
     _, pos = forward_kinematics(rest[None], rot, root, parents=PARENTS)
-    speed = joint_speeds(pos, fps, periodic, periodic_length)
+    speed = joint_speeds(pos, fps, periodic_length=periodic_length, seam=periodic)
     before = float(speed.max()) if speed.size else 0.0
     fast = speed > limit
     n_fast = int(fast.sum())
@@ -219,7 +204,7 @@ def limit_joint_speed(rot: np.ndarray, root: np.ndarray, ref_rot: np.ndarray, re
                 break
             rounds += 1
             _, pc = forward_kinematics(rest[c][None], out[:, c], root[:, c], parents=PARENTS)
-            spd = joint_speeds(pc, fps, periodic, periodic_length)
+            spd = joint_speeds(pc, fps, periodic_length=periodic_length, seam=periodic)
             sigma *= growth
         if rounds:
             touched.append(int(c))
