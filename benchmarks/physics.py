@@ -392,12 +392,16 @@ def compare_cg(anim, repeat: int = 10) -> list[dict]:
 #   at the same interpolated target as ours (nlerp of the joint rotations and lerp of the
 #   root between two frames, then forward kinematics: targets_kernel).
 # * settle: config.settle_time simulated on frame 0, targets frozen, before frame 0 is read.
-# * walls: crowdstudy.physics.collision.static_walls_from_meta, as thin boxes; in periodic
+# * walls: crowdstudy.scene.static_walls_from_meta, as boxes WALL_DEPTH deep behind
+#   the wall's face (ours: one-sided planes facing the characters' roots); in periodic
 #   scenes (the corridor) the walls are stretched over the whole run and every character has
 #   two kinematic images at +-L (mocap bodies with its hulls, moved to the simulated pose
 #   every step): MuJoCo has no periodic boundary, the images stand in for our minimum image.
 # * output: the joint rotations R_parent^T R_child (root global) and the pelvis joint
 #   position, by :func:`rigid_to_animation`, the numpy twin of project_kernel.
+
+#: m, how deep MuJoCo's wall boxes reach behind the wall's face (away from the crowd)
+WALL_DEPTH = 0.5
 
 MUJOCO_SETTINGS = {
     # name: MuJoCo steps per 30 fps frame, weld solref (timeconst, dampratio), contact solref,
@@ -477,7 +481,7 @@ class MujocoScene:
         import mujoco
 
         from crowdstudy.body.skeleton import PARENTS
-        from crowdstudy.physics.collision import static_walls_from_meta
+        from crowdstudy.scene import static_walls_from_meta
         from crowdstudy.physics.config import PhysicsConfig
         from crowdstudy.physics.corrector import load_bodies
         from crowdstudy.physics.model import ModelBuilder, capsule_skin
@@ -527,8 +531,15 @@ class MujocoScene:
             c = 0.5 * np.array([x0 + x1, y0 + y1])
             half = 0.5 * float(np.hypot(x1 - x0, y1 - y0))
             ang = float(np.arctan2(y1 - y0, x1 - x0))
+            # ours are one-sided planes facing the crowd (wall_kernel): a box WALL_DEPTH deep
+            # behind the wall's face, away from the characters' roots, so that a limb through
+            # the face is pushed back as ours is, not through a thin sheet
+            normal = np.array([-np.sin(ang), np.cos(ang)])
+            if np.mean((self.anim_root[0, :, :2] - c) @ normal) < 0:
+                normal = -normal
+            c = c - 0.5 * WALL_DEPTH * normal
             parts.append(f'<geom name="wall{w}" type="box" pos="{c[0]:.5f} {c[1]:.5f} 1.1" euler="0 0 {ang:.6f}" '
-                         f'size="{half:.5f} 0.0005 1.1" contype="0" conaffinity="1"/>')
+                         f'size="{half:.5f} {0.5 * WALL_DEPTH:.5f} 1.1" contype="0" conaffinity="1"/>')
 
         def seg(i, j):
             s, e = p0[i, j] - self.rests[i, j], p1[i, j] - self.rests[i, j]
@@ -806,9 +817,11 @@ def measure_bars(duration: float, frame_stride: int = 10) -> list[dict]:
     capsule, m^3 per character, every ``frame_stride``-th frame), tracking error (cm; with its
     placement and motion parts, :func:`crowdstudy.metrics.tracking_parts`) and the
     smoothness of Ours against its Baseline (:func:`crowdstudy.metrics.smoothness`), with the
-    bars (:data:`BAR_TEXT`) checked per cell (``bars_failed`` lists the failed ones)."""
+    bars (:data:`BAR_TEXT`) checked per cell (``bars_failed`` lists the failed ones), and how
+    far the skin reaches through the scene's walls (``wall_p99_cm_*``, ``wall_max_cm_*``:
+    :func:`crowdstudy.metrics.wall_penetration`, the same frames as the overlap)."""
     from crowdstudy.design import load_design
-    from crowdstudy.metrics import overlap_volume, smoothness, tracking_parts
+    from crowdstudy.metrics import overlap_volume, smoothness, tracking_parts, wall_penetration
     from crowdstudy.motion.baseline import build_baseline
     from crowdstudy.physics.corrector import correct
 
@@ -830,6 +843,9 @@ def measure_bars(duration: float, frame_stride: int = 10) -> list[dict]:
                 row[f"{geom}_baseline_m3"] = ob
                 row[f"{geom}_ours_m3"] = oo
                 row[f"{geom}_ratio"] = oo / max(ob, 1e-12)
+            for name, a in (("baseline", base), ("ours", ours)):     # skin through the walls (not a bar)
+                walls = wall_penetration(a, frames=frames)
+                row[f"wall_p99_cm_{name}"], row[f"wall_max_cm_{name}"] = walls.p99_cm, walls.max_cm
             parts = tracking_parts(ours, base)
             row["tracking_cm"] = parts.total_cm
             row["tracking_placement_cm"], row["tracking_motion_cm"] = parts.placement_cm, parts.motion_cm

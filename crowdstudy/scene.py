@@ -27,7 +27,7 @@ import numpy as np
 
 from crowdstudy.errors import InvalidInputError
 
-__all__ = ["CrowdAnimation", "Crowd", "SCHEMA_VERSION"]
+__all__ = ["CrowdAnimation", "Crowd", "SCHEMA_VERSION", "static_walls_from_meta"]
 
 SCHEMA_VERSION = 1
 
@@ -358,3 +358,37 @@ class Crowd:
         except InvalidInputError as exc:
             raise InvalidInputError(f"Crowd file {str(path)!r}: {exc}") from None
 
+
+def static_walls_from_meta(meta: dict) -> np.ndarray:
+    """(M, 2, 2) wall segments (m) of a scene, from ``meta["obstacles"]``: the walls the
+    stage that made the crowd wrote there (the concert's stage front, the corridor walls
+    exactly as its navigation saw them); an empty list means no walls. Nothing is taken
+    from a study design.
+
+    A concert or corridor animation without ``meta["obstacles"]`` (a file written by an
+    older version) is an error: its walls are unknown. A scene of any other scenario (or
+    none) without the key has no walls.
+    """
+    if not isinstance(meta, dict):
+        raise InvalidInputError(f"meta: expected a dict, got {type(meta).__name__}")
+    if "obstacles" not in meta:
+        scenario = meta.get("scenario")
+        if scenario in ("concert", "corridor"):
+            raise InvalidInputError(
+                f"meta['obstacles']: missing from this {scenario} animation, so its walls are unknown "
+                "(written by an older crowdstudy?); regenerate it (crowdstudy layout/navigate, then "
+                "crowdstudy animate, or crowdstudy.motion.build_baseline), or set meta['obstacles'] to "
+                "its wall segments [[[x0, y0], [x1, y1]], ...] in metres ([] for none)")
+        return np.zeros((0, 2, 2))
+    try:
+        walls = np.asarray(meta["obstacles"], np.float64)
+    except (TypeError, ValueError):
+        raise InvalidInputError("meta['obstacles']: expected (M, 2, 2) wall segments "
+                                "[[[x0, y0], [x1, y1]], ...] in metres") from None
+    if walls.size == 0:
+        return np.zeros((0, 2, 2))
+    if walls.ndim != 3 or walls.shape[1:] != (2, 2):
+        raise InvalidInputError(f"meta['obstacles']: expected (M, 2, 2) wall segments, got shape {walls.shape}")
+    if not np.all(np.isfinite(walls)):
+        raise InvalidInputError("meta['obstacles']: wall end points must be finite numbers (m)")
+    return walls

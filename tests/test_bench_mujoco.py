@@ -75,6 +75,19 @@ def test_same_geometry_and_self_pairs(bench, kind):
                                                       or "").startswith("wall")]
     assert len(walls) == (2 if kind == "corridor" else 1)
     assert len(scene.ghost_shift) == (2 if kind == "corridor" else 0)
+    # each box's face is the wall and it lies behind it, away from the crowd (ours: one-sided
+    # planes facing the roots): the roots' side of every box face is empty
+    from crowdstudy.scene import static_walls_from_meta
+
+    roots = anim.root_translation[0, :, :2]
+    for gid, ((x0, y0), (x1, y1)) in zip(walls, static_walls_from_meta(anim.meta)):
+        centre = scene.model.geom_pos[gid, :2]
+        half_depth = scene.model.geom_size[gid, 1]
+        direction = np.array([x1 - x0, y1 - y0]) / np.hypot(x1 - x0, y1 - y0)
+        normal = np.array([-direction[1], direction[0]])
+        offset = (centre - [x0, y0]) @ normal                     # box centre from the wall's line
+        assert abs(abs(offset) - half_depth) < 1e-4 and half_depth >= 0.2
+        assert np.all(np.sign((roots - [x0, y0]) @ normal) == -np.sign(offset))
 
 
 def test_half_step_targets_equal_ours(bench):

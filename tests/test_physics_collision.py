@@ -7,11 +7,13 @@ import pytest
 
 from crowdstudy.body.capsules import closest_points_on_segments
 from crowdstudy.body.skeleton import DEFAULT_PELVIS_HEIGHT, DEFAULT_REST_JOINTS, PARENTS, children
+from crowdstudy.errors import InvalidInputError
 from crowdstudy.physics.collision import (KIND_ENVIRONMENT, KIND_GROUND, KIND_INTER, KIND_INTRA, CollisionPipeline,
-                                          Contacts, sample_static_walls, static_walls_from_meta)
+                                          Contacts, sample_static_walls)
 from crowdstudy.physics.config import PhysicsConfig
 from crowdstudy.physics.model import ModelBuilder
 from crowdstudy.physics.state import Control, State
+from crowdstudy.scene import static_walls_from_meta
 
 
 def fixture_body():
@@ -28,7 +30,7 @@ def fixture_body():
     return types.SimpleNamespace(rest_joints=rest, capsules=types.SimpleNamespace(start=start, end=end, radius=radius))
 
 
-def detect(roots, rot=None, cfg=None, points=None, period=None):
+def detect(roots, rot=None, cfg=None, points=None, period=None, walls=None):
     n = len(roots)
     builder = ModelBuilder()
     for _ in range(n):
@@ -43,7 +45,7 @@ def detect(roots, rot=None, cfg=None, points=None, period=None):
     state = State(model)
     state.x.assign(control.t_x)
     state.q.assign(control.t_glob)
-    pipe = CollisionPipeline(model, cfg, static_points=points, period=period)
+    pipe = CollisionPipeline(model, cfg, static_points=points, period=period, static_walls=walls)
     contacts = Contacts.allocate(pipe.default_capacity(), "cpu")
     pipe.collide(state, contacts)
     return model, contacts.to_numpy(), pipe
@@ -114,6 +116,63 @@ def test_environment_points_push_away_from_walls():
     env = (c["kind"] == KIND_ENVIRONMENT) & (c["depth"] > 0)
     assert env.any()
     assert np.all(c["normal"][env][:, 1] < 0)          # pushed towards -y, away from the wall
+
+
+def _wall_depths(pipe, wall_y, spec):
+    """The end spheres of every capsule against the plane y = wall_y, free side y < wall_y,
+    computed here in numpy from the pipeline's world capsules: sorted depths."""
+    model = pipe.model
+    r = model.wp["cap_radius"].numpy() + model.wp["cap_skin"].numpy() + pipe.config.contact_margin
+    ends = np.concatenate([pipe.p0w.numpy()[:, 1], pipe.p1w.numpy()[:, 1]])
+    depth = np.concatenate([r, r]) - (wall_y - ends)
+    return np.sort(depth[depth > -spec])
+
+
+def test_walls_are_one_sided_planes_on_the_side_of_the_root():
+    """A character turned so that its arms reach 0.6 m through a wall at y = 0.15: every end
+    sphere is pushed along the wall's normal towards the root's side (-y), with the depth of
+    its centre beyond the plane, also the ends that have crossed the wall; no contact has a
+    component along the wall."""
+    rot = np.zeros((1, 24, 3))
+    rot[0, 0] = [0.0, 0.0, np.pi / 2]                   # the T-pose's arms along y
+    walls = np.array([[[-2.0, 0.15], [2.0, 0.15]]])
+    cfg = PhysicsConfig(contact_margin=0.0)
+    _, c, pipe = detect([[0, 0, 1.2]], rot=rot, cfg=cfg, walls=walls)
+    env = c["kind"] == KIND_ENVIRONMENT
+    assert pipe.n_static_walls == 1 and env.sum() > 4
+    assert np.allclose(c["normal"][env], [0.0, -1.0, 0.0], atol=0.0)
+    assert c["depth"][env].max() > 0.5                  # a hand 0.6 m through is pushed back, not out
+    assert np.allclose(np.sort(c["depth"][env]), _wall_depths(pipe, 0.15, cfg.speculative_distance), atol=1e-6)
+    # the same wall seen from the other side: a root at y = 0.3 is on the +y side
+    _, c2, _ = detect([[0, 0.3, 1.2]], rot=rot, cfg=cfg, walls=walls)
+    env2 = c2["kind"] == KIND_ENVIRONMENT
+    assert env2.any() and np.allclose(c2["normal"][env2], [0.0, 1.0, 0.0], atol=0.0)
+    # point samples of the same wall push an arm that crosses them sideways, along the wall
+    # (x) or up and down (z): a drag on a walker's arm swing; why walls are planes
+    pts = sample_static_walls(walls, spacing=0.03)
+    _, cp, _ = detect([[0, 0, 1.2]], rot=rot, cfg=cfg, points=pts)
+    envp = (cp["kind"] == KIND_ENVIRONMENT) & (cp["depth"] > 0)
+    assert (np.abs(cp["normal"][envp][:, [0, 2]]).max(axis=1) > 0.9).any()
+
+
+def test_walls_end_where_their_segment_ends_and_repeat_with_the_period():
+    rot = np.zeros((1, 24, 3))
+    rot[0, 0] = [0.0, 0.0, np.pi / 2]
+    short = np.array([[[-1.0, 0.15], [1.0, 0.15]]])
+    _, beside, _ = detect([[0.5, 0, 1.2]], rot=rot, walls=short)
+    _, past, _ = detect([[2.5, 0, 1.2]], rot=rot, walls=short)
+    assert (beside["kind"] == KIND_ENVIRONMENT).any()
+    assert not (past["kind"] == KIND_ENVIRONMENT).any()
+    # periodic along x (4.5 m): x = 4.9 is the image of x = 0.4, beside the wall
+    _, here, _ = detect([[0.4, 0, 1.2]], rot=rot, walls=short, period=4.5)
+    d_here = np.sort(here["depth"][here["kind"] == KIND_ENVIRONMENT])
+    assert len(d_here) > 4
+    for x in (4.9, 4.4 + 4.5 * 5, -4.1):          # images, also many periods on (a walker's unwrapped x)
+        _, image, _ = detect([[x, 0, 1.2]], rot=rot, walls=short, period=4.5)
+        d_image = np.sort(image["depth"][image["kind"] == KIND_ENVIRONMENT])
+        assert np.allclose(d_here, d_image, atol=1e-4), x
+    with pytest.raises(InvalidInputError, match="static_walls"):
+        detect([[0.4, 0, 1.2]], walls=np.zeros((2, 3)))
 
 
 def test_static_walls_from_meta():

@@ -11,8 +11,9 @@ import pytest
 
 from crowdstudy.design import default_design_path, load_design
 from crowdstudy.errors import InvalidInputError
-from crowdstudy.physics.collision import KIND_ENVIRONMENT, sample_static_walls, static_walls_from_meta
+from crowdstudy.physics.collision import KIND_ENVIRONMENT
 from crowdstudy.physics.config import PhysicsConfig
+from crowdstudy.scene import static_walls_from_meta
 
 
 def _custom_design(folder: Path, name: str, pattern: str, replacement: str):
@@ -61,9 +62,8 @@ def _environment_contacts(anim, walls, frames) -> list[int]:
     from crowdstudy.physics.corrector import CrowdCorrector, load_bodies
 
     cfg = PhysicsConfig()
-    points = sample_static_walls(walls, spacing=cfg.environment_spacing, period=anim.periodic_length)
     corr = CrowdCorrector(load_bodies(anim.bodies), config=cfg, device="cpu", fps=anim.fps,
-                          periodic_length=anim.periodic_length, static_points=points)
+                          periodic_length=anim.periodic_length, static_walls=walls)
     counts = []
     for f in frames:
         corr.reset(anim.joint_rotations[f], anim.root_translation[f])
@@ -130,8 +130,7 @@ def test_the_physics_uses_the_scene_walls(scene, request):
     walls = static_walls_from_meta(clip.meta)
     cfg = PhysicsConfig()
     ours = correct(clip, cfg, progress=False, device="cpu")
-    points = sample_static_walls(walls, spacing=cfg.environment_spacing, period=clip.periodic_length)
-    assert ours.meta["physics"]["static_points"] == len(points) > 0     # the physics used these walls
+    assert ours.meta["physics"]["static_walls"] == len(walls) > 0     # the physics used these walls
     frames = range(clip.n_frames)
     before = _environment_contacts(clip, walls, frames)
     after = _environment_contacts(ours, walls, frames)

@@ -1,6 +1,7 @@
 """Measurements of crowd animations: inter-character overlap volume (body meshes or
 capsules), tracking error, smoothness (jerk, high-frequency energy, speed spikes, pelvis
-acceleration, foot sliding, loop seams) and intra-body penetration; ``crowdstudy metrics``."""
+acceleration, foot sliding, loop seams), intra-body penetration and skin through the scene's
+walls; ``crowdstudy metrics``."""
 
 from crowdstudy.metrics.overlap import OverlapResult, frame_indices, overlap_volume
 from crowdstudy.metrics.smoothness import (
@@ -23,8 +24,10 @@ from crowdstudy.metrics.smoothness import (
 from crowdstudy.metrics.summary import summarize
 from crowdstudy.metrics.tracking import (IntraPenetrationResult, TrackingParts, intra_penetration, tracking_error,
                                         tracking_parts)
+from crowdstudy.metrics.walls import WallPenetration, wall_penetration
 
 __all__ = ["OverlapResult", "overlap_volume", "frame_indices", "tracking_error", "tracking_parts", "TrackingParts", "mean_jerk",
            "intra_penetration", "IntraPenetrationResult", "summarize", "smoothness", "smoothness_from_positions",
            "smoothness_ratios", "SmoothnessResult", "joint_jerk", "high_frequency_share", "joint_speeds", "peak_joint_speed",
-           "pelvis_acceleration_p99", "foot_slide", "seam_jump", "PeakSpeed", "FootSlide", "SeamJump"]
+           "pelvis_acceleration_p99", "foot_slide", "seam_jump", "PeakSpeed", "FootSlide", "SeamJump",
+           "wall_penetration", "WallPenetration"]

@@ -68,6 +68,9 @@ def _table(summary: dict) -> str:
     rows.extend(_smoothness_rows(summary))
     rows.append(("intra-body penetration", f"{summary['intra_penetration_cm']:.2f} cm mean deepest "
                                            f"({100 * summary['intra_penetration_fraction']:.1f} % of samples)"))
+    rows.append(("skin through walls", f"p99 {summary['wall_penetration_p99_cm']:.2f} cm, max "
+                                       f"{summary['wall_penetration_max_cm']:.2f} cm"
+                                       + _compare(summary, "wall_penetration_p99_cm", ".2f", ref_unit=" cm")))
     if "tracking_error_cm" in summary:
         rows.append(("tracking error", f"{summary['tracking_error_cm']:.2f} cm (placement "
                                        f"{summary['tracking_placement_cm']:.2f} cm, motion "

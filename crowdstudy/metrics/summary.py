@@ -9,6 +9,7 @@ import numpy as np
 from crowdstudy.metrics.overlap import GEOMETRIES, overlap_volume, resolve_bodies
 from crowdstudy.metrics.smoothness import _joint_positions, smoothness_from_positions, smoothness_ratios
 from crowdstudy.metrics.tracking import intra_penetration, tracking_parts
+from crowdstudy.metrics.walls import wall_penetration
 
 __all__ = ["summarize"]
 
@@ -35,7 +36,9 @@ def summarize(anim, reference=None, *, resolution: float = 0.02, frames: Any = "
         A JSON-serialisable dict: ``characters``, ``frames``, ``fps``, ``method``,
         ``resolution_m``, ``frames_measured``, ``overlap_<geometry>_m3`` and ``_litres``
         (mean per character), ``overlap_<geometry>_seconds``, ``intra_penetration_cm``,
-        ``intra_penetration_fraction``, and (clips of at least 4 frames) the smoothness keys
+        ``intra_penetration_fraction``, ``wall_penetration_p99_cm`` / ``_max_cm`` (skin
+        through the scene's walls, :func:`~crowdstudy.metrics.wall_penetration`; 0 without
+        walls), and (clips of at least 4 frames) the smoothness keys
         of :meth:`~crowdstudy.metrics.smoothness.SmoothnessResult.as_dict` (``jerk_m_s3``,
         ``hf_share``, ``max_joint_speed_m_s``, ``pelvis_accel_p99_m_s2``,
         ``foot_slide_p99_m_s`` ..., ``seam_ratio``; the planted feet of ``anim`` are taken from
@@ -43,6 +46,7 @@ def summarize(anim, reference=None, *, resolution: float = 0.02, frames: Any = "
         ``tracking_placement_cm`` and ``tracking_motion_cm``
         (:class:`~crowdstudy.metrics.tracking.TrackingParts`),
         ``reference_overlap_<geometry>_m3``, ``overlap_<geometry>_ratio`` (anim / reference),
+        ``reference_wall_penetration_p99_cm`` / ``_max_cm``,
         the reference's smoothness keys prefixed ``reference_`` and the keys of
         :func:`~crowdstudy.metrics.smoothness.smoothness_ratios` (``jerk_ratio`` ...).
     """
@@ -87,6 +91,11 @@ def summarize(anim, reference=None, *, resolution: float = 0.02, frames: Any = "
     intra = intra_penetration(anim, frames=frames, bodies=body_objs)
     out["intra_penetration_cm"] = 100.0 * intra.mean_depth
     out["intra_penetration_fraction"] = intra.fraction
+    for prefix, a in (("", anim), ("reference_", reference)):
+        if a is not None:
+            walls = wall_penetration(a, frames=frames, bodies=body_objs)
+            out[f"{prefix}wall_penetration_p99_cm"] = walls.p99_cm
+            out[f"{prefix}wall_penetration_max_cm"] = walls.max_cm
     if reference is not None:
         out.update(tracking_parts(anim, reference, bodies=body_objs).as_dict())
     return out

@@ -4,8 +4,10 @@ Pipeline (paper Sec. 3.4), every step on the state at the start of the step:
 
 1. one AABB per character (its capsules, grown by the margins);
 2. ground: both sphere ends of every capsule against the plane z = 0;
-3. environment: static objects point-sampled into a ``wp.Bvh``; each capsule's AABB
-   queries it (culled against the character AABB first);
+3. environment: walls (vertical planes on floor segments, the scene's obstacles) against
+   both end spheres of every capsule, one-sided (``wall_kernel``); other static objects
+   point-sampled into a ``wp.Bvh``, each capsule's AABB querying it (culled against the
+   character AABB first);
 4. inter-body: character AABB pairs (minimum image along x in periodic scenes; one thread
    per character over the later ones, so the pairs come out in (i, j) order on the CPU),
    then a bounding-sphere test per capsule pair (midpoints and half lengths computed once
@@ -37,7 +39,7 @@ import numpy as np
 from crowdstudy.errors import InvalidInputError
 from crowdstudy.warp_runtime import host_threads, run_parallel
 
-__all__ = ["Contacts", "CollisionPipeline", "collision_kernels", "sample_static_walls", "static_walls_from_meta",
+__all__ = ["Contacts", "CollisionPipeline", "collision_kernels", "sample_static_walls",
            "KIND_GROUND", "KIND_ENVIRONMENT", "KIND_INTER", "KIND_INTRA"]
 
 KIND_GROUND, KIND_ENVIRONMENT, KIND_INTER, KIND_INTRA = 0, 1, 2, 3
@@ -354,10 +356,77 @@ def collision_kernels():
                 push_contact(count, capacity, b, -1, d / dist, depth, c - (x[b] + sv), wp.vec3(0.0, 0.0, 0.0), k, 1,
                              c_a, c_b, c_n, c_depth, c_la, c_lb, c_k, c_kind)
 
+    @wp.kernel
+    def wall_kernel(x: wp.array(dtype=wp.vec3), p0w: wp.array(dtype=wp.vec3), p1w: wp.array(dtype=wp.vec3),
+                    cap_radius: wp.array(dtype=float), cap_skin: wp.array(dtype=float),
+                    body_char: wp.array(dtype=wp.int32), n_joints: int, side_x: wp.array(dtype=wp.vec3),
+                    walls: wp.array(dtype=wp.vec4), period: float, margin: float, spec: float, k: float,
+                    count: wp.array(dtype=wp.int32), capacity: int,
+                    c_a: wp.array(dtype=wp.int32), c_b: wp.array(dtype=wp.int32),
+                    c_n: wp.array(dtype=wp.vec3), c_depth: wp.array(dtype=float),
+                    c_la: wp.array(dtype=wp.vec3), c_lb: wp.array(dtype=wp.vec3),
+                    c_k: wp.array(dtype=float), c_kind: wp.array(dtype=wp.int32)):
+        """Both end spheres of each capsule (thread) against each wall (x0, y0, x1, y1), m: a
+        vertical plane through the segment, one-sided. Its free side is the side of the
+        character's root in ``side_x`` (the animation's target pose when known): a hand that
+        reaches through the wall is pushed back to the side its body stands on, never through
+        (point samples push a capsule whose axis has crossed them further out). The normal is
+        the wall's horizontal normal, so a body sliding along a wall feels no tangential force.
+        An end sphere counts where its foot point falls within the segment (in periodic scenes
+        at the first image that does, the character wrapped into [0, period) by its root);
+        depth r - (signed distance of the sphere centre), r the radius plus skin plus margin."""
+        b = wp.tid()
+        i = body_char[b]
+        rx = side_x[i * n_joints]
+        # periodic scenes: the character is taken into [0, period) along x by its root's
+        # wrap, then its images at +-period are tried
+        wrap = float(0.0)
+        if period > 0.0:
+            wrap = -period * wp.floor(rx[0] / period)
+        rx = wp.vec3(rx[0] + wrap, rx[1], rx[2])
+        r = cap_radius[b] + cap_skin[b] + margin
+        for m in range(walls.shape[0]):
+            s = walls[m]
+            dx = s[2] - s[0]
+            dy = s[3] - s[1]
+            ll = dx * dx + dy * dy
+            if ll < 1.0e-12:
+                continue
+            inv = 1.0 / wp.sqrt(ll)
+            nx = -dy * inv
+            ny = dx * inv
+            side = (rx[0] - s[0]) * nx + (rx[1] - s[1]) * ny
+            if side < 0.0:
+                nx = -nx
+                ny = -ny
+            normal = wp.vec3(nx, ny, 0.0)
+            for e in range(2):
+                p = p0w[b]
+                if e == 1:
+                    p = p1w[b]
+                images = int(1)
+                if period > 0.0:
+                    images = 3
+                for im in range(images):
+                    sx = wrap
+                    if im == 1:
+                        sx = wrap + period
+                    elif im == 2:
+                        sx = wrap - period
+                    ex = p[0] + sx - s[0]
+                    ey = p[1] - s[1]
+                    t = (ex * dx + ey * dy) / ll
+                    if t >= 0.0 and t <= 1.0:
+                        depth = r - (ex * nx + ey * ny)
+                        if depth > -spec:
+                            push_contact(count, capacity, b, -1, normal, depth, p - x[b], wp.vec3(0.0, 0.0, 0.0),
+                                         k, 1, c_a, c_b, c_n, c_depth, c_la, c_lb, c_k, c_kind)
+                        break
+
     return SimpleNamespace(wp=wp, segment_params=segment_params, capsules_world_kernel=capsules_world_kernel,
                            ground_kernel=ground_kernel, broadphase_kernel=broadphase_kernel,
                            narrowphase_kernel=narrowphase_kernel, intra_kernel=intra_kernel,
-                           environment_kernel=environment_kernel)
+                           environment_kernel=environment_kernel, wall_kernel=wall_kernel)
 
 
 def sample_static_walls(walls: np.ndarray, *, height: float = 2.2, spacing: float = 0.04,
@@ -391,41 +460,6 @@ def sample_static_walls(walls: np.ndarray, *, height: float = 2.2, spacing: floa
         grid = np.concatenate([np.repeat(xy, len(zs), 0), np.tile(zs, len(xy))[:, None]], 1)
         pts.append(grid)
     return np.concatenate(pts) if pts else np.zeros((0, 3))
-
-
-def static_walls_from_meta(meta: dict) -> np.ndarray:
-    """(M, 2, 2) wall segments (m) of a scene, from ``meta["obstacles"]``: the walls the
-    stage that made the crowd wrote there (the concert's stage front, the corridor walls
-    exactly as its navigation saw them); an empty list means no walls. Nothing is taken
-    from a study design.
-
-    A concert or corridor animation without ``meta["obstacles"]`` (a file written by an
-    older version) is an error: its walls are unknown. A scene of any other scenario (or
-    none) without the key has no walls.
-    """
-    if not isinstance(meta, dict):
-        raise InvalidInputError(f"meta: expected a dict, got {type(meta).__name__}")
-    if "obstacles" not in meta:
-        scenario = meta.get("scenario")
-        if scenario in ("concert", "corridor"):
-            raise InvalidInputError(
-                f"meta['obstacles']: missing from this {scenario} animation, so its walls are unknown "
-                "(written by an older crowdstudy?); regenerate it (crowdstudy layout/navigate, then "
-                "crowdstudy animate, or crowdstudy.motion.build_baseline), or set meta['obstacles'] to "
-                "its wall segments [[[x0, y0], [x1, y1]], ...] in metres ([] for none)")
-        return np.zeros((0, 2, 2))
-    try:
-        walls = np.asarray(meta["obstacles"], np.float64)
-    except (TypeError, ValueError):
-        raise InvalidInputError("meta['obstacles']: expected (M, 2, 2) wall segments "
-                                "[[[x0, y0], [x1, y1]], ...] in metres") from None
-    if walls.size == 0:
-        return np.zeros((0, 2, 2))
-    if walls.ndim != 3 or walls.shape[1:] != (2, 2):
-        raise InvalidInputError(f"meta['obstacles']: expected (M, 2, 2) wall segments, got shape {walls.shape}")
-    if not np.all(np.isfinite(walls)):
-        raise InvalidInputError("meta['obstacles']: wall end points must be finite numbers (m)")
-    return walls
 
 
 @dataclasses.dataclass(eq=False)
@@ -486,9 +520,13 @@ class CollisionPipeline:
         config: :class:`~crowdstudy.physics.config.PhysicsConfig`.
         static_points: (P, 3) metres, point samples of static objects (or None).
         period: length (m) of the periodic x axis, or None.
+        static_walls: (M, 2, 2) metres, vertical walls standing on the floor (segments in
+            the floor plane, e.g. :func:`crowdstudy.scene.static_walls_from_meta`), or None: one-sided plane
+            contacts of every capsule end (``wall_kernel``, stiffness ``config.wall_stiffness``).
     """
 
-    def __init__(self, model, config, *, static_points: np.ndarray | None = None, period: float | None = None):
+    def __init__(self, model, config, *, static_points: np.ndarray | None = None, period: float | None = None,
+                 static_walls: np.ndarray | None = None):
         self.model = model
         self.config = config
         self.k = collision_kernels()
@@ -525,6 +563,13 @@ class CollisionPipeline:
             self.env_lo = wp.vec3(*(pts.min(0) - 1e-3))
             self.env_hi = wp.vec3(*(pts.max(0) + 1e-3))
         self.n_static_points = 0 if pts is None else len(pts)
+        walls = np.zeros((0, 2, 2)) if static_walls is None else np.asarray(static_walls, np.float64)
+        if walls.size and (walls.ndim != 3 or walls.shape[1:] != (2, 2) or not np.all(np.isfinite(walls))):
+            raise InvalidInputError(f"static_walls: expected finite (M, 2, 2) wall segments in metres, "
+                                    f"got shape {walls.shape}")
+        walls = walls.reshape(-1, 2, 2)
+        self.n_static_walls = len(walls)
+        self.walls = wp.array(walls.reshape(-1, 4).astype(np.float32), dtype=wp.vec4, device=dev) if len(walls) else None
         self._scratch = None      # the second host thread's contact buffer (CPU)
         self._split = 0.75        # share of the narrow-phase threads run by the first host thread
 
@@ -564,6 +609,11 @@ class CollisionPipeline:
                                                  self.char_lo, self.char_hi, self.bvh.id, self.points, self.env_lo,
                                                  self.env_hi, self.period, margin, spec,
                                                  float(cfg.environment_stiffness), *out], device=dev)
+        if self.walls is not None and self.static_enabled and cfg.wall_stiffness > 0:
+            side = control.t_x if control is not None else state.x      # whose root gives each wall's free side
+            wp.launch(k.wall_kernel, nb, [state.x, self.p0w, self.p1w, W["cap_radius"], W["cap_skin"], W["body_char"],
+                                          nj, side, self.walls, self.period, margin, spec, float(cfg.wall_stiffness),
+                                          *out], device=dev)
         n_pairs = 0
         if n > 1 and cfg.contact_stiffness > 0:
             self.pair_count.zero_()

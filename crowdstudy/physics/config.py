@@ -95,7 +95,11 @@ class PhysicsConfig:
             ``foot_rejoin_distance`` m. 0 = never released. (The Fig. 4 character, held
             0.25 m behind its animation, steps back this way.)
         foot_rejoin_distance: m, see ``foot_release_distance``.
-        environment_stiffness: capsule-static object penalty, N/m (per sample point).
+        environment_stiffness: capsule-static object penalty, N/m (per sample point; static
+            objects given as points, e.g. the Fig. 4 plane of :mod:`crowdstudy.physics.damping`).
+        wall_stiffness: capsule-wall penalty, N/m per capsule end sphere: the scene's walls
+            (``meta["obstacles"]``) are one-sided vertical planes, the free side the one the
+            character's root stands on (``wall_kernel`` in :mod:`crowdstudy.physics.collision`).
         contact_margin: m added to the capsule radii (on top of the mesh skin) for
             inter-body and environment contacts (not ground, not intra-body).
         speculative_distance: m; capsule pairs closer than this are kept as (inactive)
@@ -192,6 +196,7 @@ class PhysicsConfig:
     foot_release_distance: float = 0.2
     foot_rejoin_distance: float = 0.02
     environment_stiffness: float = 2.0e4
+    wall_stiffness: float = 5.0e4
     contact_margin: float = 0.005
     speculative_distance: float = 0.02
     contact_activation: float = 0.005

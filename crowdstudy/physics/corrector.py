@@ -14,14 +14,14 @@ import time
 import numpy as np
 
 from crowdstudy.errors import InvalidInputError
-from crowdstudy.physics.collision import (CollisionPipeline, Contacts, sample_static_walls,
-                                          static_walls_from_meta)
+from crowdstudy.physics.collision import CollisionPipeline, Contacts
 from crowdstudy.physics.config import PhysicsConfig
 from crowdstudy.physics.finish import close_loop, lock_planted_feet, smooth_deviation
 from crowdstudy.physics.model import ModelBuilder, capsule_skin
 from crowdstudy.physics.solver import Solver
 from crowdstudy.physics.speed_limit import limit_joint_speed
 from crowdstudy.physics.state import Control, State
+from crowdstudy.scene import static_walls_from_meta
 
 __all__ = ["CrowdCorrector", "correct", "load_bodies"]
 
@@ -51,12 +51,14 @@ class CrowdCorrector:
         periodic_length: period (m) along x for periodic scenes, else None.
         static_points: (P, 3) m, point samples of static objects (see
             :func:`~crowdstudy.physics.collision.sample_static_walls`).
+        static_walls: (M, 2, 2) m, vertical walls on floor segments (one-sided plane
+            contacts; :func:`~crowdstudy.scene.static_walls_from_meta`).
         linear_solver: see :class:`~crowdstudy.physics.solver.Solver`.
         n_frames: frame slots kept on the device (offline use uploads a whole clip).
     """
 
     def __init__(self, bodies, *, config: PhysicsConfig | None = None, device: str | None = None,
-                 fps: float = 30.0, periodic_length: float | None = None, static_points=None,
+                 fps: float = 30.0, periodic_length: float | None = None, static_points=None, static_walls=None,
                  linear_solver: str | None = None, n_frames: int = 2, profile: bool = False):
         self.config = config or PhysicsConfig()
         if not isinstance(self.config, PhysicsConfig):
@@ -74,7 +76,7 @@ class CrowdCorrector:
         self.states = [State(self.model), State(self.model)]
         self.control = Control(self.model, n_frames=max(2, n_frames))
         self.pipeline = CollisionPipeline(self.model, self.config, static_points=static_points,
-                                          period=periodic_length)
+                                          period=periodic_length, static_walls=static_walls)
         self.contacts = Contacts.allocate(self.pipeline.default_capacity(), self.model.device)
         self.solver = Solver(self.model, self.config, linear_solver=linear_solver, profile=profile)
         wp = self.solver.wp
@@ -221,7 +223,6 @@ def correct(anim, config: PhysicsConfig | None = None, *, device: str | None = N
         raise InvalidInputError(f"bodies: expected {anim.n_characters} body models, got {len(bodies)}")
     period = anim.periodic_length
     walls = static_walls_from_meta(anim.meta)
-    points = sample_static_walls(walls, spacing=config.environment_spacing, period=period) if len(walls) else None
     n_out = anim.n_frames
     looped = (anim.meta.get("loop") or {}).get("mode") == "periodic" and n_out > 2
     warmup = blend = 0
@@ -233,7 +234,7 @@ def correct(anim, config: PhysicsConfig | None = None, *, device: str | None = N
     schedule = np.concatenate([np.arange(n_out - warmup, n_out), np.arange(n_out), np.arange(blend)])
     t_frames = len(schedule)
     corr = CrowdCorrector(bodies, config=config, device=device, fps=anim.fps, periodic_length=period,
-                          static_points=points, linear_solver=linear_solver, n_frames=t_frames, profile=False)
+                          static_walls=walls, linear_solver=linear_solver, n_frames=t_frames, profile=False)
     corr.control.set_frames(anim.joint_rotations[schedule], anim.root_translation[schedule], start=0)
     wp = corr.solver.wp
     m = corr.model
@@ -289,7 +290,7 @@ def correct(anim, config: PhysicsConfig | None = None, *, device: str | None = N
     physics_meta = {"config": config.as_dict(), "device": m.device, "linear_solver": corr.solver.linear_solver,
                     "steps": corr.steps, "substeps_per_frame": corr.substeps, "dt": corr.dt,
                     "cg_iterations_mean": float(iters.mean()), "cg_iterations_max": int(iters.max()),
-                    "static_points": corr.pipeline.n_static_points,
+                    "static_walls": corr.pipeline.n_static_walls,
                     "contacts_mean": float(np.mean(corr.contact_counts)) if corr.contact_counts else 0.0,
                     "contacts_max": int(max(corr.contact_counts, default=0)),
                     "contacts_dropped_steps": int(sum(c > corr.contacts.capacity for c in corr.contact_counts)),
