@@ -208,8 +208,10 @@ def test_bad_inputs_name_the_argument(bodies):
 
 @pytest.mark.slow
 def test_real_scene_d1_meets_the_overlap_and_tracking_bars():
-    """Short clip of the study's stationary D1 cell: mesh overlap <= 10 % of the Baseline's,
-    tracking error < 5 cm (the full 20 s clips are measured by ``crowdstudy bench physics --bars``).
+    """Short clip (2 s) of the study's stationary D1 cell: mesh overlap <= 10 % of the
+    Baseline's, tracking error < 5 cm (the full 20 s clips are measured by ``crowdstudy bench
+    physics --bars``). A 1 s clip, five frames measured, is too short to say: 8 % with the
+    earlier output stage (0.08 s low-pass), 13 % with today's (0.05 s), 7 % and 3 % on 2 s.
     On the generated mannequins, whose meshes the capsules fit closely (IoU about 0.81); the
     MakeHuman bodies (IoU about 0.76) keep 16 % of this clip's Baseline mesh overlap: the
     mesh beyond capsule + skin is not pushed (issue #11)."""
@@ -218,7 +220,7 @@ def test_real_scene_d1_meets_the_overlap_and_tracking_bars():
     from crowdstudy.metrics.tracking import tracking_error
     from crowdstudy.motion.baseline import build_baseline
 
-    base = build_baseline(load_design(), "stationary", "D1", duration=1.0, body_model="open")
+    base = build_baseline(load_design(), "stationary", "D1", duration=2.0, body_model="open")
     ours = correct(base, progress=False)
     frames = np.arange(0, base.n_frames, 6)
     ob = overlap_volume(base, geometry="mesh", frames=frames).mean

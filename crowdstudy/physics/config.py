@@ -210,9 +210,9 @@ class PhysicsConfig:
     environment_spacing: float = 0.04
     loop_warmup: float = 1.0
     loop_blend: float = 0.5
-    output_smoothing: float = 0.08
-    output_smoothing_root: float = 0.13
-    output_hold: float = 1.0
+    output_smoothing: float = 0.05
+    output_smoothing_root: float = 0.08
+    output_hold: float = 1.3
     speed_limit: bool = True
     speed_limit_margin: float = 0.3
     foot_lock: bool = True
