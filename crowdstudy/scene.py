@@ -27,7 +27,7 @@ import numpy as np
 
 from crowdstudy.errors import InvalidInputError
 
-__all__ = ["CrowdAnimation", "Crowd", "SCHEMA_VERSION", "static_walls_from_meta"]
+__all__ = ["CrowdAnimation", "Crowd", "SCHEMA_VERSION", "static_walls_from_meta", "wall_segments"]
 
 SCHEMA_VERSION = 1
 
@@ -380,15 +380,21 @@ def static_walls_from_meta(meta: dict) -> np.ndarray:
                 "crowdstudy animate, or crowdstudy.motion.build_baseline), or set meta['obstacles'] to "
                 "its wall segments [[[x0, y0], [x1, y1]], ...] in metres ([] for none)")
         return np.zeros((0, 2, 2))
+    return wall_segments(meta["obstacles"], "meta['obstacles']")
+
+
+def wall_segments(value, name: str) -> np.ndarray:
+    """``value`` as (M, 2, 2) wall segments in the floor plane (m; empty: (0, 2, 2)), or an
+    :class:`~crowdstudy.errors.InvalidInputError` naming ``name``."""
     try:
-        walls = np.asarray(meta["obstacles"], np.float64)
+        walls = np.asarray(value, np.float64)
     except (TypeError, ValueError):
-        raise InvalidInputError("meta['obstacles']: expected (M, 2, 2) wall segments "
+        raise InvalidInputError(f"{name}: expected (M, 2, 2) wall segments "
                                 "[[[x0, y0], [x1, y1]], ...] in metres") from None
     if walls.size == 0:
         return np.zeros((0, 2, 2))
     if walls.ndim != 3 or walls.shape[1:] != (2, 2):
-        raise InvalidInputError(f"meta['obstacles']: expected (M, 2, 2) wall segments, got shape {walls.shape}")
+        raise InvalidInputError(f"{name}: expected (M, 2, 2) wall segments, got shape {walls.shape}")
     if not np.all(np.isfinite(walls)):
-        raise InvalidInputError("meta['obstacles']: wall end points must be finite numbers (m)")
+        raise InvalidInputError(f"{name}: wall end points must be finite numbers (m)")
     return walls

@@ -36,7 +36,7 @@ import functools
 
 import numpy as np
 
-from crowdstudy.errors import InvalidInputError
+from crowdstudy.scene import wall_segments
 from crowdstudy.warp_runtime import host_threads, run_parallel
 
 __all__ = ["Contacts", "CollisionPipeline", "collision_kernels", "sample_static_walls",
@@ -563,11 +563,7 @@ class CollisionPipeline:
             self.env_lo = wp.vec3(*(pts.min(0) - 1e-3))
             self.env_hi = wp.vec3(*(pts.max(0) + 1e-3))
         self.n_static_points = 0 if pts is None else len(pts)
-        walls = np.zeros((0, 2, 2)) if static_walls is None else np.asarray(static_walls, np.float64)
-        if walls.size and (walls.ndim != 3 or walls.shape[1:] != (2, 2) or not np.all(np.isfinite(walls))):
-            raise InvalidInputError(f"static_walls: expected finite (M, 2, 2) wall segments in metres, "
-                                    f"got shape {walls.shape}")
-        walls = walls.reshape(-1, 2, 2)
+        walls = wall_segments([] if static_walls is None else static_walls, "static_walls")
         self.n_static_walls = len(walls)
         self.walls = wp.array(walls.reshape(-1, 4).astype(np.float32), dtype=wp.vec4, device=dev) if len(walls) else None
         self._scratch = None      # the second host thread's contact buffer (CPU)

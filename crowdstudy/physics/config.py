@@ -134,7 +134,6 @@ class PhysicsConfig:
             capsule (crowdstudy.physics.model.capsule_skin); 0 = bare capsules.
         intra_body: handle intra-body collisions (pairs touching in the T-pose and
             parent-child pairs are always skipped).
-        environment_spacing: spacing of the point samples on static objects, m.
         loop_warmup: s; a periodic input (``meta["loop"]["mode"] == "periodic"``) is
             simulated from this long before its first frame (the loop's end), so the
             output's first frame is a settled one ...
@@ -207,7 +206,6 @@ class PhysicsConfig:
     damping_reference_dt: float = 1.0 / 60.0
     mesh_skin_percentile: float = 90.0
     intra_body: bool = True
-    environment_spacing: float = 0.04
     loop_warmup: float = 1.0
     loop_blend: float = 0.5
     output_smoothing: float = 0.05
@@ -236,7 +234,7 @@ class PhysicsConfig:
             if not num == num or num < 0 or num == float("inf"):
                 raise InvalidInputError(f"PhysicsConfig.{field.name}: expected a finite value >= 0, got {value!r}")
         for name in ("dt", "density", "cg_tolerance", "cg_max_iterations", "max_contacts_per_character",
-                     "environment_spacing", "joint_stiffness", "foot_planted_speed", "damping_reference_dt"):
+                     "joint_stiffness", "foot_planted_speed", "damping_reference_dt"):
             if float(getattr(self, name)) <= 0:
                 raise InvalidInputError(f"PhysicsConfig.{name}: expected a positive value, got {getattr(self, name)!r}")
 
