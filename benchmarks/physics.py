@@ -30,6 +30,7 @@ import time
 import numpy as np
 
 from crowdstudy.bench import format_table, write_report
+from crowdstudy.physics.config import PhysicsConfig
 
 
 def _scene(level: str, duration: float, seed: int | None = None):
@@ -482,9 +483,9 @@ class MujocoScene:
 
         from crowdstudy.body.skeleton import PARENTS
         from crowdstudy.scene import static_walls_from_meta
-        from crowdstudy.physics.config import PhysicsConfig
         from crowdstudy.physics.corrector import load_bodies
-        from crowdstudy.physics.model import ModelBuilder, capsule_skin
+        from crowdstudy.body.capsules import capsule_skin
+        from crowdstudy.physics.model import ModelBuilder
 
         self.mujoco = mujoco
         self.anim = anim
@@ -812,14 +813,32 @@ def bar_checks(row: dict, level_index: int, n_levels: int) -> dict:
     return checks
 
 
-def measure_bars(duration: float, frame_stride: int = 10) -> list[dict]:
+def parse_cells(text: str, levels) -> list[tuple[str, str]] | None:
+    """``"concert:D1,corridor:D5"`` -> [("stationary", "D1"), ("walking", "D5")]; "" -> None
+    (every cell). Scenes are ``concert``/``stationary`` and ``corridor``/``walking``."""
+    if not text.strip():
+        return None
+    stages = {"concert": "stationary", "stationary": "stationary", "corridor": "walking", "walking": "walking"}
+    cells = []
+    for item in text.split(","):
+        scene, _, level = item.strip().partition(":")
+        if scene not in stages or level not in levels:
+            raise SystemExit(f"--cells: expected SCENE:LEVEL with SCENE in concert, corridor and LEVEL in "
+                             f"{', '.join(levels)}, got {item.strip()!r}")
+        cells.append((stages[scene], level))
+    return cells
+
+
+def measure_bars(duration: float, frame_stride: int = 10, config=None, cells=None) -> list[dict]:
     """Every (stage, density) cell of the study, ``duration`` seconds each: overlap (mesh and
     capsule, m^3 per character, every ``frame_stride``-th frame), tracking error (cm; with its
     placement and motion parts, :func:`crowdstudy.metrics.tracking_parts`) and the
     smoothness of Ours against its Baseline (:func:`crowdstudy.metrics.smoothness`), with the
     bars (:data:`BAR_TEXT`) checked per cell (``bars_failed`` lists the failed ones), and how
     far the skin reaches through the scene's walls (``wall_p99_cm_*``, ``wall_max_cm_*``:
-    :func:`crowdstudy.metrics.wall_penetration`, the same frames as the overlap)."""
+    :func:`crowdstudy.metrics.wall_penetration`, the same frames as the overlap).
+    ``config``: the :class:`~crowdstudy.physics.config.PhysicsConfig` of Ours (None: the
+    defaults); ``cells``: (stage, level) pairs to measure (None: all ten)."""
     from crowdstudy.design import load_design
     from crowdstudy.metrics import overlap_volume, smoothness, tracking_parts, wall_penetration
     from crowdstudy.motion.baseline import build_baseline
@@ -830,10 +849,12 @@ def measure_bars(duration: float, frame_stride: int = 10) -> list[dict]:
     rows = []
     for stage in ("stationary", "walking"):
         for li, level in enumerate(levels):
+            if cells is not None and (stage, level) not in cells:
+                continue
             base = build_baseline(design, stage, level, duration=duration)
             t0 = time.perf_counter()
             run_timings: dict = {}
-            ours = correct(base, progress=False, timings=run_timings)
+            ours = correct(base, config, progress=False, timings=run_timings)
             wall = time.perf_counter() - t0
             frames = np.arange(0, base.n_frames, frame_stride)
             row = {"stage": stage, "level": level, "characters": base.n_characters, "frames": base.n_frames}
@@ -893,6 +914,10 @@ def main(argv: list[str]) -> int:
     parser.add_argument("--bars", type=float, default=0.0, metavar="SECONDS",
                         help="also measure overlap/tracking on every study cell for SECONDS (20 = the full clips)")
     parser.add_argument("--bars-only", action="store_true", help="only the --bars measurement")
+    parser.add_argument("--cells", default="", metavar="SCENE:LEVEL,...",
+                        help="--bars on these cells only (e.g. concert:D1,corridor:D5; default all ten)")
+    parser.add_argument("--config", nargs="*", default=[], metavar="KEY=VALUE",
+                        help="PhysicsConfig changes for Ours in --bars (e.g. arm_scale=0.25); the report records them")
     parser.add_argument("--curve-only", action="store_true",
                         help="only the cost curve over --sizes (and its figure), no CG comparison or peers")
     parser.add_argument("--stadium", default="", metavar="N,N",
@@ -927,9 +952,13 @@ def main(argv: list[str]) -> int:
         print(f"wrote {path}", file=sys.stderr)
         return 0
     if args.bars_only:
-        bars = measure_bars(args.bars or 20.0)
+        from crowdstudy.design import load_design
+        config = PhysicsConfig.from_strings(args.config)
+        cells = parse_cells(args.cells, list(load_design().densities))
+        bars = measure_bars(args.bars or 20.0, config=config, cells=cells)
         print("bars: " + "; ".join(BAR_TEXT.values()), flush=True)
-        path = write_report("physics_bars", bars, seed=None, bar_text=BAR_TEXT)
+        name = "physics_bars" if not args.config and cells is None else "physics_bars_trial"
+        path = write_report(name, bars, seed=None, bar_text=BAR_TEXT, config_changes=list(args.config))
         print(f"wrote {path}", file=sys.stderr)
         return 0
     if args.mujoco:
@@ -964,7 +993,7 @@ def main(argv: list[str]) -> int:
     cg_rows = compare_cg(d5)
     print(format_table(cg_rows), flush=True)
     peer_rows = [] if args.no_peer else _run_mujoco(args)
-    bars = measure_bars(args.bars) if args.bars > 0 else []
+    bars = measure_bars(args.bars, config=PhysicsConfig.from_strings(args.config)) if args.bars > 0 else []
     path = write_report("physics", rows, seed=None, cg=cg_rows, peer=peer_rows, bars=bars, bar_text=BAR_TEXT,
                         devices=devices)
     print(f"wrote {path}", file=sys.stderr)

@@ -462,3 +462,28 @@ def test_stance_foot_anchor_assembly_matches_reference():
     on.assemble(state, control, none, h)
     assert np.all(on.foot_weight.numpy() == 0)
     np.testing.assert_allclose(on.foot_offset.numpy()[feet, :2], shift[feet, :2], atol=1e-6)
+
+
+def test_arm_and_trunk_scales_set_the_pd_gains_of_exactly_their_joints(small_system):
+    """``arm_scale`` multiplies k and d of the collars to hands, ``trunk_scale`` of spine2,
+    spine3, neck and head; the pelvis and feet groups keep theirs, the legs the plain k."""
+    from crowdstudy.body.skeleton import JOINT_INDEX
+    from crowdstudy.physics import Solver
+
+    model, cfg, *_ = small_system
+    joint = model.body_joint
+    arms = [JOINT_INDEX[n] for n in ("left_collar", "right_collar", "left_shoulder", "right_shoulder", "left_elbow",
+                                     "right_elbow", "left_wrist", "right_wrist", "left_hand", "right_hand")]
+    trunk = [JOINT_INDEX[n] for n in ("spine2", "spine3", "neck", "head")]
+    pelvis = [JOINT_INDEX[n] for n in ("pelvis", "left_hip", "right_hip", "spine1")]
+    feet = [JOINT_INDEX[n] for n in ("left_ankle", "right_ankle", "left_foot", "right_foot")]
+    expect = np.ones(len(joint))
+    for idx, scale in ((arms, 0.25), (trunk, 4.0), (pelvis, cfg.pelvis_scale), (feet, cfg.feet_scale)):
+        expect[np.isin(joint, idx)] = scale
+    assert np.isin(joint, [JOINT_INDEX["left_knee"], JOINT_INDEX["right_knee"]]).sum() == 4   # two characters
+    solver = Solver(model, cfg.replace(arm_scale=0.25, trunk_scale=4.0))
+    np.testing.assert_allclose(solver.body_k.numpy(), cfg.stiffness * expect, rtol=1e-6)
+    np.testing.assert_allclose(solver.body_d.numpy(), cfg.damping * expect, rtol=1e-6)
+    default = Solver(model, cfg)
+    expect[np.isin(joint, arms + trunk)] = 1.0        # the defaults: the paper's single body k
+    np.testing.assert_allclose(default.body_k.numpy(), cfg.stiffness * expect, rtol=1e-6)

@@ -48,6 +48,7 @@ __all__ = [
     "mesh_occupancy",
     "capsule_occupancy",
     "capsule_mesh_iou",
+    "capsule_skin",
 ]
 _TORSO = (0, 3, 6, 9)
 _FEET = {7: 10, 8: 11, 10: 10, 11: 11}  # bone -> the joint its floor direction points to
@@ -424,3 +425,31 @@ def capsule_mesh_iou(body, *, resolution: float = 0.01, capsules: Capsules | Non
             "mesh_volume": float(np.count_nonzero(mesh_occ)) * cell,
             "capsule_volume": float(np.count_nonzero(cap_occ)) * cell,
             "intersection": inter, "resolution": resolution}
+
+def capsule_skin(body, percentile: float = 90.0, max_skin: float = 0.04) -> np.ndarray:
+    """(J,) m: how far the body mesh reaches beyond each capsule.
+
+    For the vertices bound mostly to bone j (largest skinning weight), the ``percentile``
+    of their distance outside capsule j, clipped to [0, max_skin]. Added to the capsule
+    radius for inter-body and environment contacts so the MESHES stay apart, not only the
+    capsules. Zeros when the body has no mesh (``rest_vertices``/``weights``).
+    """
+    caps = body.capsules
+    n_j = len(caps.radius)
+    verts = getattr(body, "rest_vertices", None)
+    weights = getattr(body, "weights", None)
+    if verts is None or weights is None or percentile <= 0:
+        return np.zeros(n_j)
+    verts = np.asarray(verts, np.float64)
+    dominant = np.asarray(weights).argmax(1)
+    skin = np.zeros(n_j)
+    for j in range(n_j):
+        v = verts[dominant == j]
+        if len(v) == 0:
+            continue
+        s, e = np.asarray(caps.start[j], np.float64), np.asarray(caps.end[j], np.float64)
+        d = e - s
+        t = np.clip((v - s) @ d / max(float(d @ d), 1e-12), 0.0, 1.0)
+        excess = np.linalg.norm(v - (s + t[:, None] * d), axis=1) - caps.radius[j]
+        skin[j] = np.clip(np.percentile(excess, percentile), 0.0, max_skin)
+    return skin

@@ -1,8 +1,10 @@
 """Measurements of crowd animations: inter-character overlap volume (body meshes or
 capsules), tracking error, smoothness (jerk, high-frequency energy, speed spikes, pelvis
 acceleration, foot sliding, loop seams), intra-body penetration and skin through the scene's
-walls; ``crowdstudy metrics``."""
+walls, and an estimate of the least displacement that would separate the characters
+(the tracking floor); ``crowdstudy metrics``."""
 
+from crowdstudy.metrics.floor import SeparationFloor, separation_floor
 from crowdstudy.metrics.overlap import OverlapResult, frame_indices, overlap_volume
 from crowdstudy.metrics.smoothness import (
     FootSlide,
@@ -30,4 +32,4 @@ __all__ = ["OverlapResult", "overlap_volume", "frame_indices", "tracking_error",
            "intra_penetration", "IntraPenetrationResult", "summarize", "smoothness", "smoothness_from_positions",
            "smoothness_ratios", "SmoothnessResult", "joint_jerk", "high_frequency_share", "joint_speeds", "peak_joint_speed",
            "pelvis_acceleration_p99", "foot_slide", "seam_jump", "PeakSpeed", "FootSlide", "SeamJump",
-           "wall_penetration", "WallPenetration"]
+           "wall_penetration", "WallPenetration", "separation_floor", "SeparationFloor"]

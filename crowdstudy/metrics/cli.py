@@ -1,5 +1,8 @@
 """``crowdstudy metrics FILE.npz [--reference BASELINE.npz]``: overlap, smoothness, tracking.
 
+``--floor`` adds an estimate of how little any correction could move the characters
+(:func:`crowdstudy.metrics.separation_floor`), to read beside the tracking error.
+
 Prints a small table; ``--json out.json`` also writes the numbers (per-character smoothness
 included) with provenance; ``--per-character`` also prints a per-character smoothness
 table. With ``--reference`` each smoothness row shows the reference's value and the ratio
@@ -37,6 +40,10 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--json", type=Path, default=None, help="also write the results as JSON here")
     parser.add_argument("--per-character", action="store_true",
                         help="also print a table of the smoothness of each character")
+    parser.add_argument("--floor", action="store_true",
+                        help="also estimate the tracking floor: the least joint displacement that would take the "
+                             "capsules of the reference (or of FILE) apart, every 30th frame "
+                             "(crowdstudy.metrics.separation_floor; about 3 s a frame for 60 characters)")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
 
 
@@ -75,6 +82,10 @@ def _table(summary: dict) -> str:
         rows.append(("tracking error", f"{summary['tracking_error_cm']:.2f} cm (placement "
                                        f"{summary['tracking_placement_cm']:.2f} cm, motion "
                                        f"{summary['tracking_motion_cm']:.2f} cm)"))
+    if "separation_floor_cm" in summary:
+        rows.append(("tracking floor (estimate)", f"{summary['separation_floor_cm']:.2f} cm (arms "
+                                                  f"{summary['separation_floor_arms_cm']:.2f} cm; "
+                                                  f"{summary['separation_floor_frames']} frames)"))
     width = max(len(k) for k, _ in rows)
     return "\n".join(f"{k.ljust(width)}  {v}" for k, v in rows)
 
@@ -165,6 +176,10 @@ def run(args: argparse.Namespace) -> int:
     frames = _parse_frames(args.frames)
     summary = summarize(anim, reference, resolution=args.resolution, frames=frames, geometries=geometries,
                         device=args.device, progress=not args.no_progress, per_character=True)
+    if args.floor:
+        from crowdstudy.metrics.floor import separation_floor
+
+        summary.update(separation_floor(reference if reference is not None else anim).as_dict())
     step = summary.get("frame_step")
     if summary.get("frames_measured", summary["frames"]) < summary["frames"]:
         how = f"one frame in {step}" if step else "selected frames"

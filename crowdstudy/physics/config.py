@@ -52,6 +52,12 @@ class PhysicsConfig:
         pelvis_scale: multiplies k and d for the root's absolute rotation and the hips and
             lower spine (trunk alignment).
         feet_scale: multiplies k and d for the ankles and feet (no foot skate).
+        arm_scale: multiplies k and d for the arms (collars, shoulders, elbows, wrists,
+            hands). Below 1 a contact on a hand bends the arm rather than pushing the whole
+            character (tried for the tracking bar, README "Local corrections"; 1 = the
+            paper's single body k).
+        trunk_scale: multiplies k and d for the upper trunk, neck and head (spine2, spine3,
+            neck, head); 1 = the paper's single body k.
         root_translation_stiffness: spring of the root's absolute translation, N/m.
         root_translation_damping_scale: the root translation damper is
             ``damping * root_translation_damping_scale`` in J s^2/m^2 (the term is
@@ -131,7 +137,7 @@ class PhysicsConfig:
             same whatever the step (the paper's d = 0.006 is at h0 = 1/60 s).
         mesh_skin_percentile: per-capsule skin added for inter-body and environment
             contacts: this percentile of how far the bone's mesh vertices reach outside its
-            capsule (crowdstudy.physics.model.capsule_skin); 0 = bare capsules.
+            capsule (crowdstudy.body.capsules.capsule_skin); 0 = bare capsules.
         intra_body: handle intra-body collisions (pairs touching in the T-pose and
             parent-child pairs are always skipped).
         loop_warmup: s; a periodic input (``meta["loop"]["mode"] == "periodic"``) is
@@ -177,6 +183,8 @@ class PhysicsConfig:
     damping: float = 0.006
     pelvis_scale: float = 8.0
     feet_scale: float = 4.0
+    arm_scale: float = 1.0
+    trunk_scale: float = 1.0
     root_translation_stiffness: float = 1.0e4
     root_translation_damping_scale: float = 4.25e3
     feet_translation_stiffness: float = 5.0e3

@@ -13,11 +13,12 @@ import time
 
 import numpy as np
 
+from crowdstudy.body.capsules import capsule_skin
 from crowdstudy.errors import InvalidInputError
 from crowdstudy.physics.collision import CollisionPipeline, Contacts
 from crowdstudy.physics.config import PhysicsConfig
 from crowdstudy.physics.finish import close_loop, lock_planted_feet, smooth_deviation
-from crowdstudy.physics.model import ModelBuilder, capsule_skin
+from crowdstudy.physics.model import ModelBuilder
 from crowdstudy.physics.solver import Solver
 from crowdstudy.physics.speed_limit import limit_joint_speed
 from crowdstudy.physics.state import Control, State

@@ -23,13 +23,16 @@ from crowdstudy.body.capsules import closest_points_on_segments
 from crowdstudy.body.skeleton import JOINT_INDEX, PARENTS
 from crowdstudy.errors import InvalidInputError
 
-__all__ = ["ModelBuilder", "Model", "capsule_mass_properties", "capsule_skin",
-           "GROUP_BODY", "GROUP_PELVIS", "GROUP_FEET", "MAX_CHILDREN"]
+__all__ = ["ModelBuilder", "Model", "capsule_mass_properties",
+           "GROUP_BODY", "GROUP_PELVIS", "GROUP_FEET", "GROUP_ARM", "GROUP_TRUNK", "MAX_CHILDREN"]
 
-GROUP_BODY, GROUP_PELVIS, GROUP_FEET = 0, 1, 2
+GROUP_BODY, GROUP_PELVIS, GROUP_FEET, GROUP_ARM, GROUP_TRUNK = 0, 1, 2, 3, 4
 MAX_CHILDREN = 4
 _PELVIS_GROUP_JOINTS = ("pelvis", "left_hip", "right_hip", "spine1")
 _FEET_GROUP_JOINTS = ("left_ankle", "right_ankle", "left_foot", "right_foot")
+_ARM_GROUP_JOINTS = ("left_collar", "right_collar", "left_shoulder", "right_shoulder", "left_elbow", "right_elbow",
+                     "left_wrist", "right_wrist", "left_hand", "right_hand")
+_TRUNK_GROUP_JOINTS = ("spine2", "spine3", "neck", "head")
 
 
 def capsule_mass_properties(start: np.ndarray, end: np.ndarray, radius: np.ndarray, density: float):
@@ -62,33 +65,6 @@ def capsule_mass_properties(start: np.ndarray, end: np.ndarray, radius: np.ndarr
     return m_cyl + m_sph, J
 
 
-def capsule_skin(body, percentile: float = 90.0, max_skin: float = 0.04) -> np.ndarray:
-    """(J,) m: how far the body mesh reaches beyond each capsule.
-
-    For the vertices bound mostly to bone j (largest skinning weight), the ``percentile``
-    of their distance outside capsule j, clipped to [0, max_skin]. Added to the capsule
-    radius for inter-body and environment contacts so the MESHES stay apart, not only the
-    capsules. Zeros when the body has no mesh (``rest_vertices``/``weights``).
-    """
-    caps = body.capsules
-    n_j = len(caps.radius)
-    verts = getattr(body, "rest_vertices", None)
-    weights = getattr(body, "weights", None)
-    if verts is None or weights is None or percentile <= 0:
-        return np.zeros(n_j)
-    verts = np.asarray(verts, np.float64)
-    dominant = np.asarray(weights).argmax(1)
-    skin = np.zeros(n_j)
-    for j in range(n_j):
-        v = verts[dominant == j]
-        if len(v) == 0:
-            continue
-        s, e = np.asarray(caps.start[j], np.float64), np.asarray(caps.end[j], np.float64)
-        d = e - s
-        t = np.clip((v - s) @ d / max(float(d @ d), 1e-12), 0.0, 1.0)
-        excess = np.linalg.norm(v - (s + t[:, None] * d), axis=1) - caps.radius[j]
-        skin[j] = np.clip(np.percentile(excess, percentile), 0.0, max_skin)
-    return skin
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -104,7 +80,7 @@ class Model:
         global parent body (-1 for roots); body_children (B, MAX_CHILDREN) (-1 padded);
         anchor_parent (B, 3) m, the joint of body b in its parent's body frame;
         anchor_child (B, 3) m, the same joint in b's own frame (for roots: the pelvis joint);
-        body_group (B,) GROUP_BODY/PELVIS/FEET; intra_pairs (P, 2) global body pairs that
+        body_group (B,) GROUP_BODY/PELVIS/FEET/ARM/TRUNK; intra_pairs (P, 2) global body pairs that
         may self-collide; rest_joints (N, J, 3) m; char_mass (N,) kg.
     """
 
@@ -159,7 +135,7 @@ class ModelBuilder:
             capsules: an object with ``start`` (J, 3), ``end`` (J, 3) (metres, rest frame of
                 ``rest_joints``) and ``radius`` (J,) metres, capsule j riding on bone j.
             skin: (J,) metres added to the radii for inter-body and environment contacts
-                (see :func:`capsule_skin`); default zeros.
+                (see :func:`crowdstudy.body.capsules.capsule_skin`); default zeros.
         """
         n_j = len(self.parents)
         rest = np.asarray(rest_joints, dtype=np.float64)
@@ -222,8 +198,10 @@ class ModelBuilder:
         group = np.full(n_j, GROUP_BODY, np.int64)
         for name in _PELVIS_GROUP_JOINTS:
             group[JOINT_INDEX[name]] = GROUP_PELVIS
-        for name in _FEET_GROUP_JOINTS:
-            group[JOINT_INDEX[name]] = GROUP_FEET
+        for names, g in ((_FEET_GROUP_JOINTS, GROUP_FEET), (_ARM_GROUP_JOINTS, GROUP_ARM),
+                         (_TRUNK_GROUP_JOINTS, GROUP_TRUNK)):
+            for name in names:
+                group[JOINT_INDEX[name]] = g
         body_group = group[body_joint] if n_j == len(group) else np.zeros(n * n_j, np.int64)
         # Intra-body pairs: not parent-child, not touching in the T-pose.
         ii, jj = np.triu_indices(n_j, k=1)

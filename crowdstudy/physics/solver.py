@@ -47,7 +47,7 @@ import numpy as np
 
 from crowdstudy.errors import InvalidInputError
 from crowdstudy.physics.linear import bsr_from_triplets, solver_kernels
-from crowdstudy.physics.model import GROUP_FEET, GROUP_PELVIS
+from crowdstudy.physics.model import GROUP_ARM, GROUP_FEET, GROUP_PELVIS, GROUP_TRUNK
 from crowdstudy.warp_runtime import host_threads, run_parallel
 
 __all__ = ["Solver", "LINEAR_SOLVERS"]
@@ -111,8 +111,8 @@ class Solver:
         self.tree_work, self.tree_dinv, self.tree_l, self.tree_o = s6(), s6(), s6(), s6()
         self.y6 = wp.zeros(nb, dtype=wp.spatial_vector, device=dev)
         groups = model.body_group
-        scale = np.where(groups == GROUP_PELVIS, config.pelvis_scale,
-                         np.where(groups == GROUP_FEET, config.feet_scale, 1.0))
+        scale = np.select([groups == GROUP_PELVIS, groups == GROUP_FEET, groups == GROUP_ARM, groups == GROUP_TRUNK],
+                          [config.pelvis_scale, config.feet_scale, config.arm_scale, config.trunk_scale], 1.0)
         self.body_k = wp.array((config.stiffness * scale).astype(np.float32), dtype=wp.float32, device=dev)
         self.body_d = wp.array((config.damping * scale).astype(np.float32), dtype=wp.float32, device=dev)
         root = model.body_parent < 0

@@ -1,0 +1,240 @@
+"""How little a correction could move the characters: an estimate of the tracking floor.
+
+The tracking error (:func:`crowdstudy.metrics.tracking_error`) of a corrected crowd says how
+far it strays from its animation; :func:`separation_floor` says how far it would have to
+stray, frame by frame, only to take the characters' capsules (with the physics' mesh skin
+and contact margin) apart and out of the scene's walls. Each capsule is free to translate on
+its own (no joints, no rotations, no smoothness in time), and from the Baseline's pose the
+overlapping pairs are pushed apart half each, all at once, until none overlaps (a Jacobi
+projection, which lands close to the least displacement). The mean capsule displacement
+stands for the mean joint deviation (one capsule per bone): a correction that keeps joints,
+rotations and smooth motion cannot do much better, so a tracking bar below this estimate is
+out of reach for any correction, and the gap above it is what the method spends.
+
+It is an estimate, not a proof: Jacobi projection does not find the exact least
+displacement, and rotating a bone can move one end less than translating it would.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import Any, Sequence
+
+import numpy as np
+
+from crowdstudy.body.capsules import capsule_skin, closest_points_on_segments
+from crowdstudy.errors import InvalidInputError
+from crowdstudy.metrics.overlap import capsules_world, frame_indices, resolve_bodies
+from crowdstudy.scene import static_walls_from_meta
+
+__all__ = ["SeparationFloor", "separation_floor"]
+
+_ARM_FROM = 13          # SMPL joint order: collars (13, 14), shoulders, elbows, wrists, hands; head is 15
+_HEAD = 15
+_CULL = 0.3             # m: capsule pairs farther apart than this beyond touching are left out until re-checked
+
+
+@dataclasses.dataclass(frozen=True)
+class SeparationFloor:
+    """Per-frame least displacement that separates the capsules (:func:`separation_floor`).
+
+    Attributes:
+        per_joint: (F, N, J) m, each capsule's displacement at each measured frame.
+        frames: (F,) the measured frame indices.
+        residual: (F,) m, the deepest overlap left when the projection stopped.
+        iterations: (F,) projection rounds used.
+    """
+
+    per_joint: np.ndarray
+    frames: np.ndarray
+    residual: np.ndarray
+    iterations: np.ndarray
+
+    @property
+    def mean_cm(self) -> float:
+        """Mean over frames, characters and joints, cm: compare with the tracking error."""
+        return 100.0 * float(self.per_joint.mean()) if self.per_joint.size else 0.0
+
+    @property
+    def per_frame_cm(self) -> np.ndarray:
+        return 100.0 * self.per_joint.mean(axis=(1, 2))
+
+    @property
+    def arms_cm(self) -> float:
+        """Mean over the arm joints (collars to hands), cm."""
+        arms = [j for j in range(_ARM_FROM, self.per_joint.shape[2]) if j != _HEAD]
+        return 100.0 * float(self.per_joint[..., arms].mean()) if self.per_joint.size else 0.0
+
+    def as_dict(self) -> dict:
+        return {"separation_floor_cm": self.mean_cm, "separation_floor_arms_cm": self.arms_cm,
+                "separation_floor_frames": int(len(self.frames)),
+                "separation_floor_residual_mm": 1000.0 * float(self.residual.max(initial=0.0))}
+
+
+def _pairs(root: np.ndarray, period: float | None, reach: float):
+    """Character pairs (i < j) whose roots are within ``reach`` m (x by the minimum image in
+    periodic scenes) and the x shift that brings j next to i."""
+    i, j = np.triu_indices(len(root), k=1)
+    d = root[j] - root[i]
+    shift = np.zeros(len(i))
+    if period is not None:
+        shift = -period * np.round(d[:, 0] / period)
+        d[:, 0] += shift
+    near = np.hypot(d[:, 0], d[:, 1]) < reach
+    return i[near], j[near], shift[near]
+
+
+def separation_floor(anim, *, frames: Any = "every:30", bodies: Sequence | None = None,
+                     skin_percentile: float = 90.0, margin: float = 0.005, walls: bool = True,
+                     tolerance: float = 1e-4, max_iterations: int = 400) -> SeparationFloor:
+    """Estimate, frame by frame, the least joint displacement that removes every overlap.
+
+    Args:
+        anim: a :class:`~crowdstudy.scene.CrowdAnimation` (usually the Baseline).
+        frames: which frames (:func:`~crowdstudy.metrics.overlap.frame_indices`; default
+            every 30th: one a second at 30 fps).
+        bodies: optional body objects (default ``load_body`` of ``anim.bodies``).
+        skin_percentile: each capsule is inflated by how far its mesh reaches beyond it
+            (:func:`crowdstudy.body.capsules.capsule_skin`, the physics' default 90) ...
+        margin: ... plus this many metres (the physics' ``contact_margin``).
+        walls: also push capsules back behind the scene's walls (``meta["obstacles"]``), to
+            the side of their character's root, as the physics does.
+        tolerance: m; the projection stops when no pair overlaps by more than this.
+        max_iterations: projection rounds per frame at most.
+
+    Returns:
+        :class:`SeparationFloor`; ``mean_cm`` is the estimate to set beside the tracking.
+    """
+    if not hasattr(anim, "joint_rotations"):
+        raise TypeError(f"anim: expected a CrowdAnimation, got {type(anim).__name__}")
+    if margin < 0 or tolerance <= 0 or int(max_iterations) < 1:
+        raise InvalidInputError(f"separation_floor: expected margin >= 0, tolerance > 0 and max_iterations >= 1, "
+                                f"got {margin!r}, {tolerance!r}, {max_iterations!r}")
+    idx = frame_indices(frames, anim.n_frames)
+    body_objs = resolve_bodies(anim, bodies)
+    n, n_j = anim.n_characters, anim.n_joints
+    period = anim.periodic_length
+    radius = np.stack([np.asarray(b.capsules.radius, np.float64) for b in body_objs])
+    skin = np.stack([capsule_skin(b, skin_percentile) for b in body_objs])
+    real = radius > 1e-3                                # zero-radius capsules take no part
+    r = np.where(real, radius + skin + margin, 0.0)
+    segs = static_walls_from_meta(anim.meta) if walls else np.zeros((0, 2, 2))
+    out = np.zeros((len(idx), n, n_j))
+    residual = np.zeros(len(idx))
+    rounds = np.zeros(len(idx), np.int64)
+    aj, bj = (a.ravel() for a in np.meshgrid(np.arange(n_j), np.arange(n_j), indexing="ij"))
+    for k, f in enumerate(idx):
+        start = np.empty((n, n_j, 3))
+        end = np.empty((n, n_j, 3))
+        for c, body in enumerate(body_objs):
+            s, e, _ = capsules_world(body, anim.joint_rotations[f:f + 1, c], anim.root_translation[f:f + 1, c])
+            start[c], end[c] = s[0], e[0]
+        root = anim.root_translation[f]
+        ci, cj, shift = _pairs(root[:, :2], period, reach=2.5)
+        pa_c, pb_c = np.repeat(ci, len(aj)), np.repeat(cj, len(aj))
+        pa_j, pb_j = np.tile(aj, len(ci)), np.tile(bj, len(ci))
+        off = np.zeros((len(pa_c), 3))
+        off[:, 0] = np.repeat(shift, len(aj))
+        keep = real[pa_c, pa_j] & real[pb_c, pb_j]
+        pa_c, pb_c, pa_j, pb_j, off = pa_c[keep], pb_c[keep], pa_j[keep], pb_j[keep], off[keep]
+        reach = r[pa_c, pa_j] + r[pb_c, pb_j]
+        # the projection works on the pairs near enough to meet (culled once from the
+        # Baseline's pose, 0.3 m of slack); every pair is checked again before it stops
+        all_pairs = (pa_c, pb_c, pa_j, pb_j, off, reach)
+        _, _, gap = closest_points_on_segments(start[pa_c, pa_j], end[pa_c, pa_j], start[pb_c, pb_j] + off,
+                                               end[pb_c, pb_j] + off)
+        near = gap - reach < _CULL
+        pa_c, pb_c, pa_j, pb_j, off, reach = (a[near] for a in all_pairs)
+        wall_n, wall_sides = _wall_frames(segs, root, period)
+        move = np.zeros((n, n_j, 3))
+        deepest = 0.0
+        checked = False
+        for it in range(int(max_iterations)):
+            acc = np.zeros((n, n_j, 3))
+            cnt = np.zeros((n, n_j))
+            a0, a1 = start[pa_c, pa_j] + move[pa_c, pa_j], end[pa_c, pa_j] + move[pa_c, pa_j]
+            b0, b1 = start[pb_c, pb_j] + move[pb_c, pb_j] + off, end[pb_c, pb_j] + move[pb_c, pb_j] + off
+            s, t, dist = closest_points_on_segments(a0, a1, b0, b1)
+            depth = reach - dist
+            hit = depth > tolerance
+            deepest = float(depth.max(initial=0.0))
+            if hit.any():
+                pa = a0[hit] + s[hit, None] * (a1[hit] - a0[hit])
+                pb = b0[hit] + t[hit, None] * (b1[hit] - b0[hit])
+                normal = _unit(pa - pb)
+                push = 0.5 * depth[hit, None] * normal
+                np.add.at(acc, (pa_c[hit], pa_j[hit]), push)
+                np.add.at(cnt, (pa_c[hit], pa_j[hit]), 1.0)
+                np.add.at(acc, (pb_c[hit], pb_j[hit]), -push)
+                np.add.at(cnt, (pb_c[hit], pb_j[hit]), 1.0)
+            wall_hit = False
+            for w, (p0, p1) in enumerate(segs):
+                depth_w = _wall_depth(start + move, end + move, r, p0, p1, wall_n[w], wall_sides[w], root, period)
+                over = depth_w > tolerance
+                if over.any():
+                    wall_hit = True
+                    deepest = max(deepest, float(depth_w.max()))
+                    nrm = wall_n[w][None, None, :] * wall_sides[w][:, None, None]   # (N, 1, 3) towards the root
+                    acc += np.where(over, depth_w, 0.0)[..., None] * nrm
+                    cnt += over
+            if not hit.any() and not wall_hit:
+                if checked:
+                    break
+                ac, bc, aj_, bj_, of, re = all_pairs
+                _, _, dist_all = closest_points_on_segments(start[ac, aj_] + move[ac, aj_], end[ac, aj_] + move[ac, aj_],
+                                                            start[bc, bj_] + move[bc, bj_] + of,
+                                                            end[bc, bj_] + move[bc, bj_] + of)
+                near = re - dist_all > -_CULL
+                pa_c, pb_c, pa_j, pb_j, off, reach = (a[near] for a in all_pairs)
+                checked = True
+                if not (re - dist_all > tolerance).any():
+                    break
+                continue
+            checked = False
+            move += acc / np.maximum(cnt, 1.0)[..., None]
+        out[k] = np.linalg.norm(move, axis=-1)
+        residual[k] = max(deepest, 0.0)
+        rounds[k] = it + 1
+    return SeparationFloor(per_joint=out, frames=idx, residual=residual, iterations=rounds)
+
+
+def _unit(v: np.ndarray) -> np.ndarray:
+    norm = np.linalg.norm(v, axis=-1, keepdims=True)
+    fallback = np.zeros_like(v)
+    fallback[..., 2] = 1.0                  # coincident axes: part them vertically
+    return np.where(norm > 1e-9, v / np.maximum(norm, 1e-12), fallback)
+
+
+def _wall_frames(segs: np.ndarray, root: np.ndarray, period: float | None):
+    """Each wall's horizontal unit normal (3,) and, per character, the side (+-1) its root
+    stands on (the root wrapped into [0, period) in periodic scenes)."""
+    normals, sides = [], []
+    for p0, p1 in segs:
+        d = p1 - p0
+        nrm = np.array([-d[1], d[0], 0.0]) / max(float(np.hypot(*d)), 1e-12)
+        rx = root[:, 0] - (period * np.floor(root[:, 0] / period) if period else 0.0)
+        side = (rx - p0[0]) * nrm[0] + (root[:, 1] - p0[1]) * nrm[1]
+        normals.append(nrm)
+        sides.append(np.where(side < 0, -1.0, 1.0))
+    return normals, sides
+
+
+def _wall_depth(start, end, r, p0, p1, nrm, side, root, period):
+    """(N, J) m: how far each capsule (its deeper end sphere) reaches beyond the wall's plane
+    from its root's side, where the end's foot point lies within the segment (periodic
+    images of the character tried)."""
+    d = p1 - p0
+    ll = float(d @ d)
+    best = np.full(r.shape, -np.inf)
+    wrap = -(period * np.floor(root[:, 0] / period)) if period else np.zeros(len(root))
+    shifts = (0.0, period, -period) if period else (0.0,)
+    for pts in (start, end):
+        for sh in shifts:
+            ex = pts[..., 0] + (wrap + sh)[:, None] - p0[0]
+            ey = pts[..., 1] - p0[1]
+            t = (ex * d[0] + ey * d[1]) / ll
+            inside = (t >= 0.0) & (t <= 1.0)
+            signed = (ex * nrm[0] + ey * nrm[1]) * side[:, None]
+            depth = np.where(inside & (r > 0), r - signed, -np.inf)
+            best = np.maximum(best, depth)
+    return best

@@ -1,0 +1,58 @@
+"""``crowdstudy bench physics --bars`` options: a subset of cells and PhysicsConfig changes
+(benchmarks/physics.py), so each tried setting in the README has its command."""
+
+from __future__ import annotations
+
+import importlib.util
+from pathlib import Path
+
+import pytest
+
+
+@pytest.fixture(scope="module")
+def bench():
+    path = Path(__file__).resolve().parents[1] / "benchmarks" / "physics.py"
+    spec = importlib.util.spec_from_file_location("crowdstudy_benchmarks_physics_bars_test", path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+LEVELS = ["D1", "D2", "D3", "D4", "D5"]
+
+
+def test_cells_name_scenes_and_levels(bench):
+    assert bench.parse_cells("", LEVELS) is None
+    assert bench.parse_cells("concert:D1, corridor:D5,walking:D2", LEVELS) == [
+        ("stationary", "D1"), ("walking", "D5"), ("walking", "D2")]
+
+
+@pytest.mark.parametrize("text, bad", [("concert:D9", "concert:D9"), ("stadium:D1", "stadium:D1"),
+                                       ("concert", "concert")])
+def test_a_bad_cell_is_named(bench, text, bad):
+    with pytest.raises(SystemExit, match=f"--cells: .*{bad!r}"):
+        bench.parse_cells(text, LEVELS)
+
+
+def test_measure_bars_runs_only_the_asked_cells_with_the_asked_config(bench, monkeypatch):
+    """The cell filter and the config reach ``correct()`` (the physics itself is stubbed
+    out: this checks the plumbing, the bars' numbers are the benchmark's)."""
+    import crowdstudy.physics.corrector as corrector
+    from crowdstudy.physics.config import PhysicsConfig
+
+    seen = []
+
+    class Stop(Exception):
+        pass
+
+    def fake_correct(base, config=None, **kw):
+        seen.append((base.meta.get("stage"), base.meta.get("density_level"), base.periodic_length is not None, config))
+        raise Stop
+
+    monkeypatch.setattr(corrector, "correct", fake_correct)
+    cfg = PhysicsConfig(arm_scale=0.5)
+    with pytest.raises(Stop):
+        bench.measure_bars(0.2, config=cfg, cells=[("walking", "D2")])
+    assert len(seen) == 1
+    stage, level, periodic, config = seen[0]
+    assert (stage, level, periodic) == ("walking", "D2", True) and config is cfg
