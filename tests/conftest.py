@@ -35,3 +35,15 @@ def saved_figures(monkeypatch):
 
     monkeypatch.setattr(Figure, "savefig", savefig)
     return figures
+
+
+@pytest.fixture(scope="module")
+def physics_bench():
+    """``benchmarks/physics.py`` loaded as a module (the benchmarks are not a package)."""
+    import importlib.util
+
+    path = Path(__file__).resolve().parents[1] / "benchmarks" / "physics.py"
+    spec = importlib.util.spec_from_file_location("crowdstudy_benchmarks_physics_test", path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module

@@ -3,19 +3,13 @@
 
 from __future__ import annotations
 
-import importlib.util
-from pathlib import Path
 
 import pytest
 
 
 @pytest.fixture(scope="module")
-def bench():
-    path = Path(__file__).resolve().parents[1] / "benchmarks" / "physics.py"
-    spec = importlib.util.spec_from_file_location("crowdstudy_benchmarks_physics_bars_test", path)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+def bench(physics_bench):
+    return physics_bench
 
 
 LEVELS = ["D1", "D2", "D3", "D4", "D5"]

@@ -4,8 +4,6 @@ targets, and the same conversion back to a CrowdAnimation."""
 
 from __future__ import annotations
 
-import importlib.util
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -16,12 +14,8 @@ N_FRAMES = 10
 
 
 @pytest.fixture(scope="module")
-def bench():
-    path = Path(__file__).resolve().parents[1] / "benchmarks" / "physics.py"
-    spec = importlib.util.spec_from_file_location("crowdstudy_benchmarks_physics_test", path)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+def bench(physics_bench):
+    return physics_bench
 
 
 def _tiny(kind: str, chars=(0, 1, 2), spread: float = 0.0):
