@@ -38,8 +38,9 @@ def saved_figures(monkeypatch):
 
 
 @pytest.fixture(scope="module")
-def physics_bench():
-    """``benchmarks/physics.py`` loaded as a module (the benchmarks are not a package)."""
+def bench():
+    """``benchmarks/physics.py`` (``crowdstudy bench physics``) loaded as a module (the benchmarks
+    are not a package)."""
     import importlib.util
 
     path = Path(__file__).resolve().parents[1] / "benchmarks" / "physics.py"

@@ -3,14 +3,7 @@
 
 from __future__ import annotations
 
-
 import pytest
-
-
-@pytest.fixture(scope="module")
-def bench(physics_bench):
-    return physics_bench
-
 
 LEVELS = ["D1", "D2", "D3", "D4", "D5"]
 

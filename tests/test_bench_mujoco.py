@@ -13,11 +13,6 @@ mujoco = pytest.importorskip("mujoco", reason="mujoco is not installed (pip inst
 N_FRAMES = 10
 
 
-@pytest.fixture(scope="module")
-def bench(physics_bench):
-    return physics_bench
-
-
 def _tiny(kind: str, chars=(0, 1, 2), spread: float = 0.0):
     from crowdstudy.design import load_design
     from crowdstudy.motion.baseline import build_baseline

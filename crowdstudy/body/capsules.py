@@ -426,6 +426,7 @@ def capsule_mesh_iou(body, *, resolution: float = 0.01, capsules: Capsules | Non
             "capsule_volume": float(np.count_nonzero(cap_occ)) * cell,
             "intersection": inter, "resolution": resolution}
 
+
 def capsule_skin(body, percentile: float = 90.0, max_skin: float = 0.04) -> np.ndarray:
     """(J,) m: how far the body mesh reaches beyond each capsule.
 

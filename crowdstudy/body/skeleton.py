@@ -25,6 +25,7 @@ __all__ = [
     "PARENTS",
     "NUM_JOINTS",
     "JOINT_INDEX",
+    "ARM_JOINTS",
     "DEFAULT_REST_JOINTS",
     "DEFAULT_PELVIS_HEIGHT",
     "forward_kinematics",
@@ -43,6 +44,8 @@ PARENTS: np.ndarray = np.array(
     dtype=np.int64)
 NUM_JOINTS = len(JOINT_NAMES)
 JOINT_INDEX: dict[str, int] = {name: i for i, name in enumerate(JOINT_NAMES)}
+ARM_JOINTS: tuple[str, ...] = ("left_collar", "right_collar", "left_shoulder", "right_shoulder", "left_elbow",
+                               "right_elbow", "left_wrist", "right_wrist", "left_hand", "right_hand")
 
 # An average adult (about 1.70 m) in the T-pose, metres, relative to the pelvis. Only a
 # default for shape-independent work (clip authoring, tests): body models provide the rest

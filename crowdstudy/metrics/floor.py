@@ -23,14 +23,15 @@ from typing import Any, Sequence
 import numpy as np
 
 from crowdstudy.body.capsules import capsule_skin, closest_points_on_segments
+from crowdstudy.body.skeleton import ARM_JOINTS, JOINT_INDEX
 from crowdstudy.errors import InvalidInputError
 from crowdstudy.metrics.overlap import capsules_world, frame_indices, resolve_bodies
+from crowdstudy.metrics.walls import beyond_wall
 from crowdstudy.scene import static_walls_from_meta
 
 __all__ = ["SeparationFloor", "separation_floor"]
 
-_ARM_FROM = 13          # SMPL joint order: collars (13, 14), shoulders, elbows, wrists, hands; head is 15
-_HEAD = 15
+_ARMS = [JOINT_INDEX[name] for name in ARM_JOINTS]
 _CULL = 0.3             # m: capsule pairs farther apart than this beyond touching are left out until re-checked
 
 
@@ -62,8 +63,7 @@ class SeparationFloor:
     @property
     def arms_cm(self) -> float:
         """Mean over the arm joints (collars to hands), cm."""
-        arms = [j for j in range(_ARM_FROM, self.per_joint.shape[2]) if j != _HEAD]
-        return 100.0 * float(self.per_joint[..., arms].mean()) if self.per_joint.size else 0.0
+        return 100.0 * float(self.per_joint[..., _ARMS].mean()) if self.per_joint.size else 0.0
 
     def as_dict(self) -> dict:
         return {"separation_floor_cm": self.mean_cm, "separation_floor_arms_cm": self.arms_cm,
@@ -138,17 +138,12 @@ def separation_floor(anim, *, frames: Any = "every:30", bodies: Sequence | None 
         keep = real[pa_c, pa_j] & real[pb_c, pb_j]
         pa_c, pb_c, pa_j, pb_j, off = pa_c[keep], pb_c[keep], pa_j[keep], pb_j[keep], off[keep]
         reach = r[pa_c, pa_j] + r[pb_c, pb_j]
-        # the projection works on the pairs near enough to meet (culled once from the
-        # Baseline's pose, 0.3 m of slack); every pair is checked again before it stops
+        # the projection works on the pairs near enough to meet (culled from the Baseline's
+        # pose); every pair is checked again, and the set renewed, before it stops
         all_pairs = (pa_c, pb_c, pa_j, pb_j, off, reach)
-        _, _, gap = closest_points_on_segments(start[pa_c, pa_j], end[pa_c, pa_j], start[pb_c, pb_j] + off,
-                                               end[pb_c, pb_j] + off)
-        near = gap - reach < _CULL
-        pa_c, pb_c, pa_j, pb_j, off, reach = (a[near] for a in all_pairs)
-        wall_n, wall_sides = _wall_frames(segs, root, period)
         move = np.zeros((n, n_j, 3))
+        (pa_c, pb_c, pa_j, pb_j, off, reach), _ = _near_pairs(all_pairs, start, end, move)
         deepest = 0.0
-        checked = False
         for it in range(int(max_iterations)):
             acc = np.zeros((n, n_j, 3))
             cnt = np.zeros((n, n_j))
@@ -168,34 +163,38 @@ def separation_floor(anim, *, frames: Any = "every:30", bodies: Sequence | None 
                 np.add.at(acc, (pb_c[hit], pb_j[hit]), -push)
                 np.add.at(cnt, (pb_c[hit], pb_j[hit]), 1.0)
             wall_hit = False
-            for w, (p0, p1) in enumerate(segs):
-                depth_w = _wall_depth(start + move, end + move, r, p0, p1, wall_n[w], wall_sides[w], root, period)
+            for wall in segs:
+                depth_w, normal = _wall_depth(start + move, end + move, r, root, wall, period)
                 over = depth_w > tolerance
                 if over.any():
                     wall_hit = True
                     deepest = max(deepest, float(depth_w.max()))
-                    nrm = wall_n[w][None, None, :] * wall_sides[w][:, None, None]   # (N, 1, 3) towards the root
-                    acc += np.where(over, depth_w, 0.0)[..., None] * nrm
+                    push = np.zeros((n, 1, 3))
+                    push[:, 0, :2] = normal                      # towards the root's side
+                    acc += np.where(over, depth_w, 0.0)[..., None] * push
                     cnt += over
             if not hit.any() and not wall_hit:
-                if checked:
+                (pa_c, pb_c, pa_j, pb_j, off, reach), worst = _near_pairs(all_pairs, start, end, move)
+                if worst <= tolerance:
                     break
-                ac, bc, aj_, bj_, of, re = all_pairs
-                _, _, dist_all = closest_points_on_segments(start[ac, aj_] + move[ac, aj_], end[ac, aj_] + move[ac, aj_],
-                                                            start[bc, bj_] + move[bc, bj_] + of,
-                                                            end[bc, bj_] + move[bc, bj_] + of)
-                near = re - dist_all > -_CULL
-                pa_c, pb_c, pa_j, pb_j, off, reach = (a[near] for a in all_pairs)
-                checked = True
-                if not (re - dist_all > tolerance).any():
-                    break
-                continue
-            checked = False
+                continue                                  # a culled pair met: go on with the renewed set
             move += acc / np.maximum(cnt, 1.0)[..., None]
         out[k] = np.linalg.norm(move, axis=-1)
         residual[k] = max(deepest, 0.0)
         rounds[k] = it + 1
     return SeparationFloor(per_joint=out, frames=idx, residual=residual, iterations=rounds)
+
+
+def _near_pairs(pairs, start, end, move):
+    """The capsule pairs within ``_CULL`` of touching with the capsules moved by ``move``,
+    and the deepest overlap (m) over all ``pairs`` (char_a, char_b, joint_a, joint_b,
+    x offset of b, reach)."""
+    ac, bc, aj, bj, off, reach = pairs
+    _, _, dist = closest_points_on_segments(start[ac, aj] + move[ac, aj], end[ac, aj] + move[ac, aj],
+                                            start[bc, bj] + move[bc, bj] + off, end[bc, bj] + move[bc, bj] + off)
+    depth = reach - dist
+    near = depth > -_CULL
+    return tuple(a[near] for a in pairs), float(depth.max(initial=0.0))
 
 
 def _unit(v: np.ndarray) -> np.ndarray:
@@ -205,36 +204,12 @@ def _unit(v: np.ndarray) -> np.ndarray:
     return np.where(norm > 1e-9, v / np.maximum(norm, 1e-12), fallback)
 
 
-def _wall_frames(segs: np.ndarray, root: np.ndarray, period: float | None):
-    """Each wall's horizontal unit normal (3,) and, per character, the side (+-1) its root
-    stands on (the root wrapped into [0, period) in periodic scenes)."""
-    normals, sides = [], []
-    for p0, p1 in segs:
-        d = p1 - p0
-        nrm = np.array([-d[1], d[0], 0.0]) / max(float(np.hypot(*d)), 1e-12)
-        rx = root[:, 0] - (period * np.floor(root[:, 0] / period) if period else 0.0)
-        side = (rx - p0[0]) * nrm[0] + (root[:, 1] - p0[1]) * nrm[1]
-        normals.append(nrm)
-        sides.append(np.where(side < 0, -1.0, 1.0))
-    return normals, sides
-
-
-def _wall_depth(start, end, r, p0, p1, nrm, side, root, period):
-    """(N, J) m: how far each capsule (its deeper end sphere) reaches beyond the wall's plane
-    from its root's side, where the end's foot point lies within the segment (periodic
-    images of the character tried)."""
-    d = p1 - p0
-    ll = float(d @ d)
+def _wall_depth(start, end, r, root, wall, period):
+    """(N, J) m: how far each capsule (its deeper end sphere, radius ``r``) reaches beyond the
+    wall's face from its root's side (:func:`crowdstudy.metrics.walls.beyond_wall`), and the
+    wall's normal (N, 2) towards each root."""
     best = np.full(r.shape, -np.inf)
-    wrap = -(period * np.floor(root[:, 0] / period)) if period else np.zeros(len(root))
-    shifts = (0.0, period, -period) if period else (0.0,)
-    for pts in (start, end):
-        for sh in shifts:
-            ex = pts[..., 0] + (wrap + sh)[:, None] - p0[0]
-            ey = pts[..., 1] - p0[1]
-            t = (ex * d[0] + ey * d[1]) / ll
-            inside = (t >= 0.0) & (t <= 1.0)
-            signed = (ex * nrm[0] + ey * nrm[1]) * side[:, None]
-            depth = np.where(inside & (r > 0), r - signed, -np.inf)
-            best = np.maximum(best, depth)
-    return best
+    for ends in (start, end):
+        depth, normal = beyond_wall(ends[..., :2], root[:, :2], wall, period)
+        best = np.maximum(best, np.where(r > 0, r + depth, -np.inf))
+    return best, normal

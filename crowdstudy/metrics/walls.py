@@ -20,7 +20,7 @@ from crowdstudy.errors import InvalidInputError
 from crowdstudy.metrics.overlap import frame_indices, resolve_bodies
 from crowdstudy.scene import static_walls_from_meta
 
-__all__ = ["WallPenetration", "wall_penetration"]
+__all__ = ["WallPenetration", "wall_penetration", "beyond_wall"]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -61,28 +61,52 @@ class WallPenetration:
                 "p99_cm": self.p99_cm, "max_cm": self.max_cm, "fraction_over_1cm": self.fraction_through}
 
 
+def beyond_wall(points: np.ndarray, roots: np.ndarray, wall, period: float | None
+                ) -> tuple[np.ndarray, np.ndarray]:
+    """How far points lie beyond one wall's face, seen from their character's root.
+
+    Args:
+        points: (N, P, 2) m, P floor-plane points of each of N characters.
+        roots: (N, 2) m, each character's root (its side of the wall is the free one).
+        wall: ((x0, y0), (x1, y1)) m, the wall's floor segment.
+        period: the scene's period along x (None: not periodic). The character is taken
+            into ``[0, period)`` by its root, and each point counts at its first image
+            (0, +period, -period) whose foot point falls within the segment.
+
+    Returns:
+        ``(depth (N, P) m, normal (N, 2))``: depth > 0 beyond the face, -inf where no
+        image of the point is beside the segment; the wall's unit normal towards each
+        root's side (zeros, and depth -inf, for a degenerate segment).
+    """
+    points = np.asarray(points, np.float64)
+    roots = np.asarray(roots, np.float64)
+    (x0, y0), (x1, y1) = wall
+    d = np.array([x1 - x0, y1 - y0], np.float64)
+    ll = float(d @ d)
+    depth = np.full(points.shape[:2], -np.inf)
+    if ll < 1e-12:
+        return depth, np.zeros((len(roots), 2))
+    shift = -period * np.floor(roots[:, 0] / period) if period else np.zeros(len(roots))
+    images = (shift, shift + period, shift - period) if period else (shift,)
+    normal = np.array([-d[1], d[0]]) / np.sqrt(ll)
+    side = (roots[:, 0] + shift - x0) * normal[0] + (roots[:, 1] - y0) * normal[1]
+    normal = np.where(side[:, None] < 0, -normal, normal)
+    todo = np.ones(depth.shape, bool)
+    for sx in images:
+        rel = points + np.stack([sx - x0, np.full(len(roots), -y0)], axis=1)[:, None, :]
+        t = rel @ d / ll
+        inside = todo & (t >= 0.0) & (t <= 1.0)
+        depth = np.where(inside, -(rel * normal[:, None, :]).sum(-1), depth)
+        todo &= ~inside
+    return depth, normal
+
+
 def _depths(verts: np.ndarray, root: np.ndarray, walls: np.ndarray, period: float | None) -> float:
     """Deepest vertex (m) of one posed body (V, 3) beyond any wall, seen from ``root`` (3,)."""
-    shift = -period * np.floor(root[0] / period) if period else 0.0
-    images = (shift, shift + period, shift - period) if period else (0.0,)
-    xy = verts[:, :2]
     best = 0.0
-    for (x0, y0), (x1, y1) in walls:
-        d = np.array([x1 - x0, y1 - y0])
-        ll = float(d @ d)
-        if ll < 1e-12:
-            continue
-        normal = np.array([-d[1], d[0]]) / np.sqrt(ll)
-        if (root[0] + shift - x0) * normal[0] + (root[1] - y0) * normal[1] < 0:
-            normal = -normal
-        todo = np.ones(len(xy), bool)        # each vertex at its first image within the segment
-        for sx in images:
-            rel = xy + [sx - x0, -y0]
-            t = rel @ d / ll
-            inside = todo & (t >= 0.0) & (t <= 1.0)
-            if inside.any():
-                best = max(best, float(-(rel[inside] @ normal).min(initial=0.0)))
-            todo &= ~inside
+    for wall in walls:
+        depth, _ = beyond_wall(verts[None, :, :2], np.asarray(root)[None, :2], wall, period)
+        best = max(best, float(depth.max(initial=0.0)))
     return best
 
 

@@ -20,7 +20,7 @@ import dataclasses
 import numpy as np
 
 from crowdstudy.body.capsules import closest_points_on_segments
-from crowdstudy.body.skeleton import JOINT_INDEX, PARENTS
+from crowdstudy.body.skeleton import ARM_JOINTS, JOINT_INDEX, PARENTS
 from crowdstudy.errors import InvalidInputError
 
 __all__ = ["ModelBuilder", "Model", "capsule_mass_properties",
@@ -30,8 +30,6 @@ GROUP_BODY, GROUP_PELVIS, GROUP_FEET, GROUP_ARM, GROUP_TRUNK = 0, 1, 2, 3, 4
 MAX_CHILDREN = 4
 _PELVIS_GROUP_JOINTS = ("pelvis", "left_hip", "right_hip", "spine1")
 _FEET_GROUP_JOINTS = ("left_ankle", "right_ankle", "left_foot", "right_foot")
-_ARM_GROUP_JOINTS = ("left_collar", "right_collar", "left_shoulder", "right_shoulder", "left_elbow", "right_elbow",
-                     "left_wrist", "right_wrist", "left_hand", "right_hand")
 _TRUNK_GROUP_JOINTS = ("spine2", "spine3", "neck", "head")
 
 
@@ -63,8 +61,6 @@ def capsule_mass_properties(start: np.ndarray, end: np.ndarray, radius: np.ndarr
     eye = np.eye(3)[None]
     J = j_cross[:, None, None] * (eye - uu) + j_axial[:, None, None] * uu
     return m_cyl + m_sph, J
-
-
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -198,7 +194,7 @@ class ModelBuilder:
         group = np.full(n_j, GROUP_BODY, np.int64)
         for name in _PELVIS_GROUP_JOINTS:
             group[JOINT_INDEX[name]] = GROUP_PELVIS
-        for names, g in ((_FEET_GROUP_JOINTS, GROUP_FEET), (_ARM_GROUP_JOINTS, GROUP_ARM),
+        for names, g in ((_FEET_GROUP_JOINTS, GROUP_FEET), (ARM_JOINTS, GROUP_ARM),
                          (_TRUNK_GROUP_JOINTS, GROUP_TRUNK)):
             for name in names:
                 group[JOINT_INDEX[name]] = g
