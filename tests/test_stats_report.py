@@ -146,7 +146,7 @@ def test_single_viewpoint_design_and_determinism(tmp_path):
         assert a == (tmp_path / "run1" / "stage2_corridor" / name).read_bytes(), name
 
 
-def test_shapiro_per_cell_and_qq_figure(tmp_path):
+def test_shapiro_per_cell_and_qq_figure(tmp_path, saved_figures):
     from pathlib import Path
 
     from scipy import stats
@@ -162,5 +162,23 @@ def test_shapiro_per_cell_and_qq_figure(tmp_path):
     row = shp[shp.cell == "D5 V4 Ours"].iloc[0]
     assert row["W"] == pytest.approx(expected.statistic) and row["p"] == pytest.approx(expected.pvalue)
     assert row["n"] == 20
-    out = qq_figure(data[data.Viewpoint == "V1"], "y", ["Density", "Method"], "subject", tmp_path / "qq.png")
-    assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    import matplotlib
+    from PIL import Image
+
+    v1 = data[data.Viewpoint == "V1"]
+    with matplotlib.rc_context({"savefig.bbox": "tight"}):    # as the paper figures' style sets it
+        out = qq_figure(v1, "y", ["Density", "Method"], "subject", tmp_path / "qq.png")
+    fig = saved_figures[-1]
+    # the laid-out figure is saved whole (110 dpi), not re-cropped by the caller's rcParams
+    size, whole = Image.open(out).size, fig.get_size_inches() * 110
+    assert abs(size[0] - whole[0]) <= 1 and abs(size[1] - whole[1]) <= 1, (size, whole)
+    panels = [ax for ax in fig.axes if ax.lines]
+    assert len(panels) == 10                                       # 5 densities x 2 methods
+    shp_v1 = shapiro_by_cell(v1, "y", ["Density", "Method"], "subject")
+    for ax, (_, r) in zip(panels, shp_v1.iterrows()):
+        assert ax.get_title() == f"{r['cell']}\np={r['p']:.3f}"
+        d, m = r["cell"].split()
+        y = v1[(v1.Density == d) & (v1.Method == m)].groupby("subject")["y"].mean()
+        osm, osr = stats.probplot(y - y.mean(), dist="norm")[0]
+        np.testing.assert_allclose(ax.lines[0].get_ydata(), osr, atol=1e-12)
+        np.testing.assert_allclose(ax.lines[0].get_xdata(), osm, atol=1e-12)

@@ -59,14 +59,26 @@ def qq_figure_from_cells(cm: CellMatrix, out_path: str | Path, *, title: str | N
     import matplotlib
     matplotlib.use("Agg", force=False)
     import matplotlib.pyplot as plt
+    import matplotlib.ticker
 
     res = cell_residuals(cm)
     shp = shapiro if shapiro is not None else shapiro_from_cells(cm)
     n_rows = len(cm.levels[0])
     n_cols = res.shape[1] // n_rows
-    fig, axes = plt.subplots(n_rows, n_cols, figsize=(1.55 * n_cols + 0.6, 1.45 * n_rows + 0.7),
-                             sharex=True, sharey=True, squeeze=False)
+    # a fixed layout (margins in inches) and one limit set on the shared axes: tight_layout on
+    # a 5x8 grid of shared axes re-measures every tick label many times (seconds per figure)
+    panel_w, panel_h, gap_w, gap_h = 1.35, 1.05, 0.2, 0.4
+    left, right, bottom, top = 0.65, 0.15, 0.55, 0.45 + (0.2 if title else 0.0)
+    width = left + right + n_cols * panel_w + (n_cols - 1) * gap_w
+    height = bottom + top + n_rows * panel_h + (n_rows - 1) * gap_h
+    fig, axes = plt.subplots(n_rows, n_cols, figsize=(width, height), sharex=True, sharey=True, squeeze=False,
+                             gridspec_kw={"left": left / width, "right": 1 - right / width,
+                                          "bottom": bottom / height, "top": 1 - top / height,
+                                          "wspace": gap_w / panel_w, "hspace": gap_h / panel_h})
     lim = float(np.abs(res).max()) or 1.0
+    axes[0, 0].set_ylim(-1.1 * lim, 1.1 * lim)
+    axes[0, 0].yaxis.set_major_locator(matplotlib.ticker.MaxNLocator(4, steps=[1, 2, 5, 10], symmetric=True))
+    axes[0, 0].xaxis.set_major_locator(matplotlib.ticker.MaxNLocator(4, steps=[1, 2, 5, 10], symmetric=True))
     for j, cell in enumerate(cm.cells()):
         ax = axes[j // n_cols, j % n_cols]
         (osm, osr), (slope, icpt, _) = _st.probplot(res[:, j], dist="norm")
@@ -76,15 +88,15 @@ def qq_figure_from_cells(cm: CellMatrix, out_path: str | Path, *, title: str | N
         p = shp["p"].iloc[j]
         ax.set_title(" ".join(map(str, cell)) + (f"\np={p:.3f}" if np.isfinite(p) else "\np=n/a"), fontsize=6)
         ax.tick_params(labelsize=5)
-        ax.set_ylim(-1.1 * lim, 1.1 * lim)
-    fig.supxlabel("theoretical quantiles (standard normal)", fontsize=8)
-    fig.supylabel("residual (cell value - cell mean)", fontsize=8)
+    fig.supxlabel("theoretical quantiles (standard normal)", fontsize=8, y=0.12 / height)
+    fig.supylabel("residual (cell value - cell mean)", fontsize=8, x=0.12 / width)
     if title:
-        fig.suptitle(title, fontsize=9)
-    fig.tight_layout()
+        fig.suptitle(title, fontsize=9, y=1 - 0.08 / height)
     out = Path(out_path)
     out.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(out, dpi=dpi, metadata={"Software": None} if out.suffix.lower() == ".png" else None)
+    # the whole figure as laid out above, whatever the caller's rcParams["savefig.bbox"] says
+    fig.savefig(out, dpi=dpi, bbox_inches=fig.bbox_inches,
+                metadata={"Software": None} if out.suffix.lower() == ".png" else None)
     plt.close(fig)
     return out
 
