@@ -304,6 +304,40 @@ def test_tracking_parts_split_a_constant_shift_from_the_motion():
     assert lifted.placement_cm == pytest.approx(0.0, abs=1e-9) and lifted.motion_cm == pytest.approx(1.0)
 
 
+def test_tracking_parts_say_which_body_part_moved():
+    """A bent right elbow moves only the arm joints below it; a shifted root moves every
+    part alike; the per-character lists and the parts' means reach the summary dict."""
+    from crowdstudy.body.skeleton import ARM_JOINTS, BODY_PARTS, JOINT_INDEX
+
+    roots = np.zeros((6, 2, 3))
+    roots[:, 1, 0] = 2.0
+    ref = animation(roots)
+    body = articulated_body()
+    rot = np.zeros((6, 2, 24, 3))
+    elbow = JOINT_INDEX["right_elbow"]
+    rot[:, 0, elbow] = [0.0, 0.0, 0.5]                   # character 0: right forearm bent 0.5 rad
+    shifted = roots.copy()
+    shifted[:, 1, 1] += 0.04                             # character 1: 4 cm to the side all along
+    parts = tracking_parts(animation(shifted, rotations=rot), ref, bodies=[body, body])
+    # what the bend moves, by forward kinematics of the rest skeleton
+    rest = np.asarray(body.rest_joints)
+    pose = lambda r: forward_kinematics(rest, r, np.zeros(3))[1]  # noqa: E731
+    moved = np.linalg.norm(pose(rot[0, 0]) - pose(np.zeros((24, 3))), axis=-1)
+    arms = [JOINT_INDEX[n] for n in ARM_JOINTS]
+    assert moved[arms].max() > 0.05 and not np.delete(moved, arms).any()
+    assert parts.per_character_part_cm["legs"][0] == 0.0 and parts.per_character_part_cm["trunk"][0] == 0.0
+    assert parts.per_character_part_cm["arms"][0] == pytest.approx(100 * moved[arms].mean(), rel=1e-9)
+    for name, _ in BODY_PARTS:
+        assert parts.per_character_part_cm[name][1] == pytest.approx(4.0, rel=1e-9)
+    assert parts.per_joint_cm[JOINT_INDEX["right_hand"]] == pytest.approx(50 * moved[JOINT_INDEX["right_hand"]]
+                                                                           + 2.0, rel=1e-9)
+    out = parts.as_dict(per_character=True)
+    assert out["tracking_legs_cm"] == pytest.approx(2.0) and out["tracking_arms_cm"] > 2.0
+    per = out["tracking_per_character"]
+    assert per["arms_cm"][1] == pytest.approx(4.0) and per["placement_cm"][1] == pytest.approx(4.0)
+    assert "tracking_per_character" not in parts.as_dict()
+
+
 def test_mean_jerk_of_cubic_motion():
     fps = 30.0
     t = np.arange(12) / fps

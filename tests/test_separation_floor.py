@@ -3,6 +3,8 @@ on geometry whose answer is known."""
 
 from __future__ import annotations
 
+import re
+
 import numpy as np
 import pytest
 
@@ -63,6 +65,26 @@ def test_walls_push_back_to_the_roots_side(ball):
     assert not _floor(anim, ball, walls=False).per_joint.any()
 
 
+def test_it_says_whom_each_character_touches_and_how_deep(ball):
+    """Frame 0: ball 1 reaches 0.1 m into ball 0 and 0.05 m into ball 2 (its deeper partner
+    is 0); ball 3 stands alone. Frame 1: all apart."""
+    anim = animation([[[0.0, 0.0, 1.0], [0.5, 0.0, 1.0], [1.05, 0.0, 1.0], [4.0, 0.0, 1.0]],
+                      [[0.0, 0.0, 1.0], [1.0, 0.0, 1.0], [2.0, 0.0, 1.0], [4.0, 0.0, 1.0]]], meta=OPEN)
+    res = _floor(anim, ball)
+    np.testing.assert_allclose(res.contact_depth, [[0.1, 0.1, 0.05, 0.0], [0.0, 0.0, 0.0, 0.0]], atol=1e-9)
+    np.testing.assert_array_equal(res.partner, [[1, 0, 1, -1], [-1, -1, -1, -1]])
+    who = res.contacts_per_character()
+    np.testing.assert_allclose(who["contact_fraction"], [0.5, 0.5, 0.5, 0.0])
+    np.testing.assert_array_equal(who["partner"], [1, 0, 1, -1])
+    np.testing.assert_allclose(who["partner_fraction"], [0.5, 0.5, 0.5, 0.0])
+    np.testing.assert_allclose(who["deepest_cm"], [10.0, 10.0, 5.0, 0.0], atol=1e-7)
+    per = res.as_dict(per_character=True)["separation_floor_per_character"]
+    assert per["partner"] == [1, 0, 1, -1] and len(per["floor_cm"]) == 4
+    np.testing.assert_allclose(per["floor_cm"], res.per_character_cm)
+    assert per["floor_cm"][3] == 0.0 and per["floor_cm"][1] < per["floor_cm"][0]   # the middle one moves least
+    assert "separation_floor_per_character" not in res.as_dict()
+
+
 def test_bad_input_is_named(ball):
     anim = animation([[[0.0, 0.0, 1.0]]], meta=OPEN)
     with pytest.raises(TypeError, match="anim"):
@@ -90,6 +112,18 @@ def test_metrics_cli_reports_the_floor_of_the_reference(ball, tmp_path, monkeypa
     assert cli.main(["metrics", str(f_ours), "--reference", str(f_base), "--floor", "--geometry", "capsule",
                      "--json", str(js), "--no-progress"]) == 0
     assert "tracking floor (estimate)" in capsys.readouterr().out
+    # --per-character: where each character's tracking goes, beside its floor and partner
+    assert cli.main(["metrics", str(f_ours), "--reference", str(f_base), "--floor", "--geometry", "capsule",
+                     "--per-character", "--no-progress"]) == 0
+    out = capsys.readouterr().out
+    head = next(line for line in out.splitlines() if line.lstrip().startswith("character  tracking cm"))
+    assert "placement cm" in head and "floor cm" in head and "deepest cm" in head
+    rows = {line.split()[0]: line.split() for line in out.splitlines()[out.splitlines().index(head) + 1:][:2]}
+    # each ball 6 cm off at joint 0 of 24 (the capsule-less joints follow the root too): 6 cm everywhere
+    assert float(rows["0"][1]) == pytest.approx(6.0, abs=0.01) and float(rows["1"][2]) == pytest.approx(6.0, abs=0.01)
+    assert rows["0"][-3] == "1" and rows["1"][-3] == "0"                  # each other's partner
+    assert float(rows["0"][-1]) == pytest.approx(11.0, abs=0.05)          # 0.1 m overlap + 2 x 5 mm margin
+    assert re.search(r"largest tracking: character [01] \(6\.00 cm\), character [01] \(6\.00 cm\)", out)
     metrics = json.loads(js.read_text())["metrics"]
     # the Baseline's balls overlap by 0.1 m, plus 5 mm of margin on each: 5.5 cm each for joint 0 of 24
     assert metrics["separation_floor_cm"] == pytest.approx(5.5 / 24, rel=1e-2)

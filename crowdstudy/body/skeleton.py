@@ -26,6 +26,9 @@ __all__ = [
     "NUM_JOINTS",
     "JOINT_INDEX",
     "ARM_JOINTS",
+    "LEG_JOINTS",
+    "TRUNK_JOINTS",
+    "BODY_PARTS",
     "DEFAULT_REST_JOINTS",
     "DEFAULT_PELVIS_HEIGHT",
     "forward_kinematics",
@@ -46,6 +49,13 @@ NUM_JOINTS = len(JOINT_NAMES)
 JOINT_INDEX: dict[str, int] = {name: i for i, name in enumerate(JOINT_NAMES)}
 ARM_JOINTS: tuple[str, ...] = ("left_collar", "right_collar", "left_shoulder", "right_shoulder", "left_elbow",
                                "right_elbow", "left_wrist", "right_wrist", "left_hand", "right_hand")
+LEG_JOINTS: tuple[str, ...] = ("left_hip", "right_hip", "left_knee", "right_knee", "left_ankle", "right_ankle",
+                               "left_foot", "right_foot")
+TRUNK_JOINTS: tuple[str, ...] = ("pelvis", "spine1", "spine2", "spine3", "neck", "head")
+#: the tree split into three parts (each joint in exactly one), for reports of where a
+#: correction moves a character: ``(name, joint names)``
+BODY_PARTS: tuple[tuple[str, tuple[str, ...]], ...] = (("legs", LEG_JOINTS), ("trunk", TRUNK_JOINTS),
+                                                       ("arms", ARM_JOINTS))
 
 # An average adult (about 1.70 m) in the T-pose, metres, relative to the pelvis. Only a
 # default for shape-independent work (clip authoring, tests): body models provide the rest

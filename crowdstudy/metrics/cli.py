@@ -5,9 +5,12 @@
 
 Prints a small table; ``--json out.json`` also writes the numbers (per-character smoothness
 included) with provenance; ``--per-character`` also prints a per-character smoothness
-table. With ``--reference`` each smoothness row shows the reference's value and the ratio
-(jerk, high-frequency share, pelvis acceleration: Ours / reference) or the difference
-(largest joint speed, foot slide p99: Ours - reference, m/s). Overlap
+table and, with ``--reference``, where the tracking error goes: each character's tracking,
+placement and body parts (legs, trunk, arms), with ``--floor`` beside its own floor and
+whom it touches in the reference (how often, how deep). With ``--reference`` each
+smoothness row shows the reference's value and the ratio (jerk, high-frequency share,
+pelvis acceleration: Ours / reference) or the difference (largest joint speed, foot slide
+p99: Ours - reference, m/s). Overlap
 is measured on sampled frames (``--frames auto``: every 10th frame of clips longer than
 100 frames, e.g. 60 of the 600 frames of a 20 s clip at 30 fps), which the output states.
 """
@@ -39,7 +42,9 @@ def configure(parser: argparse.ArgumentParser) -> None:
                         help="mesh crossings on 'cpu' / 'cuda:0' (Warp) or 'numpy' (default: CUDA when present)")
     parser.add_argument("--json", type=Path, default=None, help="also write the results as JSON here")
     parser.add_argument("--per-character", action="store_true",
-                        help="also print a table of the smoothness of each character")
+                        help="also print a table of the smoothness of each character and, with --reference, of "
+                             "where each character's tracking error is (placement, legs, trunk, arms; with --floor "
+                             "also its floor and whom it touches in the reference)")
     parser.add_argument("--floor", action="store_true",
                         help="also estimate the tracking floor: the least joint displacement that would take the "
                              "capsules of the reference (or of FILE) apart, every 30th frame "
@@ -79,9 +84,11 @@ def _table(summary: dict) -> str:
                                        f"{summary['wall_penetration_max_cm']:.2f} cm"
                                        + _compare(summary, "wall_penetration_p99_cm", ".2f", ref_unit=" cm")))
     if "tracking_error_cm" in summary:
+        parts = "".join(f", {part} {summary[f'tracking_{part}_cm']:.2f}" for part in ("legs", "trunk", "arms")
+                        if summary.get(f"tracking_{part}_cm") is not None)
         rows.append(("tracking error", f"{summary['tracking_error_cm']:.2f} cm (placement "
                                        f"{summary['tracking_placement_cm']:.2f} cm, motion "
-                                       f"{summary['tracking_motion_cm']:.2f} cm)"))
+                                       f"{summary['tracking_motion_cm']:.2f} cm{parts})"))
     if "separation_floor_cm" in summary:
         rows.append(("tracking floor (estimate)", f"{summary['separation_floor_cm']:.2f} cm (arms "
                                                   f"{summary['separation_floor_arms_cm']:.2f} cm; "
@@ -162,6 +169,37 @@ def _per_character_table(summary: dict) -> str:
     return "\n".join("  ".join(cell.rjust(w) for cell, w in zip(r, widths)) for r in [header] + lines)
 
 
+def _tracking_table(summary: dict) -> str:
+    """One row per character: where its tracking error is (cm), and with ``--floor`` its
+    floor and whom it touches in the reference; then the worst characters."""
+    per = summary["tracking_per_character"]
+    floor = summary.get("separation_floor_per_character")
+    cols = [("tracking cm", per["tracking_cm"], ".2f", 1.0), ("placement cm", per["placement_cm"], ".2f", 1.0),
+            ("legs cm", per.get("legs_cm"), ".2f", 1.0), ("trunk cm", per.get("trunk_cm"), ".2f", 1.0),
+            ("arms cm", per.get("arms_cm"), ".2f", 1.0)]
+    if floor:
+        cols += [("floor cm", floor["floor_cm"], ".2f", 1.0), ("touching %", floor["contact_fraction"], ".0f", 100.0),
+                 ("partner", floor["partner"], "d", 1), ("with it %", floor["partner_fraction"], ".0f", 100.0),
+                 ("deepest cm", floor["deepest_cm"], ".1f", 1.0)]
+    cols = [c for c in cols if c[1] is not None]
+    header = ["character"] + [c[0] for c in cols]
+    lines = []
+    for i in range(len(per["tracking_cm"])):
+        row = [str(i)]
+        for name, values, spec, scale in cols:
+            value = values[i]
+            row.append("-" if value is None or (name == "partner" and value < 0) else format(scale * value, spec))
+        lines.append(row)
+    widths = [max(len(r[k]) for r in [header] + lines) for k in range(len(header))]
+    text = "\n".join("  ".join(cell.rjust(w) for cell, w in zip(r, widths)) for r in [header] + lines)
+    worst = sorted(range(len(per["tracking_cm"])), key=lambda i: -per["tracking_cm"][i])[:3]
+    text += "\nlargest tracking: " + ", ".join(f"character {i} ({per['tracking_cm'][i]:.2f} cm)" for i in worst)
+    if floor:
+        text += ("\n(touching: share of the floor's frames in which the reference's capsules, with the mesh skin "
+                 "and margin, reach into another character's; partner: the one reached deepest most often)")
+    return text
+
+
 def run(args: argparse.Namespace) -> int:
     from crowdstudy.metrics.summary import summarize
     from crowdstudy.paths import check_output_path
@@ -179,7 +217,7 @@ def run(args: argparse.Namespace) -> int:
     if args.floor:
         from crowdstudy.metrics.floor import separation_floor
 
-        summary.update(separation_floor(reference if reference is not None else anim).as_dict())
+        summary.update(separation_floor(reference if reference is not None else anim).as_dict(per_character=True))
     step = summary.get("frame_step")
     if summary.get("frames_measured", summary["frames"]) < summary["frames"]:
         how = f"one frame in {step}" if step else "selected frames"
@@ -190,6 +228,9 @@ def run(args: argparse.Namespace) -> int:
     if args.per_character:
         print()
         print(_per_character_table(summary))
+        if "tracking_per_character" in summary:
+            print()
+            print(_tracking_table(summary))
     if args.json is not None:
         seed = anim.meta.get("seed")
         record = {"file": str(args.file), "reference": None if args.reference is None else str(args.reference),

@@ -44,12 +44,17 @@ class SeparationFloor:
         frames: (F,) the measured frame indices.
         residual: (F,) m, the deepest overlap left when the projection stopped.
         iterations: (F,) projection rounds used.
+        contact_depth: (F, N) m, how deep each character's inflated capsules reach into
+            another character's in the measured (unmoved) pose, 0 where they do not touch.
+        partner: (F, N) the character it reaches deepest into there, -1 where none.
     """
 
     per_joint: np.ndarray
     frames: np.ndarray
     residual: np.ndarray
     iterations: np.ndarray
+    contact_depth: np.ndarray | None = None
+    partner: np.ndarray | None = None
 
     @property
     def mean_cm(self) -> float:
@@ -65,10 +70,45 @@ class SeparationFloor:
         """Mean over the arm joints (collars to hands), cm."""
         return 100.0 * float(self.per_joint[..., _ARMS].mean()) if self.per_joint.size else 0.0
 
-    def as_dict(self) -> dict:
-        return {"separation_floor_cm": self.mean_cm, "separation_floor_arms_cm": self.arms_cm,
-                "separation_floor_frames": int(len(self.frames)),
-                "separation_floor_residual_mm": 1000.0 * float(self.residual.max(initial=0.0))}
+    @property
+    def per_character_cm(self) -> np.ndarray:
+        """(N,) each character's mean capsule displacement, cm."""
+        return 100.0 * self.per_joint.mean(axis=(0, 2))
+
+    def contacts_per_character(self) -> dict:
+        """Whom each character touches in the measured pose: ``contact_fraction`` (N,)
+        share of the measured frames it touches anyone, ``partner`` (N,) the character it
+        is most often deepest into (-1: none), ``partner_fraction`` (N,) share of the frames
+        that partner is the deepest, ``deepest_cm`` (N,) its deepest reach over the frames."""
+        depth = self.contact_depth
+        n = self.per_joint.shape[1]
+        if depth is None or not len(depth):
+            return {"contact_fraction": np.zeros(n), "partner": np.full(n, -1), "partner_fraction": np.zeros(n),
+                    "deepest_cm": np.zeros(n)}
+        touching = depth > 0
+        partner = np.full(n, -1)
+        share = np.zeros(n)
+        for c in range(n):
+            found = self.partner[touching[:, c], c]
+            if found.size:
+                ids, counts = np.unique(found, return_counts=True)
+                partner[c] = int(ids[counts.argmax()])           # ties: the lowest index
+                share[c] = counts.max() / len(depth)
+        return {"contact_fraction": touching.mean(axis=0), "partner": partner, "partner_fraction": share,
+                "deepest_cm": 100.0 * depth.max(axis=0)}
+
+    def as_dict(self, per_character: bool = False) -> dict:
+        """The estimate and its arms' share; ``per_character``: also
+        ``separation_floor_per_character`` (lists: ``floor_cm`` and
+        :meth:`contacts_per_character`)."""
+        out = {"separation_floor_cm": self.mean_cm, "separation_floor_arms_cm": self.arms_cm,
+               "separation_floor_frames": int(len(self.frames)),
+               "separation_floor_residual_mm": 1000.0 * float(self.residual.max(initial=0.0))}
+        if per_character:
+            per = {"floor_cm": self.per_character_cm.tolist()}
+            per.update({k: v.tolist() for k, v in self.contacts_per_character().items()})
+            out["separation_floor_per_character"] = per
+        return out
 
 
 def _pairs(root: np.ndarray, period: float | None, reach: float):
@@ -122,6 +162,8 @@ def separation_floor(anim, *, frames: Any = "every:30", bodies: Sequence | None 
     out = np.zeros((len(idx), n, n_j))
     residual = np.zeros(len(idx))
     rounds = np.zeros(len(idx), np.int64)
+    contact = np.zeros((len(idx), n))
+    partner = np.full((len(idx), n), -1, np.int64)
     aj, bj = (a.ravel() for a in np.meshgrid(np.arange(n_j), np.arange(n_j), indexing="ij"))
     for k, f in enumerate(idx):
         start = np.empty((n, n_j, 3))
@@ -142,7 +184,8 @@ def separation_floor(anim, *, frames: Any = "every:30", bodies: Sequence | None 
         # pose); every pair is checked again, and the set renewed, before it stops
         all_pairs = (pa_c, pb_c, pa_j, pb_j, off, reach)
         move = np.zeros((n, n_j, 3))
-        (pa_c, pb_c, pa_j, pb_j, off, reach), _ = _near_pairs(all_pairs, start, end, move)
+        (pa_c, pb_c, pa_j, pb_j, off, reach), _, depth0 = _near_pairs(all_pairs, start, end, move)
+        contact[k], partner[k] = _deepest_partner(all_pairs[0], all_pairs[1], depth0, n)
         deepest = 0.0
         for it in range(int(max_iterations)):
             acc = np.zeros((n, n_j, 3))
@@ -174,7 +217,7 @@ def separation_floor(anim, *, frames: Any = "every:30", bodies: Sequence | None 
                     acc += np.where(over, depth_w, 0.0)[..., None] * push
                     cnt += over
             if not hit.any() and not wall_hit:
-                (pa_c, pb_c, pa_j, pb_j, off, reach), worst = _near_pairs(all_pairs, start, end, move)
+                (pa_c, pb_c, pa_j, pb_j, off, reach), worst, _ = _near_pairs(all_pairs, start, end, move)
                 if worst <= tolerance:
                     break
                 continue                                  # a culled pair met: go on with the renewed set
@@ -182,19 +225,38 @@ def separation_floor(anim, *, frames: Any = "every:30", bodies: Sequence | None 
         out[k] = np.linalg.norm(move, axis=-1)
         residual[k] = max(deepest, 0.0)
         rounds[k] = it + 1
-    return SeparationFloor(per_joint=out, frames=idx, residual=residual, iterations=rounds)
+    return SeparationFloor(per_joint=out, frames=idx, residual=residual, iterations=rounds,
+                           contact_depth=contact, partner=partner)
 
 
 def _near_pairs(pairs, start, end, move):
     """The capsule pairs within ``_CULL`` of touching with the capsules moved by ``move``,
-    and the deepest overlap (m) over all ``pairs`` (char_a, char_b, joint_a, joint_b,
-    x offset of b, reach)."""
+    the deepest overlap (m) over all ``pairs`` (char_a, char_b, joint_a, joint_b, x offset
+    of b, reach), and every pair's depth (m, negative: apart)."""
     ac, bc, aj, bj, off, reach = pairs
     _, _, dist = closest_points_on_segments(start[ac, aj] + move[ac, aj], end[ac, aj] + move[ac, aj],
                                             start[bc, bj] + move[bc, bj] + off, end[bc, bj] + move[bc, bj] + off)
     depth = reach - dist
     near = depth > -_CULL
-    return tuple(a[near] for a in pairs), float(depth.max(initial=0.0))
+    return tuple(a[near] for a in pairs), float(depth.max(initial=0.0)), depth
+
+
+def _deepest_partner(char_a: np.ndarray, char_b: np.ndarray, depth: np.ndarray, n: int):
+    """(N,) each character's deepest overlap (m, 0 if none) over the capsule pairs
+    (``char_a[p]``, ``char_b[p]``, ``depth[p]``) and (N,) whom it is with (-1: none)."""
+    deepest = np.zeros(n)
+    partner = np.full(n, -1, np.int64)
+    mine = np.concatenate([char_a, char_b])
+    other = np.concatenate([char_b, char_a])
+    both = np.concatenate([depth, depth])
+    touch = both > 0
+    mine, other, both = mine[touch], other[touch], both[touch]
+    order = np.lexsort((both, mine))                     # by character, then depth
+    mine, other, both = mine[order], other[order], both[order]
+    last = np.flatnonzero(np.r_[mine[1:] != mine[:-1], True]) if len(mine) else np.zeros(0, np.int64)
+    deepest[mine[last]] = both[last]
+    partner[mine[last]] = other[last]
+    return deepest, partner
 
 
 def _unit(v: np.ndarray) -> np.ndarray:

@@ -30,7 +30,8 @@ def summarize(anim, reference=None, *, resolution: float = 0.02, frames: Any = "
         bodies: optional body objects overriding ``load_body`` (shared with the reference).
         device: where mesh crossings run (see :func:`~crowdstudy.metrics.overlap_volume`).
         per_character: also add the per-character smoothness lists (``smoothness_per_character``
-            and, with a reference, ``reference_smoothness_per_character``).
+            and, with a reference, ``reference_smoothness_per_character`` and
+            ``tracking_per_character``: tracking, placement and each body part's, cm).
 
     Returns:
         A JSON-serialisable dict: ``characters``, ``frames``, ``fps``, ``method``,
@@ -43,8 +44,8 @@ def summarize(anim, reference=None, *, resolution: float = 0.02, frames: Any = "
         ``hf_share``, ``max_joint_speed_m_s``, ``pelvis_accel_p99_m_s2``,
         ``foot_slide_p99_m_s`` ..., ``seam_ratio``; the planted feet of ``anim`` are taken from
         the reference when given). With a reference also ``tracking_error_cm``,
-        ``tracking_placement_cm`` and ``tracking_motion_cm``
-        (:class:`~crowdstudy.metrics.tracking.TrackingParts`),
+        ``tracking_placement_cm``, ``tracking_motion_cm`` and ``tracking_legs_cm`` /
+        ``_trunk_cm`` / ``_arms_cm`` (:class:`~crowdstudy.metrics.tracking.TrackingParts`),
         ``reference_overlap_<geometry>_m3``, ``overlap_<geometry>_ratio`` (anim / reference),
         ``reference_wall_penetration_p99_cm`` / ``_max_cm``,
         the reference's smoothness keys prefixed ``reference_`` and the keys of
@@ -97,5 +98,5 @@ def summarize(anim, reference=None, *, resolution: float = 0.02, frames: Any = "
             out[f"{prefix}wall_penetration_p99_cm"] = walls.p99_cm
             out[f"{prefix}wall_penetration_max_cm"] = walls.max_cm
     if reference is not None:
-        out.update(tracking_parts(anim, reference, bodies=body_objs).as_dict())
+        out.update(tracking_parts(anim, reference, bodies=body_objs).as_dict(per_character=per_character))
     return out

@@ -4,7 +4,8 @@
   joint-position deviation, cm), with each character's own ``rest_joints``.
 * :func:`tracking_parts`: the same error split into a placement (each character's
   constant horizontal shift over the clip, as when a dense crowd spreads out) and the
-  motion's own deviation around it.
+  motion's own deviation around it, and per character and body part (legs, trunk, arms:
+  :data:`crowdstudy.body.skeleton.BODY_PARTS`), to see where a correction moves whom.
 * :func:`intra_penetration`: how deep a character's own bone capsules sink into each other,
   over pairs that do not already touch in the rest pose (adjacent bones are skipped, as
   the physics layer skips them).
@@ -21,6 +22,7 @@ from typing import Any, Sequence
 import numpy as np
 
 from crowdstudy.body.capsules import segment_distance
+from crowdstudy.body.skeleton import BODY_PARTS
 from crowdstudy.errors import InvalidInputError
 from crowdstudy.metrics.overlap import capsules_world, frame_indices, resolve_bodies
 
@@ -112,6 +114,9 @@ class TrackingParts:
             motion itself once the character's placement is taken out.
         per_character_placement_cm: (N,) |s_n|.
         per_character_cm: (N,) mean joint deviation of each character.
+        per_character_part_cm: body part name (``legs``, ``trunk``, ``arms``) -> (N,) mean
+            deviation of that part's joints (NaN where the skeleton has none of them).
+        per_joint_cm: (J,) mean deviation of each joint over frames and characters.
     """
 
     total_cm: float
@@ -119,10 +124,23 @@ class TrackingParts:
     motion_cm: float
     per_character_placement_cm: np.ndarray
     per_character_cm: np.ndarray
+    per_character_part_cm: dict = dataclasses.field(default_factory=dict)
+    per_joint_cm: np.ndarray | None = None
 
-    def as_dict(self) -> dict:
-        return {"tracking_error_cm": self.total_cm, "tracking_placement_cm": self.placement_cm,
-                "tracking_motion_cm": self.motion_cm}
+    def as_dict(self, per_character: bool = False) -> dict:
+        """Totals as ``tracking_*_cm`` (the parts' ``tracking_legs_cm`` ... are means over
+        characters); ``per_character``: also ``tracking_per_character`` (lists)."""
+        out = {"tracking_error_cm": self.total_cm, "tracking_placement_cm": self.placement_cm,
+               "tracking_motion_cm": self.motion_cm}
+        for part, values in self.per_character_part_cm.items():
+            out[f"tracking_{part}_cm"] = float(np.mean(values)) if np.all(np.isfinite(values)) else None
+        if per_character:
+            per = {"tracking_cm": self.per_character_cm.tolist(),
+                   "placement_cm": self.per_character_placement_cm.tolist()}
+            for part, values in self.per_character_part_cm.items():
+                per[f"{part}_cm"] = [float(v) if np.isfinite(v) else None for v in values]
+            out["tracking_per_character"] = per
+        return out
 
 
 def tracking_parts(anim, reference, *, bodies: Sequence | None = None) -> TrackingParts:
@@ -139,16 +157,23 @@ def tracking_parts(anim, reference, *, bodies: Sequence | None = None) -> Tracki
     for diff in _deviations(anim, reference, body_objs):
         shift[:, :2] += diff[..., :2].sum(axis=(0, 2))
     shift /= anim.n_frames * anim.n_joints
-    dist = np.zeros(n)
+    per_joint = np.zeros((n, anim.n_joints))
     rest = np.zeros(n)
     for diff in _deviations(anim, reference, body_objs):
-        dist += np.linalg.norm(diff, axis=-1).sum(axis=(0, 2))
+        per_joint += np.linalg.norm(diff, axis=-1).sum(axis=0)
         rest += np.linalg.norm(diff - shift[None, :, None], axis=-1).sum(axis=(0, 2))
+    dist = per_joint.sum(axis=1)
     count = anim.n_frames * anim.n_joints
     place = np.linalg.norm(shift, axis=1)
+    index = {name: j for j, name in enumerate(anim.joint_names)}
+    parts = {}
+    for part, names in BODY_PARTS:
+        cols = [index[name] for name in names if name in index]
+        parts[part] = (100.0 * per_joint[:, cols].mean(axis=1) / anim.n_frames) if cols else np.full(n, np.nan)
     return TrackingParts(total_cm=100.0 * float(dist.sum() / (count * n)), placement_cm=100.0 * float(place.mean()),
                          motion_cm=100.0 * float(rest.sum() / (count * n)), per_character_placement_cm=100.0 * place,
-                         per_character_cm=100.0 * dist / count)
+                         per_character_cm=100.0 * dist / count, per_character_part_cm=parts,
+                         per_joint_cm=100.0 * per_joint.sum(axis=0) / (anim.n_frames * n))
 
 
 def intra_pairs(body, *, parents: np.ndarray | None = None) -> np.ndarray:
