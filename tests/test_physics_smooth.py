@@ -311,3 +311,105 @@ def test_a_held_foot_does_not_stretch_a_straight_leg_further():
     assert d[0] <= 0.77 + 0.01 * 0.8 + 1e-9                         # at most 1 % of the leg beyond its own
     assert d[1] == pytest.approx(np.linalg.norm(target[1]))         # a bent leg reaches the target
     assert STRAIGHT_HOLD * 0.8 > np.linalg.norm(target[1])
+
+
+def _two_fixture_characters(ahead_dy: float, config: PhysicsConfig):
+    """Two test characters side by side, the second 0.18 m behind the first along y (their
+    trunks and legs overlap, their arms do not), and the inter-body contacts the pipeline
+    finds when the animation has moved the second by ``ahead_dy`` m along y one frame
+    ahead: (stiffness (C,), depth (C,)) of those contacts."""
+    from crowdstudy.physics import ModelBuilder, State
+    from crowdstudy.physics.collision import KIND_INTER, CollisionPipeline, Contacts
+    from crowdstudy.physics.state import Control
+
+    from tests.test_physics_energies import fixture_body
+
+    builder = ModelBuilder()
+    for _ in range(2):
+        builder.add_character(*vars(fixture_body()).values())
+    model = builder.finalize(device="cpu")
+    control = Control(model, n_frames=2)
+    control.ahead_frames = 1.0
+    rot = np.zeros((2, 2, 24, 3))
+    root = np.array([[[0.0, 0.0, 1.0], [0.0, 0.18, 1.0]], [[0.0, 0.0, 1.0], [0.0, 0.18 + ahead_dy, 1.0]]])
+    control.set_frames(rot, root)
+    control.advance(0, 0, 0.0)
+    state = State(model)
+    state.x.assign(control.t_x)
+    state.q.assign(control.t_glob)
+    pipeline = CollisionPipeline(model, config)
+    contacts = Contacts.allocate(pipeline.default_capacity(), "cpu")
+    pipeline.collide(state, contacts, control)
+    n = int(contacts.count.numpy()[0])
+    inter = contacts.kind.numpy()[:n] == KIND_INTER
+    return contacts.stiffness.numpy()[:n][inter], contacts.depth.numpy()[:n][inter]
+
+
+def test_a_crossing_the_animation_completes_is_let_through():
+    cfg = PhysicsConfig(contact_pass_ahead=1.0 / 30.0, intra_body=False)
+    k = cfg.contact_stiffness
+    # still overlapping one frame ahead (a lasting overlap): every contact pushes at full stiffness
+    held, depth = _two_fixture_characters(0.0, cfg)
+    assert len(held) > 3 and (depth > 0).any() and np.all(held == pytest.approx(k))
+    # apart again on the same side (the animation separates them itself): full stiffness too
+    apart, _ = _two_fixture_characters(0.5, cfg)
+    assert len(apart) == len(held) and np.all(apart == pytest.approx(k))
+    # the second character has passed through the first and stands 0.5 m on the other side:
+    # the contacts let go
+    through, _ = _two_fixture_characters(-0.68, cfg)
+    assert len(through) == len(held) and np.all(through == 0.0)
+    # only where the look-ahead is on
+    off, _ = _two_fixture_characters(-0.68, cfg.replace(contact_pass_ahead=0.0))
+    assert np.all(off == pytest.approx(k))
+    # the pass fades in over contact_pass_width (2 cm): barely apart on the other side, a part of k
+    partial, _ = _two_fixture_characters(-0.39, cfg)
+    assert np.any((partial > 0.05 * k) & (partial < 0.95 * k))
+
+
+def _translation_gradient(config: PhysicsConfig, shift: np.ndarray) -> np.ndarray:
+    """(B, 3) N: the body terms' translational gradient with every body of a test character
+    moved rigidly by ``shift`` m from its (still) target."""
+    from crowdstudy.physics import ModelBuilder, Solver, State
+    from crowdstudy.physics.collision import Contacts
+    from crowdstudy.physics.state import Control
+    from crowdstudy.warp_runtime import get_warp
+
+    from tests.test_physics_energies import fixture_body
+
+    wp = get_warp()
+    builder = ModelBuilder()
+    builder.add_character(*vars(fixture_body()).values())
+    model = builder.finalize(device="cpu")
+    control = Control(model)
+    control.set_frames(np.zeros((1, 24, 3)), np.array([[0.0, 0.0, 1.0]]))
+    control.advance(0, 0, 0.0)
+    control.hold()
+    state = State(model)
+    state.x.assign(wp.array(control.t_x.numpy() + shift.astype(np.float32), dtype=wp.vec3))
+    state.q.assign(control.t_glob)
+    solver = Solver(model, config.replace(foot_anchor_stiffness=0.0))
+    solver.assemble(state, control, Contacts.allocate(0, "cpu"), config.dt)
+    return solver.grad_t.numpy().astype(float)
+
+
+def test_translation_springs_soften_beyond_their_reach():
+    e = np.array([0.05, 0.0, 0.0])
+    base = PhysicsConfig(root_translation_stiffness=3e5, feet_translation_stiffness=0.0)
+    linear = _translation_gradient(base, e)
+    np.testing.assert_allclose(linear[0], 3e5 * e, rtol=1e-4, atol=0.05)   # the root: k e (N)
+    soft = _translation_gradient(base.replace(root_translation_reach=0.01, root_translation_far_stiffness=1e4), e)
+    k_eff = 1e4 + (3e5 - 1e4) / np.sqrt(1.0 + (0.05 / 0.01) ** 2)
+    np.testing.assert_allclose(soft[0], k_eff * e, rtol=1e-4, atol=0.05)
+    # near the animation the softened spring is as stiff as the linear one
+    small = np.array([0.0005, 0.0, 0.0])
+    np.testing.assert_allclose(_translation_gradient(base.replace(root_translation_reach=0.01), small)[0],
+                               3e5 * small, rtol=2e-3, atol=0.05)
+    # the pose springs of the other bodies (here the right hand, joint 23) saturate at k r
+    posed = base.replace(pose_translation_stiffness=2000.0)
+    hand = _translation_gradient(posed, e)[23] - linear[23]
+    np.testing.assert_allclose(hand, 2000.0 * e, rtol=1e-3, atol=0.05)
+    far = np.array([0.5, 0.0, 0.0])
+    capped = _translation_gradient(posed.replace(pose_translation_reach=0.03), far)[23] \
+        - _translation_gradient(base, far)[23]
+    assert capped[0] == pytest.approx(2000.0 * 0.5 / np.sqrt(1.0 + (0.5 / 0.03) ** 2), rel=1e-3)
+    assert capped[0] < 2000.0 * 0.03                                   # at most k r

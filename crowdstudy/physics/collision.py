@@ -216,10 +216,19 @@ def collision_kernels():
                            c_a: wp.array(dtype=wp.int32), c_b: wp.array(dtype=wp.int32),
                            c_n: wp.array(dtype=wp.vec3), c_depth: wp.array(dtype=float),
                            c_la: wp.array(dtype=wp.vec3), c_lb: wp.array(dtype=wp.vec3),
-                           c_k: wp.array(dtype=float), c_kind: wp.array(dtype=wp.int32), offset: int):
+                           c_k: wp.array(dtype=float), c_kind: wp.array(dtype=wp.int32), offset: int,
+                           pass_on: int, p0a: wp.array(dtype=wp.vec3), p1a: wp.array(dtype=wp.vec3),
+                           pass_width: float):
         """Thread (pair, capsule of the first character; thread index + ``offset`` =
         pair * J + capsule): bounding sphere vs the other character's AABB, then vs each of
-        its capsules, then the exact segment distance."""
+        its capsules, then the exact segment distance.
+
+        With ``pass_on`` the capsules (``p0a``, ``p1a``: the animation's pose a little ahead)
+        let a crossing pass: where, ahead, the closest points lie c = -(pa' - pb') . n m on
+        the far side of each other along this contact's normal n and the capsules are apart
+        by g m there, the contact's stiffness is scaled by 1 - clamp(c / w) clamp(g / w)
+        (w = ``pass_width``): limbs the animation swings through each other and apart are
+        not held up, while a lasting overlap (still touching ahead) is pushed apart."""
         tid = wp.tid() + offset
         p = tid / n_joints
         ja = tid - p * n_joints
@@ -261,7 +270,15 @@ def collision_kernels():
                     dc = x[ba] - (x[bb] + sv)
                     if wp.length(dc) > 1.0e-6:
                         n = wp.normalize(dc)
-                push_contact(count, capacity, ba, bb, n, depth, pa - x[ba], pb - (x[bb] + sv), k, 2,
+                k_pair = k
+                if pass_on != 0:
+                    sa = segment_params(p0a[ba], p1a[ba], p0a[bb] + sv, p1a[bb] + sv)
+                    qa = p0a[ba] + sa[0] * (p1a[ba] - p0a[ba])
+                    qb = p0a[bb] + sv + sa[1] * (p1a[bb] - p0a[bb])
+                    through = -wp.dot(qa - qb, n)
+                    apart = wp.length(qa - qb) - (ra + rb + margin)
+                    k_pair = k * (1.0 - wp.clamp(through / pass_width, 0.0, 1.0) * wp.clamp(apart / pass_width, 0.0, 1.0))
+                push_contact(count, capacity, ba, bb, n, depth, pa - x[ba], pb - (x[bb] + sv), k_pair, 2,
                              c_a, c_b, c_n, c_depth, c_la, c_lb, c_k, c_kind)
 
     @wp.kernel
@@ -548,6 +565,13 @@ class CollisionPipeline:
         self.p1t = wp.zeros(nb, dtype=wp.vec3, device=dev)
         self.t_lo = wp.zeros(n, dtype=wp.vec3, device=dev)
         self.t_hi = wp.zeros(n, dtype=wp.vec3, device=dev)
+        # ... and in the look-ahead pose (config.contact_pass_ahead)
+        self.pass_on = bool(config.contact_pass_ahead > 0 and config.contact_pass_width > 0)
+        na = nb if self.pass_on else 1
+        self.p0a = wp.zeros(na, dtype=wp.vec3, device=dev)
+        self.p1a = wp.zeros(na, dtype=wp.vec3, device=dev)
+        self._ahead_scratch = (wp.zeros(n, dtype=wp.vec3, device=dev), wp.zeros(n, dtype=wp.vec3, device=dev),
+                               wp.zeros(na, dtype=wp.vec3, device=dev), wp.zeros(na, dtype=wp.float32, device=dev))
         self.pair_capacity = max(16 * n, 64)
         self.pair_count = wp.zeros(1, dtype=wp.int32, device=dev)
         self.pair_i = wp.zeros(self.pair_capacity, dtype=wp.int32, device=dev)
@@ -595,6 +619,12 @@ class CollisionPipeline:
             wp.launch(k.capsules_world_kernel, n, [control.t_x, control.t_glob, W["cap_p0"], W["cap_p1"],
                                                    W["cap_radius"], W["cap_skin"], nj, 0.0, self.p0t, self.p1t,
                                                    self.t_lo, self.t_hi, self.centre_t, self.half_t], device=dev)
+        pass_on = int(self.pass_on and control is not None)
+        if pass_on:
+            lo, hi, centre, half = self._ahead_scratch
+            wp.launch(k.capsules_world_kernel, n, [control.t_x_ahead, control.t_glob_ahead, W["cap_p0"], W["cap_p1"],
+                                                   W["cap_radius"], W["cap_skin"], nj, 0.0, self.p0a, self.p1a,
+                                                   lo, hi, centre, half], device=dev)
         band = float(cfg.contact_activation)
         if cfg.ground_stiffness > 0:
             wp.launch(k.ground_kernel, nb, [state.x, self.p0w, self.p1w, W["cap_radius"], relative, self.p0t,
@@ -628,7 +658,8 @@ class CollisionPipeline:
                 wp.launch(k.narrowphase_kernel, hi - lo,
                           [state.x, self.p0w, self.p1w, W["cap_radius"], W["cap_skin"], self.centre, self.half,
                            self.char_lo, self.char_hi, self.pair_i, self.pair_j, self.pair_shift, nj, margin, spec,
-                           float(cfg.contact_stiffness), buf.count, buf.capacity, *buf.buffers(), int(lo)],
+                           float(cfg.contact_stiffness), buf.count, buf.capacity, *buf.buffers(), int(lo),
+                           pass_on, self.p0a, self.p1a, float(cfg.contact_pass_width)],
                           device=dev)
 
         def intra(buf) -> None:

@@ -59,6 +59,12 @@ class PhysicsConfig:
         trunk_scale: multiplies k and d for the upper trunk, neck and head (spine2, spine3,
             neck, head); 1 = the paper's single body k.
         root_translation_stiffness: spring of the root's absolute translation, N/m.
+        root_translation_reach: m; with it the root's translation spring softens from
+            ``root_translation_stiffness`` near the animation to
+            ``root_translation_far_stiffness`` beyond about this deviation (a pseudo-Huber
+            term on top of the far spring), so a brushed character is held in place while a
+            dense crowd can spread out; 0 = a linear spring.
+        root_translation_far_stiffness: N/m, see ``root_translation_reach``.
         root_translation_damping_scale: the root translation damper is
             ``damping * root_translation_damping_scale`` in J s^2/m^2 (the term is
             d_t/(2 h^2) |x - x_old - x^ + x^_old|^2), i.e. a damping force of
@@ -71,6 +77,10 @@ class PhysicsConfig:
             the root's and feet's: with it a pushed limb returns in world space, not only
             through its joint's rotation spring; 0 = off (the paper: joint rotations only).
         pose_translation_damping_scale: its damper is ``damping * this`` (J s^2/m^2).
+        pose_translation_reach: m; the pose spring saturates beyond about this deviation (a
+            pseudo-Huber energy: its force never exceeds ``pose_translation_stiffness *
+            pose_translation_reach`` N), so it holds a brushed limb in place but yields where
+            a dense crowd needs room; 0 = a linear spring.
         joint_stiffness: soft ball joints, N/m: k_j/2 |anchor seen from parent - anchor
             seen from child|^2. The output drops the joints' stretch (forward kinematics of
             the rotations), so a soft joint shows as sliding feet: 6e5 (rather than 2e5)
@@ -122,6 +132,15 @@ class PhysicsConfig:
             contact_release_width`` (``contact_assemble_kernel``): a limb pinned behind a
             neighbour slides through instead of whipping back later.
         contact_release_width: m, see ``contact_release_distance``; 0 = never let go.
+        contact_pass_ahead: s; an inter-body contact whose two capsules the animation has
+            passed through each other and apart again this long ahead (their closest points
+            on the other side, ``narrowphase_kernel``) lets them pass instead of holding them
+            (a crossing of limbs held up by the contact: the arms of two dancers that swing
+            through each other in one frame of the Baseline); 0 = off. Offline
+            (:func:`~crowdstudy.physics.corrector.correct`) the whole clip is ahead; fed one
+            frame at a time (``CrowdCorrector.step``) the look-ahead reaches the frame given.
+        contact_pass_width: m, the look-ahead pose's band over which that pass fades in: by
+            how far the capsules are through along the contact's normal and apart there.
         target_relative_self_contacts: ground and intra-body contacts push only with the
             depth beyond the animation's target pose's own (plus ``contact_activation``): a
             clip whose own capsules interpenetrate, or whose feet dip into the floor, is not
@@ -187,10 +206,13 @@ class PhysicsConfig:
     trunk_scale: float = 1.0
     root_translation_stiffness: float = 1.0e4
     root_translation_damping_scale: float = 4.25e3
+    root_translation_reach: float = 0.0
+    root_translation_far_stiffness: float = 1.0e4
     feet_translation_stiffness: float = 5.0e3
     feet_translation_damping_scale: float = 300.0
     pose_translation_stiffness: float = 0.0
     pose_translation_damping_scale: float = 0.0
+    pose_translation_reach: float = 0.0
     joint_stiffness: float = 6.0e5
     contact_stiffness: float = 3.0e4
     intra_stiffness: float = 1.0e4
@@ -209,6 +231,8 @@ class PhysicsConfig:
     contact_activation: float = 0.005
     contact_release_distance: float = 0.15
     contact_release_width: float = 0.15
+    contact_pass_ahead: float = 1.0 / 30.0
+    contact_pass_width: float = 0.02
     target_relative_self_contacts: bool = True
     feedforward: bool = True
     damping_reference_dt: float = 1.0 / 60.0

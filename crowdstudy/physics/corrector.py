@@ -76,6 +76,7 @@ class CrowdCorrector:
         self.dt = 1.0 / (self.fps * self.substeps)
         self.states = [State(self.model), State(self.model)]
         self.control = Control(self.model, n_frames=max(2, n_frames))
+        self.control.ahead_frames = float(self.config.contact_pass_ahead) * self.fps
         self.pipeline = CollisionPipeline(self.model, self.config, static_points=static_points,
                                           period=periodic_length, static_walls=static_walls)
         self.contacts = Contacts.allocate(self.pipeline.default_capacity(), self.model.device)

@@ -156,7 +156,8 @@ def kernels():
             body_parent: wp.array(dtype=wp.int32), body_children: wp.array2d(dtype=wp.int32),
             anchor_parent: wp.array(dtype=wp.vec3), anchor_child: wp.array(dtype=wp.vec3),
             body_k: wp.array(dtype=float), body_d: wp.array(dtype=float),
-            body_kt: wp.array(dtype=float), body_dt: wp.array(dtype=float),
+            body_kt: wp.array(dtype=float), body_dt: wp.array(dtype=float), body_reach: wp.array(dtype=float),
+            body_kt_far: wp.array(dtype=float),
             h: float, gravity: float, k_joint: float, damp_scale: float,
             grad_t: wp.array(dtype=wp.vec3), grad_r: wp.array(dtype=wp.vec3),
             hess_a: wp.array(dtype=wp.mat33), hess_b: wp.array(dtype=wp.mat33), hess_c: wp.array(dtype=wp.mat33),
@@ -168,7 +169,12 @@ def kernels():
         Terms: inertia (zero gradient at the prediction; blocks m/h^2 I and R I_body R^T / h^2),
         gravity m g z (pass 0 with the feed-forward prediction), soft ball joints k_j/2 |x_p + R_p a_p - x_b - R_b a_b|^2 (Gauss-Newton),
         PD control of Eq. 4 (root: absolute rotation; others: parent-relative) and the
-        translational PD of bodies with body_kt/body_dt > 0 (root; feet when enabled).
+        translational PD of bodies with body_kt/body_dt > 0 (root; feet when enabled; every
+        other body with ``pose_translation_stiffness``). Where ``body_reach`` r > 0 (m) the
+        spring softens with the deviation e = x - x^ from kt near the target to
+        ``body_kt_far`` kf far from it: energy kf/2 |e|^2 + (kt - kf) r^2 (sqrt(1 + |e|^2 /
+        r^2) - 1), force (kf + (kt - kf) / sqrt(1 + |e|^2 / r^2)) e, its Hessian taken as that
+        weight times I.
         Also stores, per body with a parent, the world lever arms of its joint on the parent
         (lever_p) and on itself (lever_c), and the control coupling 2 (k + d/h^2) (ctrl_c),
         used by the matrix-free off-diagonal products.
@@ -194,7 +200,12 @@ def kernels():
         dth2 = body_dt[b] * damp_scale * inv_h2
         if kt > 0.0 or dth2 > 0.0:
             # absolute translation PD (root; feet when enabled): kt/2 |x - x^|^2 + dt/(2h^2) |dx - dx^|^2
-            gt += kt * (x[b] - t_x[b]) + dth2 * ((x[b] - x_old[b]) - (t_x[b] - t_x_old[b]))
+            e = x[b] - t_x[b]
+            reach = body_reach[b]
+            if reach > 0.0:
+                kf = body_kt_far[b]
+                kt = kf + (kt - kf) / wp.sqrt(1.0 + wp.dot(e, e) / (reach * reach))
+            gt += kt * e + dth2 * ((x[b] - x_old[b]) - (t_x[b] - t_x_old[b]))
             a += (kt + dth2) * eye
         p = body_parent[b]
         if p < 0:

@@ -124,6 +124,10 @@ class Solver:
                                                  config.pose_translation_damping_scale))
         self.body_kt = wp.array(kt.astype(np.float32), dtype=wp.float32, device=dev)
         self.body_dt = wp.array(dtr.astype(np.float32), dtype=wp.float32, device=dev)
+        reach = np.where(root, config.root_translation_reach, np.where(feet, 0.0, config.pose_translation_reach))
+        far = np.where(root, config.root_translation_far_stiffness, 0.0)
+        self.body_reach = wp.array(reach.astype(np.float32), dtype=wp.float32, device=dev)
+        self.body_kt_far = wp.array(far.astype(np.float32), dtype=wp.float32, device=dev)
         self.feet_index = wp.array(np.nonzero(feet)[0].astype(np.int32), dtype=wp.int32, device=dev)
         self.foot_offset = z3()
         self.foot_stepping = wp.zeros(nb, dtype=wp.int32, device=dev)
@@ -172,7 +176,7 @@ class Solver:
                       [self.x_pred, self.q_pred, state_in.x, state_in.q, control.t_rel, control.t_rel_old,
                        control.t_x, control.t_x_old, W["body_mass"], W["body_J"], W["body_parent"],
                        W["body_children"], W["anchor_parent"], W["anchor_child"], self.body_k, self.body_d,
-                       self.body_kt, self.body_dt, float(dt), 0.0 if ff else float(cfg.gravity),
+                       self.body_kt, self.body_dt, self.body_reach, self.body_kt_far, float(dt), 0.0 if ff else float(cfg.gravity),
                        float(cfg.joint_stiffness), damp_scale, self.grad_t, self.grad_r, self.hess_a, self.hess_b,
                        self.hess_c, self.lever_p, self.lever_c, self.ctrl_c, int(lo)], device=dev)
 

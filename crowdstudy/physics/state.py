@@ -44,6 +44,9 @@ class Control:
     mass; ``t_rel_old``, ``t_glob_old`` and ``t_x_old`` the previous step's, and
     ``t_glob_older``, ``t_x_older`` the one before (the solver's feed-forward prediction
     continues the animation's own motion: its velocity change over the last two steps).
+    With ``ahead_frames`` > 0 :meth:`advance` also computes the target that many frames
+    later (clamped to the last uploaded frame): ``t_glob_ahead``, ``t_x_ahead`` (the
+    contacts' look-ahead, ``PhysicsConfig.contact_pass_ahead``).
     """
 
     def __init__(self, model, n_frames: int = 2):
@@ -63,6 +66,10 @@ class Control:
         self.t_x_old = wp.zeros(nb, dtype=wp.vec3, device=dev)
         self.t_glob_older = wp.zeros(nb, dtype=wp.quat, device=dev)
         self.t_x_older = wp.zeros(nb, dtype=wp.vec3, device=dev)
+        self.ahead_frames = 0.0
+        self.t_rel_ahead = wp.zeros(nb, dtype=wp.quat, device=dev)
+        self.t_glob_ahead = wp.zeros(nb, dtype=wp.quat, device=dev)
+        self.t_x_ahead = wp.zeros(nb, dtype=wp.vec3, device=dev)
 
     def set_frames(self, joint_rotations: np.ndarray, root_translation: np.ndarray, start: int = 0) -> None:
         """Upload frames: joint_rotations (F, N, J, 3) axis-angle rad, root_translation (F, N, 3) m."""
@@ -89,10 +96,18 @@ class Control:
         self.t_glob, self.t_glob_old, self.t_glob_older = self.t_glob_older, self.t_glob, self.t_glob_old
         self.t_x, self.t_x_old, self.t_x_older = self.t_x_older, self.t_x, self.t_x_old
         m = self.model
+        args = [m.n_joints, m.wp["body_parent"], m.wp["anchor_parent"], m.wp["anchor_child"]]
         self.k.wp.launch(self.k.targets_kernel, m.n_characters,
-                         [self.anim_q, self.anim_root, int(f0), int(f1), float(alpha), m.n_joints,
-                          m.wp["body_parent"], m.wp["anchor_parent"], m.wp["anchor_child"],
+                         [self.anim_q, self.anim_root, int(f0), int(f1), float(alpha), *args,
                           self.t_rel, self.t_glob, self.t_x], device=m.device)
+        if self.ahead_frames > 0:
+            last = self.anim_q.shape[0] - 1
+            at = min(f0 + alpha * (f1 - f0) + self.ahead_frames, float(last))
+            g0 = int(np.floor(at))
+            g1 = min(g0 + 1, last)
+            self.k.wp.launch(self.k.targets_kernel, m.n_characters,
+                             [self.anim_q, self.anim_root, g0, g1, float(at - g0), *args,
+                              self.t_rel_ahead, self.t_glob_ahead, self.t_x_ahead], device=m.device)
 
     def hold(self) -> None:
         """Make the previous targets equal to the current one (no animation velocity)."""
