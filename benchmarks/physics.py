@@ -869,9 +869,8 @@ def measure_bars(duration: float, frame_stride: int = 10, config=None, cells=Non
                 row[f"wall_p99_cm_{name}"], row[f"wall_max_cm_{name}"] = walls.p99_cm, walls.max_cm
             parts = tracking_parts(ours, base)
             row["tracking_cm"] = parts.total_cm
-            row["tracking_placement_cm"], row["tracking_motion_cm"] = parts.placement_cm, parts.motion_cm
-            for part, values in parts.per_character_part_cm.items():    # where the tracking goes (not a bar)
-                row[f"tracking_{part}_cm"] = float(np.mean(values))
+            # placement, motion and each body part's mean (where the tracking goes; not bars)
+            row.update({key: value for key, value in parts.as_dict().items() if key != "tracking_error_cm"})
             sb, so = smoothness(base, base).as_dict(), smoothness(ours, base).as_dict()
             for key, name in (("jerk_m_s3", "jerk"), ("hf_share", "hf_share"), ("max_joint_speed_m_s", "max_joint_speed"),
                               ("pelvis_accel_p99_m_s2", "pelvis_p99"), ("foot_slide_p99_m_s", "foot_slide_p99"),

@@ -22,6 +22,7 @@ import json
 import sys
 from pathlib import Path
 
+from crowdstudy.body.skeleton import BODY_PARTS
 from crowdstudy.errors import InvalidInputError
 
 __all__ = ["configure", "run"]
@@ -84,7 +85,7 @@ def _table(summary: dict) -> str:
                                        f"{summary['wall_penetration_max_cm']:.2f} cm"
                                        + _compare(summary, "wall_penetration_p99_cm", ".2f", ref_unit=" cm")))
     if "tracking_error_cm" in summary:
-        parts = "".join(f", {part} {summary[f'tracking_{part}_cm']:.2f}" for part in ("legs", "trunk", "arms")
+        parts = "".join(f", {part} {summary[f'tracking_{part}_cm']:.2f}" for part, _ in BODY_PARTS
                         if summary.get(f"tracking_{part}_cm") is not None)
         rows.append(("tracking error", f"{summary['tracking_error_cm']:.2f} cm (placement "
                                        f"{summary['tracking_placement_cm']:.2f} cm, motion "
@@ -165,6 +166,11 @@ def _per_character_table(summary: dict) -> str:
                 a, b = per[key][i], ref[key][i]
                 row.append(_fmt(a / b, ".3f") if a is not None and b else "-")
         lines.append(row)
+    return _aligned(header, lines)
+
+
+def _aligned(header: list[str], lines: list[list[str]]) -> str:
+    """The header and rows as right-aligned text columns."""
     widths = [max(len(r[k]) for r in [header] + lines) for k in range(len(header))]
     return "\n".join("  ".join(cell.rjust(w) for cell, w in zip(r, widths)) for r in [header] + lines)
 
@@ -174,9 +180,8 @@ def _tracking_table(summary: dict) -> str:
     floor and whom it touches in the reference; then the worst characters."""
     per = summary["tracking_per_character"]
     floor = summary.get("separation_floor_per_character")
-    cols = [("tracking cm", per["tracking_cm"], ".2f", 1.0), ("placement cm", per["placement_cm"], ".2f", 1.0),
-            ("legs cm", per.get("legs_cm"), ".2f", 1.0), ("trunk cm", per.get("trunk_cm"), ".2f", 1.0),
-            ("arms cm", per.get("arms_cm"), ".2f", 1.0)]
+    cols = [("tracking cm", per["tracking_cm"], ".2f", 1.0), ("placement cm", per["placement_cm"], ".2f", 1.0)]
+    cols += [(f"{part} cm", per.get(f"{part}_cm"), ".2f", 1.0) for part, _ in BODY_PARTS]
     if floor:
         cols += [("floor cm", floor["floor_cm"], ".2f", 1.0), ("touching %", floor["contact_fraction"], ".0f", 100.0),
                  ("partner", floor["partner"], "d", 1), ("with it %", floor["partner_fraction"], ".0f", 100.0),
@@ -190,8 +195,7 @@ def _tracking_table(summary: dict) -> str:
             value = values[i]
             row.append("-" if value is None or (name == "partner" and value < 0) else format(scale * value, spec))
         lines.append(row)
-    widths = [max(len(r[k]) for r in [header] + lines) for k in range(len(header))]
-    text = "\n".join("  ".join(cell.rjust(w) for cell, w in zip(r, widths)) for r in [header] + lines)
+    text = _aligned(header, lines)
     worst = sorted(range(len(per["tracking_cm"])), key=lambda i: -per["tracking_cm"][i])[:3]
     text += "\nlargest tracking: " + ", ".join(f"character {i} ({per['tracking_cm'][i]:.2f} cm)" for i in worst)
     if floor:

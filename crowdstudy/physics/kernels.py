@@ -199,7 +199,8 @@ def kernels():
         kt = body_kt[b]
         dth2 = body_dt[b] * damp_scale * inv_h2
         if kt > 0.0 or dth2 > 0.0:
-            # absolute translation PD (root; feet when enabled): kt/2 |x - x^|^2 + dt/(2h^2) |dx - dx^|^2
+            # absolute translation PD (root; feet and pose springs when enabled): kt/2 |x - x^|^2
+            # (softened beyond body_reach) + dt/(2h^2) |dx - dx^|^2
             e = x[b] - t_x[b]
             reach = body_reach[b]
             if reach > 0.0:
