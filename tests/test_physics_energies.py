@@ -140,6 +140,14 @@ def test_contact_gradient_and_gauss_newton_hessian():
     u = fd_grad(lambda d: f(d)[3], 12)
     np.testing.assert_allclose(H, 2e4 * np.outer(u, u), rtol=1e-4, atol=1e-2)
     assert np.linalg.eigvalsh(H).min() > -1e-6
+    # stiffened with the depth (d0 = 1 cm): k (d^2 / 2 + d^3 / (3 d0)), its gradient and
+    # Gauss-Newton Hessian k (1 + 2 d / d0) u u^T
+    es, gs, Hs, _ = E.contact_energy(xa, Ra, seg_a, 0.08, xb, Rb, seg_b, 0.07, 2e4, 0.01)
+    assert es == pytest.approx(2e4 * (depth**2 / 2 + depth**3 / 0.03))
+    fs = lambda d: E.contact_energy(*perturb(xa, Ra, d[:6]), seg_a, 0.08, *perturb(xb, Rb, d[6:]), seg_b,  # noqa: E731
+                                    0.07, 2e4, 0.01)[0]
+    np.testing.assert_allclose(gs, fd_grad(fs, 12), rtol=1e-4, atol=1e-3)
+    np.testing.assert_allclose(Hs, 2e4 * (1 + 2 * depth / 0.01) * np.outer(u, u), rtol=1e-4, atol=1e-2)
 
 
 def test_root_translation_energy():
@@ -156,7 +164,9 @@ def small_system():
     for s in (1.0, 0.95):
         builder.add_character(*vars(fixture_body(s)).values())
     model = builder.finalize(device="cpu")
-    cfg = PhysicsConfig()
+    # linear translation springs: their softening beyond a reach is tested on its own
+    # (tests/test_physics_smooth.py)
+    cfg = PhysicsConfig(root_translation_reach=0.0)
     control = Control(model, n_frames=2)
     rng = np.random.default_rng(3)
     rot = rng.normal(scale=0.2, size=(2, 2, 24, 3))
@@ -202,9 +212,11 @@ def test_warp_assembly_matches_numpy_reference(small_system):
     D = np.zeros((nb, 6, 6))
     kb, db = solver.body_k.numpy(), solver.body_d.numpy()
     kt, dtr = solver.body_kt.numpy(), solver.body_dt.numpy()
-    # translational PD on the roots (and the feet)
+    # translational PD on the roots and the feet, and the world-space pose springs on the rest
     assert np.all(kt[model.body_parent < 0] == cfg.root_translation_stiffness)
-    assert np.all((kt > 0) == ((model.body_parent < 0) | np.isin(model.body_joint, [7, 8, 10, 11])))
+    assert cfg.pose_translation_stiffness > 0 and np.all(kt > 0)
+    others = (model.body_parent >= 0) & ~np.isin(model.body_joint, [7, 8, 10, 11])
+    assert np.allclose(kt[others], cfg.pose_translation_stiffness)
     for b in range(nb):
         if kt[b] > 0:
             _, gt, Ht = E.root_translation_energy(xp[b], x_old[b], tx[b], tx_old[b], kt[b], dtr[b] / h**2)
@@ -328,8 +340,9 @@ def test_warp_contact_assembly_matches_numpy_reference(small_system):
             continue
         margin = cfg.contact_margin if kind == KIND_INTER else 0.0
         k = cfg.contact_stiffness if kind == KIND_INTER else cfg.intra_stiffness
+        stiffening = cfg.contact_stiffening_depth if kind == KIND_INTER else 0.0
         _, g, _, depth = E.contact_energy(x[a], R[a], seg[a], model.cap_radius[a] + margin, x[b], R[b], seg[b],
-                                          model.cap_radius[b], k)
+                                          model.cap_radius[b], k, stiffening)
         expected[a] += g[:6]
         expected[b] += g[6:]
         if depth > 0:

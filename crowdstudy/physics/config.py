@@ -15,8 +15,13 @@ is an energy (J = N m) per unit squared Frobenius distance, and d is k times a s
 (J s^2). The paper uses d = 0.006 for the body joints; pelvis and feet are stiffer and more
 damped (``pelvis_scale``, ``feet_scale`` multiply both k and d). The root is coupled in
 absolute rotation (Eq. 4 with the pelvis group's k, d) and absolute translation (a
-translational spring/damper of the same form on the pelvis bone's centre of mass); the
-foot bones get a weaker translational coupling of the same form.
+translational spring/damper of the same form on the pelvis bone's centre of mass, stiff
+within a centimetre of the animation and soft beyond, ``root_translation_reach``); the
+foot bones get a weaker translational coupling of the same form, and every other body a
+world-space spring towards where the animation puts it (``pose_translation_stiffness``; the
+paper couples those through their joint rotations only). Inter-body contacts stiffen with
+their depth (``contact_stiffening_depth``; the paper's penalty is quadratic) and let
+crossings the animation completes within a frame pass (``contact_pass_ahead``).
 
 No foot skate: while the ANIMATION's foot is planted (slow horizontally), each foot body
 (ankle and toe bones) is held horizontally where it touched down by a stiff anchor (a lagged
@@ -141,6 +146,11 @@ class PhysicsConfig:
             frame at a time (``CrowdCorrector.step``) the look-ahead reaches the frame given.
         contact_pass_width: m, the look-ahead pose's band over which that pass fades in: by
             how far the capsules are through along the contact's normal and apart there.
+        contact_stiffening_depth: m; an inter-body contact stiffens with its depth d beyond
+            the activation band: the penalty gains k d^3 / (3 d0) (force + k d^2 / d0,
+            stiffness + 2 k d / d0, d0 this depth), so a limb pressed deep meets a stiffer
+            neighbour while a light touch stays as soft as ``contact_stiffness`` (C2 at
+            d = 0); 0 = the plain quadratic penalty.
         target_relative_self_contacts: ground and intra-body contacts push only with the
             depth beyond the animation's target pose's own (plus ``contact_activation``): a
             clip whose own capsules interpenetrate, or whose feet dip into the floor, is not
@@ -204,17 +214,17 @@ class PhysicsConfig:
     feet_scale: float = 4.0
     arm_scale: float = 1.0
     trunk_scale: float = 1.0
-    root_translation_stiffness: float = 1.0e4
+    root_translation_stiffness: float = 3.0e5
     root_translation_damping_scale: float = 4.25e3
-    root_translation_reach: float = 0.0
+    root_translation_reach: float = 0.01
     root_translation_far_stiffness: float = 1.0e4
     feet_translation_stiffness: float = 5.0e3
     feet_translation_damping_scale: float = 300.0
-    pose_translation_stiffness: float = 0.0
+    pose_translation_stiffness: float = 2000.0
     pose_translation_damping_scale: float = 0.0
     pose_translation_reach: float = 0.0
     joint_stiffness: float = 6.0e5
-    contact_stiffness: float = 3.0e4
+    contact_stiffness: float = 6.0e4
     intra_stiffness: float = 1.0e4
     ground_stiffness: float = 5.0e4
     ground_friction: float = 0.0
@@ -232,7 +242,8 @@ class PhysicsConfig:
     contact_release_distance: float = 0.15
     contact_release_width: float = 0.15
     contact_pass_ahead: float = 1.0 / 30.0
-    contact_pass_width: float = 0.02
+    contact_pass_width: float = 0.04
+    contact_stiffening_depth: float = 0.01
     target_relative_self_contacts: bool = True
     feedforward: bool = True
     damping_reference_dt: float = 1.0 / 60.0
@@ -269,6 +280,19 @@ class PhysicsConfig:
                      "joint_stiffness", "foot_planted_speed", "damping_reference_dt"):
             if float(getattr(self, name)) <= 0:
                 raise InvalidInputError(f"PhysicsConfig.{name}: expected a positive value, got {getattr(self, name)!r}")
+
+    @classmethod
+    def paper_controller(cls, **changes) -> "PhysicsConfig":
+        """The paper's controller: the root held by a linear translation spring (1e4 N/m,
+        our value; the paper gives none) and every other body only through its joint
+        rotation (Eq. 4), no world-space pose springs. The Fig. 4 damping study uses it
+        (:func:`crowdstudy.physics.damping.damping_study`): with the defaults' stiff root
+        and pose springs a body held 25 cm back returns in 0.1-0.4 s whatever the damping
+        (d = 0.06 included; the paper's controller: 2.2 s), so the figure's contrast between
+        the dampings is the paper's controller's.
+        ``changes``: further fields to set."""
+        paper = {"root_translation_stiffness": 1.0e4, "root_translation_reach": 0.0, "pose_translation_stiffness": 0.0}
+        return cls(**{**paper, **changes})
 
     def replace(self, **changes) -> "PhysicsConfig":
         """A validated copy with some fields changed."""

@@ -67,7 +67,8 @@ def damping_study(dampings=(0.0, 0.006, 0.06), *, release_time: float = 3.5, dur
         duration: s simulated.
         push: m, how far behind its animation the character is held.
         body: a body model (rest_joints, capsules); default a sampled male body.
-        config: base :class:`PhysicsConfig` (its ``damping`` is replaced).
+        config: base :class:`PhysicsConfig` (its ``damping`` is replaced); default
+            :meth:`PhysicsConfig.paper_controller`, the paper's joint-space controller.
         device: Warp device.
 
     Returns:
@@ -83,7 +84,7 @@ def damping_study(dampings=(0.0, 0.006, 0.06), *, release_time: float = 3.5, dur
     if not 0 < release_time < duration:
         raise InvalidInputError(f"release_time: expected 0 < release_time < duration, got {release_time!r}")
     body = body or _default_body()
-    base = config or PhysicsConfig()
+    base = config or PhysicsConfig.paper_controller()
     rest = np.asarray(body.rest_joints)
     caps = body.capsules
     pelvis_h = float(getattr(body, "pelvis_height", 0.0) or

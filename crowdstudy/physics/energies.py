@@ -124,12 +124,14 @@ def foot_anchor_energy(x, x_old, target, target_old, offset, w, k, c, h, kt, dh2
     return energy, grad, w * (k + c / h - kt - dh2) * P
 
 
-def contact_energy(xa, Ra, seg_a, ra, xb, Rb, seg_b, rb, k):
-    """Penalty (k/2) depth^2 between capsule a and capsule b (depth = r_a + r_b - distance).
+def contact_energy(xa, Ra, seg_a, ra, xb, Rb, seg_b, rb, k, stiffening=0.0):
+    """Penalty (k/2) depth^2 between capsule a and capsule b (depth = r_a + r_b - distance),
+    plus k depth^3 / (3 d0) with ``stiffening`` = d0 > 0 (m; the inter-body contacts'
+    ``PhysicsConfig.contact_stiffening_depth``).
 
     Args: x (3,) m, R (3, 3), seg (2, 3) segment end points in the body frame (m), r m, k N/m.
-    Returns ``(E, gradient (12,), Gauss-Newton Hessian k u u^T (12, 12), depth)``, zero when
-    the capsules are apart.
+    Returns ``(E, gradient (12,), Gauss-Newton Hessian phi''(d) u u^T (12, 12), depth)``, zero
+    when the capsules are apart.
     """
     a0, a1 = xa + Ra @ seg_a[0], xa + Ra @ seg_a[1]
     b0, b1 = xb + Rb @ seg_b[0], xb + Rb @ seg_b[1]
@@ -140,4 +142,6 @@ def contact_energy(xa, Ra, seg_a, ra, xb, Rb, seg_b, rb, k):
     ca, cb = a0 + s * (a1 - a0), b0 + t * (b1 - b0)
     n = (ca - cb) / max(float(dist), 1e-12)
     u = np.concatenate([-n, -np.cross(ca - xa, n), n, np.cross(cb - xb, n)])
-    return 0.5 * k * depth**2, k * depth * u, k * np.outer(u, u), depth
+    cubic = depth / stiffening if stiffening > 0 else 0.0
+    energy = k * depth**2 * (0.5 + cubic / 3.0)
+    return energy, k * depth * (1.0 + cubic) * u, k * (1.0 + 2.0 * cubic) * np.outer(u, u), depth

@@ -14,18 +14,18 @@ of every character. Three steps turn it into the "Ours" animation, each on plain
   the separation a contact needed is kept while the correction eases in and out around it;
   circular for periodic clips. The residual overlap is measured after this stage
   (``crowdstudy bench physics --bars``).
-* :func:`lock_planted_feet`: while the input's foot is planted, the output's ankle (or, in a
-  heel rise, the ball of the foot) is held at one place by two-bone IK of the leg, the
-  offset handed smoothly through the swing to the next contact: a pushed character keeps
-  its feet where they stand instead of sliding them.
+* :func:`lock_planted_feet`: while the input's foot is planted (ankle or ball), the output's
+  foot moves as the input's at one constant offset (two-bone IK of the leg, the input's
+  foot orientation), the offset handed smoothly through the swing to the next contact: a
+  pushed character keeps its feet where they stand instead of sliding them.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from crowdstudy.body.rotations import (axis_angle_to_quaternion, matrix_to_axis_angle, matrix_to_quaternion,
-                                       quaternion_to_axis_angle, quaternion_to_matrix)
+from crowdstudy.body.rotations import (axis_angle_to_matrix, axis_angle_to_quaternion, matrix_to_axis_angle,
+                                       matrix_to_quaternion, quaternion_to_axis_angle, quaternion_to_matrix)
 from crowdstudy.body.skeleton import JOINT_INDEX, PARENTS, forward_kinematics
 from crowdstudy.errors import InvalidInputError
 from crowdstudy.motion.posing import hold_peaks, planted_runs, smoothstep5, two_bone_ik
@@ -138,28 +138,29 @@ def planted_frames(ref_joint: np.ndarray, fps: float, planted_speed: float, plan
     return step | np.roll(step, 1)
 
 
-def _foot_hold(ankle: np.ndarray, ref_ankle: np.ndarray, ankle_planted: np.ndarray, toe_planted: np.ndarray,
-               toe_arm: np.ndarray, periodic: bool):
+def _foot_hold(ankle: np.ndarray, ref_ankle: np.ndarray, contact: np.ndarray, periodic: bool):
     """Ankle targets that hold one foot of one character on the floor.
 
     Args:
         ankle: (T, 3) the output's ankle, m.
         ref_ankle: (T, 3) the reference's ankle, m.
-        ankle_planted, toe_planted: (T,) the reference's ankle / ball of the foot planted.
-        toe_arm: (T, 3) the reference foot's world orientation applied to the rest offset
-            ankle -> ball, m (where the ball is, seen from the ankle, in the reference).
+        contact: (T,) the reference's ankle or ball of the foot planted.
 
-    One contact is a run of frames where the ankle or the ball is planted. Its ankle
-    frames hold the ankle where the output's ankle is farthest from the reference's over
-    them (the placement the correction needed most, e.g. clear of a neighbour's foot); its
-    heel-rise frames (the ball planted, the ankle not) hold the ball where the held ankle put it (at
-    the nearest ankle frame) and place the ankle from it with the reference's foot
-    orientation, so the foot rolls over the ball; a contact with no ankle frame holds the
-    ball likewise where the output's ankle is farthest from the reference's. Between two
-    contacts (a swing) the offset goes over from the end of the one to the start of the
-    next along a quintic smoothstep, eased out to zero over the first and in over the last
-    ``SWING_EASE`` of the swing: the foot keeps its own corrected swing path, displaced
-    smoothly near the contacts, so its velocity stays
+    One contact is a run of frames where the ankle or the ball is planted. Over the whole
+    run the output's ankle follows the reference's ankle at one constant horizontal offset,
+    the mean of the output's offset from the reference over the run (the leg reaches it
+    from either end of the stance: holding the offset of the frame that needed the most,
+    as before, stretched pushed walkers' legs beyond reach at the other end, and the feet
+    slid, p99 4.2 cm/s against 2.4 at corridor D4). With the
+    reference's foot orientation (the caller's) the whole foot then moves as the reference's
+    does while it stands: its heel rise and roll over the ball, and its own slow creep below
+    the planted speed, so a planted foot of Ours slides exactly as much as the Baseline's.
+    (Holding the ankle still on flat frames and the ball still on heel-rise frames, as before,
+    moved the foot by the reference's creep in the single frames where a mocap foot flickers
+    between the two: 1-3 mm, 6-18 cm/s.) Between two contacts (a swing) the offset goes over
+    from the end of the one to the start of the next along a quintic smoothstep, eased out
+    to zero over the first and in over the last ``SWING_EASE`` of the swing: the foot keeps
+    its own corrected swing path, displaced smoothly near the contacts, so its velocity stays
     continuous (fading towards the held place instead drags the swinging foot back and
     shows as high-frequency knee and ankle motion; carrying the offset straight through
     pushes swinging legs into the neighbours' the physics kept them clear of). In a clip that
@@ -174,28 +175,13 @@ def _foot_hold(ankle: np.ndarray, ref_ankle: np.ndarray, ankle_planted: np.ndarr
     n = len(ankle)
     pull = np.zeros((n, 2))
     weight = np.zeros(n)
-    contact = ankle_planted | toe_planted
     runs = planted_runs(contact, periodic=periodic)
     ends = []                                   # (start, stop, offset at the start, offset at the end)
     for start, stop in runs:
         idx = np.arange(start, stop) % n
-        flat = ankle_planted[idx]
-        goal = np.empty((len(idx), 2))
-        if flat.any():
-            held = idx[flat]
-            far = held[np.argmax(np.linalg.norm(ankle[held, :2] - ref_ankle[held, :2], axis=1))]
-            lock = ankle[far, :2]
-            goal[flat] = lock
-            flat_at = np.flatnonzero(flat)
-            for k in np.flatnonzero(~flat):                      # heel rise (or before a flat phase)
-                near = idx[flat_at[np.argmin(np.abs(flat_at - k))]]
-                ball = lock + toe_arm[near, :2]
-                goal[k] = ball - toe_arm[idx[k], :2]
-        else:
-            far = idx[np.argmax(np.linalg.norm(ankle[idx, :2] - ref_ankle[idx, :2], axis=1))]
-            ball = ankle[far, :2] + toe_arm[far, :2]
-            goal[:] = ball - toe_arm[idx, :2]
-        pull[idx] = goal - ankle[idx, :2]
+        dev = ankle[idx, :2] - ref_ankle[idx, :2]
+        offset = dev.mean(axis=0)
+        pull[idx] = ref_ankle[idx, :2] + offset - ankle[idx, :2]
         weight[idx] = 1.0
         ends.append((start, stop, pull[idx[0]].copy(), pull[idx[-1]].copy()))
     if not ends or ends[0][1] - ends[0][0] >= n:
@@ -237,6 +223,32 @@ def _foot_hold(ankle: np.ndarray, ref_ankle: np.ndarray, ankle_planted: np.ndarr
     return pull, weight
 
 
+def _ankle_about_ball(hip: np.ndarray, reach: np.ndarray, ball: np.ndarray, foot: np.ndarray,
+                     target: np.ndarray) -> np.ndarray:
+    """Ankles (M, 3) at ``reach`` m from the hip and ``foot`` m from the ball (both (M,)),
+    the point of that circle nearest the ``target`` ankle; straight from the hip towards
+    the ball where the two spheres do not meet."""
+    axis = ball - hip
+    dist = np.maximum(np.linalg.norm(axis, axis=-1), 1e-9)
+    e = axis / dist[:, None]
+    along = np.clip((dist ** 2 + reach ** 2 - foot ** 2) / (2.0 * dist), -reach, reach)
+    radius = np.sqrt(np.maximum(reach ** 2 - along ** 2, 0.0))
+    side = target - hip
+    side = side - np.sum(side * e, axis=-1, keepdims=True) * e
+    side /= np.maximum(np.linalg.norm(side, axis=-1, keepdims=True), 1e-9)
+    return hip + along[:, None] * e + radius[:, None] * side
+
+
+def _rotation_between(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """(M, 3, 3) the least rotation turning direction a (M, 3) onto direction b (M, 3)."""
+    a = a / np.maximum(np.linalg.norm(a, axis=-1, keepdims=True), 1e-12)
+    b = b / np.maximum(np.linalg.norm(b, axis=-1, keepdims=True), 1e-12)
+    cross = np.cross(a, b)
+    sin = np.linalg.norm(cross, axis=-1, keepdims=True)
+    angle = np.arctan2(sin, np.sum(a * b, axis=-1, keepdims=True))
+    return axis_angle_to_matrix(cross / np.maximum(sin, 1e-12) * angle)
+
+
 def _soft_reach(hip: np.ndarray, ankle: np.ndarray, target: np.ndarray, length: np.ndarray) -> np.ndarray:
     """Ankle goals (M, 3) for the leg IK: ``target`` with its hip distance changed only by
     the soft-clamped change from the output's own ankle.
@@ -266,11 +278,13 @@ def _soft_reach(hip: np.ndarray, ankle: np.ndarray, target: np.ndarray, length: 
 def lock_planted_feet(rot: np.ndarray, root: np.ndarray, ref_rot: np.ndarray, ref_root: np.ndarray,
                       rest_joints: np.ndarray, fps: float, *, planted_speed: float = 0.02,
                       planted_height: float = 0.03, periodic: bool = False) -> np.ndarray:
-    """Hold the output's feet still while the reference's are planted (two-bone leg IK).
+    """Hold the output's feet where they stand while the reference's are planted (two-bone
+    leg IK).
 
-    While the reference's ankle is planted the output's ankle is held still; while only the
-    ball of the foot is (heel rise), the ball is held and the foot rolls over it as in the
-    reference (see ``_foot_hold``); a held foot takes the reference's world orientation.
+    While the reference's ankle or ball of the foot is planted the output's ankle follows
+    the reference's at one constant offset per contact (see ``_foot_hold``) and the foot
+    takes the reference's world orientation: a still reference foot is held still, a heel
+    rise rolls over the ball as in the reference.
 
     Args:
         rot, ref_rot: (T, N, 24, 3) axis-angle rad; root, ref_root: (T, N, 3) m.
@@ -291,14 +305,14 @@ def lock_planted_feet(rot: np.ndarray, root: np.ndarray, ref_rot: np.ndarray, re
     n_chars = rot.shape[1]
     for hip, knee, ankle in LEGS:
         toe = ankle + 3                                  # the ball of the foot (left_foot / right_foot)
-        toe_arm = np.einsum("tnab,nb->tna", ref_glob[:, :, ankle], rest[:, toe] - rest[:, ankle])
         target = pos[:, :, ankle].copy()
         weight = np.zeros(target.shape[:2])
+        ball_only = np.zeros(target.shape[:2], bool)                       # heel rise: the ball planted alone
         for i in range(n_chars):
             flat = planted_frames(ref_pos[:, i, ankle], fps, planted_speed, planted_height, periodic)
             ball = planted_frames(ref_pos[:, i, toe], fps, planted_speed, planted_height, periodic)
-            pull, weight[:, i] = _foot_hold(pos[:, i, ankle], ref_pos[:, i, ankle], flat, ball, toe_arm[:, i],
-                                            periodic)
+            ball_only[:, i] = ball & ~flat
+            pull, weight[:, i] = _foot_hold(pos[:, i, ankle], ref_pos[:, i, ankle], flat | ball, periodic)
             target[:, i, :2] += pull
         moved = weight > 0                                                          # (T, N)
         if not moved.any():
@@ -311,6 +325,17 @@ def lock_planted_feet(rot: np.ndarray, root: np.ndarray, ref_rot: np.ndarray, re
         goal = _soft_reach(hip_pos, pos[t_idx, c_idx, ankle], target[t_idx, c_idx],
                            np.linalg.norm(rest[c_idx, knee] - rest[c_idx, hip], axis=-1)
                            + np.linalg.norm(rest[c_idx, ankle] - rest[c_idx, knee], axis=-1))
+        # in a heel rise the ball stays where the target puts it: where the leg cannot reach
+        # the target, the heel rises further (the foot turns about the ball) instead of the
+        # ball sliding
+        arm = np.einsum("mab,mb->ma", ref_glob[t_idx, c_idx, ankle], rest[c_idx, toe] - rest[c_idx, ankle])
+        lift = ball_only[t_idx, c_idx] & (np.linalg.norm(goal - target[t_idx, c_idx], axis=-1) > 1e-5)
+        turn = np.broadcast_to(np.eye(3), (len(t_idx), 3, 3)).copy()
+        if lift.any():
+            ball_at = target[t_idx, c_idx][lift] + arm[lift]
+            goal[lift] = _ankle_about_ball(hip_pos[lift], np.linalg.norm(goal[lift] - hip_pos[lift], axis=-1),
+                                           ball_at, np.linalg.norm(arm[lift], axis=-1), target[t_idx, c_idx][lift])
+            turn[lift] = _rotation_between(arm[lift], ball_at - goal[lift])
         loc_a, loc_b, glob_b = two_bone_ik(hip_pos, goal, pole, pelvis,
                                            rest[c_idx, hip], rest[c_idx, knee], rest[c_idx, ankle],
                                            np.array([0.0, 1.0, 0.0]))
@@ -320,6 +345,6 @@ def lock_planted_feet(rot: np.ndarray, root: np.ndarray, ref_rot: np.ndarray, re
         w = weight[t_idx, c_idx]
         foot = quat_blend(matrix_to_quaternion(glob[t_idx, c_idx, ankle]),
                           matrix_to_quaternion(ref_glob[t_idx, c_idx, ankle]), w)
-        ankle_local = np.swapaxes(glob_b, -1, -2) @ quaternion_to_matrix(foot)
+        ankle_local = np.swapaxes(glob_b, -1, -2) @ turn @ quaternion_to_matrix(foot)
         out[t_idx, c_idx, ankle] = matrix_to_axis_angle(ankle_local)
     return out

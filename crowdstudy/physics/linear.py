@@ -36,7 +36,8 @@ def solver_kernels():
                                 c_n: wp.array(dtype=wp.vec3), c_depth: wp.array(dtype=float),
                                 c_la: wp.array(dtype=wp.vec3), c_lb: wp.array(dtype=wp.vec3),
                                 c_k: wp.array(dtype=float), c_kind: wp.array(dtype=wp.int32), friction: float,
-                                activation: float, release0: float, release_width: float, n_joints: int,
+                                activation: float, release0: float, release_width: float, stiffen: float,
+                                n_joints: int,
                                 x: wp.array(dtype=wp.vec3), t_x: wp.array(dtype=wp.vec3),
                                 v: wp.array(dtype=wp.vec3), w: wp.array(dtype=wp.vec3), h: float,
                                 grad_t: wp.array(dtype=wp.vec3), grad_r: wp.array(dtype=wp.vec3),
@@ -63,6 +64,10 @@ def solver_kernels():
         farther of the two bodies, so a hand caught behind a neighbour while its animation
         swings on slides through instead of staying pinned and whipping back; a character
         pushed as a whole keeps its contacts.
+
+        Stiffening (inter-body contacts, ``stiffen`` = d0 > 0, m): for d > 0 phi gains
+        k d^3 / (3 d0) (force k d^2 / d0, stiffness 2 k d / d0): deep contacts push harder
+        without stiffening the light touches.
 
         Ground contacts (kind 0) also get viscous friction: (c/(2h)) |P_t dp|^2, dp the
         contact point's displacement over the step and P_t the tangent projector, i.e. a
@@ -100,6 +105,9 @@ def solver_kernels():
                 k = k_c * s / activation
             else:
                 f = k_c * (depth + 0.5 * activation)
+        if stiffen > 0.0 and depth > 0.0 and c_kind[i] == 2:
+            f += k_c * depth * depth / stiffen
+            k += 2.0 * k_c * depth / stiffen
         k_eff[i] = k
         u_at[i] = at
         u_ar[i] = ar
