@@ -320,7 +320,8 @@ def test_a_held_foot_creeps_as_the_reference_does():
 
 
 def test_a_heel_rise_turns_the_foot_about_the_ball():
-    from crowdstudy.physics.finish import _ankle_about_ball, _rotation_between
+    from crowdstudy.body.rotations import rotation_between
+    from crowdstudy.physics.finish import _ankle_about_ball
 
     rng = np.random.default_rng(3)
     hip = rng.normal(size=(50, 3)) * 0.02 + [0.0, 0.0, 0.9]
@@ -344,9 +345,12 @@ def test_a_heel_rise_turns_the_foot_about_the_ball():
     far = _ankle_about_ball(hip[:1], np.array([0.5]), ball[:1], foot[:1], target[:1])
     assert np.allclose(np.cross(far[0] - hip[0], ball[0] - hip[0]), 0.0, atol=1e-12)
     assert np.linalg.norm(far[0] - hip[0]) == pytest.approx(0.5)
-    turn = _rotation_between(np.tile([1.0, 0.0, 0.0], (50, 1)), ball - ankle)
+    turn = rotation_between(np.tile([1.0, 0.0, 0.0], (50, 1)), ball - ankle)
     assert np.allclose(turn @ [1.0, 0.0, 0.0], (ball - ankle) / foot[:, None], atol=1e-9)
     assert np.allclose(turn @ np.swapaxes(turn, 1, 2), np.eye(3), atol=1e-9)
+    # parallel and opposite directions: the identity (no axis to turn about)
+    same = rotation_between(np.array([[0.0, 0.0, 2.0], [1.0, 0.0, 0.0]]), np.array([[0.0, 0.0, 1.0], [-3.0, 0.0, 0.0]]))
+    assert np.array_equal(same, np.tile(np.eye(3), (2, 1, 1)))
 
 
 def test_the_last_swing_of_a_clip_does_not_snap():

@@ -42,7 +42,7 @@ import numpy as np
 
 from crowdstudy.body.joint_names import VRM_BONES, match_names
 from crowdstudy.body.model import Body, check_fields
-from crowdstudy.body.rotations import axis_angle_to_matrix, quaternion_to_matrix
+from crowdstudy.body.rotations import axis_angle_to_matrix, quaternion_to_matrix, rotation_between
 from crowdstudy.body.skeleton import JOINT_INDEX, JOINT_NAMES, NUM_JOINTS, PARENTS, forward_kinematics
 from crowdstudy.errors import InvalidInputError
 from crowdstudy.glb import Z_UP_TO_Y_UP, GltfFile, read_gltf
@@ -145,17 +145,6 @@ def _vrm_map(doc: dict) -> dict[int, str]:
     return out
 
 
-def _rotation_between(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Smallest rotation (3, 3) taking direction a to direction b."""
-    a = a / np.linalg.norm(a)
-    b = b / np.linalg.norm(b)
-    axis = np.cross(a, b)
-    s = np.linalg.norm(axis)
-    if s < 1e-12:
-        return np.eye(3)
-    return axis_angle_to_matrix(axis / s * math.atan2(s, float(np.dot(a, b))))
-
-
 def _rest_fix(d: np.ndarray, kind: str) -> np.ndarray:
     """(3, 3) world rotation bringing bone direction d into the rest-pose limits (identity
     when within them). Arms turn about the forward axis y (in the coronal plane, so the
@@ -175,7 +164,7 @@ def _rest_fix(d: np.ndarray, kind: str) -> np.ndarray:
     horiz = math.hypot(u[0], u[1])
     h = (u[0] / horiz, u[1] / horiz) if horiz > 1e-9 else (0.0, 0.0)
     target = np.array([h[0] * math.sin(LEG_TILT_LIMIT), h[1] * math.sin(LEG_TILT_LIMIT), -math.cos(LEG_TILT_LIMIT)])
-    return _rotation_between(u, target)
+    return rotation_between(u, target)
 
 
 #: Bones straightened into the rest convention: (joint, child joint, kind).
@@ -377,7 +366,7 @@ def _upright_frame(pos: dict[str, np.ndarray]) -> np.ndarray:
     elif snap[2] == -1.0:
         first = np.diag([1.0, -1.0, -1.0])
     else:
-        first = _rotation_between(snap, np.array([0.0, 0.0, 1.0]))
+        first = rotation_between(snap, np.array([0.0, 0.0, 1.0]))
         first = np.round(first)  # an exact axis permutation
     left = first @ (pos["left_hip"] - pos["right_hip"])
     if math.hypot(left[0], left[1]) < 1e-9:

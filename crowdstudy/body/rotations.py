@@ -16,6 +16,7 @@ __all__ = [
     "matrix_to_quaternion",
     "axis_angle_to_quaternion",
     "quaternion_to_axis_angle",
+    "rotation_between",
     "skew",
 ]
 
@@ -127,3 +128,17 @@ def matrix_to_axis_angle(matrix: np.ndarray) -> np.ndarray:
     """(..., 3, 3) -> (..., 3) axis-angle with angle in [0, pi] (through the quaternion,
     which stays accurate near 0 and pi)."""
     return quaternion_to_axis_angle(matrix_to_quaternion(matrix))
+
+
+def rotation_between(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """The smallest rotation taking direction ``a`` onto direction ``b``: (..., 3) twice ->
+    (..., 3, 3); the identity where the two are parallel or opposite (|a x b| < 1e-12 for
+    the unit directions)."""
+    a = np.asarray(a, dtype=np.float64)
+    b = np.asarray(b, dtype=np.float64)
+    a = a / np.linalg.norm(a, axis=-1, keepdims=True)
+    b = b / np.linalg.norm(b, axis=-1, keepdims=True)
+    cross = np.cross(a, b)
+    sin = np.linalg.norm(cross, axis=-1, keepdims=True)
+    angle = np.arctan2(sin, np.sum(a * b, axis=-1, keepdims=True))
+    return axis_angle_to_matrix(np.where(sin >= 1e-12, cross / np.maximum(sin, 1e-12) * angle, 0.0))

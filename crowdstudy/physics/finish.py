@@ -24,8 +24,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from crowdstudy.body.rotations import (axis_angle_to_matrix, axis_angle_to_quaternion, matrix_to_axis_angle,
-                                       matrix_to_quaternion, quaternion_to_axis_angle, quaternion_to_matrix)
+from crowdstudy.body.rotations import (axis_angle_to_quaternion, matrix_to_axis_angle, matrix_to_quaternion,
+                                       quaternion_to_axis_angle, quaternion_to_matrix, rotation_between)
 from crowdstudy.body.skeleton import JOINT_INDEX, PARENTS, forward_kinematics
 from crowdstudy.errors import InvalidInputError
 from crowdstudy.motion.posing import hold_peaks, planted_runs, smoothstep5, two_bone_ik
@@ -239,16 +239,6 @@ def _ankle_about_ball(hip: np.ndarray, reach: np.ndarray, ball: np.ndarray, foot
     return hip + along[:, None] * e + radius[:, None] * side
 
 
-def _rotation_between(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """(M, 3, 3) the least rotation turning direction a (M, 3) onto direction b (M, 3)."""
-    a = a / np.maximum(np.linalg.norm(a, axis=-1, keepdims=True), 1e-12)
-    b = b / np.maximum(np.linalg.norm(b, axis=-1, keepdims=True), 1e-12)
-    cross = np.cross(a, b)
-    sin = np.linalg.norm(cross, axis=-1, keepdims=True)
-    angle = np.arctan2(sin, np.sum(a * b, axis=-1, keepdims=True))
-    return axis_angle_to_matrix(cross / np.maximum(sin, 1e-12) * angle)
-
-
 def _soft_reach(hip: np.ndarray, ankle: np.ndarray, target: np.ndarray, length: np.ndarray) -> np.ndarray:
     """Ankle goals (M, 3) for the leg IK: ``target`` with its hip distance changed only by
     the soft-clamped change from the output's own ankle.
@@ -328,14 +318,15 @@ def lock_planted_feet(rot: np.ndarray, root: np.ndarray, ref_rot: np.ndarray, re
         # in a heel rise the ball stays where the target puts it: where the leg cannot reach
         # the target, the heel rises further (the foot turns about the ball) instead of the
         # ball sliding
-        arm = np.einsum("mab,mb->ma", ref_glob[t_idx, c_idx, ankle], rest[c_idx, toe] - rest[c_idx, ankle])
-        lift = ball_only[t_idx, c_idx] & (np.linalg.norm(goal - target[t_idx, c_idx], axis=-1) > 1e-5)
-        turn = np.broadcast_to(np.eye(3), (len(t_idx), 3, 3)).copy()
-        if lift.any():
-            ball_at = target[t_idx, c_idx][lift] + arm[lift]
+        aim = target[t_idx, c_idx]
+        lift = np.flatnonzero(ball_only[t_idx, c_idx] & (np.linalg.norm(goal - aim, axis=-1) > 1e-5))
+        if len(lift):
+            tl, cl = t_idx[lift], c_idx[lift]
+            arm = np.einsum("mab,mb->ma", ref_glob[tl, cl, ankle], rest[cl, toe] - rest[cl, ankle])
+            ball_at = aim[lift] + arm
             goal[lift] = _ankle_about_ball(hip_pos[lift], np.linalg.norm(goal[lift] - hip_pos[lift], axis=-1),
-                                           ball_at, np.linalg.norm(arm[lift], axis=-1), target[t_idx, c_idx][lift])
-            turn[lift] = _rotation_between(arm[lift], ball_at - goal[lift])
+                                           ball_at, np.linalg.norm(arm, axis=-1), aim[lift])
+            turn = rotation_between(arm, ball_at - goal[lift])
         loc_a, loc_b, glob_b = two_bone_ik(hip_pos, goal, pole, pelvis,
                                            rest[c_idx, hip], rest[c_idx, knee], rest[c_idx, ankle],
                                            np.array([0.0, 1.0, 0.0]))
@@ -345,6 +336,9 @@ def lock_planted_feet(rot: np.ndarray, root: np.ndarray, ref_rot: np.ndarray, re
         w = weight[t_idx, c_idx]
         foot = quat_blend(matrix_to_quaternion(glob[t_idx, c_idx, ankle]),
                           matrix_to_quaternion(ref_glob[t_idx, c_idx, ankle]), w)
-        ankle_local = np.swapaxes(glob_b, -1, -2) @ turn @ quaternion_to_matrix(foot)
+        foot_rot = quaternion_to_matrix(foot)
+        if len(lift):
+            foot_rot[lift] = turn @ foot_rot[lift]
+        ankle_local = np.swapaxes(glob_b, -1, -2) @ foot_rot
         out[t_idx, c_idx, ankle] = matrix_to_axis_angle(ankle_local)
     return out
