@@ -28,6 +28,7 @@ __all__ = ["main", "COMMANDS"]
 #: (name, module, one-line description), in pipeline order.
 COMMANDS: tuple[tuple[str, str, str], ...] = (
     ("assets", "crowdstudy.body.cli_assets", "Fetch and convert the MakeHuman body assets (CC0, from PyPI; set-up runs it)."),
+    ("precompile", "crowdstudy.precompile", "Compile the Warp kernels once, ahead of first use (set-up runs it)."),
     ("layout", "crowdstudy.layout.cli", "Place characters in a region as a Poisson-disk set (stationary crowds)."),
     ("navigate", "crowdstudy.navigation.cli", "Walk a crowd with ORCA (corridor scenario) and write its trajectories."),
     ("animate", "crowdstudy.motion.cli", "Turn layouts or trajectories into the Baseline full-body crowd animation."),

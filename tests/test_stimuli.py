@@ -20,7 +20,7 @@ from crowdstudy.design import default_design_path, load_design  # noqa: E402
 from crowdstudy.errors import InvalidInputError  # noqa: E402
 from crowdstudy.render import stimuli as stimuli_module  # noqa: E402
 from crowdstudy.render.stimuli import (MANIFEST_COLUMNS, animation_digest, animation_record, build_stimuli,  # noqa: E402
-                                       preset_settings)
+                                       preset_settings, video_digest)
 
 
 @pytest.fixture(scope="module")
@@ -191,3 +191,19 @@ def test_bad_stimuli_inputs(tiny_design, tmp_path):
         build_stimuli(tiny_design, tmp_path / "b", preset="quick", workers=-1, progress=False)
     with pytest.raises(InvalidInputError, match="does not exist"):
         build_stimuli(tmp_path / "nope.toml", tmp_path / "c", preset="quick", workers=0, progress=False)
+    for bad in (0.0, -1.0, tiny_design.duration + 1.0, "2"):
+        with pytest.raises(InvalidInputError, match="duration"):
+            build_stimuli(tiny_design, tmp_path / "d", preset="quick", duration=bad, workers=0, progress=False)
+
+
+def test_a_shorter_pilot_set_is_its_own_set(tiny_design):
+    quick = preset_settings(tiny_design, "quick")
+    short = preset_settings(tiny_design, "quick", duration=1.0)
+    assert quick["duration"] == 2.0 and short["duration"] == 1.0
+    assert {k: v for k, v in short.items() if k != "duration"} == {k: v for k, v in quick.items() if k != "duration"}
+    assert preset_settings(tiny_design, "full", duration=3.0)["duration"] == 3.0
+    # a resumed build sees every animation and video of the other length as stale
+    stim = tiny_design.stimuli()[0]
+    assert animation_digest(tiny_design, stim, short) != animation_digest(tiny_design, stim, quick)
+    assert video_digest(tiny_design, stim, short, body_loader=mannequin_loader) != video_digest(
+        tiny_design, stim, quick, body_loader=mannequin_loader)

@@ -32,7 +32,7 @@ import numpy as np
 from crowdstudy.body.skeleton import NUM_JOINTS, PARENTS
 from crowdstudy.errors import InvalidInputError
 
-__all__ = ["CrowdSkinner"]
+__all__ = ["CrowdSkinner", "warp_kernels"]
 
 #: The segment table, int32 rows: body, first vertex in the sorted rest buffer,
 #: first weight row, vertex count, number of joints nk, the body's output offset,
@@ -46,7 +46,8 @@ _CHUNKS_PER_THREAD = 4
 _KERNELS = None
 
 
-def _kernels():
+def warp_kernels():
+    """Build (once) ``(wp, forward kinematics, segment skinning, vertex skinning)`` kernels."""
     global _KERNELS
     if _KERNELS is not None:
         return _KERNELS
@@ -219,7 +220,7 @@ class CrowdSkinner:
 
         if len(bodies) == 0:
             raise InvalidInputError("bodies: expected at least one Body")
-        wp, self._fk, self._skin_segments, self._skin_vertices = _kernels()
+        wp, self._fk, self._skin_segments, self._skin_vertices = warp_kernels()
         self._wp = wp
         self.device = resolve_device(device)
         is_cuda = wp.get_device(self.device).is_cuda

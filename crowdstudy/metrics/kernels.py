@@ -13,16 +13,18 @@ import functools
 
 import numpy as np
 
-__all__ = ["mesh_crossings_warp", "WarpSkinner"]
+__all__ = ["mesh_crossings_warp", "WarpSkinner", "warp_kernels"]
 
 
 @functools.lru_cache(maxsize=1)
-def _kernels():
+def warp_kernels():
+    """Build (once) the namespace of this module's Warp kernels (ray crossings, skinning)."""
     from types import SimpleNamespace
 
     from crowdstudy.warp_runtime import get_warp
 
     wp = get_warp()
+    wp.set_module_options({"enable_backward": False}, module=__name__)   # forward only: no adjoints to compile
 
     @wp.func
     def edge_value(verts: wp.array(dtype=wp.vec3d), vi: int, vj: int, px: wp.float64, py: wp.float64):
@@ -148,7 +150,7 @@ def mesh_crossings_warp(vertices: np.ndarray, faces: np.ndarray, face_solid: np.
     """
     from crowdstudy.metrics.columns import Crossings
 
-    k = _kernels()
+    k = warp_kernels()
     wp = k.wp
     first = np.zeros(len(rects) + 1, np.int32)
     first[1:] = np.cumsum([len(r) for r in rects])
@@ -195,7 +197,7 @@ class WarpSkinner:
     def __init__(self, bodies: list, device: str):
         from crowdstudy.body.skeleton import PARENTS
 
-        k = _kernels()
+        k = warp_kernels()
         self._wp = k.wp
         self._kernel = k.skin_vertices
         self.device = device

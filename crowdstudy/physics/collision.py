@@ -56,6 +56,7 @@ def collision_kernels():
     from crowdstudy.warp_runtime import get_warp
 
     wp = get_warp()
+    wp.set_module_options({"enable_backward": False}, module=__name__)   # forward only: no adjoints to compile
 
     @wp.func
     def segment_params(p0: wp.vec3, p1: wp.vec3, q0: wp.vec3, q1: wp.vec3):

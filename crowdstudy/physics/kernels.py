@@ -27,6 +27,7 @@ def kernels():
     from crowdstudy.warp_runtime import get_warp
 
     wp = get_warp()
+    wp.set_module_options({"enable_backward": False}, module=__name__)   # forward only: no adjoints to compile
 
     @wp.func
     def quat_exp(w: wp.vec3):

@@ -29,6 +29,7 @@ def solver_kernels():
     from crowdstudy.warp_runtime import get_warp
 
     wp = get_warp()
+    wp.set_module_options({"enable_backward": False}, module=__name__)   # forward only: no adjoints to compile
 
     @wp.kernel
     def contact_assemble_kernel(count: wp.array(dtype=wp.int32), capacity: int,

@@ -86,14 +86,19 @@ PRESETS = {
 }
 
 
-def preset_settings(design, preset: str) -> dict:
-    """The render settings of ``preset`` for ``design`` (:data:`PRESETS`, None filled in)."""
+def preset_settings(design, preset: str, *, duration: float | None = None) -> dict:
+    """The render settings of ``preset`` for ``design`` (:data:`PRESETS`, None filled in);
+    ``duration`` (s), when given, replaces the preset's clip length."""
     if preset not in PRESETS:
         raise InvalidInputError(f"preset: expected one of {', '.join(PRESETS)}, got {preset!r}")
+    if duration is not None and (isinstance(duration, bool) or not isinstance(duration, (int, float))
+                                 or not 0 < duration <= design.duration):
+        raise InvalidInputError(f"duration: expected seconds in (0, {design.duration:g}] (the design's clip "
+                                f"length), got {duration!r}")
     p = dict(PRESETS[preset])
     p["width"] = p["width"] or design.video_width
     p["height"] = p["height"] or design.video_height
-    p["duration"] = float(p["duration"] or design.duration)
+    p["duration"] = float(duration if duration is not None else p["duration"] or design.duration)
     p["fps"] = float(design.fps)
     return p
 
@@ -420,8 +425,9 @@ def _cached_animation(folder: Path, cell: str, method: str, digest: str) -> bool
 
 # -- the builder -------------------------------------------------------------------------
 
-def build_stimuli(design, out_dir, *, preset: str = "full", scheduler: str | None = None, workers: int | None = None,
-                  progress: bool = True, body_loader=None, physics=None) -> dict:
+def build_stimuli(design, out_dir, *, preset: str = "full", duration: float | None = None,
+                  scheduler: str | None = None, workers: int | None = None, progress: bool = True, body_loader=None,
+                  physics=None) -> dict:
     """Build (or finish) the stimulus set of a study design.
 
     Args:
@@ -429,6 +435,8 @@ def build_stimuli(design, out_dir, *, preset: str = "full", scheduler: str | Non
         out_dir: output folder (created): ``animations/``, ``videos/``, manifest files.
         preset: "full" (the design's 1920x1080, 20 s) or "quick" (320x180, 2 s, same
             character counts).
+        duration: seconds per video instead of the preset's (a short pilot set); at most the
+            design's duration.
         scheduler: "tcp://HOST:PORT" of a Dask distributed scheduler; None = local.
         workers: local worker processes (default: one per 4 CPUs, at least 1; 0 = run in
             this process).
@@ -443,7 +451,7 @@ def build_stimuli(design, out_dir, *, preset: str = "full", scheduler: str | Non
 
     if not isinstance(design, StudyDesign):
         design = load_design(design)
-    settings = preset_settings(design, preset)
+    settings = preset_settings(design, preset, duration=duration)
     physics = _physics_config(physics)
     out_dir = Path(out_dir)
     check_output_path(out_dir / "manifest.json", "out")

@@ -17,6 +17,8 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--out", required=True, help="output folder (videos/, animations/, manifest.json/.csv)")
     parser.add_argument("--preset", choices=("quick", "full"), default="full",
                         help="full: the design's 1920x1080, 20 s; quick: 320x180, 2 s (same character counts)")
+    parser.add_argument("--duration", type=float, metavar="SECONDS",
+                        help="seconds per video instead of the preset's (a short pilot set; at most the design's)")
     parser.add_argument("--scheduler", help="Dask distributed scheduler address, tcp://HOST:PORT")
     parser.add_argument("--workers", type=int, help="local worker processes (default one per 4 CPUs; 0 = in process)")
     parser.add_argument("--config", nargs="*", default=[], metavar="KEY=VALUE",
@@ -34,7 +36,7 @@ def run(args: argparse.Namespace) -> int:
     check_output_dir(args.out, "--out")
     design = load_design(args.design)
     physics = PhysicsConfig.from_strings(args.config)
-    manifest = build_stimuli(design, args.out, preset=args.preset, scheduler=args.scheduler, workers=args.workers,
+    manifest = build_stimuli(design, args.out, preset=args.preset, duration=args.duration, scheduler=args.scheduler, workers=args.workers,
                              progress=not args.quiet, physics=physics)
     print(f"stimuli: {len(manifest['stimuli'])} videos listed in {args.out}/manifest.json and manifest.csv")
     return 0
