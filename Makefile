@@ -15,12 +15,13 @@ setup:
 demo: setup
 	$(VENV)/bin/crowdstudy demo
 
-# pytest-xdist: one worker per CPU core, each test file on one worker (module fixtures once)
+# pytest-xdist: one worker per CPU core, each test file on one worker (module fixtures once),
+# the files in the order tests/conftest.py gives them (the slowest first)
 test: setup
-	$(PY) -m pytest -q -n auto --dist loadfile
+	$(PY) -m pytest -q -n auto --dist loadfile --no-loadscope-reorder
 
 test-fast: setup
-	$(PY) -m pytest -q -n auto --dist loadfile -m "not slow and not browser"
+	$(PY) -m pytest -q -n auto --dist loadfile --no-loadscope-reorder -m "not slow and not browser"
 
 figures: setup
 	$(PY) paper_figs/make_all.py
