@@ -57,7 +57,8 @@ fi
 # Compiled once into the kernel cache (WARP_CACHE_PATH; the Makefile puts it in build/), on
 # two threads, in the background while the assets and npm packages below are fetched; a warm
 # cache makes this a check of about a second.
-.venv/bin/crowdstudy precompile > build/precompile.log 2>&1 &
+# (the Makefile's and the tests' cache when set-up runs alone too)
+WARP_CACHE_PATH="${WARP_CACHE_PATH:-$ROOT/build/warp-cache}" .venv/bin/crowdstudy precompile > build/precompile.log 2>&1 &
 precompile_pid=$!
 
 # --- MakeHuman body assets ------------------------------------------------------
