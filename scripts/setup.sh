@@ -54,10 +54,9 @@ if [ ! -f "$STAMP_DIR/pip" ] || [ pyproject.toml -nt "$STAMP_DIR/pip" ] || \
 fi
 
 # --- Warp kernels ------------------------------------------------------------------
-# Compiled once into the kernel cache (WARP_CACHE_PATH; the Makefile puts it in build/), on
-# two threads, in the background while the assets and npm packages below are fetched; a warm
-# cache makes this a check of about a second.
-# (the Makefile's and the tests' cache when set-up runs alone too)
+# Compiled once into the kernel cache (WARP_CACHE_PATH, by default build/warp-cache like the
+# Makefile's and the tests'), on two threads, in the background while the assets and npm
+# packages below are fetched; a warm cache makes this a check of about a second.
 WARP_CACHE_PATH="${WARP_CACHE_PATH:-$ROOT/build/warp-cache}" .venv/bin/crowdstudy precompile > build/precompile.log 2>&1 &
 precompile_pid=$!
 
