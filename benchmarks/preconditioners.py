@@ -45,11 +45,12 @@ def sample_systems(n_characters: int, warmup: int, samples: tuple[int, ...]):
     bodies and the joints per character."""
     from crowdstudy.physics.linear import bsr_from_triplets
 
-    bench = _physics_benchmark()
-    _corrector, _scene, _tile = bench._corrector, bench._scene, bench._tile
-    base = _scene("D5", warmup / 60.0 + 0.5)
-    anim = base if n_characters == base.n_characters else _tile(base, n_characters)
-    corr = _corrector(anim)
+    from crowdstudy.bench import load_benchmark
+
+    physics = load_benchmark("physics")        # its scene and corrector helpers
+    base = physics._scene("D5", warmup / 60.0 + 0.5)
+    anim = base if n_characters == base.n_characters else physics._tile(base, n_characters)
+    corr = physics._corrector(anim)
     nb, nj = corr.model.n_bodies, corr.model.n_joints
     sub, out = corr.substeps, []
     for s in range(warmup):
@@ -72,29 +73,14 @@ def sample_systems(n_characters: int, warmup: int, samples: tuple[int, ...]):
     return out, nb, nj
 
 
-def _physics_benchmark():
-    """``benchmarks/physics.py`` (its scene and corrector helpers), loaded by path: the
-    benchmarks are not a package."""
-    import importlib.util
-    from pathlib import Path
-
-    path = Path(__file__).resolve().parent / "physics.py"
-    spec = importlib.util.spec_from_file_location("crowdstudy_benchmarks_physics", path)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
-
-
 def _pcg(a, b, apply_m, tol: float, max_iter: int) -> int:
     """Iterations of PCG from zero until |r| <= tol |b| (the solver's criterion)."""
-    x, r = np.zeros_like(b), b.copy()
+    r = b.copy()
     z = apply_m(r)
     p, rz, limit = z.copy(), float(r @ z), tol * np.linalg.norm(b)
     for k in range(1, max_iter + 1):
         q = a @ p
-        alpha = rz / float(p @ q)
-        x += alpha * p
-        r -= alpha * q
+        r -= (rz / float(p @ q)) * q           # the iterate itself is not needed, only its residual
         if np.linalg.norm(r) <= limit:
             return k
         z = apply_m(r)

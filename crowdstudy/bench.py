@@ -23,7 +23,7 @@ from crowdstudy.provenance import provenance, repository_root
 from crowdstudy.tables import format_table
 
 __all__ = ["configure", "run", "measure", "write_report", "report_path", "format_table", "benchmarks_dir",
-           "available"]
+           "available", "load_benchmark"]
 
 
 def benchmarks_dir() -> Path:
@@ -62,7 +62,8 @@ def write_report(name: str, rows: list[dict], *, out: Path | None = None, seed: 
     return out
 
 
-def _load(name: str):
+def load_benchmark(name: str):
+    """``benchmarks/NAME.py`` as a module (the benchmarks are scripts, not a package)."""
     path = benchmarks_dir() / f"{name}.py"
     if not path.is_file():
         raise InvalidInputError(f"unknown benchmark {name!r}; available: {', '.join(available()) or 'none'}")
@@ -80,7 +81,7 @@ def configure(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     names = available() if args.name == "all" else [args.name]
     status = 0
-    modules = {name: _load(name) for name in names}
+    modules = {name: load_benchmark(name) for name in names}
     for name in names:  # before any benchmark runs: a report that cannot be written fails at once
         check_output_path(report_path(name), f"benchmark {name} report")
     for name in names:

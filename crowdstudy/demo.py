@@ -6,9 +6,8 @@
 4. Metrics: overlap volume before/after, tracking error, smoothness (table).
 5. Short videos of both crowds and an overlap image (red = interpenetrating surfaces).
 6. The study: the quick stimulus set (all 60 videos, small and 2 s long, or ``--duration``
-   when that is shorter), simulated
-   participants answering through the real server and database, the export, and the
-   repeated-measures analysis with its report and figures.
+   when that is shorter), simulated participants answering through the real server and
+   database, the export, and the repeated-measures analysis with its report and figures.
 
 Every output goes under ``--out`` (default ``demo_out/``); the last lines list them and say
 how to run the full study.
@@ -30,8 +29,9 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--out", type=Path, default=Path("demo_out"), help="output folder (default demo_out/)")
     parser.add_argument("--design", type=Path, default=None, help="study design TOML (default stimuli/study.toml)")
     parser.add_argument("--density", default="D5", help="density level of the two showcase crowds (default D5)")
-    parser.add_argument("--duration", type=float, default=4.0, help="seconds of the showcase animations (default 4); the quick stimulus set's "
-                             "videos are 2 s, or this long when it is shorter")
+    parser.add_argument("--duration", type=float, default=4.0,
+                        help="seconds of the showcase animations (default 4); the quick stimulus set's videos are "
+                             "2 s, or this long when it is shorter")
     parser.add_argument("--participants", type=int, default=12, help="simulated participants (default 12)")
     parser.add_argument("--seed", type=int, default=1, help="seed of the simulated participants (default 1)")
     parser.add_argument("--skip-study", action="store_true", help="stop after step 5 (no stimulus set, no participants)")

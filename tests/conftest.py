@@ -11,7 +11,7 @@ import pytest  # noqa: E402
 
 SHARED = ROOT.parent / "shared"
 
-#: the slowest test files (seconds on the 2-core machine), run first: with `-n auto --dist
+#: the slowest test files, slowest first (measured on the 2-core machine), run first: with `-n auto --dist
 #: loadfile --no-loadscope-reorder` (the Makefile's) the end-to-end demo starts at once on one
 #: worker and the rest of the suite fills the other around it (xdist's default order, most
 #: tests first, started the demo last and left one worker idle at the end)
@@ -53,10 +53,6 @@ def saved_figures(monkeypatch):
 def bench():
     """``benchmarks/physics.py`` (``crowdstudy bench physics``) loaded as a module (the benchmarks
     are not a package)."""
-    import importlib.util
+    from crowdstudy.bench import load_benchmark
 
-    path = Path(__file__).resolve().parents[1] / "benchmarks" / "physics.py"
-    spec = importlib.util.spec_from_file_location("crowdstudy_benchmarks_physics_test", path)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    return load_benchmark("physics")

@@ -4,19 +4,14 @@ solver assembled, and each alternative is a preconditioner CG converges with."""
 
 from __future__ import annotations
 
-import importlib.util
-from pathlib import Path
-
 import pytest
+
+from crowdstudy.bench import load_benchmark
 
 
 @pytest.fixture(scope="module")
 def study():
-    path = Path(__file__).resolve().parents[1] / "benchmarks" / "preconditioners.py"
-    spec = importlib.util.spec_from_file_location("crowdstudy_benchmarks_preconditioners_test", path)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    return load_benchmark("preconditioners")
 
 
 def test_the_reference_reproduces_the_solver_and_the_alternatives_converge(study):

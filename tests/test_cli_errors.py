@@ -106,5 +106,5 @@ def test_bench_checks_its_report_path_before_running(tmp_path, monkeypatch, caps
                 raise AssertionError("the benchmark ran although its report cannot be written")
         return Module
 
-    monkeypatch.setattr(bench, "_load", refuse)
+    monkeypatch.setattr(bench, "load_benchmark", refuse)
     _one_line_error(capsys, ["bench", "study"], "benchmark study report", d)

@@ -36,7 +36,7 @@ def run(args: argparse.Namespace) -> int:
     check_output_dir(args.out, "--out")
     design = load_design(args.design)
     physics = PhysicsConfig.from_strings(args.config)
-    manifest = build_stimuli(design, args.out, preset=args.preset, duration=args.duration, scheduler=args.scheduler, workers=args.workers,
-                             progress=not args.quiet, physics=physics)
+    manifest = build_stimuli(design, args.out, preset=args.preset, duration=args.duration, scheduler=args.scheduler,
+                             workers=args.workers, progress=not args.quiet, physics=physics)
     print(f"stimuli: {len(manifest['stimuli'])} videos listed in {args.out}/manifest.json and manifest.csv")
     return 0
