@@ -29,7 +29,7 @@ import time
 
 import numpy as np
 
-from crowdstudy.bench import format_table, write_report
+from crowdstudy.bench import format_table, report_path, write_report
 from crowdstudy.physics.config import PhysicsConfig
 
 
@@ -66,14 +66,14 @@ def _corrector(anim, **kw):  # kw: CrowdCorrector options (device, config, ...)
     return corr
 
 
-def time_steps(anim, steps: int, device: str = "cpu") -> dict:
-    """Median ms per phase over ``steps`` steps.
+def time_steps(anim, steps: int, device: str = "cpu", config=None) -> dict:
+    """Median ms per phase over ``steps`` steps (``config``: a PhysicsConfig, default the defaults).
 
     Warp's CPU kernels run synchronously in the calling thread, so both the wall clock and
     the thread's CPU time are recorded: on a shared machine the wall clock also counts the
     time slices other processes take (preemption), the CPU time only this process's work.
     """
-    corr = _corrector(anim, device=device)
+    corr = _corrector(anim, device=device, config=config)
     sub = corr.substeps
     names = ("detection", "assembly", "solve", "update")
     wp = corr.solver.wp
@@ -173,7 +173,7 @@ def device_rows(cpu_only: bool = False) -> list[dict]:
     return rows
 
 
-def cost_curve(sizes, steps: int, device: str = "cpu", base=None) -> list[dict]:
+def cost_curve(sizes, steps: int, device: str = "cpu", base=None, config=None) -> list[dict]:
     """ms per step (= per simulated 1/60 s at the study's 1/60 s step) against characters:
     the D5 concert tiled on a grid of floors (:func:`_tile`) for each size; CPU (main
     thread) and wall medians over ``steps`` steps, the phases, and memory: the Warp arrays
@@ -187,7 +187,7 @@ def cost_curve(sizes, steps: int, device: str = "cpu", base=None) -> list[dict]:
         anim = base if n == base.n_characters else _tile(base, n)
         gc.collect()
         rss0 = _rss_mib()
-        r = time_steps(anim, steps, device=device)
+        r = time_steps(anim, steps, device=device, config=config)
         grown = _rss_mib() - rss0
         row = {"characters": n, "device": device, "steps": steps, "load": os.getloadavg()[0],
                "cpu_ms_per_60th": r["total_cpu_ms"], "wall_ms_per_60th": r["total_wall_ms"],
@@ -210,8 +210,6 @@ def runtime_figure(rows: list[dict], path=None):
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-
-    from crowdstudy.bench import report_path
 
     path = report_path("physics_runtime").with_suffix(".png") if path is None else path
     fig, ax = plt.subplots(figsize=(6.0, 4.2), dpi=120)
@@ -918,7 +916,8 @@ def main(argv: list[str]) -> int:
     parser.add_argument("--cells", default="", metavar="SCENE:LEVEL,...",
                         help="--bars on these cells only (e.g. concert:D1,corridor:D5; default all ten)")
     parser.add_argument("--config", nargs="*", default=[], metavar="KEY=VALUE",
-                        help="PhysicsConfig changes for Ours in --bars (e.g. arm_scale=0.25); the report records them")
+                        help="PhysicsConfig changes for the timed steps and --bars (e.g. cg_tolerance=1e-4); the "
+                             "report (physics_*_trial) records them")
     parser.add_argument("--curve-only", action="store_true",
                         help="only the cost curve over --sizes (and its figure), no CG comparison or peers")
     parser.add_argument("--stadium", default="", metavar="N,N",
@@ -972,30 +971,36 @@ def main(argv: list[str]) -> int:
     cuda = any(r["present"] and r["device"].startswith("cuda") for r in devices)
     if args.curve_only:
         d5 = _scene("D5", duration)
-        rows = cost_curve(sizes, args.steps, base=d5)
+        config = PhysicsConfig.from_strings(args.config) if args.config else None
+        rows = cost_curve(sizes, args.steps, base=d5, config=config)
         if cuda:
-            rows += cost_curve(sizes, args.steps, device="cuda:0", base=d5)
-        figure = runtime_figure(rows)
+            rows += cost_curve(sizes, args.steps, device="cuda:0", base=d5, config=config)
+        name = "physics_curve_trial" if args.config else "physics_curve"
+        figure = runtime_figure(rows, path=report_path("physics_runtime_trial").with_suffix(".png")
+                                if args.config else None)
         print(f"figure: {figure}", flush=True)
-        path = write_report("physics_curve", rows, seed=None, devices=devices, figure=str(figure))
+        path = write_report(name, rows, seed=None, devices=devices, figure=str(figure),
+                            config_changes=list(args.config))
         print(f"wrote {path}", file=sys.stderr)
         return 0
     d1, d5 = _scene("D1", duration), _scene("D5", duration)
+    config = PhysicsConfig.from_strings(args.config) if args.config else None
     rows = []
     for n in sizes:
         anim = d1 if n == d1.n_characters else d5 if n == d5.n_characters else _tile(d5, n)
-        r = time_steps(anim, args.steps)
+        r = time_steps(anim, args.steps, config=config)
         rows.append({"characters": n, **r, "cpu_ms_per_character": r["total_cpu_ms"] / n})
         print(format_table([rows[-1]]), flush=True)
         if cuda:
-            r = time_steps(anim, args.steps, device="cuda:0")
+            r = time_steps(anim, args.steps, device="cuda:0", config=config)
             rows.append({"characters": n, **r, "cpu_ms_per_character": r["total_cpu_ms"] / n})
             print(format_table([rows[-1]]), flush=True)
     cg_rows = compare_cg(d5)
     print(format_table(cg_rows), flush=True)
     peer_rows = [] if args.no_peer else _run_mujoco(args)
     bars = measure_bars(args.bars, config=PhysicsConfig.from_strings(args.config)) if args.bars > 0 else []
-    path = write_report("physics", rows, seed=None, cg=cg_rows, peer=peer_rows, bars=bars, bar_text=BAR_TEXT,
+    path = write_report("physics_trial" if args.config else "physics", rows, seed=None, cg=cg_rows, peer=peer_rows,
+                        bars=bars, bar_text=BAR_TEXT, config_changes=list(args.config),
                         devices=devices)
     print(f"wrote {path}", file=sys.stderr)
     return 0

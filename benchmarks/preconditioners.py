@@ -41,8 +41,8 @@ __all__ = ["main", "sample_systems", "compare"]
 def sample_systems(n_characters: int, warmup: int, samples: tuple[int, ...]):
     """Run the corrector's steps on the tiled D5 concert and keep the assembled system at
     the steps ``samples`` (< ``warmup``): a list of {step, A (CSR), tree (A without the
-    contacts' couplings), b, x (body positions), fused_iterations, contacts}, the number of
-    bodies and the joints per character."""
+    contacts' couplings), b, x (body positions), fused_iterations, tolerance (the solver's
+    relative residual), contacts}, the number of bodies and the joints per character."""
     from crowdstudy.physics.linear import bsr_from_triplets
 
     from crowdstudy.bench import load_benchmark
@@ -67,7 +67,7 @@ def sample_systems(n_characters: int, warmup: int, samples: tuple[int, ...]):
             tree = bsr_from_triplets(rows[:3 * nb], cols[:3 * nb], vals[:3 * nb], nb).tocsr()
             out.append({"step": s, "A": a, "tree": tree, "b": rhs.astype(np.float64).ravel(),
                         "x": corr.states[0].x.numpy().astype(np.float64), "fused_iterations": corr.solver.last_cg[0],
-                        "contacts": int(corr.contacts.n_active())})
+                        "tolerance": float(corr.config.cg_tolerance), "contacts": int(corr.contacts.n_active())})
         corr.solver.update(corr.states[0], corr.states[1], corr.dt)
         corr.states.reverse()
     return out, nb, nj
@@ -121,12 +121,14 @@ def _rigid_basis(x: np.ndarray, nj: int, rotations: bool):
                          shape=shape)
 
 
-def compare(system: dict, nb: int, nj: int, tol: float = 1e-4, max_iter: int = 400) -> list[dict]:
-    """One row per preconditioner for one assembled system (see the module docstring)."""
+def compare(system: dict, nb: int, nj: int, tol: float | None = None, max_iter: int = 400) -> list[dict]:
+    """One row per preconditioner for one assembled system (see the module docstring);
+    ``tol``: relative residual (None: the solver's, ``system["tolerance"]``)."""
     import scipy.sparse as sp
     import scipy.sparse.linalg as spl
 
     a, b = system["A"], system["b"]
+    tol = system["tolerance"] if tol is None else tol
     size, nc = 6 * nj, nb // nj
     owner = np.arange(6 * nb) // size
     coo = a.tocoo()

@@ -43,3 +43,14 @@ def test_measure_bars_runs_only_the_asked_cells_with_the_asked_config(bench, mon
     assert len(seen) == 1
     stage, level, periodic, config = seen[0]
     assert (stage, level, periodic) == ("walking", "D2", True) and config is cfg
+
+
+def test_timed_steps_run_with_the_asked_config(bench):
+    """``--config`` reaches the timed steps too (the cost curve's trial runs): a looser CG
+    tolerance takes fewer iterations on the same crowd."""
+    from crowdstudy.physics.config import PhysicsConfig
+
+    crowd = bench._tile(bench._scene("D5", 0.5), 6)
+    loose = bench.time_steps(crowd, 3, config=PhysicsConfig(cg_tolerance=1e-2))
+    tight = bench.time_steps(crowd, 3, config=PhysicsConfig(cg_tolerance=1e-6, cg_max_iterations=400))
+    assert 0 < loose["cg_iterations"] < tight["cg_iterations"]
