@@ -16,6 +16,9 @@ Measured in one run, on the same animation (the D5 stationary Baseline, 60 chara
   representative one);
 * a per-pass breakdown (shadow, cull, static layer copy, characters, environment, MSAA
   resolve, read-back), the static layers drawn beforehand as a video's set-up does;
+* the characters' pass taken apart, for ``ours`` and ``plain``: its vertex stage and set-up
+  (the pass under a 1x1 scissor), its fragments, and of those the shading (against the
+  same pass with a constant-colour fragment shader);
 * the projected time of the whole 60-video set (60 x 600 frames) on this machine, from
   the wall time of ``ours+encode`` and, load-independent, from the CPU time of rendering
   plus encoding spread over the machine's CPUs.
@@ -120,6 +123,69 @@ def _passes(renderer, frame: int) -> dict:
         timed("msaa resolve", lambda: ctx.copy_framebuffer(renderer.fbo_out, renderer.fbo_msaa))
     timed("read-back", lambda: renderer.fbo_out.read(components=3, alignment=1))
     return out
+
+
+_FLAT_FRAGMENT = "#version 330 core\nout vec4 f_color;\nvoid main() { f_color = vec4(0.6, 0.5, 0.4, 1.0); }\n"
+
+
+def _character_parts(renderer, frame: int, reps: int = 4) -> dict:
+    """Where the characters' pass goes (median wall s over ``reps`` draws of one frame, the
+    pass alone as :func:`_passes` times it): ``full``, with the renderer's shaders;
+    ``vertex+setup``, the same under a 1x1 scissor (skinning, clipping, binning: every
+    fragment culled); ``constant-colour fragments``, the same vertex stage with a fragment
+    shader that writes one colour. So ``fragments`` = full - vertex+setup, of which
+    ``shading`` = full - constant-colour is the cost of the characters' fragment shader
+    (texture, lighting) and the rest rasterisation, depth test and colour writes."""
+    from crowdstudy.render.renderer import _shader_source
+
+    ctx = renderer.ctx
+    flat = ctx.program(vertex_shader="#version 330 core\n" + _shader_source("character.vert"),
+                       fragment_shader=_FLAT_FRAGMENT)
+    added = []
+    for gl in renderer._gl_groups:
+        gl["vaos"][flat] = vao = ctx.vertex_array(
+            flat, [(gl["vbo"], "4i 4f 4f 2f 3f", "in_joints", "in_weights", "in_scores_a", "in_scores_b",
+                    "in_material"), (gl["inst"], "1i 1i 1f /i", "in_char", "in_member", "in_shift")],
+            index_buffer=gl["ibo"], index_element_size=4, skip_errors=True)
+        added.append((gl, vao))
+
+    def draw(prog, scissor):
+        times = []
+        for _ in range(reps):
+            renderer.render_raw(frame)
+            renderer._load_frame(frame)
+            renderer._shadow_pass()
+            vp = renderer._prepare(frame, upload=False)
+            fbo = renderer.fbo_msaa or renderer.fbo_out
+            fbo.use()
+            ctx.viewport = (0, 0, renderer.width, renderer.height)
+            renderer.tex_shadow.use(3)
+            for lit in renderer._lit_programs:
+                if "u_view_proj" in lit:
+                    lit["u_view_proj"].write(np.ascontiguousarray(vp.T, dtype=np.float32).tobytes())
+            fbo.clear(0.5, 0.5, 0.5, 1.0, depth=1.0)
+            ctx.finish()
+            ctx.scissor = scissor
+            t0 = time.perf_counter()
+            renderer._cull_back_faces(True)
+            renderer._draw_characters(prog, vp)
+            renderer._cull_back_faces(False)
+            ctx.finish()
+            times.append(time.perf_counter() - t0)
+            ctx.scissor = None
+        return float(np.median(times))
+
+    try:
+        full = draw(renderer.prog_char, None)
+        vertex = draw(renderer.prog_char, (0, 0, 1, 1))
+        constant = draw(flat, None)
+    finally:
+        for gl, vao in added:
+            del gl["vaos"][flat]
+            vao.release()
+        flat.release()
+    return {"full": full, "vertex+setup": vertex, "constant-colour fragments": constant,
+            "fragments": full - vertex, "shading": full - constant}
 
 
 def _psnr(path: str, reference: str) -> float:
@@ -354,7 +420,7 @@ def main(argv: list[str]) -> int:
     configs = [("ours", dict(msaa=4, shadows=True)), ("plain (no MSAA, no shadows)", dict(msaa=0, shadows=False)),
                ("full-mesh (4x MSAA, shadows)", dict(msaa=4, shadows=True, max_faces=None)),
                ("mannequin (open model, 4x MSAA, shadows)", dict(msaa=4, shadows=True))]
-    rows, breakdown, encoders = [], {}, []
+    rows, breakdown, encoders, parts = [], {}, [], {}
     for name, kw in configs:
         scene = mannequins if name.startswith("mannequin") else anim
         t_init = time.perf_counter()
@@ -363,6 +429,8 @@ def main(argv: list[str]) -> int:
             r.set_view(args.view)
             r.draw_layers()   # a video's set-up draws them (render_video); not a per-frame cost
             res = _time_frames(r, frames)
+            if name in ("ours", "plain (no MSAA, no shadows)"):
+                parts[name] = _character_parts(r, frames[-1])
             if name == "ours":
                 breakdown = _passes(r, frames[-1])
                 with tempfile.TemporaryDirectory() as tmp:
@@ -401,12 +469,19 @@ def main(argv: list[str]) -> int:
     print("where the time goes (one 'ours' frame, seconds):")
     for k, v in breakdown.items():
         print(f"  {k:14s} {v:.4f}")
+    print("the characters' pass, taken apart (wall s; 'plain' has no MSAA and no shadows):")
+    print(format_table([{"part": k, **{cfg: parts[cfg][k] for cfg in parts}} for k in next(iter(parts.values()))]))
+    if len(parts) == 2:
+        ours_p, plain_p = parts["ours"], parts["plain (no MSAA, no shadows)"]
+        print(f"  4x MSAA: fragments {ours_p['fragments'] / max(plain_p['fragments'], 1e-9):.2f}x, shading "
+              f"{ours_p['shading'] / max(plain_p['shading'], 1e-9):.2f}x the plain pass's")
     print("encoder alone (per 1080p frame; ffmpeg's CPU time, not in cpu_s above):")
     print(format_table(encoders))
     print(f"projected whole set ({n_set} frames, render+encode): {projected_h:.2f} h at the measured wall time; "
           f"{projected_cpu_h:.2f} h from CPU time ({cpu_per_frame:.3f} CPU-s per frame over {cpus} idle CPUs) "
           f"(target 0.15 s/frame -> {0.15 * n_set / 3600:.2f} h)")
-    path = write_report("render", rows, vs_mannequin=vs_mannequin, breakdown=breakdown, encoders=encoders, projected_set_hours=projected_h,
+    path = write_report("render", rows, vs_mannequin=vs_mannequin, breakdown=breakdown, character_pass=parts,
+                        encoders=encoders, projected_set_hours=projected_h,
                         projected_set_hours_cpu=projected_cpu_h, cpu_s_per_frame_render_encode=cpu_per_frame, gl=info,
                         load=os.getloadavg()[0], frames=args.frames, width=args.width, height=args.height,
                         devices=devices)
