@@ -168,3 +168,26 @@ def test_overlap_bisection_marks_the_pixels_of_the_full_scan(design, monkeypatch
     for fast, full in zip(*masks):
         assert full.mean() > 0.005, "the crowd should interpenetrate"
         assert np.array_equal(fast, full)
+
+
+def test_taking_the_character_pass_apart_leaves_the_renderer_as_it_was(design):
+    """``crowdstudy bench render``'s probe of the characters' pass (a 1x1 scissor, a
+    constant-colour program) draws into the renderer's own buffers: afterwards the picture,
+    the scissor and the vertex arrays are as before, and every part it reports is a duration
+    (their sizes are the benchmark's, not a test's)."""
+    from crowdstudy.bench import load_benchmark
+
+    probe = load_benchmark("render")
+    anim = crowd_animation(grid_positions(8, margin=0.45), n_frames=2)
+    with mannequin_renderer(anim, design) as r:
+        r.set_view("V1")
+        before = r.render(1)
+        keys = [set(gl["vaos"]) for gl in r._gl_groups]
+        parts = probe._character_parts(r, 1, reps=1)
+        assert [set(gl["vaos"]) for gl in r._gl_groups] == keys
+        assert r.ctx.scissor == (0, 0, r.width, r.height) or r.ctx.scissor is None
+        after = r.render(1)
+    assert set(parts) == {"full", "vertex+setup", "constant-colour fragments", "fragments", "shading"}
+    assert all(np.isfinite(v) for v in parts.values()) and parts["full"] > 0
+    assert parts["fragments"] == pytest.approx(parts["full"] - parts["vertex+setup"])
+    assert np.array_equal(before, after)
