@@ -73,6 +73,19 @@ def _time_frames(renderer, frames: list[int]) -> dict:
     return {"wall_s": float(np.median(wall)), "cpu_s": float(np.median(cpu))}
 
 
+def _bind_frame_target(renderer, vp: np.ndarray):
+    """Bind the frame's target (the MSAA buffer if any) with the shadow map and the camera,
+    as ``CrowdRenderer._draw_frame`` does before the characters; the framebuffer."""
+    fbo = renderer.fbo_msaa or renderer.fbo_out
+    fbo.use()
+    renderer.ctx.viewport = (0, 0, renderer.width, renderer.height)
+    renderer.tex_shadow.use(3)
+    for prog in renderer._lit_programs:
+        if "u_view_proj" in prog:
+            prog["u_view_proj"].write(np.ascontiguousarray(vp.T, dtype=np.float32).tobytes())
+    return fbo
+
+
 def _passes(renderer, frame: int) -> dict:
     """Wall seconds of each pass of one frame (the GPU/llvmpipe finished after each), as
     ``CrowdRenderer._draw_frame`` runs them; the static layer is drawn beforehand."""
@@ -101,12 +114,7 @@ def _passes(renderer, frame: int) -> dict:
     parts = renderer._layer_parts
 
     def start():
-        fbo.use()
-        ctx.viewport = (0, 0, renderer.width, renderer.height)
-        renderer.tex_shadow.use(3)
-        for prog in renderer._lit_programs:
-            if "u_view_proj" in prog:
-                prog["u_view_proj"].write(np.ascontiguousarray(vp.T, dtype=np.float32).tobytes())
+        _bind_frame_target(renderer, vp)
         if parts:
             layer = renderer._layer(beat if "cut_figures" in parts else None, beat)
             fbo.use()
@@ -156,14 +164,7 @@ def _character_parts(renderer, frame: int, reps: int = 4) -> dict:
             renderer._load_frame(frame)
             renderer._shadow_pass()
             vp = renderer._prepare(frame, upload=False)
-            fbo = renderer.fbo_msaa or renderer.fbo_out
-            fbo.use()
-            ctx.viewport = (0, 0, renderer.width, renderer.height)
-            renderer.tex_shadow.use(3)
-            for lit in renderer._lit_programs:
-                if "u_view_proj" in lit:
-                    lit["u_view_proj"].write(np.ascontiguousarray(vp.T, dtype=np.float32).tobytes())
-            fbo.clear(0.5, 0.5, 0.5, 1.0, depth=1.0)
+            _bind_frame_target(renderer, vp).clear(0.5, 0.5, 0.5, 1.0, depth=1.0)
             ctx.finish()
             ctx.scissor = scissor
             t0 = time.perf_counter()
