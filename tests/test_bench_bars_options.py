@@ -54,3 +54,22 @@ def test_timed_steps_run_with_the_asked_config(bench):
     loose = bench.time_steps(crowd, 3, config=PhysicsConfig(cg_tolerance=1e-2))
     tight = bench.time_steps(crowd, 3, config=PhysicsConfig(cg_tolerance=1e-6, cg_max_iterations=400))
     assert 0 < loose["cg_iterations"] < tight["cg_iterations"]
+
+
+def test_the_seam_bar_applies_to_a_looped_concert_only(bench):
+    """A concert clip too short to hold whole loops is not looped: its last-to-first jump is
+    no seam a viewer sees, so the bar is not checked (the corridor dissolves instead)."""
+    from crowdstudy.design import load_design
+    from crowdstudy.motion.baseline import build_baseline
+
+    design = load_design()
+    looped = build_baseline(design, "stationary", "D1", duration=4.0, body_model="open")
+    short = build_baseline(design, "stationary", "D1", duration=0.3, body_model="open")
+    assert bench.loop_mode(looped) == "periodic" and bench.loop_mode(short) == "none"
+    row = {"stage": "stationary", "jerk_ratio": 1.0, "hf_share_ours": 0.01, "hf_share_baseline": 0.01,
+           "max_joint_speed_ours": 5.0, "max_joint_speed_baseline": 5.0, "pelvis_p99_ours": 1.0,
+           "pelvis_p99_baseline": 1.0, "foot_slide_p99_ours": 0.01, "mesh_ratio": 0.01, "tracking_cm": 1.0,
+           "seam_ratio_baseline": 7.4, "seam_ratio_ours": 7.5}
+    assert bench.bar_checks({**row, "loop": "periodic"}, 2, 5)["seam"] is False
+    assert "seam" not in bench.bar_checks({**row, "loop": "none"}, 2, 5)
+    assert "seam" not in bench.bar_checks({**row, "stage": "walking", "loop": "dissolve"}, 2, 5)
