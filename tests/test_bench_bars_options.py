@@ -63,7 +63,7 @@ def test_the_seam_bar_applies_to_a_looped_concert_only(bench):
     from crowdstudy.motion.baseline import build_baseline
 
     design = load_design()
-    looped = build_baseline(design, "stationary", "D1", duration=4.0, body_model="open")
+    looped = build_baseline(design, "stationary", "D1", duration=2.0, body_model="open")
     short = build_baseline(design, "stationary", "D1", duration=0.3, body_model="open")
     assert bench.loop_mode(looped) == "periodic" and bench.loop_mode(short) == "none"
     row = {"stage": "stationary", "jerk_ratio": 1.0, "hf_share_ours": 0.01, "hf_share_baseline": 0.01,
