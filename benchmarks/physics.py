@@ -815,8 +815,7 @@ def bar_checks(row: dict, level_index: int, n_levels: int) -> dict:
 def loop_mode(anim) -> str:
     """How the animation's video loops: ``meta["loop"]["mode"]`` ("periodic", "dissolve" or
     "none")."""
-    loop = anim.meta.get("loop") if isinstance(anim.meta, dict) else None
-    return str(loop.get("mode", "none")) if isinstance(loop, dict) else "none"
+    return str((anim.meta.get("loop") or {}).get("mode", "none"))
 
 
 def parse_cells(text: str, levels) -> list[tuple[str, str]] | None:
@@ -938,6 +937,8 @@ def main(argv: list[str]) -> int:
                         help="stadium runs hand correct() body proxies without the meshes (needed at 5,000 "
                              "MakeHuman characters in 24 GiB)")
     args = parser.parse_args(argv)
+    config = PhysicsConfig.from_strings(args.config)      # the defaults without --config
+    trial = "_trial" if args.config else ""                 # reports of changed settings keep their own names
     try:
         sizes = [int(v) for v in args.sizes.split(",") if v.strip()]
     except ValueError:
@@ -962,11 +963,10 @@ def main(argv: list[str]) -> int:
         return 0
     if args.bars_only:
         from crowdstudy.design import load_design
-        config = PhysicsConfig.from_strings(args.config)
         cells = parse_cells(args.cells, list(load_design().densities))
         bars = measure_bars(args.bars or 20.0, config=config, cells=cells)
         print("bars: " + "; ".join(BAR_TEXT.values()), flush=True)
-        name = "physics_bars" if not args.config and cells is None else "physics_bars_trial"
+        name = "physics_bars_trial" if trial or cells is not None else "physics_bars"
         path = write_report(name, bars, seed=None, bar_text=BAR_TEXT, config_changes=list(args.config))
         print(f"wrote {path}", file=sys.stderr)
         return 0
@@ -980,20 +980,16 @@ def main(argv: list[str]) -> int:
     cuda = any(r["present"] and r["device"].startswith("cuda") for r in devices)
     if args.curve_only:
         d5 = _scene("D5", duration)
-        config = PhysicsConfig.from_strings(args.config) if args.config else None
         rows = cost_curve(sizes, args.steps, base=d5, config=config)
         if cuda:
             rows += cost_curve(sizes, args.steps, device="cuda:0", base=d5, config=config)
-        name = "physics_curve_trial" if args.config else "physics_curve"
-        figure = runtime_figure(rows, path=report_path("physics_runtime_trial").with_suffix(".png")
-                                if args.config else None)
+        figure = runtime_figure(rows, path=report_path(f"physics_runtime{trial}").with_suffix(".png"))
         print(f"figure: {figure}", flush=True)
-        path = write_report(name, rows, seed=None, devices=devices, figure=str(figure),
+        path = write_report(f"physics_curve{trial}", rows, seed=None, devices=devices, figure=str(figure),
                             config_changes=list(args.config))
         print(f"wrote {path}", file=sys.stderr)
         return 0
     d1, d5 = _scene("D1", duration), _scene("D5", duration)
-    config = PhysicsConfig.from_strings(args.config) if args.config else None
     rows = []
     for n in sizes:
         anim = d1 if n == d1.n_characters else d5 if n == d5.n_characters else _tile(d5, n)
@@ -1007,8 +1003,8 @@ def main(argv: list[str]) -> int:
     cg_rows = compare_cg(d5)
     print(format_table(cg_rows), flush=True)
     peer_rows = [] if args.no_peer else _run_mujoco(args)
-    bars = measure_bars(args.bars, config=PhysicsConfig.from_strings(args.config)) if args.bars > 0 else []
-    path = write_report("physics_trial" if args.config else "physics", rows, seed=None, cg=cg_rows, peer=peer_rows,
+    bars = measure_bars(args.bars, config=config) if args.bars > 0 else []
+    path = write_report(f"physics{trial}", rows, seed=None, cg=cg_rows, peer=peer_rows,
                         bars=bars, bar_text=BAR_TEXT, config_changes=list(args.config),
                         devices=devices)
     print(f"wrote {path}", file=sys.stderr)

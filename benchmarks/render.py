@@ -144,17 +144,14 @@ def _character_parts(renderer, frame: int, reps: int = 4) -> dict:
     shader that writes one colour. So ``fragments`` = full - vertex+setup, of which
     ``shading`` = full - constant-colour is the cost of the characters' fragment shader
     (texture, lighting) and the rest rasterisation, depth test and colour writes."""
-    from crowdstudy.render.renderer import _shader_source
+    from crowdstudy.render.renderer import _shader_source, _group_vertex_array
 
     ctx = renderer.ctx
     flat = ctx.program(vertex_shader="#version 330 core\n" + _shader_source("character.vert"),
                        fragment_shader=_FLAT_FRAGMENT)
     added = []
     for gl in renderer._gl_groups:
-        gl["vaos"][flat] = vao = ctx.vertex_array(
-            flat, [(gl["vbo"], "4i 4f 4f 2f 3f", "in_joints", "in_weights", "in_scores_a", "in_scores_b",
-                    "in_material"), (gl["inst"], "1i 1i 1f /i", "in_char", "in_member", "in_shift")],
-            index_buffer=gl["ibo"], index_element_size=4, skip_errors=True)
+        gl["vaos"][flat] = vao = _group_vertex_array(ctx, flat, gl["vbo"], gl["inst"], gl["ibo"])
         added.append((gl, vao))
 
     def draw(prog, scissor):

@@ -86,6 +86,14 @@ def _program(ctx, vert: str, frag: str, *, lit_vertex: bool = False, lit_fragmen
     return ctx.program(vertex_shader=vs, fragment_shader=fs)
 
 
+def _group_vertex_array(ctx, prog, vbo, inst, ibo):
+    """The vertex array of one template group for ``prog`` (a program on ``character.vert``):
+    the group's static attributes ``vbo``, its per-instance buffer ``inst``, its faces ``ibo``."""
+    return ctx.vertex_array(prog, [(vbo, "4i 4f 4f 2f 3f", "in_joints", "in_weights", "in_scores_a", "in_scores_b",
+                                    "in_material"), (inst, "1i 1i 1f /i", "in_char", "in_member", "in_shift")],
+                            index_buffer=ibo, index_element_size=4, skip_errors=True)
+
+
 def _set(prog, name: str, value) -> None:
     if name in prog:
         if isinstance(value, np.ndarray):
@@ -283,12 +291,7 @@ class CrowdRenderer:
             tex_rest = own(ctx.texture((rest_w, rows), 4, data=padded.tobytes(), dtype="f4"))
             tex_rest.filter = (moderngl.NEAREST, moderngl.NEAREST)
             inst = own(ctx.buffer(reserve=len(g.members) * len(_COPIES) * 12, dynamic=True))
-            vaos = {}
-            for prog in self._char_programs:
-                vaos[prog] = own(ctx.vertex_array(prog, [(vbo, "4i 4f 4f 2f 3f", "in_joints", "in_weights",
-                                                          "in_scores_a", "in_scores_b", "in_material"),
-                                                     (inst, "1i 1i 1f /i", "in_char", "in_member", "in_shift")],
-                                                  index_buffer=ibo, index_element_size=4, skip_errors=True))
+            vaos = {prog: own(_group_vertex_array(ctx, prog, vbo, inst, ibo)) for prog in self._char_programs}
             self._gl_groups.append({"group": g, "vbo": vbo, "ibo": ibo, "rest": tex_rest, "rest_width": rest_w,
                                     "inst": inst, "vaos": vaos, "count": 0, "level": level, "coarse": coarse})
 
