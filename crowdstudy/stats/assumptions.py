@@ -86,7 +86,10 @@ def qq_figure_from_cells(cm: CellMatrix, out_path: str | Path, *, title: str | N
         xs = np.array([osm.min(), osm.max()])
         ax.plot(xs, icpt + slope * xs, "-", lw=0.8, color="#c0392b")
         p = shp["p"].iloc[j]
-        ax.set_title(" ".join(map(str, cell)) + (f"\np={p:.3f}" if np.isfinite(p) else "\np=n/a"), fontsize=6)
+        # y given: matplotlib then skips placing each title above its axes' tick labels (none
+        # are on top), which measured the ticks of the 40 panels again (2.9 -> 2.5 s a figure,
+        # the same pixels)
+        ax.set_title(" ".join(map(str, cell)) + (f"\np={p:.3f}" if np.isfinite(p) else "\np=n/a"), fontsize=6, y=1.0)
         ax.tick_params(labelsize=5)
     fig.supxlabel("theoretical quantiles (standard normal)", fontsize=8, y=0.12 / height)
     fig.supylabel("residual (cell value - cell mean)", fontsize=8, x=0.12 / width)
