@@ -62,8 +62,9 @@ fi
 # set never caches a module Python compiles on import, so every process would compile its
 # imports again). The packages' tests folders are left out; a file that fails to compile
 # only costs its import time, so a failure is reported and set-up goes on.
-# The same for this checkout's own modules (crowdstudy/, tests/: the tests start about 150
-# `python -m crowdstudy` processes), every run: compileall only redoes files that changed.
+# The same for this checkout's modules (the tests start about 150 `python -m crowdstudy`
+# processes; pytest compiles the test modules itself, rewriting their asserts), every run:
+# compileall only redoes the files that changed.
 site=$(.venv/bin/python -c 'import sysconfig; print(sysconfig.get_paths()["purelib"])')
 (if [ ! -f "$STAMP_DIR/bytecode" ]; then
      if .venv/bin/python -m compileall -q -j 0 -x '/tests?/' "$site" > build/bytecode.log 2>&1; then
@@ -72,7 +73,7 @@ site=$(.venv/bin/python -c 'import sysconfig; print(sysconfig.get_paths()["purel
          echo "[setup] note: some installed files did not byte-compile (build/bytecode.log); they compile on import" >&2
      fi
  fi
- .venv/bin/python -m compileall -q -j 0 crowdstudy tests benchmarks paper_figs analysis > build/bytecode-src.log 2>&1 ||
+ .venv/bin/python -m compileall -q -j 0 crowdstudy benchmarks paper_figs > build/bytecode-src.log 2>&1 ||
      echo "[setup] note: some of crowdstudy's files did not byte-compile (build/bytecode-src.log)" >&2) &
 bytecode_pid=$!
 
