@@ -16,7 +16,7 @@
   contacts, the same self pairs, ground and walls; the same settle and interpolated targets,
   through soft welds to mocap bodies) on concert D5 and corridor D5: ms per step and per
   simulated 1/60 s (CPU and wall), mesh and capsule overlap as a fraction of the Baseline's,
-  tracking error and jerk, for 3 MuJoCo tunings (``MUJOCO_SETTINGS``).
+  tracking error and jerk, for 4 MuJoCo tunings (``MUJOCO_SETTINGS``).
 """
 
 from __future__ import annotations
@@ -412,7 +412,20 @@ MUJOCO_SETTINGS = {
                                  solimp=(0.95, 0.99, 0.001), joint_damping=1.0),
     "weld0.05-dt1/120": dict(substeps=4, weld_solref=(0.05, 1.0), contact_solref=(0.0167, 1.0),
                              solimp=(0.95, 0.99, 0.001), joint_damping=1.0),
+    # stiffer welds (MuJoCo clamps a timeconst below 2 steps, so this needs the 1/120 s step)
+    "weld0.025-dt1/120": dict(substeps=4, weld_solref=(0.025, 1.0), contact_solref=(0.0167, 1.0),
+                              solimp=(0.95, 0.99, 0.001), joint_damping=1.0),
 }
+
+
+def check_timeconsts(setting: dict, dt: float) -> None:
+    """Raise ValueError where a weld's or contact's solref time constant is under 2 steps:
+    MuJoCo silently clamps it to 2 * dt, so two such tunings would run the same model."""
+    for key in ("weld_solref", "contact_solref"):
+        timeconst = float(setting[key][0])
+        if timeconst < 2.0 * dt - 1e-9:
+            raise ValueError(f"MuJoCo setting {key}: time constant {timeconst:g} s is under 2 steps "
+                             f"({2.0 * dt:.4g} s at a {dt:.4g} s step), which MuJoCo clamps to 2 steps")
 
 
 def _quat_mul(a, b):
@@ -500,6 +513,7 @@ class MujocoScene:
         self.rests = np.asarray(cm.rest_joints, np.float64)
         self.substeps = int(st["substeps"])
         self.dt = 1.0 / (anim.fps * self.substeps)
+        check_timeconsts(st, self.dt)
         from crowdstudy.body.rotations import axis_angle_to_quaternion
 
         self.anim_q = axis_angle_to_quaternion(anim.joint_rotations)

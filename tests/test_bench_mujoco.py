@@ -132,3 +132,17 @@ def test_conversion_back_same_as_ours_and_tracks(bench):
     assert not timing["unstable"] and timing["steps_per_60th"] == 1.0
     assert mj.meta["method"] == "MuJoCo" and mj.n_frames == anim.n_frames
     assert tracking_error(mj, anim) < 3.0
+
+
+def test_every_tuning_is_one_mujoco_runs_as_written(bench):
+    """MuJoCo clamps a solref time constant under two steps to two steps without a word (a
+    weld at 0.02 s and one at 0.03 s ran the same model at 1/60 s): every tuning of the
+    benchmark keeps its welds and contacts at or above two of its steps, and one that does
+    not is refused, naming the field."""
+    assert len(bench.MUJOCO_SETTINGS) == 4
+    for st in bench.MUJOCO_SETTINGS.values():
+        bench.check_timeconsts(st, 1.0 / (30.0 * st["substeps"]))
+    too_stiff = dict(bench.MUJOCO_SETTINGS["weld0.05"], weld_solref=(0.02, 1.0))
+    with pytest.raises(ValueError, match="weld_solref"):
+        bench.MujocoScene(_tiny("concert", chars=(0,)), setting=too_stiff)
+    bench.MujocoScene(_tiny("concert", chars=(0,)), setting=dict(too_stiff, substeps=4))   # 1/120 s: 2 steps
