@@ -16,7 +16,7 @@
   contacts, the same self pairs, ground and walls; the same settle and interpolated targets,
   through soft welds to mocap bodies) on concert D5 and corridor D5: ms per step and per
   simulated 1/60 s (CPU and wall), mesh and capsule overlap as a fraction of the Baseline's,
-  tracking error and jerk, for 4 MuJoCo tunings (``MUJOCO_SETTINGS``).
+  tracking error and jerk, for each MuJoCo tuning in ``MUJOCO_SETTINGS``.
 """
 
 from __future__ import annotations
