@@ -495,12 +495,13 @@ def test_arm_and_trunk_scales_set_the_pd_gains_of_exactly_their_joints(small_sys
     pelvis = [JOINT_INDEX[n] for n in ("pelvis", "left_hip", "right_hip", "spine1")]
     feet = [JOINT_INDEX[n] for n in ("left_ankle", "right_ankle", "left_foot", "right_foot")]
     expect = np.ones(len(joint))
-    for idx, scale in ((arms, 0.25), (trunk, 4.0), (pelvis, cfg.pelvis_scale), (feet, cfg.feet_scale)):
+    for idx, scale in ((arms, 0.5), (trunk, 4.0), (pelvis, cfg.pelvis_scale), (feet, cfg.feet_scale)):
         expect[np.isin(joint, idx)] = scale
     assert np.isin(joint, [JOINT_INDEX["left_knee"], JOINT_INDEX["right_knee"]]).sum() == 4   # two characters
-    solver = Solver(model, cfg.replace(arm_scale=0.25, trunk_scale=4.0))
+    solver = Solver(model, cfg.replace(arm_scale=0.5, trunk_scale=4.0))
     np.testing.assert_allclose(solver.body_k.numpy(), cfg.stiffness * expect, rtol=1e-6)
     np.testing.assert_allclose(solver.body_d.numpy(), cfg.damping * expect, rtol=1e-6)
     default = Solver(model, cfg)
-    expect[np.isin(joint, arms + trunk)] = 1.0        # the defaults: the paper's single body k
+    expect[np.isin(joint, arms)] = 0.25               # the defaults: soft arms (held by the pose springs)
+    expect[np.isin(joint, trunk)] = 1.0               # and the paper's single body k for the trunk
     np.testing.assert_allclose(default.body_k.numpy(), cfg.stiffness * expect, rtol=1e-6)

@@ -18,7 +18,7 @@ absolute rotation (Eq. 4 with the pelvis group's k, d) and absolute translation 
 translational spring/damper of the same form on the pelvis bone's centre of mass, 3e5 N/m
 within a centimetre of the animation and 2e5 beyond, ``root_translation_reach``); the
 foot bones get a weaker translational coupling of the same form, and every other body a
-world-space spring towards where the animation puts it (``pose_translation_stiffness``; the
+world-space spring and damper towards where the animation puts it (``pose_translation_*``; the
 paper couples those through their joint rotations only). Inter-body contacts stiffen with
 their depth (``contact_stiffening_depth``; the paper's penalty is quadratic) and let
 crossings the animation completes within a frame pass (``contact_pass_ahead``).
@@ -59,8 +59,9 @@ class PhysicsConfig:
         feet_scale: multiplies k and d for the ankles and feet (no foot skate).
         arm_scale: multiplies k and d for the arms (collars, shoulders, elbows, wrists,
             hands). Below 1 a contact on a hand bends the arm rather than pushing the whole
-            character (tried for the tracking bar, README "Local corrections"; 1 = the
-            paper's single body k).
+            character; 0.25 (1 until 2026-12-04), with the damped world-space pose springs
+            below holding each arm body where the animation puts it (README "Damped pose
+            springs"; 1 = the paper's single body k).
         trunk_scale: multiplies k and d for the upper trunk, neck and head (spine2, spine3,
             neck, head); 1 = the paper's single body k.
         root_translation_stiffness: spring of the root's absolute translation, N/m.
@@ -84,7 +85,14 @@ class PhysicsConfig:
             (trunk, head, arms, legs) towards where the animation puts it in the world, like
             the root's and feet's: with it a pushed limb returns in world space, not only
             through its joint's rotation spring; 0 = off (the paper: joint rotations only).
-        pose_translation_damping_scale: its damper is ``damping * this`` (J s^2/m^2).
+            8000 (2000 until 2026-12-04), damped as below.
+        pose_translation_damping_scale: its damper is ``damping * this`` (J s^2/m^2): a force
+            of ``damping * this / damping_reference_dt`` N s/m (360 at the default 1000)
+            against the body's velocity relative to the animation's, near critical for a
+            hand on the 8000 N/m spring. Undamped (0, the value until 2026-12-04) a pushed
+            limb overshoots on its way back; damped, concert D5 leaves 3.7 % of the
+            Baseline's overlap where the same springs undamped left 4.8 % (README "Damped
+            pose springs").
         pose_translation_reach: m; the pose spring saturates beyond about this deviation (a
             pseudo-Huber energy: its force never exceeds ``pose_translation_stiffness *
             pose_translation_reach`` N), so it holds a brushed limb in place but yields where
@@ -190,7 +198,8 @@ class PhysicsConfig:
         output_hold: before the low-pass each deviation component is held at its largest
             magnitude within +-``output_hold`` kernel widths (a dilation), so the low-pass
             does not shave the separation a contact needed: the correction eases in a little
-            before a contact and out after it (0 = a plain low-pass).
+            before a contact and out after it (0 = a plain low-pass). 0.8 (the joints held
+            one frame, the root two; 1.3 until 2026-12-04).
         speed_limit: the last step of the output stage
             (:func:`crowdstudy.physics.speed_limit.limit_joint_speed`): where a joint of the
             output moves faster than the input crowd's fastest joint plus
@@ -220,7 +229,7 @@ class PhysicsConfig:
     damping: float = 0.006
     pelvis_scale: float = 8.0
     feet_scale: float = 4.0
-    arm_scale: float = 1.0
+    arm_scale: float = 0.25
     trunk_scale: float = 1.0
     root_translation_stiffness: float = 3.0e5
     root_translation_damping_scale: float = 4.25e3
@@ -228,8 +237,8 @@ class PhysicsConfig:
     root_translation_far_stiffness: float = 2.0e5
     feet_translation_stiffness: float = 5.0e3
     feet_translation_damping_scale: float = 300.0
-    pose_translation_stiffness: float = 2000.0
-    pose_translation_damping_scale: float = 0.0
+    pose_translation_stiffness: float = 8000.0
+    pose_translation_damping_scale: float = 1000.0
     pose_translation_reach: float = 0.0
     joint_stiffness: float = 6.0e5
     contact_stiffness: float = 6.0e4
@@ -261,7 +270,7 @@ class PhysicsConfig:
     loop_blend: float = 0.5
     output_smoothing: float = 0.05
     output_smoothing_root: float = 0.08
-    output_hold: float = 1.3
+    output_hold: float = 0.8
     speed_limit: bool = True
     speed_limit_margin: float = 0.3
     foot_lock: bool = True
@@ -294,12 +303,15 @@ class PhysicsConfig:
         """The paper's controller: the root held by a linear translation spring (1e4 N/m,
         our value; the paper gives none) and every other body only through its joint
         rotation (Eq. 4), no world-space pose springs. The Fig. 4 damping study uses it
-        (:func:`crowdstudy.physics.damping.damping_study`): with the defaults' stiff root
-        and pose springs a body held 25 cm back returns in 0.1-0.4 s whatever the damping
+        (:func:`crowdstudy.physics.damping.damping_study`): the arms at the body's k
+        (``arm_scale`` 1) and no pose damper either. With the defaults' stiff root and pose
+        springs (2000 N/m, undamped, when measured on 2026-12-03) a body held 25 cm back
+        returns in 0.1-0.4 s whatever the damping
         (d = 0.06 included; the paper's controller: 2.2 s), so the figure's contrast between
         the dampings is the paper's controller's.
         ``changes``: further fields to set."""
-        paper = {"root_translation_stiffness": 1.0e4, "root_translation_reach": 0.0, "pose_translation_stiffness": 0.0}
+        paper = {"root_translation_stiffness": 1.0e4, "root_translation_reach": 0.0, "pose_translation_stiffness": 0.0,
+                 "pose_translation_damping_scale": 0.0, "arm_scale": 1.0}
         return cls(**{**paper, **changes})
 
     def replace(self, **changes) -> "PhysicsConfig":
