@@ -21,7 +21,8 @@ def concert():
     return build_baseline(load_design(), "stationary", "D5", duration=0.3, body_model="open")
 
 
-def _run(anim, monkeypatch, threads: str, steps: int = 8, capacity: int | None = None, split: float | None = None):
+def _run(anim, monkeypatch, threads: str, steps: int = 8, capacity: int | None = None, split: float | None = None,
+         split_pcg: bool = True, config=None):
     import crowdstudy.physics.collision as collision
     import crowdstudy.physics.solver as solver
     from crowdstudy.physics.corrector import CrowdCorrector, load_bodies
@@ -30,7 +31,8 @@ def _run(anim, monkeypatch, threads: str, steps: int = 8, capacity: int | None =
     monkeypatch.setenv("CROWDSTUDY_THREADS", threads)
     monkeypatch.setattr(collision, "_MIN_SPLIT_THREADS", 0)       # split even this small scene
     monkeypatch.setattr(solver, "_MIN_CHARACTERS_PER_THREAD", 1)
-    corr = CrowdCorrector(load_bodies(anim.bodies), fps=anim.fps, n_frames=anim.n_frames, device="cpu")
+    monkeypatch.setattr(solver, "_MIN_CHARACTERS_SPLIT_PCG", 1 if split_pcg else 10 ** 9)   # the split PCG too
+    corr = CrowdCorrector(load_bodies(anim.bodies), fps=anim.fps, n_frames=anim.n_frames, device="cpu", config=config)
     if capacity is not None:
         corr.contacts = Contacts.allocate(capacity, "cpu")
     if split is not None:
@@ -66,6 +68,21 @@ def test_two_host_threads_give_the_same_bits(concert, monkeypatch, split):
     assert max(n for n, _ in one[1]) > 100           # the scene has contacts (inter-body among them)
     assert any((c["kind"] == 2).any() for _, c in one[1])
     _same(one, two)
+
+
+def test_the_split_pcg_solves_what_the_fused_one_solves(concert, monkeypatch):
+    # the PCG split over the two halves of the crowd (per-half rows and contacts, the partial
+    # dot products added in a fixed order) differs from the one-launch PCG only in the
+    # summation order of its dot products: solved tightly, both reach the same states
+    from crowdstudy.physics.config import PhysicsConfig
+
+    tight = PhysicsConfig(cg_tolerance=1e-6, cg_max_iterations=400)
+    fused = _run(concert, monkeypatch, "1", split_pcg=False, config=tight)
+    split = _run(concert, monkeypatch, "2", split_pcg=True, config=tight)
+    assert any((c["kind"] == 2).any() for _, c in fused[1])
+    assert not np.array_equal(split[0]["x"], fused[0]["x"])     # not the same code path ...
+    np.testing.assert_allclose(split[0]["x"], fused[0]["x"], rtol=0, atol=5e-5)   # ... the same solution (m; float32 CG)
+    np.testing.assert_allclose(split[0]["v"], fused[0]["v"], rtol=0, atol=5e-3)   # m/s
 
 
 def test_overflowing_contacts_drop_the_same_surplus(concert, monkeypatch):

@@ -263,21 +263,22 @@ def solver_kernels():
                 work[p] = work[p] - l * wp.transpose(o)
 
     @wp.func
-    def tree_apply(nb: int, parent: wp.array(dtype=wp.int32), r_t: wp.array(dtype=wp.vec3),
+    def tree_apply(lo: int, hi: int, parent: wp.array(dtype=wp.int32), r_t: wp.array(dtype=wp.vec3),
                    r_r: wp.array(dtype=wp.vec3), dinv: wp.array(dtype=wp.spatial_matrix),
                    lmat: wp.array(dtype=wp.spatial_matrix), omat: wp.array(dtype=wp.spatial_matrix),
                    y6: wp.array(dtype=wp.spatial_vector), z_t: wp.array(dtype=wp.vec3), z_r: wp.array(dtype=wp.vec3)):
-        """z = P r with P the inverse of every character's tree block (sequential)."""
-        for b in range(nb):
+        """z = P r on bodies [lo, hi) (whole characters) with P the inverse of every
+        character's tree block (sequential)."""
+        for b in range(lo, hi):
             rt = r_t[b]
             rr = r_r[b]
             y6[b] = wp.spatial_vector(rt[0], rt[1], rt[2], rr[0], rr[1], rr[2])
-        for bb in range(nb):
-            b = nb - 1 - bb
+        for bb in range(lo, hi):
+            b = hi - 1 - (bb - lo)
             p = parent[b]
             if p >= 0:
                 y6[p] = y6[p] - lmat[b] * y6[b]
-        for b in range(nb):
+        for b in range(lo, hi):
             p = parent[b]
             y = y6[b]
             if p >= 0:
@@ -325,7 +326,7 @@ def solver_kernels():
                       z_t: wp.array(dtype=wp.vec3), z_r: wp.array(dtype=wp.vec3)):
         """z = P r: mode 1 the per-character tree solve, mode 0 the 6x6 block Jacobi. Returns r.z."""
         if mode == 1:
-            tree_apply(nb, parent, r_t, r_r, dinv, lmat, omat, y6, z_t, z_r)
+            tree_apply(0, nb, parent, r_t, r_r, dinv, lmat, omat, y6, z_t, z_r)
         else:
             for i in range(nb):
                 ptr = p_tr[i]
@@ -410,6 +411,126 @@ def solver_kernels():
         stats[1] = rel
 
     @wp.kernel
+    def pcg_split_init_kernel(lo: int, hi: int, part: int, grad_t: wp.array(dtype=wp.vec3),
+                              grad_r: wp.array(dtype=wp.vec3), parent: wp.array(dtype=wp.int32),
+                              dinv: wp.array(dtype=wp.spatial_matrix), lmat: wp.array(dtype=wp.spatial_matrix),
+                              omat: wp.array(dtype=wp.spatial_matrix), y6: wp.array(dtype=wp.spatial_vector),
+                              x_t: wp.array(dtype=wp.vec3), x_r: wp.array(dtype=wp.vec3),
+                              r_t: wp.array(dtype=wp.vec3), r_r: wp.array(dtype=wp.vec3),
+                              z_t: wp.array(dtype=wp.vec3), z_r: wp.array(dtype=wp.vec3),
+                              p_t: wp.array(dtype=wp.vec3), p_r: wp.array(dtype=wp.vec3),
+                              sums: wp.array(dtype=float)):
+        """Split PCG, start, on bodies [lo, hi) (whole characters; one thread): x = 0,
+        r = -g, z = P r (the character preconditioner), the direction buffer p zeroed;
+        partial sums |r|^2 -> sums[4 part], r.z -> sums[4 part + 1]."""
+        bn = float(0.0)
+        for i in range(lo, hi):
+            x_t[i] = wp.vec3(0.0, 0.0, 0.0)
+            x_r[i] = wp.vec3(0.0, 0.0, 0.0)
+            p_t[i] = wp.vec3(0.0, 0.0, 0.0)
+            p_r[i] = wp.vec3(0.0, 0.0, 0.0)
+            rt = -grad_t[i]
+            rr = -grad_r[i]
+            r_t[i] = rt
+            r_r[i] = rr
+            bn += wp.dot(rt, rt) + wp.dot(rr, rr)
+        tree_apply(lo, hi, parent, r_t, r_r, dinv, lmat, omat, y6, z_t, z_r)
+        rz = float(0.0)
+        for i in range(lo, hi):
+            rz += wp.dot(r_t[i], z_t[i]) + wp.dot(r_r[i], z_r[i])
+        sums[4 * part] = bn
+        sums[4 * part + 1] = rz
+
+    @wp.kernel
+    def pcg_split_matvec_kernel(lo: int, hi: int, part: int, beta: float, n_list: int,
+                                contact_list: wp.array(dtype=wp.int32),
+                                hess_a: wp.array(dtype=wp.mat33), hess_b: wp.array(dtype=wp.mat33),
+                                hess_c: wp.array(dtype=wp.mat33), parent: wp.array(dtype=wp.int32),
+                                lever_p: wp.array(dtype=wp.vec3), lever_c: wp.array(dtype=wp.vec3),
+                                ctrl_c: wp.array(dtype=float), k_joint: float,
+                                c_a: wp.array(dtype=wp.int32), c_b: wp.array(dtype=wp.int32),
+                                u_at: wp.array(dtype=wp.vec3), u_ar: wp.array(dtype=wp.vec3),
+                                u_bt: wp.array(dtype=wp.vec3), u_br: wp.array(dtype=wp.vec3),
+                                k_eff: wp.array(dtype=float),
+                                z_t: wp.array(dtype=wp.vec3), z_r: wp.array(dtype=wp.vec3),
+                                po_t: wp.array(dtype=wp.vec3), po_r: wp.array(dtype=wp.vec3),
+                                p_t: wp.array(dtype=wp.vec3), p_r: wp.array(dtype=wp.vec3),
+                                q_t: wp.array(dtype=wp.vec3), q_r: wp.array(dtype=wp.vec3),
+                                sums: wp.array(dtype=float)):
+        """Split PCG, one iteration's direction and product on bodies [lo, hi) (one
+        thread): p = z + beta p_old (``po``, the previous direction buffer) into ``p``, then
+        q = H p for these rows with the same terms in the same order as ``matvec``; the
+        body-body contacts are the first ``n_list`` of ``contact_list`` (those with a body
+        in the range, in contact order), and a body of the other range is read as
+        z + beta p_old, which that range's thread does not write in this phase. Partial p.q
+        -> sums[4 part + 2]."""
+        for i in range(lo, hi):
+            p_t[i] = z_t[i] + beta * po_t[i]
+            p_r[i] = z_r[i] + beta * po_r[i]
+        for i in range(lo, hi):
+            bm = hess_b[i]
+            q_t[i] = hess_a[i] * p_t[i] + bm * p_r[i]
+            q_r[i] = wp.transpose(bm) * p_t[i] + hess_c[i] * p_r[i]
+        for c in range(lo, hi):
+            pa = parent[c]
+            if pa >= 0:
+                rp = lever_p[c]
+                rc = lever_c[c]
+                cc = ctrl_c[c]
+                zc = wp.cross(rc, p_r[c]) - p_t[c]
+                zp = p_t[pa] - wp.cross(rp, p_r[pa])
+                q_t[pa] = q_t[pa] + k_joint * zc
+                q_r[pa] = q_r[pa] + k_joint * wp.cross(rp, zc) - cc * p_r[c]
+                q_t[c] = q_t[c] - k_joint * zp
+                q_r[c] = q_r[c] - k_joint * wp.cross(rc, zp) - cc * p_r[pa]
+        for j in range(n_list):
+            i = contact_list[j]
+            a = c_a[i]
+            b = c_b[i]
+            k = k_eff[i]
+            if a >= lo and a < hi:
+                sb = wp.dot(u_bt[i], z_t[b] + beta * po_t[b]) + wp.dot(u_br[i], z_r[b] + beta * po_r[b])
+                q_t[a] = q_t[a] + (k * sb) * u_at[i]
+                q_r[a] = q_r[a] + (k * sb) * u_ar[i]
+            if b >= lo and b < hi:
+                sa = wp.dot(u_at[i], z_t[a] + beta * po_t[a]) + wp.dot(u_ar[i], z_r[a] + beta * po_r[a])
+                q_t[b] = q_t[b] + (k * sa) * u_bt[i]
+                q_r[b] = q_r[b] + (k * sa) * u_br[i]
+        pq = float(0.0)
+        for i in range(lo, hi):
+            pq += wp.dot(p_t[i], q_t[i]) + wp.dot(p_r[i], q_r[i])
+        sums[4 * part + 2] = pq
+
+    @wp.kernel
+    def pcg_split_update_kernel(lo: int, hi: int, part: int, alpha: float,
+                                p_t: wp.array(dtype=wp.vec3), p_r: wp.array(dtype=wp.vec3),
+                                q_t: wp.array(dtype=wp.vec3), q_r: wp.array(dtype=wp.vec3),
+                                x_t: wp.array(dtype=wp.vec3), x_r: wp.array(dtype=wp.vec3),
+                                r_t: wp.array(dtype=wp.vec3), r_r: wp.array(dtype=wp.vec3),
+                                parent: wp.array(dtype=wp.int32), dinv: wp.array(dtype=wp.spatial_matrix),
+                                lmat: wp.array(dtype=wp.spatial_matrix), omat: wp.array(dtype=wp.spatial_matrix),
+                                y6: wp.array(dtype=wp.spatial_vector),
+                                z_t: wp.array(dtype=wp.vec3), z_r: wp.array(dtype=wp.vec3),
+                                sums: wp.array(dtype=float)):
+        """Split PCG, one iteration's step on bodies [lo, hi) (one thread): x += alpha p,
+        r -= alpha q, z = P r; partial |r|^2 -> sums[4 part + 3], r.z -> sums[4 part + 1]."""
+        rr2 = float(0.0)
+        for i in range(lo, hi):
+            x_t[i] = x_t[i] + alpha * p_t[i]
+            x_r[i] = x_r[i] + alpha * p_r[i]
+            rt = r_t[i] - alpha * q_t[i]
+            rr = r_r[i] - alpha * q_r[i]
+            r_t[i] = rt
+            r_r[i] = rr
+            rr2 += wp.dot(rt, rt) + wp.dot(rr, rr)
+        tree_apply(lo, hi, parent, r_t, r_r, dinv, lmat, omat, y6, z_t, z_r)
+        rz = float(0.0)
+        for i in range(lo, hi):
+            rz += wp.dot(r_t[i], z_t[i]) + wp.dot(r_r[i], z_r[i])
+        sums[4 * part + 3] = rr2
+        sums[4 * part + 1] = rz
+
+    @wp.kernel
     def triplets_bodies_kernel(nb: int, hess_a: wp.array(dtype=wp.mat33), hess_b: wp.array(dtype=wp.mat33),
                                hess_c: wp.array(dtype=wp.mat33), parent: wp.array(dtype=wp.int32),
                                lever_p: wp.array(dtype=wp.vec3), lever_c: wp.array(dtype=wp.vec3),
@@ -492,7 +613,9 @@ def solver_kernels():
 
     return SimpleNamespace(wp=wp, contact_assemble_kernel=contact_assemble_kernel, precond_kernel=precond_kernel,
                            tree_factor_kernel=tree_factor_kernel, tree_precond_kernel=tree_precond_kernel,
-                           pcg_fused_kernel=pcg_fused_kernel, triplets_bodies_kernel=triplets_bodies_kernel,
+                           pcg_fused_kernel=pcg_fused_kernel, pcg_split_init_kernel=pcg_split_init_kernel,
+                           pcg_split_matvec_kernel=pcg_split_matvec_kernel,
+                           pcg_split_update_kernel=pcg_split_update_kernel, triplets_bodies_kernel=triplets_bodies_kernel,
                            triplets_contacts_kernel=triplets_contacts_kernel, unpack_kernel=unpack_kernel)
 
 

@@ -19,8 +19,11 @@
 On the CPU with two host threads (:func:`~crowdstudy.warp_runtime.host_threads`), the
 per-body and per-character kernels (prediction and body terms, the tree factorisation, the
 update) run on the two halves of the crowd at once; they write disjoint bodies, so the
-result is the same bits as one thread. The PCG stays one thread (its dot products are
-global).
+result is the same bits as one thread. From ``_MIN_CHARACTERS_SPLIT_PCG`` characters on, the
+PCG is split the same way (``Solver._solve_split``: each half's rows with the contacts that
+touch them, the partial dot products added in a fixed order on the host), whatever the
+threads at hand, so that a crowd gives the same bits on any machine; below it, the fused
+one-launch PCG.
 
 Linear solvers (``linear_solver``):
 
@@ -59,6 +62,11 @@ FEET_TRANSLATION_JOINTS = (7, 8, 10, 11)
 
 #: below this many characters per half the two-thread split costs more than it saves
 _MIN_CHARACTERS_PER_THREAD = 16
+#: from this many characters on, the CPU PCG runs split over the two halves of the crowd
+#: (``Solver._solve_split``); below, its per-iteration hand-overs cost more than the second
+#: core saves (measured 2026-12-04: 60 characters 10.4 ms per step against 4.5, 200 14.3 against
+#: 13.1, 1,000 47.6-49.2 against 52.8-53.3, two host threads)
+_MIN_CHARACTERS_SPLIT_PCG = 500
 
 
 class Solver:
@@ -106,6 +114,9 @@ class Solver:
         self.ctrl_c = wp.zeros(nb, dtype=wp.float32, device=dev)
         self.dx, self.dw = z3(), z3()
         self.work = [z3() for _ in range(8)]
+        self.work_split = [z3(), z3()]     # the split PCG's second direction buffer (t, r)
+        self.split_sums = wp.zeros(8, dtype=wp.float32, device=dev)
+        self._split_lists = None           # its per-half contact lists
         self.stats = wp.zeros(2, dtype=wp.float32, device=dev)
         s6 = lambda: wp.zeros(nb, dtype=wp.spatial_matrix, device=dev)  # noqa: E731
         self.tree_work, self.tree_dinv, self.tree_l, self.tree_o = s6(), s6(), s6(), s6()
@@ -210,7 +221,10 @@ class Solver:
         """Solve H [dx; dw] = -g into ``self.dx``, ``self.dw``."""
         wp, ks, m, cfg = self.wp, self.ks, self.model, self.config
         dev, nb = m.device, m.n_bodies
-        if self.linear_solver == "fused":
+        if self.linear_solver == "fused" and self._split_pcg():
+            self._factor_tree()
+            self._solve_split(contacts)
+        elif self.linear_solver == "fused":
             mode = 1 if self.preconditioner == "character" else 0
             if mode:
                 self._factor_tree()
@@ -267,6 +281,98 @@ class Solver:
             return
         half = n // 2
         run_parallel(lambda: run(0, half), lambda: run(half, n))
+
+    def _split_pcg(self) -> bool:
+        """Whether the CPU PCG runs split over the two halves of the crowd (the character
+        preconditioner on the CPU with at least ``_MIN_CHARACTERS_SPLIT_PCG`` characters). It depends on the crowd only, never on the threads at hand, so a
+        crowd gives the same bits on any machine: with one host thread the halves run one
+        after the other."""
+        return (self.model.device == "cpu" and self.preconditioner == "character"
+                and self.model.n_characters >= _MIN_CHARACTERS_SPLIT_PCG)
+
+    def _solve_split(self, contacts) -> None:
+        """The PCG of ``pcg_fused_kernel`` over the two halves of the crowd (the bodies of
+        characters [0, n/2) and [n/2, n)): each phase of an iteration runs on both halves
+        at once (:func:`~crowdstudy.warp_runtime.run_parallel`), each half with the
+        body-body contacts that touch it, in contact order; the host adds the two partial
+        dot products in a fixed order and computes alpha and beta in float32. A row's
+        matrix-vector product is the fused kernel's term for term; the dot products differ
+        from the fused kernel's in their summation order only."""
+        wp, ks, m, cfg = self.wp, self.ks, self.model, self.config
+        dev, nj = m.device, m.n_joints
+        cut = (m.n_characters // 2) * nj
+        halves = ((0, 0, cut), (1, cut, m.n_bodies))
+        r_t, r_r, z_t, z_r, p_t, p_r, q_t, q_r = self.work
+        po_t, po_r = self.work_split
+        sums = self.split_sums
+        parent, f32 = m.wp["body_parent"], np.float32
+        # the body-body contacts of each half (a contact across the cut is in both)
+        n_act = contacts.n_active()
+        a = contacts.body_a.numpy()[:n_act]
+        b = contacts.body_b.numpy()[:n_act]
+        coupled = (b >= 0) & (self.k_eff.numpy()[:n_act] > 0)
+        if self._split_lists is None or self._split_lists[0].shape[0] < contacts.capacity:
+            self._split_lists = [wp.zeros(contacts.capacity, dtype=wp.int32, device=dev) for _ in range(2)]
+        counts = []
+        for lst, mine in zip(self._split_lists, (coupled & ((a < cut) | (b < cut)), coupled & ((a >= cut) | (b >= cut)))):
+            idx = np.flatnonzero(mine).astype(np.int32)
+            lst.numpy()[:len(idx)] = idx
+            counts.append(len(idx))
+
+        def record(kernel, inputs):
+            return wp.launch(kernel, 1, inputs, device=dev, record_cmd=True)
+
+        init, matvec, update = [], [], []
+        for (part, lo, hi), n_list, lst in zip(halves, counts, self._split_lists):
+            init.append(record(ks.pcg_split_init_kernel,
+                               [lo, hi, part, self.grad_t, self.grad_r, parent, self.tree_dinv, self.tree_l,
+                                self.tree_o, self.y6, self.dx, self.dw, r_t, r_r, z_t, z_r, po_t, po_r, sums]))
+            mv, up = [], []
+            for (pot, por), (pnt, pnr) in (((po_t, po_r), (p_t, p_r)), ((p_t, p_r), (po_t, po_r))):
+                mv.append(record(ks.pcg_split_matvec_kernel,
+                                 [lo, hi, part, 0.0, n_list, lst, self.hess_a, self.hess_b, self.hess_c, parent,
+                                  self.lever_p, self.lever_c, self.ctrl_c, float(cfg.joint_stiffness),
+                                  contacts.body_a, contacts.body_b, self.u_at, self.u_ar, self.u_bt, self.u_br,
+                                  self.k_eff, z_t, z_r, pot, por, pnt, pnr, q_t, q_r, sums]))
+                up.append(record(ks.pcg_split_update_kernel,
+                                 [lo, hi, part, 0.0, pnt, pnr, q_t, q_r, self.dx, self.dw, r_t, r_r, parent,
+                                  self.tree_dinv, self.tree_l, self.tree_o, self.y6, z_t, z_r, sums]))
+            matvec.append(mv)
+            update.append(up)
+
+        def both(cmds, value=None) -> None:
+            if value is not None:
+                for cmd in cmds:
+                    cmd.set_param_at_index(3, value)
+            run_parallel(cmds[0].launch, cmds[1].launch)
+
+        both(init)
+        s = sums.numpy()
+        bnorm2 = f32(s[0]) + f32(s[4])
+        rz = f32(s[1]) + f32(s[5])
+        rel = f32(1.0) if bnorm2 > 0 else f32(0.0)
+        tol = f32(cfg.cg_tolerance)
+        tol2 = tol * tol * bnorm2
+        beta = f32(0.0)
+        it, buf = 0, 0
+        while it < int(cfg.cg_max_iterations) and rel > tol:
+            both([matvec[0][buf], matvec[1][buf]], float(beta))
+            s = sums.numpy()
+            pq = f32(s[2]) + f32(s[6])
+            if not pq > 0:
+                break
+            both([update[0][buf], update[1][buf]], float(rz / pq))
+            s = sums.numpy()
+            rr2 = f32(s[3]) + f32(s[7])
+            it += 1
+            rel = np.sqrt(rr2 / bnorm2, dtype=f32)
+            if rr2 <= tol2:
+                break
+            rz_new = f32(s[1]) + f32(s[5])
+            beta = rz_new / rz
+            rz = rz_new
+            buf = 1 - buf
+        self.last_cg = (it, float(rel))
 
     def _factor_tree(self) -> None:
         m, cfg = self.model, self.config
