@@ -155,20 +155,19 @@ def solver_kernels():
         p_tt[i] = ai + aib * si * wp.transpose(aib)
 
     @wp.func
-    def matvec(nb: int, n_contacts: int, x_t: wp.array(dtype=wp.vec3), x_r: wp.array(dtype=wp.vec3),
-               hess_a: wp.array(dtype=wp.mat33), hess_b: wp.array(dtype=wp.mat33), hess_c: wp.array(dtype=wp.mat33),
-               parent: wp.array(dtype=wp.int32), lever_p: wp.array(dtype=wp.vec3), lever_c: wp.array(dtype=wp.vec3),
-               ctrl_c: wp.array(dtype=float), k_joint: float,
-               c_a: wp.array(dtype=wp.int32), c_b: wp.array(dtype=wp.int32),
-               u_at: wp.array(dtype=wp.vec3), u_ar: wp.array(dtype=wp.vec3),
-               u_bt: wp.array(dtype=wp.vec3), u_br: wp.array(dtype=wp.vec3), k_eff: wp.array(dtype=float),
-               y_t: wp.array(dtype=wp.vec3), y_r: wp.array(dtype=wp.vec3)):
-        """y = H x, sequentially: diagonal blocks, joint couplings, contact couplings."""
-        for i in range(nb):
+    def body_rows(lo: int, hi: int, x_t: wp.array(dtype=wp.vec3), x_r: wp.array(dtype=wp.vec3),
+                  hess_a: wp.array(dtype=wp.mat33), hess_b: wp.array(dtype=wp.mat33),
+                  hess_c: wp.array(dtype=wp.mat33), parent: wp.array(dtype=wp.int32),
+                  lever_p: wp.array(dtype=wp.vec3), lever_c: wp.array(dtype=wp.vec3),
+                  ctrl_c: wp.array(dtype=float), k_joint: float,
+                  y_t: wp.array(dtype=wp.vec3), y_r: wp.array(dtype=wp.vec3)):
+        """y = (diagonal blocks + joint couplings) x on bodies [lo, hi) (whole characters:
+        a joint's parent is in its child's character), sequentially."""
+        for i in range(lo, hi):
             bm = hess_b[i]
             y_t[i] = hess_a[i] * x_t[i] + bm * x_r[i]
             y_r[i] = wp.transpose(bm) * x_t[i] + hess_c[i] * x_r[i]
-        for c in range(nb):
+        for c in range(lo, hi):
             p = parent[c]
             if p >= 0:
                 rp = lever_p[c]
@@ -180,6 +179,19 @@ def solver_kernels():
                 y_r[p] = y_r[p] + k_joint * wp.cross(rp, zc) - cc * x_r[c]
                 y_t[c] = y_t[c] - k_joint * zp
                 y_r[c] = y_r[c] - k_joint * wp.cross(rc, zp) - cc * x_r[p]
+        return 0
+
+    @wp.func
+    def matvec(nb: int, n_contacts: int, x_t: wp.array(dtype=wp.vec3), x_r: wp.array(dtype=wp.vec3),
+               hess_a: wp.array(dtype=wp.mat33), hess_b: wp.array(dtype=wp.mat33), hess_c: wp.array(dtype=wp.mat33),
+               parent: wp.array(dtype=wp.int32), lever_p: wp.array(dtype=wp.vec3), lever_c: wp.array(dtype=wp.vec3),
+               ctrl_c: wp.array(dtype=float), k_joint: float,
+               c_a: wp.array(dtype=wp.int32), c_b: wp.array(dtype=wp.int32),
+               u_at: wp.array(dtype=wp.vec3), u_ar: wp.array(dtype=wp.vec3),
+               u_bt: wp.array(dtype=wp.vec3), u_br: wp.array(dtype=wp.vec3), k_eff: wp.array(dtype=float),
+               y_t: wp.array(dtype=wp.vec3), y_r: wp.array(dtype=wp.vec3)):
+        """y = H x, sequentially: diagonal blocks, joint couplings, contact couplings."""
+        body_rows(0, nb, x_t, x_r, hess_a, hess_b, hess_c, parent, lever_p, lever_c, ctrl_c, k_joint, y_t, y_r)
         for i in range(n_contacts):
             b = c_b[i]
             k = k_eff[i]
@@ -318,6 +330,48 @@ def solver_kernels():
             z[b] = alpha * work[b] + beta * y[b]
 
     @wp.func
+    def dot6(lo: int, hi: int, a_t: wp.array(dtype=wp.vec3), a_r: wp.array(dtype=wp.vec3),
+             b_t: wp.array(dtype=wp.vec3), b_r: wp.array(dtype=wp.vec3)):
+        """sum over bodies [lo, hi) of a . b (translation and rotation parts), in order."""
+        total = float(0.0)
+        for i in range(lo, hi):
+            total += wp.dot(a_t[i], b_t[i]) + wp.dot(a_r[i], b_r[i])
+        return total
+
+    @wp.func
+    def pcg_start(lo: int, hi: int, grad_t: wp.array(dtype=wp.vec3), grad_r: wp.array(dtype=wp.vec3),
+                  x_t: wp.array(dtype=wp.vec3), x_r: wp.array(dtype=wp.vec3),
+                  r_t: wp.array(dtype=wp.vec3), r_r: wp.array(dtype=wp.vec3)):
+        """x = 0, r = -g on bodies [lo, hi); returns their |r|^2."""
+        bn = float(0.0)
+        for i in range(lo, hi):
+            x_t[i] = wp.vec3(0.0, 0.0, 0.0)
+            x_r[i] = wp.vec3(0.0, 0.0, 0.0)
+            rt = -grad_t[i]
+            rr = -grad_r[i]
+            r_t[i] = rt
+            r_r[i] = rr
+            bn += wp.dot(rt, rt) + wp.dot(rr, rr)
+        return bn
+
+    @wp.func
+    def pcg_advance(lo: int, hi: int, alpha: float, p_t: wp.array(dtype=wp.vec3), p_r: wp.array(dtype=wp.vec3),
+                    q_t: wp.array(dtype=wp.vec3), q_r: wp.array(dtype=wp.vec3),
+                    x_t: wp.array(dtype=wp.vec3), x_r: wp.array(dtype=wp.vec3),
+                    r_t: wp.array(dtype=wp.vec3), r_r: wp.array(dtype=wp.vec3)):
+        """x += alpha p, r -= alpha q on bodies [lo, hi); returns their new |r|^2."""
+        rr2 = float(0.0)
+        for i in range(lo, hi):
+            x_t[i] = x_t[i] + alpha * p_t[i]
+            x_r[i] = x_r[i] + alpha * p_r[i]
+            rt = r_t[i] - alpha * q_t[i]
+            rr = r_r[i] - alpha * q_r[i]
+            r_t[i] = rt
+            r_r[i] = rr
+            rr2 += wp.dot(rt, rt) + wp.dot(rr, rr)
+        return rr2
+
+    @wp.func
     def apply_precond(mode: int, nb: int, parent: wp.array(dtype=wp.int32),
                       r_t: wp.array(dtype=wp.vec3), r_r: wp.array(dtype=wp.vec3),
                       p_tt: wp.array(dtype=wp.mat33), p_tr: wp.array(dtype=wp.mat33), p_rr: wp.array(dtype=wp.mat33),
@@ -332,10 +386,7 @@ def solver_kernels():
                 ptr = p_tr[i]
                 z_t[i] = p_tt[i] * r_t[i] + ptr * r_r[i]
                 z_r[i] = wp.transpose(ptr) * r_t[i] + p_rr[i] * r_r[i]
-        rz = float(0.0)
-        for i in range(nb):
-            rz += wp.dot(r_t[i], z_t[i]) + wp.dot(r_r[i], z_r[i])
-        return rz
+        return dot6(0, nb, r_t, r_r, z_t, z_r)
 
     @wp.kernel
     def pcg_fused_kernel(nb: int, count: wp.array(dtype=wp.int32), capacity: int,
@@ -360,15 +411,7 @@ def solver_kernels():
                          stats: wp.array(dtype=float)):
         """PCG for H x = -g in one launch (one thread; for the CPU). stats = (iterations, |r|/|b|)."""
         nc = wp.min(count[0], capacity)
-        bnorm2 = float(0.0)
-        for i in range(nb):
-            x_t[i] = wp.vec3(0.0, 0.0, 0.0)
-            x_r[i] = wp.vec3(0.0, 0.0, 0.0)
-            rt = -grad_t[i]
-            rr = -grad_r[i]
-            r_t[i] = rt
-            r_r[i] = rr
-            bnorm2 += wp.dot(rt, rt) + wp.dot(rr, rr)
+        bnorm2 = pcg_start(0, nb, grad_t, grad_r, x_t, x_r, r_t, r_r)
         rz = apply_precond(precond_mode, nb, parent, r_t, r_r, p_tt, p_tr, p_rr, dinv, lmat, omat, y6, z_t, z_r)
         for i in range(nb):
             p_t[i] = z_t[i]
@@ -381,21 +424,11 @@ def solver_kernels():
         while it < max_iter and rel > tol:
             matvec(nb, nc, p_t, p_r, hess_a, hess_b, hess_c, parent, lever_p, lever_c, ctrl_c, k_joint,
                    c_a, c_b, u_at, u_ar, u_bt, u_br, k_eff, q_t, q_r)
-            pq = float(0.0)
-            for i in range(nb):
-                pq += wp.dot(p_t[i], q_t[i]) + wp.dot(p_r[i], q_r[i])
+            pq = dot6(0, nb, p_t, p_r, q_t, q_r)
             if pq <= 0.0:
                 break
             alpha = rz / pq
-            rr2 = float(0.0)
-            for i in range(nb):
-                x_t[i] = x_t[i] + alpha * p_t[i]
-                x_r[i] = x_r[i] + alpha * p_r[i]
-                rt = r_t[i] - alpha * q_t[i]
-                rr = r_r[i] - alpha * q_r[i]
-                r_t[i] = rt
-                r_r[i] = rr
-                rr2 += wp.dot(rt, rt) + wp.dot(rr, rr)
+            rr2 = pcg_advance(0, nb, alpha, p_t, p_r, q_t, q_r, x_t, x_r, r_t, r_r)
             it += 1
             rel = wp.sqrt(rr2 / bnorm2)
             if rr2 <= tol2:
@@ -423,23 +456,12 @@ def solver_kernels():
         """Split PCG, start, on bodies [lo, hi) (whole characters; one thread): x = 0,
         r = -g, z = P r (the character preconditioner), the direction buffer p zeroed;
         partial sums |r|^2 -> sums[4 part], r.z -> sums[4 part + 1]."""
-        bn = float(0.0)
         for i in range(lo, hi):
-            x_t[i] = wp.vec3(0.0, 0.0, 0.0)
-            x_r[i] = wp.vec3(0.0, 0.0, 0.0)
             p_t[i] = wp.vec3(0.0, 0.0, 0.0)
             p_r[i] = wp.vec3(0.0, 0.0, 0.0)
-            rt = -grad_t[i]
-            rr = -grad_r[i]
-            r_t[i] = rt
-            r_r[i] = rr
-            bn += wp.dot(rt, rt) + wp.dot(rr, rr)
+        sums[4 * part] = pcg_start(lo, hi, grad_t, grad_r, x_t, x_r, r_t, r_r)
         tree_apply(lo, hi, parent, r_t, r_r, dinv, lmat, omat, y6, z_t, z_r)
-        rz = float(0.0)
-        for i in range(lo, hi):
-            rz += wp.dot(r_t[i], z_t[i]) + wp.dot(r_r[i], z_r[i])
-        sums[4 * part] = bn
-        sums[4 * part + 1] = rz
+        sums[4 * part + 1] = dot6(lo, hi, r_t, r_r, z_t, z_r)
 
     @wp.kernel
     def pcg_split_matvec_kernel(lo: int, hi: int, part: int, beta: float, n_list: int,
@@ -467,22 +489,7 @@ def solver_kernels():
         for i in range(lo, hi):
             p_t[i] = z_t[i] + beta * po_t[i]
             p_r[i] = z_r[i] + beta * po_r[i]
-        for i in range(lo, hi):
-            bm = hess_b[i]
-            q_t[i] = hess_a[i] * p_t[i] + bm * p_r[i]
-            q_r[i] = wp.transpose(bm) * p_t[i] + hess_c[i] * p_r[i]
-        for c in range(lo, hi):
-            pa = parent[c]
-            if pa >= 0:
-                rp = lever_p[c]
-                rc = lever_c[c]
-                cc = ctrl_c[c]
-                zc = wp.cross(rc, p_r[c]) - p_t[c]
-                zp = p_t[pa] - wp.cross(rp, p_r[pa])
-                q_t[pa] = q_t[pa] + k_joint * zc
-                q_r[pa] = q_r[pa] + k_joint * wp.cross(rp, zc) - cc * p_r[c]
-                q_t[c] = q_t[c] - k_joint * zp
-                q_r[c] = q_r[c] - k_joint * wp.cross(rc, zp) - cc * p_r[pa]
+        body_rows(lo, hi, p_t, p_r, hess_a, hess_b, hess_c, parent, lever_p, lever_c, ctrl_c, k_joint, q_t, q_r)
         for j in range(n_list):
             i = contact_list[j]
             a = c_a[i]
@@ -496,10 +503,7 @@ def solver_kernels():
                 sa = wp.dot(u_at[i], z_t[a] + beta * po_t[a]) + wp.dot(u_ar[i], z_r[a] + beta * po_r[a])
                 q_t[b] = q_t[b] + (k * sa) * u_bt[i]
                 q_r[b] = q_r[b] + (k * sa) * u_br[i]
-        pq = float(0.0)
-        for i in range(lo, hi):
-            pq += wp.dot(p_t[i], q_t[i]) + wp.dot(p_r[i], q_r[i])
-        sums[4 * part + 2] = pq
+        sums[4 * part + 2] = dot6(lo, hi, p_t, p_r, q_t, q_r)
 
     @wp.kernel
     def pcg_split_update_kernel(lo: int, hi: int, part: int, alpha: float,
@@ -514,21 +518,11 @@ def solver_kernels():
                                 sums: wp.array(dtype=float)):
         """Split PCG, one iteration's step on bodies [lo, hi) (one thread): x += alpha p,
         r -= alpha q, z = P r; partial |r|^2 -> sums[4 part + 3], r.z -> sums[4 part + 1]."""
-        rr2 = float(0.0)
-        for i in range(lo, hi):
-            x_t[i] = x_t[i] + alpha * p_t[i]
-            x_r[i] = x_r[i] + alpha * p_r[i]
-            rt = r_t[i] - alpha * q_t[i]
-            rr = r_r[i] - alpha * q_r[i]
-            r_t[i] = rt
-            r_r[i] = rr
-            rr2 += wp.dot(rt, rt) + wp.dot(rr, rr)
+        # ``wp`` named in the body makes it a closure variable of the kernel, which Warp
+        # needs to evaluate the (string) annotations above
+        sums[4 * part + 3] = wp.float32(pcg_advance(lo, hi, alpha, p_t, p_r, q_t, q_r, x_t, x_r, r_t, r_r))
         tree_apply(lo, hi, parent, r_t, r_r, dinv, lmat, omat, y6, z_t, z_r)
-        rz = float(0.0)
-        for i in range(lo, hi):
-            rz += wp.dot(r_t[i], z_t[i]) + wp.dot(r_r[i], z_r[i])
-        sums[4 * part + 3] = rr2
-        sums[4 * part + 1] = rz
+        sums[4 * part + 1] = dot6(lo, hi, r_t, r_r, z_t, z_r)
 
     @wp.kernel
     def triplets_bodies_kernel(nb: int, hess_a: wp.array(dtype=wp.mat33), hess_b: wp.array(dtype=wp.mat33),
