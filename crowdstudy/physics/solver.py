@@ -65,7 +65,7 @@ _MIN_CHARACTERS_PER_THREAD = 16
 #: from this many characters on, the CPU PCG runs split over the two halves of the crowd
 #: (``Solver._solve_split``); below, its per-iteration hand-overs cost more than the second
 #: core saves (measured 2026-12-04: 60 characters 10.4 ms per step against 4.5, 200 14.3 against
-#: 13.1, 1,000 47.6-49.2 against 52.8-53.3, two host threads)
+#: 13.1, 1,000 47.4-49.2 against 51.7-53.3, two host threads)
 _MIN_CHARACTERS_SPLIT_PCG = 500
 
 
@@ -284,9 +284,9 @@ class Solver:
 
     def _split_pcg(self) -> bool:
         """Whether the CPU PCG runs split over the two halves of the crowd (the character
-        preconditioner on the CPU with at least ``_MIN_CHARACTERS_SPLIT_PCG`` characters). It depends on the crowd only, never on the threads at hand, so a
-        crowd gives the same bits on any machine: with one host thread the halves run one
-        after the other."""
+        preconditioner on the CPU with at least ``_MIN_CHARACTERS_SPLIT_PCG`` characters).
+        It depends on the crowd only, never on the threads at hand, so a crowd gives the
+        same bits on any machine: with one host thread the halves run one after the other."""
         return (self.model.device == "cpu" and self.preconditioner == "character"
                 and self.model.n_characters >= _MIN_CHARACTERS_SPLIT_PCG)
 
