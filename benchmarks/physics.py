@@ -375,7 +375,7 @@ def compare_cg(anim, repeat: int = 10) -> list[dict]:
 # --- MuJoCo peer ----------------------------------------------------------------------------
 #
 # The same characters as a MuJoCo model, built from the SAME crowdstudy Model as Ours
-# (ModelBuilder + capsule_skin at PhysicsConfig.mesh_skin_percentile):
+# (ModelBuilder + PhysicsConfig.mesh_skin):
 #
 # * per bone two capsules on the same segment: a "core" of the bare radius (density ->
 #   the same masses and inertias; ground contacts and self contacts, like ours) and a
@@ -496,7 +496,6 @@ class MujocoScene:
         from crowdstudy.body.skeleton import PARENTS
         from crowdstudy.scene import static_walls_from_meta
         from crowdstudy.physics.corrector import load_bodies
-        from crowdstudy.body.capsules import capsule_skin
         from crowdstudy.physics.model import ModelBuilder
 
         self.mujoco = mujoco
@@ -506,7 +505,7 @@ class MujocoScene:
         bodies = load_bodies(anim.bodies)
         builder = ModelBuilder()
         for b in bodies:
-            builder.add_character(b.rest_joints, b.capsules, capsule_skin(b, config.mesh_skin_percentile))
+            builder.add_character(b.rest_joints, b.capsules, config.mesh_skin(b))
         cm = self.cs_model = builder.finalize(density=config.density, device="cpu")
         n, nj = cm.n_characters, cm.n_joints
         self.n, self.nj = n, nj

@@ -131,3 +131,48 @@ def test_bad_capsule_input():
     body = cb.load_body({"model": "open", "sex": "male"})
     with pytest.raises(InvalidInputError, match="resolution"):
         capsule_mesh_iou(body, resolution=0.0)
+
+
+class _SkinBody:
+    """24 vertical capsules (radius 5 cm) with ten vertices each at known distances outside."""
+
+    def __init__(self, excess_cm):
+        self.capsules = Capsules(start=np.zeros((24, 3)), end=np.tile([0.0, 0.0, 0.1], (24, 1)),
+                                 radius=np.full(24, 0.05))
+        angle = np.linspace(0.0, 2.0 * np.pi, 10, endpoint=False)
+        verts, owner = [], []
+        for j in range(24):
+            r = 0.05 + np.asarray(excess_cm[j]) / 100.0
+            verts.append(np.stack([r * np.cos(angle), r * np.sin(angle), np.full(10, 0.05)], axis=1))
+            owner += [j] * 10
+        self.rest_vertices = np.concatenate(verts)
+        self.weights = np.eye(24)[owner]
+
+
+def test_capsule_skin_is_the_percentile_capped_and_halved_on_the_hands():
+    from crowdstudy.body.capsules import HAND_BONES, capsule_skin
+    from crowdstudy.body.skeleton import JOINT_NAMES
+    from crowdstudy.physics.config import PhysicsConfig
+
+    rng = np.random.default_rng(3)
+    excess = rng.uniform(0.0, 4.0, size=(24, 10))        # cm beyond each capsule
+    excess[5] = -1.0                                       # bone 5's mesh lies inside its capsule
+    body = _SkinBody(excess)
+    expected = np.clip(np.percentile(excess / 100.0, 90, axis=1), 0.0, None)
+    np.testing.assert_allclose(capsule_skin(body, 90.0, max_skin=0.04, hand_scale=1.0), np.minimum(expected, 0.04),
+                               atol=1e-12)
+    skin = capsule_skin(body)                              # defaults: the physics' 1.5 cm cap, hands halved
+    capped = np.minimum(expected, 0.015)
+    assert sorted(JOINT_NAMES[j] for j in HAND_BONES) == ["left_hand", "left_wrist", "right_hand", "right_wrist"]
+    others = [j for j in range(24) if j not in HAND_BONES]
+    np.testing.assert_allclose(skin[others], capped[others], atol=1e-12)
+    np.testing.assert_allclose(skin[list(HAND_BONES)], 0.5 * capped[list(HAND_BONES)], atol=1e-12)
+    assert skin[5] == 0.0 and skin.max() <= 0.015
+    # the physics reads its skin through its configuration
+    cfg = PhysicsConfig(mesh_skin_percentile=50.0, mesh_skin_max=0.03, mesh_skin_hand_scale=0.25)
+    np.testing.assert_allclose(cfg.mesh_skin(body), capsule_skin(body, 50.0, max_skin=0.03, hand_scale=0.25))
+    assert np.all(PhysicsConfig(mesh_skin_percentile=0.0).mesh_skin(body) == 0.0)
+    with pytest.raises(InvalidInputError, match="hand_scale"):
+        capsule_skin(body, hand_scale=-1.0)
+    with pytest.raises(InvalidInputError, match="mesh_skin_max"):
+        PhysicsConfig(mesh_skin_max=-0.01)

@@ -275,7 +275,8 @@ def test_a_dense_crowd_held_in_place_tracks_closer():
     placement 3.87 against 5.08 cm (on 1 s: 7.02 / 8.18, 3.68 / 4.97); on the 20 s cells
     (``crowdstudy bench physics --bars``) concert D5 8.71 -> 7.53 cm, corridor D5 5.41 ->
     4.91. With the damped 8 kN/m pose springs since, which hold the limbs too: 5.32 against
-    5.91 cm, placement 2.75 against 3.50 cm."""
+    5.91 cm, placement 2.75 against 3.50 cm; with the skins capped at 1.5 cm (2026-12-05),
+    which need less room: 4.80 against 5.33 cm, placement 2.36 against 2.98 cm."""
     from crowdstudy.design import load_design
     from crowdstudy.metrics.tracking import tracking_parts
     from crowdstudy.motion.baseline import build_baseline
@@ -283,9 +284,9 @@ def test_a_dense_crowd_held_in_place_tracks_closer():
     base = build_baseline(load_design(), "stationary", "D5", duration=0.5, body_model="open")
     held = tracking_parts(correct(base, progress=False), base)
     spread = tracking_parts(correct(base, PhysicsConfig(root_translation_far_stiffness=1e4), progress=False), base)
-    assert spread.placement_cm > 3.0                               # the soft root lets the crowd spread
-    assert held.total_cm <= spread.total_cm - 0.4, (held, spread)
-    assert held.placement_cm <= spread.placement_cm - 0.6, (held, spread)
+    assert spread.placement_cm > 2.5                               # the soft root lets the crowd spread
+    assert held.total_cm <= spread.total_cm - 0.35, (held, spread)
+    assert held.placement_cm <= spread.placement_cm - 0.45, (held, spread)
 
 
 def _planted_foot_speed(anim, reference):

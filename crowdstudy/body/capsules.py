@@ -32,7 +32,7 @@ from pathlib import Path
 
 import numpy as np
 
-from crowdstudy.body.skeleton import NUM_JOINTS, PARENTS, forward_kinematics
+from crowdstudy.body.skeleton import JOINT_INDEX, NUM_JOINTS, PARENTS, forward_kinematics
 from crowdstudy.errors import InvalidInputError
 from crowdstudy.paths import cache_dir
 
@@ -49,8 +49,11 @@ __all__ = [
     "capsule_occupancy",
     "capsule_mesh_iou",
     "capsule_skin",
+    "HAND_BONES",
 ]
 _TORSO = (0, 3, 6, 9)
+#: the palm and finger bones of the 24-joint skeleton (left/right wrist, left/right hand)
+HAND_BONES = tuple(JOINT_INDEX[name] for name in ("left_wrist", "right_wrist", "left_hand", "right_hand"))
 _FEET = {7: 10, 8: 11, 10: 10, 11: 11}  # bone -> the joint its floor direction points to
 
 
@@ -427,14 +430,26 @@ def capsule_mesh_iou(body, *, resolution: float = 0.01, capsules: Capsules | Non
             "intersection": inter, "resolution": resolution}
 
 
-def capsule_skin(body, percentile: float = 90.0, max_skin: float = 0.04) -> np.ndarray:
+def capsule_skin(body, percentile: float = 90.0, max_skin: float = 0.015, hand_scale: float = 0.5) -> np.ndarray:
     """(J,) m: how far the body mesh reaches beyond each capsule.
 
     For the vertices bound mostly to bone j (largest skinning weight), the ``percentile``
     of their distance outside capsule j, clipped to [0, max_skin]. Added to the capsule
     radius for inter-body and environment contacts so the MESHES stay apart, not only the
     capsules. Zeros when the body has no mesh (``rest_vertices``/``weights``).
+
+    The skin grows the capsule in every direction, while what reaches beyond a capsule is
+    mostly one protrusion: the thumb and spread fingers beside a hand's capsule (2-4 cm on
+    the MakeHuman bodies at the 90th percentile), a chest or a shoulder blade beside the
+    upper trunk's (up to 4 cm). ``max_skin`` caps it (0.04 until 2026-12-05), and the palm
+    and finger bones (``left/right_wrist``, ``left/right_hand`` of a 24-joint skeleton)
+    take ``hand_scale`` of their skin: a hand 3-4 cm thick had a contact sphere 12-14 cm
+    across and stopped 3-5 cm short of a back it was pressed on (README, "Where concert D5's
+    tracking goes").
     """
+    if max_skin < 0 or hand_scale < 0:
+        raise InvalidInputError(f"capsule_skin: expected max_skin >= 0 and hand_scale >= 0, got {max_skin!r}, "
+                                f"{hand_scale!r}")
     caps = body.capsules
     n_j = len(caps.radius)
     verts = getattr(body, "rest_vertices", None)
@@ -453,4 +468,6 @@ def capsule_skin(body, percentile: float = 90.0, max_skin: float = 0.04) -> np.n
         t = np.clip((v - s) @ d / max(float(d @ d), 1e-12), 0.0, 1.0)
         excess = np.linalg.norm(v - (s + t[:, None] * d), axis=1) - caps.radius[j]
         skin[j] = np.clip(np.percentile(excess, percentile), 0.0, max_skin)
+    if n_j == NUM_JOINTS:
+        skin[list(HAND_BONES)] *= hand_scale
     return skin

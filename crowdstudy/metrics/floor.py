@@ -125,7 +125,8 @@ def _pairs(root: np.ndarray, period: float | None, reach: float):
 
 
 def separation_floor(anim, *, frames: Any = "every:30", bodies: Sequence | None = None,
-                     skin_percentile: float = 90.0, margin: float = 0.005, walls: bool = True,
+                     skin_percentile: float = 90.0, skin_max: float = 0.015, hand_skin_scale: float = 0.5,
+                     margin: float = 0.005, walls: bool = True,
                      tolerance: float = 1e-4, max_iterations: int = 400) -> SeparationFloor:
     """Estimate, frame by frame, the least joint displacement that removes every overlap.
 
@@ -135,7 +136,9 @@ def separation_floor(anim, *, frames: Any = "every:30", bodies: Sequence | None 
             every 30th: one a second at 30 fps).
         bodies: optional body objects (default ``load_body`` of ``anim.bodies``).
         skin_percentile: each capsule is inflated by how far its mesh reaches beyond it
-            (:func:`crowdstudy.body.capsules.capsule_skin`, the physics' default 90) ...
+            (:func:`crowdstudy.body.capsules.capsule_skin`, the physics' default 90),
+            at most ``skin_max`` m and ``hand_skin_scale`` of it on the palm and finger
+            bones (the physics' ``mesh_skin_max`` and ``mesh_skin_hand_scale``) ...
         margin: ... plus this many metres (the physics' ``contact_margin``).
         walls: also push capsules back behind the scene's walls (``meta["obstacles"]``), to
             the side of their character's root, as the physics does.
@@ -155,7 +158,8 @@ def separation_floor(anim, *, frames: Any = "every:30", bodies: Sequence | None 
     n, n_j = anim.n_characters, anim.n_joints
     period = anim.periodic_length
     radius = np.stack([np.asarray(b.capsules.radius, np.float64) for b in body_objs])
-    skin = np.stack([capsule_skin(b, skin_percentile) for b in body_objs])
+    skin = np.stack([capsule_skin(b, skin_percentile, max_skin=skin_max, hand_scale=hand_skin_scale)
+                     for b in body_objs])
     real = radius > 1e-3                                # zero-radius capsules take no part
     r = np.where(real, radius + skin + margin, 0.0)
     segs = static_walls_from_meta(anim.meta) if walls else np.zeros((0, 2, 2))

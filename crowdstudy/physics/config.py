@@ -36,6 +36,9 @@ from __future__ import annotations
 
 import dataclasses
 
+import numpy as np
+
+from crowdstudy.body.capsules import capsule_skin
 from crowdstudy.errors import InvalidInputError
 
 __all__ = ["PhysicsConfig"]
@@ -180,6 +183,17 @@ class PhysicsConfig:
         mesh_skin_percentile: per-capsule skin added for inter-body and environment
             contacts: this percentile of how far the bone's mesh vertices reach outside its
             capsule (crowdstudy.body.capsules.capsule_skin); 0 = bare capsules.
+        mesh_skin_max: m, no capsule's skin exceeds this. 0.015 (0.04 until 2026-12-05):
+            the skin grows a capsule in every direction to cover a protrusion on one side
+            (a chest, a shoulder blade, a thumb); capped, a dense crowd needs less room
+            (concert D5 tracking 5.78 -> 5.18 cm with the hand scale below, overlap 3.7 ->
+            4.3 % of the Baseline's; README "Where concert D5's tracking goes").
+        mesh_skin_hand_scale: the palm and finger bones take this share of their skin
+            (``capsule_skin``'s ``hand_scale``): their 90th percentile is the thumb and
+            spread fingers, 2-4 cm beside a hand 3-4 cm thick, and a whole skin stopped a
+            hand pressed on a neighbour's back 3-5 cm short of it. 0.5 (1 until
+            2026-12-05); 0 left a hand sink into the walkers of a D1 cell (5.4 % of the
+            Baseline's overlap).
         intra_body: handle intra-body collisions (pairs touching in the T-pose and
             parent-child pairs are always skipped).
         loop_warmup: s; a periodic input (``meta["loop"]["mode"] == "periodic"``) is
@@ -198,8 +212,9 @@ class PhysicsConfig:
         output_hold: before the low-pass each deviation component is held at its largest
             magnitude within +-``output_hold`` kernel widths (a dilation), so the low-pass
             does not shave the separation a contact needed: the correction eases in a little
-            before a contact and out after it (0 = a plain low-pass). 0.8 (the joints held
-            one frame, the root two; 1.3 until 2026-12-04).
+            before a contact and out after it (0 = a plain low-pass). 0.6: the joints and
+            the root held one frame (0.8 until 2026-12-05 held the root two, 1.3 until
+            2026-12-04).
         speed_limit: the last step of the output stage
             (:func:`crowdstudy.physics.speed_limit.limit_joint_speed`): where a joint of the
             output moves faster than the input crowd's fastest joint plus
@@ -265,12 +280,14 @@ class PhysicsConfig:
     feedforward: bool = True
     damping_reference_dt: float = 1.0 / 60.0
     mesh_skin_percentile: float = 90.0
+    mesh_skin_max: float = 0.015
+    mesh_skin_hand_scale: float = 0.5
     intra_body: bool = True
     loop_warmup: float = 1.0
     loop_blend: float = 0.5
     output_smoothing: float = 0.05
     output_smoothing_root: float = 0.08
-    output_hold: float = 0.8
+    output_hold: float = 0.6
     speed_limit: bool = True
     speed_limit_margin: float = 0.3
     foot_lock: bool = True
@@ -346,6 +363,13 @@ class PhysicsConfig:
             except ValueError:
                 raise InvalidInputError(f"--config: {key} expects a {type(default).__name__}, got {raw!r}") from None
         return cls(**changes)
+
+    def mesh_skin(self, body) -> np.ndarray:
+        """(J,) m: the skin this configuration adds to ``body``'s capsule radii for
+        inter-body and environment contacts (:func:`crowdstudy.body.capsules.capsule_skin`
+        at ``mesh_skin_percentile``, ``mesh_skin_max``, ``mesh_skin_hand_scale``)."""
+        return capsule_skin(body, self.mesh_skin_percentile, max_skin=self.mesh_skin_max,
+                            hand_scale=self.mesh_skin_hand_scale)
 
     def as_dict(self) -> dict:
         return dataclasses.asdict(self)

@@ -13,7 +13,6 @@ import time
 
 import numpy as np
 
-from crowdstudy.body.capsules import capsule_skin
 from crowdstudy.errors import InvalidInputError
 from crowdstudy.physics.collision import CollisionPipeline, Contacts
 from crowdstudy.physics.config import PhysicsConfig
@@ -68,8 +67,7 @@ class CrowdCorrector:
             raise InvalidInputError(f"fps: expected a positive frame rate, got {fps!r}")
         builder = ModelBuilder()
         for body in bodies:
-            builder.add_character(body.rest_joints, body.capsules,
-                                  capsule_skin(body, self.config.mesh_skin_percentile))
+            builder.add_character(body.rest_joints, body.capsules, self.config.mesh_skin(body))
         self.model = builder.finalize(density=self.config.density, device=device)
         self.fps = float(fps)
         self.substeps = max(1, int(round(1.0 / (self.fps * self.config.dt))))
