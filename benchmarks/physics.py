@@ -279,7 +279,7 @@ class _BodyProxy:
 
 
 def stadium_run(n: int, level: str = "D3", duration: float = 20.0, frame_stride: int = 10,
-                overlap_characters: int = 300, light_bodies: bool = False) -> dict:
+                overlap_characters: int = 300, light_bodies: bool = False, config=None) -> dict:
     """``correct()`` on a stadium crowd (:func:`stadium_crowd`): wall time, ms per step, peak
     memory, NaN/stability, and the bars (:func:`bar_checks`) of Ours against its Baseline.
 
@@ -304,7 +304,7 @@ def stadium_run(n: int, level: str = "D3", duration: float = 20.0, frame_stride:
     c0 = time.process_time()
     t0 = time.perf_counter()
     bodies = [_BodyProxy(load_body(rec)) for rec in base.bodies] if light_bodies else None
-    ours = correct(base, progress=False, device="cpu", timings=timings, bodies=bodies)
+    ours = correct(base, config, progress=False, device="cpu", timings=timings, bodies=bodies)
     wall = time.perf_counter() - t0
     cpu = time.process_time() - c0
     peak = _rss_mib("VmHWM")
@@ -937,8 +937,8 @@ def main(argv: list[str]) -> int:
     parser.add_argument("--cells", default="", metavar="SCENE:LEVEL,...",
                         help="--bars on these cells only (e.g. concert:D1,corridor:D5; default all ten)")
     parser.add_argument("--config", nargs="*", default=[], metavar="KEY=VALUE",
-                        help="PhysicsConfig changes for the timed steps and --bars (e.g. cg_tolerance=1e-4); the "
-                             "report (physics_*_trial) records them")
+                        help="PhysicsConfig changes for the timed steps, --bars and --stadium (e.g. "
+                             "cg_tolerance=1e-4); the report (physics_*_trial) records them")
     parser.add_argument("--curve-only", action="store_true",
                         help="only the cost curve over --sizes (and its figure), no CG comparison or peers")
     parser.add_argument("--stadium", default="", metavar="N,N",
@@ -969,9 +969,11 @@ def main(argv: list[str]) -> int:
         if len(secs) != len(counts) or min(counts) < 1 or min(secs) <= 0:
             raise SystemExit("--stadium-seconds: one positive value, or one per --stadium size")
         devices = device_rows()      # the stadium runs are CPU runs; the rows say what else is there
-        rows = [stadium_run(n, args.stadium_level, s, light_bodies=args.light_bodies) for n, s in zip(counts, secs)]
+        rows = [stadium_run(n, args.stadium_level, s, light_bodies=args.light_bodies, config=config)
+                for n, s in zip(counts, secs)]
         print("bars: " + "; ".join(BAR_TEXT.values()), flush=True)
-        path = write_report("physics_stadium", rows, seed=None, devices=devices, bar_text=BAR_TEXT)
+        path = write_report("physics_stadium" + trial, rows, seed=None, devices=devices, bar_text=BAR_TEXT,
+                            config_changes=list(args.config))
         print(f"wrote {path}", file=sys.stderr)
         return 0
     if args.bars_only:

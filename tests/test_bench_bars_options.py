@@ -45,6 +45,29 @@ def test_measure_bars_runs_only_the_asked_cells_with_the_asked_config(bench, mon
     assert (stage, level, periodic) == ("walking", "D2", True) and config is cfg
 
 
+def test_stadium_runs_take_the_asked_config(bench, monkeypatch):
+    """``--stadium N --config K=V`` hands the config to the stadium's ``correct()`` (the crowd
+    and the physics are stubbed out: this checks the plumbing)."""
+    import crowdstudy.physics.corrector as corrector
+
+    seen = []
+
+    class Stop(Exception):
+        pass
+
+    def fake_correct(base, config=None, **kw):
+        seen.append((base.n_characters, config))
+        raise Stop
+
+    monkeypatch.setattr(corrector, "correct", fake_correct)
+    monkeypatch.setattr(bench, "stadium_crowd", lambda n, level, duration: bench._scene("D1", 0.2))
+    with pytest.raises(Stop):
+        bench.main(["--stadium", "20", "--stadium-seconds", "0.2", "--config", "mesh_skin_max=0.04",
+                    "output_hold=0.8"])
+    assert len(seen) == 1
+    assert seen[0][1].mesh_skin_max == 0.04 and seen[0][1].output_hold == 0.8
+
+
 def test_timed_steps_run_with_the_asked_config(bench):
     """``--config`` reaches the timed steps too (the cost curve's trial runs): a looser CG
     tolerance takes fewer iterations on the same crowd."""
