@@ -25,11 +25,14 @@ def test_the_reference_reproduces_the_solver_and_the_alternatives_converge(study
     for name, r in rows.items():
         assert 0 < r["iterations"] < 400, (name, r)          # converged under the cap
         assert r["cost_ratio"] == pytest.approx(r["cost"] / ref["cost"], abs=0.01)
-    # the rigid coarse space and the sweeps take fewer iterations (measured at step 7, to the
-    # default 1e-3: 21 with the character blocks, +rigid 17, two-level 12, block SGS 13; the
-    # translations alone 20. To 1e-4: 31, 26, 18, 17, 32)
-    for name in ("+rigid", "rigid two-level", "block SGS"):
+    # the two-level rigid coarse space and the block sweeps take fewer iterations, the additive
+    # rigid coarse space no more (measured at step 7, to the default 1e-3, with the skins of
+    # 2026-12-05: 14 with the character blocks, +rigid 14, two-level 10, block SGS 7, the
+    # translations alone 15; to 1e-4: 20, 20, 15, 10, 22. With the 4 cm skins before, to 1e-3:
+    # 21, 17, 12, 13, 20)
+    for name in ("rigid two-level", "block SGS"):
         assert rows[name]["iterations"] < ref["iterations"], (name, rows[name])
+    assert rows["+rigid"]["iterations"] <= ref["iterations"], rows["+rigid"]
     # work counted per application: two-level two more matvecs, SGS two block solves
     two, sgs = rows["rigid two-level"], rows["block SGS"]
     assert two["matvec"] == 3 * two["iterations"] and two["block"] == two["iterations"]
