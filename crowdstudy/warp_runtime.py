@@ -14,7 +14,7 @@ import time
 
 from crowdstudy.paths import cache_dir
 
-__all__ = ["get_warp", "resolve_device", "host_threads", "run_parallel"]
+__all__ = ["get_warp", "resolve_device", "host_threads", "run_parallel", "run_together"]
 
 
 @functools.lru_cache(maxsize=1)
@@ -174,3 +174,37 @@ def run_parallel(first, second) -> tuple[float, float]:
         t_second = worker.result()
     policy.record(t_first + t_second, time.perf_counter() - w0)
     return t_first, t_second
+
+
+def run_together(first, second) -> bool:
+    """Run two callables that synchronise with each other (e.g. at a ``threading.Barrier``)
+    on two threads at once, ``second`` on the helper thread, and wait for both; returns
+    True. Where :func:`run_parallel` would run serially (one host thread, or a second core
+    that has not paid off lately), runs nothing and returns False: the caller takes its
+    serial path, which must give the same result."""
+    policy = getattr(_local, "policy", None)
+    if policy is None:
+        policy = _local.policy = _Policy()
+    forced = bool(os.environ.get("CROWDSTUDY_THREADS"))
+    if host_threads() < 2 or not (forced or policy.parallel()):
+        return False
+    worker = getattr(_local, "worker", None)
+    if worker is None:
+        worker = _local.worker = _Worker()
+    w0 = time.perf_counter()
+    c0 = time.thread_time()
+    worker.submit(lambda: _thread_seconds(second))
+    try:
+        first()
+    finally:
+        t_second = worker.result()
+    t_first = time.thread_time() - c0
+    policy.record(t_first + t_second, time.perf_counter() - w0)
+    return True
+
+
+def _thread_seconds(fn) -> float:
+    c0 = time.thread_time()
+    fn()
+    return time.thread_time() - c0
+

@@ -9,7 +9,7 @@ from crowdstudy.body.capsules import closest_points_on_segments
 from crowdstudy.body.skeleton import DEFAULT_PELVIS_HEIGHT, DEFAULT_REST_JOINTS, PARENTS, children
 from crowdstudy.errors import InvalidInputError
 from crowdstudy.physics.collision import (KIND_ENVIRONMENT, KIND_GROUND, KIND_INTER, KIND_INTRA, CollisionPipeline,
-                                          Contacts, sample_static_walls)
+                                          Contacts, collision_kernels, sample_static_walls, sweep_pairs)
 from crowdstudy.physics.config import PhysicsConfig
 from crowdstudy.physics.model import ModelBuilder
 from crowdstudy.physics.state import Control, State
@@ -81,6 +81,37 @@ def test_inter_body_contacts_match_exact_capsule_distance():
     assert inter.sum() == np.count_nonzero(caps.radius[all_a] + caps.radius[all_b] - d_all > 0)
     _, far, _ = detect([[0, 0, 1.2], [3.0, 0, 1.2]])
     assert not (far["kind"] == KIND_INTER).any()
+
+
+def test_the_sweep_finds_the_broadphase_kernels_pairs_in_its_order():
+    """``sweep_pairs`` (the CPU's broad phase from 200 characters) returns exactly the
+    pairs of ``broadphase_kernel`` in the same (i, j) order: random boxes on a crowd's
+    floor, with shared lower x (ties) and boxes that touch exactly."""
+    k = collision_kernels()
+    wp = k.wp
+    rng = np.random.default_rng(5)
+    n = 700
+    lo = np.column_stack([rng.uniform(0, 30, n), rng.uniform(0, 12, n), rng.uniform(0, 0.1, n)])
+    lo[::7, 0] = lo[3, 0]                                             # ties along x
+    hi = lo + np.column_stack([rng.uniform(0.3, 1.0, n), rng.uniform(0.3, 1.0, n), rng.uniform(1.5, 1.9, n)])
+    lo[10] = (hi[11, 0], lo[11, 1], lo[11, 2])                       # touching exactly along x
+    hi[10] = lo[10] + (0.5, 0.5, 1.7)
+    lo[12] = (lo[13, 0], hi[13, 1], lo[13, 2])                       # ... and along y
+    hi[12] = lo[12] + (0.5, 0.5, 1.7)
+    lo, hi = lo.astype(np.float32), hi.astype(np.float32)
+    cap = 20 * n
+    count = wp.zeros(1, dtype=wp.int32)
+    pi, pj = wp.zeros(cap, dtype=wp.int32), wp.zeros(cap, dtype=wp.int32)
+    shift = wp.zeros(cap, dtype=wp.float32)
+    wp.launch(k.broadphase_kernel, n, [wp.array(lo, dtype=wp.vec3), wp.array(hi, dtype=wp.vec3), 0.0, count, cap,
+                                       pi, pj, shift])
+    m = int(count.numpy()[0])
+    assert 1000 < m < cap
+    i, j = sweep_pairs(lo, hi)
+    assert len(i) == m
+    np.testing.assert_array_equal(i, pi.numpy()[:m])
+    np.testing.assert_array_equal(j, pj.numpy()[:m])
+    assert {(10, 11), (12, 13)} <= set(zip(i.tolist(), j.tolist()))
 
 
 def test_periodic_minimum_image():
@@ -188,3 +219,45 @@ def test_static_walls_from_meta():
             static_walls_from_meta({"scenario": scenario, "periodic": {"axis": 0, "length": 4.5}})
     with pytest.raises(ValueError, match="obstacles"):
         static_walls_from_meta({"obstacles": [[1, 2, 3]]})
+
+
+def test_a_dense_crowd_finds_every_touching_capsule_pair_of_different_characters():
+    """The culling (character AABBs, the second character's capsules masked against the
+    first's box, bounding spheres) drops no contact: on a 200-character D5 concert (the
+    CPU's sweep broad phase), every pair of capsules of different characters closer than
+    their radii + skins + margin + speculative distance (numpy, all pairs) is a contact."""
+    from crowdstudy.design import load_design
+    from crowdstudy.motion.baseline import build_baseline
+    from crowdstudy.physics.corrector import CrowdCorrector, load_bodies
+
+    anim = build_baseline(load_design(), "stationary", "D5", duration=0.2, body_model="open")
+    reps = 4                                              # 240 characters: four floors side by side
+    shift = np.array([8.0, 0.0, 0.0])
+    root = np.concatenate([anim.root_translation + r * shift for r in range(reps)], 1)
+    rot = np.concatenate([anim.joint_rotations] * reps, 1)
+    bodies = load_bodies(anim.bodies * reps)
+    corr = CrowdCorrector(bodies, fps=anim.fps, n_frames=anim.n_frames, device="cpu")
+    corr.control.set_frames(rot, root)
+    corr.reset_to_frame(0)
+    corr.control.advance(0, 1, 1.0)
+    pipe = corr.pipeline
+    assert corr.model.n_characters >= 200 and pipe.period == 0.0
+    pipe.collide(corr.states[0], corr.contacts, corr.control)
+    c = corr.contacts.to_numpy()
+    found = {(a, b) for a, b, kind in zip(c["body_a"], c["body_b"], c["kind"]) if kind == KIND_INTER}
+    p0, p1 = pipe.p0w.numpy().astype(float), pipe.p1w.numpy().astype(float)
+    reach = corr.model.wp["cap_radius"].numpy() + corr.model.wp["cap_skin"].numpy()
+    limit = float(corr.config.contact_margin) + pipe.speculative
+    nj, n = corr.model.n_joints, corr.model.n_characters
+    ci, cj = np.triu_indices(n, 1)                        # character pairs less than 3 m apart
+    pelvis = p0[::nj]
+    close = np.linalg.norm(pelvis[ci] - pelvis[cj], axis=1) < 3.0
+    ci, cj = ci[close], cj[close]
+    ja, jb = np.meshgrid(np.arange(nj), np.arange(nj), indexing="ij")
+    ia = (ci[:, None] * nj + ja.ravel()).ravel()
+    ib = (cj[:, None] * nj + jb.ravel()).ravel()
+    _, _, dist = closest_points_on_segments(p0[ia], p1[ia], p0[ib], p1[ib])
+    touching = reach[ia] + reach[ib] + limit - dist > 1e-4       # clear of float32 rounding
+    want = set(zip(ia[touching].tolist(), ib[touching].tolist()))
+    assert len(want) > 2000
+    assert want <= found

@@ -280,6 +280,41 @@ def test_fused_pcg_solves_the_assembled_system(small_system):
     solver.preconditioner = "character"
 
 
+def test_tree_preconditioner_is_the_inverse_of_each_characters_block(small_system):
+    """The character preconditioner (block LDL^T, joint blocks applied from the levers) equals
+    the dense inverse of each character's diagonal blocks plus joint couplings."""
+    from crowdstudy.physics.collision import CollisionPipeline, Contacts
+    from crowdstudy.physics.linear import bsr_from_triplets
+
+    model, cfg, control, state, solver = small_system
+    pipe = CollisionPipeline(model, cfg)
+    contacts = Contacts.allocate(pipe.default_capacity(), "cpu")
+    pipe.collide(state, contacts)
+    solver.assemble(state, control, contacts, cfg.dt)
+    solver._factor_tree()
+    nb, nj = model.n_bodies, model.n_joints
+    rows, cols, vals, _ = solver.triplets(Contacts.allocate(0, "cpu"))     # bodies and joints only
+    tree = bsr_from_triplets(rows.numpy(), cols.numpy(), vals.numpy().astype(float), nb).toarray()
+    wp = solver.wp
+    rng = np.random.default_rng(7)
+    x = rng.normal(size=(nb, 6)).astype(np.float32)
+    y = rng.normal(size=(nb, 6)).astype(np.float32)
+    xw, yw = wp.array(x, dtype=wp.spatial_vector), wp.array(y, dtype=wp.spatial_vector)
+    z = wp.zeros(nb, dtype=wp.spatial_vector)
+    work = wp.zeros(nb, dtype=wp.spatial_vector)
+    wp.launch(solver.ks.tree_precond_kernel, model.n_characters,
+              [nj, model.wp["body_parent"], solver.tree_dinv, solver.tree_l, solver.lever_p, solver.lever_c,
+               solver.ctrl_c, float(cfg.joint_stiffness), xw, yw, z, 0.5, 2.0, work])
+    m = 6 * nj
+    for c in range(model.n_characters):
+        sl = slice(c * m, (c + 1) * m)
+        block = tree[sl, sl]
+        assert np.abs(tree[sl, :c * m]).max(initial=0) == 0 and np.abs(tree[sl, (c + 1) * m:]).max(initial=0) == 0
+        want = 0.5 * np.linalg.solve(block, x.ravel()[sl].astype(float)) + 2.0 * y.ravel()[sl]
+        got = z.numpy().ravel()[sl]
+        assert np.linalg.norm(got - want) <= 1e-4 * np.linalg.norm(want)
+
+
 def test_warp_off_diagonal_joint_blocks_match_numpy_reference(small_system):
     from crowdstudy.physics.collision import Contacts
 

@@ -245,24 +245,23 @@ def test_real_scene_d1_meets_the_overlap_and_tracking_bars():
 @pytest.mark.slow
 def test_the_default_cg_tolerance_tracks_as_a_tight_solve_does():
     """One Newton step per frame needs no tight linear solve: on 0.5 s of the densest concert
-    cell the default tolerance (1e-3) tracks the animation within 0.3 cm of a solve to 1e-5
-    (measured: 6.96 against 6.96 cm; a tolerance of 0.1 tracks at 7.61, and on 1 s 7.02 at
-    1e-3, 7.08 to 1e-6, 7.71 at 0.1; with the root's far spring at 1e4 N/m 8.18 against
-    8.20). The joints
-    themselves are not compared: in a crowd this dense a limb that meets its neighbour a
-    step apart takes another way round it, whatever the tolerance (1e-4 against 1e-6: mean
-    1.6 cm, largest 45 cm)."""
+    cell the default tolerance (3e-3) tracks the animation within 0.06 cm of a solve to 1e-5
+    (measured 2026-12-05: 4.805 against 4.809 cm; 1e-3 4.794; a tolerance of 0.1 tracks at
+    4.917, 0.11 cm off, which this test would catch). The joints themselves are not
+    compared: in a crowd this dense a limb that meets its neighbour a step apart takes
+    another way round it, whatever the tolerance (1e-4 against 1e-6: mean 1.6 cm, largest
+    45 cm)."""
     from crowdstudy.design import load_design
     from crowdstudy.metrics.tracking import tracking_error
     from crowdstudy.motion.baseline import build_baseline
 
     base = build_baseline(load_design(), "stationary", "D5", duration=0.5, body_model="open")
-    assert PhysicsConfig().cg_tolerance == 1e-3
+    assert PhysicsConfig().cg_tolerance == 3e-3
     default = tracking_error(correct(base, progress=False), base)
     tight = tracking_error(correct(base, PhysicsConfig(cg_tolerance=1e-5, cg_max_iterations=400), progress=False),
                            base)
     assert tight > 2.0                          # a dense cell: the contacts move the crowd
-    assert abs(default - tight) <= 0.3, (default, tight)
+    assert abs(default - tight) <= 0.06, (default, tight)
 
 
 @pytest.mark.slow

@@ -1,9 +1,11 @@
 """The two-host-thread CPU path of the physics gives the same bits as one thread.
 
-The per-body and per-character kernels run on the two halves of the crowd and the narrow
-phase on two ranges of its threads (the second into a scratch buffer appended after the
-first), so the contacts come out in the same order and every state the same, whatever the
-split (``crowdstudy.warp_runtime.run_parallel``)."""
+The per-body and per-character kernels run on the two halves of the crowd (the contacts'
+terms too: each half takes the contacts that touch it, in order), the narrow phase on two
+ranges of its threads (the second into a scratch buffer appended after the first), the
+current and look-ahead targets and capsule poses at once, so the contacts come out in the
+same order and every state the same, whatever the split
+(``crowdstudy.warp_runtime.run_parallel``)."""
 
 from __future__ import annotations
 
@@ -25,6 +27,7 @@ def _run(anim, monkeypatch, threads: str, steps: int = 8, capacity: int | None =
          split_pcg: bool = True, config=None):
     import crowdstudy.physics.collision as collision
     import crowdstudy.physics.solver as solver
+    import crowdstudy.physics.state as state
     from crowdstudy.physics.corrector import CrowdCorrector, load_bodies
     from crowdstudy.physics.collision import Contacts
 
@@ -32,6 +35,9 @@ def _run(anim, monkeypatch, threads: str, steps: int = 8, capacity: int | None =
     monkeypatch.setattr(collision, "_MIN_SPLIT_THREADS", 0)       # split even this small scene
     monkeypatch.setattr(solver, "_MIN_CHARACTERS_PER_THREAD", 1)
     monkeypatch.setattr(solver, "_MIN_CHARACTERS_SPLIT_PCG", 1 if split_pcg else 10 ** 9)   # the split PCG too
+    monkeypatch.setattr(solver, "_MIN_CHARACTERS_SPLIT_ASSEMBLY", 1)   # the contacts' terms by halves
+    monkeypatch.setattr(collision, "_MIN_CHARACTERS_PARALLEL", 1)      # the three capsule poses at once
+    monkeypatch.setattr(state, "_MIN_CHARACTERS_PARALLEL", 1)          # the two targets at once
     corr = CrowdCorrector(load_bodies(anim.bodies), fps=anim.fps, n_frames=anim.n_frames, device="cpu", config=config)
     if capacity is not None:
         corr.contacts = Contacts.allocate(capacity, "cpu")
@@ -109,3 +115,40 @@ def test_host_threads_setting(monkeypatch):
     monkeypatch.setenv("CROWDSTUDY_THREADS", "two")
     with pytest.raises(InvalidInputError, match="CROWDSTUDY_THREADS"):
         host_threads()
+
+
+def test_run_together_meets_at_a_barrier_or_declines(monkeypatch):
+    """``run_together`` runs two callables that wait for each other on two threads at once,
+    or (one host thread) runs nothing and says so; an error on either side reaches the
+    caller without leaving the other side waiting."""
+    import threading
+
+    from crowdstudy.warp_runtime import run_together
+
+    monkeypatch.setenv("CROWDSTUDY_THREADS", "1")
+    ran = []
+    assert run_together(lambda: ran.append(1), lambda: ran.append(2)) is False and ran == []
+    monkeypatch.setenv("CROWDSTUDY_THREADS", "2")
+    barrier = threading.Barrier(2, timeout=10)
+    seen = []
+
+    def side(name):
+        for step in range(3):
+            seen.append((step, name))
+            barrier.wait()
+
+    assert run_together(lambda: side("a"), lambda: side("b")) is True
+    assert [s for s, _ in seen] == [0, 0, 1, 1, 2, 2]          # in step with each other
+
+    broken = threading.Barrier(2, timeout=10)
+
+    def fails():
+        broken.abort()
+        raise ZeroDivisionError
+
+    def waits():
+        with pytest.raises(threading.BrokenBarrierError):
+            broken.wait()
+
+    with pytest.raises(ZeroDivisionError):
+        run_together(waits, fails)

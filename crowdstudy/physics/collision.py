@@ -39,13 +39,19 @@ import numpy as np
 from crowdstudy.scene import wall_segments
 from crowdstudy.warp_runtime import host_threads, run_parallel
 
-__all__ = ["Contacts", "CollisionPipeline", "collision_kernels", "sample_static_walls",
+__all__ = ["Contacts", "CollisionPipeline", "collision_kernels", "sample_static_walls", "sweep_pairs",
            "KIND_GROUND", "KIND_ENVIRONMENT", "KIND_INTER", "KIND_INTRA"]
 
 KIND_GROUND, KIND_ENVIRONMENT, KIND_INTER, KIND_INTRA = 0, 1, 2, 3
 
-#: narrow-phase plus intra-body threads below which detection stays on one host thread
+#: capsule pairs to test (character pairs x J, plus the intra-body pairs) below which
+#: detection stays on one host thread
 _MIN_SPLIT_THREADS = 20000
+#: characters from which the CPU finds the overlapping character AABBs by a sweep along x
+#: (``sweep_kernel``, O(n k)) instead of ``broadphase_kernel``'s n^2 / 2 tests
+_MIN_CHARACTERS_SWEEP = 200
+#: characters from which the three capsule poses are computed on two host threads at once
+_MIN_CHARACTERS_PARALLEL = 200
 
 
 @functools.lru_cache(maxsize=1)
@@ -207,6 +213,63 @@ def collision_kernels():
                 pair_shift[idx] = shift
 
     @wp.kernel
+    def sweep_kernel(char_lo: wp.array(dtype=wp.vec3), char_hi: wp.array(dtype=wp.vec3),
+                     order: wp.array(dtype=wp.int32), sorted_lo_x: wp.array(dtype=float), reach: float,
+                     pair_count: wp.array(dtype=wp.int32), pair_capacity: int,
+                     pair_i: wp.array(dtype=wp.int32), pair_j: wp.array(dtype=wp.int32),
+                     pair_shift: wp.array(dtype=float)):
+        """``broadphase_kernel``'s pairs without a period, in O(n k): the characters sorted by
+        their AABB's lower x (``order``, ``sorted_lo_x``); character i (thread) binary-searches
+        the first that starts within ``reach`` m (the widest box along x, plus slack) before
+        it, tests those that start before it ends, and sorts its pairs by j. For the CPU,
+        where the threads run in order, so that the pairs come out in (i, j) order as from
+        ``broadphase_kernel`` (when they overflow ``pair_capacity``, the kept ones may differ)."""
+        i = wp.tid()
+        n = char_lo.shape[0]
+        lo_i = char_lo[i]
+        hi_i = char_hi[i]
+        key = lo_i[0] - reach
+        a = int(0)
+        b = n
+        while a < b:
+            mid = (a + b) / 2
+            if sorted_lo_x[mid] < key:
+                a = mid + 1
+            else:
+                b = mid
+        start = int(-1)
+        k = a
+        while k < n:
+            if sorted_lo_x[k] > hi_i[0]:
+                break
+            j = order[k]
+            k += 1
+            if j <= i:
+                continue
+            lo_j = char_lo[j]
+            hi_j = char_hi[j]
+            if lo_i[0] > hi_j[0] or lo_j[0] > hi_i[0] or lo_i[1] > hi_j[1] or lo_j[1] > hi_i[1]:
+                continue
+            if lo_i[2] > hi_j[2] or lo_j[2] > hi_i[2]:
+                continue
+            idx = wp.atomic_add(pair_count, 0, 1)
+            if start < 0:
+                start = idx
+            if idx < pair_capacity:
+                pair_i[idx] = i
+                pair_j[idx] = j
+                pair_shift[idx] = 0.0
+        if start >= 0:
+            end = wp.min(pair_count[0], pair_capacity)
+            for s in range(start + 1, end):          # insertion sort of this character's pairs by j
+                v = pair_j[s]
+                t = s - 1
+                while t >= start and pair_j[t] > v:
+                    pair_j[t + 1] = pair_j[t]
+                    t -= 1
+                pair_j[t + 1] = v
+
+    @wp.kernel
     def narrowphase_kernel(x: wp.array(dtype=wp.vec3), p0w: wp.array(dtype=wp.vec3), p1w: wp.array(dtype=wp.vec3),
                            cap_radius: wp.array(dtype=float), cap_skin: wp.array(dtype=float),
                            centre: wp.array(dtype=wp.vec3), half: wp.array(dtype=float),
@@ -220,9 +283,16 @@ def collision_kernels():
                            c_k: wp.array(dtype=float), c_kind: wp.array(dtype=wp.int32), offset: int,
                            pass_on: int, p0a: wp.array(dtype=wp.vec3), p1a: wp.array(dtype=wp.vec3),
                            pass_width: float):
-        """Thread (pair, capsule of the first character; thread index + ``offset`` =
-        pair * J + capsule): bounding sphere vs the other character's AABB, then vs each of
-        its capsules, then the exact segment distance.
+        """Pair of characters (thread + ``offset``): first the second character's capsules
+        that may touch the first (a bit mask); then each capsule of the first character, in
+        joint order: its bounding sphere against the second character's AABB, then against
+        each masked capsule, in joint order, then the exact segment distance. The contacts
+        come out in (pair, first capsule, second capsule) order.
+
+        The mask: the first character's AABB holds every point within r_a + margin +
+        speculative distance of its capsules' segments, so a contact's point on the second
+        capsule's surface lies inside it; a capsule whose bounding sphere (half length +
+        radius + skin) misses that box has no contact and is skipped.
 
         With ``pass_on`` the capsules (``p0a``, ``p1a``: the animation's pose a little ahead)
         let a crossing pass: where, ahead, the closest points lie c = -(pa' - pb') . n m on
@@ -230,57 +300,70 @@ def collision_kernels():
         by g m there, the contact's stiffness is scaled by 1 - clamp(c / w) clamp(g / w)
         (w = ``pass_width``): limbs the animation swings through each other and apart are
         not held up, while a lasting overlap (still touching ahead) is pushed apart."""
-        tid = wp.tid() + offset
-        p = tid / n_joints
-        ja = tid - p * n_joints
+        p = wp.tid() + offset
         ia = pair_i[p]
         ib = pair_j[p]
         sv = wp.vec3(pair_shift[p], 0.0, 0.0)
-        ba = ia * n_joints + ja
-        a0 = p0w[ba]
-        a1 = p1w[ba]
-        ra = cap_radius[ba] + cap_skin[ba]
-        ca = centre[ba]
-        bound_a = half[ba] + ra + margin + spec
-        # sphere of capsule a against the AABB of character b (already grown)
-        lo = char_lo[ib] + sv
-        hi = char_hi[ib] + sv
-        closest = wp.min(wp.max(ca, lo), hi)
-        if wp.length_sq(closest - ca) > bound_a * bound_a:
-            return
+        lo_a = char_lo[ia]
+        hi_a = char_hi[ia]
+        mask = int(0)
         for jb in range(n_joints):
             bb = ib * n_joints + jb
-            rb = cap_radius[bb] + cap_skin[bb]
             cb = centre[bb] + sv
-            reach = bound_a + half[bb] + rb
-            if wp.length_sq(cb - ca) > reach * reach:
+            r = half[bb] + cap_radius[bb] + cap_skin[bb]
+            closest = wp.min(wp.max(cb, lo_a), hi_a)
+            if wp.length_sq(closest - cb) <= r * r:
+                mask = mask | (1 << jb)
+        if mask == 0:
+            return
+        lo = char_lo[ib] + sv
+        hi = char_hi[ib] + sv
+        for ja in range(n_joints):
+            ba = ia * n_joints + ja
+            ra = cap_radius[ba] + cap_skin[ba]
+            ca = centre[ba]
+            bound_a = half[ba] + ra + margin + spec
+            # sphere of capsule a against the AABB of character b (already grown)
+            closest = wp.min(wp.max(ca, lo), hi)
+            if wp.length_sq(closest - ca) > bound_a * bound_a:
                 continue
-            b0 = p0w[bb] + sv
-            b1 = p1w[bb] + sv
-            st = segment_params(a0, a1, b0, b1)
-            pa = a0 + st[0] * (a1 - a0)
-            pb = b0 + st[1] * (b1 - b0)
-            d = pa - pb
-            dist = wp.length(d)
-            depth = ra + rb + margin - dist
-            if depth > -spec:
-                n = wp.vec3(0.0, 1.0, 0.0)
-                if dist > 1.0e-6:
-                    n = d / dist
-                else:
-                    dc = x[ba] - (x[bb] + sv)
-                    if wp.length(dc) > 1.0e-6:
-                        n = wp.normalize(dc)
-                k_pair = k
-                if pass_on != 0:
-                    sa = segment_params(p0a[ba], p1a[ba], p0a[bb] + sv, p1a[bb] + sv)
-                    qa = p0a[ba] + sa[0] * (p1a[ba] - p0a[ba])
-                    qb = p0a[bb] + sv + sa[1] * (p1a[bb] - p0a[bb])
-                    through = -wp.dot(qa - qb, n)
-                    apart = wp.length(qa - qb) - (ra + rb + margin)
-                    k_pair = k * (1.0 - wp.clamp(through / pass_width, 0.0, 1.0) * wp.clamp(apart / pass_width, 0.0, 1.0))
-                push_contact(count, capacity, ba, bb, n, depth, pa - x[ba], pb - (x[bb] + sv), k_pair, 2,
-                             c_a, c_b, c_n, c_depth, c_la, c_lb, c_k, c_kind)
+            a0 = p0w[ba]
+            a1 = p1w[ba]
+            for jb in range(n_joints):
+                if (mask >> jb) & 1 == 0:
+                    continue
+                bb = ib * n_joints + jb
+                rb = cap_radius[bb] + cap_skin[bb]
+                cb = centre[bb] + sv
+                reach = bound_a + half[bb] + rb
+                if wp.length_sq(cb - ca) > reach * reach:
+                    continue
+                b0 = p0w[bb] + sv
+                b1 = p1w[bb] + sv
+                st = segment_params(a0, a1, b0, b1)
+                pa = a0 + st[0] * (a1 - a0)
+                pb = b0 + st[1] * (b1 - b0)
+                d = pa - pb
+                dist = wp.length(d)
+                depth = ra + rb + margin - dist
+                if depth > -spec:
+                    n = wp.vec3(0.0, 1.0, 0.0)
+                    if dist > 1.0e-6:
+                        n = d / dist
+                    else:
+                        dc = x[ba] - (x[bb] + sv)
+                        if wp.length(dc) > 1.0e-6:
+                            n = wp.normalize(dc)
+                    k_pair = k
+                    if pass_on != 0:
+                        sa = segment_params(p0a[ba], p1a[ba], p0a[bb] + sv, p1a[bb] + sv)
+                        qa = p0a[ba] + sa[0] * (p1a[ba] - p0a[ba])
+                        qb = p0a[bb] + sv + sa[1] * (p1a[bb] - p0a[bb])
+                        through = -wp.dot(qa - qb, n)
+                        apart = wp.length(qa - qb) - (ra + rb + margin)
+                        k_pair = k * (1.0 - wp.clamp(through / pass_width, 0.0, 1.0) * wp.clamp(apart / pass_width, 0.0, 1.0))
+                    push_contact(count, capacity, ba, bb, n, depth, pa - x[ba], pb - (x[bb] + sv), k_pair, 2,
+                                 c_a, c_b, c_n, c_depth, c_la, c_lb, c_k, c_kind)
 
     @wp.kernel
     def intra_kernel(x: wp.array(dtype=wp.vec3), p0w: wp.array(dtype=wp.vec3), p1w: wp.array(dtype=wp.vec3),
@@ -442,9 +525,45 @@ def collision_kernels():
                         break
 
     return SimpleNamespace(wp=wp, segment_params=segment_params, capsules_world_kernel=capsules_world_kernel,
-                           ground_kernel=ground_kernel, broadphase_kernel=broadphase_kernel,
+                           ground_kernel=ground_kernel, broadphase_kernel=broadphase_kernel, sweep_kernel=sweep_kernel,
                            narrowphase_kernel=narrowphase_kernel, intra_kernel=intra_kernel,
                            environment_kernel=environment_kernel, wall_kernel=wall_kernel)
+
+
+def launch_sweep(lo: np.ndarray, char_lo, char_hi, order, sorted_lo_x, pair_count, pair_capacity: int,
+                 pair_i, pair_j, pair_shift) -> None:
+    """Launch ``sweep_kernel`` on the CPU: ``lo``, ``hi`` the boxes' corners as numpy (n, 3)
+    (m) and as Warp arrays; ``order`` and ``sorted_lo_x`` Warp scratch arrays of length n."""
+    k = collision_kernels()
+    wp = k.wp
+    lo = np.asarray(lo)
+    idx = np.argsort(lo[:, 0], kind="stable")
+    order.numpy()[:] = idx
+    sorted_lo_x.numpy()[:] = lo[idx, 0]
+    hi = char_hi.numpy()
+    reach = float(np.max(hi[:, 0] - lo[:, 0])) + 1e-3 if len(lo) else 0.0
+    pair_count.zero_()
+    wp.launch(k.sweep_kernel, len(lo), [char_lo, char_hi, order, sorted_lo_x, reach, pair_count, pair_capacity,
+                                         pair_i, pair_j, pair_shift], device="cpu")
+
+
+def sweep_pairs(lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The pairs (i < j) of overlapping boxes (``lo``, ``hi``: (n, 3) corners, m) in (i, j)
+    order by ``sweep_kernel`` on the CPU: the pairs and the order of ``broadphase_kernel``
+    without a period (closed intervals, the kernel's comparisons)."""
+    wp = collision_kernels().wp
+    lo = np.ascontiguousarray(lo, np.float32)
+    hi = np.ascontiguousarray(hi, np.float32)
+    n = len(lo)
+    cap = max(n * (n - 1) // 2, 1)
+    count = wp.zeros(1, dtype=wp.int32, device="cpu")
+    pi, pj = wp.zeros(cap, dtype=wp.int32, device="cpu"), wp.zeros(cap, dtype=wp.int32, device="cpu")
+    shift = wp.zeros(cap, dtype=wp.float32, device="cpu")
+    launch_sweep(lo, wp.array(lo, dtype=wp.vec3, device="cpu"), wp.array(hi, dtype=wp.vec3, device="cpu"),
+                 wp.zeros(max(n, 1), dtype=wp.int32, device="cpu"), wp.zeros(max(n, 1), dtype=wp.float32, device="cpu"),
+                 count, cap, pi, pj, shift)
+    m = int(count.numpy()[0])
+    return pi.numpy()[:m].copy(), pj.numpy()[:m].copy()
 
 
 def sample_static_walls(walls: np.ndarray, *, height: float = 2.2, spacing: float = 0.04,
@@ -592,6 +711,7 @@ class CollisionPipeline:
         self.n_static_walls = len(walls)
         self.walls = wp.array(walls.reshape(-1, 4).astype(np.float32), dtype=wp.vec4, device=dev) if len(walls) else None
         self._scratch = None      # the second host thread's contact buffer (CPU)
+        self._sweep_scratch = None  # the sweep's sorted order and lower x (CPU)
         self._split = 0.75        # share of the narrow-phase threads run by the first host thread
 
     def default_capacity(self) -> int:
@@ -611,21 +731,30 @@ class CollisionPipeline:
         margin = float(cfg.contact_margin)
         contacts.count.zero_()
         out = [contacts.count, contacts.capacity, *contacts.buffers()]
-        wp.launch(k.capsules_world_kernel, n, [state.x, state.q, W["cap_p0"], W["cap_p1"], W["cap_radius"],
-                                               W["cap_skin"], nj, margin + spec, self.p0w, self.p1w, self.char_lo, self.char_hi,
-                                               self.centre, self.half],
-                  device=dev)
         relative = int(bool(cfg.target_relative_self_contacts) and control is not None)
-        if relative:
-            wp.launch(k.capsules_world_kernel, n, [control.t_x, control.t_glob, W["cap_p0"], W["cap_p1"],
-                                                   W["cap_radius"], W["cap_skin"], nj, 0.0, self.p0t, self.p1t,
-                                                   self.t_lo, self.t_hi, self.centre_t, self.half_t], device=dev)
         pass_on = int(self.pass_on and control is not None)
-        if pass_on:
-            lo, hi, centre, half = self._ahead_scratch
-            wp.launch(k.capsules_world_kernel, n, [control.t_x_ahead, control.t_glob_ahead, W["cap_p0"], W["cap_p1"],
-                                                   W["cap_radius"], W["cap_skin"], nj, 0.0, self.p0a, self.p1a,
-                                                   lo, hi, centre, half], device=dev)
+
+        def capsules_now() -> None:         # the state's capsules and character AABBs
+            wp.launch(k.capsules_world_kernel, n, [state.x, state.q, W["cap_p0"], W["cap_p1"], W["cap_radius"],
+                                                   W["cap_skin"], nj, margin + spec, self.p0w, self.p1w,
+                                                   self.char_lo, self.char_hi, self.centre, self.half], device=dev)
+
+        def capsules_target() -> None:      # ... in the target pose and in the look-ahead pose
+            if relative:
+                wp.launch(k.capsules_world_kernel, n, [control.t_x, control.t_glob, W["cap_p0"], W["cap_p1"],
+                                                       W["cap_radius"], W["cap_skin"], nj, 0.0, self.p0t, self.p1t,
+                                                       self.t_lo, self.t_hi, self.centre_t, self.half_t], device=dev)
+            if pass_on:
+                lo, hi, centre, half = self._ahead_scratch
+                wp.launch(k.capsules_world_kernel, n, [control.t_x_ahead, control.t_glob_ahead, W["cap_p0"],
+                                                       W["cap_p1"], W["cap_radius"], W["cap_skin"], nj, 0.0, self.p0a,
+                                                       self.p1a, lo, hi, centre, half], device=dev)
+
+        if (relative or pass_on) and dev == "cpu" and n >= _MIN_CHARACTERS_PARALLEL and host_threads() >= 2:
+            run_parallel(capsules_now, capsules_target)      # disjoint outputs: the same bits either way
+        else:
+            capsules_now()
+            capsules_target()
         band = float(cfg.contact_activation)
         if cfg.ground_stiffness > 0:
             wp.launch(k.ground_kernel, nb, [state.x, self.p0w, self.p1w, W["cap_radius"], relative, self.p0t,
@@ -643,10 +772,17 @@ class CollisionPipeline:
                                           *out], device=dev)
         n_pairs = 0
         if n > 1 and cfg.contact_stiffness > 0:
-            self.pair_count.zero_()
-            wp.launch(k.broadphase_kernel, n, [self.char_lo, self.char_hi, self.period, self.pair_count,
-                                               self.pair_capacity, self.pair_i, self.pair_j, self.pair_shift],
-                      device=dev)
+            if dev == "cpu" and self.period <= 0.0 and n >= _MIN_CHARACTERS_SWEEP:
+                if self._sweep_scratch is None:
+                    self._sweep_scratch = (wp.zeros(n, dtype=wp.int32, device=dev),
+                                           wp.zeros(n, dtype=wp.float32, device=dev))
+                launch_sweep(self.char_lo.numpy(), self.char_lo, self.char_hi, *self._sweep_scratch, self.pair_count,
+                             self.pair_capacity, self.pair_i, self.pair_j, self.pair_shift)
+            else:
+                self.pair_count.zero_()
+                wp.launch(k.broadphase_kernel, n, [self.char_lo, self.char_hi, self.period, self.pair_count,
+                                                   self.pair_capacity, self.pair_i, self.pair_j, self.pair_shift],
+                          device=dev)
             n_pairs = int(self.pair_count.numpy()[0])
             if n_pairs > self.pair_capacity:
                 self.dropped_pairs += n_pairs - self.pair_capacity
@@ -654,7 +790,7 @@ class CollisionPipeline:
         n_intra = W["intra_pairs"].shape[0]
         intra_on = bool(cfg.intra_body and n_intra and cfg.intra_stiffness > 0)
 
-        def narrow(buf, lo: int, hi: int) -> None:     # narrow-phase threads [lo, hi) into buf
+        def narrow(buf, lo: int, hi: int) -> None:     # the pairs [lo, hi) into buf
             if hi > lo:
                 wp.launch(k.narrowphase_kernel, hi - lo,
                           [state.x, self.p0w, self.p1w, W["cap_radius"], W["cap_skin"], self.centre, self.half,
@@ -670,12 +806,12 @@ class CollisionPipeline:
                                                     band, spec, float(cfg.intra_stiffness), buf.count,
                                                     buf.capacity, *buf.buffers()], device=dev)
 
-        total = n_pairs * nj
-        if dev != "cpu" or host_threads() < 2 or total + n_intra < _MIN_SPLIT_THREADS:
+        total = n_pairs
+        if dev != "cpu" or host_threads() < 2 or total * nj + n_intra < _MIN_SPLIT_THREADS:
             narrow(contacts, 0, total)
             intra(contacts)
             return
-        # two host threads: the first runs the first `split` of the narrow-phase threads into
+        # two host threads: the first runs the first `split` of the character pairs into
         # `contacts`, the second the rest and the intra-body pairs into a scratch buffer,
         # appended after: the same contacts in the same order as one thread (the order the
         # solver sums them in), whatever the split, which only balances the two threads.
@@ -683,7 +819,7 @@ class CollisionPipeline:
             self._scratch = Contacts.allocate(contacts.capacity, dev)
         scratch = self._scratch
         scratch.count.zero_()
-        cut = min(max(int(round(self._split * n_pairs)), 0), n_pairs) * nj
+        cut = min(max(int(round(self._split * n_pairs)), 0), n_pairs)
         t0, t1 = run_parallel(lambda: narrow(contacts, 0, cut), lambda: (narrow(scratch, cut, total), intra(scratch)))
         self._balance(t0, t1, cut, total)
         base = int(contacts.count.numpy()[0])
@@ -696,10 +832,11 @@ class CollisionPipeline:
 
     def _balance(self, t0: float, t1: float, cut: int, total: int) -> None:
         """Move the split of the narrow phase towards equal CPU time on both host threads
-        (``t0`` s for threads [0, cut), ``t1`` s for [cut, total) plus the intra pairs)."""
+        (``t0`` s for the character pairs [0, cut), ``t1`` s for [cut, total) plus the
+        intra-body pairs)."""
         if cut <= 0 or total <= 0 or t0 <= 0.0:
             return
-        per = t0 / cut                               # s per narrow-phase thread
+        per = t0 / cut                               # s per character pair
         rest = max(t1 - per * (total - cut), 0.0)    # the intra pairs
         target = min(max((per * total + rest) / (2.0 * per * total), 0.05), 0.95)
         self._split = 0.5 * self._split + 0.5 * target

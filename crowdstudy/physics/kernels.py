@@ -148,6 +148,35 @@ def kernels():
         return control_gradient(rp, rc, tgt, damp_ref, k, dh2)
 
     @wp.kernel
+    def joint_terms_kernel(q: wp.array(dtype=wp.quat), q_old: wp.array(dtype=wp.quat),
+                           t_rel: wp.array(dtype=wp.quat), t_rel_old: wp.array(dtype=wp.quat),
+                           body_parent: wp.array(dtype=wp.int32), anchor_parent: wp.array(dtype=wp.vec3),
+                           anchor_child: wp.array(dtype=wp.vec3), body_k: wp.array(dtype=float),
+                           body_d: wp.array(dtype=float), h: float, damp_scale: float,
+                           lever_p: wp.array(dtype=wp.vec3), lever_c: wp.array(dtype=wp.vec3),
+                           ctrl_c: wp.array(dtype=float), ctrl_g: wp.array(dtype=wp.vec3), offset: int):
+        """The joint of body b = thread + ``offset`` (b the child), at the predicted
+        orientations: the world lever arms on the parent (lever_p, m) and on b (lever_c, m),
+        the control coupling 2 (k + d/h^2) (ctrl_c) and the child-side gradient of its PD
+        term (ctrl_g, N m; the parent's is the negative); zeros for a root. Computed once per
+        joint for ``assemble_bodies_kernel`` (the child and the parent read them)."""
+        b = wp.tid() + offset
+        p = body_parent[b]
+        if p < 0:
+            lever_p[b] = wp.vec3(0.0, 0.0, 0.0)
+            lever_c[b] = wp.vec3(0.0, 0.0, 0.0)
+            ctrl_c[b] = 0.0
+            ctrl_g[b] = wp.vec3(0.0, 0.0, 0.0)
+            return
+        inv_h2 = 1.0 / (h * h)
+        k = body_k[b]
+        dh2 = body_d[b] * damp_scale * inv_h2
+        lever_p[b] = wp.quat_rotate(q[p], anchor_parent[b])
+        lever_c[b] = wp.quat_rotate(q[b], anchor_child[b])
+        ctrl_c[b] = 2.0 * (k + dh2)
+        ctrl_g[b] = joint_control_terms(b, p, q, q_old, t_rel, t_rel_old, k, dh2)
+
+    @wp.kernel
     def assemble_bodies_kernel(
             x: wp.array(dtype=wp.vec3), q: wp.array(dtype=wp.quat),
             x_old: wp.array(dtype=wp.vec3), q_old: wp.array(dtype=wp.quat),
@@ -163,7 +192,7 @@ def kernels():
             grad_t: wp.array(dtype=wp.vec3), grad_r: wp.array(dtype=wp.vec3),
             hess_a: wp.array(dtype=wp.mat33), hess_b: wp.array(dtype=wp.mat33), hess_c: wp.array(dtype=wp.mat33),
             lever_p: wp.array(dtype=wp.vec3), lever_c: wp.array(dtype=wp.vec3), ctrl_c: wp.array(dtype=float),
-            offset: int):
+            ctrl_g: wp.array(dtype=wp.vec3), offset: int):
         """Gradient (N, N m) and diagonal Hessian block of every body (b = thread + ``offset``)
         at the predicted state.
 
@@ -176,9 +205,10 @@ def kernels():
         ``body_kt_far`` kf far from it: energy kf/2 |e|^2 + (kt - kf) r^2 (sqrt(1 + |e|^2 /
         r^2) - 1), force (kf + (kt - kf) / sqrt(1 + |e|^2 / r^2)) e, its Hessian taken as that
         weight times I.
-        Also stores, per body with a parent, the world lever arms of its joint on the parent
-        (lever_p) and on itself (lever_c), and the control coupling 2 (k + d/h^2) (ctrl_c),
-        used by the matrix-free off-diagonal products.
+        Reads each joint's lever arms, control coupling and PD gradient from
+        ``joint_terms_kernel`` (run first on the same bodies: a body and its children are in
+        one character); the lever arms and couplings also serve the matrix-free off-diagonal
+        products.
 
         ``damp_scale`` = h / h0 multiplies every damping coefficient of the d/(2 h^2) form
         (Eq. 4 and the translational dampers), so that the damping force (d / h0) times the
@@ -216,13 +246,10 @@ def kernels():
             damp_ref = wp.quat_to_matrix(q_old[b]) + tgt - wp.quat_to_matrix(t_rel_old[b])
             gr += control_gradient(eye, rb, tgt, damp_ref, k, dh2)
             c += (2.0 * (k + dh2)) * eye
-            lever_p[b] = wp.vec3(0.0, 0.0, 0.0)
-            lever_c[b] = wp.vec3(0.0, 0.0, 0.0)
-            ctrl_c[b] = 0.0
         else:
             # b is the child of joint (p, b).
-            r_p = wp.quat_rotate(q[p], anchor_parent[b])
-            r_c = wp.quat_rotate(q[b], anchor_child[b])
+            r_p = lever_p[b]
+            r_c = lever_c[b]
             cvec = x[p] + r_p - x[b] - r_c
             gt += -k_joint * cvec
             gr += -k_joint * wp.cross(r_c, cvec)
@@ -230,18 +257,14 @@ def kernels():
             a += k_joint * eye
             bb += -k_joint * sk
             c += -k_joint * (sk * sk)
-            gr += joint_control_terms(b, p, q, q_old, t_rel, t_rel_old, k, dh2)
-            cc = 2.0 * (k + dh2)
-            c += cc * eye
-            lever_p[b] = r_p
-            lever_c[b] = r_c
-            ctrl_c[b] = cc
+            gr += ctrl_g[b]
+            c += ctrl_c[b] * eye
         for s in range(body_children.shape[1]):
             ch = body_children[b, s]
             if ch >= 0:
                 # b is the parent of joint (b, ch).
-                r_p = wp.quat_rotate(q[b], anchor_parent[ch])
-                r_c = wp.quat_rotate(q[ch], anchor_child[ch])
+                r_p = lever_p[ch]
+                r_c = lever_c[ch]
                 cvec = x[b] + r_p - x[ch] - r_c
                 gt += k_joint * cvec
                 gr += k_joint * wp.cross(r_p, cvec)
@@ -249,10 +272,8 @@ def kernels():
                 a += k_joint * eye
                 bb += -k_joint * sk
                 c += -k_joint * (sk * sk)
-                kc = body_k[ch]
-                dc = body_d[ch] * damp_scale * inv_h2
-                gr -= joint_control_terms(ch, b, q, q_old, t_rel, t_rel_old, kc, dc)
-                c += (2.0 * (kc + dc)) * eye
+                gr -= ctrl_g[ch]
+                c += ctrl_c[ch] * eye
         grad_t[b] = gt
         grad_r[b] = gr
         hess_a[b] = a
@@ -310,8 +331,9 @@ def kernels():
                            damp_scale: float,
                            planted_speed: float, k_anchor: float, c_anchor: float, max_force: float,
                            release_distance: float, rejoin_distance: float,
-                           grad_t: wp.array(dtype=wp.vec3), hess_a: wp.array(dtype=wp.mat33)):
+                           grad_t: wp.array(dtype=wp.vec3), hess_a: wp.array(dtype=wp.mat33), offset_feet: int):
         """Stance-foot anchor (static friction of planted feet), added to the assembled system.
+        Foot i = thread + ``offset_feet`` of ``feet``.
 
         The animation's foot body is planted when its horizontal speed |v^_xy| is below
         ``planted_speed`` (weight w = 1), free above twice that (w = 0, linear in between).
@@ -329,7 +351,7 @@ def kernels():
         is back within ``rejoin_distance`` m (``weight`` (F,) holds w, ``stepping`` (B,) the
         flag).
         """
-        i = wp.tid()
+        i = wp.tid() + offset_feet
         b = feet[i]
         vt = (t_x[b] - t_x_old[b]) / h
         speed = wp.sqrt(vt[0] * vt[0] + vt[1] * vt[1])
@@ -370,6 +392,7 @@ def kernels():
 
     return SimpleNamespace(wp=wp, quat_exp=quat_exp, quat_log=quat_log, vee_asym=vee_asym,
                            targets_kernel=targets_kernel, predict_kernel=predict_kernel,
+                           joint_terms_kernel=joint_terms_kernel,
                            assemble_bodies_kernel=assemble_bodies_kernel, update_kernel=update_kernel,
                            project_kernel=project_kernel, set_state_kernel=set_state_kernel,
                            control_gradient=control_gradient, foot_anchor_kernel=foot_anchor_kernel)

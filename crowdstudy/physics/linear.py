@@ -46,7 +46,8 @@ def solver_kernels():
                                 hess_c: wp.array(dtype=wp.mat33),
                                 u_at: wp.array(dtype=wp.vec3), u_ar: wp.array(dtype=wp.vec3),
                                 u_bt: wp.array(dtype=wp.vec3), u_br: wp.array(dtype=wp.vec3),
-                                k_eff: wp.array(dtype=float)):
+                                k_eff: wp.array(dtype=float), contact_list: wp.array(dtype=wp.int32), use_list: int,
+                                lo: int, hi: int):
         """Penalty of one contact (thread) on its depth d (m). d(q) is linear in the increments
         with gradient u_a = -(n, l_a x n), u_b = (n, l_b x n); linearised to the prediction
         (q_t + h v). Gradient phi'(d) u, Gauss-Newton Hessian phi''(d) u u^T.
@@ -72,13 +73,23 @@ def solver_kernels():
 
         Ground contacts (kind 0) also get viscous friction: (c/(2h)) |P_t dp|^2, dp the
         contact point's displacement over the step and P_t the tangent projector, i.e. a
-        force c v_t (c = ``friction``, N s/m) against sliding; Hessian (c/h) J^T P_t J."""
+        force c v_t (c = ``friction``, N s/m) against sliding; Hessian (c/h) J^T P_t J.
+
+        Only bodies in [``lo``, ``hi``) receive terms, and only a contact whose body a is
+        among them writes its ``k_eff`` and ``u``; with ``use_list`` the thread's contact is
+        ``contact_list[thread]`` (two host threads: each half of the crowd takes the contacts
+        that touch it, in contact order, so every body sums its terms in the same order as
+        one launch over all contacts with [0, B))."""
         i = wp.tid()
+        if use_list != 0:
+            i = contact_list[i]
         n_active = wp.min(count[0], capacity)
         if i >= n_active:
             return
         a = c_a[i]
         b = c_b[i]
+        own_a = a >= lo and a < hi
+        own_b = b >= lo and b < hi
         n = c_n[i]
         at = -n
         ar = -wp.cross(c_la[i], n)
@@ -95,7 +106,8 @@ def solver_kernels():
                          wp.length((x[b] - t_x[b]) - (x[rb] - t_x[rb])))
             k_c = k_c * wp.clamp(1.0 - (dev - release0) / release_width, 0.0, 1.0)
         if k_c <= 0.0 or depth <= -activation or (activation <= 0.0 and depth <= 0.0):
-            k_eff[i] = 0.0
+            if own_a:
+                k_eff[i] = 0.0
             return
         f = k_c * depth
         k = k_c
@@ -109,23 +121,26 @@ def solver_kernels():
         if stiffen > 0.0 and depth > 0.0 and c_kind[i] == 2:
             f += k_c * depth * depth / stiffen
             k += 2.0 * k_c * depth / stiffen
-        k_eff[i] = k
-        u_at[i] = at
-        u_ar[i] = ar
-        u_bt[i] = bt
-        u_br[i] = br
-        wp.atomic_add(grad_t, a, f * at)
-        wp.atomic_add(grad_r, a, f * ar)
-        wp.atomic_add(hess_a, a, k * wp.outer(at, at))
-        wp.atomic_add(hess_b, a, k * wp.outer(at, ar))
-        wp.atomic_add(hess_c, a, k * wp.outer(ar, ar))
+        if own_a:
+            k_eff[i] = k
+            u_at[i] = at
+            u_ar[i] = ar
+            u_bt[i] = bt
+            u_br[i] = br
+            wp.atomic_add(grad_t, a, f * at)
+            wp.atomic_add(grad_r, a, f * ar)
+            wp.atomic_add(hess_a, a, k * wp.outer(at, at))
+            wp.atomic_add(hess_b, a, k * wp.outer(at, ar))
+            wp.atomic_add(hess_c, a, k * wp.outer(ar, ar))
         if b >= 0:
+            if not own_b:
+                return
             wp.atomic_add(grad_t, b, f * bt)
             wp.atomic_add(grad_r, b, f * br)
             wp.atomic_add(hess_a, b, k * wp.outer(bt, bt))
             wp.atomic_add(hess_b, b, k * wp.outer(bt, br))
             wp.atomic_add(hess_c, b, k * wp.outer(br, br))
-        elif c_kind[i] == 0 and friction > 0.0:
+        elif c_kind[i] == 0 and friction > 0.0 and own_a:
             lever = c_la[i]
             pt = wp.identity(n=3, dtype=float) - wp.outer(n, n)
             vp = v[a] + wp.cross(w[a], lever)
@@ -245,14 +260,26 @@ def solver_kernels():
         sc = wp.skew(rc)
         return block66(-kj * eye, kj * sc, -kj * sp, kj * (sp * sc) - cc * eye)
 
+    @wp.func
+    def joint_apply_t(kj: float, rp: wp.vec3, rc: wp.vec3, cc: float, y: wp.spatial_vector):
+        """O^T y for the joint's (parent, child) block O (``joint_block``) without forming
+        it: O^T (y_t, y_r) = (k_j z, k_j r_c x z - c y_r) with z = r_p x y_r - y_t (the
+        skew blocks are antisymmetric). A few cross products instead of reading and
+        multiplying a stored 6x6 matrix in every preconditioner application."""
+        yt = wp.vec3(y[0], y[1], y[2])
+        yr = wp.vec3(y[3], y[4], y[5])
+        z = wp.cross(rp, yr) - yt
+        t = kj * z
+        r = kj * wp.cross(rc, z) - cc * yr
+        return wp.spatial_vector(t[0], t[1], t[2], r[0], r[1], r[2])
+
     @wp.kernel
     def tree_factor_kernel(n_joints: int, hess_a: wp.array(dtype=wp.mat33), hess_b: wp.array(dtype=wp.mat33),
                            hess_c: wp.array(dtype=wp.mat33), parent: wp.array(dtype=wp.int32),
                            lever_p: wp.array(dtype=wp.vec3), lever_c: wp.array(dtype=wp.vec3),
                            ctrl_c: wp.array(dtype=float), k_joint: float,
                            work: wp.array(dtype=wp.spatial_matrix), dinv: wp.array(dtype=wp.spatial_matrix),
-                           lmat: wp.array(dtype=wp.spatial_matrix), omat: wp.array(dtype=wp.spatial_matrix),
-                           offset: int):
+                           lmat: wp.array(dtype=wp.spatial_matrix), offset: int):
         """Exact block LDL^T of one character's (thread + ``offset``) 6J x 6J block (diagonal
         blocks plus joint couplings, a tree): leaves are eliminated into their parents
         (parents[j] < j)."""
@@ -270,17 +297,18 @@ def solver_kernels():
             if p >= 0:
                 o = joint_block(k_joint, lever_p[b], lever_c[b], ctrl_c[b])
                 l = o * di
-                omat[b] = o
                 lmat[b] = l
                 work[p] = work[p] - l * wp.transpose(o)
 
     @wp.func
     def tree_apply(lo: int, hi: int, parent: wp.array(dtype=wp.int32), r_t: wp.array(dtype=wp.vec3),
                    r_r: wp.array(dtype=wp.vec3), dinv: wp.array(dtype=wp.spatial_matrix),
-                   lmat: wp.array(dtype=wp.spatial_matrix), omat: wp.array(dtype=wp.spatial_matrix),
+                   lmat: wp.array(dtype=wp.spatial_matrix), lever_p: wp.array(dtype=wp.vec3),
+                   lever_c: wp.array(dtype=wp.vec3), ctrl_c: wp.array(dtype=float), k_joint: float,
                    y6: wp.array(dtype=wp.spatial_vector), z_t: wp.array(dtype=wp.vec3), z_r: wp.array(dtype=wp.vec3)):
         """z = P r on bodies [lo, hi) (whole characters) with P the inverse of every
-        character's tree block (sequential)."""
+        character's tree block (sequential); the joint blocks O^T from the levers
+        (``joint_apply_t``)."""
         for b in range(lo, hi):
             rt = r_t[b]
             rr = r_r[b]
@@ -294,7 +322,7 @@ def solver_kernels():
             p = parent[b]
             y = y6[b]
             if p >= 0:
-                y = y - wp.transpose(omat[b]) * y6[p]
+                y = y - joint_apply_t(k_joint, lever_p[b], lever_c[b], ctrl_c[b], y6[p])
             x = dinv[b] * y
             y6[b] = x
             z_t[b] = wp.vec3(x[0], x[1], x[2])
@@ -304,7 +332,8 @@ def solver_kernels():
     @wp.kernel
     def tree_precond_kernel(n_joints: int, parent: wp.array(dtype=wp.int32),
                             dinv: wp.array(dtype=wp.spatial_matrix), lmat: wp.array(dtype=wp.spatial_matrix),
-                            omat: wp.array(dtype=wp.spatial_matrix), x: wp.array(dtype=wp.spatial_vector),
+                            lever_p: wp.array(dtype=wp.vec3), lever_c: wp.array(dtype=wp.vec3), ctrl_c: wp.array(dtype=float), k_joint: float,
+                            x: wp.array(dtype=wp.spatial_vector),
                             y: wp.array(dtype=wp.spatial_vector), z: wp.array(dtype=wp.spatial_vector),
                             alpha: float, beta: float, work: wp.array(dtype=wp.spatial_vector)):
         """z = alpha P x + beta y, P the tree solve of one character (thread); for
@@ -323,7 +352,7 @@ def solver_kernels():
             p = parent[b]
             v = work[b]
             if p >= 0:
-                v = v - wp.transpose(omat[b]) * work[p]
+                v = v - joint_apply_t(k_joint, lever_p[b], lever_c[b], ctrl_c[b], work[p])
             work[b] = dinv[b] * v
         for j in range(n_joints):
             b = b0 + j
@@ -376,11 +405,11 @@ def solver_kernels():
                       r_t: wp.array(dtype=wp.vec3), r_r: wp.array(dtype=wp.vec3),
                       p_tt: wp.array(dtype=wp.mat33), p_tr: wp.array(dtype=wp.mat33), p_rr: wp.array(dtype=wp.mat33),
                       dinv: wp.array(dtype=wp.spatial_matrix), lmat: wp.array(dtype=wp.spatial_matrix),
-                      omat: wp.array(dtype=wp.spatial_matrix), y6: wp.array(dtype=wp.spatial_vector),
-                      z_t: wp.array(dtype=wp.vec3), z_r: wp.array(dtype=wp.vec3)):
+                      lever_p: wp.array(dtype=wp.vec3), lever_c: wp.array(dtype=wp.vec3), ctrl_c: wp.array(dtype=float), k_joint: float,
+                      y6: wp.array(dtype=wp.spatial_vector), z_t: wp.array(dtype=wp.vec3), z_r: wp.array(dtype=wp.vec3)):
         """z = P r: mode 1 the per-character tree solve, mode 0 the 6x6 block Jacobi. Returns r.z."""
         if mode == 1:
-            tree_apply(0, nb, parent, r_t, r_r, dinv, lmat, omat, y6, z_t, z_r)
+            tree_apply(0, nb, parent, r_t, r_r, dinv, lmat, lever_p, lever_c, ctrl_c, k_joint, y6, z_t, z_r)
         else:
             for i in range(nb):
                 ptr = p_tr[i]
@@ -394,8 +423,7 @@ def solver_kernels():
                          hess_c: wp.array(dtype=wp.mat33), p_tt: wp.array(dtype=wp.mat33),
                          p_tr: wp.array(dtype=wp.mat33), p_rr: wp.array(dtype=wp.mat33),
                          precond_mode: int, dinv: wp.array(dtype=wp.spatial_matrix),
-                         lmat: wp.array(dtype=wp.spatial_matrix), omat: wp.array(dtype=wp.spatial_matrix),
-                         y6: wp.array(dtype=wp.spatial_vector),
+                         lmat: wp.array(dtype=wp.spatial_matrix), y6: wp.array(dtype=wp.spatial_vector),
                          parent: wp.array(dtype=wp.int32), lever_p: wp.array(dtype=wp.vec3),
                          lever_c: wp.array(dtype=wp.vec3), ctrl_c: wp.array(dtype=float), k_joint: float,
                          c_a: wp.array(dtype=wp.int32), c_b: wp.array(dtype=wp.int32),
@@ -412,7 +440,8 @@ def solver_kernels():
         """PCG for H x = -g in one launch (one thread; for the CPU). stats = (iterations, |r|/|b|)."""
         nc = wp.min(count[0], capacity)
         bnorm2 = pcg_start(0, nb, grad_t, grad_r, x_t, x_r, r_t, r_r)
-        rz = apply_precond(precond_mode, nb, parent, r_t, r_r, p_tt, p_tr, p_rr, dinv, lmat, omat, y6, z_t, z_r)
+        rz = apply_precond(precond_mode, nb, parent, r_t, r_r, p_tt, p_tr, p_rr, dinv, lmat, lever_p, lever_c,
+                           ctrl_c, k_joint, y6, z_t, z_r)
         for i in range(nb):
             p_t[i] = z_t[i]
             p_r[i] = z_r[i]
@@ -433,7 +462,8 @@ def solver_kernels():
             rel = wp.sqrt(rr2 / bnorm2)
             if rr2 <= tol2:
                 break
-            rz_new = apply_precond(precond_mode, nb, parent, r_t, r_r, p_tt, p_tr, p_rr, dinv, lmat, omat, y6,
+            rz_new = apply_precond(precond_mode, nb, parent, r_t, r_r, p_tt, p_tr, p_rr, dinv, lmat, lever_p,
+                                   lever_c, ctrl_c, k_joint, y6,
                                    z_t, z_r)
             beta = rz_new / rz
             rz = rz_new
@@ -447,7 +477,8 @@ def solver_kernels():
     def pcg_split_init_kernel(lo: int, hi: int, part: int, grad_t: wp.array(dtype=wp.vec3),
                               grad_r: wp.array(dtype=wp.vec3), parent: wp.array(dtype=wp.int32),
                               dinv: wp.array(dtype=wp.spatial_matrix), lmat: wp.array(dtype=wp.spatial_matrix),
-                              omat: wp.array(dtype=wp.spatial_matrix), y6: wp.array(dtype=wp.spatial_vector),
+                              lever_p: wp.array(dtype=wp.vec3), lever_c: wp.array(dtype=wp.vec3), ctrl_c: wp.array(dtype=float), k_joint: float,
+                              y6: wp.array(dtype=wp.spatial_vector),
                               x_t: wp.array(dtype=wp.vec3), x_r: wp.array(dtype=wp.vec3),
                               r_t: wp.array(dtype=wp.vec3), r_r: wp.array(dtype=wp.vec3),
                               z_t: wp.array(dtype=wp.vec3), z_r: wp.array(dtype=wp.vec3),
@@ -460,7 +491,7 @@ def solver_kernels():
             p_t[i] = wp.vec3(0.0, 0.0, 0.0)
             p_r[i] = wp.vec3(0.0, 0.0, 0.0)
         sums[4 * part] = pcg_start(lo, hi, grad_t, grad_r, x_t, x_r, r_t, r_r)
-        tree_apply(lo, hi, parent, r_t, r_r, dinv, lmat, omat, y6, z_t, z_r)
+        tree_apply(lo, hi, parent, r_t, r_r, dinv, lmat, lever_p, lever_c, ctrl_c, k_joint, y6, z_t, z_r)
         sums[4 * part + 1] = dot6(lo, hi, r_t, r_r, z_t, z_r)
 
     @wp.kernel
@@ -512,7 +543,7 @@ def solver_kernels():
                                 x_t: wp.array(dtype=wp.vec3), x_r: wp.array(dtype=wp.vec3),
                                 r_t: wp.array(dtype=wp.vec3), r_r: wp.array(dtype=wp.vec3),
                                 parent: wp.array(dtype=wp.int32), dinv: wp.array(dtype=wp.spatial_matrix),
-                                lmat: wp.array(dtype=wp.spatial_matrix), omat: wp.array(dtype=wp.spatial_matrix),
+                                lmat: wp.array(dtype=wp.spatial_matrix), lever_p: wp.array(dtype=wp.vec3), lever_c: wp.array(dtype=wp.vec3), ctrl_c: wp.array(dtype=float), k_joint: float,
                                 y6: wp.array(dtype=wp.spatial_vector),
                                 z_t: wp.array(dtype=wp.vec3), z_r: wp.array(dtype=wp.vec3),
                                 sums: wp.array(dtype=float)):
@@ -521,7 +552,7 @@ def solver_kernels():
         # ``wp`` named in the body makes it a closure variable of the kernel, which Warp
         # needs to evaluate the (string) annotations above
         sums[4 * part + 3] = wp.float32(pcg_advance(lo, hi, alpha, p_t, p_r, q_t, q_r, x_t, x_r, r_t, r_r))
-        tree_apply(lo, hi, parent, r_t, r_r, dinv, lmat, omat, y6, z_t, z_r)
+        tree_apply(lo, hi, parent, r_t, r_r, dinv, lmat, lever_p, lever_c, ctrl_c, k_joint, y6, z_t, z_r)
         sums[4 * part + 1] = dot6(lo, hi, r_t, r_r, z_t, z_r)
 
     @wp.kernel

@@ -44,6 +44,7 @@ Jacobi 4.2 ms (hits the 60-iteration cap), scipy 20 ms, ``warp.optim.linear.cg``
 
 from __future__ import annotations
 
+import threading
 import time
 
 import numpy as np
@@ -51,7 +52,7 @@ import numpy as np
 from crowdstudy.errors import InvalidInputError
 from crowdstudy.physics.linear import bsr_from_triplets, solver_kernels
 from crowdstudy.physics.model import GROUP_ARM, GROUP_FEET, GROUP_PELVIS, GROUP_TRUNK
-from crowdstudy.warp_runtime import host_threads, run_parallel
+from crowdstudy.warp_runtime import host_threads, run_parallel, run_together
 
 __all__ = ["Solver", "LINEAR_SOLVERS"]
 
@@ -62,6 +63,9 @@ FEET_TRANSLATION_JOINTS = (7, 8, 10, 11)
 
 #: below this many characters per half the two-thread split costs more than it saves
 _MIN_CHARACTERS_PER_THREAD = 16
+#: from this many characters on, the CPU assembles the two halves of the crowd at once,
+#: contacts included (below, listing each half's contacts costs about what it saves)
+_MIN_CHARACTERS_SPLIT_ASSEMBLY = 200
 #: from this many characters on, the CPU PCG runs split over the two halves of the crowd
 #: (``Solver._solve_split``); below, its per-iteration hand-overs cost more than the second
 #: core saves (measured 2026-12-04: 60 characters 10.4 ms per step against 4.5, 200 14.3 against
@@ -112,14 +116,16 @@ class Solver:
         self.p_tt, self.p_tr, self.p_rr = m3(), m3(), m3()
         self.lever_p, self.lever_c = z3(), z3()
         self.ctrl_c = wp.zeros(nb, dtype=wp.float32, device=dev)
+        self.ctrl_g = wp.zeros(nb, dtype=wp.vec3, device=dev)     # each joint's PD gradient on its child (N m)
         self.dx, self.dw = z3(), z3()
         self.work = [z3() for _ in range(8)]
         self.work_split = [z3(), z3()]     # the split PCG's second direction buffer (t, r)
         self.split_sums = wp.zeros(8, dtype=wp.float32, device=dev)
         self._split_lists = None           # its per-half contact lists
+        self._split_cmds = None            # its recorded launches (and the buffers they were recorded on)
         self.stats = wp.zeros(2, dtype=wp.float32, device=dev)
         s6 = lambda: wp.zeros(nb, dtype=wp.spatial_matrix, device=dev)  # noqa: E731
-        self.tree_work, self.tree_dinv, self.tree_l, self.tree_o = s6(), s6(), s6(), s6()
+        self.tree_work, self.tree_dinv, self.tree_l = s6(), s6(), s6()
         self.y6 = wp.zeros(nb, dtype=wp.spatial_vector, device=dev)
         groups = model.body_group
         scale = np.select([groups == GROUP_PELVIS, groups == GROUP_FEET, groups == GROUP_ARM, groups == GROUP_TRUNK],
@@ -143,6 +149,9 @@ class Solver:
         self.foot_offset = z3()
         self.foot_stepping = wp.zeros(nb, dtype=wp.int32, device=dev)
         self.foot_weight = wp.zeros(max(int(feet.sum()), 1), dtype=wp.float32, device=dev)
+        self._feet_host = np.nonzero(feet)[0]        # feet_index on the host (sorted)
+        self._no_list = wp.zeros(1, dtype=wp.int32, device=dev)
+        self._assembly_lists = None
         self._contact_capacity = -1
         self.last_cg = (0, 0.0)
 
@@ -183,47 +192,87 @@ class Solver:
                       [state_in.x, state_in.q, state_in.v, state_in.w, float(dt), int(ff), control.t_x,
                        control.t_x_old, control.t_x_older, control.t_glob, control.t_glob_old, control.t_glob_older,
                        self.x_pred, self.q_pred, int(lo)], device=dev)
+            wp.launch(kb.joint_terms_kernel, hi - lo,
+                      [self.q_pred, state_in.q, control.t_rel, control.t_rel_old, W["body_parent"],
+                       W["anchor_parent"], W["anchor_child"], self.body_k, self.body_d, float(dt), damp_scale,
+                       self.lever_p, self.lever_c, self.ctrl_c, self.ctrl_g, int(lo)], device=dev)
             wp.launch(kb.assemble_bodies_kernel, hi - lo,
                       [self.x_pred, self.q_pred, state_in.x, state_in.q, control.t_rel, control.t_rel_old,
                        control.t_x, control.t_x_old, W["body_mass"], W["body_J"], W["body_parent"],
                        W["body_children"], W["anchor_parent"], W["anchor_child"], self.body_k, self.body_d,
                        self.body_kt, self.body_dt, self.body_reach, self.body_kt_far, float(dt), 0.0 if ff else float(cfg.gravity),
                        float(cfg.joint_stiffness), damp_scale, self.grad_t, self.grad_r, self.hess_a, self.hess_b,
-                       self.hess_c, self.lever_p, self.lever_c, self.ctrl_c, int(lo)], device=dev)
+                       self.hess_c, self.lever_p, self.lever_c, self.ctrl_c, self.ctrl_g, int(lo)], device=dev)
 
-        # the body terms of a body read its parent's prediction: split at a character boundary
-        self._split_characters(lambda c0, c1: bodies(c0 * m.n_joints, c1 * m.n_joints))
-        if cfg.foot_anchor_stiffness > 0 and self.feet_index.shape[0]:
-            wp.launch(kb.foot_anchor_kernel, self.feet_index.shape[0],
-                      [self.feet_index, self.x_pred, state_in.x, control.t_x, control.t_x_old, self.foot_offset,
-                       self.foot_weight, self.foot_stepping, self.body_kt, self.body_dt, float(dt), damp_scale,
-                       float(cfg.foot_planted_speed),
-                       float(cfg.foot_anchor_stiffness), float(cfg.foot_anchor_damping),
-                       float(cfg.foot_anchor_max_force), float(cfg.foot_release_distance),
-                       float(cfg.foot_rejoin_distance), self.grad_t, self.hess_a],
-                      device=dev)
+        n_feet = self.feet_index.shape[0] if cfg.foot_anchor_stiffness > 0 else 0
+
+        def feet(f0: int, f1: int) -> None:     # the stance anchors of feet [f0, f1) (feet_index order)
+            if f1 > f0:
+                wp.launch(kb.foot_anchor_kernel, f1 - f0,
+                          [self.feet_index, self.x_pred, state_in.x, control.t_x, control.t_x_old, self.foot_offset,
+                           self.foot_weight, self.foot_stepping, self.body_kt, self.body_dt, float(dt), damp_scale,
+                           float(cfg.foot_planted_speed),
+                           float(cfg.foot_anchor_stiffness), float(cfg.foot_anchor_damping),
+                           float(cfg.foot_anchor_max_force), float(cfg.foot_release_distance),
+                           float(cfg.foot_rejoin_distance), self.grad_t, self.hess_a, int(f0)],
+                          device=dev)
+
+        def contact_terms(n_threads: int, contact_list, use_list: int, lo: int, hi: int) -> None:
+            if n_threads:
+                wp.launch(ks.contact_assemble_kernel, n_threads,
+                          [contacts.count, contacts.capacity, contacts.body_a, contacts.body_b, contacts.normal,
+                           contacts.depth, contacts.lever_a, contacts.lever_b, contacts.stiffness, contacts.kind,
+                           float(cfg.ground_friction), float(cfg.contact_activation),
+                           float(cfg.contact_release_distance), float(cfg.contact_release_width),
+                           float(cfg.contact_stiffening_depth), m.n_joints,
+                           state_in.x, control.t_x,
+                           state_in.v,
+                           state_in.w, float(dt), self.grad_t, self.grad_r, self.hess_a, self.hess_b, self.hess_c,
+                           self.u_at, self.u_ar, self.u_bt, self.u_br, self.k_eff, contact_list, int(use_list),
+                           int(lo), int(hi)], device=dev)
+
         # on the CPU the host reads the contact count for free: launch only the stored
         # contacts (the kernel skips the rest); on CUDA the whole capacity (no host sync)
-        n_launch = contacts.capacity if m.device != "cpu" else contacts.n_active()
-        if n_launch:
-            wp.launch(ks.contact_assemble_kernel, n_launch,
-                      [contacts.count, contacts.capacity, contacts.body_a, contacts.body_b, contacts.normal,
-                       contacts.depth, contacts.lever_a, contacts.lever_b, contacts.stiffness, contacts.kind,
-                       float(cfg.ground_friction), float(cfg.contact_activation),
-                       float(cfg.contact_release_distance), float(cfg.contact_release_width),
-                       float(cfg.contact_stiffening_depth), m.n_joints,
-                       state_in.x, control.t_x,
-                       state_in.v,
-                       state_in.w, float(dt), self.grad_t, self.grad_r, self.hess_a, self.hess_b, self.hess_c,
-                       self.u_at, self.u_ar, self.u_bt, self.u_br, self.k_eff], device=dev)
+        n_launch = contacts.capacity if dev != "cpu" else contacts.n_active()
+        if not self._split_assembly():
+            # the body terms of a body read its parent's prediction: split at a character boundary
+            self._split_characters(lambda c0, c1: bodies(c0 * m.n_joints, c1 * m.n_joints))
+            feet(0, n_feet)
+            contact_terms(n_launch, self._no_list, 0, 0, m.n_bodies)
+            return
+        # two host threads, one per half of the crowd: each predicts and assembles its
+        # bodies, adds their stance anchors and the terms of the contacts that touch them
+        # (a contact across the cut is in both lists; each half adds only to its own
+        # bodies): every body sums the same terms in the same order as one thread
+        cut = (m.n_characters // 2) * m.n_joints
+        a = contacts.body_a.numpy()[:n_launch]
+        b = contacts.body_b.numpy()[:n_launch]
+        if self._assembly_lists is None or self._assembly_lists[0].shape[0] < max(contacts.capacity, 1):
+            self._assembly_lists = [wp.zeros(max(contacts.capacity, 1), dtype=wp.int32, device=dev) for _ in range(2)]
+        counts = []
+        for lst, mine in zip(self._assembly_lists, ((a < cut) | ((b >= 0) & (b < cut)), (a >= cut) | (b >= cut))):
+            idx = np.flatnonzero(mine).astype(np.int32)
+            lst.numpy()[:len(idx)] = idx
+            counts.append(len(idx))
+        feet_cut = int(np.searchsorted(self._feet_host, cut)) if n_feet else 0
+        run_parallel(lambda: (bodies(0, cut), feet(0, feet_cut),
+                              contact_terms(counts[0], self._assembly_lists[0], 1, 0, cut)),
+                     lambda: (bodies(cut, m.n_bodies), feet(feet_cut, n_feet),
+                              contact_terms(counts[1], self._assembly_lists[1], 1, cut, m.n_bodies)))
+
+    def _split_assembly(self) -> bool:
+        """Whether the assembly runs as two halves of the crowd at once (CPU, two host
+        threads, at least ``_MIN_CHARACTERS_SPLIT_ASSEMBLY`` characters; the same bits
+        either way)."""
+        return (self.model.device == "cpu" and host_threads() >= 2
+                and self.model.n_characters >= _MIN_CHARACTERS_SPLIT_ASSEMBLY)
 
     def solve(self, contacts) -> None:
         """Solve H [dx; dw] = -g into ``self.dx``, ``self.dw``."""
         wp, ks, m, cfg = self.wp, self.ks, self.model, self.config
         dev, nb = m.device, m.n_bodies
         if self.linear_solver == "fused" and self._split_pcg():
-            self._factor_tree()
-            self._solve_split(contacts)
+            self._solve_split(contacts)         # factorises each half's characters with its start
         elif self.linear_solver == "fused":
             mode = 1 if self.preconditioner == "character" else 0
             if mode:
@@ -233,7 +282,7 @@ class Solver:
                                                   self.p_rr], device=dev)
             wp.launch(ks.pcg_fused_kernel, 1,
                       [nb, contacts.count, contacts.capacity, self.hess_a, self.hess_b, self.hess_c, self.p_tt,
-                       self.p_tr, self.p_rr, mode, self.tree_dinv, self.tree_l, self.tree_o, self.y6,
+                       self.p_tr, self.p_rr, mode, self.tree_dinv, self.tree_l, self.y6,
                        m.wp["body_parent"], self.lever_p, self.lever_c, self.ctrl_c,
                        float(cfg.joint_stiffness), contacts.body_a, contacts.body_b, self.u_at, self.u_ar,
                        self.u_bt, self.u_br, self.k_eff, self.grad_t, self.grad_r, float(cfg.cg_tolerance),
@@ -298,14 +347,13 @@ class Solver:
         dot products in a fixed order and computes alpha and beta in float32. A row's
         matrix-vector product is the fused kernel's term for term; the dot products differ
         from the fused kernel's in their summation order only."""
-        wp, ks, m, cfg = self.wp, self.ks, self.model, self.config
+        wp, m, cfg = self.wp, self.model, self.config
         dev, nj = m.device, m.n_joints
         cut = (m.n_characters // 2) * nj
         halves = ((0, 0, cut), (1, cut, m.n_bodies))
-        r_t, r_r, z_t, z_r, p_t, p_r, q_t, q_r = self.work
-        po_t, po_r = self.work_split
         sums = self.split_sums
-        parent, f32 = m.wp["body_parent"], np.float32
+        f32 = np.float32
+        levers = (self.lever_p, self.lever_c, self.ctrl_c, float(cfg.joint_stiffness))   # the joint blocks
         # the body-body contacts of each half (a contact across the cut is in both)
         n_act = contacts.n_active()
         a = contacts.body_a.numpy()[:n_act]
@@ -319,26 +367,16 @@ class Solver:
             lst.numpy()[:len(idx)] = idx
             counts.append(len(idx))
 
-        def record(kernel, inputs):
-            return wp.launch(kernel, 1, inputs, device=dev, record_cmd=True)
-
-        init, matvec, update = [], [], []
-        for (part, lo, hi), n_list, lst in zip(halves, counts, self._split_lists):
-            init.append(record(ks.pcg_split_init_kernel,
-                               [lo, hi, part, self.grad_t, self.grad_r, parent, self.tree_dinv, self.tree_l,
-                                self.tree_o, self.y6, self.dx, self.dw, r_t, r_r, z_t, z_r, po_t, po_r, sums]))
-            mv, up = [], []
-            for (pot, por), (pnt, pnr) in (((po_t, po_r), (p_t, p_r)), ((p_t, p_r), (po_t, po_r))):
-                mv.append(record(ks.pcg_split_matvec_kernel,
-                                 [lo, hi, part, 0.0, n_list, lst, self.hess_a, self.hess_b, self.hess_c, parent,
-                                  self.lever_p, self.lever_c, self.ctrl_c, float(cfg.joint_stiffness),
-                                  contacts.body_a, contacts.body_b, self.u_at, self.u_ar, self.u_bt, self.u_br,
-                                  self.k_eff, z_t, z_r, pot, por, pnt, pnr, q_t, q_r, sums]))
-                up.append(record(ks.pcg_split_update_kernel,
-                                 [lo, hi, part, 0.0, pnt, pnr, q_t, q_r, self.dx, self.dw, r_t, r_r, parent,
-                                  self.tree_dinv, self.tree_l, self.tree_o, self.y6, z_t, z_r, sums]))
-            matvec.append(mv)
-            update.append(up)
+        # the ten launches, recorded once per set of buffers (packing their arguments cost
+        # about 1 ms a step at 1,000 characters); each step sets the contact counts
+        key = (id(contacts.body_a), id(contacts.body_b), id(self.u_at), id(self.k_eff),
+               *(id(lst) for lst in self._split_lists))
+        if self._split_cmds is None or self._split_cmds[0] != key:
+            self._split_cmds = (key, self._record_split(contacts, halves, levers))
+        init, matvec, update = self._split_cmds[1]
+        for part, n_list in enumerate(counts):
+            for cmd in matvec[part]:
+                cmd.set_param_at_index(4, n_list)
 
         def both(cmds, value=None) -> None:
             if value is not None:
@@ -346,45 +384,115 @@ class Solver:
                     cmd.set_param_at_index(3, value)
             run_parallel(cmds[0].launch, cmds[1].launch)
 
-        both(init)
+        # each half factorises its characters' tree blocks, then starts its PCG rows
+        half = m.n_characters // 2
+        run_parallel(lambda: (self._factor_range(0, half), init[0].launch()),
+                     lambda: (self._factor_range(half, m.n_characters), init[1].launch()))
         s = sums.numpy()
         bnorm2 = f32(s[0]) + f32(s[4])
-        rz = f32(s[1]) + f32(s[5])
-        rel = f32(1.0) if bnorm2 > 0 else f32(0.0)
+        rz0 = f32(s[1]) + f32(s[5])
         tol = f32(cfg.cg_tolerance)
-        tol2 = tol * tol * bnorm2
-        beta = f32(0.0)
-        it, buf = 0, 0
-        while it < int(cfg.cg_max_iterations) and rel > tol:
-            both([matvec[0][buf], matvec[1][buf]], float(beta))
-            s = sums.numpy()
-            pq = f32(s[2]) + f32(s[6])
-            if not pq > 0:
-                break
-            both([update[0][buf], update[1][buf]], float(rz / pq))
-            s = sums.numpy()
-            rr2 = f32(s[3]) + f32(s[7])
-            it += 1
-            rel = np.sqrt(rr2 / bnorm2, dtype=f32)
-            if rr2 <= tol2:
-                break
-            rz_new = f32(s[1]) + f32(s[5])
-            beta = rz_new / rz
-            rz = rz_new
-            buf = 1 - buf
+        max_it = int(cfg.cg_max_iterations)
+
+        def iterate(phase) -> tuple[int, np.float32]:
+            """The PCG iterations; ``phase(cmds, buf, value)`` runs one phase (``matvec`` or
+            ``update``, direction buffer ``buf``, beta or alpha) and returns once every half
+            has run it. The partial sums are read right after each phase: a half that runs
+            ahead into the next phase writes other slots of ``sums``."""
+            rz = rz0
+            rel = f32(1.0) if bnorm2 > 0 else f32(0.0)
+            tol2 = tol * tol * bnorm2
+            beta = f32(0.0)
+            it, buf = 0, 0
+            while it < max_it and rel > tol:
+                phase(matvec, buf, float(beta))
+                s = sums.numpy()
+                pq = f32(s[2]) + f32(s[6])
+                if not pq > 0:
+                    break
+                phase(update, buf, float(rz / pq))
+                s = sums.numpy()
+                rr2, rz_new = f32(s[3]) + f32(s[7]), f32(s[1]) + f32(s[5])
+                it += 1
+                rel = np.sqrt(rr2 / bnorm2, dtype=f32)
+                if rr2 <= tol2:
+                    break
+                beta = rz_new / rz
+                rz = rz_new
+                buf = 1 - buf
+            return it, rel
+
+        # two threads at once, each iterating its half and meeting the other at a barrier
+        # after each phase (one wake-up a phase, where handing each phase over costs two);
+        # else both halves phase by phase from this thread: the same arithmetic either way
+        barrier = threading.Barrier(2)
+        result = []
+
+        def half_loop(part: int):
+            def phase(cmds, buf, value):
+                cmd = cmds[part][buf]
+                cmd.set_param_at_index(3, value)
+                try:
+                    cmd.launch()
+                finally:
+                    barrier.wait()
+            try:
+                out = iterate(phase)
+            except BaseException:
+                barrier.abort()
+                raise
+            if part == 0:
+                result.append(out)
+
+        if not run_together(lambda: half_loop(0), lambda: half_loop(1)):
+            result.append(iterate(lambda cmds, buf, value: both([cmds[0][buf], cmds[1][buf]], value)))
+        it, rel = result[0]
         self.last_cg = (it, float(rel))
 
-    def _factor_tree(self) -> None:
+    def _record_split(self, contacts, halves, levers):
+        """The split PCG's launches (init, matvec and update of each half; the two
+        direction buffers alternate), recorded for ``_solve_split``."""
+        wp, ks, m, cfg = self.wp, self.ks, self.model, self.config
+        dev = m.device
+        r_t, r_r, z_t, z_r, p_t, p_r, q_t, q_r = self.work
+        po_t, po_r = self.work_split
+        sums = self.split_sums
+        parent = m.wp["body_parent"]
+
+        def record(kernel, inputs):
+            return wp.launch(kernel, 1, inputs, device=dev, record_cmd=True)
+
+        init, matvec, update = [], [], []
+        for (part, lo, hi), lst in zip(halves, self._split_lists):
+            init.append(record(ks.pcg_split_init_kernel,
+                               [lo, hi, part, self.grad_t, self.grad_r, parent, self.tree_dinv, self.tree_l,
+                                *levers, self.y6, self.dx, self.dw, r_t, r_r, z_t, z_r, po_t, po_r, sums]))
+            mv, up = [], []
+            for (pot, por), (pnt, pnr) in (((po_t, po_r), (p_t, p_r)), ((p_t, p_r), (po_t, po_r))):
+                mv.append(record(ks.pcg_split_matvec_kernel,
+                                 [lo, hi, part, 0.0, 0, lst, self.hess_a, self.hess_b, self.hess_c, parent,
+                                  self.lever_p, self.lever_c, self.ctrl_c, float(cfg.joint_stiffness),
+                                  contacts.body_a, contacts.body_b, self.u_at, self.u_ar, self.u_bt, self.u_br,
+                                  self.k_eff, z_t, z_r, pot, por, pnt, pnr, q_t, q_r, sums]))
+                up.append(record(ks.pcg_split_update_kernel,
+                                 [lo, hi, part, 0.0, pnt, pnr, q_t, q_r, self.dx, self.dw, r_t, r_r, parent,
+                                  self.tree_dinv, self.tree_l, *levers, self.y6, z_t, z_r, sums]))
+            matvec.append(mv)
+            update.append(up)
+
+        return init, matvec, update
+
+    def _factor_range(self, c0: int, c1: int) -> None:
+        """The tree preconditioner's factors of characters [c0, c1)."""
         m, cfg = self.model, self.config
+        if c1 > c0:
+            self.wp.launch(self.ks.tree_factor_kernel, c1 - c0,
+                           [m.n_joints, self.hess_a, self.hess_b, self.hess_c, m.wp["body_parent"],
+                            self.lever_p, self.lever_c, self.ctrl_c, float(cfg.joint_stiffness), self.tree_work,
+                            self.tree_dinv, self.tree_l, int(c0)], device=m.device)
 
-        def factor(c0: int, c1: int) -> None:
-            if c1 > c0:
-                self.wp.launch(self.ks.tree_factor_kernel, c1 - c0,
-                               [m.n_joints, self.hess_a, self.hess_b, self.hess_c, m.wp["body_parent"],
-                                self.lever_p, self.lever_c, self.ctrl_c, float(cfg.joint_stiffness), self.tree_work,
-                                self.tree_dinv, self.tree_l, self.tree_o, int(c0)], device=m.device)
-
-        self._split_characters(factor)
+    def _factor_tree(self) -> None:
+        self._split_characters(self._factor_range)
 
     def _solve_warp(self, rows, cols, vals, rhs) -> None:
         import warp.optim.linear as wl
@@ -401,7 +509,8 @@ class Solver:
 
             def matvec(x, y, z, alpha, beta):
                 wp.launch(self.ks.tree_precond_kernel, m.n_characters,
-                          [m.n_joints, m.wp["body_parent"], self.tree_dinv, self.tree_l, self.tree_o, x, y, z,
+                          [m.n_joints, m.wp["body_parent"], self.tree_dinv, self.tree_l, self.lever_p,
+                           self.lever_c, self.ctrl_c, float(cfg.joint_stiffness), x, y, z,
                            float(alpha), float(beta), work], device=m.device)
 
             precond = wl.LinearOperator(self._bsr.shape, self._bsr.dtype, self._bsr.device, matvec)

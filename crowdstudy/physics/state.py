@@ -6,8 +6,13 @@ import numpy as np
 
 from crowdstudy.body.rotations import axis_angle_to_quaternion
 from crowdstudy.errors import InvalidInputError
+from crowdstudy.warp_runtime import host_threads, run_parallel
 
 __all__ = ["State", "Control"]
+
+#: from this many characters on, the CPU computes the current and the look-ahead targets on
+#: two host threads at once (below, the hand-over costs more than the second launch)
+_MIN_CHARACTERS_PARALLEL = 200
 
 
 class State:
@@ -97,10 +102,13 @@ class Control:
         self.t_x, self.t_x_old, self.t_x_older = self.t_x_older, self.t_x, self.t_x_old
         m = self.model
         args = [m.n_joints, m.wp["body_parent"], m.wp["anchor_parent"], m.wp["anchor_child"]]
-        self.k.wp.launch(self.k.targets_kernel, m.n_characters,
-                         [self.anim_q, self.anim_root, int(f0), int(f1), float(alpha), *args,
-                          self.t_rel, self.t_glob, self.t_x], device=m.device)
-        if self.ahead_frames > 0:
+
+        def current() -> None:
+            self.k.wp.launch(self.k.targets_kernel, m.n_characters,
+                             [self.anim_q, self.anim_root, int(f0), int(f1), float(alpha), *args,
+                              self.t_rel, self.t_glob, self.t_x], device=m.device)
+
+        def ahead() -> None:
             last = self.anim_q.shape[0] - 1
             at = min(f0 + alpha * (f1 - f0) + self.ahead_frames, float(last))
             g0 = int(np.floor(at))
@@ -108,6 +116,14 @@ class Control:
             self.k.wp.launch(self.k.targets_kernel, m.n_characters,
                              [self.anim_q, self.anim_root, g0, g1, float(at - g0), *args,
                               self.t_rel_ahead, self.t_glob_ahead, self.t_x_ahead], device=m.device)
+
+        if self.ahead_frames <= 0:
+            current()
+        elif m.device == "cpu" and m.n_characters >= _MIN_CHARACTERS_PARALLEL and host_threads() >= 2:
+            run_parallel(current, ahead)          # disjoint outputs: the same bits either way
+        else:
+            current()
+            ahead()
 
     def hold(self) -> None:
         """Make the previous targets equal to the current one (no animation velocity)."""
