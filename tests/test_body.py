@@ -313,3 +313,21 @@ def test_open_model_generation_is_deterministic_and_a_bad_cache_is_regenerated(t
     assert bad.stat().st_size > 100_000  # rewritten
     with pytest.raises(InvalidInputError, match="sex"):
         open_model("robot")
+
+
+def test_axis_angle_to_matrix_is_rodrigues():
+    """Entry by entry (the closed form of I + a K + b K^2) against scipy's rotation, on a
+    crowd-sized batch with the zero rotation, tiny angles (the Taylor branch) and angles
+    near pi."""
+    from scipy.spatial.transform import Rotation
+
+    from crowdstudy.body.rotations import axis_angle_to_matrix
+
+    rng = np.random.default_rng(11)
+    v = rng.normal(size=(40, 24, 3)) * rng.uniform(0, 3.1, size=(40, 24, 1))
+    v[0, :6] = [[0, 0, 0], [1e-9, 0, 0], [0, 3e-7, -2e-7], [np.pi, 0, 0], [0, 0, -np.pi + 1e-9], [1, 2, 2]]
+    got = axis_angle_to_matrix(v)
+    assert got.shape == (40, 24, 3, 3)
+    want = Rotation.from_rotvec(v.reshape(-1, 3)).as_matrix().reshape(got.shape)
+    np.testing.assert_allclose(got, want, rtol=0, atol=1e-13)
+    assert axis_angle_to_matrix(np.array([0.0, 0.0, np.pi / 2])) @ np.array([1.0, 0, 0]) == pytest.approx([0, 1, 0])

@@ -9,16 +9,20 @@ Pipeline (paper Sec. 3.4), every step on the state at the start of the step:
    point-sampled into a ``wp.Bvh``, each capsule's AABB querying it (culled against the
    character AABB first);
 4. inter-body: character AABB pairs (minimum image along x in periodic scenes; one thread
-   per character over the later ones, so the pairs come out in (i, j) order on the CPU),
-   then a bounding-sphere test per capsule pair (midpoints and half lengths computed once
+   per character over the later ones, so the pairs come out in (i, j) order on the CPU; on
+   the CPU from 200 characters without a period, the characters sorted by x, each against
+   those that start before it ends: ``sweep_kernel``, the same pairs in the same order),
+   then per pair (one thread) the second character's capsules that can reach the first's
+   AABB, a bounding-sphere test per capsule pair (midpoints and half lengths computed once
    per step with the world capsules), then the exact segment-segment distance;
 5. intra-body: the model's pair list (pairs touching in the T-pose and parent-child pairs
    are excluded), bounding-sphere test, exact distance.
 
 On the CPU with two host threads (:func:`~crowdstudy.warp_runtime.host_threads`) the
-narrow phase runs on two ranges of its threads at once, the second range and the intra-body
-pairs into a scratch buffer appended after the first: the same contacts in the same order
-as one thread.
+narrow phase runs on two ranges of its character pairs at once, the second range and the
+intra-body pairs into a scratch buffer appended after the first: the same contacts in the
+same order as one thread; from 200 characters the capsule poses of the state and of the
+target and look-ahead poses are computed at once too.
 
 A contact stores body a, body b (-1 for static), the unit normal n from b to a, the signed
 depth ``delta = r_a + r_b + margin - distance`` (contacts are kept speculatively down to
@@ -361,7 +365,8 @@ def collision_kernels():
                         qb = p0a[bb] + sv + sa[1] * (p1a[bb] - p0a[bb])
                         through = -wp.dot(qa - qb, n)
                         apart = wp.length(qa - qb) - (ra + rb + margin)
-                        k_pair = k * (1.0 - wp.clamp(through / pass_width, 0.0, 1.0) * wp.clamp(apart / pass_width, 0.0, 1.0))
+                        k_pair = k * (1.0 - wp.clamp(through / pass_width, 0.0, 1.0)
+                                      * wp.clamp(apart / pass_width, 0.0, 1.0))
                     push_contact(count, capacity, ba, bb, n, depth, pa - x[ba], pb - (x[bb] + sv), k_pair, 2,
                                  c_a, c_b, c_n, c_depth, c_la, c_lb, c_k, c_kind)
 

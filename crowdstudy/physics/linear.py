@@ -332,7 +332,8 @@ def solver_kernels():
     @wp.kernel
     def tree_precond_kernel(n_joints: int, parent: wp.array(dtype=wp.int32),
                             dinv: wp.array(dtype=wp.spatial_matrix), lmat: wp.array(dtype=wp.spatial_matrix),
-                            lever_p: wp.array(dtype=wp.vec3), lever_c: wp.array(dtype=wp.vec3), ctrl_c: wp.array(dtype=float), k_joint: float,
+                            lever_p: wp.array(dtype=wp.vec3), lever_c: wp.array(dtype=wp.vec3),
+                            ctrl_c: wp.array(dtype=float), k_joint: float,
                             x: wp.array(dtype=wp.spatial_vector),
                             y: wp.array(dtype=wp.spatial_vector), z: wp.array(dtype=wp.spatial_vector),
                             alpha: float, beta: float, work: wp.array(dtype=wp.spatial_vector)):
@@ -405,8 +406,10 @@ def solver_kernels():
                       r_t: wp.array(dtype=wp.vec3), r_r: wp.array(dtype=wp.vec3),
                       p_tt: wp.array(dtype=wp.mat33), p_tr: wp.array(dtype=wp.mat33), p_rr: wp.array(dtype=wp.mat33),
                       dinv: wp.array(dtype=wp.spatial_matrix), lmat: wp.array(dtype=wp.spatial_matrix),
-                      lever_p: wp.array(dtype=wp.vec3), lever_c: wp.array(dtype=wp.vec3), ctrl_c: wp.array(dtype=float), k_joint: float,
-                      y6: wp.array(dtype=wp.spatial_vector), z_t: wp.array(dtype=wp.vec3), z_r: wp.array(dtype=wp.vec3)):
+                      lever_p: wp.array(dtype=wp.vec3), lever_c: wp.array(dtype=wp.vec3),
+                      ctrl_c: wp.array(dtype=float), k_joint: float,
+                      y6: wp.array(dtype=wp.spatial_vector), z_t: wp.array(dtype=wp.vec3),
+                      z_r: wp.array(dtype=wp.vec3)):
         """z = P r: mode 1 the per-character tree solve, mode 0 the 6x6 block Jacobi. Returns r.z."""
         if mode == 1:
             tree_apply(0, nb, parent, r_t, r_r, dinv, lmat, lever_p, lever_c, ctrl_c, k_joint, y6, z_t, z_r)
@@ -477,7 +480,8 @@ def solver_kernels():
     def pcg_split_init_kernel(lo: int, hi: int, part: int, grad_t: wp.array(dtype=wp.vec3),
                               grad_r: wp.array(dtype=wp.vec3), parent: wp.array(dtype=wp.int32),
                               dinv: wp.array(dtype=wp.spatial_matrix), lmat: wp.array(dtype=wp.spatial_matrix),
-                              lever_p: wp.array(dtype=wp.vec3), lever_c: wp.array(dtype=wp.vec3), ctrl_c: wp.array(dtype=float), k_joint: float,
+                              lever_p: wp.array(dtype=wp.vec3), lever_c: wp.array(dtype=wp.vec3),
+                              ctrl_c: wp.array(dtype=float), k_joint: float,
                               y6: wp.array(dtype=wp.spatial_vector),
                               x_t: wp.array(dtype=wp.vec3), x_r: wp.array(dtype=wp.vec3),
                               r_t: wp.array(dtype=wp.vec3), r_r: wp.array(dtype=wp.vec3),
@@ -543,7 +547,8 @@ def solver_kernels():
                                 x_t: wp.array(dtype=wp.vec3), x_r: wp.array(dtype=wp.vec3),
                                 r_t: wp.array(dtype=wp.vec3), r_r: wp.array(dtype=wp.vec3),
                                 parent: wp.array(dtype=wp.int32), dinv: wp.array(dtype=wp.spatial_matrix),
-                                lmat: wp.array(dtype=wp.spatial_matrix), lever_p: wp.array(dtype=wp.vec3), lever_c: wp.array(dtype=wp.vec3), ctrl_c: wp.array(dtype=float), k_joint: float,
+                                lmat: wp.array(dtype=wp.spatial_matrix), lever_p: wp.array(dtype=wp.vec3),
+                                lever_c: wp.array(dtype=wp.vec3), ctrl_c: wp.array(dtype=float), k_joint: float,
                                 y6: wp.array(dtype=wp.spatial_vector),
                                 z_t: wp.array(dtype=wp.vec3), z_r: wp.array(dtype=wp.vec3),
                                 sums: wp.array(dtype=float)):

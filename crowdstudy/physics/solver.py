@@ -19,11 +19,13 @@
 On the CPU with two host threads (:func:`~crowdstudy.warp_runtime.host_threads`), the
 per-body and per-character kernels (prediction and body terms, the tree factorisation, the
 update) run on the two halves of the crowd at once; they write disjoint bodies, so the
-result is the same bits as one thread. From ``_MIN_CHARACTERS_SPLIT_PCG`` characters on, the
-PCG is split the same way (``Solver._solve_split``: each half's rows with the contacts that
-touch them, the partial dot products added in a fixed order on the host), whatever the
-threads at hand, so that a crowd gives the same bits on any machine; below it, the fused
-one-launch PCG.
+result is the same bits as one thread. From ``_MIN_CHARACTERS_SPLIT_ASSEMBLY`` characters the
+contact terms too (each half takes the contacts that touch it, in order, and adds to its own
+bodies). From ``_MIN_CHARACTERS_SPLIT_PCG`` characters on, the PCG is split the same way
+(``Solver._solve_split``: each half's rows with the contacts that touch them, the partial
+dot products added in a fixed order on the host; on two threads each half iterates on its
+own thread and the two meet at a barrier after each phase), whatever the threads at hand,
+so that a crowd gives the same bits on any machine; below it, the fused one-launch PCG.
 
 Linear solvers (``linear_solver``):
 
