@@ -560,15 +560,18 @@ def sweep_pairs(lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]
     lo = np.ascontiguousarray(lo, np.float32)
     hi = np.ascontiguousarray(hi, np.float32)
     n = len(lo)
-    cap = max(n * (n - 1) // 2, 1)
+    cap = max(min(n * (n - 1) // 2, 32 * n), 1)          # grown below if the boxes overlap more
     count = wp.zeros(1, dtype=wp.int32, device="cpu")
-    pi, pj = wp.zeros(cap, dtype=wp.int32, device="cpu"), wp.zeros(cap, dtype=wp.int32, device="cpu")
-    shift = wp.zeros(cap, dtype=wp.float32, device="cpu")
-    launch_sweep(lo, wp.array(lo, dtype=wp.vec3, device="cpu"), wp.array(hi, dtype=wp.vec3, device="cpu"),
-                 wp.zeros(max(n, 1), dtype=wp.int32, device="cpu"), wp.zeros(max(n, 1), dtype=wp.float32, device="cpu"),
-                 count, cap, pi, pj, shift)
-    m = int(count.numpy()[0])
-    return pi.numpy()[:m].copy(), pj.numpy()[:m].copy()
+    boxes = (wp.array(lo, dtype=wp.vec3, device="cpu"), wp.array(hi, dtype=wp.vec3, device="cpu"),
+             wp.zeros(max(n, 1), dtype=wp.int32, device="cpu"), wp.zeros(max(n, 1), dtype=wp.float32, device="cpu"))
+    while True:
+        pi, pj = wp.zeros(cap, dtype=wp.int32, device="cpu"), wp.zeros(cap, dtype=wp.int32, device="cpu")
+        shift = wp.zeros(cap, dtype=wp.float32, device="cpu")
+        launch_sweep(lo, *boxes, count, cap, pi, pj, shift)
+        m = int(count.numpy()[0])
+        if m <= cap:
+            return pi.numpy()[:m].copy(), pj.numpy()[:m].copy()
+        cap = m
 
 
 def sample_static_walls(walls: np.ndarray, *, height: float = 2.2, spacing: float = 0.04,
