@@ -148,32 +148,46 @@ class _Policy:
             self.serial_left = self.SERIAL_CALLS
 
 
-def run_parallel(first, second) -> tuple[float, float]:
-    """Run two independent callables, ``second`` on a helper thread when
-    :func:`host_threads` allows it and it pays off (see ``_Policy``), and wait for both.
-    Returns the CPU seconds each took (``time.thread_time``), for balancing the split."""
-    def timed(fn):
-        c0 = time.thread_time()
-        fn()
-        return time.thread_time() - c0
+def _thread_seconds(fn) -> float:
+    """CPU seconds (``time.thread_time``) this thread spent running ``fn``."""
+    c0 = time.thread_time()
+    fn()
+    return time.thread_time() - c0
 
+
+def _pays_off() -> bool:
+    """Whether two calls may go to two threads now: :func:`host_threads` allows it and the
+    second core has paid off lately (``_Policy``; always when ``CROWDSTUDY_THREADS`` is set)."""
     policy = getattr(_local, "policy", None)
     if policy is None:
         policy = _local.policy = _Policy()
     forced = bool(os.environ.get("CROWDSTUDY_THREADS"))      # set: no second-guessing (benchmarks)
-    if host_threads() < 2 or not (forced or policy.parallel()):
-        return timed(first), timed(second)
+    return host_threads() >= 2 and (forced or policy.parallel())
+
+
+def _on_two_threads(first, second) -> tuple[float, float]:
+    """``second`` on this thread's helper while ``first`` runs here; waits for both,
+    records the gain for ``_Policy`` and returns the CPU seconds of each."""
     worker = getattr(_local, "worker", None)
     if worker is None:
         worker = _local.worker = _Worker()
     w0 = time.perf_counter()
-    worker.submit(lambda: timed(second))
+    worker.submit(lambda: _thread_seconds(second))
     try:
-        t_first = timed(first)
+        t_first = _thread_seconds(first)
     finally:
         t_second = worker.result()
-    policy.record(t_first + t_second, time.perf_counter() - w0)
+    _local.policy.record(t_first + t_second, time.perf_counter() - w0)
     return t_first, t_second
+
+
+def run_parallel(first, second) -> tuple[float, float]:
+    """Run two independent callables, ``second`` on a helper thread when
+    :func:`host_threads` allows it and it pays off (see ``_Policy``), and wait for both.
+    Returns the CPU seconds each took (``time.thread_time``), for balancing the split."""
+    if not _pays_off():
+        return _thread_seconds(first), _thread_seconds(second)
+    return _on_two_threads(first, second)
 
 
 def run_together(first, second) -> bool:
@@ -182,29 +196,7 @@ def run_together(first, second) -> bool:
     True. Where :func:`run_parallel` would run serially (one host thread, or a second core
     that has not paid off lately), runs nothing and returns False: the caller takes its
     serial path, which must give the same result."""
-    policy = getattr(_local, "policy", None)
-    if policy is None:
-        policy = _local.policy = _Policy()
-    forced = bool(os.environ.get("CROWDSTUDY_THREADS"))
-    if host_threads() < 2 or not (forced or policy.parallel()):
+    if not _pays_off():
         return False
-    worker = getattr(_local, "worker", None)
-    if worker is None:
-        worker = _local.worker = _Worker()
-    w0 = time.perf_counter()
-    c0 = time.thread_time()
-    worker.submit(lambda: _thread_seconds(second))
-    try:
-        first()
-    finally:
-        t_second = worker.result()
-    t_first = time.thread_time() - c0
-    policy.record(t_first + t_second, time.perf_counter() - w0)
+    _on_two_threads(first, second)
     return True
-
-
-def _thread_seconds(fn) -> float:
-    c0 = time.thread_time()
-    fn()
-    return time.thread_time() - c0
-
