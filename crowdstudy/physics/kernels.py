@@ -184,7 +184,6 @@ def kernels():
             t_x: wp.array(dtype=wp.vec3), t_x_old: wp.array(dtype=wp.vec3),
             body_mass: wp.array(dtype=float), body_J: wp.array(dtype=wp.mat33),
             body_parent: wp.array(dtype=wp.int32), body_children: wp.array2d(dtype=wp.int32),
-            anchor_parent: wp.array(dtype=wp.vec3), anchor_child: wp.array(dtype=wp.vec3),
             body_k: wp.array(dtype=float), body_d: wp.array(dtype=float),
             body_kt: wp.array(dtype=float), body_dt: wp.array(dtype=float), body_reach: wp.array(dtype=float),
             body_kt_far: wp.array(dtype=float),

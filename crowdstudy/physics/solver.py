@@ -201,8 +201,8 @@ class Solver:
             wp.launch(kb.assemble_bodies_kernel, hi - lo,
                       [self.x_pred, self.q_pred, state_in.x, state_in.q, control.t_rel, control.t_rel_old,
                        control.t_x, control.t_x_old, W["body_mass"], W["body_J"], W["body_parent"],
-                       W["body_children"], W["anchor_parent"], W["anchor_child"], self.body_k, self.body_d,
-                       self.body_kt, self.body_dt, self.body_reach, self.body_kt_far, float(dt), 0.0 if ff else float(cfg.gravity),
+                       W["body_children"], self.body_k, self.body_d, self.body_kt, self.body_dt, self.body_reach,
+                       self.body_kt_far, float(dt), 0.0 if ff else float(cfg.gravity),
                        float(cfg.joint_stiffness), damp_scale, self.grad_t, self.grad_r, self.hess_a, self.hess_b,
                        self.hess_c, self.lever_p, self.lever_c, self.ctrl_c, self.ctrl_g, int(lo)], device=dev)
 
@@ -249,18 +249,26 @@ class Solver:
         cut = (m.n_characters // 2) * m.n_joints
         a = contacts.body_a.numpy()[:n_launch]
         b = contacts.body_b.numpy()[:n_launch]
-        if self._assembly_lists is None or self._assembly_lists[0].shape[0] < max(contacts.capacity, 1):
-            self._assembly_lists = [wp.zeros(max(contacts.capacity, 1), dtype=wp.int32, device=dev) for _ in range(2)]
-        counts = []
-        for lst, mine in zip(self._assembly_lists, ((a < cut) | ((b >= 0) & (b < cut)), (a >= cut) | (b >= cut))):
-            idx = np.flatnonzero(mine).astype(np.int32)
-            lst.numpy()[:len(idx)] = idx
-            counts.append(len(idx))
+        self._assembly_lists, counts = self._half_lists(
+            self._assembly_lists, contacts.capacity, ((a < cut) | ((b >= 0) & (b < cut)), (a >= cut) | (b >= cut)))
         feet_cut = int(np.searchsorted(self._feet_host, cut)) if n_feet else 0
         run_parallel(lambda: (bodies(0, cut), feet(0, feet_cut),
                               contact_terms(counts[0], self._assembly_lists[0], 1, 0, cut)),
                      lambda: (bodies(cut, m.n_bodies), feet(feet_cut, n_feet),
                               contact_terms(counts[1], self._assembly_lists[1], 1, cut, m.n_bodies)))
+
+    def _half_lists(self, lists, capacity: int, masks) -> tuple[list, list[int]]:
+        """The contacts selected by each of the two ``masks`` (the two halves of the crowd),
+        in contact order, written into ``lists`` (two int32 arrays of at least ``capacity``,
+        allocated anew when None or too short); returns the lists and the two counts."""
+        if lists is None or lists[0].shape[0] < max(capacity, 1):
+            lists = [self.wp.zeros(max(capacity, 1), dtype=self.wp.int32, device=self.model.device) for _ in range(2)]
+        counts = []
+        for lst, mine in zip(lists, masks):
+            idx = np.flatnonzero(mine).astype(np.int32)
+            lst.numpy()[:len(idx)] = idx
+            counts.append(len(idx))
+        return lists, counts
 
     def _split_assembly(self) -> bool:
         """Whether the assembly runs as two halves of the crowd at once (CPU, two host
@@ -349,9 +357,8 @@ class Solver:
         dot products in a fixed order and computes alpha and beta in float32. A row's
         matrix-vector product is the fused kernel's term for term; the dot products differ
         from the fused kernel's in their summation order only."""
-        wp, m, cfg = self.wp, self.model, self.config
-        dev, nj = m.device, m.n_joints
-        cut = (m.n_characters // 2) * nj
+        m, cfg = self.model, self.config
+        cut = (m.n_characters // 2) * m.n_joints
         halves = ((0, 0, cut), (1, cut, m.n_bodies))
         sums = self.split_sums
         f32 = np.float32
@@ -361,13 +368,9 @@ class Solver:
         a = contacts.body_a.numpy()[:n_act]
         b = contacts.body_b.numpy()[:n_act]
         coupled = (b >= 0) & (self.k_eff.numpy()[:n_act] > 0)
-        if self._split_lists is None or self._split_lists[0].shape[0] < contacts.capacity:
-            self._split_lists = [wp.zeros(contacts.capacity, dtype=wp.int32, device=dev) for _ in range(2)]
-        counts = []
-        for lst, mine in zip(self._split_lists, (coupled & ((a < cut) | (b < cut)), coupled & ((a >= cut) | (b >= cut)))):
-            idx = np.flatnonzero(mine).astype(np.int32)
-            lst.numpy()[:len(idx)] = idx
-            counts.append(len(idx))
+        self._split_lists, counts = self._half_lists(
+            self._split_lists, contacts.capacity,
+            (coupled & ((a < cut) | (b < cut)), coupled & ((a >= cut) | (b >= cut))))
 
         # the ten launches, recorded once per set of buffers (packing their arguments cost
         # about 1 ms a step at 1,000 characters); each step sets the contact counts
