@@ -535,13 +535,14 @@ def collision_kernels():
                            environment_kernel=environment_kernel, wall_kernel=wall_kernel)
 
 
-def launch_sweep(lo: np.ndarray, char_lo, char_hi, order, sorted_lo_x, pair_count, pair_capacity: int,
+def launch_sweep(char_lo, char_hi, order, sorted_lo_x, pair_count, pair_capacity: int,
                  pair_i, pair_j, pair_shift) -> None:
-    """Launch ``sweep_kernel`` on the CPU: ``lo``, ``hi`` the boxes' corners as numpy (n, 3)
-    (m) and as Warp arrays; ``order`` and ``sorted_lo_x`` Warp scratch arrays of length n."""
+    """Launch ``sweep_kernel`` on the CPU: ``char_lo``, ``char_hi`` the boxes' corners (CPU
+    Warp arrays of vec3, m, read here as numpy too); ``order`` and ``sorted_lo_x`` Warp
+    scratch arrays of length n."""
     k = collision_kernels()
     wp = k.wp
-    lo = np.asarray(lo)
+    lo = char_lo.numpy()
     idx = np.argsort(lo[:, 0], kind="stable")
     order.numpy()[:] = idx
     sorted_lo_x.numpy()[:] = lo[idx, 0]
@@ -567,7 +568,7 @@ def sweep_pairs(lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]
     while True:
         pi, pj = wp.zeros(cap, dtype=wp.int32, device="cpu"), wp.zeros(cap, dtype=wp.int32, device="cpu")
         shift = wp.zeros(cap, dtype=wp.float32, device="cpu")
-        launch_sweep(lo, *boxes, count, cap, pi, pj, shift)
+        launch_sweep(*boxes, count, cap, pi, pj, shift)
         m = int(count.numpy()[0])
         if m <= cap:
             return pi.numpy()[:m].copy(), pj.numpy()[:m].copy()
@@ -784,8 +785,8 @@ class CollisionPipeline:
                 if self._sweep_scratch is None:
                     self._sweep_scratch = (wp.zeros(n, dtype=wp.int32, device=dev),
                                            wp.zeros(n, dtype=wp.float32, device=dev))
-                launch_sweep(self.char_lo.numpy(), self.char_lo, self.char_hi, *self._sweep_scratch, self.pair_count,
-                             self.pair_capacity, self.pair_i, self.pair_j, self.pair_shift)
+                launch_sweep(self.char_lo, self.char_hi, *self._sweep_scratch, self.pair_count, self.pair_capacity,
+                             self.pair_i, self.pair_j, self.pair_shift)
             else:
                 self.pair_count.zero_()
                 wp.launch(k.broadphase_kernel, n, [self.char_lo, self.char_hi, self.period, self.pair_count,
