@@ -50,11 +50,17 @@ __all__ = [
     "capsule_mesh_iou",
     "capsule_skin",
     "HAND_BONES",
+    "SKIN_PERCENTILE",
+    "SKIN_MAX",
+    "SKIN_HAND_SCALE",
 ]
 _TORSO = (0, 3, 6, 9)
 #: the palm and finger bones of the 24-joint skeleton (left/right wrist, left/right hand)
 HAND_BONES = tuple(JOINT_INDEX[name] for name in ("left_wrist", "right_wrist", "left_hand", "right_hand"))
 _FEET = {7: 10, 8: 11, 10: 10, 11: 11}  # bone -> the joint its floor direction points to
+#: :func:`capsule_skin`'s defaults, which the physics (``PhysicsConfig.mesh_skin_*``) and the
+#: separation floor (``crowdstudy.metrics.floor``) take as theirs
+SKIN_PERCENTILE, SKIN_MAX, SKIN_HAND_SCALE = 90.0, 0.015, 0.5
 
 
 @dataclass(frozen=True)
@@ -430,7 +436,8 @@ def capsule_mesh_iou(body, *, resolution: float = 0.01, capsules: Capsules | Non
             "intersection": inter, "resolution": resolution}
 
 
-def capsule_skin(body, percentile: float = 90.0, max_skin: float = 0.015, hand_scale: float = 0.5) -> np.ndarray:
+def capsule_skin(body, percentile: float = SKIN_PERCENTILE, max_skin: float = SKIN_MAX,
+                 hand_scale: float = SKIN_HAND_SCALE) -> np.ndarray:
     """(J,) m: how far the body mesh reaches beyond each capsule.
 
     For the vertices bound mostly to bone j (largest skinning weight), the ``percentile``

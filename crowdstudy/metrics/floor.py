@@ -22,7 +22,8 @@ from typing import Any, Sequence
 
 import numpy as np
 
-from crowdstudy.body.capsules import capsule_skin, closest_points_on_segments
+from crowdstudy.body.capsules import (SKIN_HAND_SCALE, SKIN_MAX, SKIN_PERCENTILE, capsule_skin,
+                                      closest_points_on_segments)
 from crowdstudy.body.skeleton import ARM_JOINTS, JOINT_INDEX
 from crowdstudy.errors import InvalidInputError
 from crowdstudy.metrics.overlap import capsules_world, frame_indices, resolve_bodies
@@ -125,7 +126,8 @@ def _pairs(root: np.ndarray, period: float | None, reach: float):
 
 
 def separation_floor(anim, *, frames: Any = "every:30", bodies: Sequence | None = None,
-                     skin_percentile: float = 90.0, skin_max: float = 0.015, hand_skin_scale: float = 0.5,
+                     skin_percentile: float = SKIN_PERCENTILE, skin_max: float = SKIN_MAX,
+                     hand_skin_scale: float = SKIN_HAND_SCALE,
                      margin: float = 0.005, walls: bool = True,
                      tolerance: float = 1e-4, max_iterations: int = 400) -> SeparationFloor:
     """Estimate, frame by frame, the least joint displacement that removes every overlap.

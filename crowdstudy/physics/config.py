@@ -38,7 +38,7 @@ import dataclasses
 
 import numpy as np
 
-from crowdstudy.body.capsules import capsule_skin
+from crowdstudy.body.capsules import SKIN_HAND_SCALE, SKIN_MAX, SKIN_PERCENTILE, capsule_skin
 from crowdstudy.errors import InvalidInputError
 
 __all__ = ["PhysicsConfig"]
@@ -280,9 +280,9 @@ class PhysicsConfig:
     target_relative_self_contacts: bool = True
     feedforward: bool = True
     damping_reference_dt: float = 1.0 / 60.0
-    mesh_skin_percentile: float = 90.0
-    mesh_skin_max: float = 0.015
-    mesh_skin_hand_scale: float = 0.5
+    mesh_skin_percentile: float = SKIN_PERCENTILE      # 90
+    mesh_skin_max: float = SKIN_MAX                    # 0.015 m
+    mesh_skin_hand_scale: float = SKIN_HAND_SCALE      # 0.5
     intra_body: bool = True
     loop_warmup: float = 1.0
     loop_blend: float = 0.5
