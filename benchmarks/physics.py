@@ -313,7 +313,8 @@ def stadium_run(n: int, level: str = "D3", duration: float = 20.0, frame_stride:
     max_dev = float(np.max(np.linalg.norm(ours.root_translation - base.root_translation, axis=-1)))
     row = {"stage": "stationary", "level": level, "characters": n, "frames": base.n_frames, "seconds": duration,
            "animate_s": t_anim, "correct_wall_s": wall, "correct_cpu_s": cpu,
-           "setup_s": timings.get("setup_seconds"), "ms_per_step_wall": timings.get("ms_per_step"),
+           "setup_s": timings.get("setup_seconds"), "simulate_s": timings.get("simulate_seconds"),
+           "output_s": timings.get("output_seconds"), "ms_per_step_wall": timings.get("ms_per_step"),
            "steps": timings.get("steps"), "finite": finite, "max_root_deviation_m": max_dev,
            "baseline_rss_mib": rss_base - rss0, "peak_rss_mib": peak,
            "peak_kib_per_character": 1024.0 * (peak - rss0) / n,

@@ -23,7 +23,7 @@ __all__ = ["KERNEL_MODULES", "precompile", "configure", "run"]
 #: every Warp module of the toolkit
 KERNEL_MODULES: tuple[tuple[str, str | None], ...] = (
     ("crowdstudy.physics.kernels", "kernels"),
-    ("crowdstudy.physics.collision", "collision_kernels"),
+    ("crowdstudy.physics.collision_kernels", "collision_kernels"),
     ("crowdstudy.physics.linear", "solver_kernels"),
     ("crowdstudy.metrics.kernels", "warp_kernels"),
     ("crowdstudy.body.skinning", "warp_kernels"),

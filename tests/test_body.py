@@ -324,10 +324,75 @@ def test_axis_angle_to_matrix_is_rodrigues():
     from crowdstudy.body.rotations import axis_angle_to_matrix
 
     rng = np.random.default_rng(11)
-    v = rng.normal(size=(40, 24, 3)) * rng.uniform(0, 3.1, size=(40, 24, 1))
+    v = rng.normal(size=(400, 24, 3)) * rng.uniform(0, 3.1, size=(400, 24, 1))     # more than one block
     v[0, :6] = [[0, 0, 0], [1e-9, 0, 0], [0, 3e-7, -2e-7], [np.pi, 0, 0], [0, 0, -np.pi + 1e-9], [1, 2, 2]]
     got = axis_angle_to_matrix(v)
-    assert got.shape == (40, 24, 3, 3)
+    assert got.shape == (400, 24, 3, 3)
     want = Rotation.from_rotvec(v.reshape(-1, 3)).as_matrix().reshape(got.shape)
     np.testing.assert_allclose(got, want, rtol=0, atol=1e-13)
     assert axis_angle_to_matrix(np.array([0.0, 0.0, np.pi / 2])) @ np.array([1.0, 0, 0]) == pytest.approx([0, 1, 0])
+
+
+def test_axis_angle_to_quaternion_is_scipys():
+    from scipy.spatial.transform import Rotation
+
+    from crowdstudy.body.rotations import axis_angle_to_quaternion
+
+    rng = np.random.default_rng(12)
+    v = rng.normal(size=(500, 24, 3)) * rng.uniform(0, 3.1, size=(500, 24, 1))
+    v[0, :3] = [[0, 0, 0], [1e-10, 0, 0], [0, 3e-9, -2e-9]]
+    got = axis_angle_to_quaternion(v)
+    want = Rotation.from_rotvec(v.reshape(-1, 3)).as_quat().reshape(got.shape)
+    want *= np.sign(want[..., 3:]) * np.sign(got[..., 3:])         # scipy picks w >= 0
+    np.testing.assert_allclose(got, want, rtol=0, atol=1e-15)
+    with pytest.raises(InvalidInputError, match="rotvec"):
+        axis_angle_to_quaternion(np.zeros((4, 2)))
+
+
+def _chain_fk(rest, rot, root, parents):
+    """Forward kinematics one pose at a time, straight from the definition."""
+    from scipy.spatial.transform import Rotation
+
+    glob = np.empty(rot.shape[:-1] + (3, 3))
+    pos = np.empty(rot.shape)
+    for idx in np.ndindex(rot.shape[:-2]):
+        r = rest[idx[-rest.ndim + 2:]] if rest.ndim > 2 else rest
+        local = Rotation.from_rotvec(rot[idx]).as_matrix()
+        for j, p in enumerate(parents):
+            if p < 0:
+                glob[idx + (j,)], pos[idx + (j,)] = local[j], root[idx]
+            else:
+                glob[idx + (j,)] = glob[idx + (p,)] @ local[j]
+                pos[idx + (j,)] = pos[idx + (p,)] + glob[idx + (p,)] @ (r[j] - r[p])
+    return glob, pos
+
+
+def test_forward_kinematics_in_blocks_is_the_chain_rule():
+    """Blocks of poses (several blocks, the last one short; a few poses; one pose; rest
+    joints and roots broadcast) against the pose-by-pose definition, and one pose alone
+    gives the bits it gets inside a batch."""
+    from crowdstudy.body.skeleton import PARENTS, forward_kinematics
+
+    rng = np.random.default_rng(13)
+    rest = DEFAULT_REST_JOINTS[None] + rng.normal(0, 0.02, size=(3, 24, 3))
+    rot = rng.normal(0, 0.6, size=(1500, 3, 24, 3))                  # 4,500 poses: two blocks
+    rot[0, 0, 5] = [1e-9, 0, 0]
+    root = rng.normal(size=(1500, 3, 3))
+    glob, pos = forward_kinematics(rest[None], rot, root)
+    assert glob.shape == (1500, 3, 24, 3, 3) and pos.shape == (1500, 3, 24, 3)
+    pick = [0, 1, 700, 1100, 1499]
+    want_g, want_p = _chain_fk(rest, rot[pick], root[pick], PARENTS)
+    np.testing.assert_allclose(glob[pick], want_g, rtol=0, atol=1e-13)
+    np.testing.assert_allclose(pos[pick], want_p, rtol=0, atol=1e-13)
+    one_g, one_p = forward_kinematics(rest[2], rot[1100, 2], root[1100, 2])
+    assert np.array_equal(one_g, glob[1100, 2]) and np.array_equal(one_p, pos[1100, 2])
+    few_g, few_p = forward_kinematics(rest[1], rot[:5, 1], np.zeros(3))     # a few poses, the root broadcast
+    np.testing.assert_allclose(few_p, _chain_fk(rest[1], rot[:5, 1], np.zeros((5, 3)), PARENTS)[1], rtol=0,
+                               atol=1e-13)
+    mats = axis_angle_to_matrix(rot[:40])
+    mat_g, mat_p = forward_kinematics(rest[None], mats, root[:40], rotations_are_matrices=True)
+    assert np.array_equal(mat_g, glob[:40]) and np.array_equal(mat_p, pos[:40])
+    with pytest.raises(InvalidInputError, match="joint_rotations"):
+        forward_kinematics(rest, rot[0, :, :5], root[0])
+    with pytest.raises(InvalidInputError, match="root_translation"):
+        forward_kinematics(rest, rot[0], root[0, :, :2])

@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from crowdstudy.body.rotations import axis_angle_to_matrix
+from crowdstudy.body.rotations import rodrigues_rows
 from crowdstudy.errors import InvalidInputError
 
 __all__ = [
@@ -123,23 +123,112 @@ def forward_kinematics(rest_joints: np.ndarray, joint_rotations: np.ndarray,
     """
     rest = np.asarray(rest_joints, dtype=np.float64)
     rot = np.asarray(joint_rotations, dtype=np.float64)
-    local = rot if rotations_are_matrices else axis_angle_to_matrix(rot)
     n_j = len(parents)
     if rest.shape[-2:] != (n_j, 3):
         raise InvalidInputError(f"rest_joints: expected shape (..., {n_j}, 3), got {rest.shape}")
-    if local.shape[-3:] != (n_j, 3, 3):
+    if rotations_are_matrices and rot.shape[-3:] != (n_j, 3, 3):
+        raise InvalidInputError(f"joint_rotations: expected (..., {n_j}, 3, 3) matrices, got {rot.shape}")
+    if not rotations_are_matrices and rot.shape[-2:] != (n_j, 3):
         raise InvalidInputError(f"joint_rotations: expected (..., {n_j}, 3) axis-angle, got {rot.shape}")
     root = np.asarray(root_translation, dtype=np.float64)
-    batch = np.broadcast_shapes(rest.shape[:-2], local.shape[:-3], root.shape[:-1])
+    if root.shape[-1:] != (3,):
+        raise InvalidInputError(f"root_translation: expected shape (..., 3), got {root.shape}")
+    rot_batch = rot.shape[:-3] if rotations_are_matrices else rot.shape[:-2]
+    batch = np.broadcast_shapes(rest.shape[:-2], rot_batch, root.shape[:-1])
+    parents = np.asarray(parents)
+    offsets = rest - rest[..., np.maximum(parents, 0), :]
     glob = np.empty(batch + (n_j, 3, 3))
     pos = np.empty(batch + (n_j, 3))
-    glob[..., 0, :, :] = local[..., 0, :, :]
-    pos[..., 0, :] = root
-    offsets = rest - rest[..., np.maximum(parents, 0), :]
-    for j in range(1, n_j):
+    # Poses are taken in blocks of about _FK_BLOCK along the leading batch axis, each laid out
+    # component-major ((J, 3, 3, M) arrays, M poses): every joint is then a few dozen
+    # ufunc calls on contiguous cache-sized rows instead of M batched 3x3 products, and no
+    # temporary grows with the whole batch (fresh memory is dear on a virtual machine).
+    lead = batch[0] if batch else 1
+    per_row = int(np.prod(batch[1:], dtype=np.int64)) if len(batch) > 1 else 1
+    rows = max(1, _FK_BLOCK // max(per_row, 1))
+    full_rot = np.broadcast_to(rot, batch + rot.shape[len(rot_batch):])
+    full_off = np.broadcast_to(offsets, batch + (n_j, 3))
+    full_root = np.broadcast_to(root, batch + (3,))
+    flat_glob = glob.reshape(-1, n_j, 3, 3)
+    flat_pos = pos.reshape(-1, n_j, 3)
+    for r0 in range(0, lead, rows):
+        r1 = min(lead, r0 + rows)
+        pick = (slice(r0, r1),) if batch else ()
+        block_rot = full_rot[pick].reshape((-1,) + rot.shape[len(rot_batch):])
+        m0, m1 = r0 * per_row, r1 * per_row if batch else 1
+        block_off, block_root = full_off[pick].reshape(-1, n_j, 3), full_root[pick].reshape(-1, 3)
+        if m1 - m0 <= _FK_FEW:
+            _fk_few(block_rot, block_off, block_root, parents, rotations_are_matrices, flat_glob[m0:m1],
+                    flat_pos[m0:m1])
+            continue
+        g, p = _fk_block(block_rot, block_off, block_root, parents, rotations_are_matrices)
+        flat_glob[m0:m1] = g.transpose(3, 0, 1, 2)
+        flat_pos[m0:m1] = p.transpose(2, 0, 1)
+    return glob, pos
+
+
+#: poses per block of :func:`forward_kinematics` (about 2 MB of rotations per block)
+_FK_BLOCK = 4096
+
+
+#: up to this many poses a block is computed pose-major (:func:`_fk_few`): fewer, larger
+#: ufunc calls; the same sums in the same order, so the same bits
+_FK_FEW = 16
+
+
+def _fk_few(rot: np.ndarray, offsets: np.ndarray, root: np.ndarray, parents: np.ndarray, matrices: bool,
+            glob: np.ndarray, pos: np.ndarray) -> None:
+    """Forward kinematics of a few poses into ``glob`` (M, J, 3, 3) and ``pos`` (M, J, 3)
+    (arguments as :func:`_fk_block`)."""
+    if matrices:
+        local = rot
+    else:
+        rows = rodrigues_rows(rot[..., 0], rot[..., 1], rot[..., 2], np.empty((3, 3) + rot.shape[:2]))
+        local = rows.transpose(2, 3, 0, 1)
+    glob[:, 0] = local[:, 0]
+    pos[:, 0] = root
+    for j in range(1, len(parents)):
         p = int(parents[j])
-        glob[..., j, :, :] = glob[..., p, :, :] @ local[..., j, :, :]
-        pos[..., j, :] = pos[..., p, :] + np.einsum("...ab,...b->...a", glob[..., p, :, :], offsets[..., j, :])
+        gp = glob[:, p]
+        # (g0 l0 + g1 l1) + g2 l2 per entry, as _fk_block sums them
+        glob[:, j] = (gp[:, :, :, None] * local[:, j, None, :, :]).sum(axis=2)
+        pos[:, j] = (gp * offsets[:, j, None, :]).sum(axis=2) + pos[:, p]
+
+
+def _fk_block(rot: np.ndarray, offsets: np.ndarray, root: np.ndarray, parents: np.ndarray,
+              matrices: bool) -> tuple[np.ndarray, np.ndarray]:
+    """Forward kinematics of M poses, component-major: rot (M, J, 3) axis-angle or (M, J, 3, 3),
+    offsets (M, J, 3) from each joint's parent at rest, root (M, 3) -> ``(glob (J, 3, 3, M),
+    pos (J, 3, M))``."""
+    n_j = len(parents)
+    m = rot.shape[0]
+    if matrices:
+        local = np.ascontiguousarray(rot.transpose(1, 2, 3, 0))
+    else:
+        comp = np.ascontiguousarray(rot.transpose(2, 1, 0))                 # (3, J, M)
+        local = rodrigues_rows(comp[0], comp[1], comp[2], np.empty((3, 3, n_j, m))).transpose(2, 0, 1, 3)
+    off = np.ascontiguousarray(offsets.transpose(1, 2, 0))                    # (J, 3, M)
+    glob = np.empty((n_j, 3, 3, m))
+    pos = np.empty((n_j, 3, m))
+    glob[0] = local[0]
+    pos[0] = root.T
+    tmp = np.empty(m)
+    for j in range(1, n_j):
+        gp, lj, gj, oj = glob[int(parents[j])], local[j], glob[j], off[j]
+        pj, pp = pos[j], pos[int(parents[j])]
+        for a in range(3):
+            for b in range(3):
+                np.multiply(gp[a, 0], lj[0, b], out=gj[a, b])
+                np.multiply(gp[a, 1], lj[1, b], out=tmp)
+                gj[a, b] += tmp
+                np.multiply(gp[a, 2], lj[2, b], out=tmp)
+                gj[a, b] += tmp
+            np.multiply(gp[a, 0], oj[0], out=pj[a])
+            np.multiply(gp[a, 1], oj[1], out=tmp)
+            pj[a] += tmp
+            np.multiply(gp[a, 2], oj[2], out=tmp)
+            pj[a] += tmp
+            pj[a] += pp[a]
     return glob, pos
 
 

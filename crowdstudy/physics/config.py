@@ -134,7 +134,7 @@ class PhysicsConfig:
             objects given as points, e.g. the Fig. 4 plane of :mod:`crowdstudy.physics.damping`).
         wall_stiffness: capsule-wall penalty, N/m per capsule end sphere: the scene's walls
             (``meta["obstacles"]``) are one-sided vertical planes, the free side the one the
-            character's root stands on (``wall_kernel`` in :mod:`crowdstudy.physics.collision`).
+            character's root stands on (``wall_kernel`` in :mod:`crowdstudy.physics.collision_kernels`).
         contact_margin: m added to the capsule radii (on top of the mesh skin) for
             inter-body and environment contacts (not ground, not intra-body).
         speculative_distance: m; capsule pairs closer than this are kept as (inactive)

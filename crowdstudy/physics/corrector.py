@@ -16,14 +16,17 @@ import numpy as np
 from crowdstudy.errors import InvalidInputError
 from crowdstudy.physics.collision import CollisionPipeline, Contacts
 from crowdstudy.physics.config import PhysicsConfig
-from crowdstudy.physics.finish import close_loop, lock_planted_feet, smooth_deviation
 from crowdstudy.physics.model import ModelBuilder
+from crowdstudy.physics.output_stage import finish_crowd
 from crowdstudy.physics.solver import Solver
-from crowdstudy.physics.speed_limit import limit_joint_speed
 from crowdstudy.physics.state import Control, State
 from crowdstudy.scene import static_walls_from_meta
 
 __all__ = ["CrowdCorrector", "correct", "load_bodies"]
+
+
+#: frames of the input animation handed to :meth:`Control.set_frames` at a time
+_UPLOAD_FRAMES = 64
 
 
 def load_bodies(records) -> list:
@@ -185,14 +188,17 @@ def correct(anim, config: PhysicsConfig | None = None, *, device: str | None = N
         timings: a dict to fill with this run's timings (they are never written into the
             animation, so the same input gives the same bytes): ``setup_seconds`` (model
             build and upload), ``settle_seconds`` (placement and the settle steps),
-            ``simulate_seconds`` (the clip's simulation steps), ``wall_seconds`` (settle,
-            clip, projection and readback), ``steps``, ``timed_steps`` and ``ms_per_step``
+            ``simulate_seconds`` (the clip's simulation steps), ``output_seconds`` (the
+            output stage, :func:`~crowdstudy.physics.output_stage.finish_crowd`),
+            ``wall_seconds`` (settle, clip, projection, readback and output stage), ``steps``,
+            ``timed_steps`` and ``ms_per_step``
             (``simulate_seconds`` over the timed steps: the clip's steps only, not the settle
             steps, the projection or the readback; when there is no settle step, the first
             frame, which launches (and may compile) the kernels, is left out; None when no
             step was timed).
 
-    The simulated poses go through the output stage (:mod:`crowdstudy.physics.finish`): a
+    The simulated poses go through the output stage (:mod:`crowdstudy.physics.output_stage`,
+    a few characters at a time on both host threads; :mod:`crowdstudy.physics.finish`): a
     periodic input (``meta["loop"]["mode"] == "periodic"``) is simulated from
     ``config.loop_warmup`` before its start to ``config.loop_blend`` past its end and the
     loop closed; the deviation from the input is low-passed (held at its peaks first); planted
@@ -235,7 +241,9 @@ def correct(anim, config: PhysicsConfig | None = None, *, device: str | None = N
     t_frames = len(schedule)
     corr = CrowdCorrector(bodies, config=config, device=device, fps=anim.fps, periodic_length=period,
                           static_walls=walls, linear_solver=linear_solver, n_frames=t_frames, profile=False)
-    corr.control.set_frames(anim.joint_rotations[schedule], anim.root_translation[schedule], start=0)
+    for f0 in range(0, t_frames, _UPLOAD_FRAMES):       # no copy of the whole clip in the schedule's order
+        part = schedule[f0:f0 + _UPLOAD_FRAMES]
+        corr.control.set_frames(anim.joint_rotations[part], anim.root_translation[part], start=f0)
     wp = corr.solver.wp
     m = corr.model
     out_rot = wp.zeros((t_frames, m.n_bodies), dtype=wp.vec3, device=m.device)
@@ -262,28 +270,20 @@ def correct(anim, config: PhysicsConfig | None = None, *, device: str | None = N
             bar.update(1)
     if bar is not None:
         bar.close()
-    rot = out_rot.numpy().reshape(t_frames, m.n_characters, m.n_joints, 3).astype(np.float64)
-    root = out_root.numpy().astype(np.float64)
-    if looped:
-        rot, root = close_loop(rot, root, n_out, warmup, blend)
-    rot, root = smooth_deviation(rot, root, anim.joint_rotations, anim.root_translation,
-                                 config.output_smoothing * anim.fps, periodic=looped,
-                                 root_sigma_frames=config.output_smoothing_root * anim.fps, hold=config.output_hold)
+    t_output = time.perf_counter()
     rest = np.stack([np.asarray(b.rest_joints, np.float64) for b in bodies])
-    if config.foot_lock:
-        rot = lock_planted_feet(rot, root, anim.joint_rotations, anim.root_translation, rest, anim.fps,
-                                planted_speed=config.foot_lock_speed, periodic=looped)
-    speed_report = None
-    if config.speed_limit:
-        rot, speed_report = limit_joint_speed(rot, root, anim.joint_rotations, anim.root_translation, rest, anim.fps,
-                                              margin=config.speed_limit_margin, periodic=looped,
-                                              periodic_length=anim.periodic_length)
-    wall = time.perf_counter() - t_start
+    rot, root, speed_report = finish_crowd(out_rot.numpy().reshape(t_frames, m.n_characters, m.n_joints, 3),
+                                           out_root.numpy(), anim.joint_rotations, anim.root_translation, rest,
+                                           anim.fps, config, warmup=warmup, blend=blend, looped=looped,
+                                           periodic_length=anim.periodic_length)
+    t_end = time.perf_counter()
+    wall = t_end - t_start
     if timings is not None:
         timed = frame_seconds if round(config.settle_time / corr.dt) > 0 else frame_seconds[1:]
         timed_steps = len(timed) * corr.substeps
         timings.update({"setup_seconds": t_start - t_setup, "settle_seconds": t_settled - t_start,
-                        "simulate_seconds": float(sum(frame_seconds)), "wall_seconds": wall, "steps": corr.steps,
+                        "simulate_seconds": float(sum(frame_seconds)), "output_seconds": t_end - t_output,
+                        "wall_seconds": wall, "steps": corr.steps,
                         "timed_steps": timed_steps,
                         "ms_per_step": 1000.0 * sum(timed) / timed_steps if timed_steps else None})
     iters = np.asarray(corr.cg_iterations) if corr.cg_iterations else np.zeros(1)

@@ -9,7 +9,7 @@ Newton system ``H [dx; dw] = -g`` is stored as 6x6 diagonal blocks ``[[A, B], [B
 (three mat33 arrays), plus matrix-free off-diagonal terms per joint and per contact
 (see :mod:`crowdstudy.physics.solver`).
 
-The collision kernels live in :mod:`crowdstudy.physics.collision`.
+The collision kernels live in :mod:`crowdstudy.physics.collision_kernels`.
 """
 
 from __future__ import annotations

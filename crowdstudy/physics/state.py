@@ -38,6 +38,10 @@ class State:
         return {name: getattr(self, name).numpy().copy() for name in ("x", "q", "v", "w")}
 
 
+#: joint rotations converted and uploaded per block by :meth:`Control.set_frames`
+_UPLOAD_ROTATIONS = 1 << 16
+
+
 class Control:
     """The animation's target for the current step and the previous one (Eq. 4 needs both).
 
@@ -89,9 +93,13 @@ class Control:
                                     f" and (F, {m.n_characters}, 3), got {rot.shape} and {root.shape}")
         if start < 0 or start + f > self.anim_q.shape[0]:
             raise InvalidInputError(f"start: frames [{start}, {start + f}) do not fit the {self.anim_q.shape[0]} slots")
-        quats = axis_angle_to_quaternion(rot).reshape(f, -1, 4).astype(np.float32)
         wp = self.k.wp
-        self.anim_q[start:start + f].assign(wp.array(quats, dtype=wp.quat, device=m.device))
+        # a few frames at a time: no float64 quaternion copy of the whole clip
+        step = max(1, _UPLOAD_ROTATIONS // max(1, m.n_bodies))
+        for f0 in range(0, f, step):
+            f1 = min(f, f0 + step)
+            quats = axis_angle_to_quaternion(rot[f0:f1]).reshape(f1 - f0, -1, 4).astype(np.float32)
+            self.anim_q[start + f0:start + f1].assign(wp.array(quats, dtype=wp.quat, device=m.device))
         self.anim_root[start:start + f].assign(wp.array(root.astype(np.float32), dtype=wp.vec3, device=m.device))
 
     def advance(self, f0: int, f1: int, alpha: float) -> None:
