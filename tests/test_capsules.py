@@ -63,6 +63,39 @@ def test_cached_fit_is_the_fit_read_back_and_follows_the_body(tmp_path, monkeypa
                            weights=body.weights)
     assert fit_digest(same) == fit_digest(body) != fit_digest(moved)
     assert fit_digest(body, 0.03) != fit_digest(body, 0.02)
+    # the shared weights' digest is kept for read-only arrays only: a writeable copy with
+    # the same values has the same key, and changing it in place changes the key
+    weights = np.array(body.weights)
+    copied = SimpleNamespace(rest_vertices=body.rest_vertices, rest_joints=body.rest_joints, faces=body.faces,
+                             weights=weights)
+    assert fit_digest(copied) == fit_digest(body)
+    weights[5] = weights[5][::-1]
+    assert fit_digest(copied) != fit_digest(body)
+    with pytest.raises(ValueError):
+        body.weights[0, 0] = 1.0          # the shared template cannot change under its digest
+
+
+def test_skins_of_the_grouped_vertices_are_the_per_bone_percentiles():
+    """capsule_skin groups the vertices by their dominant bone once per weights array; each
+    bone's skin is the percentile of its own vertices' distance outside its capsule."""
+    from crowdstudy.body import load_body
+    from crowdstudy.body.capsules import capsule_skin
+    from crowdstudy.body.shapes import sample_bodies
+
+    body = load_body(sample_bodies(1, 4)[0])
+    caps = body.capsules
+    dominant = np.asarray(body.weights).argmax(1)
+    want = np.zeros(len(caps.radius))
+    for j in range(len(want)):
+        v = np.asarray(body.rest_vertices, np.float64)[dominant == j]
+        if len(v):
+            d = caps.end[j] - caps.start[j]
+            t = np.clip((v - caps.start[j]) @ d / max(d @ d, 1e-12), 0.0, 1.0)     # a sphere: d = 0
+            out = np.linalg.norm(v - (caps.start[j] + t[:, None] * d), axis=1) - caps.radius[j]
+            want[j] = np.clip(np.percentile(out, 90.0), 0.0, 0.02)
+    got = capsule_skin(body, 90.0, max_skin=0.02, hand_scale=1.0)
+    np.testing.assert_allclose(got, want, rtol=0, atol=1e-12)
+    assert (got > 0).sum() >= 12
 
 
 def test_mesh_occupancy_matches_analytic_volumes():

@@ -27,6 +27,7 @@ import functools
 import hashlib
 import os
 import tempfile
+import weakref
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -257,15 +258,45 @@ def _source_digest() -> bytes:
     return hashlib.sha256(Path(__file__).read_bytes()).digest()
 
 
+#: per-array results remembered for read-only arrays that own their data (the shared
+#: MakeHuman template's weights and faces): {(id, what): (weak reference, value)}
+_FROZEN: dict = {}
+
+
+def _frozen(arr: np.ndarray, what: str, compute):
+    """``compute(arr)``, remembered while ``arr`` lives when nothing can change it (read-only
+    and owning its data); computed afresh for any other array."""
+    if arr.flags.writeable or not arr.flags.owndata:
+        return compute(arr)
+    key = (id(arr), what)
+    hit = _FROZEN.get(key)
+    if hit is not None and hit[0]() is arr:
+        return hit[1]
+    value = compute(arr)
+    _FROZEN[key] = (weakref.ref(arr, lambda _ref, key=key: _FROZEN.pop(key, None)), value)
+    return value
+
+
+def _array_digest(arr, dtype) -> bytes:
+    """SHA-256 of an array's shape and contiguous bytes as ``dtype``."""
+    def digest(a: np.ndarray) -> bytes:
+        c = np.ascontiguousarray(a, dtype=dtype)
+        h = hashlib.sha256(repr(c.shape).encode())
+        h.update(c.tobytes())
+        return h.digest()
+
+    return _frozen(np.asarray(arr), f"sha256/{np.dtype(dtype).str}", digest)
+
+
 def fit_digest(body, resolution: float = 0.02) -> str:
     """Hex digest of everything :func:`fit_capsules` reads from ``body`` (rest vertices and
-    joints, faces, skinning weights), the grid ``resolution`` and this module's source."""
+    joints, faces, skinning weights), the grid ``resolution`` and this module's source. The
+    digests of read-only arrays (the weights and faces every MakeHuman body shares) are
+    computed once per process."""
     h = hashlib.sha256(_source_digest())
     for arr, dtype in ((body.rest_vertices, np.float64), (body.rest_joints, np.float64), (body.faces, np.int64),
                        (body.weights, np.float64)):
-        a = np.ascontiguousarray(np.asarray(arr, dtype=dtype))
-        h.update(repr(a.shape).encode())
-        h.update(a.tobytes())
+        h.update(_array_digest(arr, dtype))
     h.update(repr(float(resolution)).encode())
     return h.hexdigest()
 
@@ -464,12 +495,13 @@ def capsule_skin(body, percentile: float = SKIN_PERCENTILE, max_skin: float = SK
     if verts is None or weights is None or percentile <= 0:
         return np.zeros(n_j)
     verts = np.asarray(verts, np.float64)
-    dominant = np.asarray(weights).argmax(1)
+    # the vertices grouped by their dominant bone (for the shared template weights: once)
+    order, bounds = _frozen(np.asarray(weights), "dominant", _dominant_groups)
     skin = np.zeros(n_j)
-    for j in range(n_j):
-        v = verts[dominant == j]
-        if len(v) == 0:
+    for j in range(min(n_j, len(bounds) - 1)):
+        if bounds[j] == bounds[j + 1]:
             continue
+        v = verts[order[bounds[j]:bounds[j + 1]]]
         s, e = np.asarray(caps.start[j], np.float64), np.asarray(caps.end[j], np.float64)
         d = e - s
         t = np.clip((v - s) @ d / max(float(d @ d), 1e-12), 0.0, 1.0)
@@ -478,3 +510,12 @@ def capsule_skin(body, percentile: float = SKIN_PERCENTILE, max_skin: float = SK
     if n_j == NUM_JOINTS:
         skin[list(HAND_BONES)] *= hand_scale
     return skin
+
+
+def _dominant_groups(weights: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The vertices ordered by their largest skinning weight's bone (stable: in index order
+    within a bone) and each bone's slice bounds: bone j has ``order[bounds[j]:bounds[j + 1]]``."""
+    dominant = weights.argmax(1)
+    order = np.argsort(dominant, kind="stable")
+    bounds = np.searchsorted(dominant[order], np.arange(weights.shape[1] + 1))
+    return order, bounds

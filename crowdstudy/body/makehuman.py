@@ -196,6 +196,7 @@ def template_surface() -> Surface:
         part = np.where(vertex >= int(a["n_body"]), 1, 0).astype(np.int8)  # 0 body, 1 eye
         _TEMPLATE["surface"] = Surface(vertex=vertex, uv=uv, faces=faces, part=part)
         tri = np.concatenate([a["quads"][:, [0, 1, 2]], a["quads"][:, [0, 2, 3]]]).astype(np.int32)
+        tri.flags.writeable = False                   # shared by every body
         _TEMPLATE["faces"] = tri
     return _TEMPLATE["surface"]
 
@@ -222,6 +223,8 @@ def makehuman_body(record: dict, fields: dict) -> Body:
     if "weights" not in _TEMPLATE:
         _TEMPLATE["weights"] = _top4(a["weights"].astype(np.float64))
         _TEMPLATE["weights32"] = _TEMPLATE["weights"].astype(np.float32)
+        # shared by every body: read-only, so per-array results (digests) can be kept
+        _TEMPLATE["weights32"].flags.writeable = False
     weights = _TEMPLATE["weights"]
     verts, joints = _t_pose(verts, joints, weights)
     verts = _curl_fingers(verts, joints, weights)
