@@ -155,3 +155,47 @@ def test_periodic_copies_wear_other_characters_clothes():
         hue = np.sqrt(np.asarray(look.shirt) / max(max(look.shirt), 1e-6))
         assert np.abs(seen[k] - hue).max() < 0.3, (k, seen[k], hue)
     assert looks[0].shirt != looks[1].shirt
+
+
+def test_the_texture_array_keeps_within_what_the_driver_holds():
+    """A study crowd keeps 1024^2 texels per character at 1080p; a stadium crowd gets smaller
+    layers, so the array stays under the budget (llvmpipe refuses 2 GiB: every character
+    was drawn black at 1,000 characters)."""
+    from crowdstudy.render.appearance import TEXTURE_ARRAY_BUDGET, TEXTURE_SIZE, _array_bytes, texture_size
+
+    assert texture_size(1080, 60) == TEXTURE_SIZE == 1024
+    assert texture_size(1080, 1000) == 512 and texture_size(1080, 5000) == 128
+    assert texture_size(480, 60) == 512 and texture_size(300) == 256
+    for n in (1, 60, 299, 300, 400, 1000, 2000, 5000, 20000):
+        size = texture_size(1080, n)
+        assert _array_bytes(size, n) <= TEXTURE_ARRAY_BUDGET or size == 64
+        assert size == 1024 or _array_bytes(2 * size, n) > TEXTURE_ARRAY_BUDGET     # no smaller than needed
+    assert _array_bytes(1024, 500) >= 2 ** 31 > TEXTURE_ARRAY_BUDGET
+
+
+def test_a_texture_array_the_driver_refuses_is_an_error_not_black_characters():
+    from types import SimpleNamespace
+
+    from crowdstudy.errors import InvalidInputError
+    from crowdstudy.render.appearance import paint_textures
+
+    class RefusingContext:
+        """A GL context whose driver is out of memory after the texture array's allocation."""
+
+        def __init__(self):
+            self.reads = 0
+            self.released = False
+
+        @property
+        def error(self):
+            self.reads += 1
+            return "GL_NO_ERROR" if self.reads == 1 else "GL_OUT_OF_MEMORY"
+
+        def texture_array(self, size, components):
+            return SimpleNamespace(release=lambda: setattr(self, "released", True))
+
+    ctx = RefusingContext()
+    bodies = [SimpleNamespace(surface=object()) for _ in range(500)]
+    with pytest.raises(InvalidInputError, match=r"could not hold 500 layers of 1024\^2 texels \(2\.6 GiB"):
+        paint_textures(ctx, bodies, [None] * 500, program=None, size=1024)
+    assert ctx.released

@@ -32,8 +32,8 @@ from crowdstudy.errors import InvalidInputError
 from crowdstudy.render.garments import surface_codes
 from crowdstudy.render.palette import HAIR, SHIRTS, SHOES, SKIN_TONES, TROUSERS, srgb_to_linear
 
-__all__ = ["Appearance", "assign_appearance", "paint_textures", "RACE_SKIN", "TEXTURE_SIZE", "skin_tone", "nearest_painted", "fill_from_nearest",
-           "texture_size"]
+__all__ = ["Appearance", "assign_appearance", "paint_textures", "RACE_SKIN", "TEXTURE_SIZE", "TEXTURE_ARRAY_BUDGET",
+           "skin_tone", "nearest_painted", "fill_from_nearest", "texture_size"]
 
 #: sRGB skin tone of each MakeHuman ancestry (african, asian, caucasian), blended in linear RGB
 RACE_SKIN = ((92, 58, 40), (206, 160, 122), (222, 176, 148))
@@ -49,10 +49,38 @@ _PAINTED: collections.OrderedDict = collections.OrderedDict()
 _NEAREST: dict = {}
 
 
-def texture_size(height: int) -> int:
+#: bytes the albedo texture array (one layer per character, mipmaps included) may take:
+#: Mesa's llvmpipe refuses an array of 2 GiB or more (GL_OUT_OF_MEMORY), which 400
+#: characters at 1024^2 texels reach
+TEXTURE_ARRAY_BUDGET = 1536 * 2 ** 20
+
+
+def texture_size(height: int, n_characters: int = 1) -> int:
     """Texture side for an image ``height`` pixels tall: 1024 from 720p up, else 512 or 256
-    (a character never covers more texels of its texture than pixels on screen there)."""
-    return TEXTURE_SIZE if height >= 720 else 512 if height >= 360 else 256
+    (a character never covers more texels of its texture than pixels on screen there),
+    halved while ``n_characters`` layers would exceed :data:`TEXTURE_ARRAY_BUDGET` (a
+    crowd of 1,000 gets 512, 5,000 get 128: each character then covers few pixels)."""
+    size = TEXTURE_SIZE if height >= 720 else 512 if height >= 360 else 256
+    while size > 64 and _array_bytes(size, n_characters) > TEXTURE_ARRAY_BUDGET:
+        size //= 2
+    return size
+
+
+def _check_allocated(ctx, tex, layers: int, size: int) -> None:
+    """Raise (and release ``tex``) when the driver refused the texture array: a refused array
+    reads as zeros, and every character would be drawn black."""
+    error = ctx.error
+    if error != "GL_NO_ERROR":
+        tex.release()
+        raise InvalidInputError(f"paint_textures: the GL driver could not hold {layers} layers of {size}^2 texels "
+                                f"({_array_bytes(size, layers) / 2 ** 30:.1f} GiB with mipmaps; {error}); "
+                                f"use texture_size(height, n_characters), which keeps within "
+                                f"{TEXTURE_ARRAY_BUDGET / 2 ** 30:.1f} GiB")
+
+
+def _array_bytes(size: int, layers: int) -> int:
+    """RGBA8 bytes of a mipmapped texture array of ``layers`` layers ``size`` texels square."""
+    return layers * size * size * 4 * 4 // 3
 
 
 @dataclasses.dataclass(frozen=True)
@@ -200,7 +228,9 @@ def paint_textures(ctx, bodies: list, looks: list[Appearance], program, *, size:
     n = len(bodies)
     textured = [i for i, b in enumerate(bodies) if getattr(b, "surface", None) is not None]
     layer_size = size if textured else 1
+    _ = ctx.error                               # clear an earlier error: the next check is this array's
     tex = ctx.texture_array((layer_size, layer_size, max(n, 1)), 4)
+    _check_allocated(ctx, tex, n, layer_size)
     codes: list = [None] * n
     if not textured:
         return tex, codes
@@ -256,6 +286,7 @@ def paint_textures(ctx, bodies: list, looks: list[Appearance], program, *, size:
         fbo.release()
         color.release()
     tex.build_mipmaps()
+    _check_allocated(ctx, tex, n, size)
     tex.filter = (moderngl.LINEAR_MIPMAP_NEAREST, moderngl.LINEAR)
     return tex, codes
 

@@ -212,7 +212,7 @@ class CrowdRenderer:
         prog_paint = _program(ctx, "paint.vert", "paint.frag")
         try:
             tex_albedo, codes = paint_textures(ctx, self.bodies, self.looks, prog_paint,
-                                               size=texture_size(self.height))
+                                               size=texture_size(self.height, len(self.bodies)))
             self.tex_albedo = own(tex_albedo)
         finally:
             prog_paint.release()
