@@ -285,6 +285,7 @@ def paint_textures(ctx, bodies: list, looks: list[Appearance], program, *, size:
             ibo.release()
         fbo.release()
         color.release()
+    _ = ctx.error                               # the painting's own errors are not the mipmaps'
     tex.build_mipmaps()
     _check_allocated(ctx, tex, n, size)
     tex.filter = (moderngl.LINEAR_MIPMAP_NEAREST, moderngl.LINEAR)
