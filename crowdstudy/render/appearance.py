@@ -285,7 +285,9 @@ def paint_textures(ctx, bodies: list, looks: list[Appearance], program, *, size:
             ibo.release()
         fbo.release()
         color.release()
-    _ = ctx.error                               # the painting's own errors are not the mipmaps'
+    # clear what the painting left: on Mesa, moderngl's framebuffer creation above leaves a
+    # GL_INVALID_OPERATION (the layers are painted all the same); the check below is the mipmaps'
+    _ = ctx.error
     tex.build_mipmaps()
     _check_allocated(ctx, tex, n, size)
     tex.filter = (moderngl.LINEAR_MIPMAP_NEAREST, moderngl.LINEAR)
