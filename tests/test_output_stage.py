@@ -79,6 +79,16 @@ def test_blocks_give_the_whole_crowds_animation_and_report(crowd, chunk, threads
     assert rot32.dtype == np.float64 and np.abs(rot32 - rot).max() < 1e-3
 
 
+def test_the_progress_bar_counts_the_blocks_and_changes_nothing(crowd, capsys):
+    config = PhysicsConfig()
+    quiet = finish_crowd(*crowd, FPS, config, warmup=WARMUP, blend=BLEND, looped=True, chunk=2, threads=2)
+    shown = finish_crowd(*crowd, FPS, config, warmup=WARMUP, blend=BLEND, looped=True, chunk=2, threads=2,
+                         progress=True)
+    assert np.array_equal(quiet[0], shown[0]) and quiet[2] == shown[2]
+    err = capsys.readouterr().err
+    assert "output stage" in err and "0/4 [" in err               # 7 characters: 4 blocks of 2
+
+
 def test_the_limit_is_the_whole_crowds(crowd):
     _, _, ref_rot, ref_root, rest = crowd
     from crowdstudy.body.skeleton import forward_kinematics

@@ -275,7 +275,7 @@ def correct(anim, config: PhysicsConfig | None = None, *, device: str | None = N
     rot, root, speed_report = finish_crowd(out_rot.numpy().reshape(t_frames, m.n_characters, m.n_joints, 3),
                                            out_root.numpy(), anim.joint_rotations, anim.root_translation, rest,
                                            anim.fps, config, warmup=warmup, blend=blend, looped=looped,
-                                           periodic_length=anim.periodic_length)
+                                           periodic_length=anim.periodic_length, progress=progress)
     t_end = time.perf_counter()
     wall = t_end - t_start
     if timings is not None:

@@ -16,7 +16,7 @@ the input. Fresh memory is expensive on a virtual machine, about 10 s per GB her
 
 from __future__ import annotations
 
-from concurrent.futures import ThreadPoolExecutor
+from concurrent.futures import ThreadPoolExecutor, as_completed
 
 import numpy as np
 
@@ -38,11 +38,21 @@ def _blocks(n: int, chunk: int) -> list[tuple[int, int]]:
     return [(c0, min(n, c0 + chunk)) for c0 in range(0, n, chunk)]
 
 
-def _map(fn, items, threads: int) -> list:
+def _map(fn, items, threads: int, bar=None) -> list:
+    """``[fn(item) for item in items]`` on up to ``threads`` threads, in order; ``bar`` (a
+    tqdm bar or None) advances as each item finishes."""
+    def tick(result):
+        if bar is not None:
+            bar.update(1)
+        return result
+
     if threads <= 1 or len(items) < 2:
-        return [fn(item) for item in items]
+        return [tick(fn(item)) for item in items]
     with ThreadPoolExecutor(min(threads, len(items))) as pool:
-        return list(pool.map(fn, items))
+        futures = [pool.submit(fn, item) for item in items]
+        for future in as_completed(futures):
+            tick(None)
+        return [future.result() for future in futures]
 
 
 def crowd_speed_limit(ref_rot: np.ndarray, ref_root: np.ndarray, rest_joints: np.ndarray, fps: float,
@@ -73,7 +83,8 @@ def _merge(reports: list[tuple[int, SpeedLimitReport]], limit: float) -> SpeedLi
 def finish_crowd(sim_rot: np.ndarray, sim_root: np.ndarray, ref_rot: np.ndarray, ref_root: np.ndarray,
                  rest_joints: np.ndarray, fps: float, config: PhysicsConfig, *, warmup: int = 0, blend: int = 0,
                  looped: bool = False, periodic_length: float | None = None, chunk: int = OUTPUT_CHUNK,
-                 threads: int | None = None) -> tuple[np.ndarray, np.ndarray, SpeedLimitReport | None]:
+                 threads: int | None = None,
+                 progress: bool = False) -> tuple[np.ndarray, np.ndarray, SpeedLimitReport | None]:
     """The simulated poses -> the "Ours" animation.
 
     Args:
@@ -90,6 +101,7 @@ def finish_crowd(sim_rot: np.ndarray, sim_root: np.ndarray, ref_rot: np.ndarray,
         periodic_length: m, the scene's period along x, or None.
         chunk: characters per block (the result does not depend on it).
         threads: host threads (None: :func:`~crowdstudy.warp_runtime.host_threads`).
+        progress: a tqdm bar over the blocks on stderr.
 
     Returns:
         ``(rot (T, N, J, 3), root (T, N, 3), speed report or None)``, float64. The report is
@@ -137,6 +149,16 @@ def finish_crowd(sim_rot: np.ndarray, sim_root: np.ndarray, ref_rot: np.ndarray,
         out_root[:, c0:c1] = root
         return c0, report
 
-    done = _map(block, _blocks(n_chars, chunk), threads)
+    blocks = _blocks(n_chars, chunk)
+    bar = None
+    if progress:
+        from tqdm import tqdm
+
+        bar = tqdm(total=len(blocks), desc="output stage", unit="block", leave=False)
+    try:
+        done = _map(block, blocks, threads, bar)
+    finally:
+        if bar is not None:
+            bar.close()
     report = _merge(done, limit) if limit is not None else None
     return out_rot, out_root, report
