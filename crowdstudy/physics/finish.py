@@ -267,7 +267,8 @@ def _soft_reach(hip: np.ndarray, ankle: np.ndarray, target: np.ndarray, length: 
 
 def lock_planted_feet(rot: np.ndarray, root: np.ndarray, ref_rot: np.ndarray, ref_root: np.ndarray,
                       rest_joints: np.ndarray, fps: float, *, planted_speed: float = 0.02,
-                      planted_height: float = 0.03, periodic: bool = False) -> np.ndarray:
+                      planted_height: float = 0.03, periodic: bool = False,
+                      ref_kinematics: tuple | None = None) -> np.ndarray:
     """Hold the output's feet where they stand while the reference's are planted (two-bone
     leg IK).
 
@@ -283,6 +284,8 @@ def lock_planted_feet(rot: np.ndarray, root: np.ndarray, ref_rot: np.ndarray, re
         planted_speed: m/s, a reference joint (ankle, ball) counts as planted below this
             horizontal speed (and within ``planted_height`` m of its lowest height).
         periodic: the clip loops (contacts may wrap around the seam).
+        ref_kinematics: ``forward_kinematics(rest_joints[None], ref_rot, ref_root)`` when the
+            caller has it already (None: computed here).
 
     Returns:
         (T, N, 24, 3) joint rotations with new hip, knee and ankle rotations; the ankle's
@@ -290,7 +293,9 @@ def lock_planted_feet(rot: np.ndarray, root: np.ndarray, ref_rot: np.ndarray, re
     """
     rest = np.asarray(rest_joints, np.float64)
     glob, pos = forward_kinematics(rest[None], rot, root, parents=PARENTS)
-    ref_glob, ref_pos = forward_kinematics(rest[None], ref_rot, ref_root, parents=PARENTS)
+    if ref_kinematics is None:
+        ref_kinematics = forward_kinematics(rest[None], ref_rot, ref_root, parents=PARENTS)
+    ref_glob, ref_pos = ref_kinematics
     out = np.array(rot, dtype=np.float64, copy=True)
     n_chars = rot.shape[1]
     for hip, knee, ankle in LEGS:

@@ -22,10 +22,9 @@ import numpy as np
 
 from crowdstudy.body.skeleton import PARENTS, forward_kinematics
 from crowdstudy.errors import InvalidInputError
-from crowdstudy.metrics import joint_speeds
 from crowdstudy.physics.config import PhysicsConfig
 from crowdstudy.physics.finish import close_loop, lock_planted_feet, smooth_deviation
-from crowdstudy.physics.speed_limit import SpeedLimitReport, limit_joint_speed
+from crowdstudy.physics.speed_limit import SpeedLimitReport, fastest_reference_joint, limit_joint_speed
 from crowdstudy.warp_runtime import host_threads
 
 __all__ = ["OUTPUT_CHUNK", "crowd_speed_limit", "finish_crowd"]
@@ -64,8 +63,7 @@ def crowd_speed_limit(ref_rot: np.ndarray, ref_root: np.ndarray, rest_joints: np
     def fastest(block):
         c0, c1 = block
         _, pos = forward_kinematics(rest_joints[None, c0:c1], ref_rot[:, c0:c1], ref_root[:, c0:c1], parents=PARENTS)
-        speed = joint_speeds(pos, fps, periodic_length=periodic_length)
-        return float(speed.max()) if speed.size else 0.0
+        return fastest_reference_joint(pos, fps, periodic_length)
 
     return max(_map(fastest, _blocks(ref_rot.shape[1], chunk), threads)) + float(margin)
 
@@ -138,13 +136,16 @@ def finish_crowd(sim_rot: np.ndarray, sim_root: np.ndarray, ref_rot: np.ndarray,
             rot, root = close_loop(rot, root, n_frames, warmup, blend)
         rot, root = smooth_deviation(rot, root, r_rot, r_root, config.output_smoothing * fps, periodic=looped,
                                      root_sigma_frames=config.output_smoothing_root * fps, hold=config.output_hold)
+        # the input's kinematics, once for the foot lock and the speed limit
+        r_fk = forward_kinematics(r_rest[None], r_rot, r_root, parents=PARENTS) \
+            if config.foot_lock or limit is not None else None
         if config.foot_lock:
             rot = lock_planted_feet(rot, root, r_rot, r_root, r_rest, fps, planted_speed=config.foot_lock_speed,
-                                    periodic=looped)
+                                    periodic=looped, ref_kinematics=r_fk)
         report = None
         if limit is not None:
             rot, report = limit_joint_speed(rot, root, r_rot, r_root, r_rest, fps, limit=limit, periodic=looped,
-                                            periodic_length=periodic_length)
+                                            periodic_length=periodic_length, ref_kinematics=r_fk)
         out_rot[:, c0:c1] = rot
         out_root[:, c0:c1] = root
         return c0, report

@@ -35,7 +35,7 @@ from crowdstudy.metrics import joint_speeds
 from crowdstudy.motion.quaternions import quat_conjugate, quat_multiply
 from crowdstudy.physics.finish import planted_frames
 
-__all__ = ["SpeedLimitReport", "limit_joint_speed", "UPPER_CHAIN_STOP"]
+__all__ = ["SpeedLimitReport", "limit_joint_speed", "fastest_reference_joint", "UPPER_CHAIN_STOP"]
 
 #: an upper-body chain is re-timed up to, not including, these joints (the root and the
 #: lower spine carry the legs and the held feet)
@@ -109,11 +109,20 @@ def _window(fast_steps: np.ndarray, n_frames: int, width: float, periodic: bool)
     return w
 
 
+def fastest_reference_joint(ref_pos: np.ndarray, fps: float, periodic_length: float | None = None) -> float:
+    """The reference's fastest joint, m/s, over its own steps (positions (T, ..., J, 3) m):
+    a clip cut from a longer loop need not meet its first frame smoothly, and its seam is
+    no motion of the reference, so the seam does not count (0 for a single frame)."""
+    speed = joint_speeds(ref_pos, fps, periodic_length=periodic_length)
+    return float(speed.max()) if speed.size else 0.0
+
+
 def limit_joint_speed(rot: np.ndarray, root: np.ndarray, ref_rot: np.ndarray, ref_root: np.ndarray,
                       rest_joints: np.ndarray, fps: float, *, margin: float = 0.3,
                       limit: float | None = None, periodic: bool = False, sigma0: float = 1.0,
                       growth: float = 1.5, max_rounds: int = 12, planted_speed: float = 0.02,
-                      planted_height: float = 0.03, periodic_length: float | None = None) -> tuple[np.ndarray, SpeedLimitReport]:
+                      planted_height: float = 0.03, periodic_length: float | None = None,
+                      ref_kinematics: tuple | None = None) -> tuple[np.ndarray, SpeedLimitReport]:
     """Re-time the correction where it makes a joint faster than ``limit``.
 
     Args:
@@ -132,6 +141,8 @@ def limit_joint_speed(rot: np.ndarray, root: np.ndarray, ref_rot: np.ndarray, re
         planted_speed, planted_height: m/s and m, when the reference's ankle or ball counts
             as planted (:func:`~crowdstudy.physics.finish.planted_frames`): a leg is re-timed
             only on the frames where neither is.
+        ref_kinematics: ``forward_kinematics(rest_joints[None], ref_rot, ref_root)`` when the
+            caller has it already (None: computed here).
 
     Returns:
         ``(rot, report)``: new joint rotations (the input's where nothing was too fast) and a
@@ -150,11 +161,11 @@ def limit_joint_speed(rot: np.ndarray, root: np.ndarray, ref_rot: np.ndarray, re
                                 f"{fps!r}, {margin!r}, {sigma0!r}, {growth!r}, {max_rounds!r}")
     rest = np.asarray(rest_joints, np.float64)
     n_frames = rot.shape[0]
-    _, ref_pos = forward_kinematics(rest[None], ref_rot, ref_root, parents=PARENTS)
+    if ref_kinematics is None:
+        ref_kinematics = forward_kinematics(rest[None], ref_rot, ref_root, parents=PARENTS)
+    ref_pos = ref_kinematics[1]
     if limit is None:
-        # the reference's own steps only: a clip cut from a longer loop need not meet its
-        # first frame smoothly, and its seam is no motion of the reference
-        limit = float(joint_speeds(ref_pos, fps, periodic_length=periodic_length).max()) + float(margin)
+        limit = fastest_reference_joint(ref_pos, fps, periodic_length) + float(margin)
     _, pos = forward_kinematics(rest[None], rot, root, parents=PARENTS)
     speed = joint_speeds(pos, fps, periodic_length=periodic_length, seam=periodic)
     before = float(speed.max()) if speed.size else 0.0
