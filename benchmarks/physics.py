@@ -8,6 +8,10 @@
   ``build/bench/physics_runtime.png``;
 * ``--stadium 1000,5000``: ``correct()`` on stadium crowds (``--stadium-level``,
   ``--stadium-seconds``): time, peak memory per character, NaN/stability and the bars;
+* ``--bars-only --bars 20 [--cells ...] [--seeds study,1,2]``: the bars of every study cell
+  (or of some), on the study's own crowds or on other seeds of the same cells; with more
+  than one seed, the spread per cell (:func:`seed_spread`) and its figure
+  ``build/bench/physics_bars_seeds.png``;
 * the CG implementations on the same assembled 60-character system (fused single-launch
   PCG with the per-character tree preconditioner or 6x6 block Jacobi, scipy CG on a BSR
   matrix, warp.optim.linear.cg on a warp.sparse BSR matrix);
@@ -811,6 +815,12 @@ BAR_TEXT = {"jerk": "mean jerk <= 1.3x", "hf": "HF share <= 1.5x", "speed": "max
             "seam": "seam <= 1.5x median step (a looped concert)"}
 
 
+def tracking_bar_cm(level_index: int, n_levels: int) -> float | None:
+    """The tracking bar of a level, cm: 1.5 at the sparsest (D1), 5 at the densest (D5),
+    None between (the bar is stated for D1 and D5 only)."""
+    return 1.5 if level_index == 0 else 5.0 if level_index == n_levels - 1 else None
+
+
 def bar_checks(row: dict, level_index: int, n_levels: int) -> dict:
     """Pass/fail of each bar for one measured cell (``row`` from :func:`measure_bars`)."""
     checks = {"jerk": row["jerk_ratio"] <= 1.3,
@@ -819,8 +829,9 @@ def bar_checks(row: dict, level_index: int, n_levels: int) -> dict:
               "pelvis": row["pelvis_p99_ours"] <= 2.0 * row["pelvis_p99_baseline"] + 0.5,
               "slide": row["foot_slide_p99_ours"] <= 0.05,
               "overlap": row["mesh_ratio"] <= 0.05}
-    if level_index in (0, n_levels - 1):          # the bar is stated for D1 and D5 only
-        checks["tracking"] = row["tracking_cm"] <= (1.5 if level_index == 0 else 5.0)
+    bar = tracking_bar_cm(level_index, n_levels)
+    if bar is not None:
+        checks["tracking"] = row["tracking_cm"] <= bar
     if row["loop"] == "periodic":                 # a looped concert (a clip too short to loop has no seam)
         checks["seam"] = max(row["seam_ratio_baseline"], row["seam_ratio_ours"]) <= 1.5
     return checks
@@ -848,7 +859,110 @@ def parse_cells(text: str, levels) -> list[tuple[str, str]] | None:
     return cells
 
 
-def measure_bars(duration: float, frame_stride: int = 10, config=None, cells=None) -> list[dict]:
+def parse_seeds(text: str) -> list[int | None]:
+    """``"study,1,2"`` -> [None, 1, 2] (``study``: the design's seed of each cell)."""
+    seeds: list[int | None] = []
+    for item in text.split(","):
+        item = item.strip()
+        if item == "study":
+            seeds.append(None)
+            continue
+        try:
+            value = int(item)
+        except ValueError:
+            value = -1
+        if value < 0:
+            raise SystemExit(f"--seeds: expected 'study' or non-negative integers, comma-separated, got {item!r}")
+        seeds.append(value)
+    if len(set(seeds)) != len(seeds):
+        raise SystemExit(f"--seeds: a seed is given twice in {text!r}")
+    return seeds
+
+
+SPREAD_COLUMNS = ["stage", "level", "seeds", "mesh_ratio_study", "mesh_ratio_mean", "mesh_ratio_sd",
+                  "mesh_ratio_min", "mesh_ratio_max", "baseline_cm3_mean", "ours_cm3_mean", "ours_cm3_max",
+                  "overlap_met", "tracking_cm_mean", "tracking_cm_max",
+                  "tracking_met", "all_bars_met"]
+
+
+def seed_spread(rows: list[dict]) -> list[dict]:
+    """Per cell, how the bars vary from crowd to crowd (rows of :func:`measure_bars` with
+    several seeds): the mesh overlap ratio's mean, sample standard deviation, range and the
+    study seed's value (NaN where the study's own crowd was not measured), the overlap itself
+    in cm^3 per character (the Baseline's mean, Ours' mean and largest: a sparse cell's ratio
+    is a ratio of small volumes), the tracking
+    error's mean and largest value, and how many crowds meet the overlap bar, the tracking
+    bar (D1 and D5 only; "" elsewhere) and every bar, as "k/n"."""
+    cells: dict = {}
+    for r in rows:
+        cells.setdefault((r["stage"], r["level"]), []).append(r)
+    out = []
+    for (stage, level), rs in cells.items():
+        ratio = np.array([r["mesh_ratio"] for r in rs], float)
+        track = np.array([r["tracking_cm"] for r in rs], float)
+        failed = [set(filter(None, r["bars_failed"].replace("-", "").split(","))) for r in rs]
+        study = [r["mesh_ratio"] for r in rs if r.get("study_seed")]
+        n = len(rs)
+        out.append({"stage": stage, "level": level, "seeds": n,
+                    "mesh_ratio_study": float(study[0]) if study else float("nan"),
+                    "mesh_ratio_mean": float(ratio.mean()),
+                    "mesh_ratio_sd": float(ratio.std(ddof=1)) if n > 1 else 0.0,
+                    "mesh_ratio_min": float(ratio.min()), "mesh_ratio_max": float(ratio.max()),
+                    "baseline_cm3_mean": 1e6 * float(np.mean([r["mesh_baseline_m3"] for r in rs])),
+                    "ours_cm3_mean": 1e6 * float(np.mean([r["mesh_ours_m3"] for r in rs])),
+                    "ours_cm3_max": 1e6 * float(np.max([r["mesh_ours_m3"] for r in rs])),
+                    "overlap_met": f"{sum('overlap' not in f for f in failed)}/{n}",
+                    "tracking_cm_mean": float(track.mean()), "tracking_cm_max": float(track.max()),
+                    "tracking_met": (f"{sum('tracking' not in f for f in failed)}/{n}"
+                                     if rs[0].get("tracking_bar_cm") is not None else ""),
+                    "all_bars_met": f"{sum(not f for f in failed)}/{n}"})
+    return out
+
+
+def seed_figure(rows: list[dict], path=None):
+    """The bars crowd by crowd (PNG): mesh overlap (% of the Baseline's) and tracking error
+    (cm) per cell, one dot per seed, the study's own crowd ringed, the bars as lines."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    path = report_path("physics_bars_seeds").with_suffix(".png") if path is None else path
+    cells = list(dict.fromkeys((r["stage"], r["level"]) for r in rows))
+    names = [f"{'concert' if st == 'stationary' else 'corridor'}\n{lv}" for st, lv in cells]
+    fig, axes = plt.subplots(2, 1, figsize=(max(6.0, 0.8 * len(cells) + 2), 6.4), dpi=120, sharex=True)
+    for ax, key, scale, label in ((axes[0], "mesh_ratio", 100.0, "mesh overlap, % of the Baseline's"),
+                                  (axes[1], "tracking_cm", 1.0, "tracking error, cm")):
+        for i, cell in enumerate(cells):
+            sel = [r for r in rows if (r["stage"], r["level"]) == cell]
+            ys = np.array([r[key] * scale for r in sel])
+            xs = i + np.linspace(-0.15, 0.15, len(ys)) if len(ys) > 1 else np.full(1, float(i))
+            ax.plot(xs, ys, "o", color="tab:blue", ms=5, alpha=0.8)
+            for x, r, y in zip(xs, sel, ys):
+                if r.get("study_seed"):
+                    ax.plot([x], [y], "o", mfc="none", mec="k", ms=10, mew=1.5)
+            ax.plot([i - 0.25, i + 0.25], [ys.mean()] * 2, "-", color="tab:blue", lw=2)
+        ax.set_ylabel(label)
+        ax.grid(True, axis="y", alpha=0.3)
+    axes[0].axhline(5.0, color="r", ls="--", lw=1, label="bar: 5 %")
+    for i, cell in enumerate(cells):
+        bar = next(r.get("tracking_bar_cm") for r in rows if (r["stage"], r["level"]) == cell)
+        if bar is not None:
+            axes[1].plot([i - 0.3, i + 0.3], [bar, bar], "r--", lw=1)
+    axes[0].plot([], [], "o", mfc="none", mec="k", ms=10, label="the study's own crowd")
+    axes[0].plot([], [], "-", color="tab:blue", lw=2, label="mean over seeds")
+    axes[0].legend(fontsize=7, loc="upper left")
+    axes[1].set_xticks(range(len(cells)), names, fontsize=8)
+    axes[0].set_title("The bars crowd by crowd: one dot per seed of each study cell")
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path)
+    plt.close(fig)
+    return path
+
+
+def measure_bars(duration: float, frame_stride: int = 10, config=None, cells=None,
+                 seeds=(None,)) -> list[dict]:
     """Every (stage, density) cell of the study, ``duration`` seconds each: overlap (mesh and
     capsule, m^3 per character, every ``frame_stride``-th frame), tracking error (cm; with its
     placement and motion parts, :func:`crowdstudy.metrics.tracking_parts`) and the
@@ -857,11 +971,11 @@ def measure_bars(duration: float, frame_stride: int = 10, config=None, cells=Non
     far the skin reaches through the scene's walls (``wall_p99_cm_*``, ``wall_max_cm_*``:
     :func:`crowdstudy.metrics.wall_penetration`, the same frames as the overlap).
     ``config``: the :class:`~crowdstudy.physics.config.PhysicsConfig` of Ours (None: the
-    defaults); ``cells``: (stage, level) pairs to measure (None: all ten)."""
+    defaults); ``cells``: (stage, level) pairs to measure (None: all ten); ``seeds``: the
+    cells' seeds, each one a crowd of its own (layout, bodies, clips; None: the design's
+    seed of the cell, the study's stimulus). Each row records its ``seed`` and whether it
+    is the study's (``study_seed``)."""
     from crowdstudy.design import load_design
-    from crowdstudy.metrics import overlap_volume, smoothness, tracking_parts, wall_penetration
-    from crowdstudy.motion.baseline import build_baseline
-    from crowdstudy.physics.corrector import correct
 
     design = load_design()
     levels = list(design.densities)
@@ -870,43 +984,57 @@ def measure_bars(duration: float, frame_stride: int = 10, config=None, cells=Non
         for li, level in enumerate(levels):
             if cells is not None and (stage, level) not in cells:
                 continue
-            base = build_baseline(design, stage, level, duration=duration)
-            t0 = time.perf_counter()
-            run_timings: dict = {}
-            ours = correct(base, config, progress=False, timings=run_timings)
-            wall = time.perf_counter() - t0
-            frames = np.arange(0, base.n_frames, frame_stride)
-            row = {"stage": stage, "level": level, "characters": base.n_characters, "frames": base.n_frames,
-                   "loop": loop_mode(base)}
-            for geom in ("mesh", "capsule"):
-                ob = overlap_volume(base, geometry=geom, frames=frames).mean
-                oo = overlap_volume(ours, geometry=geom, frames=frames).mean
-                row[f"{geom}_baseline_m3"] = ob
-                row[f"{geom}_ours_m3"] = oo
-                row[f"{geom}_ratio"] = oo / max(ob, 1e-12)
-            for name, a in (("baseline", base), ("ours", ours)):     # skin through the walls (not a bar)
-                walls = wall_penetration(a, frames=frames)
-                row[f"wall_p99_cm_{name}"], row[f"wall_max_cm_{name}"] = walls.p99_cm, walls.max_cm
-            parts = tracking_parts(ours, base)
-            row["tracking_cm"] = parts.total_cm
-            # placement, motion and each body part's mean (where the tracking goes; not bars)
-            row.update({key: value for key, value in parts.as_dict().items() if key != "tracking_error_cm"})
-            sb, so = smoothness(base, base).as_dict(), smoothness(ours, base).as_dict()
-            for key, name in (("jerk_m_s3", "jerk"), ("hf_share", "hf_share"), ("max_joint_speed_m_s", "max_joint_speed"),
-                              ("pelvis_accel_p99_m_s2", "pelvis_p99"), ("foot_slide_p99_m_s", "foot_slide_p99"),
-                              ("seam_ratio", "seam_ratio")):
-                row[f"{name}_baseline"], row[f"{name}_ours"] = sb[key], so[key]
-            row["jerk_ratio"] = so["jerk_m_s3"] / sb["jerk_m_s3"]
-            row["foot_slide_over_5cm_s_ours"] = so["foot_slide_fraction_over_5cm_s"]
-            checks = bar_checks(row, li, len(levels))
-            row["bars_failed"] = ",".join(k for k, ok in checks.items() if not ok) or "-"
-            limited = (ours.meta.get("physics") or {}).get("speed_limit") or {}
-            row["speed_limited_characters"] = len(limited.get("characters", ()))   # re-timed by the speed limit
-            row["correct_wall_s"] = wall
-            row["ms_per_step_wall"] = run_timings["ms_per_step"]     # the clip's steps only
-            rows.append(row)
-            print(format_table([row]), flush=True)
+            for seed in seeds:
+                rows.append(_bars_of_cell(design, stage, li, level, seed, duration, frame_stride, config))
+                print(format_table([rows[-1]]), flush=True)
     return rows
+
+
+def _bars_of_cell(design, stage: str, li: int, level: str, seed, duration: float, frame_stride: int,
+                  config) -> dict:
+    """One row of :func:`measure_bars`: one crowd of one cell, corrected and measured."""
+    from crowdstudy.metrics import overlap_volume, smoothness, tracking_parts, wall_penetration
+    from crowdstudy.motion.baseline import build_baseline
+    from crowdstudy.physics.corrector import correct
+
+    levels = list(design.densities)
+    base = build_baseline(design, stage, level, duration=duration, seed=seed)
+    t0 = time.perf_counter()
+    run_timings: dict = {}
+    ours = correct(base, config, progress=False, timings=run_timings)
+    wall = time.perf_counter() - t0
+    frames = np.arange(0, base.n_frames, frame_stride)
+    study_seed = design.cell_seed(design.stage(stage), level)
+    row = {"stage": stage, "level": level, "seed": int(base.meta["seed"]),
+           "study_seed": int(base.meta["seed"]) == study_seed, "characters": base.n_characters,
+           "frames": base.n_frames, "loop": loop_mode(base), "tracking_bar_cm": tracking_bar_cm(li, len(levels))}
+    for geom in ("mesh", "capsule"):
+        ob = overlap_volume(base, geometry=geom, frames=frames).mean
+        oo = overlap_volume(ours, geometry=geom, frames=frames).mean
+        row[f"{geom}_baseline_m3"] = ob
+        row[f"{geom}_ours_m3"] = oo
+        row[f"{geom}_ratio"] = oo / max(ob, 1e-12)
+    for name, a in (("baseline", base), ("ours", ours)):     # skin through the walls (not a bar)
+        walls = wall_penetration(a, frames=frames)
+        row[f"wall_p99_cm_{name}"], row[f"wall_max_cm_{name}"] = walls.p99_cm, walls.max_cm
+    parts = tracking_parts(ours, base)
+    row["tracking_cm"] = parts.total_cm
+    # placement, motion and each body part's mean (where the tracking goes; not bars)
+    row.update({key: value for key, value in parts.as_dict().items() if key != "tracking_error_cm"})
+    sb, so = smoothness(base, base).as_dict(), smoothness(ours, base).as_dict()
+    for key, name in (("jerk_m_s3", "jerk"), ("hf_share", "hf_share"), ("max_joint_speed_m_s", "max_joint_speed"),
+                      ("pelvis_accel_p99_m_s2", "pelvis_p99"), ("foot_slide_p99_m_s", "foot_slide_p99"),
+                      ("seam_ratio", "seam_ratio")):
+        row[f"{name}_baseline"], row[f"{name}_ours"] = sb[key], so[key]
+    row["jerk_ratio"] = so["jerk_m_s3"] / sb["jerk_m_s3"]
+    row["foot_slide_over_5cm_s_ours"] = so["foot_slide_fraction_over_5cm_s"]
+    checks = bar_checks(row, li, len(levels))
+    row["bars_failed"] = ",".join(k for k, ok in checks.items() if not ok) or "-"
+    limited = (ours.meta.get("physics") or {}).get("speed_limit") or {}
+    row["speed_limited_characters"] = len(limited.get("characters", ()))   # re-timed by the speed limit
+    row["correct_wall_s"] = wall
+    row["ms_per_step_wall"] = run_timings["ms_per_step"]     # the clip's steps only
+    return row
 
 
 def _run_mujoco(args) -> list[dict]:
@@ -937,6 +1065,9 @@ def main(argv: list[str]) -> int:
     parser.add_argument("--bars-only", action="store_true", help="only the --bars measurement")
     parser.add_argument("--cells", default="", metavar="SCENE:LEVEL,...",
                         help="--bars on these cells only (e.g. concert:D1,corridor:D5; default all ten)")
+    parser.add_argument("--seeds", default="study", metavar="SEED,...",
+                        help="--bars-only on these seeds of each cell ('study': the stimulus's own crowd; "
+                             "e.g. study,1,2,3): with more than one, the spread per cell and its figure")
     parser.add_argument("--config", nargs="*", default=[], metavar="KEY=VALUE",
                         help="PhysicsConfig changes for the timed steps, --bars and --stadium (e.g. "
                              "cg_tolerance=1e-4); the report (physics_*_trial) records them")
@@ -980,10 +1111,20 @@ def main(argv: list[str]) -> int:
     if args.bars_only:
         from crowdstudy.design import load_design
         cells = parse_cells(args.cells, list(load_design().densities))
-        bars = measure_bars(args.bars or 20.0, config=config, cells=cells)
+        seeds = parse_seeds(args.seeds)
+        bars = measure_bars(args.bars or 20.0, config=config, cells=cells, seeds=seeds)
         print("bars: " + "; ".join(BAR_TEXT.values()), flush=True)
-        name = "physics_bars_trial" if trial or cells is not None else "physics_bars"
-        path = write_report(name, bars, seed=None, bar_text=BAR_TEXT, config_changes=list(args.config))
+        extra: dict = {}
+        if len(seeds) > 1:
+            extra["spread"] = seed_spread(bars)
+            print(format_table(extra["spread"], SPREAD_COLUMNS), flush=True)
+            extra["figure"] = str(seed_figure(bars, path=report_path(f"physics_bars_seeds{trial}").with_suffix(".png")))
+            print(f"figure: {extra['figure']}", flush=True)
+            name = f"physics_bars_seeds{trial}"
+        else:
+            name = "physics_bars_trial" if trial or cells is not None or seeds != [None] else "physics_bars"
+        path = write_report(name, bars, seed=None, bar_text=BAR_TEXT, config_changes=list(args.config),
+                            seeds=["study" if v is None else v for v in seeds], **extra)
         print(f"wrote {path}", file=sys.stderr)
         return 0
     if args.mujoco:

@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import numpy as np
 import pytest
 
 LEVELS = ["D1", "D2", "D3", "D4", "D5"]
@@ -96,3 +97,94 @@ def test_the_seam_bar_applies_to_a_looped_concert_only(bench):
     assert bench.bar_checks({**row, "loop": "periodic"}, 2, 5)["seam"] is False
     assert "seam" not in bench.bar_checks({**row, "loop": "none"}, 2, 5)
     assert "seam" not in bench.bar_checks({**row, "stage": "walking", "loop": "dissolve"}, 2, 5)
+
+
+def test_seeds_name_the_study_and_integers(bench):
+    assert bench.parse_seeds("study") == [None]
+    assert bench.parse_seeds("study, 1,22") == [None, 1, 22]
+    for text, bad in (("1,x", "'x'"), ("-3", "'-3'"), ("1,1", "twice")):
+        with pytest.raises(SystemExit, match=f"--seeds: .*{bad}"):
+            bench.parse_seeds(text)
+
+
+def test_measure_bars_runs_each_cell_on_each_seed(bench, monkeypatch):
+    """Cells x seeds, in that order; the plumbing only (one row per call is recorded)."""
+    calls = []
+
+    def fake_cell(design, stage, li, level, seed, duration, frame_stride, config):
+        calls.append((stage, level, seed))
+        return {"stage": stage, "level": level, "seed": seed}
+
+    monkeypatch.setattr(bench, "_bars_of_cell", fake_cell)
+    rows = bench.measure_bars(0.2, cells=[("stationary", "D2"), ("walking", "D5")], seeds=[None, 7])
+    assert calls == [("stationary", "D2", None), ("stationary", "D2", 7), ("walking", "D5", None), ("walking", "D5", 7)]
+    assert [r["seed"] for r in rows] == [None, 7, None, 7]
+
+
+@pytest.mark.parametrize("seed, study", [(None, True), (7, False)])
+def test_a_seed_builds_another_crowd_of_the_cell(bench, monkeypatch, seed, study):
+    """The seed reaches the Baseline (its layout and clips) and the row says whether the crowd
+    is the study's own."""
+    import crowdstudy.physics.corrector as corrector
+    from crowdstudy.design import load_design
+
+    design = load_design()
+    seen = []
+
+    class Stop(Exception):
+        pass
+
+    def fake_correct(base, config=None, **kw):
+        seen.append((base.meta["seed"], base.root_translation[0].copy()))
+        raise Stop
+
+    monkeypatch.setattr(corrector, "correct", fake_correct)
+    with pytest.raises(Stop):
+        bench._bars_of_cell(design, "stationary", 1, "D2", seed, 0.2, 10, None)
+    expected = design.cell_seed(design.stage("stationary"), "D2") if study else seed
+    assert seen[0][0] == expected
+    if not study:      # another crowd: the characters stand elsewhere
+        with pytest.raises(Stop):
+            bench._bars_of_cell(design, "stationary", 1, "D2", None, 0.2, 10, None)
+        assert seen[1][0] != seed and not np.allclose(seen[0][1], seen[1][1])
+
+
+def _row(stage, level, seed, ratio, tracking, failed, study=False, bar=None):
+    return {"stage": stage, "level": level, "seed": seed, "study_seed": study, "mesh_ratio": ratio,
+            "mesh_baseline_m3": 1e-4, "mesh_ours_m3": ratio * 1e-4, "tracking_cm": tracking,
+            "bars_failed": failed, "tracking_bar_cm": bar}
+
+
+def test_the_spread_counts_the_crowds_that_meet_each_bar(bench):
+    rows = [_row("stationary", "D3", 11, 0.044, 2.0, "-", study=True),
+            _row("stationary", "D3", 1, 0.056, 2.2, "overlap"),
+            _row("stationary", "D3", 2, 0.032, 2.4, "-"),
+            _row("walking", "D5", 1, 0.03, 5.5, "tracking,hf", bar=5.0),
+            _row("walking", "D5", 2, 0.06, 4.5, "overlap", bar=5.0)]
+    spread = {(r["stage"], r["level"]): r for r in bench.seed_spread(rows)}
+    d3 = spread[("stationary", "D3")]
+    assert d3["seeds"] == 3 and d3["mesh_ratio_study"] == 0.044
+    assert d3["mesh_ratio_mean"] == pytest.approx(0.044) and d3["mesh_ratio_sd"] == pytest.approx(0.012)
+    assert (d3["mesh_ratio_min"], d3["mesh_ratio_max"]) == (0.032, 0.056)
+    assert d3["overlap_met"] == "2/3" and d3["all_bars_met"] == "2/3" and d3["tracking_met"] == ""
+    assert d3["tracking_cm_max"] == 2.4
+    assert d3["baseline_cm3_mean"] == pytest.approx(100.0) and d3["ours_cm3_mean"] == pytest.approx(4.4)
+    assert d3["ours_cm3_max"] == pytest.approx(5.6)
+    d5 = spread[("walking", "D5")]
+    assert np.isnan(d5["mesh_ratio_study"]) and d5["overlap_met"] == "1/2"
+    assert d5["tracking_met"] == "1/2" and d5["all_bars_met"] == "0/2"
+
+
+def test_the_seed_figure_draws_each_crowd_and_the_bars(bench, tmp_path):
+    import matplotlib.image as mpimg
+
+    rows = [_row("stationary", "D1", s, r, t, "-", study=s == 0, bar=1.5)
+            for s, r, t in ((0, 0.02, 1.0), (1, 0.03, 1.2))]
+    rows += [_row("walking", "D5", s, r, t, "-", bar=5.0) for s, r, t in ((0, 0.04, 4.0), (1, 0.02, 4.5))]
+    path = bench.seed_figure(rows, path=tmp_path / "seeds.png")
+    img = mpimg.imread(path)[..., :3]
+    red = (img[..., 0] > 0.9) & (img[..., 1] < 0.2) & (img[..., 2] < 0.2)       # the bars' dashed lines
+    blue = (np.abs(img[..., 0] - 0.12) < 0.08) & (np.abs(img[..., 2] - 0.71) < 0.08)   # the dots
+    assert red.sum() > 100 and blue.sum() > 100
+    top, bottom = red[: img.shape[0] // 2], red[img.shape[0] // 2:]
+    assert top.any() and bottom.any()          # the overlap bar above, the tracking bars below
