@@ -951,7 +951,7 @@ def seed_figure(rows: list[dict], path=None):
             axes[1].plot([i - 0.3, i + 0.3], [bar, bar], "r--", lw=1)
     axes[0].plot([], [], "o", mfc="none", mec="k", ms=10, label="the study's own crowd")
     axes[0].plot([], [], "-", color="tab:blue", lw=2, label="mean over seeds")
-    axes[0].legend(fontsize=7, loc="upper left")
+    axes[0].legend(fontsize=7, loc="upper right", framealpha=0.9)
     axes[1].set_xticks(range(len(cells)), names, fontsize=8)
     axes[0].set_title("The bars crowd by crowd: one dot per seed of each study cell")
     fig.tight_layout()
