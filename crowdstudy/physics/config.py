@@ -63,8 +63,8 @@ class PhysicsConfig:
         arm_scale: multiplies k and d for the arms (collars, shoulders, elbows, wrists,
             hands). Below 1 a contact on a hand bends the arm rather than pushing the whole
             character; 0.25 (1 until 2026-12-04), with the damped world-space pose springs
-            below holding each arm body where the animation puts it (README "Damped pose
-            springs"; 1 = the paper's single body k).
+            below holding each arm body where the animation puts it
+            (docs/correction-history.md, "Damped pose springs"; 1 = the paper's single body k).
         trunk_scale: multiplies k and d for the upper trunk, neck and head (spine2, spine3,
             neck, head); 1 = the paper's single body k.
         root_translation_stiffness: spring of the root's absolute translation, N/m.
@@ -94,8 +94,8 @@ class PhysicsConfig:
             against the body's velocity relative to the animation's, near critical for a
             hand on the 8000 N/m spring. Undamped (0, the value until 2026-12-04) a pushed
             limb overshoots on its way back; damped, concert D5 leaves 3.7 % of the
-            Baseline's overlap where the same springs undamped left 4.8 % (README "Damped
-            pose springs").
+            Baseline's overlap where the same springs undamped left 4.8 %
+            (docs/correction-history.md, "Damped pose springs").
         pose_translation_reach: m; the pose spring saturates beyond about this deviation (a
             pseudo-Huber energy: its force never exceeds ``pose_translation_stiffness *
             pose_translation_reach`` N), so it holds a brushed limb in place but yields where
@@ -165,7 +165,8 @@ class PhysicsConfig:
             stiffness + 2 k d / d0, d0 this depth), so a limb pressed deep meets a stiffer
             neighbour while a light touch stays as soft as ``contact_stiffness`` (C2 at
             d = 0); 0 = the plain quadratic penalty. It costs CG iterations where contacts
-            are deep (README, "Stadium crowds"); a stiffness held beyond d0 or 3 d0 cost
+            are deep (docs/performance-history.md, "The stiffer defaults cost CG
+            iterations"); a stiffness held beyond d0 or 3 d0 cost
             fewer and left more overlap (concert D3 6.4 and 5.8 % of the Baseline's).
         target_relative_self_contacts: ground and intra-body contacts push only with the
             depth beyond the animation's target pose's own (plus ``contact_activation``): a
@@ -187,7 +188,8 @@ class PhysicsConfig:
             the skin grows a capsule in every direction to cover a protrusion on one side
             (a chest, a shoulder blade, a thumb); capped, a dense crowd needs less room
             (concert D5 tracking 5.78 -> 5.18 cm with the hand scale below, overlap 3.7 ->
-            4.3 % of the Baseline's; README "Where concert D5's tracking goes").
+            4.3 % of the Baseline's; docs/correction-history.md, "Where concert D5's tracking
+            goes").
         mesh_skin_hand_scale: the palm and finger bones take this share of their skin
             (``capsule_skin``'s ``hand_scale``): their 90th percentile is the thumb and
             spread fingers, 2-4 cm beside a hand 3-4 cm thick, and a whole skin stopped a
@@ -231,8 +233,9 @@ class PhysicsConfig:
         cg_tolerance: relative residual |r|/|b| at which CG stops. 3e-3 (since 2026-12-05;
             1e-3 before, 1e-4 until 2026-12-04): the one Newton step of a frame needs no
             tighter solve. On every 20 s study cell 1e-3 and 3e-3 leave the same mesh overlap,
-            tracking and smoothness within run-to-run noise (README, "CG stops at"), and 3e-3
-            takes about 11 iterations where 1e-3 takes 14 (1,000 characters).
+            tracking and smoothness within run-to-run noise (docs/performance-history.md,
+            "CG stops at"), and 3e-3 takes about 11 iterations where 1e-3 takes 14 (1,000
+            characters).
         cg_max_iterations: CG iteration cap per step.
         max_contacts_per_character: contact capacity = this * characters (+ ground and
             environment contacts); overflowing contacts are dropped and counted.
