@@ -282,6 +282,31 @@ class _BodyProxy:
         self.weights[np.arange(len(dominant)), dominant] = 1
 
 
+def tile_ratios(xy: np.ndarray, baseline: np.ndarray, ours: np.ndarray, tile: tuple[float, float],
+                min_characters: int) -> np.ndarray:
+    """The overlap ratio of each neighbourhood of a large crowd: the characters binned by
+    their floor position ``xy`` (N, 2) m into ``tile`` = (width, depth) m rectangles (a study
+    cell's floor), and per tile the sum of Ours' per-character overlap over the Baseline's
+    (``ours``, ``baseline``: (N,) m^3). Tiles with fewer than ``min_characters`` characters
+    (the crowd's ragged edge) or no Baseline overlap are left out. Returns the ratios, in
+    tile order (row-major from the smallest x and y)."""
+    xy = np.asarray(xy, float)
+    if xy.ndim != 2 or xy.shape[1] != 2 or len(xy) != len(baseline) or len(xy) != len(ours):
+        raise ValueError(f"xy (N, 2), baseline (N,) and ours (N,): got {xy.shape}, {np.shape(baseline)}, "
+                         f"{np.shape(ours)}")
+    if len(xy) == 0:
+        return np.zeros(0)
+    cell = np.floor((xy - xy.min(axis=0)) / np.asarray(tile, float)).astype(int)
+    key = cell[:, 1] * (cell[:, 0].max() + 1) + cell[:, 0]
+    out = []
+    for k in np.unique(key):
+        members = key == k
+        b = float(np.sum(np.asarray(baseline)[members]))
+        if members.sum() >= min_characters and b > 0:
+            out.append(float(np.sum(np.asarray(ours)[members])) / b)
+    return np.asarray(out)
+
+
 def stadium_run(n: int, level: str = "D3", duration: float = 20.0, frame_stride: int = 10,
                 overlap_characters: int = 300, light_bodies: bool = False, config=None) -> dict:
     """``correct()`` on a stadium crowd (:func:`stadium_crowd`): wall time, ms per step, peak
@@ -290,7 +315,10 @@ def stadium_run(n: int, level: str = "D3", duration: float = 20.0, frame_stride:
     The mesh overlap is measured on every ``frame_stride``-th frame and on the
     ``overlap_characters`` characters nearest the floor's centre (the overlap among them;
     the full crowd's mesh overlap costs minutes per frame at 5,000); the smoothness and
-    tracking on every character and frame. ``light_bodies`` hands ``correct()`` and the
+    tracking on every character and frame. The overlap is also given neighbourhood by
+    neighbourhood (:func:`tile_ratios` on study-cell-sized tiles: ``tiles``,
+    ``mesh_ratio_tile_min/median/max``, ``tiles_over_overlap_bar``), the spread a study cell
+    of the same density shows from crowd to crowd. ``light_bodies`` hands ``correct()`` and the
     joint metrics :class:`_BodyProxy` objects (at 5,000 MakeHuman characters the full body
     models alone would not fit in 24 GiB: ``correct()`` keeps every body for the run)."""
     from crowdstudy.body import load_body
@@ -326,11 +354,25 @@ def stadium_run(n: int, level: str = "D3", duration: float = 20.0, frame_stride:
            "loop": loop_mode(base)}
     sub = _central_subset(base, min(overlap_characters, n))
     frames = np.arange(0, base.n_frames, frame_stride)
+    per_character = {}
     for geom in ("mesh", "capsule"):
-        ob = overlap_volume(_select(base, sub), geometry=geom, frames=frames).mean
-        oo = overlap_volume(_select(ours, sub), geometry=geom, frames=frames).mean
+        rb = overlap_volume(_select(base, sub), geometry=geom, frames=frames)
+        ro = overlap_volume(_select(ours, sub), geometry=geom, frames=frames)
+        ob, oo = rb.mean, ro.mean
         row[f"{geom}_baseline_m3"], row[f"{geom}_ours_m3"], row[f"{geom}_ratio"] = ob, oo, oo / max(ob, 1e-12)
+        per_character[geom] = (rb.per_character.mean(axis=0), ro.per_character.mean(axis=0))
     row["overlap_subset"] = f"{len(sub)} central characters, every {frame_stride}th frame"
+    # the same overlap neighbourhood by neighbourhood: study-cell-sized tiles of the floor
+    design = load_design()
+    tile = (float(design.floor_width), float(design.floor_depth))
+    ratios = tile_ratios(base.root_translation[0, sub, :2], *per_character["mesh"], tile,
+                         min_characters=max(1, design.n_characters(level) // 2))
+    row["tile_m"] = f"{tile[0]:g} x {tile[1]:g}"
+    row["tiles"] = len(ratios)
+    if len(ratios):
+        row["mesh_ratio_tile_min"], row["mesh_ratio_tile_median"], row["mesh_ratio_tile_max"] = (
+            float(ratios.min()), float(np.median(ratios)), float(ratios.max()))
+        row["tiles_over_overlap_bar"] = f"{int(np.sum(ratios > 0.05))}/{len(ratios)}"
     row["tracking_cm"] = tracking_error(ours, base, bodies=bodies)
     sb, so = smoothness(base, base, bodies=bodies).as_dict(), smoothness(ours, base, bodies=bodies).as_dict()
     for key, name in (("jerk_m_s3", "jerk"), ("hf_share", "hf_share"), ("max_joint_speed_m_s", "max_joint_speed"),

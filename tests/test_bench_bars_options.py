@@ -188,3 +188,21 @@ def test_the_seed_figure_draws_each_crowd_and_the_bars(bench, tmp_path):
     assert red.sum() > 100 and blue.sum() > 100
     top, bottom = red[: img.shape[0] // 2], red[img.shape[0] // 2:]
     assert top.any() and bottom.any()          # the overlap bar above, the tracking bars below
+
+
+def test_tile_ratios_are_the_overlap_of_each_neighbourhood(bench):
+    """Characters binned into floor tiles: each tile's summed Ours over summed Baseline; a
+    tile with too few characters, or no Baseline overlap, is left out."""
+    xy = np.array([[0.5, 0.5], [1.0, 2.0], [2.9, 0.1],          # tile (0, 0)
+                   [3.5, 0.5], [5.0, 2.5],                      # tile (1, 0)
+                   [0.5, 3.5],                                  # tile (0, 1): one character
+                   [4.0, 4.0], [5.5, 3.1]])                     # tile (1, 1): no Baseline overlap
+    base = np.array([1.0, 2.0, 1.0, 4.0, 4.0, 9.0, 0.0, 0.0])
+    ours = np.array([0.1, 0.0, 0.1, 0.2, 0.6, 9.0, 0.5, 0.5])
+    ratios = bench.tile_ratios(xy, base, ours, (3.0, 3.0), min_characters=2)
+    assert ratios == pytest.approx([0.05, 0.1])
+    assert bench.tile_ratios(xy, base, ours, (3.0, 3.0), min_characters=1) == pytest.approx([0.05, 0.1, 1.0])
+    whole = bench.tile_ratios(xy, base, ours, (10.0, 10.0), min_characters=1)
+    assert whole == pytest.approx([ours.sum() / base.sum()])
+    with pytest.raises(ValueError, match="xy"):
+        bench.tile_ratios(xy[:, :1], base, ours, (3.0, 3.0), 1)
