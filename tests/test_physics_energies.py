@@ -540,3 +540,31 @@ def test_arm_and_trunk_scales_set_the_pd_gains_of_exactly_their_joints(small_sys
     expect[np.isin(joint, arms)] = 0.25               # the defaults: soft arms (held by the pose springs)
     expect[np.isin(joint, trunk)] = 1.0               # and the paper's single body k for the trunk
     np.testing.assert_allclose(default.body_k.numpy(), cfg.stiffness * expect, rtol=1e-6)
+
+
+def test_set_frames_gathers_the_asked_frames_in_blocks(monkeypatch):
+    """``frames=`` uploads those frames of the clip, in slot order, the same bits as the
+    frames gathered first; the upload blocks (a few frames at a time) do not change them;
+    a bad index is named."""
+    import crowdstudy.physics.state as state_mod
+    from crowdstudy.errors import InvalidInputError
+    from crowdstudy.physics import Control, ModelBuilder
+
+    builder = ModelBuilder()
+    for s in (1.0, 0.95):
+        builder.add_character(*vars(fixture_body(s)).values())
+    model = builder.finalize(device="cpu")
+    rng = np.random.default_rng(5)
+    rot = rng.normal(scale=0.3, size=(7, 2, 24, 3))
+    root = rng.normal(size=(7, 2, 3))
+    schedule = np.array([5, 6, 0, 1, 2, 3, 4, 5, 6, 0])
+    gathered = Control(model, n_frames=len(schedule))
+    gathered.set_frames(rot[schedule], root[schedule])
+    monkeypatch.setattr(state_mod, "_UPLOAD_ROTATIONS", 3 * model.n_bodies)        # blocks of 3 frames
+    indexed = Control(model, n_frames=len(schedule) + 1)
+    indexed.set_frames(rot, root, start=1, frames=schedule)
+    assert np.array_equal(indexed.anim_q.numpy()[1:], gathered.anim_q.numpy())
+    assert np.array_equal(indexed.anim_root.numpy()[1:], gathered.anim_root.numpy())
+    for bad in (np.array([0, 7]), np.array([-1]), np.array([0.5]), np.zeros((2, 2), int)):
+        with pytest.raises(InvalidInputError, match="frames"):
+            indexed.set_frames(rot, root, frames=bad)

@@ -25,10 +25,6 @@ from crowdstudy.scene import static_walls_from_meta
 __all__ = ["CrowdCorrector", "correct", "load_bodies"]
 
 
-#: frames of the input animation handed to :meth:`Control.set_frames` at a time
-_UPLOAD_FRAMES = 64
-
-
 def load_bodies(records) -> list:
     """Body models (rest joints + capsules) for character records (``crowdstudy.body``)."""
     from crowdstudy.body import load_body
@@ -241,9 +237,7 @@ def correct(anim, config: PhysicsConfig | None = None, *, device: str | None = N
     t_frames = len(schedule)
     corr = CrowdCorrector(bodies, config=config, device=device, fps=anim.fps, periodic_length=period,
                           static_walls=walls, linear_solver=linear_solver, n_frames=t_frames, profile=False)
-    for f0 in range(0, t_frames, _UPLOAD_FRAMES):       # no copy of the whole clip in the schedule's order
-        part = schedule[f0:f0 + _UPLOAD_FRAMES]
-        corr.control.set_frames(anim.joint_rotations[part], anim.root_translation[part], start=f0)
+    corr.control.set_frames(anim.joint_rotations, anim.root_translation, start=0, frames=schedule)
     wp = corr.solver.wp
     m = corr.model
     out_rot = wp.zeros((t_frames, m.n_bodies), dtype=wp.vec3, device=m.device)

@@ -80,17 +80,28 @@ class Control:
         self.t_glob_ahead = wp.zeros(nb, dtype=wp.quat, device=dev)
         self.t_x_ahead = wp.zeros(nb, dtype=wp.vec3, device=dev)
 
-    def set_frames(self, joint_rotations: np.ndarray, root_translation: np.ndarray, start: int = 0) -> None:
-        """Upload frames: joint_rotations (F, N, J, 3) axis-angle rad, root_translation (F, N, 3) m."""
+    def set_frames(self, joint_rotations: np.ndarray, root_translation: np.ndarray, start: int = 0,
+                   frames: np.ndarray | None = None) -> None:
+        """Upload frames: joint_rotations (F, N, J, 3) axis-angle rad, root_translation (F, N, 3) m,
+        into the slots from ``start``. ``frames``: which of the F frames to upload, in slot
+        order (an integer index; None: all of them): a looped clip's schedule is gathered a
+        few frames at a time, never copied whole."""
         m = self.model
         rot = np.asarray(joint_rotations, np.float64)
         root = np.asarray(root_translation, np.float64)
         if rot.ndim == 3:
             rot, root = rot[None], root[None]
-        f = rot.shape[0]
-        if rot.shape[1:] != (m.n_characters, m.n_joints, 3) or root.shape != (f, m.n_characters, 3):
+        if rot.shape[1:] != (m.n_characters, m.n_joints, 3) or root.shape != (rot.shape[0], m.n_characters, 3):
             raise InvalidInputError(f"joint_rotations/root_translation: expected (F, {m.n_characters}, {m.n_joints}, 3)"
                                     f" and (F, {m.n_characters}, 3), got {rot.shape} and {root.shape}")
+        if frames is None:
+            frames = np.arange(rot.shape[0])
+        frames = np.asarray(frames)
+        if frames.ndim != 1 or frames.dtype.kind not in "iu" or (
+                len(frames) and (frames.min() < 0 or frames.max() >= rot.shape[0])):
+            raise InvalidInputError(f"frames: expected a 1-D integer index into the {rot.shape[0]} frames given, "
+                                    f"got {frames!r}")
+        f = len(frames)
         if start < 0 or start + f > self.anim_q.shape[0]:
             raise InvalidInputError(f"start: frames [{start}, {start + f}) do not fit the {self.anim_q.shape[0]} slots")
         wp = self.k.wp
@@ -98,9 +109,10 @@ class Control:
         step = max(1, _UPLOAD_ROTATIONS // max(1, m.n_bodies))
         for f0 in range(0, f, step):
             f1 = min(f, f0 + step)
-            quats = axis_angle_to_quaternion(rot[f0:f1]).reshape(f1 - f0, -1, 4).astype(np.float32)
+            quats = axis_angle_to_quaternion(rot[frames[f0:f1]]).reshape(f1 - f0, -1, 4).astype(np.float32)
             self.anim_q[start + f0:start + f1].assign(wp.array(quats, dtype=wp.quat, device=m.device))
-        self.anim_root[start:start + f].assign(wp.array(root.astype(np.float32), dtype=wp.vec3, device=m.device))
+        self.anim_root[start:start + f].assign(wp.array(root[frames].astype(np.float32), dtype=wp.vec3,
+                                                        device=m.device))
 
     def advance(self, f0: int, f1: int, alpha: float) -> None:
         """Shift the targets (current -> old -> older) and compute the target between frames
