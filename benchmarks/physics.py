@@ -297,14 +297,29 @@ def tile_ratios(xy: np.ndarray, baseline: np.ndarray, ours: np.ndarray, tile: tu
     if len(xy) == 0:
         return np.zeros(0)
     cell = np.floor((xy - xy.min(axis=0)) / np.asarray(tile, float)).astype(int)
-    key = cell[:, 1] * (cell[:, 0].max() + 1) + cell[:, 0]
-    out = []
-    for k in np.unique(key):
-        members = key == k
-        b = float(np.sum(np.asarray(baseline)[members]))
-        if members.sum() >= min_characters and b > 0:
-            out.append(float(np.sum(np.asarray(ours)[members])) / b)
-    return np.asarray(out)
+    _, tile_of = np.unique(cell[:, 1] * (cell[:, 0].max() + 1) + cell[:, 0], return_inverse=True)
+    count = np.bincount(tile_of)
+    b = np.bincount(tile_of, weights=np.asarray(baseline, float))
+    o = np.bincount(tile_of, weights=np.asarray(ours, float))
+    keep = (count >= min_characters) & (b > 0)
+    return o[keep] / b[keep]
+
+
+def _smoothness_columns(base, ours, bodies=None) -> dict:
+    """The smoothness columns of a bars row (:func:`crowdstudy.metrics.smoothness`): each
+    measure's ``NAME_baseline`` and ``NAME_ours``, ``jerk_ratio`` and
+    ``foot_slide_over_5cm_s_ours``."""
+    from crowdstudy.metrics import smoothness
+
+    sb, so = smoothness(base, base, bodies=bodies).as_dict(), smoothness(ours, base, bodies=bodies).as_dict()
+    cols = {}
+    for key, name in (("jerk_m_s3", "jerk"), ("hf_share", "hf_share"), ("max_joint_speed_m_s", "max_joint_speed"),
+                      ("pelvis_accel_p99_m_s2", "pelvis_p99"), ("foot_slide_p99_m_s", "foot_slide_p99"),
+                      ("seam_ratio", "seam_ratio")):
+        cols[f"{name}_baseline"], cols[f"{name}_ours"] = sb[key], so[key]
+    cols["jerk_ratio"] = so["jerk_m_s3"] / sb["jerk_m_s3"]
+    cols["foot_slide_over_5cm_s_ours"] = so["foot_slide_fraction_over_5cm_s"]
+    return cols
 
 
 def stadium_run(n: int, level: str = "D3", duration: float = 20.0, frame_stride: int = 10,
@@ -323,10 +338,11 @@ def stadium_run(n: int, level: str = "D3", duration: float = 20.0, frame_stride:
     models alone would not fit in 24 GiB: ``correct()`` keeps every body for the run)."""
     from crowdstudy.body import load_body
     from crowdstudy.design import load_design
-    from crowdstudy.metrics import overlap_volume, smoothness, tracking_error
+    from crowdstudy.metrics import overlap_volume, tracking_error
     from crowdstudy.physics.corrector import correct
 
-    levels = list(load_design().densities)
+    design = load_design()
+    levels = list(design.densities)
     rss0 = _rss_mib()
     t0 = time.perf_counter()
     base = stadium_crowd(n, level, duration)
@@ -354,18 +370,17 @@ def stadium_run(n: int, level: str = "D3", duration: float = 20.0, frame_stride:
            "loop": loop_mode(base)}
     sub = _central_subset(base, min(overlap_characters, n))
     frames = np.arange(0, base.n_frames, frame_stride)
-    per_character = {}
     for geom in ("mesh", "capsule"):
         rb = overlap_volume(_select(base, sub), geometry=geom, frames=frames)
         ro = overlap_volume(_select(ours, sub), geometry=geom, frames=frames)
         ob, oo = rb.mean, ro.mean
         row[f"{geom}_baseline_m3"], row[f"{geom}_ours_m3"], row[f"{geom}_ratio"] = ob, oo, oo / max(ob, 1e-12)
-        per_character[geom] = (rb.per_character.mean(axis=0), ro.per_character.mean(axis=0))
+        if geom == "mesh":      # per character, for the neighbourhoods below
+            mesh_per_character = (rb.per_character.mean(axis=0), ro.per_character.mean(axis=0))
     row["overlap_subset"] = f"{len(sub)} central characters, every {frame_stride}th frame"
     # the same overlap neighbourhood by neighbourhood: study-cell-sized tiles of the floor
-    design = load_design()
     tile = (float(design.floor_width), float(design.floor_depth))
-    ratios = tile_ratios(base.root_translation[0, sub, :2], *per_character["mesh"], tile,
+    ratios = tile_ratios(base.root_translation[0, sub, :2], *mesh_per_character, tile,
                          min_characters=max(1, design.n_characters(level) // 2))
     row["tile_m"] = f"{tile[0]:g} x {tile[1]:g}"
     row["tiles"] = len(ratios)
@@ -374,12 +389,7 @@ def stadium_run(n: int, level: str = "D3", duration: float = 20.0, frame_stride:
             float(ratios.min()), float(np.median(ratios)), float(ratios.max()))
         row["tiles_over_overlap_bar"] = f"{int(np.sum(ratios > 0.05))}/{len(ratios)}"
     row["tracking_cm"] = tracking_error(ours, base, bodies=bodies)
-    sb, so = smoothness(base, base, bodies=bodies).as_dict(), smoothness(ours, base, bodies=bodies).as_dict()
-    for key, name in (("jerk_m_s3", "jerk"), ("hf_share", "hf_share"), ("max_joint_speed_m_s", "max_joint_speed"),
-                      ("pelvis_accel_p99_m_s2", "pelvis_p99"), ("foot_slide_p99_m_s", "foot_slide_p99"),
-                      ("seam_ratio", "seam_ratio")):
-        row[f"{name}_baseline"], row[f"{name}_ours"] = sb[key], so[key]
-    row["jerk_ratio"] = so["jerk_m_s3"] / sb["jerk_m_s3"]
+    row.update(_smoothness_columns(base, ours, bodies))
     checks = bar_checks(row, levels.index(level), len(levels))
     row["bars_failed"] = ",".join(k for k, ok in checks.items() if not ok) or "-"
     print(format_table([row]), flush=True)
@@ -1035,7 +1045,7 @@ def measure_bars(duration: float, frame_stride: int = 10, config=None, cells=Non
 def _bars_of_cell(design, stage: str, li: int, level: str, seed, duration: float, frame_stride: int,
                   config) -> dict:
     """One row of :func:`measure_bars`: one crowd of one cell, corrected and measured."""
-    from crowdstudy.metrics import overlap_volume, smoothness, tracking_parts, wall_penetration
+    from crowdstudy.metrics import overlap_volume, tracking_parts, wall_penetration
     from crowdstudy.motion.baseline import build_baseline
     from crowdstudy.physics.corrector import correct
 
@@ -1063,13 +1073,7 @@ def _bars_of_cell(design, stage: str, li: int, level: str, seed, duration: float
     row["tracking_cm"] = parts.total_cm
     # placement, motion and each body part's mean (where the tracking goes; not bars)
     row.update({key: value for key, value in parts.as_dict().items() if key != "tracking_error_cm"})
-    sb, so = smoothness(base, base).as_dict(), smoothness(ours, base).as_dict()
-    for key, name in (("jerk_m_s3", "jerk"), ("hf_share", "hf_share"), ("max_joint_speed_m_s", "max_joint_speed"),
-                      ("pelvis_accel_p99_m_s2", "pelvis_p99"), ("foot_slide_p99_m_s", "foot_slide_p99"),
-                      ("seam_ratio", "seam_ratio")):
-        row[f"{name}_baseline"], row[f"{name}_ours"] = sb[key], so[key]
-    row["jerk_ratio"] = so["jerk_m_s3"] / sb["jerk_m_s3"]
-    row["foot_slide_over_5cm_s_ours"] = so["foot_slide_fraction_over_5cm_s"]
+    row.update(_smoothness_columns(base, ours))
     checks = bar_checks(row, li, len(levels))
     row["bars_failed"] = ",".join(k for k, ok in checks.items() if not ok) or "-"
     limited = (ours.meta.get("physics") or {}).get("speed_limit") or {}
