@@ -239,6 +239,9 @@ def test_cli_prints_and_writes_the_timings(tmp_path, capsys, baseline_file):
     sidecar = tmp_path / "sub" / "ours.timings.json"
     timings = json.loads(sidecar.read_text())
     assert printed["timings"] == str(sidecar) and printed["ms_per_step"] > 0
+    # a D1 concert: sparse, corrected with the sparse profile's skins
+    assert printed["crowd_density"] < 4.5 and printed["profile_weight"] == 0.0
+    assert printed["mesh_skin_max"] == timings["mesh_skin_max"] == 0.04
     assert timings["ms_per_step"] > 0 and timings["steps"] == (6 - 1) * timings["substeps_per_frame"] == 10
     anim = CrowdAnimation.load(out)
     assert anim.n_frames == 6 and "ms_per_step" not in anim.meta["physics"]

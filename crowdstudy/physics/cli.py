@@ -53,7 +53,11 @@ def run(args: argparse.Namespace) -> int:
     phys = out.meta["physics"]
     record = {"output": str(output), "frames": out.n_frames, "characters": out.n_characters,
               "device": phys["device"], "linear_solver": phys["linear_solver"],
-              "substeps_per_frame": phys["substeps_per_frame"], **timings}
+              "substeps_per_frame": phys["substeps_per_frame"],
+              # how crowded the input is and the skins and hold it was corrected with
+              "crowd_density": round(phys["crowd_density"], 3), "profile_weight": phys["profile_weight"],
+              "mesh_skin_max": phys["config"]["mesh_skin_max"], "output_hold": phys["config"]["output_hold"],
+              **timings}
     sidecar.write_text(json.dumps(record, indent=2, sort_keys=True) + "\n")
     ms = timings.get("ms_per_step")
     print(json.dumps({**record, "ms_per_step": None if ms is None else round(ms, 3), "timings": str(sidecar)}),

@@ -196,6 +196,28 @@ class PhysicsConfig:
             hand pressed on a neighbour's back 3-5 cm short of it. 0.5 (1 until
             2026-12-05); 0 left a hand sink into the walkers of a D1 cell (5.4 % of the
             Baseline's overlap).
+        crowd_adaptive: size the skins and the output's hold by how crowded the crowd is
+            (:meth:`for_density`; :func:`~crowdstudy.physics.corrector.correct` measures the
+            crowd with :func:`~crowdstudy.physics.crowding.crowd_density`): the fields above
+            (``mesh_skin_max``, ``mesh_skin_hand_scale``, ``output_hold``) are the DENSE
+            profile, used at ``dense_density`` and above; the ``sparse_*`` fields below are
+            used at ``sparse_density`` and below; linear between. A dense crowd has no room
+            for skins that over-cover the meshes (thick skins push concert D5 to 5.78 cm of
+            tracking, over its 5 cm bar), while a sparser one has the room, and thin skins
+            there leave arms in trunks (a D3 stadium kept 5.8 % of its overlap, over the 5 %
+            bar; docs/correction-history.md, "Skins by the room a crowd has"). False: the
+            fields above for every crowd.
+        sparse_density: characters per m^2 (the :func:`crowd_density` measure) at and below
+            which the sparse profile applies; 4.5: five crowds of the concert's D3 cell
+            (3.8-4.5) and a D3 stadium (4.2) take it whole.
+        dense_density: characters per m^2 at and above which the dense profile applies; 6.0:
+            five crowds of each D5 cell (6.1-7.2) take it whole, the D4 cells (5.1-6.3) lie
+            between.
+        sparse_mesh_skin_max: m, ``mesh_skin_max`` of the sparse profile (0.04: the skins
+            before 2026-12-05, which every cell but concert D5 met its bars with).
+        sparse_mesh_skin_hand_scale: ``mesh_skin_hand_scale`` of the sparse profile.
+        sparse_output_hold: ``output_hold`` of the sparse profile (0.8: the root held two
+            frames, the joints one).
         intra_body: handle intra-body collisions (pairs touching in the T-pose and
             parent-child pairs are always skipped).
         loop_warmup: s; a periodic input (``meta["loop"]["mode"] == "periodic"``) is
@@ -286,6 +308,12 @@ class PhysicsConfig:
     mesh_skin_percentile: float = SKIN_PERCENTILE      # 90
     mesh_skin_max: float = SKIN_MAX                    # 0.015 m
     mesh_skin_hand_scale: float = SKIN_HAND_SCALE      # 0.5
+    crowd_adaptive: bool = True
+    sparse_density: float = 4.5
+    dense_density: float = 6.0
+    sparse_mesh_skin_max: float = 0.04
+    sparse_mesh_skin_hand_scale: float = 1.0
+    sparse_output_hold: float = 0.8
     intra_body: bool = True
     loop_warmup: float = 1.0
     loop_blend: float = 0.5
@@ -318,6 +346,36 @@ class PhysicsConfig:
                      "joint_stiffness", "foot_planted_speed", "damping_reference_dt"):
             if float(getattr(self, name)) <= 0:
                 raise InvalidInputError(f"PhysicsConfig.{name}: expected a positive value, got {getattr(self, name)!r}")
+        if self.crowd_adaptive and not self.dense_density > self.sparse_density:
+            raise InvalidInputError(f"PhysicsConfig.dense_density: expected more than sparse_density "
+                                    f"({self.sparse_density!r}), got {self.dense_density!r}")
+
+    def profile_weight(self, density: float) -> float:
+        """How far ``density`` (characters per m^2) lies towards the dense profile: 0 at
+        ``sparse_density`` and below, 1 at ``dense_density`` and above, linear between."""
+        density = float(density)
+        if not density == density or density < 0:
+            raise InvalidInputError(f"density: expected characters per m^2 >= 0, got {density!r}")
+        span = self.dense_density - self.sparse_density
+        return float(np.clip((density - self.sparse_density) / span, 0.0, 1.0))
+
+    def for_density(self, density: float) -> "PhysicsConfig":
+        """The configuration a crowd of ``density`` characters per m^2 is corrected with:
+        ``mesh_skin_max``, ``mesh_skin_hand_scale`` and ``output_hold`` interpolated
+        between the sparse and the dense profile (``profile_weight``) and
+        ``crowd_adaptive`` off, so the copy is final (resolving it again changes nothing).
+        Without ``crowd_adaptive``: this configuration, unchanged."""
+        if not self.crowd_adaptive:
+            return self
+        w = self.profile_weight(density)
+
+        def mix(sparse: float, dense: float) -> float:
+            return float((1.0 - w) * sparse + w * dense)      # exactly either profile at its end
+
+        return self.replace(mesh_skin_max=mix(self.sparse_mesh_skin_max, self.mesh_skin_max),
+                            mesh_skin_hand_scale=mix(self.sparse_mesh_skin_hand_scale, self.mesh_skin_hand_scale),
+                            output_hold=mix(self.sparse_output_hold, self.output_hold),
+                            crowd_adaptive=False)
 
     @classmethod
     def paper_controller(cls, **changes) -> "PhysicsConfig":

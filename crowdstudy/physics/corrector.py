@@ -16,6 +16,7 @@ import numpy as np
 from crowdstudy.errors import InvalidInputError
 from crowdstudy.physics.collision import CollisionPipeline, Contacts
 from crowdstudy.physics.config import PhysicsConfig
+from crowdstudy.physics.crowding import crowd_density
 from crowdstudy.physics.model import ModelBuilder
 from crowdstudy.physics.output_stage import finish_crowd
 from crowdstudy.physics.solver import Solver
@@ -44,7 +45,10 @@ class CrowdCorrector:
 
     Args:
         bodies: N objects with ``rest_joints`` (J, 3) m and ``capsules`` (start, end, radius).
-        config: :class:`PhysicsConfig` (defaults: the paper's).
+        config: :class:`PhysicsConfig` (defaults: the paper's), used as given: fed frame by
+            frame there is no crowd to measure yet, so its skins and hold are the dense
+            profile's unless the caller passes ``config.for_density(density)``
+            (:func:`~crowdstudy.physics.crowding.local_density` of the expected crowd).
         device: Warp device ("cpu", "cuda:0"; None picks CUDA when present).
         fps: frame rate of the fed animation (Hz).
         periodic_length: period (m) along x for periodic scenes, else None.
@@ -202,11 +206,17 @@ def correct(anim, config: PhysicsConfig | None = None, *, device: str | None = N
     ``config.speed_limit_margin``) the correction there is re-timed
     (:mod:`crowdstudy.physics.speed_limit`; its report in ``meta["physics"]["speed_limit"]``).
 
+    With ``config.crowd_adaptive`` (the default) the crowd's density is measured first
+    (:func:`~crowdstudy.physics.crowding.crowd_density`) and the crowd corrected with
+    ``config.for_density(density)``: the skins and the output's hold of its profile.
+
     Returns:
         A new CrowdAnimation with the same bodies/clips, the corrected ``root_translation``
         (T, N, 3) m and ``joint_rotations`` (T, N, J, 3) rad, and meta ``method = "Ours"``,
-        ``physics`` (config, device, linear solver, steps, substeps, dt, CG iterations,
-        contact counts, dropped pairs, static points; deterministic values only).
+        ``physics`` (the configuration used, the crowd's measured density and its
+        ``profile_weight`` (None without ``crowd_adaptive``), device, linear solver, steps,
+        substeps, dt, CG iterations, contact counts, dropped pairs, static points;
+        deterministic values only).
     """
     if timings is not None and not isinstance(timings, dict):
         raise InvalidInputError(f"timings: expected a dict to fill (or None), got {type(timings).__name__}")
@@ -220,6 +230,11 @@ def correct(anim, config: PhysicsConfig | None = None, *, device: str | None = N
     if anim.n_joints != len(PARENTS) or not np.array_equal(anim.parents, PARENTS):
         raise InvalidInputError(f"anim.parents: the physics expects the {len(PARENTS)}-joint skeleton")
     config = config or PhysicsConfig()
+    if not isinstance(config, PhysicsConfig):
+        raise InvalidInputError(f"config: expected a PhysicsConfig, got {type(config).__name__}")
+    density = crowd_density(anim)
+    weight = config.profile_weight(density) if config.crowd_adaptive else None
+    config = config.for_density(density)
     bodies = load_bodies(anim.bodies) if bodies is None else list(bodies)
     if len(bodies) != anim.n_characters:
         raise InvalidInputError(f"bodies: expected {anim.n_characters} body models, got {len(bodies)}")
@@ -281,7 +296,8 @@ def correct(anim, config: PhysicsConfig | None = None, *, device: str | None = N
                         "timed_steps": timed_steps,
                         "ms_per_step": 1000.0 * sum(timed) / timed_steps if timed_steps else None})
     iters = np.asarray(corr.cg_iterations) if corr.cg_iterations else np.zeros(1)
-    physics_meta = {"config": config.as_dict(), "device": m.device, "linear_solver": corr.solver.linear_solver,
+    physics_meta = {"config": config.as_dict(), "crowd_density": density, "profile_weight": weight,
+                    "device": m.device, "linear_solver": corr.solver.linear_solver,
                     "steps": corr.steps, "substeps_per_frame": corr.substeps, "dt": corr.dt,
                     "cg_iterations_mean": float(iters.mean()), "cg_iterations_max": int(iters.max()),
                     "static_walls": corr.pipeline.n_static_walls,
