@@ -35,6 +35,7 @@ import numpy as np
 
 from crowdstudy.bench import format_table, report_path, write_report
 from crowdstudy.physics.config import PhysicsConfig
+from crowdstudy.physics.crowding import crowd_density
 
 
 def _scene(level: str, duration: float, seed: int | None = None):
@@ -62,8 +63,11 @@ def _tile(anim, n: int, spacing: float = 3.2):
 
 
 def _corrector(anim, **kw):  # kw: CrowdCorrector options (device, config, ...)
+    """A CrowdCorrector on ``anim``'s whole clip, placed at frame 0, its configuration
+    resolved for the crowd as ``correct()`` resolves it (``PhysicsConfig.for_density``)."""
     from crowdstudy.physics.corrector import CrowdCorrector, load_bodies
 
+    kw["config"] = (kw.get("config") or PhysicsConfig()).for_density(crowd_density(anim))
     corr = CrowdCorrector(load_bodies(anim.bodies), fps=anim.fps, n_frames=anim.n_frames, **kw)
     corr.control.set_frames(anim.joint_rotations, anim.root_translation)
     corr.reset_to_frame(0)
@@ -305,6 +309,14 @@ def tile_ratios(xy: np.ndarray, baseline: np.ndarray, ours: np.ndarray, tile: tu
     return o[keep] / b[keep]
 
 
+def _profile_columns(ours) -> dict:
+    """How crowded ``correct()`` found the crowd and the skins and hold it used
+    (``PhysicsConfig.for_density``)."""
+    phys = ours.meta["physics"]
+    return {"crowd_density": phys["crowd_density"], "profile_weight": phys["profile_weight"],
+            "mesh_skin_max": phys["config"]["mesh_skin_max"], "output_hold": phys["config"]["output_hold"]}
+
+
 def _smoothness_columns(base, ours, bodies=None) -> dict:
     """The smoothness columns of a bars row (:func:`crowdstudy.metrics.smoothness`): each
     measure's ``NAME_baseline`` and ``NAME_ours``, ``jerk_ratio`` and
@@ -367,7 +379,7 @@ def stadium_run(n: int, level: str = "D3", duration: float = 20.0, frame_stride:
            "baseline_rss_mib": rss_base - rss0, "peak_rss_mib": peak,
            "peak_kib_per_character": 1024.0 * (peak - rss0) / n,
            "bodies": "proxies (rest joints, capsules, vertices)" if light_bodies else "full body models",
-           "loop": loop_mode(base)}
+           "loop": loop_mode(base), **_profile_columns(ours)}
     sub = _central_subset(base, min(overlap_characters, n))
     frames = np.arange(0, base.n_frames, frame_stride)
     for geom in ("mesh", "capsule"):
@@ -557,7 +569,8 @@ class MujocoScene:
 
         self.mujoco = mujoco
         self.anim = anim
-        self.config = config = config or PhysicsConfig()
+        # the geometry and hold correct() would use on this crowd
+        self.config = config = (config or PhysicsConfig()).for_density(crowd_density(anim))
         self.setting = st = dict(MUJOCO_SETTINGS[setting] if isinstance(setting, str) else setting)
         bodies = load_bodies(anim.bodies)
         builder = ModelBuilder()
@@ -1059,7 +1072,8 @@ def _bars_of_cell(design, stage: str, li: int, level: str, seed, duration: float
     study_seed = design.cell_seed(design.stage(stage), level)
     row = {"stage": stage, "level": level, "seed": int(base.meta["seed"]),
            "study_seed": int(base.meta["seed"]) == study_seed, "characters": base.n_characters,
-           "frames": base.n_frames, "loop": loop_mode(base), "tracking_bar_cm": tracking_bar_cm(li, len(levels))}
+           "frames": base.n_frames, "loop": loop_mode(base), "tracking_bar_cm": tracking_bar_cm(li, len(levels)),
+           **_profile_columns(ours)}
     for geom in ("mesh", "capsule"):
         ob = overlap_volume(base, geometry=geom, frames=frames).mean
         oo = overlap_volume(ours, geometry=geom, frames=frames).mean
