@@ -47,8 +47,9 @@ class CrowdCorrector:
         bodies: N objects with ``rest_joints`` (J, 3) m and ``capsules`` (start, end, radius).
         config: :class:`PhysicsConfig` (defaults: the paper's), used as given: fed frame by
             frame there is no crowd to measure yet, so its skins and hold are the dense
-            profile's unless the caller passes ``config.for_density(density)``
-            (:func:`~crowdstudy.physics.crowding.local_density` of the expected crowd).
+            profile's unless the caller passes ``config.for_density(density)`` (the median
+            of :func:`~crowdstudy.physics.crowding.local_density` over the expected crowd's
+            positions).
         device: Warp device ("cpu", "cuda:0"; None picks CUDA when present).
         fps: frame rate of the fed animation (Hz).
         periodic_length: period (m) along x for periodic scenes, else None.
