@@ -19,7 +19,9 @@ def configure(parser: argparse.ArgumentParser) -> None:
                                        "the sidecar OUTPUT_STEM.timings.json beside it")
     parser.add_argument("--device", default=None, help="Warp device: cpu or cuda:0 (default: CUDA when present)")
     parser.add_argument("--config", nargs="*", default=[], metavar="KEY=VALUE",
-                        help="PhysicsConfig overrides, e.g. damping=0.006 contact_stiffness=3e4")
+                        help="PhysicsConfig overrides, e.g. damping=0.006 contact_stiffness=3e4; the skins and "
+                             "hold follow the crowd's density (sparse_* below sparse_density, the plain fields "
+                             "above dense_density); crowd_adaptive=false uses the plain fields for any crowd")
     parser.add_argument("--frames", type=int, default=None,
                         help="correct only the first FRAMES frames (2 .. the clip's frame count)")
     parser.add_argument("--linear-solver", choices=("fused", "warp", "scipy"), default=None,
