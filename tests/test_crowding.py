@@ -39,6 +39,9 @@ def test_a_periodic_row_has_no_ends():
     assert open_row[0] == pytest.approx(2 / (np.pi * 0.8 ** 2)) and open_row[5] == pytest.approx(ring[5])
     # positions given outside the first period are the same crowd
     assert np.allclose(local_density(xy + [[8.0, 0.0]], k=2, period=4.0), ring)
+    # a root a hair below 0 (its x mod the period rounds to the period itself) still counts
+    seam = xy - [[0.1 + 1e-17, 0.0]]
+    assert np.allclose(local_density(seam, k=2, period=4.0), ring)
 
 
 def test_local_density_edge_cases_and_errors():

@@ -56,7 +56,9 @@ def local_density(root_xy: np.ndarray, *, k: int = NEIGHBOURS, period: float | N
         if period is not None:
             # a torus along x only: y spread over a box far larger than the crowd
             span = float(np.ptp(pts[:, 1])) + 1.0
-            pts = np.column_stack([np.mod(pts[:, 0], period), pts[:, 1] - pts[:, 1].min()])
+            x = np.mod(pts[:, 0], period)
+            x[x >= period] = 0.0                          # mod of a tiny negative x rounds up to the period
+            pts = np.column_stack([x, pts[:, 1] - pts[:, 1].min()])
             tree = cKDTree(pts, boxsize=[period, 4.0 * span])
         else:
             tree = cKDTree(pts)
