@@ -35,7 +35,7 @@ import numpy as np
 
 from crowdstudy.bench import format_table, report_path, write_report
 from crowdstudy.physics.config import PhysicsConfig
-from crowdstudy.physics.crowding import crowd_density
+from crowdstudy.physics.crowding import crowd_config
 
 
 def _scene(level: str, duration: float, seed: int | None = None):
@@ -67,7 +67,7 @@ def _corrector(anim, **kw):  # kw: CrowdCorrector options (device, config, ...)
     resolved for the crowd as ``correct()`` resolves it (``PhysicsConfig.for_density``)."""
     from crowdstudy.physics.corrector import CrowdCorrector, load_bodies
 
-    kw["config"] = (kw.get("config") or PhysicsConfig()).for_density(crowd_density(anim))
+    kw["config"] = crowd_config(anim, kw.get("config"))[0]
     corr = CrowdCorrector(load_bodies(anim.bodies), fps=anim.fps, n_frames=anim.n_frames, **kw)
     corr.control.set_frames(anim.joint_rotations, anim.root_translation)
     corr.reset_to_frame(0)
@@ -570,7 +570,7 @@ class MujocoScene:
         self.mujoco = mujoco
         self.anim = anim
         # the geometry and hold correct() would use on this crowd
-        self.config = config = (config or PhysicsConfig()).for_density(crowd_density(anim))
+        self.config = config = crowd_config(anim, config)[0]
         self.setting = st = dict(MUJOCO_SETTINGS[setting] if isinstance(setting, str) else setting)
         bodies = load_bodies(anim.bodies)
         builder = ModelBuilder()

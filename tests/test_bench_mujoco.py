@@ -31,11 +31,10 @@ def _tiny(kind: str, chars=(0, 1, 2), spread: float = 0.0):
 
 def _ours(anim):
     """Ours as ``correct()`` sets it up: the configuration resolved for this crowd."""
-    from crowdstudy.physics.config import PhysicsConfig
     from crowdstudy.physics.corrector import CrowdCorrector, load_bodies
-    from crowdstudy.physics.crowding import crowd_density
+    from crowdstudy.physics.crowding import crowd_config
 
-    config = PhysicsConfig().for_density(crowd_density(anim))
+    config = crowd_config(anim)[0]
     corr = CrowdCorrector(load_bodies(anim.bodies), fps=anim.fps, n_frames=anim.n_frames, device="cpu",
                           config=config)
     corr.control.set_frames(anim.joint_rotations, anim.root_translation)

@@ -6,7 +6,7 @@ import pytest
 
 from crowdstudy.errors import InvalidInputError
 from crowdstudy.physics.config import PhysicsConfig
-from crowdstudy.physics.crowding import crowd_density, local_density
+from crowdstudy.physics.crowding import crowd_config, crowd_density, local_density
 
 
 def _lattice(n: int, spacing: float) -> np.ndarray:
@@ -112,3 +112,9 @@ def test_correct_sizes_the_skins_by_the_crowd():
     assert np.array_equal(ours.root_translation, by_hand.root_translation)
     assert not np.array_equal(ours.joint_rotations, dense.joint_rotations)
     assert by_hand.meta["physics"]["profile_weight"] is None
+    # the one resolution correct() and the benchmarks' peers share
+    used, measured, weight = crowd_config(clip, cfg)
+    assert used.as_dict() == phys["config"] and measured == phys["crowd_density"] and weight == 0.0
+    assert crowd_config(clip, cfg.replace(crowd_adaptive=False))[2] is None
+    with pytest.raises(InvalidInputError, match="config"):
+        crowd_config(clip, {"mesh_skin_max": 0.04})

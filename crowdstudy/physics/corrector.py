@@ -16,7 +16,7 @@ import numpy as np
 from crowdstudy.errors import InvalidInputError
 from crowdstudy.physics.collision import CollisionPipeline, Contacts
 from crowdstudy.physics.config import PhysicsConfig
-from crowdstudy.physics.crowding import crowd_density
+from crowdstudy.physics.crowding import crowd_config
 from crowdstudy.physics.model import ModelBuilder
 from crowdstudy.physics.output_stage import finish_crowd
 from crowdstudy.physics.solver import Solver
@@ -209,7 +209,8 @@ def correct(anim, config: PhysicsConfig | None = None, *, device: str | None = N
 
     With ``config.crowd_adaptive`` (the default) the crowd's density is measured first
     (:func:`~crowdstudy.physics.crowding.crowd_density`) and the crowd corrected with
-    ``config.for_density(density)``: the skins and the output's hold of its profile.
+    ``config.for_density(density)``: the skins and the output's hold of its profile
+    (:func:`~crowdstudy.physics.crowding.crowd_config`).
 
     Returns:
         A new CrowdAnimation with the same bodies/clips, the corrected ``root_translation``
@@ -230,12 +231,7 @@ def correct(anim, config: PhysicsConfig | None = None, *, device: str | None = N
         raise InvalidInputError(f"anim: expected a CrowdAnimation, got {type(anim).__name__}")
     if anim.n_joints != len(PARENTS) or not np.array_equal(anim.parents, PARENTS):
         raise InvalidInputError(f"anim.parents: the physics expects the {len(PARENTS)}-joint skeleton")
-    config = config or PhysicsConfig()
-    if not isinstance(config, PhysicsConfig):
-        raise InvalidInputError(f"config: expected a PhysicsConfig, got {type(config).__name__}")
-    density = crowd_density(anim)
-    weight = config.profile_weight(density) if config.crowd_adaptive else None
-    config = config.for_density(density)
+    config, density, weight = crowd_config(anim, config)
     bodies = load_bodies(anim.bodies) if bodies is None else list(bodies)
     if len(bodies) != anim.n_characters:
         raise InvalidInputError(f"bodies: expected {anim.n_characters} body models, got {len(bodies)}")

@@ -18,8 +18,9 @@ from __future__ import annotations
 import numpy as np
 
 from crowdstudy.errors import InvalidInputError
+from crowdstudy.physics.config import PhysicsConfig
 
-__all__ = ["local_density", "crowd_density"]
+__all__ = ["local_density", "crowd_density", "crowd_config"]
 
 NEIGHBOURS = 4        # k: the ring of nearest neighbours a character's room is judged by
 SAMPLES = 60          # frames sampled at most (evenly) per animation
@@ -76,3 +77,17 @@ def crowd_density(anim, *, k: int = NEIGHBOURS, samples: int = SAMPLES) -> float
     root = np.asarray(anim.root_translation, np.float64)
     frames = np.unique(np.linspace(0, root.shape[0] - 1, min(int(samples), root.shape[0])).round().astype(int))
     return float(np.median(local_density(root[frames, :, :2], k=k, period=anim.periodic_length)))
+
+
+def crowd_config(anim, config: PhysicsConfig | None = None) -> tuple[PhysicsConfig, float, float | None]:
+    """The configuration ``anim``'s crowd is corrected with, as
+    :func:`~crowdstudy.physics.corrector.correct` uses it: ``(config.for_density(density),
+    density, profile weight)``, the density its :func:`crowd_density` (characters per m^2)
+    and the weight None when ``config.crowd_adaptive`` is off (``config`` None: the
+    defaults)."""
+    config = config or PhysicsConfig()
+    if not isinstance(config, PhysicsConfig):
+        raise InvalidInputError(f"config: expected a PhysicsConfig, got {type(config).__name__}")
+    density = crowd_density(anim)
+    weight = config.profile_weight(density) if config.crowd_adaptive else None
+    return config.for_density(density), density, weight
