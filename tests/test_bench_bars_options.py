@@ -1,5 +1,5 @@
 """``crowdstudy bench physics --bars`` options: a subset of cells and PhysicsConfig changes
-(benchmarks/physics.py), so each tried setting in the README has its command."""
+(benchmarks/physics.py), so each setting tried in docs/lab-notes/ has its command."""
 
 from __future__ import annotations
 

@@ -1,6 +1,6 @@
 """Rotation conversions, vectorised over any leading batch shape.
 
-Conventions (DESIGN.md): quaternions are scalar-last ``(x, y, z, w)``; files store
+Conventions (docs/concepts/conventions.md): quaternions are scalar-last ``(x, y, z, w)``; files store
 rotations as axis-angle vectors (angle = norm, in radians); matrices act on column
 vectors (``v_world = R @ v_local``).
 """

@@ -1,6 +1,6 @@
 """The 24-joint kinematic tree (SMPL-compatible) and forward kinematics.
 
-Rest pose conventions (DESIGN.md, plus the choices made here):
+Rest pose conventions (docs/concepts/conventions.md, plus the choices made here):
 
 * Z up, floor at z = 0 in world space; in the *rest* (T-pose) the character faces **+y**,
   so its right-hand side is **+x** and its left-hand side **-x**; arms are horizontal.

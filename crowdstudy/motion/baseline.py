@@ -44,7 +44,7 @@ _MIN_STRIDE_FACTOR = 0.5
 #: Speeds below this (m/s) keep the previous facing direction.
 _TURN_SPEED = 0.15
 #: Largest tempo change (fraction) a dance clip may take so that a whole number of its
-#: loops fills the animation (DESIGN.md: concert stimuli are exactly periodic); the 15
+#: loops fills the animation (docs/concepts/methods.md: concert stimuli are exactly periodic); the 15
 #: shipped clips need at most 11.1 % at 20 s / 30 fps. Beyond it the clip keeps its own
 #: length and the animation is not periodic (short test durations).
 MAX_LOOP_TEMPO_CHANGE = 0.12

@@ -1,6 +1,6 @@
 """Quaternion helpers for motion clips, vectorised over any leading batch shape.
 
-Quaternions are scalar-last ``(x, y, z, w)`` (DESIGN.md). These complement
+Quaternions are scalar-last ``(x, y, z, w)`` (docs/concepts/conventions.md). These complement
 :mod:`crowdstudy.body.rotations` (conversions between axis-angle, matrices and
 quaternions) with what clip sampling and blending need: products, sign alignment and a
 C1 periodic Catmull-Rom interpolation.

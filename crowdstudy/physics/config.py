@@ -64,7 +64,7 @@ class PhysicsConfig:
             hands). Below 1 a contact on a hand bends the arm rather than pushing the whole
             character; 0.25 (1 until 2026-12-04), with the damped world-space pose springs
             below holding each arm body where the animation puts it
-            (docs/correction-history.md, "Damped pose springs"; 1 = the paper's single body k).
+            (docs/lab-notes/correction-history.md, "Damped pose springs"; 1 = the paper's single body k).
         trunk_scale: multiplies k and d for the upper trunk, neck and head (spine2, spine3,
             neck, head); 1 = the paper's single body k.
         root_translation_stiffness: spring of the root's absolute translation, N/m.
@@ -76,7 +76,7 @@ class PhysicsConfig:
             2026-12-04, when the crowd could spread out): a dense crowd held in place makes
             room with the limbs that touch rather than whole bodies, and tracks closer
             (concert D5 8.71 -> 7.53 cm, corridor D5 5.41 -> 4.91 cm, mesh overlap within
-            its 5 % bar on every 20 s cell; README "The correction as a participant sees it").
+            its 5 % bar on every 20 s cell; docs/lab-notes/2026-12-05-readme-measurements.md).
         root_translation_damping_scale: the root translation damper is
             ``damping * root_translation_damping_scale`` in J s^2/m^2 (the term is
             d_t/(2 h^2) |x - x_old - x^ + x^_old|^2), i.e. a damping force of
@@ -95,7 +95,7 @@ class PhysicsConfig:
             hand on the 8000 N/m spring. Undamped (0, the value until 2026-12-04) a pushed
             limb overshoots on its way back; damped, concert D5 leaves 3.7 % of the
             Baseline's overlap where the same springs undamped left 4.8 %
-            (docs/correction-history.md, "Damped pose springs").
+            (docs/lab-notes/correction-history.md, "Damped pose springs").
         pose_translation_reach: m; the pose spring saturates beyond about this deviation (a
             pseudo-Huber energy: its force never exceeds ``pose_translation_stiffness *
             pose_translation_reach`` N), so it holds a brushed limb in place but yields where
@@ -165,7 +165,7 @@ class PhysicsConfig:
             stiffness + 2 k d / d0, d0 this depth), so a limb pressed deep meets a stiffer
             neighbour while a light touch stays as soft as ``contact_stiffness`` (C2 at
             d = 0); 0 = the plain quadratic penalty. It costs CG iterations where contacts
-            are deep (docs/performance-history.md, "The stiffer defaults cost CG
+            are deep (docs/lab-notes/performance-history.md, "The stiffer defaults cost CG
             iterations"); a stiffness held beyond d0 or 3 d0 cost
             fewer and left more overlap (concert D3 6.4 and 5.8 % of the Baseline's).
         target_relative_self_contacts: ground and intra-body contacts push only with the
@@ -188,7 +188,7 @@ class PhysicsConfig:
             the skin grows a capsule in every direction to cover a protrusion on one side
             (a chest, a shoulder blade, a thumb); capped, a dense crowd needs less room
             (concert D5 tracking 5.78 -> 5.18 cm with the hand scale below, overlap 3.7 ->
-            4.3 % of the Baseline's; docs/correction-history.md, "Where concert D5's tracking
+            4.3 % of the Baseline's; docs/lab-notes/correction-history.md, "Where concert D5's tracking
             goes").
         mesh_skin_hand_scale: the palm and finger bones take this share of their skin
             (``capsule_skin``'s ``hand_scale``): their 90th percentile is the thumb and
@@ -205,7 +205,7 @@ class PhysicsConfig:
             for skins that over-cover the meshes (thick skins push concert D5 to 5.78 cm of
             tracking, over its 5 cm bar), while a sparser one has the room, and thin skins
             there leave arms in trunks (a D3 stadium kept 5.8 % of its overlap, over the 5 %
-            bar; docs/correction-history.md, "Skins by the room a crowd has"). False: the
+            bar; docs/lab-notes/correction-history.md, "Skins by the room a crowd has"). False: the
             fields above for every crowd.
         sparse_density: characters per m^2 (the :func:`crowd_density` measure) at and below
             which the sparse profile applies; 4.5: five crowds of the concert's D3 cell
@@ -255,7 +255,7 @@ class PhysicsConfig:
         cg_tolerance: relative residual |r|/|b| at which CG stops. 3e-3 (since 2026-12-05;
             1e-3 before, 1e-4 until 2026-12-04): the one Newton step of a frame needs no
             tighter solve. On every 20 s study cell 1e-3 and 3e-3 leave the same mesh overlap,
-            tracking and smoothness within run-to-run noise (docs/performance-history.md,
+            tracking and smoothness within run-to-run noise (docs/lab-notes/performance-history.md,
             "CG stops at"), and 3e-3 takes about 11 iterations where 1e-3 takes 14 (1,000
             characters).
         cg_max_iterations: CG iteration cap per step.

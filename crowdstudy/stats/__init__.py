@@ -1,4 +1,4 @@
-"""Statistics of the perceptual study (DESIGN.md, "The study", Analysis).
+"""Statistics of the perceptual study (docs/guides/analysis.md).
 
 - :mod:`~crowdstudy.stats.scoring`: validate responses.csv, reverse negative items,
   item-pair reliability, composites, per participant x cell means.
