@@ -91,13 +91,19 @@ def _gpus() -> list[str]:
 
 def machine() -> dict:
     """The machine a benchmark ran on: ``cpu`` (model name), ``cores`` (logical CPUs this
-    process may use), ``gpus`` (names; empty for none), ``platform`` and ``python``."""
+    process may use), ``gpus`` (names; empty for none), ``load_average`` (1, 5 and 15
+    minutes, when the report is written: other work on a shared machine slows a timing),
+    ``platform`` and ``python``."""
     try:
         cores = len(os.sched_getaffinity(0))
     except (AttributeError, OSError):
         cores = os.cpu_count() or 0
-    return {"cpu": _cpu_model(), "cores": int(cores), "gpus": _gpus(), "platform": platform.platform(),
-            "python": platform.python_version()}
+    try:
+        load = [round(x, 2) for x in os.getloadavg()]
+    except (AttributeError, OSError):
+        load = None
+    return {"cpu": _cpu_model(), "cores": int(cores), "gpus": _gpus(), "load_average": load,
+            "platform": platform.platform(), "python": platform.python_version()}
 
 
 def command_line() -> str:

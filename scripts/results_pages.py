@@ -81,7 +81,11 @@ def _machine_text(machine) -> str:
     cores = machine.get("cores")
     gpus = machine.get("gpus") or []
     gpu = ", ".join(gpus) if gpus else "no GPU"
-    return f"{cpu}, {cores} cores, {gpu}" if cores else f"{cpu}, {gpu}"
+    text = f"{cpu}, {cores} cores, {gpu}" if cores else f"{cpu}, {gpu}"
+    load = machine.get("load_average")
+    if isinstance(load, (list, tuple)) and load:
+        text += f", load {load[0]:.1f}"
+    return text
 
 
 def heading_line(report: dict) -> str:

@@ -16,6 +16,7 @@ def test_write_report_records_command_machine_and_date(tmp_path):
     assert isinstance(report["command"], str) and report["command"]
     machine = report["machine"]
     assert machine["cpu"] and machine["cores"] >= 1 and isinstance(machine["gpus"], list)
+    assert machine["load_average"] is None or len(machine["load_average"]) == 3
     assert report["date"][:4].isdigit() and report["date"][4] == "-" and "T" in report["date"]
 
 

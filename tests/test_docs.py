@@ -195,13 +195,13 @@ def test_nav_pages_exist(hooks, results):
 def test_results_tables_are_headed_by_command_machine_and_date(results, tmp_path):
     report = {"benchmark": "toy", "rows": [{"case": "a", "median_s": 0.0123, "ok": True}],
               "command": "crowdstudy bench toy --n 3", "date": "2026-12-07T10:00:00+00:00",
-              "machine": {"cpu": "Some CPU", "cores": 2, "gpus": []}, "provenance": {"git_sha": "abc", "seed": 1},
+              "machine": {"cpu": "Some CPU", "cores": 2, "gpus": [], "load_average": [1.25, 1.0, 0.5]}, "provenance": {"git_sha": "abc", "seed": 1},
               "extra_rows": [{"x": 1}], "repeat": 5}
     (tmp_path / "toy.json").write_text(json.dumps(report))
     (tmp_path / "old.json").write_text(json.dumps({"benchmark": "old", "rows": [{"x": 1.5}]}))
     pages = results.render_all(tmp_path)
     toy = pages["results/toy.md"].splitlines()
-    head = "`crowdstudy bench toy --n 3` · Some CPU, 2 cores, no GPU · 2026-12-07"
+    head = "`crowdstudy bench toy --n 3` · Some CPU, 2 cores, no GPU, load 1.2 · 2026-12-07"
     tables = [i for i, line in enumerate(toy) if line.startswith("| ") and toy[i - 1] == ""]
     assert len(tables) == 3                                  # rows, extra_rows, settings
     assert all(toy[i - 2] == head for i in tables)
