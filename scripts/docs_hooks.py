@@ -43,7 +43,7 @@ import results_pages  # noqa: E402  (beside this file)
 
 log = logging.getLogger("mkdocs.hooks.crowdstudy")
 
-HELP_WIDTH = 96
+HELP_WIDTH = 80
 API_INDEX = "reference/api/index.md"
 RESULTS_INDEX = "results/index.md"
 
