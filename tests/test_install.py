@@ -55,7 +55,8 @@ DRIVER = textwrap.dedent(r'''
 
     # The questionnaire through the installed package: page, own scripts, jsPsych and plugins.
     from starlette.testclient import TestClient
-    from crowdstudy.study.app import UI_PLUGINS, create_app
+    from crowdstudy.study.app import create_app
+    from crowdstudy.study.routes_static import UI_PLUGINS
     from crowdstudy.study.fake_stimuli import write_fake_stimuli
     stim = write_fake_stimuli(Path("stim"), n_files=2, seconds=0.5, width=64, height=36)
     cfg = build_config(stim, db="sqlite:///study.db", admin_token="install-test-token-0123456789")
