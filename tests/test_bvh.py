@@ -5,12 +5,11 @@ import dataclasses
 import numpy as np
 import pytest
 
-from crowdstudy.body.rotations import axis_angle_to_matrix, matrix_to_axis_angle
+from crowdstudy.body.rotations import axis_angle_to_matrix, matrix_to_axis_angle, rot_y
 from crowdstudy.body.skeleton import DEFAULT_REST_JOINTS, JOINT_INDEX, PARENTS, forward_kinematics
 from crowdstudy.errors import InvalidInputError
 from crowdstudy.motion import load_amass, load_bvh, load_clip, save_bvh
 from crowdstudy.motion.bvh import parse_bvh
-from crowdstudy.motion.posing import rot_y
 from crowdstudy.motion.rig import ANKLE_HEIGHT
 
 J = JOINT_INDEX

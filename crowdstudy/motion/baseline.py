@@ -20,15 +20,15 @@ from __future__ import annotations
 import numpy as np
 
 from crowdstudy.body import load_body
-from crowdstudy.body.rotations import axis_angle_to_quaternion, quaternion_to_axis_angle
-from crowdstudy.body.skeleton import DEFAULT_PELVIS_HEIGHT, JOINT_INDEX, JOINT_NAMES, PARENTS
+from crowdstudy.body.rotations import (axis_angle_to_quaternion, quat_about_z, quat_conjugate, quat_multiply,
+                                       quat_nearest_sign, quaternion_to_axis_angle)
+from crowdstudy.body.skeleton import DEFAULT_PELVIS_HEIGHT, JOINT_INDEX, JOINT_NAMES, PARENTS, mirror_pose
 from crowdstudy.errors import InvalidInputError
 from crowdstudy.motion.clip import MotionClip
 from crowdstudy.motion.legs import plant_legs
 from crowdstudy.motion.library import list_clips, load_clip, walk_clips
 from crowdstudy.motion.mocap_library import dance_loop, idle_loop
 from crowdstudy.motion.selfcontact import clear_hands
-from crowdstudy.motion.quaternions import mirror_pose, quat_about_z, quat_conjugate, quat_multiply
 from crowdstudy.provenance import provenance
 from crowdstudy.scene import Crowd, CrowdAnimation
 
@@ -44,7 +44,7 @@ _MIN_STRIDE_FACTOR = 0.5
 #: Speeds below this (m/s) keep the previous facing direction.
 _TURN_SPEED = 0.15
 #: Largest tempo change (fraction) a dance clip may take so that a whole number of its
-#: loops fills the animation (DESIGN.md: concert stimuli are exactly periodic); the 15
+#: loops fills the animation (concert stimuli are exactly periodic); the 15
 #: shipped clips need at most 11.1 % at 20 s / 30 fps. Beyond it the clip keeps its own
 #: length and the animation is not periodic (short test durations).
 MAX_LOOP_TEMPO_CHANGE = 0.12
@@ -292,7 +292,7 @@ def _scale_upper_body(quat: np.ndarray, table: np.ndarray, amp: np.ndarray) -> n
     loop's mean pose (per joint, the normalised mean of ``table`` (S, 24, 4))."""
     if np.allclose(amp, 1.0):
         return quat
-    mean = np.sum(table * np.where(np.sum(table * table[:1], -1, keepdims=True) < 0, -1.0, 1.0), axis=0)
+    mean = np.sum(quat_nearest_sign(table, table[:1]), axis=0)
     mean /= np.linalg.norm(mean, axis=-1, keepdims=True)                     # (24, 4)
     out = quat.copy()
     j = _UPPER_BODY

@@ -28,11 +28,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from crowdstudy.body.rotations import axis_angle_to_quaternion, quaternion_to_axis_angle
+from crowdstudy.body.rotations import (axis_angle_to_quaternion, quat_conjugate, quat_multiply,
+                                       quaternion_to_axis_angle)
 from crowdstudy.body.skeleton import JOINT_INDEX, PARENTS, forward_kinematics
 from crowdstudy.errors import InvalidInputError
 from crowdstudy.metrics import joint_speeds
-from crowdstudy.motion.quaternions import quat_conjugate, quat_multiply
 from crowdstudy.physics.finish import planted_frames
 
 __all__ = ["SpeedLimitReport", "limit_joint_speed", "fastest_reference_joint", "UPPER_CHAIN_STOP"]
