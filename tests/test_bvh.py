@@ -137,6 +137,12 @@ def test_bad_bvh_files_name_the_file_and_line(tmp_path, small_bvh):
     off.write_text("\n".join(bad))
     with pytest.raises(InvalidInputError, match=r"offset\.bvh: line \d+: field 'OFFSET'"):
         load_bvh(off)
+    # a joint line without its block: no offset, named
+    orphan = tmp_path / "orphan.bvh"
+    joint = next(k for k, l in enumerate(lines) if l.strip().startswith("JOINT"))
+    orphan.write_text("\n".join(lines[:joint] + ["  JOINT Stray"] + lines[joint:]))
+    with pytest.raises(InvalidInputError, match=r"orphan\.bvh: line \d+: field 'OFFSET': missing for joint 'Stray'"):
+        parse_bvh(orphan)
     # not a BVH at all, and a missing file
     text = tmp_path / "notes.bvh"
     text.write_text("hello\n")
