@@ -32,7 +32,8 @@ Steps (:func:`read_character`):
 
 The steps are public pieces for importers of other files: :func:`map_skin_joints` (step 2's
 mapping and step 3's weight targets), :func:`read_skin_binds` (a skin's bind pose, step 1)
-and :func:`read_skinned_mesh` (the meshes bound to those skins, merged, step 1).
+and :func:`read_skinned_mesh` (the meshes bound to those skins, merged, step 1), on the
+node tree of :func:`node_parents` and :func:`node_world_matrices`.
 """
 
 from __future__ import annotations
@@ -53,7 +54,8 @@ from crowdstudy.glb import Z_UP_TO_Y_UP, GltfFile, read_gltf
 
 __all__ = ["GltfCharacter", "read_character", "load_gltf_body", "node_local_matrix", "RECORD_FIELDS",
            "ARM_ELEVATION_LIMIT", "LEG_TILT_LIMIT", "OPTIONAL_JOINTS", "SkinJointMap", "map_skin_joints",
-           "SkinBind", "read_skin_binds", "SkinnedMesh", "read_skinned_mesh"]
+           "SkinBind", "read_skin_binds", "SkinnedMesh", "read_skinned_mesh", "node_parents",
+           "node_world_matrices"]
 
 #: Fields a ``{"model": "gltf"}`` body record may hold.
 RECORD_FIELDS = ("model", "path", "skin", "height", "sex")
@@ -108,7 +110,8 @@ def node_local_matrix(node: dict) -> np.ndarray:
     return m
 
 
-def _parents(doc: dict) -> np.ndarray:
+def node_parents(doc: dict) -> np.ndarray:
+    """(nodes,) int64 parent node index of every node of a glTF document (-1 for roots)."""
     nodes = doc.get("nodes", [])
     parent = np.full(len(nodes), -1, dtype=np.int64)
     for i, node in enumerate(nodes):
@@ -117,7 +120,9 @@ def _parents(doc: dict) -> np.ndarray:
     return parent
 
 
-def _world_matrices(doc: dict, parent: np.ndarray) -> np.ndarray:
+def node_world_matrices(doc: dict, parent: np.ndarray) -> np.ndarray:
+    """(nodes, 4, 4) float64 world transforms of every node in the document's default pose
+    (no animation applied); ``parent`` from :func:`node_parents`."""
     nodes = doc.get("nodes", [])
     local = [node_local_matrix(n) for n in nodes]
     world: list[np.ndarray | None] = [None] * len(nodes)
@@ -202,8 +207,8 @@ def read_character(path: str | Path, *, skin: int = 0, height: float | None = No
     path = Path(path)
     gltf = read_gltf(path)
     _check_skin(gltf.doc, skin, path)
-    parent = _parents(gltf.doc)
-    world = _world_matrices(gltf.doc, parent)
+    parent = node_parents(gltf.doc)
+    world = node_world_matrices(gltf.doc, parent)
     joint_map = map_skin_joints(gltf.doc, skin, parent, path)
     binds = read_skin_binds(gltf, joint_map, world, path)
     mesh = read_skinned_mesh(gltf, binds, skin, path)
