@@ -497,20 +497,6 @@ def check_timeconsts(setting: dict, dt: float) -> None:
                              f"({2.0 * dt:.4g} s at a {dt:.4g} s step), which MuJoCo clamps to 2 steps")
 
 
-def _quat_mul(a, b):
-    """Hamilton product of scalar-last quaternions (..., 4)."""
-    ax, ay, az, aw = np.moveaxis(a, -1, 0)
-    bx, by, bz, bw = np.moveaxis(b, -1, 0)
-    return np.stack([aw * bx + ax * bw + ay * bz - az * by, aw * by - ax * bz + ay * bw + az * bx,
-                     aw * bz + ax * by - ay * bx + az * bw, aw * bw - ax * bx - ay * by - az * bz], -1)
-
-
-def _quat_rotate(q, v):
-    vq = np.concatenate([v, np.zeros(v.shape[:-1] + (1,))], -1)
-    conj = q * np.array([-1.0, -1.0, -1.0, 1.0])
-    return _quat_mul(_quat_mul(q, vq), conj)[..., :3]
-
-
 def interpolated_targets(anim_q, anim_root, rests, f0: int, f1: int, alpha: float):
     """The target pose of ``targets_kernel`` in numpy (float64).
 
@@ -518,20 +504,18 @@ def interpolated_targets(anim_q, anim_root, rests, f0: int, f1: int, alpha: floa
     rests (N, J, 3) m. Local rotations nlerp (short arc) and the root lerps between frames
     f0 and f1 at ``alpha``; returns ``(global rotations (N, J, 4), joint positions (N, J, 3))``.
     """
+    from crowdstudy.body.rotations import quat_blend, quat_multiply, quat_rotate
     from crowdstudy.body.skeleton import PARENTS
 
-    a, b = anim_q[f0], anim_q[f1]
-    s = np.where(np.sum(a * b, -1, keepdims=True) < 0.0, -1.0, 1.0)
-    local = (1.0 - alpha) * a + s * alpha * b
-    local /= np.linalg.norm(local, axis=-1, keepdims=True)
+    local = quat_blend(anim_q[f0], anim_q[f1], alpha)
     glob = np.empty_like(local)
     pos = np.empty(local.shape[:-1] + (3,))
     glob[:, 0] = local[:, 0]
     pos[:, 0] = (1.0 - alpha) * anim_root[f0] + alpha * anim_root[f1]
     for j in range(1, len(PARENTS)):
         p = PARENTS[j]
-        glob[:, j] = _quat_mul(glob[:, p], local[:, j])
-        pos[:, j] = pos[:, p] + _quat_rotate(glob[:, p], rests[:, j] - rests[:, p])
+        glob[:, j] = quat_multiply(glob[:, p], local[:, j])
+        pos[:, j] = pos[:, p] + quat_rotate(glob[:, p], rests[:, j] - rests[:, p])
     return glob, pos
 
 
@@ -539,14 +523,13 @@ def rigid_to_animation(glob_q, root_pos):
     """Bone world rotations (..., J, 4) scalar-last and pelvis joint positions (..., 3) ->
     ``(joint_rotations (..., J, 3) axis-angle, root (..., 3))``: root global, the others
     R_parent^T R_child, as ``project_kernel`` writes Ours."""
-    from crowdstudy.body.rotations import quaternion_to_axis_angle
+    from crowdstudy.body.rotations import quat_conjugate, quat_multiply, quaternion_to_axis_angle
     from crowdstudy.body.skeleton import PARENTS
 
     q = np.asarray(glob_q, np.float64)
     q = q / np.linalg.norm(q, axis=-1, keepdims=True)
     local = q.copy()
-    conj = q[..., PARENTS[1:], :] * np.array([-1.0, -1.0, -1.0, 1.0])
-    local[..., 1:, :] = _quat_mul(conj, q[..., 1:, :])
+    local[..., 1:, :] = quat_multiply(quat_conjugate(q[..., PARENTS[1:], :]), q[..., 1:, :])
     return quaternion_to_axis_angle(local), np.asarray(root_pos, np.float64).copy()
 
 

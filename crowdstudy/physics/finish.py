@@ -25,11 +25,11 @@ from __future__ import annotations
 import numpy as np
 
 from crowdstudy.body.rotations import (axis_angle_to_quaternion, matrix_to_axis_angle, matrix_to_quaternion,
-                                       quaternion_to_axis_angle, quaternion_to_matrix, rotation_between)
+                                       quat_blend, quat_conjugate, quat_multiply, quaternion_to_axis_angle,
+                                       quaternion_to_matrix, rotation_between)
 from crowdstudy.body.skeleton import JOINT_INDEX, PARENTS, forward_kinematics
 from crowdstudy.errors import InvalidInputError
 from crowdstudy.motion.posing import hold_peaks, planted_runs, smoothstep5, two_bone_ik
-from crowdstudy.motion.quaternions import quat_blend, quat_conjugate, quat_multiply
 
 __all__ = ["close_loop", "smooth_deviation", "lock_planted_feet", "planted_frames"]
 
