@@ -225,6 +225,7 @@ class EnvironmentPass:
         return float(np.float32((frame / self.fps * self.env.beat_hz) % 1.0))
 
     def set_beat(self, beat: float) -> None:
+        """Pose the audience figures at beat phase ``beat`` (see :meth:`beat`)."""
         set_uniform(self.programs.venue, "u_beat", beat)
 
     def draw(self, parts) -> None:
@@ -307,6 +308,9 @@ class ColorPass:
             set_uniform(prog, "u_view_proj", gl_matrix(vp))
 
     def run(self, fbo, vp: np.ndarray, eye, beat: float) -> None:
+        """Draw the frame into ``fbo`` seen through ``vp`` from ``eye`` (m), the audience at
+        beat phase ``beat``; the characters' bones and instances must be loaded and
+        selected, the shadow map drawn."""
         import moderngl
         ctx, size = self.ctx, (0, 0, self.targets.width, self.targets.height)
         ctx.enable(moderngl.DEPTH_TEST)
