@@ -33,7 +33,8 @@ import time
 
 import numpy as np
 
-from crowdstudy.bench import format_table, report_path, write_report
+from crowdstudy.bench import report_path, write_report
+from crowdstudy.tables import format_table
 from crowdstudy.physics.config import PhysicsConfig
 from crowdstudy.physics.crowding import crowd_config
 

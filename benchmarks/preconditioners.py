@@ -199,7 +199,8 @@ def compare(system: dict, nb: int, nj: int, tol: float | None = None, max_iter: 
 
 
 def main(argv: list[str]) -> int:
-    from crowdstudy.bench import format_table, write_report
+    from crowdstudy.bench import write_report
+    from crowdstudy.tables import format_table
 
     parser = argparse.ArgumentParser(prog="crowdstudy bench preconditioners", description=__doc__.split("\n")[0])
     parser.add_argument("--characters", type=int, default=1000, help="tiled D5 concert characters (default 1000)")
