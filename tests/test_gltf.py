@@ -18,14 +18,14 @@ import numpy as np
 import pytest
 
 from crowdstudy.body import load_body
+from crowdstudy.body.gltf_container import Z_UP_TO_Y_UP, read_gltf
 from crowdstudy.body.gltf_model import ARM_ELEVATION_LIMIT, node_local_matrix, read_character
 from crowdstudy.body.rotations import axis_angle_to_matrix, quaternion_to_matrix
 from crowdstudy.body.shapes import sample_bodies
 from crowdstudy.body.skeleton import JOINT_INDEX, JOINT_NAMES, PARENTS, forward_kinematics
 from crowdstudy.cli import main
 from crowdstudy.errors import InvalidInputError
-from crowdstudy.glb import read_gltf
-from crowdstudy.gltf.export import Z_UP_TO_Y_UP, build_gltf, character_prefix, export_gltf
+from crowdstudy.gltf.export import build_gltf, character_prefix, export_gltf
 from crowdstudy.scene import CrowdAnimation
 from gltf_fixtures import EXTRA_TARGET, write_mixamo_character
 
