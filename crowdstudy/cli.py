@@ -15,7 +15,9 @@ missing system component) are printed as one line naming what is wrong, with exi
 Anything else is a bug or an unexpected failure: it propagates with its traceback (exit
 code 1), so a numpy or pandas ``ValueError`` is never mistaken for a user error. Sub-commands
 check their output paths (:func:`crowdstudy.paths.check_output_path`,
-:func:`crowdstudy.paths.check_output_dir`) before the long work starts.
+:func:`crowdstudy.paths.check_output_dir`) before the long work starts. Progress bars are
+drawn only where stderr is a terminal; ``crowdstudy --progress COMMAND`` draws them anyway,
+``--no-progress`` never (:mod:`crowdstudy.progress`).
 """
 
 from __future__ import annotations
@@ -61,6 +63,11 @@ def _build_parser(chosen: str | None) -> argparse.ArgumentParser:
         description="Perception research on dense 3D crowds: stimuli, participant sessions, statistics.",
     )
     parser.add_argument("--version", action="version", version=f"crowdstudy {__version__}")
+    bars = parser.add_mutually_exclusive_group()
+    bars.add_argument("--progress", dest="progress", action="store_const", const="on", default=None,
+                      help="draw progress bars even when stderr is not a terminal (a log, a pipe)")
+    bars.add_argument("--no-progress", dest="progress", action="store_const", const="off",
+                      help="never draw progress bars (default: only on a terminal)")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", title="commands")
     for name, module_name, help_text in COMMANDS:
         p = sub.add_parser(name, help=help_text, description=help_text)
@@ -84,6 +91,10 @@ def main(argv: list[str] | None = None) -> int:
     if getattr(args, "_run", None) is None:
         parser.print_help()
         return 0 if not argv else 2
+    if args.progress is not None:      # the environment carries it to the processes the command starts
+        from crowdstudy.progress import set_progress_mode
+
+        set_progress_mode(args.progress)
     try:
         return int(args._run(args) or 0)
     except CrowdstudyError as exc:

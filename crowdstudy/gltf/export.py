@@ -201,9 +201,9 @@ def build_gltf(anim, *, bodies=None, colors: bool = True, progress: bool = False
     index_accessors: dict[str, int] = {}  # bodies of one template share faces
     iterator = range(n)
     if progress:
-        from tqdm import tqdm
+        from crowdstudy.progress import progress_bar
 
-        iterator = tqdm(iterator, desc="glTF characters", unit="char")
+        iterator = progress_bar(iterator, desc="glTF characters", unit="char")
     for i in iterator:
         body = bodies[i]
         prefix = character_prefix(i, n)
