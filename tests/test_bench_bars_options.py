@@ -12,6 +12,15 @@ import crowdstudy.physics.acceptance as acceptance
 LEVELS = ["D1", "D2", "D3", "D4", "D5"]
 
 
+@pytest.fixture(scope="module")
+def bench():
+    """``benchmarks/physics.py`` loaded as a module (the benchmarks are scripts, not a
+    package): its command line and its tables."""
+    from crowdstudy.bench import load_benchmark
+
+    return load_benchmark("physics")
+
+
 def test_cells_name_scenes_and_levels(bench):
     assert bench.parse_cells("", LEVELS) is None
     assert bench.parse_cells("concert:D1, corridor:D5,walking:D2", LEVELS) == [
