@@ -22,7 +22,8 @@ import argparse
 
 import numpy as np
 
-from crowdstudy.bench import format_table, measure, write_report
+from crowdstudy.bench import measure, write_report
+from crowdstudy.tables import format_table
 
 
 def _stationary_crowd(n: int, seed: int):

@@ -9,7 +9,6 @@ output uniform.
 
 from __future__ import annotations
 
-import argparse
 import importlib.util
 import json
 import statistics
@@ -20,10 +19,9 @@ from typing import Callable
 from crowdstudy.errors import InvalidInputError
 from crowdstudy.paths import check_output_path
 from crowdstudy.provenance import provenance, repository_root
-from crowdstudy.tables import format_table
 
-__all__ = ["configure", "run", "measure", "write_report", "report_path", "format_table", "benchmarks_dir",
-           "available", "load_benchmark"]
+__all__ = ["measure", "write_report", "report_path", "benchmarks_dir", "available", "load_benchmark",
+           "run_benchmarks"]
 
 
 def benchmarks_dir() -> Path:
@@ -73,18 +71,15 @@ def load_benchmark(name: str):
     return module
 
 
-def configure(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("name", help="benchmark to run: one of the scripts in benchmarks/, or 'all'")
-    parser.add_argument("bench_args", nargs=argparse.REMAINDER, help="arguments passed to the benchmark")
-
-
-def run(args: argparse.Namespace) -> int:
-    names = available() if args.name == "all" else [args.name]
+def run_benchmarks(name: str, bench_args: list[str]) -> int:
+    """Run benchmark ``name`` (or every one, ``"all"``) with ``bench_args``; the exit status
+    is the bitwise or of theirs. Every report path is checked before any benchmark runs."""
+    names = available() if name == "all" else [name]
     status = 0
     modules = {name: load_benchmark(name) for name in names}
     for name in names:  # before any benchmark runs: a report that cannot be written fails at once
         check_output_path(report_path(name), f"benchmark {name} report")
     for name in names:
         print(f"== benchmark {name} ==", flush=True)
-        status |= int(modules[name].main(list(args.bench_args)) or 0)
+        status |= int(modules[name].main(list(bench_args)) or 0)
     return status

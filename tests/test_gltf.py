@@ -18,6 +18,7 @@ import numpy as np
 import pytest
 
 from crowdstudy.body import load_body
+from crowdstudy.body.gltf_container import Z_UP_TO_Y_UP, read_gltf
 from crowdstudy.body.gltf_model import (ARM_ELEVATION_LIMIT, map_skin_joints, node_local_matrix, node_parents,
                                         node_world_matrices, read_character, read_skin_binds,
                                         read_skinned_mesh)
@@ -26,8 +27,7 @@ from crowdstudy.body.shapes import sample_bodies
 from crowdstudy.body.skeleton import JOINT_INDEX, JOINT_NAMES, PARENTS, forward_kinematics
 from crowdstudy.cli import main
 from crowdstudy.errors import InvalidInputError
-from crowdstudy.glb import read_gltf
-from crowdstudy.gltf.export import Z_UP_TO_Y_UP, build_gltf, character_prefix, export_gltf
+from crowdstudy.gltf.export import build_gltf, character_prefix, export_gltf
 from crowdstudy.scene import CrowdAnimation
 from gltf_fixtures import EXTRA_TARGET, write_mixamo_character
 

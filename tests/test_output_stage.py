@@ -79,7 +79,10 @@ def test_blocks_give_the_whole_crowds_animation_and_report(crowd, chunk, threads
     assert rot32.dtype == np.float64 and np.abs(rot32 - rot).max() < 1e-3
 
 
-def test_the_progress_bar_counts_the_blocks_and_changes_nothing(crowd, capsys):
+def test_the_progress_bar_counts_the_blocks_and_changes_nothing(crowd, capsys, monkeypatch):
+    from crowdstudy.progress import PROGRESS_ENV
+
+    monkeypatch.setenv(PROGRESS_ENV, "1")       # captured stderr is no terminal: draw the bar anyway
     config = PhysicsConfig()
     quiet = finish_crowd(*crowd, FPS, config, warmup=WARMUP, blend=BLEND, looped=True, chunk=2, threads=2)
     shown = finish_crowd(*crowd, FPS, config, warmup=WARMUP, blend=BLEND, looped=True, chunk=2, threads=2,

@@ -211,15 +211,13 @@ def test_real_scene_d1_meets_the_overlap_and_tracking_bars():
     """Short clip (2 s) of the study's stationary D1 cell: mesh overlap <= 15 % of the
     Baseline's, tracking error within the D1 bar's 1.5 cm (the full 20 s clips are measured by
     ``crowdstudy bench physics --bars``). A clip this short is a smoke test, not the bar: two
-    pairs make nearly all of a D1 cell's overlap. With the damped pose springs of 2026-12-04
-    it keeps 12.9 % (every 6th frame; 10.2 % every 2nd) at 0.79 cm, the springs before them
-    6.2 % (7.4 %) at 1.16 cm; on 8 s 15.4 % against 16.5 %, and on the 20 s MakeHuman cell
-    2.4 % against 4.8 %. Earlier: a 1 s clip, five frames measured, 8 % with the
-    earlier output stage (0.08 s low-pass), 13 % with a 0.05 s one, 7 % and 3 % on 2 s.
-    On the generated mannequins, whose meshes the capsules fit closely (IoU about 0.81); the
+    pairs make nearly all of a D1 cell's overlap, hence a bound looser than the full clip's
+    5 % bar (how this clip's numbers moved is in the correction's history under docs/). On the
+    generated mannequins, whose meshes the capsules fit closely (IoU about 0.81); the
     MakeHuman bodies (IoU about 0.76) keep 16 % of this clip's Baseline mesh overlap: the
     mesh beyond capsule + skin is not pushed (issue #11)."""
     from crowdstudy.design import load_design
+    from crowdstudy.metrics import BarTolerances
     from crowdstudy.metrics.overlap import overlap_volume
     from crowdstudy.metrics.tracking import tracking_error
     from crowdstudy.motion.baseline import build_baseline
@@ -231,7 +229,7 @@ def test_real_scene_d1_meets_the_overlap_and_tracking_bars():
     oo = overlap_volume(ours, geometry="mesh", frames=frames).mean
     assert ob > 0
     assert oo <= 0.15 * ob
-    assert tracking_error(ours, base) < 1.5
+    assert tracking_error(ours, base) < BarTolerances().tracking_sparsest_cm      # the D1 bar
     from crowdstudy.body.skeleton import forward_kinematics
     from crowdstudy.physics.corrector import load_bodies
 

@@ -45,12 +45,12 @@ from pathlib import Path
 
 import numpy as np
 
+from crowdstudy.body.gltf_container import Z_UP_TO_Y_UP, GltfFile, read_gltf
 from crowdstudy.body.joint_names import VRM_BONES, match_names
 from crowdstudy.body.model import Body, check_fields
 from crowdstudy.body.rotations import axis_angle_to_matrix, quaternion_to_matrix, rotation_between
 from crowdstudy.body.skeleton import JOINT_INDEX, JOINT_NAMES, NUM_JOINTS, PARENTS, forward_kinematics
 from crowdstudy.errors import InvalidInputError
-from crowdstudy.glb import Z_UP_TO_Y_UP, GltfFile, read_gltf
 
 __all__ = ["GltfCharacter", "read_character", "load_gltf_body", "node_local_matrix", "RECORD_FIELDS",
            "ARM_ELEVATION_LIMIT", "LEG_TILT_LIMIT", "OPTIONAL_JOINTS", "SkinJointMap", "map_skin_joints",

@@ -39,16 +39,16 @@ from pathlib import Path
 
 import numpy as np
 
+from crowdstudy.body.gltf_container import ARRAY_BUFFER, ELEMENT_ARRAY_BUFFER, Z_UP_TO_Y_UP, GltfBuilder
 from crowdstudy.body.rotations import axis_angle_to_quaternion, quat_align_signs
 from crowdstudy.body.skeleton import JOINT_NAMES, NUM_JOINTS, PARENTS
 from crowdstudy.errors import InvalidInputError
-from crowdstudy.glb import ARRAY_BUFFER, ELEMENT_ARRAY_BUFFER, Z_UP_TO_Y_UP, GltfBuilder
 from crowdstudy.render.bodies import region_scores, vertex_normals
 
-__all__ = ["export_gltf", "build_gltf", "Z_UP_TO_Y_UP", "WORLD_ROTATION", "character_prefix",
+__all__ = ["export_gltf", "build_gltf", "WORLD_ROTATION", "character_prefix",
            "add_skinned_mesh", "encode_png"]
 
-#: ``Z_UP_TO_Y_UP`` (:mod:`crowdstudy.glb`) as the quaternion ``(x, y, z, w)`` of the
+#: ``Z_UP_TO_Y_UP`` (:mod:`crowdstudy.body.gltf_container`) as the quaternion ``(x, y, z, w)`` of the
 #: ``crowdstudy_world`` node.
 WORLD_ROTATION = (0.0, math.sqrt(0.5), math.sqrt(0.5), 0.0)
 WORLD_NODE = "crowdstudy_world"
@@ -191,9 +191,9 @@ def build_gltf(anim, *, bodies=None, colors: bool = True, progress: bool = False
     index_accessors: dict[str, int] = {}  # bodies of one template share faces
     iterator = range(n)
     if progress:
-        from tqdm import tqdm
+        from crowdstudy.progress import progress_bar
 
-        iterator = tqdm(iterator, desc="glTF characters", unit="char")
+        iterator = progress_bar(iterator, desc="glTF characters", unit="char")
     for i in iterator:
         body = bodies[i]
         prefix = character_prefix(i, n)

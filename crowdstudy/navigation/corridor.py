@@ -190,9 +190,9 @@ def corridor_crowd(design, level: str, seed, *, duration: float | None = None, f
     warm_frames = int(round(warm_up * fps))
     bar = None
     if progress:
-        from tqdm import tqdm
+        from crowdstudy.progress import progress_bar
 
-        bar = tqdm(total=warm_frames + n_frames, desc=f"corridor {level}", unit="frame", leave=False)
+        bar = progress_bar(total=warm_frames + n_frames, desc=f"corridor {level}", unit="frame", leave=False)
     for _ in range(warm_frames):
         sim.set_preferred_velocities(preferred(sim.positions))
         sim.step(substeps)

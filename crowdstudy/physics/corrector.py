@@ -263,9 +263,9 @@ def correct(anim, config: PhysicsConfig | None = None, *, device: str | None = N
     corr.project(out_rot, out_root, 0)
     bar = None
     if progress:
-        from tqdm import tqdm
+        from crowdstudy.progress import progress_bar
 
-        bar = tqdm(total=t_frames - 1, desc="correct", unit="frame", leave=False)
+        bar = progress_bar(total=t_frames - 1, desc="correct", unit="frame", leave=False)
     for f in range(1, t_frames):
         t0 = time.perf_counter()
         corr._advance_between(f - 1, f)

@@ -153,9 +153,9 @@ def finish_crowd(sim_rot: np.ndarray, sim_root: np.ndarray, ref_rot: np.ndarray,
     blocks = _blocks(n_chars, chunk)
     bar = None
     if progress:
-        from tqdm import tqdm
+        from crowdstudy.progress import progress_bar
 
-        bar = tqdm(total=len(blocks), desc="output stage", unit="block", leave=False)
+        bar = progress_bar(total=len(blocks), desc="output stage", unit="block", leave=False)
     try:
         done = _map(block, blocks, threads, bar)
     finally:

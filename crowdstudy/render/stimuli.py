@@ -488,7 +488,7 @@ def _cell_name(stim) -> str:
 
 
 def _build_animations(design, out_dir: Path, settings, todo, runner: _Runner, progress: bool, physics) -> dict:
-    from tqdm import tqdm
+    from crowdstudy.progress import progress_bar
 
     folder = out_dir / "animations"
     cells: dict[str, tuple] = {}  # cell -> (a stimulus of it, methods its videos need)
@@ -514,7 +514,7 @@ def _build_animations(design, out_dir: Path, settings, todo, runner: _Runner, pr
             else:
                 job["baseline"] = str(folder / f"{cell}-Baseline.npz")
         jobs.append(job)
-    bar = tqdm(total=len(jobs), desc="cell animations", unit="cell", disable=not progress or not jobs)
+    bar = progress_bar(total=len(jobs), desc="cell animations", unit="cell", enabled=progress and bool(jobs))
     for job, res in runner.run(animation_job, jobs):
         for name, content in res["files"].items():
             if isinstance(content, (bytes, bytearray)):
@@ -530,8 +530,7 @@ def _build_animations(design, out_dir: Path, settings, todo, runner: _Runner, pr
 
 def _render_videos(design, out_dir: Path, preset: str, settings, todo, rows: dict, order, metrics, runner: _Runner,
                    progress: bool, body_loader, digests: dict) -> None:
-    from tqdm import tqdm
-
+    from crowdstudy.progress import progress_bar
     from crowdstudy.render.video import sha256_file
 
     from crowdstudy.render.renderer import baseline_color_positions
@@ -554,7 +553,7 @@ def _render_videos(design, out_dir: Path, preset: str, settings, todo, rows: dic
             job["animation"] = str(anim_path)
             job["out"] = str(out_dir / "videos" / f"{s.stimulus_id}.mp4")
         jobs.append(job)
-    bar = tqdm(total=len(jobs), desc="stimulus videos", unit="video", disable=not progress or not jobs)
+    bar = progress_bar(total=len(jobs), desc="stimulus videos", unit="video", enabled=progress and bool(jobs))
     for job, res in runner.run(video_job, jobs):
         s = job["stimulus"]
         rel = f"videos/{s['stimulus_id']}.mp4"

@@ -278,8 +278,7 @@ def render_video(anim, viewpoint, out_path, *, width: int | None = None, height:
         everything encoded) and "red" (the overlap view's samples): ``{stage}_wall_s``,
         ``{stage}_cpu_s``).
     """
-    from tqdm import tqdm
-
+    from crowdstudy.progress import progress_bar
     from crowdstudy.render.renderer import CrowdRenderer
 
     if design is None:
@@ -302,7 +301,7 @@ def render_video(anim, viewpoint, out_path, *, width: int | None = None, height:
         clock.lap("setup")
         writer = VideoWriter(out_path, width, height, fps, crf=crf, preset=preset, bottom_up=not overlap_view)
         try:
-            bar = tqdm(range(len(plan)), desc=out_path.name, unit="frame", disable=not progress, leave=False)
+            bar = progress_bar(range(len(plan)), desc=out_path.name, unit="frame", enabled=progress, leave=False)
             if overlap_view:
                 red += _write_overlap_frames(renderer, plan, writer, bar)
             else:

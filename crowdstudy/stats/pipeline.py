@@ -208,8 +208,8 @@ def analyze(responses: pd.DataFrame | str | Path, design=None, out_dir: str | Pa
     work = [(st, c) for st in chosen for c in comps]
     iterator = work
     if progress:
-        from tqdm import tqdm
-        iterator = tqdm(work, desc="analysis", unit="anova", leave=False)
+        from crowdstudy.progress import progress_bar
+        iterator = progress_bar(work, desc="analysis", unit="anova", leave=False)
     per_stage_panels: dict[int, dict] = {}
     extras: dict[tuple[int, str], dict] = {}
     for st, comp in iterator:

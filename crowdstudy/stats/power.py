@@ -113,8 +113,8 @@ def power_analysis(design, n_participants: int, *, model: ResponseModel | None =
     seeds = np.random.SeedSequence(int(seed)).generate_state(int(sims), dtype=np.uint32)
     iterator = range(int(sims))
     if progress:
-        from tqdm import tqdm
-        iterator = tqdm(iterator, desc="power", unit="study", leave=False)
+        from crowdstudy.progress import progress_bar
+        iterator = progress_bar(iterator, desc="power", unit="study", leave=False)
     pvals = np.full((int(sims), len(comps) * len(effects)), np.nan)
     np2 = np.full_like(pvals, np.nan)
     dzs = np.full((int(sims), len(comps)), np.nan)
