@@ -14,9 +14,11 @@ Per-thread variable-length lists (neighbours, ORCA lines, projected lines) live 
 
 from __future__ import annotations
 
+import warp as wp
+
 from crowdstudy.warp_runtime import get_warp
 
-wp = get_warp()
+get_warp()      # the project's kernel cache and log level, set before this module can compile
 wp.set_module_options({"enable_backward": False})     # forward only: halves the compile time
 
 __all__ = ["cell_keys", "cell_ranges", "compute_velocities", "integrate"]

@@ -52,9 +52,8 @@ import time
 import numpy as np
 
 from crowdstudy.errors import InvalidInputError
-from crowdstudy.physics.linear import bsr_from_triplets, solver_kernels
 from crowdstudy.physics.model import GROUP_ARM, GROUP_FEET, GROUP_PELVIS, GROUP_TRUNK
-from crowdstudy.warp_runtime import host_threads, run_parallel, run_together
+from crowdstudy.warp_runtime import get_warp, host_threads, run_parallel, run_together
 
 __all__ = ["Solver", "LINEAR_SOLVERS"]
 
@@ -90,13 +89,9 @@ class Solver:
 
     def __init__(self, model, config, *, linear_solver: str | None = None, profile: bool = False,
                  preconditioner: str = "character"):
-        from crowdstudy.physics.kernels import kernels
-
         self.model = model
         self.config = config
-        self.kb = kernels()
-        self.ks = solver_kernels()
-        wp = self.kb.wp
+        wp = get_warp()
         self.wp = wp
         dev = model.device
         if linear_solver is None:
@@ -182,7 +177,9 @@ class Solver:
 
     def assemble(self, state_in, control, contacts, dt: float) -> None:
         """Prediction, gradient and diagonal Hessian blocks (bodies, then contacts)."""
-        wp, kb, ks, m, cfg = self.wp, self.kb, self.ks, self.model, self.config
+        from crowdstudy.physics import kernels as kb, linear as ks
+
+        wp, m, cfg = self.wp, self.model, self.config
         W, dev = m.wp, m.device
         self._contact_buffers(contacts.capacity)
         ff = bool(cfg.feedforward)
@@ -279,7 +276,9 @@ class Solver:
 
     def solve(self, contacts) -> None:
         """Solve H [dx; dw] = -g into ``self.dx``, ``self.dw``."""
-        wp, ks, m, cfg = self.wp, self.ks, self.model, self.config
+        from crowdstudy.physics import linear as ks
+
+        wp, m, cfg = self.wp, self.model, self.config
         dev, nb = m.device, m.n_bodies
         if self.linear_solver == "fused" and self._split_pcg():
             self._solve_split(contacts)         # factorises each half's characters with its start
@@ -308,7 +307,9 @@ class Solver:
 
     def triplets(self, contacts):
         """The whole system as BSR triplets (rows, cols, 6x6 values) and the rhs (B,) vec6."""
-        wp, ks, m, cfg = self.wp, self.ks, self.model, self.config
+        from crowdstudy.physics import linear as ks
+
+        wp, m, cfg = self.wp, self.model, self.config
         dev, nb = m.device, m.n_bodies
         cap = contacts.capacity
         n_trip = 3 * nb + 2 * cap
@@ -457,7 +458,9 @@ class Solver:
     def _record_split(self, contacts, halves, levers):
         """The split PCG's launches (init, matvec and update of each half; the two
         direction buffers alternate), recorded for ``_solve_split``."""
-        wp, ks, m, cfg = self.wp, self.ks, self.model, self.config
+        from crowdstudy.physics import linear as ks
+
+        wp, m, cfg = self.wp, self.model, self.config
         dev = m.device
         r_t, r_r, z_t, z_r, p_t, p_r, q_t, q_r = self.work
         po_t, po_r = self.work_split
@@ -489,9 +492,11 @@ class Solver:
 
     def _factor_range(self, c0: int, c1: int) -> None:
         """The tree preconditioner's factors of characters [c0, c1)."""
+        from crowdstudy.physics import linear as ks
+
         m, cfg = self.model, self.config
         if c1 > c0:
-            self.wp.launch(self.ks.tree_factor_kernel, c1 - c0,
+            self.wp.launch(ks.tree_factor_kernel, c1 - c0,
                            [m.n_joints, self.hess_a, self.hess_b, self.hess_c, m.wp["body_parent"],
                             self.lever_p, self.lever_c, self.ctrl_c, float(cfg.joint_stiffness), self.tree_work,
                             self.tree_dinv, self.tree_l, int(c0)], device=m.device)
@@ -503,6 +508,8 @@ class Solver:
         import warp.optim.linear as wl
         import warp.sparse as wsp
 
+        from crowdstudy.physics import linear as ks
+
         wp, cfg, m = self.wp, self.config, self.model
         nb = m.n_bodies
         if self._bsr is None:
@@ -513,7 +520,7 @@ class Solver:
             work = self.y6
 
             def matvec(x, y, z, alpha, beta):
-                wp.launch(self.ks.tree_precond_kernel, m.n_characters,
+                wp.launch(ks.tree_precond_kernel, m.n_characters,
                           [m.n_joints, m.wp["body_parent"], self.tree_dinv, self.tree_l, self.lever_p,
                            self.lever_c, self.ctrl_c, float(cfg.joint_stiffness), x, y, z,
                            float(alpha), float(beta), work], device=m.device)
@@ -524,13 +531,15 @@ class Solver:
         self._x6.zero_()
         it, res, atol = wl.cg(self._bsr, rhs, self._x6, tol=float(cfg.cg_tolerance),
                               maxiter=int(cfg.cg_max_iterations), M=precond, check_every=5, use_cuda_graph=False)
-        wp.launch(self.ks.unpack_kernel, nb, [self._x6, self.dx, self.dw], device=m.device)
+        wp.launch(ks.unpack_kernel, nb, [self._x6, self.dx, self.dw], device=m.device)
         # cg returns the absolute residual and atol = tol * |b|: report |r| / |b| like the others
         rel = float(res) * float(cfg.cg_tolerance) / float(atol) if float(atol) > 0 else float(res)
         self.last_cg = (int(it), rel)
 
     def _solve_scipy(self, rows, cols, vals, rhs) -> None:
         import scipy.sparse.linalg as spl
+
+        from crowdstudy.physics.linear import bsr_from_triplets
 
         wp, cfg, nb = self.wp, self.config, self.model.n_bodies
         r, c, v, b = rows.numpy(), cols.numpy(), vals.numpy().astype(np.float64), rhs.numpy().astype(np.float64)
@@ -548,14 +557,16 @@ class Solver:
         self.last_cg = (counter[0], float(res))
 
     def update(self, state_in, state_out, dt: float) -> None:
+        from crowdstudy.physics import kernels as kb
+
         wp, m = self.wp, self.model
 
         def update(c0: int, c1: int) -> None:
             lo, hi = c0 * m.n_joints, c1 * m.n_joints
             if hi > lo:
-                wp.launch(self.kb.update_kernel, hi - lo, [self.x_pred, self.q_pred, state_in.x, state_in.q, self.dx,
-                                                           self.dw, float(dt), state_out.x, state_out.q, state_out.v,
-                                                           state_out.w, int(lo)], device=m.device)
+                wp.launch(kb.update_kernel, hi - lo, [self.x_pred, self.q_pred, state_in.x, state_in.q, self.dx,
+                                                      self.dw, float(dt), state_out.x, state_out.q, state_out.v,
+                                                      state_out.w, int(lo)], device=m.device)
 
         self._split_characters(update)
 
