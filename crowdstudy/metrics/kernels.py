@@ -20,7 +20,7 @@ import warp as wp
 
 from crowdstudy.warp_runtime import get_warp
 
-__all__ = ["edge_value", "edge_covers", "face_crossings", "skin_vertices", "mesh_crossings_warp", "WarpSkinner"]
+__all__ = ["face_crossings", "skin_vertices", "mesh_crossings_warp", "WarpSkinner"]
 
 get_warp()      # the project's kernel cache and log level, set before this module can compile
 wp.set_module_options({"enable_backward": False})     # forward only: no adjoints to compile

@@ -21,8 +21,8 @@ import warp as wp
 
 from crowdstudy.warp_runtime import get_warp
 
-__all__ = ["segment_params", "push_contact", "capsules_world_kernel", "ground_kernel", "broadphase_kernel",
-           "sweep_kernel", "narrowphase_kernel", "intra_kernel", "environment_kernel", "wall_kernel"]
+__all__ = ["capsules_world_kernel", "ground_kernel", "broadphase_kernel", "sweep_kernel", "narrowphase_kernel",
+           "intra_kernel", "environment_kernel", "wall_kernel"]
 
 get_warp()      # the project's kernel cache and log level, set before this module can compile
 wp.set_module_options({"enable_backward": False})     # forward only: no adjoints to compile
@@ -243,8 +243,9 @@ def sweep_kernel(char_lo: wp.array(dtype=wp.vec3), char_hi: wp.array(dtype=wp.ve
 def narrowphase_kernel(x: wp.array(dtype=wp.vec3), p0w: wp.array(dtype=wp.vec3), p1w: wp.array(dtype=wp.vec3),
                        cap_radius: wp.array(dtype=float), cap_skin: wp.array(dtype=float),
                        centre: wp.array(dtype=wp.vec3), half: wp.array(dtype=float),
-                       char_lo: wp.array(dtype=wp.vec3), char_hi: wp.array(dtype=wp.vec3), pair_i: wp.array(dtype=wp.int32),
-                       pair_j: wp.array(dtype=wp.int32), pair_shift: wp.array(dtype=float),
+                       char_lo: wp.array(dtype=wp.vec3), char_hi: wp.array(dtype=wp.vec3),
+                       pair_i: wp.array(dtype=wp.int32), pair_j: wp.array(dtype=wp.int32),
+                       pair_shift: wp.array(dtype=float),
                        n_joints: int, margin: float, spec: float, k: float,
                        count: wp.array(dtype=wp.int32), capacity: int,
                        c_a: wp.array(dtype=wp.int32), c_b: wp.array(dtype=wp.int32),

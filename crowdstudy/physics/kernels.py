@@ -26,9 +26,8 @@ import warp as wp
 
 from crowdstudy.warp_runtime import get_warp
 
-__all__ = ["quat_exp", "quat_log", "vee_asym", "quat_nlerp", "control_gradient", "targets_kernel",
-           "predict_kernel", "joint_terms_kernel", "assemble_bodies_kernel", "update_kernel", "project_kernel",
-           "set_state_kernel", "foot_anchor_kernel"]
+__all__ = ["targets_kernel", "predict_kernel", "joint_terms_kernel", "assemble_bodies_kernel", "update_kernel",
+           "project_kernel", "set_state_kernel", "foot_anchor_kernel"]
 
 get_warp()      # the project's kernel cache and log level, set before this module can compile
 wp.set_module_options({"enable_backward": False})     # forward only: no adjoints to compile
@@ -190,6 +189,64 @@ def joint_terms_kernel(q: wp.array(dtype=wp.quat), q_old: wp.array(dtype=wp.quat
     ctrl_g[b] = joint_control_terms(b, p, q, q_old, t_rel, t_rel_old, k, dh2)
 
 
+@wp.func
+def translation_pd_terms(e: wp.vec3, dv: wp.vec3, kt: float, dth2: float, reach: float, kt_far: float,
+                         eye: wp.mat33, gt: wp.vec3, a: wp.mat33):
+    """Absolute translation PD of a body (root; feet and pose springs when enabled) added to
+    its gradient ``gt`` (N) and translation block ``a`` (N/m): kt/2 |e|^2 + dt/(2 h^2)
+    |dv|^2, e = x - x^ the deviation from the target (m), dv = (x - x_old) - (x^ - x^_old)
+    the step's displacement beyond the target's (m), dth2 = dt/h^2 (N/m).
+
+    Where ``reach`` r > 0 (m) the spring softens with the deviation from kt near the target
+    to ``kt_far`` kf far from it: energy kf/2 |e|^2 + (kt - kf) r^2 (sqrt(1 + |e|^2 / r^2)
+    - 1), force (kf + (kt - kf) / sqrt(1 + |e|^2 / r^2)) e, its Hessian taken as that
+    weight times I. Returns the new (gt, a)."""
+    k_e = kt
+    if reach > 0.0:
+        k_e = kt_far + (kt - kt_far) / wp.sqrt(1.0 + wp.dot(e, e) / (reach * reach))
+    return gt + (k_e * e + dth2 * dv), a + (k_e + dth2) * eye
+
+
+@wp.func
+def joint_child_terms(k_joint: float, r_p: wp.vec3, r_c: wp.vec3, x_p: wp.vec3, x_b: wp.vec3, ctrl_g: wp.vec3,
+                      ctrl_c: float, eye: wp.mat33, gt: wp.vec3, gr: wp.vec3, a: wp.mat33, bb: wp.mat33,
+                      c: wp.mat33):
+    """Body b as the CHILD of joint (p, b): the soft ball joint k_j/2 |x_p + r_p - x_b -
+    r_c|^2 (Gauss-Newton; r_p, r_c the world lever arms, m; k_j N/m) and the joint's PD
+    term (gradient ``ctrl_g`` N m, coupling ``ctrl_c``, from ``joint_terms_kernel``) added
+    to b's gradient (gt N, gr N m) and diagonal blocks (a, bb, c). Returns the new
+    (gt, gr, a, bb, c)."""
+    cvec = x_p + r_p - x_b - r_c
+    gt += -k_joint * cvec
+    gr += -k_joint * wp.cross(r_c, cvec)
+    sk = wp.skew(r_c)
+    a += k_joint * eye
+    bb += -k_joint * sk
+    c += -k_joint * (sk * sk)
+    gr += ctrl_g
+    c += ctrl_c * eye
+    return gt, gr, a, bb, c
+
+
+@wp.func
+def joint_parent_terms(k_joint: float, r_p: wp.vec3, r_c: wp.vec3, x_b: wp.vec3, x_ch: wp.vec3, ctrl_g: wp.vec3,
+                       ctrl_c: float, eye: wp.mat33, gt: wp.vec3, gr: wp.vec3, a: wp.mat33, bb: wp.mat33,
+                       c: wp.mat33):
+    """Body b as the PARENT of joint (b, ch): the same spring and PD term as
+    ``joint_child_terms`` seen from the parent's side (the PD gradient negated). Returns
+    the new (gt, gr, a, bb, c)."""
+    cvec = x_b + r_p - x_ch - r_c
+    gt += k_joint * cvec
+    gr += k_joint * wp.cross(r_p, cvec)
+    sk = wp.skew(r_p)
+    a += k_joint * eye
+    bb += -k_joint * sk
+    c += -k_joint * (sk * sk)
+    gr -= ctrl_g
+    c += ctrl_c * eye
+    return gt, gr, a, bb, c
+
+
 @wp.kernel
 def assemble_bodies_kernel(
         x: wp.array(dtype=wp.vec3), q: wp.array(dtype=wp.quat),
@@ -210,14 +267,11 @@ def assemble_bodies_kernel(
     at the predicted state.
 
     Terms: inertia (zero gradient at the prediction; blocks m/h^2 I and R I_body R^T / h^2),
-    gravity m g z (pass 0 with the feed-forward prediction), soft ball joints k_j/2 |x_p + R_p a_p - x_b - R_b a_b|^2 (Gauss-Newton),
-    PD control of Eq. 4 (root: absolute rotation; others: parent-relative) and the
-    translational PD of bodies with body_kt/body_dt > 0 (root; feet when enabled; every
-    other body with ``pose_translation_stiffness``). Where ``body_reach`` r > 0 (m) the
-    spring softens with the deviation e = x - x^ from kt near the target to
-    ``body_kt_far`` kf far from it: energy kf/2 |e|^2 + (kt - kf) r^2 (sqrt(1 + |e|^2 /
-    r^2) - 1), force (kf + (kt - kf) / sqrt(1 + |e|^2 / r^2)) e, its Hessian taken as that
-    weight times I.
+    gravity m g z (pass 0 with the feed-forward prediction), soft ball joints
+    (``joint_child_terms``, ``joint_parent_terms``), PD control of Eq. 4 (root: absolute
+    rotation; others: parent-relative) and the translational PD of bodies with
+    body_kt/body_dt > 0 (root; feet when enabled; every other body with
+    ``pose_translation_stiffness``; ``translation_pd_terms``).
     Reads each joint's lever arms, control coupling and PD gradient from
     ``joint_terms_kernel`` (run first on the same bodies: a body and its children are in
     one character); the lever arms and couplings also serve the matrix-free off-diagonal
@@ -243,15 +297,8 @@ def assemble_bodies_kernel(
     kt = body_kt[b]
     dth2 = body_dt[b] * damp_scale * inv_h2
     if kt > 0.0 or dth2 > 0.0:
-        # absolute translation PD (root; feet and pose springs when enabled): kt/2 |x - x^|^2
-        # (softened beyond body_reach) + dt/(2h^2) |dx - dx^|^2
-        e = x[b] - t_x[b]
-        reach = body_reach[b]
-        if reach > 0.0:
-            kf = body_kt_far[b]
-            kt = kf + (kt - kf) / wp.sqrt(1.0 + wp.dot(e, e) / (reach * reach))
-        gt += kt * e + dth2 * ((x[b] - x_old[b]) - (t_x[b] - t_x_old[b]))
-        a += (kt + dth2) * eye
+        dv = (x[b] - x_old[b]) - (t_x[b] - t_x_old[b])
+        gt, a = translation_pd_terms(x[b] - t_x[b], dv, kt, dth2, body_reach[b], body_kt_far[b], eye, gt, a)
     p = body_parent[b]
     if p < 0:
         # Root: absolute rotation (Eq. 4 with Rp = I) and absolute translation.
@@ -260,33 +307,13 @@ def assemble_bodies_kernel(
         gr += control_gradient(eye, rb, tgt, damp_ref, k, dh2)
         c += (2.0 * (k + dh2)) * eye
     else:
-        # b is the child of joint (p, b).
-        r_p = lever_p[b]
-        r_c = lever_c[b]
-        cvec = x[p] + r_p - x[b] - r_c
-        gt += -k_joint * cvec
-        gr += -k_joint * wp.cross(r_c, cvec)
-        sk = wp.skew(r_c)
-        a += k_joint * eye
-        bb += -k_joint * sk
-        c += -k_joint * (sk * sk)
-        gr += ctrl_g[b]
-        c += ctrl_c[b] * eye
+        gt, gr, a, bb, c = joint_child_terms(k_joint, lever_p[b], lever_c[b], x[p], x[b], ctrl_g[b], ctrl_c[b],
+                                             eye, gt, gr, a, bb, c)
     for s in range(body_children.shape[1]):
         ch = body_children[b, s]
         if ch >= 0:
-            # b is the parent of joint (b, ch).
-            r_p = lever_p[ch]
-            r_c = lever_c[ch]
-            cvec = x[b] + r_p - x[ch] - r_c
-            gt += k_joint * cvec
-            gr += k_joint * wp.cross(r_p, cvec)
-            sk = wp.skew(r_p)
-            a += k_joint * eye
-            bb += -k_joint * sk
-            c += -k_joint * (sk * sk)
-            gr -= ctrl_g[ch]
-            c += ctrl_c[ch] * eye
+            gt, gr, a, bb, c = joint_parent_terms(k_joint, lever_p[ch], lever_c[ch], x[b], x[ch], ctrl_g[ch],
+                                                  ctrl_c[ch], eye, gt, gr, a, bb, c)
     grad_t[b] = gt
     grad_r[b] = gr
     hess_a[b] = a

@@ -38,6 +38,93 @@ get_warp()      # the project's kernel cache and log level, set before this modu
 wp.set_module_options({"enable_backward": False})     # forward only: no adjoints to compile
 
 
+@wp.func
+def release_scale(a: int, b: int, n_joints: int, x: wp.array(dtype=wp.vec3), t_x: wp.array(dtype=wp.vec3),
+                  release0: float, release_width: float):
+    """Factor in [0, 1] on the penalty of an inter-body contact between bodies a and b.
+
+    A limb held farther than ``release0`` m from where its animation puts it RELATIVE to
+    its character's root (dev = |(x - x^) - (x_root - x^_root)|, centres of mass, m) lets
+    go of the contact gradually: clamp(1 - (dev - release0) / release_width, 0, 1) for the
+    farther of the two bodies, so a hand caught behind a neighbour while its animation
+    swings on slides through instead of staying pinned and whipping back; a character
+    pushed as a whole keeps its contacts."""
+    ra = (a / n_joints) * n_joints
+    rb = (b / n_joints) * n_joints
+    dev = wp.max(wp.length((x[a] - t_x[a]) - (x[ra] - t_x[ra])),
+                 wp.length((x[b] - t_x[b]) - (x[rb] - t_x[rb])))
+    return wp.clamp(1.0 - (dev - release0) / release_width, 0.0, 1.0)
+
+
+@wp.func
+def penalty_force(depth: float, k_c: float, activation: float, stiffen: float, kind: int):
+    """Force f = phi'(d) (N) and stiffness k = phi''(d) (N/m) of the penalty phi on the
+    depth d (m) of an active contact of stiffness k_c (N/m).
+
+    With ``activation`` e = 0, phi = (k/2) d^2 for d > 0 (only positive predicted depths
+    act): its stiffness jumps from 0 to k as a contact starts, so a contact predicted just
+    apart is ignored for a step and then pushes at full stiffness, and touching limbs
+    chatter. With e > 0 (m) the penalty is C2 in d: phi = k (d + e)^3 / (6 e) for
+    -e < d < 0 (the stiffness ramps from 0 to k over the last e of approach), and
+    phi = k/2 d^2 + k e/2 d + k e^2/6 for d >= 0 (force k (d + e/2), stiffness k).
+
+    Stiffening (inter-body contacts, ``kind`` 2, ``stiffen`` = d0 > 0, m): for d > 0 phi
+    gains k d^3 / (3 d0) (force k d^2 / d0, stiffness 2 k d / d0): deep contacts push
+    harder without stiffening the light touches."""
+    f = k_c * depth
+    k = k_c
+    if activation > 0.0:
+        if depth < 0.0:
+            s = depth + activation
+            f = k_c * s * s / (2.0 * activation)
+            k = k_c * s / activation
+        else:
+            f = k_c * (depth + 0.5 * activation)
+    if stiffen > 0.0 and depth > 0.0 and kind == 2:
+        f += k_c * depth * depth / stiffen
+        k += 2.0 * k_c * depth / stiffen
+    return f, k
+
+
+@wp.func
+def add_contact_terms(body: int, f: float, k: float, u_t: wp.vec3, u_r: wp.vec3,
+                      grad_t: wp.array(dtype=wp.vec3), grad_r: wp.array(dtype=wp.vec3),
+                      hess_a: wp.array(dtype=wp.mat33), hess_b: wp.array(dtype=wp.mat33),
+                      hess_c: wp.array(dtype=wp.mat33)):
+    """Add a contact's gradient f u (N, N m) and Gauss-Newton blocks k u u^T to ``body``
+    (atomics: several contacts touch a body); u = (u_t, u_r) the depth's gradient with
+    respect to the body's increments (dx, dw)."""
+    wp.atomic_add(grad_t, body, f * u_t)
+    wp.atomic_add(grad_r, body, f * u_r)
+    wp.atomic_add(hess_a, body, k * wp.outer(u_t, u_t))
+    wp.atomic_add(hess_b, body, k * wp.outer(u_t, u_r))
+    wp.atomic_add(hess_c, body, k * wp.outer(u_r, u_r))
+    return 0
+
+
+@wp.func
+def add_ground_friction(a: int, n: wp.vec3, lever: wp.vec3, friction: float, h: float,
+                        v: wp.array(dtype=wp.vec3), w: wp.array(dtype=wp.vec3),
+                        grad_t: wp.array(dtype=wp.vec3), grad_r: wp.array(dtype=wp.vec3),
+                        hess_a: wp.array(dtype=wp.mat33), hess_b: wp.array(dtype=wp.mat33),
+                        hess_c: wp.array(dtype=wp.mat33)):
+    """Viscous friction of a ground contact of body ``a`` (normal ``n``, lever arm
+    ``lever`` m): (c/(2h)) |P_t dp|^2, dp the contact point's displacement over the step
+    and P_t the tangent projector, i.e. a force c v_t (c = ``friction``, N s/m) against
+    sliding; Hessian (c/h) J^T P_t J."""
+    pt = wp.identity(n=3, dtype=float) - wp.outer(n, n)
+    vp = v[a] + wp.cross(w[a], lever)
+    ft = friction * (pt * vp)
+    sl = wp.skew(lever)
+    ch = friction / h
+    wp.atomic_add(grad_t, a, ft)
+    wp.atomic_add(grad_r, a, wp.cross(lever, ft))
+    wp.atomic_add(hess_a, a, ch * pt)
+    wp.atomic_add(hess_b, a, -ch * (pt * sl))
+    wp.atomic_add(hess_c, a, -ch * (sl * pt * sl))
+    return 0
+
+
 @wp.kernel
 def contact_assemble_kernel(count: wp.array(dtype=wp.int32), capacity: int,
                             c_a: wp.array(dtype=wp.int32), c_b: wp.array(dtype=wp.int32),
@@ -57,30 +144,11 @@ def contact_assemble_kernel(count: wp.array(dtype=wp.int32), capacity: int,
                             lo: int, hi: int):
     """Penalty of one contact (thread) on its depth d (m). d(q) is linear in the increments
     with gradient u_a = -(n, l_a x n), u_b = (n, l_b x n); linearised to the prediction
-    (q_t + h v). Gradient phi'(d) u, Gauss-Newton Hessian phi''(d) u u^T.
-
-    With ``activation`` e = 0, phi = (k/2) d^2 for d > 0 (only positive predicted depths
-    act): its stiffness jumps from 0 to k as a contact starts, so a contact predicted just
-    apart is ignored for a step and then pushes at full stiffness, and touching limbs
-    chatter. With e > 0 (m) the penalty is C2 in d: phi = k (d + e)^3 / (6 e) for
-    -e < d < 0 (the stiffness ramps from 0 to k over the last e of approach), and
-    phi = k/2 d^2 + k e/2 d + k e^2/6 for d >= 0 (force k (d + e/2), stiffness k).
-
-    Release (inter-body contacts, ``release_width`` > 0): a limb held farther than
-    ``release0`` m from where its animation puts it RELATIVE to its character's root
-    (dev = |(x - x^) - (x_root - x^_root)|, centres of mass) lets go of the contact
-    gradually: phi is scaled by clamp(1 - (dev - release0) / release_width, 0, 1) of the
-    farther of the two bodies, so a hand caught behind a neighbour while its animation
-    swings on slides through instead of staying pinned and whipping back; a character
-    pushed as a whole keeps its contacts.
-
-    Stiffening (inter-body contacts, ``stiffen`` = d0 > 0, m): for d > 0 phi gains
-    k d^3 / (3 d0) (force k d^2 / d0, stiffness 2 k d / d0): deep contacts push harder
-    without stiffening the light touches.
-
-    Ground contacts (kind 0) also get viscous friction: (c/(2h)) |P_t dp|^2, dp the
-    contact point's displacement over the step and P_t the tangent projector, i.e. a
-    force c v_t (c = ``friction``, N s/m) against sliding; Hessian (c/h) J^T P_t J.
+    (q_t + h v). Gradient phi'(d) u, Gauss-Newton Hessian phi''(d) u u^T (``penalty_force``;
+    inter-body contacts let go of limbs held far from their animation, ``release_scale``,
+    when ``release_width`` > 0). Ground contacts (kind 0) also get viscous friction
+    (``add_ground_friction``). Writes the contact's effective stiffness ``k_eff`` (0 when
+    inactive) and its ``u`` for the matrix-free contact couplings.
 
     Only bodies in [``lo``, ``hi``) receive terms, and only a contact whose body a is
     among them writes its ``k_eff`` and ``u``; with ``use_list`` the thread's contact is
@@ -107,58 +175,25 @@ def contact_assemble_kernel(count: wp.array(dtype=wp.int32), capacity: int,
         depth += h * (wp.dot(bt, v[b]) + wp.dot(br, w[b]))
     k_c = c_k[i]
     if release_width > 0.0 and c_kind[i] == 2 and b >= 0:
-        ra = (a / n_joints) * n_joints
-        rb = (b / n_joints) * n_joints
-        dev = wp.max(wp.length((x[a] - t_x[a]) - (x[ra] - t_x[ra])),
-                     wp.length((x[b] - t_x[b]) - (x[rb] - t_x[rb])))
-        k_c = k_c * wp.clamp(1.0 - (dev - release0) / release_width, 0.0, 1.0)
+        k_c = k_c * release_scale(a, b, n_joints, x, t_x, release0, release_width)
     if k_c <= 0.0 or depth <= -activation or (activation <= 0.0 and depth <= 0.0):
         if own_a:
             k_eff[i] = 0.0
         return
-    f = k_c * depth
-    k = k_c
-    if activation > 0.0:
-        if depth < 0.0:
-            s = depth + activation
-            f = k_c * s * s / (2.0 * activation)
-            k = k_c * s / activation
-        else:
-            f = k_c * (depth + 0.5 * activation)
-    if stiffen > 0.0 and depth > 0.0 and c_kind[i] == 2:
-        f += k_c * depth * depth / stiffen
-        k += 2.0 * k_c * depth / stiffen
+    f, k = penalty_force(depth, k_c, activation, stiffen, c_kind[i])
     if own_a:
         k_eff[i] = k
         u_at[i] = at
         u_ar[i] = ar
         u_bt[i] = bt
         u_br[i] = br
-        wp.atomic_add(grad_t, a, f * at)
-        wp.atomic_add(grad_r, a, f * ar)
-        wp.atomic_add(hess_a, a, k * wp.outer(at, at))
-        wp.atomic_add(hess_b, a, k * wp.outer(at, ar))
-        wp.atomic_add(hess_c, a, k * wp.outer(ar, ar))
+        add_contact_terms(a, f, k, at, ar, grad_t, grad_r, hess_a, hess_b, hess_c)
     if b >= 0:
         if not own_b:
             return
-        wp.atomic_add(grad_t, b, f * bt)
-        wp.atomic_add(grad_r, b, f * br)
-        wp.atomic_add(hess_a, b, k * wp.outer(bt, bt))
-        wp.atomic_add(hess_b, b, k * wp.outer(bt, br))
-        wp.atomic_add(hess_c, b, k * wp.outer(br, br))
+        add_contact_terms(b, f, k, bt, br, grad_t, grad_r, hess_a, hess_b, hess_c)
     elif c_kind[i] == 0 and friction > 0.0 and own_a:
-        lever = c_la[i]
-        pt = wp.identity(n=3, dtype=float) - wp.outer(n, n)
-        vp = v[a] + wp.cross(w[a], lever)
-        ft = friction * (pt * vp)
-        sl = wp.skew(lever)
-        ch = friction / h
-        wp.atomic_add(grad_t, a, ft)
-        wp.atomic_add(grad_r, a, wp.cross(lever, ft))
-        wp.atomic_add(hess_a, a, ch * pt)
-        wp.atomic_add(hess_b, a, -ch * (pt * sl))
-        wp.atomic_add(hess_c, a, -ch * (sl * pt * sl))
+        add_ground_friction(a, n, c_la[i], friction, h, v, w, grad_t, grad_r, hess_a, hess_b, hess_c)
 
 
 @wp.kernel
@@ -580,7 +615,7 @@ def pcg_split_update_kernel(lo: int, hi: int, part: int, alpha: float,
                             sums: wp.array(dtype=float)):
     """Split PCG, one iteration's step on bodies [lo, hi) (one thread): x += alpha p,
     r -= alpha q, z = P r; partial |r|^2 -> sums[4 part + 3], r.z -> sums[4 part + 1]."""
-    sums[4 * part + 3] = wp.float32(pcg_advance(lo, hi, alpha, p_t, p_r, q_t, q_r, x_t, x_r, r_t, r_r))
+    sums[4 * part + 3] = pcg_advance(lo, hi, alpha, p_t, p_r, q_t, q_r, x_t, x_r, r_t, r_r)
     tree_apply(lo, hi, parent, r_t, r_r, dinv, lmat, lever_p, lever_c, ctrl_c, k_joint, y6, z_t, z_r)
     sums[4 * part + 1] = dot6(lo, hi, r_t, r_r, z_t, z_r)
 

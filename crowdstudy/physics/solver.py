@@ -358,11 +358,24 @@ class Solver:
         dot products in a fixed order and computes alpha and beta in float32. A row's
         matrix-vector product is the fused kernel's term for term; the dot products differ
         from the fused kernel's in their summation order only."""
-        m, cfg = self.model, self.config
+        m = self.model
         cut = (m.n_characters // 2) * m.n_joints
+        init, matvec, update = self._split_commands(contacts, cut)
+        # each half factorises its characters' tree blocks, then starts its PCG rows
+        half = m.n_characters // 2
+        run_parallel(lambda: (self._factor_range(0, half), init[0].launch()),
+                     lambda: (self._factor_range(half, m.n_characters), init[1].launch()))
+        s = self.split_sums.numpy()
+        it, rel = self._split_iterations(matvec, update, np.float32(s[0]) + np.float32(s[4]),
+                                         np.float32(s[1]) + np.float32(s[5]))
+        self.last_cg = (it, float(rel))
+
+    def _split_commands(self, contacts, cut: int) -> tuple[list, list, list]:
+        """The split PCG's recorded launches (see :meth:`_record_split`) for the halves
+        split at body ``cut``, with this step's body-body contact lists and their counts
+        set."""
+        m, cfg = self.model, self.config
         halves = ((0, 0, cut), (1, cut, m.n_bodies))
-        sums = self.split_sums
-        f32 = np.float32
         levers = (self.lever_p, self.lever_c, self.ctrl_c, float(cfg.joint_stiffness))   # the joint blocks
         # the body-body contacts of each half (a contact across the cut is in both)
         n_act = contacts.n_active()
@@ -383,20 +396,16 @@ class Solver:
         for part, n_list in enumerate(counts):
             for cmd in matvec[part]:
                 cmd.set_param_at_index(4, n_list)
+        return init, matvec, update
 
-        def both(cmds, value=None) -> None:
-            if value is not None:
-                for cmd in cmds:
-                    cmd.set_param_at_index(3, value)
-            run_parallel(cmds[0].launch, cmds[1].launch)
-
-        # each half factorises its characters' tree blocks, then starts its PCG rows
-        half = m.n_characters // 2
-        run_parallel(lambda: (self._factor_range(0, half), init[0].launch()),
-                     lambda: (self._factor_range(half, m.n_characters), init[1].launch()))
-        s = sums.numpy()
-        bnorm2 = f32(s[0]) + f32(s[4])
-        rz0 = f32(s[1]) + f32(s[5])
+    def _split_iterations(self, matvec, update, bnorm2: np.float32, rz0: np.float32) -> tuple[int, np.float32]:
+        """The split PCG's iterations from |r|^2 = ``bnorm2`` and r.z = ``rz0`` (float32, as
+        the fused kernel); returns (iterations, |r| / |b|). On two threads each half
+        iterates on its own thread and meets the other at a barrier after each phase (one
+        wake-up a phase, where handing each phase over costs two); else both halves phase
+        by phase from this thread: the same arithmetic either way."""
+        cfg, sums = self.config, self.split_sums
+        f32 = np.float32
         tol = f32(cfg.cg_tolerance)
         max_it = int(cfg.cg_max_iterations)
 
@@ -428,9 +437,6 @@ class Solver:
                 buf = 1 - buf
             return it, rel
 
-        # two threads at once, each iterating its half and meeting the other at a barrier
-        # after each phase (one wake-up a phase, where handing each phase over costs two);
-        # else both halves phase by phase from this thread: the same arithmetic either way
         barrier = threading.Barrier(2)
         result = []
 
@@ -450,10 +456,15 @@ class Solver:
             if part == 0:
                 result.append(out)
 
+        def both(cmds, buf, value) -> None:     # one phase of both halves, from this thread
+            pair = [cmds[0][buf], cmds[1][buf]]
+            for cmd in pair:
+                cmd.set_param_at_index(3, value)
+            run_parallel(pair[0].launch, pair[1].launch)
+
         if not run_together(lambda: half_loop(0), lambda: half_loop(1)):
-            result.append(iterate(lambda cmds, buf, value: both([cmds[0][buf], cmds[1][buf]], value)))
-        it, rel = result[0]
-        self.last_cg = (it, float(rel))
+            result.append(iterate(both))
+        return result[0]
 
     def _record_split(self, contacts, halves, levers):
         """The split PCG's launches (init, matvec and update of each half; the two
