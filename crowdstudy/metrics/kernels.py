@@ -68,6 +68,14 @@ def face_crossings(verts: wp.array(dtype=wp.vec3d), faces: wp.array2d(dtype=wp.i
                    out_solid: wp.array(dtype=wp.int32), out_ix: wp.array(dtype=wp.int32),
                    out_iy: wp.array(dtype=wp.int32), out_z: wp.array(dtype=wp.float64),
                    out_sign: wp.array(dtype=wp.int32)):
+    """The column crossings of face f (thread): columns at ((ix + 1/2) h, (iy + 1/2) h)
+    (h m) inside the face's projection and inside one of its solid's partner rectangles
+    (``rects`` rows ``rect_first[s]`` to ``rect_first[s + 1]``, column index ranges).
+
+    ``write`` 0 counts them into ``counts[f]``; ``write`` 1 writes them from
+    ``offsets[f]``: solid, column (ix, iy), height z of the crossing (m) and its sign (+1
+    entering, -1 leaving going up the column, for an outward-oriented surface; see
+    :class:`~crowdstudy.metrics.columns.Crossings`)."""
     f = wp.tid()
     s = face_solid[f]
     r0 = rect_first[s]
@@ -127,6 +135,9 @@ def face_crossings(verts: wp.array(dtype=wp.vec3d), faces: wp.array2d(dtype=wp.i
 def skin_vertices(rest: wp.array(dtype=wp.vec3d), joint: wp.array2d(dtype=wp.int32),
                   weight: wp.array2d(dtype=wp.float64), rot: wp.array(dtype=wp.mat33d),
                   trans: wp.array(dtype=wp.vec3d), out: wp.array(dtype=wp.vec3d)):
+    """Vertex v (thread) posed by linear blend skinning: sum over its 4 joints of weight
+    times (R_joint p_rest + t_joint), R (N J,) mat33d and t (N J,) vec3d (m) each joint's
+    world transform relative to the rest pose."""
     v = wp.tid()
     p = rest[v]
     acc = wp.vec3d()

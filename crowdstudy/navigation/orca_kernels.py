@@ -1,5 +1,9 @@
-"""Warp kernels of the ORCA simulator (imported by :class:`~crowdstudy.navigation.orca.ORCASimulator`
-only, so ``import crowdstudy.navigation`` does not load Warp).
+"""Warp kernels of the ORCA simulator.
+
+:class:`~crowdstudy.navigation.orca.ORCASimulator` imports this module inside its methods,
+so ``import crowdstudy.navigation`` does not load Warp; importing it configures Warp
+(:func:`~crowdstudy.warp_runtime.get_warp`) before anything here can compile. Positions in
+m, velocities in m/s, times in s, in the floor plane (x, y).
 
 One thread per agent. The velocity kernel follows the RVO2 library's algorithm (van den
 Berg, Guy, Snape, Lin, Manocha: "Reciprocal n-body collision avoidance", 2011): ORCA
@@ -9,7 +13,9 @@ disc; when it is infeasible, the 3D linear program that keeps the obstacle half-
 and minimises the largest violation of the agent half-planes. Single-precision like RVO2.
 
 Per-thread variable-length lists (neighbours, ORCA lines, projected lines) live in rows of
-2D scratch arrays ``[agent, slot]`` so the same code runs on CPU and CUDA devices.
+2D scratch arrays ``[agent, slot]`` so the same code runs on CPU and CUDA devices. An ORCA
+line is a point ``lp`` (m/s) and a unit direction ``ld``; the permitted velocities lie to
+its left.
 """
 
 from __future__ import annotations
@@ -18,10 +24,10 @@ import warp as wp
 
 from crowdstudy.warp_runtime import get_warp
 
+__all__ = ["cell_keys", "cell_ranges", "integrate", "compute_velocities"]
+
 get_warp()      # the project's kernel cache and log level, set before this module can compile
 wp.set_module_options({"enable_backward": False})     # forward only: halves the compile time
-
-__all__ = ["cell_keys", "cell_ranges", "integrate", "compute_velocities"]
 
 EPSILON = wp.constant(1.0e-5)      # RVO_EPSILON
 BIG = wp.constant(1.0e30)
@@ -29,17 +35,21 @@ BIG = wp.constant(1.0e30)
 
 @wp.func
 def det2(a: wp.vec2, b: wp.vec2):
+    """The 2D cross product a x b (> 0 when b lies to the left of a)."""
     return a[0] * b[1] - a[1] * b[0]
 
 
 @wp.func
 def wrap_coord(x: float, x0: float, length: float):
+    """``x`` (m) wrapped into the periodic range [x0, x0 + length)."""
     s = (x - x0) / length
     return x - length * wp.floor(s)
 
 
 @wp.func
 def grid_cell(p: wp.vec2, origin: wp.vec2, inv_cell: wp.vec2, nx: int, ny: int):
+    """The (ix, iy) cell of the nx x ny grid (lower corner ``origin`` m, ``inv_cell`` the
+    inverse cell sizes, 1/m) that holds ``p`` (m), clamped to the grid."""
     ix = int(wp.floor((p[0] - origin[0]) * inv_cell[0]))
     iy = int(wp.floor((p[1] - origin[1]) * inv_cell[1]))
     ix = wp.clamp(ix, 0, nx - 1)
@@ -51,6 +61,8 @@ def grid_cell(p: wp.vec2, origin: wp.vec2, inv_cell: wp.vec2, nx: int, ny: int):
 def cell_keys(pos: wp.array(dtype=wp.vec2), origin: wp.vec2, inv_cell: wp.vec2, nx: int, ny: int,
               periodic: int, x0: float, length: float,
               keys: wp.array(dtype=int), values: wp.array(dtype=int)):
+    """The grid cell of agent i (thread) as its sort key (``iy * nx + ix``) and i as its
+    value (wrapped into the periodic range first when ``periodic``)."""
     i = wp.tid()
     p = pos[i]
     if periodic != 0:
@@ -62,6 +74,8 @@ def cell_keys(pos: wp.array(dtype=wp.vec2), origin: wp.vec2, inv_cell: wp.vec2, 
 
 @wp.kernel
 def cell_ranges(keys: wp.array(dtype=int), n: int, cell_start: wp.array(dtype=int), cell_end: wp.array(dtype=int)):
+    """From the ``n`` sorted keys, each cell's slice [cell_start, cell_end) of the sorted
+    agents (cells without agents keep their zeroed range)."""
     i = wp.tid()
     k = keys[i]
     if i == 0:
@@ -77,6 +91,7 @@ def cell_ranges(keys: wp.array(dtype=int), n: int, cell_start: wp.array(dtype=in
 @wp.kernel
 def integrate(pos: wp.array(dtype=wp.vec2), vel: wp.array(dtype=wp.vec2), new_vel: wp.array(dtype=wp.vec2),
               dt: float):
+    """Explicit Euler step of agent i (thread): v <- new_vel (m/s), p <- p + v dt (m, s)."""
     i = wp.tid()
     v = new_vel[i]
     vel[i] = v
@@ -184,11 +199,14 @@ def lp3(lp: wp.array2d(dtype=wp.vec2), ld: wp.array2d(dtype=wp.vec2),
 
 @wp.func
 def leg_left(rel: wp.vec2, leg: float, r: float, dist_sq: float):
+    """Direction of the left leg of the velocity obstacle of a disc of radius ``r`` (m) at
+    ``rel`` (m), |rel|^2 = ``dist_sq``, ``leg`` = sqrt(dist_sq - r^2)."""
     return wp.vec2(rel[0] * leg - rel[1] * r, rel[0] * r + rel[1] * leg) / dist_sq
 
 
 @wp.func
 def leg_right(rel: wp.vec2, leg: float, r: float, dist_sq: float):
+    """Direction of the right leg (see ``leg_left``)."""
     return wp.vec2(rel[0] * leg + rel[1] * r, -rel[0] * r + rel[1] * leg) / dist_sq
 
 

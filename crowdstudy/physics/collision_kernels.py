@@ -71,6 +71,8 @@ def push_contact(count: wp.array(dtype=wp.int32), capacity: int, a: int, b: int,
                  c_n: wp.array(dtype=wp.vec3), c_depth: wp.array(dtype=float),
                  c_la: wp.array(dtype=wp.vec3), c_lb: wp.array(dtype=wp.vec3),
                  c_k: wp.array(dtype=float), c_kind: wp.array(dtype=wp.int32)):
+    """Append one contact to the contact arrays (C,) at the next slot of ``count``; a
+    contact past ``capacity`` is counted but not stored (the caller sees the overflow)."""
     idx = wp.atomic_add(count, 0, 1)
     if idx < capacity:
         c_a[idx] = a

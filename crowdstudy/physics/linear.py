@@ -268,6 +268,7 @@ def matvec(nb: int, n_contacts: int, x_t: wp.array(dtype=wp.vec3), x_r: wp.array
 
 @wp.func
 def block66(a: wp.mat33, b: wp.mat33, c: wp.mat33, d: wp.mat33):
+    """The 6x6 matrix [[a, b], [c, d]] of four 3x3 blocks."""
     m = wp.spatial_matrix()
     for i in range(3):
         for j in range(3):
@@ -280,6 +281,7 @@ def block66(a: wp.mat33, b: wp.mat33, c: wp.mat33, d: wp.mat33):
 
 @wp.func
 def sub33(m: wp.spatial_matrix, r0: int, c0: int):
+    """The 3x3 block of ``m`` from row ``r0``, column ``c0``."""
     out = wp.mat33(0.0)
     for i in range(3):
         for j in range(3):
@@ -698,6 +700,8 @@ def triplets_contacts_kernel(offset: int, count: wp.array(dtype=wp.int32), capac
 @wp.kernel
 def unpack_kernel(x6: wp.array(dtype=wp.spatial_vector), x_t: wp.array(dtype=wp.vec3),
                   x_r: wp.array(dtype=wp.vec3)):
+    """Split a packed (B,) spatial_vector solution (dx m, dw rad) into its translation and
+    rotation parts, (B,) vec3 each."""
     i = wp.tid()
     s = x6[i]
     x_t[i] = wp.vec3(s[0], s[1], s[2])

@@ -31,17 +31,22 @@ Linear solvers (``linear_solver``):
 
 * ``"fused"``: the whole PCG in ONE Warp kernel launch (a single thread loops over the
   blocks). Warp's CPU kernels run on one thread anyway, so this removes every
-  per-iteration launch; the fastest on CPU (measured in ``benchmarks/physics.py``).
+  per-iteration launch; the fastest on CPU.
 * ``"warp"``: a ``warp.sparse`` BSR matrix (6x6 blocks) assembled on the device and
   ``warp.optim.linear.cg`` with the same preconditioner (as a ``LinearOperator``): the
-  CUDA default (untested on a GPU here; the same code path is tested on the CPU).
+  CUDA default (the CPU tests run the same code path; ``tests/test_gpu.py`` runs it on a
+  CUDA device where there is one).
 * ``"scipy"``: the same BSR matrix on the host and ``scipy.sparse.linalg.cg`` with the 6x6
   block Jacobi (benchmark peer).
 
-Measured on the 2-core CPU (60 characters, D5, one assembled step; ``crowdstudy bench
-physics``): fused + character preconditioner 1.5 ms (13 iterations), fused + 6x6 block
-Jacobi 4.2 ms (hits the 60-iteration cap), scipy 20 ms, ``warp.optim.linear.cg`` 300 ms
-(its per-iteration launches and the BSR rebuild dominate on CPU).
+``crowdstudy bench physics`` times them. On a CPU the fused PCG with the character
+preconditioner wins: with the 6x6 block Jacobi it needs several times the iterations (it
+may stop at the iteration cap); scipy is an order of magnitude slower, and
+``warp.optim.linear.cg`` two (its per-iteration launches and the BSR rebuild dominate).
+
+The Warp kernels live in :mod:`crowdstudy.physics.kernels` (bodies) and
+:mod:`crowdstudy.physics.linear` (contacts and linear algebra); the methods that launch
+them import those modules, so importing this one does not import Warp.
 """
 
 from __future__ import annotations
@@ -69,8 +74,8 @@ _MIN_CHARACTERS_PER_THREAD = 16
 _MIN_CHARACTERS_SPLIT_ASSEMBLY = 200
 #: from this many characters on, the CPU PCG runs split over the two halves of the crowd
 #: (``Solver._solve_split``); below, its per-iteration hand-overs cost more than the second
-#: core saves (measured 2026-12-04: 60 characters 10.4 ms per step against 4.5, 200 14.3 against
-#: 13.1, 1,000 47.4-49.2 against 51.7-53.3, two host threads)
+#: core saves (on two host threads the split still loses at a couple of hundred characters
+#: and wins at a thousand)
 _MIN_CHARACTERS_SPLIT_PCG = 500
 
 
