@@ -19,12 +19,13 @@ import time
 __all__ = ["KERNEL_MODULES", "precompile"]
 
 #: (Python module, the function that defines its kernels or None when importing does) of
-#: every Warp module of the toolkit
+#: every Warp module of the toolkit. Importing a kernel module configures Warp
+#: (:func:`~crowdstudy.warp_runtime.get_warp`: the kernel cache) before its kernels exist.
 KERNEL_MODULES: tuple[tuple[str, str | None], ...] = (
-    ("crowdstudy.physics.kernels", "kernels"),
-    ("crowdstudy.physics.collision_kernels", "collision_kernels"),
-    ("crowdstudy.physics.linear", "solver_kernels"),
-    ("crowdstudy.metrics.kernels", "warp_kernels"),
+    ("crowdstudy.physics.kernels", None),
+    ("crowdstudy.physics.collision_kernels", None),
+    ("crowdstudy.physics.linear", None),
+    ("crowdstudy.metrics.kernels", None),
     ("crowdstudy.body.skinning", "warp_kernels"),
     ("crowdstudy.navigation.orca_kernels", None),
 )

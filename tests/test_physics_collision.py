@@ -9,7 +9,7 @@ from crowdstudy.body.capsules import closest_points_on_segments
 from crowdstudy.body.skeleton import DEFAULT_PELVIS_HEIGHT, DEFAULT_REST_JOINTS, PARENTS, children
 from crowdstudy.errors import InvalidInputError
 from crowdstudy.physics.collision import (KIND_ENVIRONMENT, KIND_GROUND, KIND_INTER, KIND_INTRA, CollisionPipeline,
-                                          Contacts, collision_kernels, sample_static_walls, sweep_pairs)
+                                          Contacts, sample_static_walls, sweep_pairs)
 from crowdstudy.physics.config import PhysicsConfig
 from crowdstudy.physics.model import ModelBuilder
 from crowdstudy.physics.state import Control, State
@@ -87,8 +87,10 @@ def test_the_sweep_finds_the_broadphase_kernels_pairs_in_its_order():
     """``sweep_pairs`` (the CPU's broad phase from 200 characters) returns exactly the
     pairs of ``broadphase_kernel`` in the same (i, j) order: random boxes on a crowd's
     floor, with shared lower x (ties) and boxes that touch exactly."""
-    k = collision_kernels()
-    wp = k.wp
+    from crowdstudy.physics import collision_kernels as k
+    from crowdstudy.warp_runtime import get_warp
+
+    wp = get_warp()
     rng = np.random.default_rng(5)
     n = 700
     lo = np.column_stack([rng.uniform(0, 30, n), rng.uniform(0, 12, n), rng.uniform(0, 0.1, n)])

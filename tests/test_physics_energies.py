@@ -8,6 +8,7 @@ import pytest
 from crowdstudy.body.rotations import axis_angle_to_matrix
 from crowdstudy.body.skeleton import DEFAULT_REST_JOINTS, PARENTS, children
 from crowdstudy.physics import energies as E
+from crowdstudy.warp_runtime import get_warp
 
 RNG = np.random.default_rng(7)
 EPS = 1e-6
@@ -175,7 +176,7 @@ def small_system():
     control.advance(0, 0, 0.0)
     control.advance(0, 1, 1.0)
     state = State(model)
-    wp = control.k.wp
+    wp = get_warp()
     nb = model.n_bodies
     f32 = np.float32
     x = (control.t_x.numpy() + rng.normal(scale=0.01, size=(nb, 3))).astype(f32)
@@ -284,7 +285,7 @@ def test_tree_preconditioner_is_the_inverse_of_each_characters_block(small_syste
     """The character preconditioner (block LDL^T, joint blocks applied from the levers) equals
     the dense inverse of each character's diagonal blocks plus joint couplings."""
     from crowdstudy.physics.collision import CollisionPipeline, Contacts
-    from crowdstudy.physics.linear import bsr_from_triplets
+    from crowdstudy.physics.linear import bsr_from_triplets, tree_precond_kernel
 
     model, cfg, control, state, solver = small_system
     pipe = CollisionPipeline(model, cfg)
@@ -302,7 +303,7 @@ def test_tree_preconditioner_is_the_inverse_of_each_characters_block(small_syste
     xw, yw = wp.array(x, dtype=wp.spatial_vector), wp.array(y, dtype=wp.spatial_vector)
     z = wp.zeros(nb, dtype=wp.spatial_vector)
     work = wp.zeros(nb, dtype=wp.spatial_vector)
-    wp.launch(solver.ks.tree_precond_kernel, model.n_characters,
+    wp.launch(tree_precond_kernel, model.n_characters,
               [nj, model.wp["body_parent"], solver.tree_dinv, solver.tree_l, solver.lever_p, solver.lever_c,
                solver.ctrl_c, float(cfg.joint_stiffness), xw, yw, z, 0.5, 2.0, work])
     m = 6 * nj
@@ -405,7 +406,7 @@ def test_ground_contact_friction_gradient():
     state = State(model)
     state.x.assign(control.t_x)
     state.q.assign(control.t_glob)
-    wp = control.k.wp
+    wp = get_warp()
     vel = np.array([0.2, -0.1, 0.0])
     state.v.assign(wp.array(np.tile(vel, (model.n_bodies, 1)).astype(np.float32), dtype=wp.vec3))
     pipe = CollisionPipeline(model, cfg)
@@ -469,7 +470,7 @@ def test_stance_foot_anchor_assembly_matches_reference():
     control.set_frames(np.zeros((1, 24, 3)), np.array([[0.0, 0.0, 0.95]]))
     control.advance(0, 0, 0.0)
     control.hold()
-    wp = control.k.wp
+    wp = get_warp()
     state = State(model)
     tx = control.t_x.numpy().astype(float)
     shift = np.zeros_like(tx)

@@ -40,9 +40,8 @@ import dataclasses
 
 import numpy as np
 
-from crowdstudy.physics.collision_kernels import collision_kernels
 from crowdstudy.scene import wall_segments
-from crowdstudy.warp_runtime import host_threads, run_parallel
+from crowdstudy.warp_runtime import get_warp, host_threads, run_parallel
 
 __all__ = ["Contacts", "CollisionPipeline", "sample_static_walls", "sweep_pairs",
            "KIND_GROUND", "KIND_ENVIRONMENT", "KIND_INTER", "KIND_INTRA"]
@@ -65,8 +64,8 @@ def launch_sweep(char_lo, char_hi, order, sorted_lo_x, pair_count, pair_capacity
     """Launch ``sweep_kernel`` on the CPU: ``char_lo``, ``char_hi`` the boxes' corners (CPU
     Warp arrays of vec3, m, read here as numpy too); ``order`` and ``sorted_lo_x`` Warp
     scratch arrays of length n."""
-    k = collision_kernels()
-    wp = k.wp
+    from crowdstudy.physics.collision_kernels import sweep_kernel
+
     lo = char_lo.numpy()
     idx = np.argsort(lo[:, 0], kind="stable")
     order.numpy()[:] = idx
@@ -74,15 +73,15 @@ def launch_sweep(char_lo, char_hi, order, sorted_lo_x, pair_count, pair_capacity
     hi = char_hi.numpy()
     reach = float(np.max(hi[:, 0] - lo[:, 0])) + 1e-3 if len(lo) else 0.0
     pair_count.zero_()
-    wp.launch(k.sweep_kernel, len(lo), [char_lo, char_hi, order, sorted_lo_x, reach, pair_count, pair_capacity,
-                                         pair_i, pair_j, pair_shift], device="cpu")
+    get_warp().launch(sweep_kernel, len(lo), [char_lo, char_hi, order, sorted_lo_x, reach, pair_count,
+                                              pair_capacity, pair_i, pair_j, pair_shift], device="cpu")
 
 
 def sweep_pairs(lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The pairs (i < j) of overlapping boxes (``lo``, ``hi``: (n, 3) corners, m) in (i, j)
     order by ``sweep_kernel`` on the CPU: the pairs and the order of ``broadphase_kernel``
     without a period (closed intervals, the kernel's comparisons)."""
-    wp = collision_kernels().wp
+    wp = get_warp()
     lo = np.ascontiguousarray(lo, np.float32)
     hi = np.ascontiguousarray(hi, np.float32)
     n = len(lo)
@@ -156,8 +155,6 @@ class Contacts:
 
     @classmethod
     def allocate(cls, capacity: int, device: str) -> "Contacts":
-        from crowdstudy.warp_runtime import get_warp
-
         wp = get_warp()
         return cls(capacity=int(capacity), count=wp.zeros(1, dtype=wp.int32, device=device),
                    body_a=wp.zeros(capacity, dtype=wp.int32, device=device),
@@ -200,8 +197,7 @@ class CollisionPipeline:
                  static_walls: np.ndarray | None = None):
         self.model = model
         self.config = config
-        self.k = collision_kernels()
-        wp = self.k.wp
+        wp = get_warp()
         dev = model.device
         n, nb = model.n_characters, model.n_bodies
         self.period = float(period or 0.0)
@@ -257,16 +253,27 @@ class CollisionPipeline:
         ``control`` (:class:`~crowdstudy.physics.state.Control`, advanced to this step): with
         ``config.target_relative_self_contacts``, ground and intra-body contacts count only
         the depth beyond the target pose's own (see ``intra_kernel``)."""
-        k, wp, m, cfg = self.k, self.k.wp, self.model, self.config
-        dev = m.device
-        W = m.wp
-        nj, n, nb = m.n_joints, m.n_characters, m.n_bodies
-        spec = self.speculative
+        cfg = self.config
         margin = float(cfg.contact_margin)
         contacts.count.zero_()
-        out = [contacts.count, contacts.capacity, *contacts.buffers()]
         relative = int(bool(cfg.target_relative_self_contacts) and control is not None)
         pass_on = int(self.pass_on and control is not None)
+        self._capsule_poses(state, control, relative, pass_on, margin)
+        self._static_contacts(state, contacts, control, relative, margin)
+        n_pairs = self._character_pairs()
+        self._pair_contacts(state, contacts, relative, pass_on, margin, n_pairs)
+
+    def _capsule_poses(self, state, control, relative: int, pass_on: int, margin: float) -> None:
+        """World capsules, their midpoints and half lengths, and the character AABBs (grown
+        by ``margin`` plus the speculative distance, m) of ``state``; with ``relative`` the
+        same in the target pose, with ``pass_on`` in the look-ahead pose (``control``)."""
+        from crowdstudy.physics import collision_kernels as k
+
+        wp, m = get_warp(), self.model
+        dev = m.device
+        W = m.wp
+        nj, n = m.n_joints, m.n_characters
+        spec = self.speculative
 
         def capsules_now() -> None:         # the state's capsules and character AABBs
             wp.launch(k.capsules_world_kernel, n, [state.x, state.q, W["cap_p0"], W["cap_p1"], W["cap_radius"],
@@ -289,6 +296,18 @@ class CollisionPipeline:
         else:
             capsules_now()
             capsules_target()
+
+    def _static_contacts(self, state, contacts: Contacts, control, relative: int, margin: float) -> None:
+        """The contacts with the ground, the point-sampled static objects and the walls
+        (needs :meth:`_capsule_poses` first)."""
+        from crowdstudy.physics import collision_kernels as k
+
+        wp, m, cfg = get_warp(), self.model, self.config
+        dev = m.device
+        W = m.wp
+        nj, nb = m.n_joints, m.n_bodies
+        spec = self.speculative
+        out = [contacts.count, contacts.capacity, *contacts.buffers()]
         band = float(cfg.contact_activation)
         if cfg.ground_stiffness > 0:
             wp.launch(k.ground_kernel, nb, [state.x, self.p0w, self.p1w, W["cap_radius"], relative, self.p0t,
@@ -304,6 +323,15 @@ class CollisionPipeline:
             wp.launch(k.wall_kernel, nb, [state.x, self.p0w, self.p1w, W["cap_radius"], W["cap_skin"], W["body_char"],
                                           nj, side, self.walls, self.period, margin, spec, float(cfg.wall_stiffness),
                                           *out], device=dev)
+
+    def _character_pairs(self) -> int:
+        """The broad phase: the overlapping character AABBs into ``pair_i``, ``pair_j``,
+        ``pair_shift`` (needs :meth:`_capsule_poses` first); returns how many were kept (the
+        surplus over ``pair_capacity`` is counted in ``dropped_pairs``)."""
+        from crowdstudy.physics import collision_kernels as k
+
+        wp, m, cfg = get_warp(), self.model, self.config
+        dev, n = m.device, m.n_characters
         n_pairs = 0
         if n > 1 and cfg.contact_stiffness > 0:
             if dev == "cpu" and self.period <= 0.0 and n >= _MIN_CHARACTERS_SWEEP:
@@ -321,6 +349,21 @@ class CollisionPipeline:
             if n_pairs > self.pair_capacity:
                 self.dropped_pairs += n_pairs - self.pair_capacity
                 n_pairs = self.pair_capacity
+        return n_pairs
+
+    def _pair_contacts(self, state, contacts: Contacts, relative: int, pass_on: int, margin: float,
+                       n_pairs: int) -> None:
+        """The inter-body contacts of the first ``n_pairs`` character pairs (the narrow
+        phase) and the intra-body contacts, appended to ``contacts``: on the CPU with two
+        host threads, split over both (see below)."""
+        from crowdstudy.physics import collision_kernels as k
+
+        wp, m, cfg = get_warp(), self.model, self.config
+        dev = m.device
+        W = m.wp
+        nj = m.n_joints
+        spec = self.speculative
+        band = float(cfg.contact_activation)
         n_intra = W["intra_pairs"].shape[0]
         intra_on = bool(cfg.intra_body and n_intra and cfg.intra_stiffness > 0)
 

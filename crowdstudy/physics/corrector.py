@@ -99,10 +99,11 @@ class CrowdCorrector:
         return self.states[0]
 
     def _place(self) -> None:
-        k = self.control.k
-        k.wp.launch(k.set_state_kernel, self.model.n_bodies, [self.control.t_x, self.control.t_glob, self.state.x,
-                                                              self.state.q, self.state.v, self.state.w],
-                    device=self.model.device)
+        from crowdstudy.physics.kernels import set_state_kernel
+
+        self.solver.wp.launch(set_state_kernel, self.model.n_bodies,
+                              [self.control.t_x, self.control.t_glob, self.state.x, self.state.q, self.state.v,
+                               self.state.w], device=self.model.device)
         self.solver.reset_foot_anchors()
 
     def reset(self, joint_rotations: np.ndarray, root_translation: np.ndarray, *, settle: bool = False) -> None:
@@ -154,10 +155,12 @@ class CrowdCorrector:
 
     def project(self, out_rot, out_root, frame: int) -> None:
         """Write the current pose into row ``frame`` of (F, B) vec3 / (F, N) vec3 device arrays."""
-        k, m = self.control.k, self.model
-        k.wp.launch(k.project_kernel, m.n_bodies, [self.state.x, self.state.q, m.wp["body_parent"],
-                                                   m.wp["anchor_child"], m.n_joints, int(frame), out_rot, out_root],
-                    device=m.device)
+        from crowdstudy.physics.kernels import project_kernel
+
+        m = self.model
+        self.solver.wp.launch(project_kernel, m.n_bodies, [self.state.x, self.state.q, m.wp["body_parent"],
+                                                           m.wp["anchor_child"], m.n_joints, int(frame), out_rot,
+                                                           out_root], device=m.device)
 
     def step(self, joint_rotations: np.ndarray, root_translation: np.ndarray):
         """Feed the next target frame; returns the corrected pose of that frame:

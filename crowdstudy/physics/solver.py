@@ -31,17 +31,22 @@ Linear solvers (``linear_solver``):
 
 * ``"fused"``: the whole PCG in ONE Warp kernel launch (a single thread loops over the
   blocks). Warp's CPU kernels run on one thread anyway, so this removes every
-  per-iteration launch; the fastest on CPU (measured in ``benchmarks/physics.py``).
+  per-iteration launch; the fastest on CPU.
 * ``"warp"``: a ``warp.sparse`` BSR matrix (6x6 blocks) assembled on the device and
   ``warp.optim.linear.cg`` with the same preconditioner (as a ``LinearOperator``): the
-  CUDA default (untested on a GPU here; the same code path is tested on the CPU).
+  CUDA default (the CPU tests run the same code path; ``tests/test_gpu.py`` runs it on a
+  CUDA device where there is one).
 * ``"scipy"``: the same BSR matrix on the host and ``scipy.sparse.linalg.cg`` with the 6x6
   block Jacobi (benchmark peer).
 
-Measured on the 2-core CPU (60 characters, D5, one assembled step; ``crowdstudy bench
-physics``): fused + character preconditioner 1.5 ms (13 iterations), fused + 6x6 block
-Jacobi 4.2 ms (hits the 60-iteration cap), scipy 20 ms, ``warp.optim.linear.cg`` 300 ms
-(its per-iteration launches and the BSR rebuild dominate on CPU).
+``crowdstudy bench physics`` times them. On a CPU the fused PCG with the character
+preconditioner wins: with the 6x6 block Jacobi it needs several times the iterations (it
+may stop at the iteration cap); scipy is an order of magnitude slower, and
+``warp.optim.linear.cg`` two (its per-iteration launches and the BSR rebuild dominate).
+
+The Warp kernels live in :mod:`crowdstudy.physics.kernels` (bodies) and
+:mod:`crowdstudy.physics.linear` (contacts and linear algebra); the methods that launch
+them import those modules, so importing this one does not import Warp.
 """
 
 from __future__ import annotations
@@ -52,9 +57,8 @@ import time
 import numpy as np
 
 from crowdstudy.errors import InvalidInputError
-from crowdstudy.physics.linear import bsr_from_triplets, solver_kernels
 from crowdstudy.physics.model import GROUP_ARM, GROUP_FEET, GROUP_PELVIS, GROUP_TRUNK
-from crowdstudy.warp_runtime import host_threads, run_parallel, run_together
+from crowdstudy.warp_runtime import get_warp, host_threads, run_parallel, run_together
 
 __all__ = ["Solver", "LINEAR_SOLVERS"]
 
@@ -70,8 +74,8 @@ _MIN_CHARACTERS_PER_THREAD = 16
 _MIN_CHARACTERS_SPLIT_ASSEMBLY = 200
 #: from this many characters on, the CPU PCG runs split over the two halves of the crowd
 #: (``Solver._solve_split``); below, its per-iteration hand-overs cost more than the second
-#: core saves (measured 2026-12-04: 60 characters 10.4 ms per step against 4.5, 200 14.3 against
-#: 13.1, 1,000 47.4-49.2 against 51.7-53.3, two host threads)
+#: core saves (on two host threads the split still loses at a couple of hundred characters
+#: and wins at a thousand)
 _MIN_CHARACTERS_SPLIT_PCG = 500
 
 
@@ -90,13 +94,9 @@ class Solver:
 
     def __init__(self, model, config, *, linear_solver: str | None = None, profile: bool = False,
                  preconditioner: str = "character"):
-        from crowdstudy.physics.kernels import kernels
-
         self.model = model
         self.config = config
-        self.kb = kernels()
-        self.ks = solver_kernels()
-        wp = self.kb.wp
+        wp = get_warp()
         self.wp = wp
         dev = model.device
         if linear_solver is None:
@@ -182,7 +182,9 @@ class Solver:
 
     def assemble(self, state_in, control, contacts, dt: float) -> None:
         """Prediction, gradient and diagonal Hessian blocks (bodies, then contacts)."""
-        wp, kb, ks, m, cfg = self.wp, self.kb, self.ks, self.model, self.config
+        from crowdstudy.physics import kernels as kb, linear as ks
+
+        wp, m, cfg = self.wp, self.model, self.config
         W, dev = m.wp, m.device
         self._contact_buffers(contacts.capacity)
         ff = bool(cfg.feedforward)
@@ -279,7 +281,9 @@ class Solver:
 
     def solve(self, contacts) -> None:
         """Solve H [dx; dw] = -g into ``self.dx``, ``self.dw``."""
-        wp, ks, m, cfg = self.wp, self.ks, self.model, self.config
+        from crowdstudy.physics import linear as ks
+
+        wp, m, cfg = self.wp, self.model, self.config
         dev, nb = m.device, m.n_bodies
         if self.linear_solver == "fused" and self._split_pcg():
             self._solve_split(contacts)         # factorises each half's characters with its start
@@ -308,7 +312,9 @@ class Solver:
 
     def triplets(self, contacts):
         """The whole system as BSR triplets (rows, cols, 6x6 values) and the rhs (B,) vec6."""
-        wp, ks, m, cfg = self.wp, self.ks, self.model, self.config
+        from crowdstudy.physics import linear as ks
+
+        wp, m, cfg = self.wp, self.model, self.config
         dev, nb = m.device, m.n_bodies
         cap = contacts.capacity
         n_trip = 3 * nb + 2 * cap
@@ -357,11 +363,24 @@ class Solver:
         dot products in a fixed order and computes alpha and beta in float32. A row's
         matrix-vector product is the fused kernel's term for term; the dot products differ
         from the fused kernel's in their summation order only."""
-        m, cfg = self.model, self.config
+        m = self.model
         cut = (m.n_characters // 2) * m.n_joints
+        init, matvec, update = self._split_commands(contacts, cut)
+        # each half factorises its characters' tree blocks, then starts its PCG rows
+        half = m.n_characters // 2
+        run_parallel(lambda: (self._factor_range(0, half), init[0].launch()),
+                     lambda: (self._factor_range(half, m.n_characters), init[1].launch()))
+        s = self.split_sums.numpy()
+        it, rel = self._split_iterations(matvec, update, np.float32(s[0]) + np.float32(s[4]),
+                                         np.float32(s[1]) + np.float32(s[5]))
+        self.last_cg = (it, float(rel))
+
+    def _split_commands(self, contacts, cut: int) -> tuple[list, list, list]:
+        """The split PCG's recorded launches (see :meth:`_record_split`) for the halves
+        split at body ``cut``, with this step's body-body contact lists and their counts
+        set."""
+        m, cfg = self.model, self.config
         halves = ((0, 0, cut), (1, cut, m.n_bodies))
-        sums = self.split_sums
-        f32 = np.float32
         levers = (self.lever_p, self.lever_c, self.ctrl_c, float(cfg.joint_stiffness))   # the joint blocks
         # the body-body contacts of each half (a contact across the cut is in both)
         n_act = contacts.n_active()
@@ -382,20 +401,16 @@ class Solver:
         for part, n_list in enumerate(counts):
             for cmd in matvec[part]:
                 cmd.set_param_at_index(4, n_list)
+        return init, matvec, update
 
-        def both(cmds, value=None) -> None:
-            if value is not None:
-                for cmd in cmds:
-                    cmd.set_param_at_index(3, value)
-            run_parallel(cmds[0].launch, cmds[1].launch)
-
-        # each half factorises its characters' tree blocks, then starts its PCG rows
-        half = m.n_characters // 2
-        run_parallel(lambda: (self._factor_range(0, half), init[0].launch()),
-                     lambda: (self._factor_range(half, m.n_characters), init[1].launch()))
-        s = sums.numpy()
-        bnorm2 = f32(s[0]) + f32(s[4])
-        rz0 = f32(s[1]) + f32(s[5])
+    def _split_iterations(self, matvec, update, bnorm2: np.float32, rz0: np.float32) -> tuple[int, np.float32]:
+        """The split PCG's iterations from |r|^2 = ``bnorm2`` and r.z = ``rz0`` (float32, as
+        the fused kernel); returns (iterations, |r| / |b|). On two threads each half
+        iterates on its own thread and meets the other at a barrier after each phase (one
+        wake-up a phase, where handing each phase over costs two); else both halves phase
+        by phase from this thread: the same arithmetic either way."""
+        cfg, sums = self.config, self.split_sums
+        f32 = np.float32
         tol = f32(cfg.cg_tolerance)
         max_it = int(cfg.cg_max_iterations)
 
@@ -427,9 +442,6 @@ class Solver:
                 buf = 1 - buf
             return it, rel
 
-        # two threads at once, each iterating its half and meeting the other at a barrier
-        # after each phase (one wake-up a phase, where handing each phase over costs two);
-        # else both halves phase by phase from this thread: the same arithmetic either way
         barrier = threading.Barrier(2)
         result = []
 
@@ -449,15 +461,22 @@ class Solver:
             if part == 0:
                 result.append(out)
 
+        def both(cmds, buf, value) -> None:     # one phase of both halves, from this thread
+            pair = [cmds[0][buf], cmds[1][buf]]
+            for cmd in pair:
+                cmd.set_param_at_index(3, value)
+            run_parallel(pair[0].launch, pair[1].launch)
+
         if not run_together(lambda: half_loop(0), lambda: half_loop(1)):
-            result.append(iterate(lambda cmds, buf, value: both([cmds[0][buf], cmds[1][buf]], value)))
-        it, rel = result[0]
-        self.last_cg = (it, float(rel))
+            result.append(iterate(both))
+        return result[0]
 
     def _record_split(self, contacts, halves, levers):
         """The split PCG's launches (init, matvec and update of each half; the two
         direction buffers alternate), recorded for ``_solve_split``."""
-        wp, ks, m, cfg = self.wp, self.ks, self.model, self.config
+        from crowdstudy.physics import linear as ks
+
+        wp, m, cfg = self.wp, self.model, self.config
         dev = m.device
         r_t, r_r, z_t, z_r, p_t, p_r, q_t, q_r = self.work
         po_t, po_r = self.work_split
@@ -489,9 +508,11 @@ class Solver:
 
     def _factor_range(self, c0: int, c1: int) -> None:
         """The tree preconditioner's factors of characters [c0, c1)."""
+        from crowdstudy.physics import linear as ks
+
         m, cfg = self.model, self.config
         if c1 > c0:
-            self.wp.launch(self.ks.tree_factor_kernel, c1 - c0,
+            self.wp.launch(ks.tree_factor_kernel, c1 - c0,
                            [m.n_joints, self.hess_a, self.hess_b, self.hess_c, m.wp["body_parent"],
                             self.lever_p, self.lever_c, self.ctrl_c, float(cfg.joint_stiffness), self.tree_work,
                             self.tree_dinv, self.tree_l, int(c0)], device=m.device)
@@ -503,6 +524,8 @@ class Solver:
         import warp.optim.linear as wl
         import warp.sparse as wsp
 
+        from crowdstudy.physics import linear as ks
+
         wp, cfg, m = self.wp, self.config, self.model
         nb = m.n_bodies
         if self._bsr is None:
@@ -513,7 +536,7 @@ class Solver:
             work = self.y6
 
             def matvec(x, y, z, alpha, beta):
-                wp.launch(self.ks.tree_precond_kernel, m.n_characters,
+                wp.launch(ks.tree_precond_kernel, m.n_characters,
                           [m.n_joints, m.wp["body_parent"], self.tree_dinv, self.tree_l, self.lever_p,
                            self.lever_c, self.ctrl_c, float(cfg.joint_stiffness), x, y, z,
                            float(alpha), float(beta), work], device=m.device)
@@ -524,13 +547,15 @@ class Solver:
         self._x6.zero_()
         it, res, atol = wl.cg(self._bsr, rhs, self._x6, tol=float(cfg.cg_tolerance),
                               maxiter=int(cfg.cg_max_iterations), M=precond, check_every=5, use_cuda_graph=False)
-        wp.launch(self.ks.unpack_kernel, nb, [self._x6, self.dx, self.dw], device=m.device)
+        wp.launch(ks.unpack_kernel, nb, [self._x6, self.dx, self.dw], device=m.device)
         # cg returns the absolute residual and atol = tol * |b|: report |r| / |b| like the others
         rel = float(res) * float(cfg.cg_tolerance) / float(atol) if float(atol) > 0 else float(res)
         self.last_cg = (int(it), rel)
 
     def _solve_scipy(self, rows, cols, vals, rhs) -> None:
         import scipy.sparse.linalg as spl
+
+        from crowdstudy.physics.linear import bsr_from_triplets
 
         wp, cfg, nb = self.wp, self.config, self.model.n_bodies
         r, c, v, b = rows.numpy(), cols.numpy(), vals.numpy().astype(np.float64), rhs.numpy().astype(np.float64)
@@ -548,14 +573,16 @@ class Solver:
         self.last_cg = (counter[0], float(res))
 
     def update(self, state_in, state_out, dt: float) -> None:
+        from crowdstudy.physics import kernels as kb
+
         wp, m = self.wp, self.model
 
         def update(c0: int, c1: int) -> None:
             lo, hi = c0 * m.n_joints, c1 * m.n_joints
             if hi > lo:
-                wp.launch(self.kb.update_kernel, hi - lo, [self.x_pred, self.q_pred, state_in.x, state_in.q, self.dx,
-                                                           self.dw, float(dt), state_out.x, state_out.q, state_out.v,
-                                                           state_out.w, int(lo)], device=m.device)
+                wp.launch(kb.update_kernel, hi - lo, [self.x_pred, self.q_pred, state_in.x, state_in.q, self.dx,
+                                                      self.dw, float(dt), state_out.x, state_out.q, state_out.v,
+                                                      state_out.w, int(lo)], device=m.device)
 
         self._split_characters(update)
 
