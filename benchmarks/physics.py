@@ -460,8 +460,8 @@ def compare_cg(anim, repeat: int = 10) -> list[dict]:
 # * targets: each bone is welded (soft equality) to a mocap body placed at every MuJoCo step
 #   at the same interpolated target as ours (nlerp of the joint rotations and lerp of the
 #   root between two frames, then forward kinematics: targets_kernel).
-# * settle: config.settle_time simulated on frame 0, targets frozen, before frame 0 is read.
-# * walls: crowdstudy.scene.static_walls_from_meta, as boxes WALL_DEPTH deep behind
+# * settle: config.solver.settle_time simulated on frame 0, targets frozen, before frame 0 is read.
+# * walls: crowdstudy.scene_meta.static_walls_from_meta, as boxes WALL_DEPTH deep behind
 #   the wall's face (ours: one-sided planes facing the characters' roots); in periodic
 #   scenes (the corridor) the walls are stretched over the whole run and every character has
 #   two kinematic images at +-L (mocap bodies with its hulls, moved to the simulated pose
@@ -563,7 +563,7 @@ class MujocoScene:
         import mujoco
 
         from crowdstudy.body.skeleton import PARENTS
-        from crowdstudy.scene import static_walls_from_meta
+        from crowdstudy.scene_meta import static_walls_from_meta
         from crowdstudy.physics.corrector import load_bodies
         from crowdstudy.physics.model import ModelBuilder
 

@@ -70,7 +70,7 @@ def test_same_geometry_and_self_pairs(bench, kind):
     assert len(scene.ghost_shift) == (2 if kind == "corridor" else 0)
     # each box's face is the wall and it lies behind it, away from the crowd (ours: one-sided
     # planes facing the roots): the roots' side of every box face is empty
-    from crowdstudy.scene import static_walls_from_meta
+    from crowdstudy.scene_meta import static_walls_from_meta
 
     roots = anim.root_translation[0, :, :2]
     for gid, ((x0, y0), (x1, y1)) in zip(walls, static_walls_from_meta(anim.meta)):

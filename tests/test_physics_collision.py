@@ -13,7 +13,7 @@ from crowdstudy.physics.collision import (KIND_ENVIRONMENT, KIND_GROUND, KIND_IN
 from crowdstudy.physics.config import PhysicsConfig
 from crowdstudy.physics.model import ModelBuilder
 from crowdstudy.physics.state import Control, State
-from crowdstudy.scene import static_walls_from_meta
+from crowdstudy.scene_meta import static_walls_from_meta
 
 
 def fixture_body():

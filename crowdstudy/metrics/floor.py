@@ -28,7 +28,7 @@ from crowdstudy.body.skeleton import ARM_JOINTS, JOINT_INDEX
 from crowdstudy.errors import InvalidInputError
 from crowdstudy.metrics.overlap import capsules_world, frame_indices, resolve_bodies
 from crowdstudy.metrics.walls import beyond_wall
-from crowdstudy.scene import static_walls_from_meta
+from crowdstudy.scene_meta import static_walls_from_meta
 
 __all__ = ["SeparationFloor", "separation_floor"]
 

@@ -41,7 +41,7 @@ import dataclasses
 import numpy as np
 
 from crowdstudy.physics.collision_kernels import collision_kernels
-from crowdstudy.scene import wall_segments
+from crowdstudy.scene_meta import wall_segments
 from crowdstudy.warp_runtime import host_threads, run_parallel
 
 __all__ = ["Contacts", "CollisionPipeline", "sample_static_walls", "sweep_pairs",
@@ -192,8 +192,8 @@ class CollisionPipeline:
         static_points: (P, 3) metres, point samples of static objects (or None).
         period: length (m) of the periodic x axis, or None.
         static_walls: (M, 2, 2) metres, vertical walls standing on the floor (segments in
-            the floor plane, e.g. :func:`crowdstudy.scene.static_walls_from_meta`), or None: one-sided plane
-            contacts of every capsule end (``wall_kernel``, stiffness ``config.wall_stiffness``).
+            the floor plane, e.g. :func:`crowdstudy.scene_meta.static_walls_from_meta`), or None: one-sided plane
+            contacts of every capsule end (``wall_kernel``, stiffness ``config.contacts.wall_stiffness``).
     """
 
     def __init__(self, model, config, *, static_points: np.ndarray | None = None, period: float | None = None,

@@ -21,7 +21,7 @@ from crowdstudy.physics.model import ModelBuilder
 from crowdstudy.physics.output_stage import finish_crowd
 from crowdstudy.physics.solver import Solver
 from crowdstudy.physics.state import Control, State
-from crowdstudy.scene import static_walls_from_meta
+from crowdstudy.scene_meta import loop_mode, static_walls_from_meta
 
 __all__ = ["CrowdCorrector", "correct", "load_bodies"]
 
@@ -56,7 +56,7 @@ class CrowdCorrector:
         static_points: (P, 3) m, point samples of static objects (see
             :func:`~crowdstudy.physics.collision.sample_static_walls`).
         static_walls: (M, 2, 2) m, vertical walls on floor segments (one-sided plane
-            contacts; :func:`~crowdstudy.scene.static_walls_from_meta`).
+            contacts; :func:`~crowdstudy.scene_meta.static_walls_from_meta`).
         linear_solver: see :class:`~crowdstudy.physics.solver.Solver`.
         n_frames: frame slots kept on the device (offline use uploads a whole clip).
     """
@@ -238,7 +238,7 @@ def correct(anim, config: PhysicsConfig | None = None, *, device: str | None = N
     period = anim.periodic_length
     walls = static_walls_from_meta(anim.meta)
     n_out = anim.n_frames
-    looped = (anim.meta.get("loop") or {}).get("mode") == "periodic" and n_out > 2
+    looped = loop_mode(anim.meta) == "periodic" and n_out > 2
     warmup = blend = 0
     if looped:
         # a periodic clip: simulate from `warmup` frames before its start (the end of the
