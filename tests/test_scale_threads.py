@@ -152,3 +152,17 @@ def test_run_together_meets_at_a_barrier_or_declines(monkeypatch):
 
     with pytest.raises(ZeroDivisionError):
         run_together(waits, fails)
+
+
+def test_device_names_are_cpu_cuda_or_cuda_n():
+    from crowdstudy.physics.solver import LINEAR_SOLVERS, PRECONDITIONERS
+    from crowdstudy.warp_runtime import device_kind, resolve_device
+
+    assert [device_kind(d) for d in ("cpu", "cuda", "cuda:0", "cuda:12")] == ["cpu", "cuda", "cuda", "cuda"]
+    for bad in ("gpu", "cpu:0", "cuda:", "CUDA", "", None):
+        with pytest.raises(InvalidInputError, match="device: expected 'cpu', 'cuda' or 'cuda:N'"):
+            device_kind(bad)
+    with pytest.raises(InvalidInputError, match="device"):
+        resolve_device("gpu0")
+    assert resolve_device("cpu") == "cpu"
+    assert LINEAR_SOLVERS == ("fused", "warp", "scipy") and PRECONDITIONERS == ("character", "body")

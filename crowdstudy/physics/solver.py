@@ -48,17 +48,23 @@ from __future__ import annotations
 
 import threading
 import time
+from typing import Literal, get_args
 
 import numpy as np
 
 from crowdstudy.errors import InvalidInputError
 from crowdstudy.physics.linear import bsr_from_triplets, solver_kernels
 from crowdstudy.physics.model import GROUP_ARM, GROUP_FEET, GROUP_PELVIS, GROUP_TRUNK
-from crowdstudy.warp_runtime import host_threads, run_parallel, run_together
+from crowdstudy.warp_runtime import device_kind, host_threads, run_parallel, run_together
 
-__all__ = ["Solver", "LINEAR_SOLVERS"]
+__all__ = ["Solver", "LinearSolver", "LINEAR_SOLVERS", "Preconditioner", "PRECONDITIONERS"]
 
-LINEAR_SOLVERS = ("fused", "warp", "scipy")
+#: The CG implementations (module docstring).
+LinearSolver = Literal["fused", "warp", "scipy"]
+LINEAR_SOLVERS: tuple[LinearSolver, ...] = get_args(LinearSolver)
+#: The CG preconditioners (module docstring).
+Preconditioner = Literal["character", "body"]
+PRECONDITIONERS: tuple[Preconditioner, ...] = get_args(Preconditioner)
 #: joints whose bodies get the optional absolute translation PD (the feet: ankle and toe bodies)
 FEET_TRANSLATION_JOINTS = (7, 8, 10, 11)
 
@@ -88,8 +94,8 @@ class Solver:
     After each step :attr:`last_cg` holds ``(iterations, relative residual)``.
     """
 
-    def __init__(self, model, config, *, linear_solver: str | None = None, profile: bool = False,
-                 preconditioner: str = "character"):
+    def __init__(self, model, config, *, linear_solver: LinearSolver | None = None, profile: bool = False,
+                 preconditioner: Preconditioner = "character"):
         from crowdstudy.physics.kernels import kernels
 
         self.model = model
@@ -100,12 +106,12 @@ class Solver:
         self.wp = wp
         dev = model.device
         if linear_solver is None:
-            linear_solver = "fused" if dev == "cpu" else "warp"
+            linear_solver = "fused" if device_kind(dev) == "cpu" else "warp"
         if linear_solver not in LINEAR_SOLVERS:
             raise InvalidInputError(f"linear_solver: expected one of {LINEAR_SOLVERS}, got {linear_solver!r}")
         self.linear_solver = linear_solver
-        if preconditioner not in ("character", "body"):
-            raise InvalidInputError(f"preconditioner: expected 'character' or 'body', got {preconditioner!r}")
+        if preconditioner not in PRECONDITIONERS:
+            raise InvalidInputError(f"preconditioner: expected one of {PRECONDITIONERS}, got {preconditioner!r}")
         self.preconditioner = preconditioner
         self.profile = profile
         self.timings = {"assembly": 0.0, "solve": 0.0, "update": 0.0}
