@@ -38,10 +38,10 @@ Linear solvers (``linear_solver``):
 * ``"scipy"``: the same BSR matrix on the host and ``scipy.sparse.linalg.cg`` with the 6x6
   block Jacobi (benchmark peer).
 
-Measured on the 2-core CPU (60 characters, D5, one assembled step; ``crowdstudy bench
-physics``): fused + character preconditioner 1.5 ms (13 iterations), fused + 6x6 block
-Jacobi 4.2 ms (hits the 60-iteration cap), scipy 20 ms, ``warp.optim.linear.cg`` 300 ms
-(its per-iteration launches and the BSR rebuild dominate on CPU).
+On a CPU (``crowdstudy bench physics`` times them) the fused PCG with the character
+preconditioner is the fastest by far: the 6x6 block Jacobi needs several times the
+iterations (it may hit the iteration cap), scipy pays for the host round trip, and
+``warp.optim.linear.cg`` for its per-iteration launches and the BSR rebuild.
 """
 
 from __future__ import annotations
@@ -76,8 +76,7 @@ _MIN_CHARACTERS_PER_THREAD = 16
 _MIN_CHARACTERS_SPLIT_ASSEMBLY = 200
 #: from this many characters on, the CPU PCG runs split over the two halves of the crowd
 #: (``Solver._solve_split``); below, its per-iteration hand-overs cost more than the second
-#: core saves (measured 2026-12-04: 60 characters 10.4 ms per step against 4.5, 200 14.3 against
-#: 13.1, 1,000 47.4-49.2 against 51.7-53.3, two host threads)
+#: core saves (two host threads; ``crowdstudy bench physics`` times both)
 _MIN_CHARACTERS_SPLIT_PCG = 500
 
 
