@@ -34,7 +34,7 @@ import time
 import numpy as np
 
 from crowdstudy.bench import format_table, report_path, write_report
-from crowdstudy.physics.config import PhysicsConfig
+from crowdstudy.physics.config_file import add_config_option, config_from_cli
 from crowdstudy.physics.crowding import crowd_config
 
 
@@ -314,7 +314,7 @@ def _profile_columns(ours) -> dict:
     (``PhysicsConfig.for_density``)."""
     phys = ours.meta["physics"]
     return {"crowd_density": phys["crowd_density"], "profile_weight": phys["profile_weight"],
-            "mesh_skin_max": phys["config"]["mesh_skin_max"], "output_hold": phys["config"]["output_hold"]}
+            "mesh_skin_max": phys["config"]["skin"]["max"], "output_hold": phys["config"]["output"]["hold"]}
 
 
 def _smoothness_columns(base, ours, bodies=None) -> dict:
@@ -576,7 +576,7 @@ class MujocoScene:
         builder = ModelBuilder()
         for b in bodies:
             builder.add_character(b.rest_joints, b.capsules, config.mesh_skin(b))
-        cm = self.cs_model = builder.finalize(density=config.density, device="cpu")
+        cm = self.cs_model = builder.finalize(density=config.body.density, device="cpu")
         n, nj = cm.n_characters, cm.n_joints
         self.n, self.nj = n, nj
         self.rests = np.asarray(cm.rest_joints, np.float64)
@@ -589,18 +589,18 @@ class MujocoScene:
         self.anim_root = np.asarray(anim.root_translation, np.float64)
         period = anim.periodic_length
         self.ghost_shift = np.array([-period, period]) if period else np.zeros(0)
-        margin = float(config.contact_margin)
+        margin = float(config.contacts.margin)
         p0 = (cm.cap_p0 + cm.body_com_rest).reshape(n, nj, 3)    # capsule ends in the rest frame
         p1 = (cm.cap_p1 + cm.body_com_rest).reshape(n, nj, 3)
         rad = cm.cap_radius.reshape(n, nj)
         hull = (cm.cap_radius + cm.cap_skin).reshape(n, nj)
         sr = lambda v: f'{v[0]:g} {v[1]:g}'                     # noqa: E731
         si = " ".join(f"{v:g}" for v in st["solimp"])
-        g = -float(config.gravity)
+        g = -float(config.body.gravity)
         parts = [f'<mujoco><option timestep="{self.dt:.10g}" gravity="0 0 {g:g}" integrator="implicitfast"/>',
                  '<size memory="1G"/>',
                  f'<default><geom condim="1" solref="{sr(st["contact_solref"])}" solimp="{si}"/>'
-                 f'<default class="core"><geom contype="2" conaffinity="0" density="{config.density:g}" group="1"/>'
+                 f'<default class="core"><geom contype="2" conaffinity="0" density="{config.body.density:g}" group="1"/>'
                  '</default>'
                  f'<default class="hull"><geom contype="1" conaffinity="1" density="0" margin="{margin:g}" '
                  'group="2"/></default></default><worldbody>',
@@ -777,7 +777,7 @@ def mujoco_peer(anim, config=None, setting: str | dict = "weld0.05", *, settle: 
     out_rot = np.zeros(anim.joint_rotations.shape)
     out_root = np.zeros(anim.root_translation.shape)
     if settle:
-        for _ in range(int(round(scene.config.settle_time / scene.dt))):
+        for _ in range(int(round(scene.config.solver.settle_time / scene.dt))):
             scene.set_targets(0, 0, 0.0)
             scene.step()
     out_rot[0], out_root[0] = scene.read()
@@ -1128,9 +1128,8 @@ def main(argv: list[str]) -> int:
     parser.add_argument("--seeds", default="study", metavar="SEED,...",
                         help="--bars-only on these seeds of each cell ('study': the stimulus's own crowd; "
                              "e.g. study,1,2,3): with more than one, the spread per cell and its figure")
-    parser.add_argument("--config", nargs="*", default=[], metavar="KEY=VALUE",
-                        help="PhysicsConfig changes for the timed steps, --bars and --stadium (e.g. "
-                             "cg_tolerance=1e-4); the report (physics_*_trial) records them")
+    add_config_option(parser, "the physics of the timed steps, --bars and --stadium (e.g. cg_tolerance=1e-4); "
+                              "the report (physics_*_trial) records them")
     parser.add_argument("--curve-only", action="store_true",
                         help="only the cost curve over --sizes (and its figure), no CG comparison or peers")
     parser.add_argument("--stadium", default="", metavar="N,N",
@@ -1142,7 +1141,7 @@ def main(argv: list[str]) -> int:
                         help="stadium runs hand correct() body proxies without the meshes (needed at 5,000 "
                              "MakeHuman characters in 24 GiB)")
     args = parser.parse_args(argv)
-    config = PhysicsConfig.from_strings(args.config)      # the defaults without --config
+    config = config_from_cli(args.config)                  # the defaults without --config
     trial = "_trial" if args.config else ""                 # reports of changed settings keep their own names
     try:
         sizes = [int(v) for v in args.sizes.split(",") if v.strip()]

@@ -38,7 +38,7 @@ def test_measure_bars_runs_only_the_asked_cells_with_the_asked_config(bench, mon
         raise Stop
 
     monkeypatch.setattr(corrector, "correct", fake_correct)
-    cfg = PhysicsConfig(arm_scale=0.5)
+    cfg = PhysicsConfig().with_values(arm_scale=0.5)
     with pytest.raises(Stop):
         bench.measure_bars(0.2, config=cfg, cells=[("walking", "D2")])
     assert len(seen) == 1
@@ -63,10 +63,10 @@ def test_stadium_runs_take_the_asked_config(bench, monkeypatch):
     monkeypatch.setattr(corrector, "correct", fake_correct)
     monkeypatch.setattr(bench, "stadium_crowd", lambda n, level, duration: bench._scene("D1", 0.2))
     with pytest.raises(Stop):
-        bench.main(["--stadium", "20", "--stadium-seconds", "0.2", "--config", "mesh_skin_max=0.04",
-                    "output_hold=0.8"])
+        bench.main(["--stadium", "20", "--stadium-seconds", "0.2", "--config", "skin.max=0.04",
+                    "output.hold=0.8"])
     assert len(seen) == 1
-    assert seen[0][1].mesh_skin_max == 0.04 and seen[0][1].output_hold == 0.8
+    assert seen[0][1].skin.max == 0.04 and seen[0][1].output.hold == 0.8
 
 
 def test_timed_steps_run_with_the_asked_config(bench):
@@ -75,8 +75,9 @@ def test_timed_steps_run_with_the_asked_config(bench):
     from crowdstudy.physics.config import PhysicsConfig
 
     crowd = bench._tile(bench._scene("D5", 0.5), 6)
-    loose = bench.time_steps(crowd, 3, config=PhysicsConfig(cg_tolerance=1e-2))
-    tight = bench.time_steps(crowd, 3, config=PhysicsConfig(cg_tolerance=1e-6, cg_max_iterations=400))
+    loose = bench.time_steps(crowd, 3, config=PhysicsConfig().with_values(cg_tolerance=1e-2))
+    tight_cfg = PhysicsConfig().with_values(cg_tolerance=1e-6, cg_max_iterations=400)
+    tight = bench.time_steps(crowd, 3, config=tight_cfg)
     assert 0 < loose["cg_iterations"] < tight["cg_iterations"]
 
 

@@ -49,10 +49,10 @@ def test_same_geometry_and_self_pairs(bench, kind):
     m, cfg = corr.model, corr.config
     n, nj = anim.n_characters, anim.n_joints
     # inter-body (hull) capsules: radius + mesh skin, plus the contact margin, body by body
-    ours = (m.cap_radius + m.cap_skin + cfg.contact_margin).reshape(n, nj)
+    ours = (m.cap_radius + m.cap_skin + cfg.contacts.margin).reshape(n, nj)
     np.testing.assert_allclose(scene.inter_body_radius(), ours, atol=1e-7)
     assert np.all(m.cap_skin.reshape(n, nj).max(1) > 0)          # the skin is really there
-    np.testing.assert_allclose(scene.model.geom_margin[scene.hull_geom], cfg.contact_margin)
+    np.testing.assert_allclose(scene.model.geom_margin[scene.hull_geom], cfg.contacts.margin)
     # ground and self contacts on the bare capsule, no margin; masses from the bare capsule
     np.testing.assert_allclose(scene.model.geom_size[scene.core_geom, 0], m.cap_radius.reshape(n, nj), atol=1e-7)
     assert np.all(scene.model.geom_margin[scene.core_geom] == 0)

@@ -82,7 +82,7 @@ def test_the_split_pcg_solves_what_the_fused_one_solves(concert, monkeypatch):
     # summation order of its dot products: solved tightly, both reach the same states
     from crowdstudy.physics.config import PhysicsConfig
 
-    tight = PhysicsConfig(cg_tolerance=1e-6, cg_max_iterations=400)
+    tight = PhysicsConfig().with_values(cg_tolerance=1e-6, cg_max_iterations=400)
     fused = _run(concert, monkeypatch, "1", split_pcg=False, config=tight)
     split = _run(concert, monkeypatch, "2", split_pcg=True, config=tight)
     assert any((c["kind"] == 2).any() for _, c in fused[1])

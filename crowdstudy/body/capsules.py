@@ -59,8 +59,9 @@ _TORSO = (0, 3, 6, 9)
 #: the palm and finger bones of the 24-joint skeleton (left/right wrist, left/right hand)
 HAND_BONES = tuple(JOINT_INDEX[name] for name in ("left_wrist", "right_wrist", "left_hand", "right_hand"))
 _FEET = {7: 10, 8: 11, 10: 10, 11: 11}  # bone -> the joint its floor direction points to
-#: :func:`capsule_skin`'s defaults, which the physics (``PhysicsConfig.mesh_skin_*``) and the
-#: separation floor (``crowdstudy.metrics.floor``) take as theirs
+#: :func:`capsule_skin`'s defaults, which the physics (``PhysicsConfig.skin.percentile`` and
+#: the dense end of ``PhysicsConfig.profile``) and the separation floor
+#: (``crowdstudy.metrics.floor``) take as theirs
 SKIN_PERCENTILE, SKIN_MAX, SKIN_HAND_SCALE = 90.0, 0.015, 0.5
 
 

@@ -45,12 +45,15 @@ class CrowdCorrector:
 
     Args:
         bodies: N objects with ``rest_joints`` (J, 3) m and ``capsules`` (start, end, radius).
-        config: :class:`PhysicsConfig` (defaults: the paper's), used as given: fed frame by
-            frame there is no crowd to measure yet, so its skins and hold are the dense
-            profile's unless the caller passes ``config.for_density(density)`` (the median
-            of :func:`~crowdstudy.physics.crowding.local_density` over the expected crowd's
+        config: :class:`PhysicsConfig` (defaults: the paper's). Fed frame by frame there is
+            no crowd to measure yet, so the fields that follow the density profile
+            (``skin.max``, ``skin.hand_scale``, ``output.hold`` left None) take its dense
+            end (:meth:`PhysicsConfig.for_dense_crowd`; :attr:`config` is that resolved
+            copy) unless the caller passes ``config.for_density(density)`` (the median of
+            :func:`~crowdstudy.physics.crowding.local_density` over the expected crowd's
             positions).
-        device: Warp device ("cpu", "cuda:0"; None picks CUDA when present).
+        device: Warp device: "cpu", "cuda" or "cuda:N" (None or "auto": CUDA when
+            present; :func:`~crowdstudy.warp_runtime.resolve_device`).
         fps: frame rate of the fed animation (Hz).
         periodic_length: period (m) along x for periodic scenes, else None.
         static_points: (P, 3) m, point samples of static objects (see
@@ -64,21 +67,22 @@ class CrowdCorrector:
     def __init__(self, bodies, *, config: PhysicsConfig | None = None, device: str | None = None,
                  fps: float = 30.0, periodic_length: float | None = None, static_points=None, static_walls=None,
                  linear_solver: str | None = None, n_frames: int = 2, profile: bool = False):
-        self.config = config or PhysicsConfig()
-        if not isinstance(self.config, PhysicsConfig):
+        config = PhysicsConfig() if config is None else config
+        if not isinstance(config, PhysicsConfig):
             raise InvalidInputError(f"config: expected a PhysicsConfig, got {type(config).__name__}")
+        self.config = config.for_dense_crowd()
         if not fps or fps <= 0:
             raise InvalidInputError(f"fps: expected a positive frame rate, got {fps!r}")
         builder = ModelBuilder()
         for body in bodies:
             builder.add_character(body.rest_joints, body.capsules, self.config.mesh_skin(body))
-        self.model = builder.finalize(density=self.config.density, device=device)
+        self.model = builder.finalize(density=self.config.body.density, device=device)
         self.fps = float(fps)
-        self.substeps = max(1, int(round(1.0 / (self.fps * self.config.dt))))
+        self.substeps = max(1, int(round(1.0 / (self.fps * self.config.solver.dt))))
         self.dt = 1.0 / (self.fps * self.substeps)
         self.states = [State(self.model), State(self.model)]
         self.control = Control(self.model, n_frames=max(2, n_frames))
-        self.control.ahead_frames = float(self.config.contact_pass_ahead) * self.fps
+        self.control.ahead_frames = float(self.config.contacts.pass_ahead) * self.fps
         self.pipeline = CollisionPipeline(self.model, self.config, static_points=static_points,
                                           period=periodic_length, static_walls=static_walls)
         self.contacts = Contacts.allocate(self.pipeline.default_capacity(), self.model.device)
@@ -107,7 +111,7 @@ class CrowdCorrector:
 
     def reset(self, joint_rotations: np.ndarray, root_translation: np.ndarray, *, settle: bool = False) -> None:
         """Place every body at the given pose, at rest: (N, J, 3) rad and (N, 3) m; with
-        ``settle`` then simulate ``config.settle_time`` on that pose (see :meth:`settle`)."""
+        ``settle`` then simulate ``config.solver.settle_time`` on that pose (see :meth:`settle`)."""
         self.control.set_frames(joint_rotations, root_translation, start=0)
         self.control.set_frames(joint_rotations, root_translation, start=1)
         self.control.advance(0, 0, 0.0)
@@ -125,9 +129,9 @@ class CrowdCorrector:
         self._ready = True
 
     def settle(self, seconds: float | None = None, frame: int = 0) -> None:
-        """Simulate ``seconds`` (default ``config.settle_time``) with the target frozen at
+        """Simulate ``seconds`` (default ``config.solver.settle_time``) with the target frozen at
         uploaded frame ``frame``: resolves the overlaps of the starting pose."""
-        seconds = self.config.settle_time if seconds is None else float(seconds)
+        seconds = self.config.solver.settle_time if seconds is None else float(seconds)
         for _ in range(int(round(seconds / self.dt))):
             self.control.advance(frame, frame, 0.0)
             self.pipeline.collide(self.states[0], self.contacts, self.control)
@@ -201,22 +205,23 @@ def correct(anim, config: PhysicsConfig | None = None, *, device: str | None = N
     The simulated poses go through the output stage (:mod:`crowdstudy.physics.output_stage`,
     a few characters at a time on both host threads; :mod:`crowdstudy.physics.finish`): a
     periodic input (``meta["loop"]["mode"] == "periodic"``) is simulated from
-    ``config.loop_warmup`` before its start to ``config.loop_blend`` past its end and the
-    loop closed; the deviation from the input is low-passed (held at its peaks first); planted
-    feet are held; where a joint is left faster than the input crowd's fastest (plus
-    ``config.speed_limit_margin``) the correction there is re-timed
+    ``config.output.loop_warmup`` before its start to ``config.output.loop_blend`` past its
+    end and the loop closed; the deviation from the input is low-passed (held at its peaks
+    first); planted feet are held; where a joint is left faster than the input crowd's
+    fastest (plus ``config.output.speed_limit_margin``) the correction there is re-timed
     (:mod:`crowdstudy.physics.speed_limit`; its report in ``meta["physics"]["speed_limit"]``).
 
-    With ``config.crowd_adaptive`` (the default) the crowd's density is measured first
+    The crowd's density is measured first
     (:func:`~crowdstudy.physics.crowding.crowd_density`) and the crowd corrected with
-    ``config.for_density(density)``: the skins and the output's hold of its profile
+    ``config.for_density(density)``: the fields that follow the density profile (by default
+    the skins and the output's hold) take their values at that density
     (:func:`~crowdstudy.physics.crowding.crowd_config`).
 
     Returns:
         A new CrowdAnimation with the same bodies/clips, the corrected ``root_translation``
         (T, N, 3) m and ``joint_rotations`` (T, N, J, 3) rad, and meta ``method = "Ours"``,
         ``physics`` (the configuration used, the crowd's measured density and its
-        ``profile_weight`` (None without ``crowd_adaptive``), device, linear solver, steps,
+        ``profile_weight`` (None when no field follows the profile), device, linear solver, steps,
         substeps, dt, CG iterations, contact counts, dropped pairs, static points;
         deterministic values only).
     """
@@ -243,8 +248,8 @@ def correct(anim, config: PhysicsConfig | None = None, *, device: str | None = N
     if looped:
         # a periodic clip: simulate from `warmup` frames before its start (the end of the
         # loop), through the period, and `blend` frames on, to close the loop (finish.close_loop)
-        warmup = min(int(round(config.loop_warmup * anim.fps)), n_out)
-        blend = min(int(round(config.loop_blend * anim.fps)), n_out - 1)
+        warmup = min(int(round(config.output.loop_warmup * anim.fps)), n_out)
+        blend = min(int(round(config.output.loop_blend * anim.fps)), n_out - 1)
     schedule = np.concatenate([np.arange(n_out - warmup, n_out), np.arange(n_out), np.arange(blend)])
     t_frames = len(schedule)
     corr = CrowdCorrector(bodies, config=config, device=device, fps=anim.fps, periodic_length=period,
@@ -285,7 +290,7 @@ def correct(anim, config: PhysicsConfig | None = None, *, device: str | None = N
     t_end = time.perf_counter()
     wall = t_end - t_start
     if timings is not None:
-        timed = frame_seconds if round(config.settle_time / corr.dt) > 0 else frame_seconds[1:]
+        timed = frame_seconds if round(config.solver.settle_time / corr.dt) > 0 else frame_seconds[1:]
         timed_steps = len(timed) * corr.substeps
         timings.update({"setup_seconds": t_start - t_setup, "settle_seconds": t_settled - t_start,
                         "simulate_seconds": float(sum(frame_seconds)), "output_seconds": t_end - t_output,

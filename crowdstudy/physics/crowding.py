@@ -79,11 +79,11 @@ def crowd_config(anim, config: PhysicsConfig | None = None) -> tuple[PhysicsConf
     """The configuration ``anim``'s crowd is corrected with, as
     :func:`~crowdstudy.physics.corrector.correct` uses it: ``(config.for_density(density),
     density, profile weight)``, the density its :func:`crowd_density` (characters per m^2)
-    and the weight None when ``config.crowd_adaptive`` is off (``config`` None: the
-    defaults)."""
-    config = config or PhysicsConfig()
+    and the weight None when no field of ``config`` follows the density profile
+    (``config.follows_profile``; ``config`` None: the defaults)."""
+    config = PhysicsConfig() if config is None else config
     if not isinstance(config, PhysicsConfig):
         raise InvalidInputError(f"config: expected a PhysicsConfig, got {type(config).__name__}")
     density = crowd_density(anim)
-    weight = config.profile_weight(density) if config.crowd_adaptive else None
+    weight = config.profile_weight(density) if config.follows_profile else None
     return config.for_density(density), density, weight

@@ -199,7 +199,7 @@ def kernels():
         gravity m g z (pass 0 with the feed-forward prediction), soft ball joints k_j/2 |x_p + R_p a_p - x_b - R_b a_b|^2 (Gauss-Newton),
         PD control of Eq. 4 (root: absolute rotation; others: parent-relative) and the
         translational PD of bodies with body_kt/body_dt > 0 (root; feet when enabled; every
-        other body with ``pose_translation_stiffness``). Where ``body_reach`` r > 0 (m) the
+        other body with ``control.pose_translation_stiffness``). Where ``body_reach`` r > 0 (m) the
         spring softens with the deviation e = x - x^ from kt near the target to
         ``body_kt_far`` kf far from it: energy kf/2 |e|^2 + (kt - kf) r^2 (sqrt(1 + |e|^2 /
         r^2) - 1), force (kf + (kt - kf) / sqrt(1 + |e|^2 / r^2)) e, its Hessian taken as that
