@@ -26,7 +26,7 @@ import difflib
 from collections.abc import Mapping
 
 from crowdstudy.errors import InvalidInputError
-from crowdstudy.physics.config_sections import field_types
+from crowdstudy.physics.config_sections import DensityProfile, field_types
 
 __all__ = ["FORMER_NAMES", "RETIRED_NAMES", "Leaf", "leaves", "sections", "resolve_key", "resolve_changes",
            "parse_text"]
@@ -60,13 +60,15 @@ FORMER_NAMES: dict[str, str] = {
     "sparse_output_hold": "profile.sparse.output_hold",
 }
 
+_DENSE = DensityProfile().dense
 _FOLLOW = ("none (the default) follows the crowd's density between profile.sparse.{p} and profile.dense.{p}; "
            "a number fixes it for every crowd")
 #: Former flat names whose meaning depended on another field: what to set instead.
 RETIRED_NAMES: dict[str, str] = {
     "crowd_adaptive": "the skins and the hold follow the crowd's density while skin.max, skin.hand_scale and "
                       "output.hold are none (the default); give those three numbers to fix them for every crowd "
-                      "(the dense profile: skin.max=0.015 skin.hand_scale=0.5 output.hold=0.6)",
+                      f"(the dense profile: skin.max={_DENSE.skin_max:g} skin.hand_scale={_DENSE.skin_hand_scale:g} "
+                      f"output.hold={_DENSE.output_hold:g})",
     "mesh_skin_max": "set skin.max: " + _FOLLOW.format(p="skin_max"),
     "mesh_skin_hand_scale": "set skin.hand_scale: " + _FOLLOW.format(p="skin_hand_scale"),
     "output_hold": "set output.hold: " + _FOLLOW.format(p="output_hold"),
