@@ -41,7 +41,7 @@ import numpy as np
 from crowdstudy.bench import report_path, write_report
 from crowdstudy.metrics.bars import BarTolerances
 from crowdstudy.physics.acceptance import measure_bars
-from crowdstudy.physics.config import PhysicsConfig
+from crowdstudy.physics.config_file import add_config_option, config_from_cli
 from crowdstudy.physics.mujoco_compare import MUJOCO_COLUMNS, compare_mujoco
 from crowdstudy.physics.mujoco_peer import MUJOCO_SETTINGS
 from crowdstudy.physics.stadium import stadium_run
@@ -334,9 +334,8 @@ def _parser() -> argparse.ArgumentParser:
     parser.add_argument("--seeds", default="study", metavar="SEED,...",
                         help="--bars-only on these seeds of each cell ('study': the stimulus's own crowd; "
                              "e.g. study,1,2,3): with more than one, the spread per cell and its figure")
-    parser.add_argument("--config", nargs="*", default=[], metavar="KEY=VALUE",
-                        help="PhysicsConfig changes for the timed steps, --bars and --stadium (e.g. "
-                             "cg_tolerance=1e-4); the report (physics_*_trial) records them")
+    add_config_option(parser, "the physics of the timed steps, --bars and --stadium (e.g. cg_tolerance=1e-4); "
+                              "the report (physics_*_trial) records them")
     parser.add_argument("--curve-only", action="store_true",
                         help="only the cost curve over --sizes (and its figure), no CG comparison or peers")
     parser.add_argument("--stadium", default="", metavar="N,N",
@@ -431,7 +430,7 @@ def _main_steps(args, config, trial: str, sizes: list[int], devices: list[dict],
 
 def main(argv: list[str]) -> int:
     args = _parser().parse_args(argv)
-    config = PhysicsConfig.from_strings(args.config)      # the defaults without --config
+    config = config_from_cli(args.config)                  # the defaults without --config
     trial = "_trial" if args.config else ""                 # reports of changed settings keep their own names
     try:
         sizes = [int(v) for v in args.sizes.split(",") if v.strip()]

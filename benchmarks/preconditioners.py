@@ -67,7 +67,7 @@ def sample_systems(n_characters: int, warmup: int, samples: tuple[int, ...]):
             tree = bsr_from_triplets(rows[:3 * nb], cols[:3 * nb], vals[:3 * nb], nb).tocsr()
             out.append({"step": s, "A": a, "tree": tree, "b": rhs.astype(np.float64).ravel(),
                         "x": corr.states[0].x.numpy().astype(np.float64), "fused_iterations": corr.solver.last_cg[0],
-                        "tolerance": float(corr.config.cg_tolerance), "contacts": int(corr.contacts.n_active())})
+                        "tolerance": float(corr.config.solver.cg_tolerance), "contacts": int(corr.contacts.n_active())})
         corr.solver.update(corr.states[0], corr.states[1], corr.dt)
         corr.states.reverse()
     return out, nb, nj

@@ -50,7 +50,7 @@ def test_measure_bars_runs_only_the_asked_cells_with_the_asked_config(monkeypatc
         raise Stop
 
     monkeypatch.setattr(corrector, "correct", fake_correct)
-    cfg = PhysicsConfig(arm_scale=0.5)
+    cfg = PhysicsConfig().with_values(arm_scale=0.5)
     with pytest.raises(Stop):
         acceptance.measure_bars(0.2, config=cfg, cells=[("walking", "D2")])
     assert len(seen) == 1
@@ -79,10 +79,10 @@ def test_stadium_runs_take_the_asked_config(bench, monkeypatch):
     monkeypatch.setattr(stadium, "stadium_crowd",
                         lambda n, level, duration: build_baseline(load_design(), "stationary", "D1", duration=0.2))
     with pytest.raises(Stop):
-        bench.main(["--stadium", "20", "--stadium-seconds", "0.2", "--config", "mesh_skin_max=0.04",
-                    "output_hold=0.8"])
+        bench.main(["--stadium", "20", "--stadium-seconds", "0.2", "--config", "skin.max=0.04",
+                    "output.hold=0.8"])
     assert len(seen) == 1
-    assert seen[0][1].mesh_skin_max == 0.04 and seen[0][1].output_hold == 0.8
+    assert seen[0][1].skin.max == 0.04 and seen[0][1].output.hold == 0.8
 
 
 def test_timed_steps_run_with_the_asked_config():
@@ -94,8 +94,8 @@ def test_timed_steps_run_with_the_asked_config():
     from crowdstudy.physics.step_timing import tile_crowd, time_steps
 
     crowd = tile_crowd(build_baseline(load_design(), "stationary", "D5", duration=0.5), 6)
-    loose = time_steps(crowd, 3, config=PhysicsConfig(cg_tolerance=1e-2))
-    tight = time_steps(crowd, 3, config=PhysicsConfig(cg_tolerance=1e-6, cg_max_iterations=400))
+    loose = time_steps(crowd, 3, config=PhysicsConfig().with_values(cg_tolerance=1e-2))
+    tight = time_steps(crowd, 3, config=PhysicsConfig().with_values(cg_tolerance=1e-6, cg_max_iterations=400))
     assert 0 < loose["cg_iterations"] < tight["cg_iterations"]
 
 

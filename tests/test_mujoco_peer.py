@@ -59,10 +59,10 @@ def test_same_geometry_and_self_pairs(mujoco, kind):
     m, cfg = corr.model, corr.config
     n, nj = anim.n_characters, anim.n_joints
     # inter-body (hull) capsules: radius + mesh skin, plus the contact margin, body by body
-    ours = (m.cap_radius + m.cap_skin + cfg.contact_margin).reshape(n, nj)
+    ours = (m.cap_radius + m.cap_skin + cfg.contacts.margin).reshape(n, nj)
     np.testing.assert_allclose(scene.inter_body_radius(), ours, atol=1e-7)
     assert np.all(m.cap_skin.reshape(n, nj).max(1) > 0)          # the skin is really there
-    np.testing.assert_allclose(scene.model.geom_margin[scene.hull_geom], cfg.contact_margin)
+    np.testing.assert_allclose(scene.model.geom_margin[scene.hull_geom], cfg.contacts.margin)
     # ground and self contacts on the bare capsule, no margin; masses from the bare capsule
     np.testing.assert_allclose(scene.model.geom_size[scene.core_geom, 0], m.cap_radius.reshape(n, nj), atol=1e-7)
     assert np.all(scene.model.geom_margin[scene.core_geom] == 0)
@@ -80,7 +80,7 @@ def test_same_geometry_and_self_pairs(mujoco, kind):
     assert len(scene.ghost_shift) == (2 if kind == "corridor" else 0)
     # each box's face is the wall and it lies behind it, away from the crowd (ours: one-sided
     # planes facing the roots): the roots' side of every box face is empty
-    from crowdstudy.scene import static_walls_from_meta
+    from crowdstudy.scene_meta import static_walls_from_meta
 
     roots = anim.root_translation[0, :, :2]
     for gid, ((x0, y0), (x1, y1)) in zip(walls, static_walls_from_meta(anim.meta)):

@@ -26,7 +26,7 @@ def standing_root(bodies, xy):
 
 
 def inter_depth(corr):
-    pipe = CollisionPipeline(corr.model, corr.config.replace(contact_margin=0.0))
+    pipe = CollisionPipeline(corr.model, corr.config.with_values(margin=0.0))
     contacts = Contacts.allocate(pipe.default_capacity(), "cpu")
     pipe.collide(corr.state, contacts)
     c = contacts.to_numpy()
@@ -67,7 +67,7 @@ def test_overlapping_characters_separate(bodies):
 
 
 def test_reset_with_settle_starts_resolved(bodies):
-    corr = CrowdCorrector(bodies[:2], device="cpu", config=PhysicsConfig(settle_time=0.3))
+    corr = CrowdCorrector(bodies[:2], device="cpu", config=PhysicsConfig().with_values(settle_time=0.3))
     root = standing_root(bodies[:2], [(0.0, 0.0), (0.2, 0.05)])
     rot = np.zeros((2, 24, 3))
     corr.reset(rot, root)
@@ -82,7 +82,7 @@ def test_linear_solvers_agree(bodies):
     results = {}
     for name in ("fused", "scipy", "warp"):
         corr = CrowdCorrector(bodies[:2], device="cpu", linear_solver=name,
-                              config=PhysicsConfig(cg_tolerance=1e-6, cg_max_iterations=400))
+                              config=PhysicsConfig().with_values(cg_tolerance=1e-6, cg_max_iterations=400))
         root = standing_root(bodies[:2], [(0.0, 0.0), (0.25, 0.0)])
         corr.reset(np.zeros((2, 24, 3)), root)
         _, r = corr.step(np.zeros((2, 24, 3)), root + [0.0, 0.02, 0.0])
@@ -178,18 +178,18 @@ def test_cli_correct_round_trip(tmp_path, records, bodies):
                "--config", "damping=0.01"])
     assert rc == 0
     out = CrowdAnimation.load(tmp_path / "out.npz")
-    assert out.meta["method"] == "Ours" and out.meta["physics"]["config"]["damping"] == 0.01
+    assert out.meta["method"] == "Ours" and out.meta["physics"]["config"]["control"]["damping"] == 0.01
 
 
 def test_bad_inputs_name_the_argument(bodies):
     from crowdstudy.physics.model import ModelBuilder
 
-    with pytest.raises(ValueError, match="dt"):
-        PhysicsConfig(dt=-1.0)
-    with pytest.raises(ValueError, match="unknown key 'stifness'"):
-        PhysicsConfig.from_strings(["stifness=3"])
+    with pytest.raises(ValueError, match="solver.dt"):
+        PhysicsConfig().with_values(dt=-1.0)
+    with pytest.raises(ValueError, match="unknown PhysicsConfig field 'stifness'"):
+        PhysicsConfig.from_overrides({"stifness": "3"}, strings=True)
     with pytest.raises(ValueError, match="damping"):
-        PhysicsConfig.from_strings(["damping=abc"])
+        PhysicsConfig.from_overrides({"damping": "abc"}, strings=True)
     with pytest.raises(ValueError, match="anim"):
         correct("not an animation")
     with pytest.raises(ValueError, match="linear_solver"):
@@ -254,10 +254,10 @@ def test_the_default_cg_tolerance_tracks_as_a_tight_solve_does():
     from crowdstudy.motion.baseline import build_baseline
 
     base = build_baseline(load_design(), "stationary", "D5", duration=0.5, body_model="open")
-    assert PhysicsConfig().cg_tolerance == 3e-3
+    assert PhysicsConfig().solver.cg_tolerance == 3e-3
     default = tracking_error(correct(base, progress=False), base)
-    tight = tracking_error(correct(base, PhysicsConfig(cg_tolerance=1e-5, cg_max_iterations=400), progress=False),
-                           base)
+    tight_cfg = PhysicsConfig().with_values(cg_tolerance=1e-5, cg_max_iterations=400)
+    tight = tracking_error(correct(base, tight_cfg, progress=False), base)
     assert tight > 2.0                          # a dense cell: the contacts move the crowd
     assert abs(default - tight) <= 0.06, (default, tight)
 
@@ -280,7 +280,8 @@ def test_a_dense_crowd_held_in_place_tracks_closer():
 
     base = build_baseline(load_design(), "stationary", "D5", duration=0.5, body_model="open")
     held = tracking_parts(correct(base, progress=False), base)
-    spread = tracking_parts(correct(base, PhysicsConfig(root_translation_far_stiffness=1e4), progress=False), base)
+    soft = PhysicsConfig().with_values(root_translation_far_stiffness=1e4)
+    spread = tracking_parts(correct(base, soft, progress=False), base)
     assert spread.placement_cm > 2.5                               # the soft root lets the crowd spread
     assert held.total_cm <= spread.total_cm - 0.35, (held, spread)
     assert held.placement_cm <= spread.placement_cm - 0.45, (held, spread)

@@ -28,7 +28,7 @@ from crowdstudy.body.skeleton import ARM_JOINTS, JOINT_INDEX
 from crowdstudy.errors import InvalidInputError
 from crowdstudy.metrics.overlap import capsules_world, frame_indices, resolve_bodies
 from crowdstudy.metrics.walls import beyond_wall
-from crowdstudy.scene import static_walls_from_meta
+from crowdstudy.scene_meta import static_walls_from_meta
 
 __all__ = ["SeparationFloor", "separation_floor"]
 
@@ -140,10 +140,10 @@ def separation_floor(anim, *, frames: Any = "every:30", bodies: Sequence | None 
         skin_percentile: each capsule is inflated by how far its mesh reaches beyond it
             (:func:`crowdstudy.body.capsules.capsule_skin`, the physics' default 90),
             at most ``skin_max`` m and ``hand_skin_scale`` of it on the palm and finger
-            bones (the physics' ``mesh_skin_max`` and ``mesh_skin_hand_scale``: its dense
-            profile, which a crowd as dense as concert D5 is corrected with; a sparser
-            crowd's skins are thicker, ``PhysicsConfig.for_density``) ...
-        margin: ... plus this many metres (the physics' ``contact_margin``).
+            bones (the physics' ``skin.max`` and ``skin.hand_scale`` at the dense end of its
+            density profile, which a crowd as dense as concert D5 is corrected with; a
+            sparser crowd's skins are thicker, ``PhysicsConfig.for_density``) ...
+        margin: ... plus this many metres (the physics' ``contacts.margin``).
         walls: also push capsules back behind the scene's walls (``meta["obstacles"]``), to
             the side of their character's root, as the physics does.
         tolerance: m; the projection stops when no pair overlaps by more than this.

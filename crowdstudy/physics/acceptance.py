@@ -25,7 +25,7 @@ def profile_columns(ours) -> dict:
     ``mesh_skin_max`` (m), ``output_hold``."""
     phys = ours.meta["physics"]
     return {"crowd_density": phys["crowd_density"], "profile_weight": phys["profile_weight"],
-            "mesh_skin_max": phys["config"]["mesh_skin_max"], "output_hold": phys["config"]["output_hold"]}
+            "mesh_skin_max": phys["config"]["skin"]["max"], "output_hold": phys["config"]["output"]["hold"]}
 
 
 def measure_bars(duration: float, frame_stride: int = 10, config=None,

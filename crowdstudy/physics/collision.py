@@ -40,7 +40,7 @@ import dataclasses
 
 import numpy as np
 
-from crowdstudy.scene import wall_segments
+from crowdstudy.scene_meta import wall_segments
 from crowdstudy.warp_runtime import get_warp, host_threads, run_parallel
 
 __all__ = ["Contacts", "CollisionPipeline", "sample_static_walls", "sweep_pairs",
@@ -189,8 +189,8 @@ class CollisionPipeline:
         static_points: (P, 3) metres, point samples of static objects (or None).
         period: length (m) of the periodic x axis, or None.
         static_walls: (M, 2, 2) metres, vertical walls standing on the floor (segments in
-            the floor plane, e.g. :func:`crowdstudy.scene.static_walls_from_meta`), or None: one-sided plane
-            contacts of every capsule end (``wall_kernel``, stiffness ``config.wall_stiffness``).
+            the floor plane, e.g. :func:`crowdstudy.scene_meta.static_walls_from_meta`), or None: one-sided plane
+            contacts of every capsule end (``wall_kernel``, stiffness ``config.contacts.wall_stiffness``).
     """
 
     def __init__(self, model, config, *, static_points: np.ndarray | None = None, period: float | None = None,
@@ -201,7 +201,7 @@ class CollisionPipeline:
         dev = model.device
         n, nb = model.n_characters, model.n_bodies
         self.period = float(period or 0.0)
-        self.speculative = float(config.speculative_distance)
+        self.speculative = float(config.contacts.speculative_distance)
         self.p0w = wp.zeros(nb, dtype=wp.vec3, device=dev)
         self.p1w = wp.zeros(nb, dtype=wp.vec3, device=dev)
         self.centre = wp.zeros(nb, dtype=wp.vec3, device=dev)     # capsule midpoints (m)
@@ -215,8 +215,8 @@ class CollisionPipeline:
         self.p1t = wp.zeros(nb, dtype=wp.vec3, device=dev)
         self.t_lo = wp.zeros(n, dtype=wp.vec3, device=dev)
         self.t_hi = wp.zeros(n, dtype=wp.vec3, device=dev)
-        # ... and in the look-ahead pose (config.contact_pass_ahead)
-        self.pass_on = bool(config.contact_pass_ahead > 0 and config.contact_pass_width > 0)
+        # ... and in the look-ahead pose (config.contacts.pass_ahead)
+        self.pass_on = bool(config.contacts.pass_ahead > 0 and config.contacts.pass_width > 0)
         na = nb if self.pass_on else 1
         self.p0a = wp.zeros(na, dtype=wp.vec3, device=dev)
         self.p1a = wp.zeros(na, dtype=wp.vec3, device=dev)
@@ -245,18 +245,18 @@ class CollisionPipeline:
         self._split = 0.75        # share of the narrow-phase threads run by the first host thread
 
     def default_capacity(self) -> int:
-        return int(self.config.max_contacts_per_character) * self.model.n_characters + 2 * self.model.n_bodies
+        return int(self.config.contacts.max_per_character) * self.model.n_characters + 2 * self.model.n_bodies
 
     def collide(self, state, contacts: Contacts, control=None) -> None:
         """Fill ``contacts`` from ``state`` (positions/orientations at the start of the step).
 
         ``control`` (:class:`~crowdstudy.physics.state.Control`, advanced to this step): with
-        ``config.target_relative_self_contacts``, ground and intra-body contacts count only
+        ``config.contacts.target_relative_self``, ground and intra-body contacts count only
         the depth beyond the target pose's own (see ``intra_kernel``)."""
         cfg = self.config
-        margin = float(cfg.contact_margin)
+        margin = float(cfg.contacts.margin)
         contacts.count.zero_()
-        relative = int(bool(cfg.target_relative_self_contacts) and control is not None)
+        relative = int(bool(cfg.contacts.target_relative_self) and control is not None)
         pass_on = int(self.pass_on and control is not None)
         self._capsule_poses(state, control, relative, pass_on, margin)
         self._static_contacts(state, contacts, control, relative, margin)
@@ -308,20 +308,20 @@ class CollisionPipeline:
         nj, nb = m.n_joints, m.n_bodies
         spec = self.speculative
         out = [contacts.count, contacts.capacity, *contacts.buffers()]
-        band = float(cfg.contact_activation)
-        if cfg.ground_stiffness > 0:
+        band = float(cfg.contacts.activation)
+        if cfg.contacts.ground_stiffness > 0:
             wp.launch(k.ground_kernel, nb, [state.x, self.p0w, self.p1w, W["cap_radius"], relative, self.p0t,
-                                            self.p1t, band, spec, float(cfg.ground_stiffness), *out], device=dev)
-        if self.bvh is not None and self.static_enabled and cfg.environment_stiffness > 0:
+                                            self.p1t, band, spec, float(cfg.contacts.ground_stiffness), *out], device=dev)
+        if self.bvh is not None and self.static_enabled and cfg.contacts.environment_stiffness > 0:
             wp.launch(k.environment_kernel, nb, [state.x, self.p0w, self.p1w, W["cap_radius"], W["cap_skin"],
                                                  W["body_char"],
                                                  self.char_lo, self.char_hi, self.bvh.id, self.points, self.env_lo,
                                                  self.env_hi, self.period, margin, spec,
-                                                 float(cfg.environment_stiffness), *out], device=dev)
-        if self.walls is not None and self.static_enabled and cfg.wall_stiffness > 0:
+                                                 float(cfg.contacts.environment_stiffness), *out], device=dev)
+        if self.walls is not None and self.static_enabled and cfg.contacts.wall_stiffness > 0:
             side = control.t_x if control is not None else state.x      # whose root gives each wall's free side
             wp.launch(k.wall_kernel, nb, [state.x, self.p0w, self.p1w, W["cap_radius"], W["cap_skin"], W["body_char"],
-                                          nj, side, self.walls, self.period, margin, spec, float(cfg.wall_stiffness),
+                                          nj, side, self.walls, self.period, margin, spec, float(cfg.contacts.wall_stiffness),
                                           *out], device=dev)
 
     def _character_pairs(self) -> int:
@@ -333,7 +333,7 @@ class CollisionPipeline:
         wp, m, cfg = get_warp(), self.model, self.config
         dev, n = m.device, m.n_characters
         n_pairs = 0
-        if n > 1 and cfg.contact_stiffness > 0:
+        if n > 1 and cfg.contacts.stiffness > 0:
             if dev == "cpu" and self.period <= 0.0 and n >= _MIN_CHARACTERS_SWEEP:
                 if self._sweep_scratch is None:
                     self._sweep_scratch = (wp.zeros(n, dtype=wp.int32, device=dev),
@@ -363,24 +363,24 @@ class CollisionPipeline:
         W = m.wp
         nj = m.n_joints
         spec = self.speculative
-        band = float(cfg.contact_activation)
+        band = float(cfg.contacts.activation)
         n_intra = W["intra_pairs"].shape[0]
-        intra_on = bool(cfg.intra_body and n_intra and cfg.intra_stiffness > 0)
+        intra_on = bool(cfg.contacts.intra_body and n_intra and cfg.contacts.intra_stiffness > 0)
 
         def narrow(buf, lo: int, hi: int) -> None:     # the pairs [lo, hi) into buf
             if hi > lo:
                 wp.launch(k.narrowphase_kernel, hi - lo,
                           [state.x, self.p0w, self.p1w, W["cap_radius"], W["cap_skin"], self.centre, self.half,
                            self.char_lo, self.char_hi, self.pair_i, self.pair_j, self.pair_shift, nj, margin, spec,
-                           float(cfg.contact_stiffness), buf.count, buf.capacity, *buf.buffers(), int(lo),
-                           pass_on, self.p0a, self.p1a, float(cfg.contact_pass_width)],
+                           float(cfg.contacts.stiffness), buf.count, buf.capacity, *buf.buffers(), int(lo),
+                           pass_on, self.p0a, self.p1a, float(cfg.contacts.pass_width)],
                           device=dev)
 
         def intra(buf) -> None:
             if intra_on:
                 wp.launch(k.intra_kernel, n_intra, [state.x, self.p0w, self.p1w, W["cap_radius"], self.centre,
                                                     self.half, W["intra_pairs"], relative, self.p0t, self.p1t,
-                                                    band, spec, float(cfg.intra_stiffness), buf.count,
+                                                    band, spec, float(cfg.contacts.intra_stiffness), buf.count,
                                                     buf.capacity, *buf.buffers()], device=dev)
 
         total = n_pairs

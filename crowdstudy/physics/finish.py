@@ -6,11 +6,11 @@ of every character. Three steps turn it into the "Ours" animation, each on plain
 * :func:`close_loop`: for a periodic input (a concert stimulus that loops), the correction
   was simulated past one period; the first frames of the output are cross-faded from the
   continuation of the last frame, so frame T-1 -> frame 0 continues the motion.
-* :func:`smooth_deviation`: a zero-phase Gaussian low-pass (``PhysicsConfig.output_smoothing``
-  seconds, ``output_smoothing_root`` for the root) of the DEVIATION from the input
+* :func:`smooth_deviation`: a zero-phase Gaussian low-pass (``PhysicsConfig.output.smoothing``
+  seconds, ``output.smoothing_root`` for the root) of the DEVIATION from the input
   animation (joint rotations relative to the input's, ``R = R^ exp([delta]x)``, and the
   root offset), never of the animation itself, so the input's own motion keeps every
-  detail; each deviation is first held at its peak over +-``output_hold`` kernel widths, so
+  detail; each deviation is first held at its peak over +-``output.hold`` kernel widths, so
   the separation a contact needed is kept while the correction eases in and out around it;
   circular for periodic clips. The residual overlap is measured after this stage
   (``crowdstudy bench physics --bars``).

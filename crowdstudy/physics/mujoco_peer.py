@@ -18,8 +18,8 @@ PhysicsConfig.mesh_skin):
 * targets: each bone is welded (soft equality) to a mocap body placed at every MuJoCo step
   at the same interpolated target as ours (nlerp of the joint rotations and lerp of the
   root between two frames, then forward kinematics: targets_kernel).
-* settle: config.settle_time simulated on frame 0, targets frozen, before frame 0 is read.
-* walls: crowdstudy.scene.static_walls_from_meta, as boxes WALL_DEPTH deep behind
+* settle: config.solver.settle_time simulated on frame 0, targets frozen, before frame 0 is read.
+* walls: crowdstudy.scene_meta.static_walls_from_meta, as boxes WALL_DEPTH deep behind
   the wall's face (ours: one-sided planes facing the characters' roots); in periodic
   scenes (the corridor) the walls are stretched over the whole run and every character has
   two kinematic images at +-L (mocap bodies with its hulls, moved to the simulated pose
@@ -170,7 +170,7 @@ class MujocoScene:
         builder = ModelBuilder()
         for b in load_bodies(anim.bodies):
             builder.add_character(b.rest_joints, b.capsules, config.mesh_skin(b))
-        cm = self.cs_model = builder.finalize(density=config.density, device="cpu")
+        cm = self.cs_model = builder.finalize(density=config.body.density, device="cpu")
         self.n, self.nj = cm.n_characters, cm.n_joints
         self.rests = np.asarray(cm.rest_joints, np.float64)
         self.substeps = int(st.substeps)
@@ -200,19 +200,19 @@ class MujocoScene:
     def _header_xml(self) -> list[str]:
         """Options, the core/hull geom classes and the ground plane."""
         config, st = self.config, self.setting
-        g = -float(config.gravity)
+        g = -float(config.body.gravity)
         return [f'<mujoco><option timestep="{self.dt:.10g}" gravity="0 0 {g:g}" integrator="implicitfast"/>',
                 '<size memory="1G"/>',
                 f'<default><geom condim="1" solref="{self._solref(st.contact_solref)}" solimp="{self._solimp()}"/>'
-                f'<default class="core"><geom contype="2" conaffinity="0" density="{config.density:g}" group="1"/>'
+                f'<default class="core"><geom contype="2" conaffinity="0" density="{config.body.density:g}" group="1"/>'
                 '</default>'
                 f'<default class="hull"><geom contype="1" conaffinity="1" density="0" '
-                f'margin="{float(config.contact_margin):g}" group="2"/></default></default><worldbody>',
+                f'margin="{float(config.contacts.margin):g}" group="2"/></default></default><worldbody>',
                 '<geom name="ground" type="plane" size="0 0 0.1" contype="0" conaffinity="2"/>']
 
     def _walls_xml(self, period) -> list[str]:
         """The scene's walls as boxes WALL_DEPTH deep behind their faces."""
-        from crowdstudy.scene import static_walls_from_meta
+        from crowdstudy.scene_meta import static_walls_from_meta
 
         parts = []
         walls = np.asarray(static_walls_from_meta(self.anim.meta), np.float64).reshape(-1, 2, 2)
@@ -407,7 +407,7 @@ def mujoco_peer(anim, config=None, setting: str | MujocoSettings = "weld0.05", *
     out_rot = np.zeros(anim.joint_rotations.shape)
     out_root = np.zeros(anim.root_translation.shape)
     if settle:
-        for _ in range(int(round(scene.config.settle_time / scene.dt))):
+        for _ in range(int(round(scene.config.solver.settle_time / scene.dt))):
             scene.set_targets(0, 0, 0.0)
             scene.step()
     out_rot[0], out_root[0] = scene.read()

@@ -53,7 +53,7 @@ class Control:
     continues the animation's own motion: its velocity change over the last two steps).
     With ``ahead_frames`` > 0 :meth:`advance` also computes the target that many frames
     later (clamped to the last uploaded frame): ``t_glob_ahead``, ``t_x_ahead`` (the
-    contacts' look-ahead, ``PhysicsConfig.contact_pass_ahead``).
+    contacts' look-ahead, ``PhysicsConfig.contacts.pass_ahead``).
     """
 
     def __init__(self, model, n_frames: int = 2):

@@ -121,7 +121,7 @@ def _physics_config(physics):
     if physics is None:
         return PhysicsConfig()
     if isinstance(physics, dict):
-        return PhysicsConfig().replace(**physics)
+        return PhysicsConfig.from_overrides(physics, where="physics")
     if not isinstance(physics, PhysicsConfig):
         raise InvalidInputError(f"physics: expected a PhysicsConfig or a dict of its fields, got {type(physics).__name__}")
     return physics
@@ -173,7 +173,7 @@ def digest_inputs(design, stimulus, settings: dict, *, physics=None, method: str
     out = {"cell": cell, "duration": settings["duration"], "fps": settings["fps"],
            "metric_frames": settings["metric_frames"], "method": method, **_shared_inputs()}
     if method != "Baseline":
-        out["physics"] = dataclasses.asdict(_physics_config(physics))
+        out["physics"] = _physics_config(physics).as_dict()
         out["baseline"] = animation_digest(design, stimulus, settings, method="Baseline")
     return out
 
@@ -441,8 +441,9 @@ def build_stimuli(design, out_dir, *, preset: str = "full", duration: float | No
         workers: local worker processes (default: one per 4 CPUs, at least 1; 0 = run in
             this process).
         body_loader: record -> Body override (tests); default ``crowdstudy.body.load_body``.
-        physics: the :class:`~crowdstudy.physics.PhysicsConfig` (or a dict of its fields) of
-            "Ours"; None = the defaults.
+        physics: the :class:`~crowdstudy.physics.PhysicsConfig` (or a dict of its fields,
+            :meth:`~crowdstudy.physics.PhysicsConfig.from_overrides`) of "Ours"; None = the
+            defaults.
     Returns:
         The manifest dict (also written to ``out_dir/manifest.json`` and ``.csv``).
     """
