@@ -268,6 +268,7 @@ def _study(design, out: Path, participants: int, seed: int, duration: float) -> 
     participants on a local server, the export and the analysis."""
     from crowdstudy.render import build_stimuli
     from crowdstudy.render.stimuli import PRESETS
+    from crowdstudy.stats.options import AnalysisOptions
     from crowdstudy.stats.pipeline import analyze
     from crowdstudy.study.bots import run_simulation
     from crowdstudy.study.export import export_study
@@ -290,7 +291,7 @@ def _study(design, out: Path, participants: int, seed: int, duration: float) -> 
     responses, demographics = out / "responses.csv", out / "demographics.csv"
     export_study(db_url, responses, demographics)
     analysis_dir = out / "analysis"
-    res = analyze(responses, design, out_dir=analysis_dir, figure_note=" - SIMULATED participants")
+    res = analyze(responses, design, analysis_dir, AnalysisOptions(figure_note=" - SIMULATED participants"))
     print("\n".join(res.summary.splitlines()[:25]))
     return {"stimulus manifest": stimuli_dir / "manifest.csv", "study database": db_path, "responses": responses,
             "demographics": demographics, "analysis report": analysis_dir / "summary.md",
