@@ -34,7 +34,7 @@ import pandas as pd
 
 from crowdstudy.design import Stage, StudyDesign
 from crowdstudy.errors import InvalidInputError
-from crowdstudy.stats._data import cell_matrix
+from crowdstudy.stats._data import CellMatrix, cell_matrix
 from crowdstudy.stats.anova import anova_from_cells
 from crowdstudy.stats.assumptions import shapiro_from_cells
 from crowdstudy.stats.contrasts import polynomial_contrasts, simple_effects
@@ -180,7 +180,7 @@ def compute_composite(scored: pd.DataFrame, design: StudyDesign, stage: Stage, c
         stars_shown=show, stars_gate=gate)
 
 
-def posthoc_for_significant(cm, anova: pd.DataFrame, *, alpha: float, adjust: str = "tukey",
+def posthoc_for_significant(cm: CellMatrix, anova: pd.DataFrame, *, alpha: float, adjust: str = "tukey",
                             level: float = 0.95) -> pd.DataFrame:
     """Pairwise comparisons for every significant effect (``p < alpha`` in ``anova``):
     a main effect -> its levels; an interaction -> each of its factors within the levels
@@ -210,7 +210,7 @@ def _stars_shown(table: pd.DataFrame, alpha: float, rule: StarsRule) -> tuple[bo
     return bool((involved["p"] < alpha).any()), gate
 
 
-def _robustness(long: pd.DataFrame, comp: str, factors: list[str], cm, alpha: float) -> Robustness:
+def _robustness(long: pd.DataFrame, comp: str, factors: list[str], cm: CellMatrix, alpha: float) -> Robustness:
     ordinal = ordinal_method_check(cm, alpha=alpha)
     try:
         mixed = mixed_model(long, comp, factors, "participant_id",

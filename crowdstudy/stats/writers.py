@@ -28,8 +28,11 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+import pandas as pd
+
 from crowdstudy.design import Stage
 from crowdstudy.provenance import provenance
+from crowdstudy.stats._data import CellMatrix
 from crowdstudy.stats.report import write_table
 from crowdstudy.stats.results import AnalysisResult, CompositeResult
 
@@ -132,7 +135,7 @@ def _stage_figure(result: AnalysisResult, stage: Stage, d: Path) -> list[Path]:
                           note=result.simulated_note)]
 
 
-def _panel(res: CompositeResult):
+def _panel(res: CompositeResult) -> tuple[CellMatrix, pd.DataFrame | None]:
     """One composite's panel of :func:`~crowdstudy.stats.figures.method_figure`: its cells
     and, where the stars are shown, the per-cell Method comparisons."""
     return res.cells, res.method_by_cell if res.stars_shown else None
