@@ -1,10 +1,10 @@
 """Scoring of questionnaire answers: validation of responses.csv, reversal of the negative
 items, item-pair reliability, composite scores and per participant x cell means.
 
-The paper's rule: ``Q' = 7 - Q`` for the negative items Q2, Q4,
-Q6 (in general ``likert_points + 1 - Q`` for every item with ``reverse = true`` in the
-design), reliability of each pair checked first, then QCR = (Q1 + Q2')/2,
-QCA = (Q3 + Q4')/2, QOR = (Q5 + Q6')/2 (the design's ``[composites]``).
+The paper's rule: ``Q' = 7 - Q`` for the negative items Q2, Q4, Q6 (in general
+``likert_points + 1 - Q`` for every item with ``reverse = true`` in the design),
+reliability of each pair checked first, then QCR = (Q1 + Q2')/2, QCA = (Q3 + Q4')/2,
+QOR = (Q5 + Q6')/2 (the design's ``[composites]``).
 """
 
 from __future__ import annotations
