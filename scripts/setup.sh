@@ -92,9 +92,15 @@ assets_msg=$(.venv/bin/crowdstudy assets fetch)
 echo "[setup] $assets_msg"
 
 # --- Web front end (jsPsych from npm) ------------------------------------------
-# It lives in the package (crowdstudy/study/ui) so that wheels ship it; pyproject.toml's
-# package-data picks the files of node_modules the page loads.
-UI=crowdstudy/study/ui
+# It lives in ui/ at the top level; crowdstudy/study/ui is a link to it (committed, like
+# stimuli/study.toml), so wheels ship it: pyproject.toml's package-data picks the files of
+# node_modules the page loads.
+UI=ui
+if [ ! -d crowdstudy/study/ui ]; then
+    echo "[setup] crowdstudy/study/ui must be the link to ../../ui that git holds (a checkout without" >&2
+    echo "[setup] symbolic links made it a file): git config core.symlinks true && git checkout -- crowdstudy/study/ui" >&2
+    exit 1
+fi
 if [ -f $UI/package.json ]; then
     if [ ! -d $UI/node_modules ] || [ $UI/package.json -nt "$STAMP_DIR/npm" ] || \
        { [ -f $UI/package-lock.json ] && [ $UI/package-lock.json -nt "$STAMP_DIR/npm" ]; }; then

@@ -21,7 +21,7 @@ def require_study_browser() -> None:
         pytest.skip("Debian chromium is not installed")
     from crowdstudy.study.server import default_ui_dir
     if not (default_ui_dir() / "node_modules" / "jspsych").is_dir():
-        pytest.skip("crowdstudy/study/ui/node_modules missing (run make setup)")
+        pytest.skip("ui/node_modules missing (run make setup)")
 
 TOKEN = "test-admin-token-0123456789abcdef"
 ADMIN = {"Authorization": f"Bearer {TOKEN}"}

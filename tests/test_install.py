@@ -28,7 +28,7 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parent.parent
-UI_MODULES = ROOT / "crowdstudy" / "study" / "ui" / "node_modules"
+UI_MODULES = ROOT / "ui" / "node_modules"
 
 # Runs inside the temporary environment, in a folder outside the source tree.
 DRIVER = textwrap.dedent(r'''
@@ -55,7 +55,8 @@ DRIVER = textwrap.dedent(r'''
 
     # The questionnaire through the installed package: page, own scripts, jsPsych and plugins.
     from starlette.testclient import TestClient
-    from crowdstudy.study.app import UI_PLUGINS, create_app
+    from crowdstudy.study.app import create_app
+    from crowdstudy.study.routes_static import UI_PLUGINS
     from crowdstudy.study.fake_stimuli import write_fake_stimuli
     stim = write_fake_stimuli(Path("stim"), n_files=2, seconds=0.5, width=64, height=36)
     cfg = build_config(stim, db="sqlite:///study.db", admin_token="install-test-token-0123456789")
@@ -98,6 +99,25 @@ def _run(cmd, **kwargs):
     proc = subprocess.run(cmd, capture_output=True, text=True, timeout=300, **kwargs)
     assert proc.returncode == 0, f"{cmd} failed ({proc.returncode}):\n{proc.stdout[-3000:]}\n{proc.stderr[-3000:]}"
     return proc
+
+
+def test_front_end_is_one_folder_linked_into_the_package():
+    """The questionnaire lives in the top-level ui/; the package's study/ui is a link to it
+    (so git holds one copy of each file, and the package finds it)."""
+    from crowdstudy.study.server import default_ui_dir
+    link = ROOT / "crowdstudy" / "study" / "ui"
+    assert link.is_symlink() and link.resolve() == (ROOT / "ui").resolve()
+    assert default_ui_dir().resolve() == (ROOT / "ui").resolve()
+    for name in ("package.json", "package-lock.json", "index.html", "README.md"):
+        assert (ROOT / "ui" / name).is_file(), name
+    tracked = subprocess.run(["git", "ls-files", "-s", "crowdstudy/study/ui", "ui"], cwd=ROOT, capture_output=True,
+                             text=True)
+    if tracked.returncode != 0:
+        pytest.skip("not a git checkout")
+    entries = [line.split(None, 3) for line in tracked.stdout.splitlines()]
+    in_package = [(mode, path) for mode, _, _, path in entries if path.startswith("crowdstudy/")]
+    assert in_package == [("120000", "crowdstudy/study/ui")], tracked.stdout   # the link alone, no copies
+    assert any(path == "ui/package.json" for *_, path in entries), tracked.stdout
 
 
 @pytest.mark.slow

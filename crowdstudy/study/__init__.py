@@ -42,9 +42,14 @@ Modules (import them directly; heavy dependencies load only there):
 - :mod:`crowdstudy.study.stimulus_set`: the stimulus manifest the server reads.
 - :mod:`crowdstudy.study.storage`: SQLAlchemy Core tables (SQLite with WAL and group commit, PostgreSQL).
 - :mod:`crowdstudy.study.group_commit`: SQLite's one writer thread, one fsync per batch of writes.
-- :mod:`crowdstudy.study.app`: the Starlette ASGI application (routes: UI, videos, JSON API, admin).
+- :mod:`crowdstudy.study.app`: the Starlette ASGI application (``create_app``) from the route tables.
+- :mod:`crowdstudy.study.routes_participant`: the participants' JSON API (``/api``).
+- :mod:`crowdstudy.study.routes_static`: the page, its scripts, jsPsych and the videos.
+- :mod:`crowdstudy.study.routes_admin`: the admin's dashboard, exports and actions (``/admin``).
 - :mod:`crowdstudy.study.session`: the participant API's logic (no per-process state).
-- :mod:`crowdstudy.study.webio`: bodies (JSON only, streamed cap), security headers, answer timing.
+- :mod:`crowdstudy.study.bodies`: the checks of every value a request sends (one parse function each).
+- :mod:`crowdstudy.study.webio`: route rows, bodies (JSON only, streamed cap), responses, security
+  headers, answer timing.
 - :mod:`crowdstudy.study.admin`: admin authentication (header or cookie, never the URL).
 - :mod:`crowdstudy.study.media`: videos under opaque names, published for a static server.
 - :mod:`crowdstudy.study.quality`: screen, fullscreen, attention checks; exclusion rules.

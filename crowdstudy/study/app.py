@@ -1,4 +1,4 @@
-"""The study server: a Starlette ASGI application (handlers: :mod:`crowdstudy.study.session`).
+"""The study server: a Starlette ASGI application (:func:`create_app`) of one :class:`StudyConfig`.
 
 Blinding
 --------
@@ -16,48 +16,31 @@ they keep no state that another process could change (:mod:`crowdstudy.study.ses
 
 Routes
 ------
-Participant front end (no authentication):
-    ``GET /``                     the jsPsych page (``ui/index.html``)
-    ``GET /js/*, /css/*``         the page's own scripts and styles (``ui/js``, ``ui/css``)
-    ``GET /lib/<package>/*``      jsPsych and its plugins' ``dist`` files from ``ui/node_modules``
-    ``GET /media/<name>.mp4``     a video under its opaque name (HTTP range requests)
-    ``GET /api/study``            items (text only), scale labels, consent HTML, stage sizes, screen rules
-JSON API of one participant (header ``X-Participant-Secret`` from registration; every POST
-body is JSON sent as ``application/json``):
-    ``POST /api/participants``                        register ({participant_id, platform?}) or resume (+ secret)
-    ``GET  /api/participants/<id>``                   state: trials ``{trial_index, stage, token, video_url,
-                                                      check?}``, next unanswered trial, status
-    ``POST /api/participants/<id>/screen-out``        ``{"width", "height"}``: failed the screen check
-    ``POST /api/participants/<id>/consent``           ``{"consent": true}``
-    ``POST /api/participants/<id>/demographics``      ``{"age": 31, "gender": "female"}``
-    ``POST /api/participants/<id>/practice``          ``{"answers": {...}, "rt_ms": ...}``
-    ``POST /api/participants/<id>/responses``         ``{"trial_index", "token", "answers", "rt_ms", "shown_at",
-                                                      "video_plays", "first_play_ms", "hidden_count", "hidden_ms",
-                                                      "fullscreen_exits", "check"?}``
-    ``GET  /api/participants/<id>/responses``         the participant's own answers (by token)
-    ``POST /api/participants/<id>/complete``          completion code / redirect URL
-    ``POST /api/participants/<id>/withdraw``          ``{"confirm": true}``: answers and demographics deleted
-Admin (``Authorization: Bearer <token>``, or the cookie of a login on ``/admin`` for GET;
-:mod:`crowdstudy.study.admin`):
-    ``GET /admin`` (login form, then the dashboard), ``POST /admin/login``, ``POST /admin/logout``,
-    ``/admin/progress.json``, ``/admin/participants.json``, ``/admin/metrics.json`` (this
-    process's answer latency percentiles), ``/admin/study.json`` (scoring metadata),
-    ``/admin/export/responses.csv``, ``/admin/export/demographics.csv``, ``/admin/export/participants.csv``;
-    ``GET /admin/participants/<id>/schedule``: trials with token, stimulus id and conditions;
-    ``POST /admin/participants/<id>/resume-link``: a new secret and the URL that continues
-    the session in another browser; ``POST /admin/participants/<id>/withdraw``.
+Three route tables, by audience: the participants' JSON API
+(:mod:`crowdstudy.study.routes_participant`, ``/api/...``), the files their browser loads
+(:mod:`crowdstudy.study.routes_static`: ``/``, ``/js``, ``/css``, ``/lib``, ``/media``) and
+the admin's dashboard, exports and actions (:mod:`crowdstudy.study.routes_admin`,
+``/admin...``). Each module's docstring lists its routes. The handlers are module-level
+functions that find everything in ``request.app.state``:
+
+* ``study``: the :class:`~crowdstudy.study.session.StudySession` (the API's logic);
+* ``config``: the :class:`StudyConfig`;
+* ``ui_dir``: the front end's folder, resolved;
+* ``answer_latency``: the :class:`~crowdstudy.study.webio.LatencyLog` of this process.
 
 Errors are JSON ``{"error": message}`` with a 4xx status: 400 malformed request, 401/403
 missing or wrong secret/token (the same for an unknown participant), 404 unknown video, 409 a
 conflicting or out-of-order answer, 410 withdrawn, 413 body too large, 415 not JSON, 422 a
-value out of range. Every answer is committed to the database before the response is sent.
+value out of range. A handler raises :class:`~crowdstudy.study.webio.ApiError` (or
+:class:`~crowdstudy.errors.InvalidInputError`, a 422) and the application's exception
+handlers write that JSON. Every answer is committed to the database before the response is
+sent.
 """
 
 from __future__ import annotations
 
 import dataclasses
 from pathlib import Path
-from typing import Any
 from urllib.parse import urlsplit
 
 from crowdstudy.design import StudyDesign
@@ -66,11 +49,7 @@ from crowdstudy.study.quality import OnlineConfig
 from crowdstudy.study.stimulus_set import StimulusSet
 from crowdstudy.study.storage import StudyStore
 
-__all__ = ["StudyConfig", "create_app", "UI_PLUGINS"]
-
-#: npm packages of ui/node_modules served under /lib/<name>/ (their dist folder).
-UI_PLUGINS = ("plugin-call-function", "plugin-html-button-response", "plugin-instructions",
-              "plugin-survey-html-form", "plugin-survey-text")
+__all__ = ["StudyConfig", "create_app"]
 
 
 @dataclasses.dataclass
@@ -98,203 +77,51 @@ class StudyConfig:
     media_url: str | None = None
 
 
+def _origin(url: str | None) -> str:
+    """``scheme://host[:port]`` of an absolute media URL (the CSP must allow it), else ""."""
+    parts = urlsplit(url) if url else None
+    return f"{parts.scheme}://{parts.netloc}" if parts and parts.scheme else ""
+
+
+async def _api_error(_request, exc):
+    from crowdstudy.study.webio import error_response
+    return error_response(exc.status, exc.message)
+
+
+async def _invalid_input(_request, exc):
+    from crowdstudy.study.webio import error_response
+    return error_response(422, str(exc))
+
+
 def create_app(config: StudyConfig):
-    """The ASGI application of one study."""
+    """The ASGI application of one study: the three route tables and the front end's
+    folders, the security headers and the answer timer, the session in ``app.state``."""
     try:
         from starlette.applications import Starlette
-        from starlette.concurrency import run_in_threadpool
         from starlette.middleware import Middleware
-        from starlette.requests import Request
-        from starlette.responses import FileResponse, HTMLResponse, JSONResponse, RedirectResponse, Response
-        from starlette.routing import Mount, Route
-        from starlette.staticfiles import StaticFiles
+        from starlette.routing import Route
     except ModuleNotFoundError as exc:  # pragma: no cover
         raise MissingDependencyError(f"the study server needs the 'web' extra: pip install 'crowdstudy[web]' "
                                      f"({exc.name} missing)") from None
-    from crowdstudy.study import admin as admin_auth
-    from crowdstudy.study.dashboard import dashboard_html
-    from crowdstudy.study.export import DEMOGRAPHIC_COLUMNS, RESPONSE_EXPORT_COLUMNS, participants_rows, rows_to_csv
-    from crowdstudy.study.media import blind_file_response, publish_media
-    from crowdstudy.study.quality import PARTICIPANT_COLUMNS
-    from crowdstudy.study.roster import list_participants, withdraw_participant
+    from crowdstudy.study import routes_admin, routes_participant, routes_static
+    from crowdstudy.study.media import publish_media
     from crowdstudy.study.session import StudySession
-    from crowdstudy.study.webio import AnswerTimer, ApiError, SecurityHeaders, read_json_body
+    from crowdstudy.study.webio import AnswerTimer, ApiError, LatencyLog, SecurityHeaders
 
-    ui = Path(config.ui_dir).resolve()
-    modules = ui / "node_modules"
-    needed = [ui / "index.html", ui / "js", ui / "css", modules / "jspsych" / "dist"] + \
-        [modules / "@jspsych" / p / "dist" for p in UI_PLUGINS]
-    absent = [str(p) for p in needed if not p.exists()]
-    if absent:
-        raise MissingDependencyError(f"the questionnaire front end is incomplete ({absent[0]} missing); run "
-                                     f"`make setup` or `cd {ui} && npm ci`")
+    ui = routes_static.check_ui(config.ui_dir)
     study = StudySession(config)
     if config.media_dir is not None:  # published copies: /media serves them too (same sizes as the CDN's)
         folder = publish_media(study.media, config.media_dir)
         study.media_files = {name: folder / name for name in study.media_files}
-    media_origin = ""
-    if config.media_url and urlsplit(config.media_url).scheme:
-        u = urlsplit(config.media_url)
-        media_origin = f"{u.scheme}://{u.netloc}"
-    no_store = {"Cache-Control": "no-store"}
-
-    def error(status: int, message: str) -> JSONResponse:
-        return JSONResponse({"error": message}, status_code=status, headers=no_store)
-
-    def endpoint(handler, *, auth: bool = True, body: bool = False):
-        """Wrap a blocking handler(pid, row, body?) -> (status, payload) | payload."""
-        async def run(request: Request):
-            try:
-                args: list[Any] = []
-                if body:
-                    args.append(await read_json_body(request))
-                pid = request.path_params["pid"]
-                secret = request.headers.get("x-participant-secret")
-
-                def call():  # one trip to the thread pool: authenticate (a database read), then the handler
-                    row = study.authenticate(pid, secret)
-                    return handler(pid, row, *args)
-                result = await run_in_threadpool(call)
-            except ApiError as exc:
-                return error(exc.status, exc.message)
-            except InvalidInputError as exc:
-                return error(422, str(exc))
-            status, payload = result if isinstance(result, tuple) else (200, result)
-            return JSONResponse(payload, status_code=status, headers=no_store)
-        return run
-
-    async def register(request: Request):
-        try:
-            data = await read_json_body(request)
-            status, payload = await run_in_threadpool(study.register, data, request.headers.get("user-agent"))
-        except ApiError as exc:
-            return error(exc.status, exc.message)
-        return JSONResponse(payload, status_code=status, headers=no_store)
-
-    async def study_info(_request: Request):
-        return JSONResponse(study.study_info, headers=no_store)
-
-    async def index(_request: Request):
-        return FileResponse(ui / "index.html", media_type="text/html", headers=no_store)
-
-    async def media(request: Request):
-        # a dictionary lookup of the opaque name, never a path join with a request value
-        path = study.media_files.get(request.path_params["name"])
-        if path is None:
-            return error(404, "no such video")
-        return blind_file_response(path, {"Cache-Control": "public, max-age=3600"})
-
-    async def health(_request: Request):
-        return JSONResponse({"ok": True})
-
-    def admin(handler, *, page: bool = False):
-        async def run(request: Request):
-            try:
-                admin_auth.check_admin(request, config.admin_token)
-            except ApiError as exc:
-                if page and exc.status in (401, 403):
-                    return HTMLResponse(admin_auth.login_page(config.design.name), status_code=exc.status,
-                                        headers=no_store)
-                return error(exc.status, exc.message)
-            try:
-                return await run_in_threadpool(handler, request)
-            except ApiError as exc:
-                return error(exc.status, exc.message)
-            except InvalidInputError as exc:
-                return error(422, str(exc))
-        return run
-
-    async def admin_login(request: Request):
-        try:
-            token = await admin_auth.read_login_form(request)
-        except ApiError as exc:
-            return error(exc.status, exc.message)
-        import hmac
-        if not hmac.compare_digest(token.encode(), config.admin_token.encode()):
-            return HTMLResponse(admin_auth.login_page(config.design.name, "Wrong admin token."), status_code=403,
-                                headers=no_store)
-        resp = RedirectResponse("/admin", status_code=303, headers=no_store)
-        resp.headers["set-cookie"] = admin_auth.cookie_header(request, config.admin_token)
-        return resp
-
-    async def admin_logout(request: Request):
-        resp = RedirectResponse("/admin", status_code=303, headers=no_store)
-        resp.headers["set-cookie"] = admin_auth.cookie_header(request, None)
-        return resp
-
-    def csv_response(text: str, name: str) -> Response:
-        return Response(text, media_type="text/csv",
-                        headers={**no_store, "Content-Disposition": f'attachment; filename="{name}"'})
-
-    def json_ok(payload) -> JSONResponse:
-        return JSONResponse(payload, headers=no_store)
-
-    timer_box: dict = {}
-
-    def timer_factory(inner):
-        timer_box["timer"] = AnswerTimer(inner)
-        return timer_box["timer"]
-
-    def admin_metrics(_request):
-        timer = timer_box.get("timer")
-        return json_ok({"server_answer_latency": timer.summary() if timer else {"answers_timed": 0}})
-
-    def admin_withdraw(request):
-        pid = study.check_pid(request.path_params["pid"])
-        if study.store.participant(pid) is None:
-            raise ApiError(404, f"unknown participant {pid!r}")
-        line = withdraw_participant(study.store, pid, by="admin", completion_code=config.online.code("withdrawn"))
-        study._schedules.pop(pid, None)
-        return json_ok(line)
-
-    def export_participants(_request):
-        return csv_response(rows_to_csv(participants_rows(study.store, config.online, study.item_ids),
-                                        PARTICIPANT_COLUMNS), "participants.csv")
-
-    lib_mounts = [Mount("/lib/jspsych/dist", StaticFiles(directory=modules / "jspsych" / "dist")),
-                  Mount("/lib/jspsych/css", StaticFiles(directory=modules / "jspsych" / "css"))]
-    lib_mounts += [Mount(f"/lib/{p}", StaticFiles(directory=modules / "@jspsych" / p / "dist")) for p in UI_PLUGINS]
-    api = "/api/participants/{pid}"
-    routes = [
-        Route("/", index),
-        Route("/healthz", health),
-        Route("/api/study", study_info),
-        Route("/api/participants", register, methods=["POST"]),
-        Route(api, endpoint(study.state_of), methods=["GET"]),
-        Route(api + "/screen-out", endpoint(study.screen_out, body=True), methods=["POST"]),
-        Route(api + "/consent", endpoint(study.consent, body=True), methods=["POST"]),
-        Route(api + "/demographics", endpoint(study.demographics, body=True), methods=["POST"]),
-        Route(api + "/practice", endpoint(study.practice, body=True), methods=["POST"]),
-        Route(api + "/responses", endpoint(study.answer, body=True), methods=["POST"]),
-        Route(api + "/responses", endpoint(study.own_responses), methods=["GET"]),
-        Route(api + "/complete", endpoint(study.complete), methods=["POST"]),
-        Route(api + "/withdraw", endpoint(study.withdraw, body=True), methods=["POST"]),
-        Route("/media/{name}", media),
-        Route("/admin", admin(lambda r: HTMLResponse(dashboard_html(study.store.progress(), config.design.name),
-                                                      headers=no_store), page=True)),
-        Route("/admin/login", admin_login, methods=["POST"]),
-        Route("/admin/logout", admin_logout, methods=["POST"]),
-        Route("/admin/progress.json", admin(lambda r: json_ok({"participants": study.store.progress(),
-                                                              "n_trials": study.n_trials}))),
-        Route("/admin/participants.json", admin(lambda r: json_ok({"participants": list_participants(study.store)}))),
-        Route("/admin/metrics.json", admin(admin_metrics)),
-        Route("/admin/study.json", admin(lambda r: json_ok(study.scoring()))),
-        Route("/admin/participants/{pid}/resume-link",
-              admin(lambda r: json_ok(study.resume_link(r.path_params["pid"]))), methods=["POST"]),
-        Route("/admin/participants/{pid}/withdraw", admin(admin_withdraw), methods=["POST"]),
-        Route("/admin/participants/{pid}/schedule",
-              admin(lambda r: json_ok(study.admin_schedule(r.path_params["pid"])))),
-        Route("/admin/export/responses.csv", admin(lambda r: csv_response(
-            rows_to_csv(study.store.response_rows(), RESPONSE_EXPORT_COLUMNS), "responses.csv"))),
-        Route("/admin/export/demographics.csv", admin(lambda r: csv_response(
-            rows_to_csv(study.store.demographics_rows(), DEMOGRAPHIC_COLUMNS), "demographics.csv"))),
-        Route("/admin/export/participants.csv", admin(export_participants)),
-        Mount("/js", StaticFiles(directory=ui / "js")),
-        Mount("/css", StaticFiles(directory=ui / "css")),
-        *lib_mounts,
-    ]
-    app = Starlette(routes=routes, middleware=[Middleware(SecurityHeaders, media_origin=media_origin),
-                                               Middleware(timer_factory)])
+    specs = (*routes_participant.ROUTES, *routes_static.ROUTES, *routes_admin.ROUTES)
+    routes = [Route(spec.path, spec.handler, methods=list(spec.methods)) for spec in specs]
+    latency = LatencyLog()
+    app = Starlette(routes=[*routes, *routes_static.ui_mounts(ui)],
+                    middleware=[Middleware(SecurityHeaders, media_origin=_origin(config.media_url)),
+                                Middleware(AnswerTimer, log=latency)],
+                    exception_handlers={ApiError: _api_error, InvalidInputError: _invalid_input})
     app.state.study = study
     app.state.config = config
+    app.state.ui_dir = ui
+    app.state.answer_latency = latency
     return app

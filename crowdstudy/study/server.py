@@ -17,7 +17,8 @@ ADMIN_TOKEN_ENV = "CROWDSTUDY_ADMIN_TOKEN"
 
 
 def default_ui_dir() -> Path:
-    """The questionnaire's front end shipped in the package (``crowdstudy/study/ui``)."""
+    """The questionnaire's front end shipped in the package (``crowdstudy/study/ui``: in a
+    checkout, the link to the top-level ``ui/``; in a wheel, copies of its files)."""
     return resource_path("crowdstudy.study", "ui")
 
 

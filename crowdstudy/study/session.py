@@ -1,4 +1,6 @@
-"""The participant API's logic (blocking; :mod:`crowdstudy.study.app` runs it in a thread pool).
+"""The participant API's logic (blocking; the route handlers of
+:mod:`crowdstudy.study.routes_participant` and :mod:`crowdstudy.study.routes_admin` run it
+in a thread pool). The request bodies' values are checked by :mod:`crowdstudy.study.bodies`.
 
 No per-process state can go stale: every request reads the participant's row (secret hash,
 progress, withdrawal) from the database, so a secret replaced or a participant withdrawn
@@ -15,32 +17,21 @@ reversal or the composites' pairing (that scoring metadata is admin-only).
 
 from __future__ import annotations
 
-import datetime as _dt
 import hashlib
 import hmac
-import math
-import re
 import secrets
 
 from crowdstudy.errors import InvalidInputError
-from crowdstudy.study.blinding import TOKEN_LENGTH, TOKEN_PATTERN, token_table
+from crowdstudy.study import bodies
+from crowdstudy.study.blinding import token_table
 from crowdstudy.study.media import PRACTICE_KEY, media_table
 from crowdstudy.study.quality import draw_checks
 from crowdstudy.study.roster import status_of, withdraw_participant
-from crowdstudy.study.schedule import PARTICIPANT_ID_PATTERN, make_schedule
+from crowdstudy.study.schedule import make_schedule
 from crowdstudy.study.storage import ITEM_IDS
 from crowdstudy.study.webio import ApiError
 
-__all__ = ["StudySession", "hash_secret", "GENDERS", "AGE_RANGE", "PLATFORM_FIELDS"]
-
-GENDERS = ("female", "male", "non-binary", "other", "prefer not to say")
-AGE_RANGE = (18, 120)
-#: Crowdsourcing-platform ids accepted at registration: {request key: database column}.
-PLATFORM_FIELDS = {"PROLIFIC_PID": "prolific_pid", "STUDY_ID": "prolific_study_id", "SESSION_ID": "prolific_session_id"}
-_PLATFORM_ID = re.compile(r"[A-Za-z0-9_-]{1,64}")
-_MAX_RT_MS = 24 * 3600 * 1000.0
-_QUALITY_INTS = ("video_plays", "hidden_count", "fullscreen_exits")
-_QUALITY_MS = ("first_play_ms", "hidden_ms")
+__all__ = ["StudySession", "hash_secret"]
 
 
 def hash_secret(secret: str) -> str:
@@ -48,26 +39,9 @@ def hash_secret(secret: str) -> str:
     return hashlib.sha256(secret.encode("utf-8")).hexdigest()
 
 
-def _is_int(v) -> bool:
-    return isinstance(v, int) and not isinstance(v, bool)
-
-
-def _parse_time(value, name: str) -> str | None:
-    if value is None:
-        return None
-    if not isinstance(value, str) or len(value) > 40:
-        raise ApiError(422, f"{name} must be an ISO 8601 timestamp string")
-    try:
-        t = _dt.datetime.fromisoformat(value.replace("Z", "+00:00"))
-    except ValueError:
-        raise ApiError(422, f"{name} must be an ISO 8601 timestamp, got {value!r}") from None
-    if t.tzinfo is None:
-        t = t.replace(tzinfo=_dt.timezone.utc)
-    return t.astimezone(_dt.timezone.utc).isoformat(timespec="milliseconds")
-
-
 class StudySession:
-    """Request handlers bound to one StudyConfig (``cfg``)."""
+    """The participant API's logic bound to one StudyConfig (``cfg``): the route handlers
+    call its methods with the authenticated participant's id, database row and request body."""
 
     def __init__(self, config):
         self.cfg = config
@@ -96,24 +70,18 @@ class StudySession:
             "consent_html": config.consent_html,
             "stages": [{"number": st.number, "scenario": st.scenario, "description": st.description,
                         "n_trials": len(self.by_stage.get(st.number, []))} for st in config.design.stages],
-            "genders": list(GENDERS), "age_range": list(AGE_RANGE),
+            "genders": list(bodies.GENDERS), "age_range": list(bodies.AGE_RANGE),
             "screen": {"min_width": self.online.min_width, "min_height": self.online.min_height},
             "fullscreen": bool(self.online.fullscreen),
             "practice_video_url": self.video_url[PRACTICE_KEY],
         }
 
     # -- participants -----------------------------------------------------------------
-    def check_pid(self, pid) -> str:
-        if not isinstance(pid, str) or not PARTICIPANT_ID_PATTERN.fullmatch(pid):
-            raise ApiError(400, "participant_id must be 1-64 letters, digits, '_' or '-' starting with a letter "
-                                "or digit")
-        return pid
-
     def authenticate(self, pid: str, secret: str | None) -> dict:
         """The participant's row, read now from the database; 401 without a secret, 403 for a
         wrong secret or an unknown id alike (the answer never tells whether an id exists),
         410 once withdrawn."""
-        self.check_pid(pid)
+        bodies.parse_participant_id(pid)
         if not secret:
             raise ApiError(401, "missing X-Participant-Secret header (the secret returned at registration)")
         row = self.store.participant(pid)
@@ -137,6 +105,11 @@ class StudySession:
             if sched:
                 self._schedules[pid] = sched
         return sched
+
+    def forget_schedule(self, pid: str) -> None:
+        """Drop this process's copy of ``pid``'s schedule (the next :meth:`schedule` reads the
+        database): after a withdrawal, and before the admin's view of it."""
+        self._schedules.pop(pid, None)
 
     def _check_of(self, trial: dict) -> dict | None:
         v = trial.get("check_value")
@@ -179,25 +152,10 @@ class StudySession:
         """GET /api/participants/<id> (row: the authenticated participant's)."""
         return self.state(pid, row)
 
-    def _platform(self, body: dict) -> dict:
-        raw = body.get("platform", {})
-        if not isinstance(raw, dict):
-            raise ApiError(400, "platform must be an object {PROLIFIC_PID, STUDY_ID, SESSION_ID}")
-        out = {}
-        for key, value in raw.items():
-            if key not in PLATFORM_FIELDS:
-                raise ApiError(400, f"platform has unknown key {key!r:.40}")
-            if not isinstance(value, str) or not _PLATFORM_ID.fullmatch(value):
-                raise ApiError(400, f"platform.{key} must be 1-64 letters, digits, '_' or '-'")
-            out[PLATFORM_FIELDS[key]] = value
-        return out
-
     def register(self, body: dict, user_agent: str | None) -> tuple[int, dict]:
-        pid = self.check_pid(body.get("participant_id"))
-        secret = body.get("secret")
-        if secret is not None and (not isinstance(secret, str) or len(secret) > 128):
-            raise ApiError(400, "secret must be a string")
-        platform = self._platform(body)
+        """POST /api/participants: a new participant (201, a new secret) or, with the secret of
+        a registered one, a resumed session (200)."""
+        pid, secret, platform = bodies.parse_registration(body)
         if secret and self.store.participant(pid) is not None:  # resume (a stale secret of a new id: register)
             row = self.authenticate(pid, secret)
             return 200, {"participant_id": pid, "secret": secret, "resumed": True, "state": self.state(pid, row)}
@@ -212,9 +170,7 @@ class StudySession:
 
     def screen_out(self, pid: str, row: dict, body: dict) -> dict:
         """Record a failed screen check (before consent only); returns the state with its code."""
-        w, h = body.get("width"), body.get("height")
-        if not _is_int(w) or not _is_int(h) or not (0 <= w <= 100000 and 0 <= h <= 100000):
-            raise ApiError(422, "width and height must be the viewport's integer CSS pixels")
+        w, h = bodies.parse_viewport(body)
         if row["consented_at"] is not None:
             raise ApiError(409, "the screen check comes before consent")
         if w >= self.online.min_width and h >= self.online.min_height:
@@ -229,90 +185,47 @@ class StudySession:
 
     def consent(self, pid: str, row: dict, body: dict) -> dict:
         self._require_active(row)
-        if body.get("consent") is not True:
-            raise ApiError(422, "consent must be true (a participant who declines is not registered further)")
+        bodies.parse_consent(body)
         return self.state(pid, self.store.set_consent(pid))
 
     def demographics(self, pid: str, row: dict, body: dict) -> dict:
         if row["consented_at"] is None:
             raise ApiError(409, "give consent before the demographics")
-        age, gender = body.get("age"), body.get("gender")
-        if isinstance(age, str) and age.strip().isdigit():
-            age = int(age.strip())
-        if not _is_int(age) or not AGE_RANGE[0] <= age <= AGE_RANGE[1]:
-            raise ApiError(422, f"age must be an integer {AGE_RANGE[0]}..{AGE_RANGE[1]}, got {age!r:.40}")
-        if gender not in GENDERS:
-            raise ApiError(422, f"gender must be one of {', '.join(GENDERS)}, got {gender!r:.40}")
+        age, gender = bodies.parse_demographics(body)
         new = self.store.set_demographics(pid, age, gender)
         if (new["age"], new["gender"]) != (age, gender):
             raise ApiError(409, "the demographics were already given; the first answer is kept")
         return self.state(pid, new)
 
-    def parse_answers(self, body: dict) -> tuple[dict, float, str | None, dict]:
-        answers = body.get("answers")
-        if not isinstance(answers, dict):
-            raise ApiError(422, "answers must be an object {\"Q1\": 1..6, ...}")
-        for q in self.item_ids:
-            if q not in answers:
-                raise ApiError(422, f"answers.{q} is missing (all {len(self.item_ids)} items are required)")
-            v = answers[q]
-            if not _is_int(v) or not 1 <= v <= self.points:
-                raise ApiError(422, f"answers.{q} must be an integer 1..{self.points}, got {v!r:.40}")
-        extra = sorted(set(answers) - set(self.item_ids))
-        if extra:
-            raise ApiError(422, f"answers has unknown item {extra[0]!r:.40}")
-        rt = body.get("rt_ms")
-        if isinstance(rt, bool) or not isinstance(rt, (int, float)) or not math.isfinite(rt) or \
-                not 0 <= rt <= _MAX_RT_MS:
-            raise ApiError(422, f"rt_ms must be a number of milliseconds 0..{_MAX_RT_MS:.0f}, got {rt!r:.40}")
-        quality = {}
-        for k in _QUALITY_INTS:
-            v = body.get(k)
-            if v is not None and (not _is_int(v) or not 0 <= v <= 100000):
-                raise ApiError(422, f"{k} must be a count 0..100000, got {v!r:.40}")
-            quality[k] = v
-        for k in _QUALITY_MS:
-            v = body.get(k)
-            if v is not None and (isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v)
-                                  or not 0 <= v <= _MAX_RT_MS):
-                raise ApiError(422, f"{k} must be milliseconds 0..{_MAX_RT_MS:.0f}, got {v!r:.40}")
-            quality[k] = None if v is None else float(v)
-        return answers, float(rt), _parse_time(body.get("shown_at"), "shown_at"), quality
-
     def practice(self, pid: str, row: dict, body: dict) -> tuple[int, dict]:
         if row["demographics_at"] is None:
             raise ApiError(409, "give consent and the demographics before the practice trial")
-        answers, rt, shown, quality = self.parse_answers(body)
+        answers = bodies.parse_likert(body, self.item_ids, self.points)
+        rt, shown, quality = bodies.parse_timing(body)
         status, _ = self.store.record_practice(pid, answers, rt, shown, quality)
         return (201 if status == "created" else 200), {"stored": status == "created", "practice": True}
 
-    def answer(self, pid: str, row: dict, body: dict) -> tuple[int, dict]:
-        if row["practice_at"] is None or row["demographics_at"] is None:
-            raise ApiError(409, "complete consent, demographics and the practice trial first")
+    def _trial(self, pid: str, body: dict) -> tuple[int, dict]:
+        """(trial_index, scheduled trial) an answer names by ``trial_index`` and ``token`` (422
+        unless the token is that trial's)."""
         sched = self.schedule(pid)
-        ti = body.get("trial_index")
-        if not _is_int(ti) or not 0 <= ti < len(sched):
-            raise ApiError(422, f"trial_index must be an integer 0..{len(sched) - 1}, got {ti!r:.40}")
-        if "stimulus_id" in body:
-            raise ApiError(422, "send the trial's token, not a stimulus_id (participants never see stimulus ids)")
-        token = body.get("token")
-        if not isinstance(token, str) or not TOKEN_PATTERN.fullmatch(token):
-            raise ApiError(422, f"token must be the trial's {TOKEN_LENGTH}-digit lowercase hex token from the "
-                                "participant's state")
+        ti, token = bodies.parse_trial_ref(body, len(sched))
         trial = sched[ti]
         if trial["token"] != token:
             other = next((t["trial_index"] for t in sched if t["token"] == token), None)
             if other is None:
                 raise ApiError(422, f"token {token} is not in this participant's schedule")
             raise ApiError(422, f"token {token} belongs to trial {other}, not to trial_index {ti}")
-        answers, rt, shown, quality = self.parse_answers(body)
-        check = body.get("check")
-        if trial["check_value"] is None:
-            if check is not None:
-                raise ApiError(422, f"trial {ti} has no attention check; send no 'check'")
-        elif not _is_int(check) or not 1 <= check <= self.points:
-            raise ApiError(422, f"check must be the answer 1..{self.points} to trial {ti}'s extra statement")
-        quality["check_answer"] = check
+        return ti, trial
+
+    def answer(self, pid: str, row: dict, body: dict) -> tuple[int, dict]:
+        """POST /api/participants/<id>/responses: one trial's answer, committed in trial order."""
+        if row["practice_at"] is None or row["demographics_at"] is None:
+            raise ApiError(409, "complete consent, demographics and the practice trial first")
+        ti, trial = self._trial(pid, body)
+        answers = bodies.parse_likert(body, self.item_ids, self.points)
+        rt, shown, quality = bodies.parse_timing(body)
+        quality["check_answer"] = bodies.parse_check(body, ti, trial["check_value"] is not None, self.points)
         status, stored = self.store.record_answer(pid, ti, trial["stimulus_id"], trial["stage"], answers, rt, shown,
                                                   quality=quality)
         if status == "out_of_order":
@@ -321,7 +234,7 @@ class StudySession:
             raise ApiError(409, f"trial {ti} already has a different answer (given in another tab or window?); "
                                 "the first one is kept, this one was recorded separately")
         return (201 if status == "created" else 200), {"stored": True, "trial_index": ti,
-                                                       "answer": _public_answer(stored, token)}
+                                                       "answer": _public_answer(stored, trial["token"])}
 
     def own_responses(self, pid: str, row: dict) -> dict:
         """The participant's stored answers, each naming its trial by token (no conditions)."""
@@ -340,11 +253,10 @@ class StudySession:
 
     def withdraw(self, pid: str, row: dict, body: dict) -> dict:
         """The participant withdraws: answers and demographics deleted, an audit line kept."""
-        if body.get("confirm") is not True:
-            raise ApiError(422, "confirm must be true")
+        bodies.parse_withdrawal(body)
         code = self.online.code("withdrawn")
         withdraw_participant(self.store, pid, by="participant", completion_code=code)
-        self._schedules.pop(pid, None)
+        self.forget_schedule(pid)
         return {"participant_id": pid, "withdrawn": True, "completion_code": code,
                 "redirect_url": self.cfg.redirect_url}
 
@@ -352,8 +264,8 @@ class StudySession:
     def admin_schedule(self, pid: str) -> dict:
         """Participant ``pid``'s trials with token, stimulus id and conditions, read from the
         database (admin only: the token -> stimulus mapping the participant must not see)."""
-        self.check_pid(pid)
-        self._schedules.pop(pid, None)
+        bodies.parse_participant_id(pid)
+        self.forget_schedule(pid)
         sched = self.schedule(pid)
         if not sched:
             raise ApiError(404, f"unknown participant {pid!r}")
@@ -368,7 +280,7 @@ class StudySession:
 
     def resume_link(self, pid: str) -> dict:
         """A new secret for ``pid`` (e.g. to continue on another device); the old one stops working."""
-        self.check_pid(pid)
+        bodies.parse_participant_id(pid)
         secret = secrets.token_urlsafe(24)
         if not self.store.replace_secret(pid, hash_secret(secret)):
             raise ApiError(404, f"unknown participant {pid!r}")

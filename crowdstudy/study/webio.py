@@ -1,4 +1,13 @@
-"""HTTP plumbing of the study server: request bodies, security headers, answer timing.
+"""HTTP plumbing of the study server: routes, request bodies, responses, security headers,
+answer timing.
+
+* :class:`RouteSpec`: one row of a route table (path, handler, methods); the tables live in
+  :mod:`crowdstudy.study.routes_participant`, :mod:`~crowdstudy.study.routes_static` and
+  :mod:`~crowdstudy.study.routes_admin`, and :func:`crowdstudy.study.app.create_app` turns
+  them into Starlette routes.
+* :class:`ApiError`: a refused request; the application's exception handler answers it
+  with :func:`error_response` (JSON ``{"error": message}``, the status, ``no-store``).
+* :func:`in_thread`: a handler's blocking work (database, files) off the event loop.
 
 * :func:`read_json_body`: the only way a handler gets a body. It insists on
   ``Content-Type: application/json`` (415 otherwise: an HTML form on another site cannot
@@ -9,7 +18,10 @@
 * :class:`SecurityHeaders`: Content-Security-Policy (own origin only, plus the media origin;
   no inline scripts; no framing), X-Frame-Options DENY, X-Content-Type-Options nosniff,
   Referrer-Policy no-referrer, Cross-Origin-Opener-Policy same-origin, Permissions-Policy.
-* :class:`AnswerTimer`: in-server latency of each answer POST (``/admin/metrics.json``).
+* :class:`AnswerTimer`: in-server latency of each answer POST, kept in a
+  :class:`LatencyLog` (``/admin/metrics.json``).
+
+Starlette is imported inside the functions (it is the ``web`` extra's).
 """
 
 from __future__ import annotations
@@ -17,12 +29,18 @@ from __future__ import annotations
 import collections
 import math
 import time
+from typing import Any, Callable, NamedTuple, TypeVar
 
-__all__ = ["ApiError", "read_json_body", "SecurityHeaders", "AnswerTimer", "MAX_BODY_BYTES", "MAX_JSON_DEPTH",
-           "content_security_policy"]
+__all__ = ["ApiError", "RouteSpec", "NO_STORE", "read_json_body", "in_thread", "json_response", "error_response",
+           "html_response", "csv_response", "SecurityHeaders", "LatencyLog", "AnswerTimer", "MAX_BODY_BYTES",
+           "MAX_JSON_DEPTH", "content_security_policy"]
 
 MAX_BODY_BYTES = 16 * 1024
 MAX_JSON_DEPTH = 8
+#: The headers of every answer that must not be cached (JSON, pages, exports).
+NO_STORE = {"Cache-Control": "no-store"}
+
+_T = TypeVar("_T")
 
 
 class ApiError(Exception):
@@ -31,6 +49,14 @@ class ApiError(Exception):
     def __init__(self, status: int, message: str):
         super().__init__(message)
         self.status, self.message = status, message
+
+
+class RouteSpec(NamedTuple):
+    """One route: ``path`` (Starlette syntax, ``{pid}`` a path parameter), the async
+    ``handler(request)`` and its HTTP ``methods`` (GET also answers HEAD)."""
+    path: str
+    handler: Callable[..., Any]
+    methods: tuple[str, ...] = ("GET",)
 
 
 def _json_depth(raw: bytes) -> int:
@@ -85,6 +111,36 @@ async def read_json_body(request) -> dict:
     return data
 
 
+async def in_thread(fn: Callable[..., _T], *args: Any) -> _T:
+    """``fn(*args)`` run in the server's thread pool (blocking work: the database, files)."""
+    from starlette.concurrency import run_in_threadpool
+    return await run_in_threadpool(fn, *args)
+
+
+def json_response(payload: Any, status: int = 200):
+    """A JSON answer that is never cached."""
+    from starlette.responses import JSONResponse
+    return JSONResponse(payload, status_code=status, headers=NO_STORE)
+
+
+def error_response(status: int, message: str):
+    """The JSON error ``{"error": message}`` with HTTP ``status``."""
+    return json_response({"error": message}, status)
+
+
+def html_response(text: str, status: int = 200):
+    """An HTML page that is never cached."""
+    from starlette.responses import HTMLResponse
+    return HTMLResponse(text, status_code=status, headers=NO_STORE)
+
+
+def csv_response(text: str, name: str):
+    """A CSV download named ``name``, never cached."""
+    from starlette.responses import Response
+    return Response(text, media_type="text/csv",
+                    headers={**NO_STORE, "Content-Disposition": f'attachment; filename="{name}"'})
+
+
 def content_security_policy(media_origin: str = "") -> str:
     """The page's CSP: scripts, styles, fetches and media from this origin (and ``media_origin``,
     e.g. ``https://cdn.example.org``, where the videos live), media also from ``blob:`` (the
@@ -121,14 +177,36 @@ class SecurityHeaders:
         await self.app(scope, receive, send_with_headers)
 
 
+class LatencyLog:
+    """The last ``maxlen`` answer latencies of this process, milliseconds, and their summary."""
+
+    def __init__(self, maxlen: int = 200_000):
+        self.values: "collections.deque[float]" = collections.deque(maxlen=maxlen)
+
+    def add(self, ms: float) -> None:
+        self.values.append(ms)
+
+    def summary(self) -> dict:
+        """``answers_timed`` and the p50/p95/p99/max latencies (ms) of the values kept."""
+        vals = sorted(self.values)
+        if not vals:
+            return {"answers_timed": 0}
+
+        def pct(q):
+            return round(vals[min(len(vals) - 1, int(math.ceil(q / 100.0 * len(vals))) - 1)], 3)
+        return {"answers_timed": len(vals), "latency_ms_p50": pct(50), "latency_ms_p95": pct(95),
+                "latency_ms_p99": pct(99), "latency_ms_max": round(vals[-1], 3)}
+
+
 class AnswerTimer:
     """ASGI middleware timing every answer POST inside the server (first byte of the request
-    handled to the last byte of the response handed to the server), milliseconds; keeps the
-    last ``maxlen`` values of this process for ``/admin/metrics.json``."""
+    handled to the last byte of the response handed to the server), milliseconds, into
+    ``log`` (the application keeps it in ``app.state.answer_latency`` for
+    ``/admin/metrics.json``)."""
 
-    def __init__(self, app, maxlen: int = 200_000):
+    def __init__(self, app, log: LatencyLog):
         self.app = app
-        self.values: "collections.deque[float]" = collections.deque(maxlen=maxlen)
+        self.log = log
 
     async def __call__(self, scope, receive, send):
         if scope["type"] != "http" or scope["method"] != "POST" or not scope["path"].endswith("/responses"):
@@ -139,16 +217,6 @@ class AnswerTimer:
         async def timed_send(message):
             await send(message)
             if message["type"] == "http.response.body" and not message.get("more_body", False):
-                self.values.append((time.perf_counter() - t0) * 1000.0)
+                self.log.add((time.perf_counter() - t0) * 1000.0)
 
         await self.app(scope, receive, timed_send)
-
-    def summary(self) -> dict:
-        vals = sorted(self.values)
-        if not vals:
-            return {"answers_timed": 0}
-
-        def pct(q):
-            return round(vals[min(len(vals) - 1, int(math.ceil(q / 100.0 * len(vals))) - 1)], 3)
-        return {"answers_timed": len(vals), "latency_ms_p50": pct(50), "latency_ms_p95": pct(95),
-                "latency_ms_p99": pct(99), "latency_ms_max": round(vals[-1], 3)}
