@@ -190,3 +190,24 @@ def test_the_help_documents_the_file_and_the_keys(capsys):
     text = " ".join(capsys.readouterr().out.split())
     assert "FILE.toml" in text and "[control] damping = 0.01" in text and "control.damping" in text
     assert "skin.max=0.015 skin.hand_scale=0.5 output.hold=0.6" in text
+
+
+def test_the_paper_preset_switches_off_every_addition():
+    """PhysicsConfig.paper(): the paper's method alone (plain prediction with gravity, Eq. 4
+    with d = 0.006 and stiffer pelvis and feet, the four penalty contacts on bare capsules,
+    no output stage), whatever the defaults say."""
+    paper, default = PhysicsConfig.paper(), PhysicsConfig()
+    assert paper.control.damping == 0.006 and paper.control.pelvis_scale > 1 and paper.control.feet_scale > 1
+    assert paper.control.arm_scale == paper.control.trunk_scale == 1.0
+    assert not paper.solver.feedforward and paper.body.gravity > 0 and paper.solver.dt == 1.0 / 60.0
+    assert paper.control.pose_translation_stiffness == paper.control.feet_translation_stiffness == 0
+    assert paper.feet.anchor_stiffness == 0
+    c = paper.contacts
+    assert min(c.stiffness, c.intra_stiffness, c.ground_stiffness, c.wall_stiffness) > 0
+    assert c.speculative_distance == c.pass_ahead == c.stiffening_depth == c.activation == c.margin == 0
+    assert not paper.follows_profile and paper.skin.max == 0 and paper.skin.percentile == 0
+    o = paper.output
+    assert o.smoothing == o.smoothing_root == o.hold == 0 and not o.speed_limit and not o.foot_lock
+    assert paper.for_density(6.5) == paper                     # no density profile to follow
+    assert PhysicsConfig.paper(damping=0.06).control.damping == 0.06
+    assert default.output.speed_limit and default.follows_profile   # the defaults are untouched

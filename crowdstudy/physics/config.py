@@ -61,6 +61,26 @@ _PAPER_CONTROLLER = {"control.root_translation_stiffness": 1.0e4, "control.root_
                      "control.pose_translation_stiffness": 0.0, "control.pose_translation_damping_scale": 0.0,
                      "control.arm_scale": 1.0}
 
+#: what the paper's method alone has (:meth:`PhysicsConfig.paper`): everything this project
+#: adds to it switched off
+_PAPER_METHOD = {
+    **_PAPER_CONTROLLER,
+    # the plain implicit-Euler prediction x + h v with gravity applied
+    "solver.feedforward": False, "solver.settle_time": 0.0,
+    # Eq. 4 on every joint, pelvis and feet stiffer; no translational springs but the root's
+    "control.trunk_scale": 1.0, "control.feet_translation_stiffness": 0.0,
+    "control.feet_translation_damping_scale": 0.0,
+    "feet.anchor_stiffness": 0.0,
+    # the four penalty contacts (k/2) depth^2 on bare capsules, nothing ahead of a contact
+    "contacts.margin": 0.0, "contacts.speculative_distance": 0.0, "contacts.activation": 0.0,
+    "contacts.release_width": 0.0, "contacts.pass_ahead": 0.0, "contacts.stiffening_depth": 0.0,
+    "contacts.target_relative_self": False,
+    "skin.percentile": 0.0, "skin.max": 0.0, "skin.hand_scale": 0.0,
+    # no output stage: the simulated poses are the output (a periodic clip still closes its loop)
+    "output.smoothing": 0.0, "output.smoothing_root": 0.0, "output.hold": 0.0,
+    "output.speed_limit": False, "output.foot_lock": False,
+}
+
 
 def _apply(obj, changes: dict[str, object]):
     """A copy of the dataclass ``obj`` with ``changes`` ({dotted path: value}) made."""
@@ -169,6 +189,22 @@ class PhysicsConfig:
         the damping, so the figure's contrast between the dampings is the paper's
         controller's. ``changes``/``fields``: further fields to set (:meth:`with_values`)."""
         return cls().with_values(_PAPER_CONTROLLER).with_values(changes, **fields)
+
+    @classmethod
+    def paper(cls, changes: Mapping[str, object] | None = None, /, **fields) -> "PhysicsConfig":
+        """The paper's method alone: inertia and gravity (the plain prediction ``x + h v``),
+        soft ball joints, the PD control of Eq. 4 with d = 0.006 and stiffer pelvis and feet
+        (the root also held by a linear translation spring, as :meth:`paper_controller`),
+        the four penalty contacts ``(k/2) depth^2`` (ground, environment and walls,
+        inter-body, intra-body) on the bare capsules, one Newton step per 1/60 s solved by
+        CG. Everything this project adds is off: the feed-forward prediction, the settle,
+        the translational pose and foot springs, the stance-foot anchor, the mesh skins and
+        the density profile, the speculative, released, passing and stiffening contacts,
+        and the output stage (smoothing, hold, speed limit, foot lock). A periodic clip is
+        still simulated from before its first frame and cross-faded into it
+        (``output.loop_warmup``, ``output.loop_blend``), so its loop stays seamless.
+        ``changes``/``fields``: further fields to set (:meth:`with_values`)."""
+        return cls().with_values(_PAPER_METHOD).with_values(changes, **fields)
 
     def replace(self, **sections) -> "PhysicsConfig":
         """A validated copy with whole sections replaced (``control=ControlConfig(...)``);
