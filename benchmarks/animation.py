@@ -22,7 +22,8 @@ import argparse
 
 import numpy as np
 
-from crowdstudy.bench import format_table, measure, write_report
+from crowdstudy.bench import measure, write_report
+from crowdstudy.tables import format_table
 
 
 def _stationary_crowd(n: int, seed: int):
@@ -61,8 +62,7 @@ def _naive_stationary(crowd, duration, fps, seed, bodies):
     from crowdstudy.motion import list_clips
     from crowdstudy.motion.baseline import DEFAULT_TEMPO, body_scales
     from crowdstudy.motion.mocap_library import dance_loop
-    from crowdstudy.body.rotations import quaternion_to_axis_angle
-    from crowdstudy.motion.quaternions import quat_about_z, quat_multiply
+    from crowdstudy.body.rotations import quat_about_z, quat_multiply, quaternion_to_axis_angle
 
     names = list_clips("dance", default_only=True)
     loops = {name: dance_loop(name, DEFAULT_TEMPO, fps, duration) for name in names}   # the same loops as ours
@@ -91,8 +91,7 @@ def _naive_stationary(crowd, duration, fps, seed, bodies):
 def _naive_walking(crowd, bodies):
     from crowdstudy.motion.baseline import body_scales, gait_blend
     from crowdstudy.motion.library import walk_clips
-    from crowdstudy.body.rotations import quaternion_to_axis_angle
-    from crowdstudy.motion.quaternions import quat_about_z, quat_blend, quat_multiply
+    from crowdstudy.body.rotations import quat_about_z, quat_blend, quat_multiply, quaternion_to_axis_angle
 
     walks = walk_clips()
     speeds = np.array([c.speed for c in walks])

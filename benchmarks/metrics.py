@@ -31,7 +31,8 @@ import time
 
 import numpy as np
 
-from crowdstudy.bench import format_table, write_report
+from crowdstudy.bench import write_report
+from crowdstudy.tables import format_table
 
 
 def _scene(n: int, seed: int = 0):

@@ -25,8 +25,9 @@ from __future__ import annotations
 import argparse
 import sys
 
-from crowdstudy.bench import format_table, write_report
+from crowdstudy.bench import write_report
 from crowdstudy.errors import InvalidInputError
+from crowdstudy.tables import format_table
 
 
 def _agents(text: str) -> list[int]:

@@ -32,7 +32,8 @@ import time
 
 import numpy as np
 
-from crowdstudy.bench import format_table, measure, write_report
+from crowdstudy.bench import measure, write_report
+from crowdstudy.tables import format_table
 
 SEED = 0
 BAR_MS = 5.0

@@ -43,14 +43,14 @@ def sample_systems(n_characters: int, warmup: int, samples: tuple[int, ...]):
     the steps ``samples`` (< ``warmup``): a list of {step, A (CSR), tree (A without the
     contacts' couplings), b, x (body positions), fused_iterations, tolerance (the solver's
     relative residual), contacts}, the number of bodies and the joints per character."""
+    from crowdstudy.design import load_design
+    from crowdstudy.motion.baseline import build_baseline
     from crowdstudy.physics.linear import bsr_from_triplets
+    from crowdstudy.physics.step_timing import tile_crowd, timed_corrector
 
-    from crowdstudy.bench import load_benchmark
-
-    physics = load_benchmark("physics")        # its scene and corrector helpers
-    base = physics._scene("D5", warmup / 60.0 + 0.5)
-    anim = base if n_characters == base.n_characters else physics._tile(base, n_characters)
-    corr = physics._corrector(anim)
+    base = build_baseline(load_design(), "stationary", "D5", duration=warmup / 60.0 + 0.5)
+    anim = base if n_characters == base.n_characters else tile_crowd(base, n_characters)
+    corr = timed_corrector(anim)
     nb, nj = corr.model.n_bodies, corr.model.n_joints
     sub, out = corr.substeps, []
     for s in range(warmup):
@@ -67,7 +67,7 @@ def sample_systems(n_characters: int, warmup: int, samples: tuple[int, ...]):
             tree = bsr_from_triplets(rows[:3 * nb], cols[:3 * nb], vals[:3 * nb], nb).tocsr()
             out.append({"step": s, "A": a, "tree": tree, "b": rhs.astype(np.float64).ravel(),
                         "x": corr.states[0].x.numpy().astype(np.float64), "fused_iterations": corr.solver.last_cg[0],
-                        "tolerance": float(corr.config.cg_tolerance), "contacts": int(corr.contacts.n_active())})
+                        "tolerance": float(corr.config.solver.cg_tolerance), "contacts": int(corr.contacts.n_active())})
         corr.solver.update(corr.states[0], corr.states[1], corr.dt)
         corr.states.reverse()
     return out, nb, nj
@@ -199,7 +199,8 @@ def compare(system: dict, nb: int, nj: int, tol: float | None = None, max_iter: 
 
 
 def main(argv: list[str]) -> int:
-    from crowdstudy.bench import format_table, write_report
+    from crowdstudy.bench import write_report
+    from crowdstudy.tables import format_table
 
     parser = argparse.ArgumentParser(prog="crowdstudy bench preconditioners", description=__doc__.split("\n")[0])
     parser.add_argument("--characters", type=int, default=1000, help="tiled D5 concert characters (default 1000)")

@@ -49,7 +49,8 @@ import time
 
 import numpy as np
 
-from crowdstudy.bench import format_table, write_report
+from crowdstudy.bench import write_report
+from crowdstudy.tables import format_table
 
 __all__ = ["main"]
 
@@ -75,20 +76,29 @@ def _time_frames(renderer, frames: list[int]) -> dict:
 
 def _bind_frame_target(renderer, vp: np.ndarray):
     """Bind the frame's target (the MSAA buffer if any) with the shadow map and the camera,
-    as ``CrowdRenderer._draw_frame`` does before the characters; the framebuffer."""
-    fbo = renderer.fbo_msaa or renderer.fbo_out
+    as the colour pass (``passes.ColorPass.run``) does before the characters; the framebuffer."""
+    fbo = renderer.targets.draw
     fbo.use()
     renderer.ctx.viewport = (0, 0, renderer.width, renderer.height)
-    renderer.tex_shadow.use(3)
-    for prog in renderer._lit_programs:
+    renderer.shadow_map.texture.use(3)
+    for prog in renderer.programs.lit:
         if "u_view_proj" in prog:
             prog["u_view_proj"].write(np.ascontiguousarray(vp.T, dtype=np.float32).tobytes())
     return fbo
 
 
+def _draw_characters(renderer, prog, vp: np.ndarray) -> None:
+    """The characters' part of the colour pass: back faces culled, ``prog`` (or its per-kind variants)."""
+    from crowdstudy.render.passes import cull_back_faces
+    cull_back_faces(renderer.ctx, True)
+    renderer.characters.draw(prog, vp)
+    cull_back_faces(renderer.ctx, False)
+
+
 def _passes(renderer, frame: int) -> dict:
     """Wall seconds of each pass of one frame (the GPU/llvmpipe finished after each), as
-    ``CrowdRenderer._draw_frame`` runs them; the static layer is drawn beforehand."""
+    ``CrowdRenderer`` runs them; the static layer is drawn beforehand."""
+    from crowdstudy.render.passes import ENV_PARTS
     ctx = renderer.ctx
     out = {}
 
@@ -100,36 +110,34 @@ def _passes(renderer, frame: int) -> dict:
         out[name] = out.get(name, 0.0) + time.perf_counter() - t0
 
     renderer.render_raw(frame)   # the frame's static layer drawn, its programs compiled
-    timed("bones upload", lambda: renderer._load_frame(frame))
-    timed("shadow pass", renderer._shadow_pass)
+    timed("bones upload", lambda: renderer.load_frame(frame))
+    timed("shadow pass", lambda: renderer.shadow_pass.run(renderer.character_positions(frame), renderer.camera))
     vp = None
 
     def prepare():
         nonlocal vp
-        vp = renderer._prepare(frame, upload=False)
+        vp = renderer.prepare(frame, upload=False)
 
     timed("cull+instances", prepare)
-    fbo = renderer.fbo_msaa or renderer.fbo_out
-    beat = renderer._beat(frame)
-    parts = renderer._layer_parts
+    fbo = renderer.targets.draw
+    beat = renderer.environment.beat(frame)
+    parts = renderer.layers.parts
 
     def start():
         _bind_frame_target(renderer, vp)
         if parts:
-            layer = renderer._layer(beat if "cut_figures" in parts else None, beat)
+            layer = renderer.layers.get(beat)
             fbo.use()
             ctx.copy_framebuffer(fbo, layer)
         else:
             fbo.clear(0.5, 0.5, 0.5, 1.0, depth=1.0)
 
     timed("static layer copy" if parts else "clear", start)
-    timed("characters", lambda: (renderer._cull_back_faces(True), renderer._draw_characters(renderer.prog_char, vp),
-                                 renderer._cull_back_faces(False)))
-    timed("environment", lambda: renderer._draw_environment(frozenset({"floor_shadowed", "floor_plain", "cut_static",
-                                                                      "cut_figures", "walls"}) - parts))
-    if renderer.fbo_msaa is not None:
-        timed("msaa resolve", lambda: ctx.copy_framebuffer(renderer.fbo_out, renderer.fbo_msaa))
-    timed("read-back", lambda: renderer.fbo_out.read(components=3, alignment=1))
+    timed("characters", lambda: _draw_characters(renderer, renderer.programs.character, vp))
+    timed("environment", lambda: renderer.environment.draw(ENV_PARTS - parts))
+    if renderer.targets.fbo_msaa is not None:
+        timed("msaa resolve", renderer.targets.resolve)
+    timed("read-back", renderer.targets.read)
     return out
 
 
@@ -144,42 +152,40 @@ def _character_parts(renderer, frame: int, reps: int = 4) -> dict:
     shader that writes one colour. So ``fragments`` = full - vertex+setup, of which
     ``shading`` = full - constant-colour is the cost of the characters' fragment shader
     (texture, lighting) and the rest rasterisation, depth test and colour writes."""
-    from crowdstudy.render.renderer import _shader_source, _group_vertex_array
+    from crowdstudy.render.gpu import group_vertex_array, shader_source
 
     ctx = renderer.ctx
-    flat = ctx.program(vertex_shader="#version 330 core\n" + _shader_source("character.vert"),
+    flat = ctx.program(vertex_shader="#version 330 core\n" + shader_source("character.vert"),
                        fragment_shader=_FLAT_FRAGMENT)
     added = []
-    for gl in renderer._gl_groups:
-        gl["vaos"][flat] = vao = _group_vertex_array(ctx, flat, gl["vbo"], gl["inst"], gl["ibo"])
+    for gl in renderer.character_resources.groups:
+        gl.vaos[flat] = vao = group_vertex_array(ctx, flat, gl.vbo, gl.inst, gl.ibo)
         added.append((gl, vao))
 
     def draw(prog, scissor):
         times = []
         for _ in range(reps):
             renderer.render_raw(frame)
-            renderer._load_frame(frame)
-            renderer._shadow_pass()
-            vp = renderer._prepare(frame, upload=False)
+            renderer.load_frame(frame)
+            renderer.shadow_pass.run(renderer.character_positions(frame), renderer.camera)
+            vp = renderer.prepare(frame, upload=False)
             _bind_frame_target(renderer, vp).clear(0.5, 0.5, 0.5, 1.0, depth=1.0)
             ctx.finish()
             ctx.scissor = scissor
             t0 = time.perf_counter()
-            renderer._cull_back_faces(True)
-            renderer._draw_characters(prog, vp)
-            renderer._cull_back_faces(False)
+            _draw_characters(renderer, prog, vp)
             ctx.finish()
             times.append(time.perf_counter() - t0)
             ctx.scissor = None
         return float(np.median(times))
 
     try:
-        full = draw(renderer.prog_char, None)
-        vertex = draw(renderer.prog_char, (0, 0, 1, 1))
+        full = draw(renderer.programs.character, None)
+        vertex = draw(renderer.programs.character, (0, 0, 1, 1))
         constant = draw(flat, None)
     finally:
         for gl, vao in added:
-            del gl["vaos"][flat]
+            del gl.vaos[flat]
             vao.release()
         flat.release()
     return {"full": full, "vertex+setup": vertex, "constant-colour fragments": constant,
@@ -263,7 +269,7 @@ def _set_main(args) -> int:
     with CrowdRenderer(d5, design=design, width=full["width"], height=full["height"], msaa=full["msaa"]) as r:
         for view in sorted({s.viewpoint for s in stimuli}):
             r.set_view(view)
-            for f in range(r._layer_phases()):   # every static layer of the view drawn
+            for f in range(r.layers.phases()):   # every static layer of the view drawn
                 r.render_raw(f)
             per_view[view] = _passes(r, 20)
             per_view[view]["frame (all passes)"] = _time_frames(r, [18, 21, 24, 27])["wall_s"]

@@ -23,12 +23,13 @@ import numpy as np
 
 
 def main(argv: list[str]) -> int:
-    from crowdstudy.bench import format_table, measure, write_report
+    from crowdstudy.bench import measure, write_report
     from crowdstudy.design import load_design
     from crowdstudy.stats.anova import rm_anova
     from crowdstudy.stats.pipeline import analyze
     from crowdstudy.stats.scoring import cell_means, composite_scores
     from crowdstudy.stats.synthetic import simulate_responses
+    from crowdstudy.tables import format_table
 
     parser = argparse.ArgumentParser(prog="crowdstudy bench stats")
     parser.add_argument("--participants", type=int, default=30)

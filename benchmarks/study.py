@@ -76,7 +76,8 @@ def run_row(n: int, database: str, processes: int, think_time: float, answers: i
 
 
 def main(argv: list[str]) -> int:
-    from crowdstudy.bench import format_table, write_report
+    from crowdstudy.bench import write_report
+    from crowdstudy.tables import format_table
 
     parser = argparse.ArgumentParser(prog="crowdstudy bench study")
     parser.add_argument("--participants", default="50,200", help="comma-separated participant counts (e.g. 50,200,1000)")

@@ -4,14 +4,13 @@ Each ``benchmarks/NAME.py`` defines ``main(argv: list[str]) -> int``. Benchmarks
 medians over repeated runs and ratios against a peer measured in the same run (pyrvo for
 navigation, MuJoCo for physics ...); they write their table as JSON under
 ``build/bench/NAME.json`` with the provenance of the run, the command line that ran it,
-the machine (CPU model, cores, GPUs) and the date. The helpers here keep their output
+the machine (CPU model, cores, GPUs, load) and the date. The helpers here keep their output
 uniform; ``scripts/results_pages.py`` turns the reports kept in ``docs/results/data/`` into
 the documentation's results pages.
 """
 
 from __future__ import annotations
 
-import argparse
 import datetime
 import importlib.util
 import json
@@ -29,13 +28,12 @@ from typing import Callable
 from crowdstudy.errors import InvalidInputError
 from crowdstudy.paths import check_output_path
 from crowdstudy.provenance import provenance, repository_root
-from crowdstudy.tables import format_table
 
-__all__ = ["configure", "run", "measure", "write_report", "report_path", "format_table", "benchmarks_dir",
-           "available", "load_benchmark", "machine", "command_line"]
+__all__ = ["measure", "write_report", "report_path", "benchmarks_dir", "available", "load_benchmark",
+           "run_benchmarks", "machine", "command_line"]
 
-#: The command line of the benchmark that :func:`run` is running (set per benchmark), which
-#: :func:`write_report` records; None outside ``crowdstudy bench``.
+#: The command line of the benchmark that :func:`run_benchmarks` is running (set per
+#: benchmark), which :func:`write_report` records; None outside ``crowdstudy bench``.
 _RUNNING: str | None = None
 
 
@@ -107,7 +105,7 @@ def machine() -> dict:
 
 
 def command_line() -> str:
-    """The command that is running: ``crowdstudy bench NAME ARGS`` inside :func:`run`,
+    """The command that is running: ``crowdstudy bench NAME ARGS`` inside :func:`run_benchmarks`,
     else this process' own command line."""
     if _RUNNING is not None:
         return _RUNNING
@@ -145,13 +143,10 @@ def load_benchmark(name: str):
     return module
 
 
-def configure(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("name", help="benchmark to run: one of the scripts in benchmarks/, or 'all'")
-    parser.add_argument("bench_args", nargs=argparse.REMAINDER, help="arguments passed to the benchmark")
-
-
-def run(args: argparse.Namespace) -> int:
-    names = available() if args.name == "all" else [args.name]
+def run_benchmarks(name: str, bench_args: list[str]) -> int:
+    """Run benchmark ``name`` (or every one, ``"all"``) with ``bench_args``; the exit status
+    is the bitwise or of theirs. Every report path is checked before any benchmark runs."""
+    names = available() if name == "all" else [name]
     status = 0
     modules = {name: load_benchmark(name) for name in names}
     for name in names:  # before any benchmark runs: a report that cannot be written fails at once
@@ -159,9 +154,9 @@ def run(args: argparse.Namespace) -> int:
     global _RUNNING
     for name in names:
         print(f"== benchmark {name} ==", flush=True)
-        _RUNNING = shlex.join(["crowdstudy", "bench", name, *args.bench_args])
+        _RUNNING = shlex.join(["crowdstudy", "bench", name, *bench_args])
         try:
-            status |= int(modules[name].main(list(args.bench_args)) or 0)
+            status |= int(modules[name].main(list(bench_args)) or 0)
         finally:
             _RUNNING = None
     return status

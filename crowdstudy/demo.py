@@ -15,35 +15,15 @@ how to run the full study.
 
 from __future__ import annotations
 
-import argparse
 import json
 import time
 from pathlib import Path
 
+from crowdstudy.design import Stage, StudyDesign, load_design
 from crowdstudy.errors import InvalidInputError
+from crowdstudy.scene import CrowdAnimation
 
-__all__ = ["configure", "run", "run_demo"]
-
-
-def configure(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--out", type=Path, default=Path("demo_out"), help="output folder (default demo_out/)")
-    parser.add_argument("--design", type=Path, default=None, help="study design TOML (default stimuli/study.toml)")
-    parser.add_argument("--density", default="D5", help="density level of the two showcase crowds (default D5)")
-    parser.add_argument("--duration", type=float, default=4.0,
-                        help="seconds of the showcase animations (default 4); the quick stimulus set's videos are "
-                             "2 s, or this long when it is shorter")
-    parser.add_argument("--participants", type=int, default=12, help="simulated participants (default 12)")
-    parser.add_argument("--seed", type=int, default=1, help="seed of the simulated participants (default 1)")
-    parser.add_argument("--skip-study", action="store_true", help="stop after step 5 (no stimulus set, no participants)")
-
-
-def run(args: argparse.Namespace) -> int:
-    from crowdstudy.paths import check_output_dir
-
-    check_output_dir(args.out, "--out")
-    run_demo(out=args.out, design=args.design, density=args.density, duration=args.duration,
-             participants=args.participants, seed=args.seed, study=not args.skip_study)
-    return 0
+__all__ = ["run_demo"]
 
 
 class _Steps:
@@ -61,30 +41,56 @@ def _table(rows: list[dict], columns: list[str]) -> str:
     return format_table(rows, columns)
 
 
-def run_demo(*, out: Path = Path("demo_out"), design=None, density: str = "D5", duration: float = 4.0,
-             participants: int = 12, seed: int = 1, study: bool = True) -> dict:
-    """Run the demo; returns ``{name: path}`` of everything written."""
-    from crowdstudy.design import load_design
+def run_demo(*, out: Path = Path("demo_out"), design: str | Path | None = None, density: str = "D5",
+             duration: float = 4.0, participants: int = 12, seed: int = 1, study: bool = True) -> dict[str, Path]:
+    """Run the demo; returns ``{name: path}`` of everything written.
 
+    The steps of the module docstring, one function each; ``study=False`` stops after step 5."""
     design = load_design(design)
+    _check_arguments(design, density, duration, participants)
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    outputs: dict[str, Path] = {}
+    step = _Steps(6 if study else 5)
+    stationary, walking = design.stage("stationary"), design.stage("walking")
+    showcase = (stationary, walking)
+
+    step("Crowd layouts (Poisson disk) and corridor trajectories (ORCA)")
+    outputs.update(_layouts(design, density, duration, out, stationary, walking))
+    step(f"Baseline animations at {density} ({duration:g} s)")
+    anims: dict[tuple[str, str], CrowdAnimation] = {}
+    outputs.update(_baselines(design, density, duration, out, showcase, anims))
+    step("Physics correction (Baseline -> Ours)")
+    outputs.update(_correction(density, out, showcase, anims))
+    step("Metrics: overlap before / after correction (mesh grid 2 cm, every 10th frame)")
+    outputs.update(_metrics(out, showcase, anims))
+    step("Rendering: short videos and the overlap image")
+    outputs.update(_renders(design, density, out, showcase, anims, outputs))
+    if study:
+        step(f"The study: quick stimulus set, {participants} simulated participants, analysis")
+        outputs.update(_study(design, out, participants, seed, duration))
+    _print_outputs(outputs)
+    return outputs
+
+
+def _check_arguments(design: StudyDesign, density: str, duration: float, participants: int) -> None:
+    """The demo's arguments, checked before any work (errors name the CLI option)."""
     if density not in design.densities:
         raise InvalidInputError(f"--density: unknown level {density!r}; expected one of {', '.join(design.densities)}")
     if not duration > 0:
         raise InvalidInputError(f"--duration: must be > 0 seconds, got {duration}")
     if participants < 2:
         raise InvalidInputError(f"--participants: need at least 2 for the analysis, got {participants}")
-    out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
-    outputs: dict[str, Path] = {}
-    step = _Steps(6 if study else 5)
 
-    # 1. layouts and trajectories ------------------------------------------------------
-    step("Crowd layouts (Poisson disk) and corridor trajectories (ORCA)")
+
+def _layouts(design: StudyDesign, density: str, duration: float, out: Path, stationary: Stage,
+             walking: Stage) -> dict[str, Path]:
+    """Step 1: the concert layouts of every density (a table of their spacing) and the
+    corridor crowd's ORCA trajectories at ``density`` (a summary line), in one plot."""
     from crowdstudy.layout import concert_layout
     from crowdstudy.navigation import corridor_crowd, trajectory_summary
     from crowdstudy.navigation.plot import plot_layouts_and_trajectories
 
-    stationary, walking = design.stage("stationary"), design.stage("walking")
     layouts, rows = [], []
     for level in design.densities:
         crowd = concert_layout(design, level, design.cell_seed(stationary, level))
@@ -99,26 +105,32 @@ def run_demo(*, out: Path = Path("demo_out"), design=None, density: str = "D5", 
           f"mean speed {summary['mean_speed']:.2f} m/s, largest disc overlap {100 * summary['max_overlap']:.1f} % "
           f"of the radius (negative = gap), wall clearance {summary['wall_clearance']:.3f} m, "
           f"fastest turn {summary['max_turn_rate'] * 180 / 3.141592653589793:.0f} deg/s")
-    outputs["layouts and trajectories"] = plot_layouts_and_trajectories(layouts, corridor,
-                                                                         out / "layouts_and_trajectories.png")
+    return {"layouts and trajectories": plot_layouts_and_trajectories(layouts, corridor,
+                                                                       out / "layouts_and_trajectories.png")}
 
-    # 2. Baseline animations -----------------------------------------------------------
-    step(f"Baseline animations at {density} ({duration:g} s)")
+
+def _baselines(design: StudyDesign, density: str, duration: float, out: Path, stages: tuple[Stage, ...],
+               anims: dict[tuple[str, str], CrowdAnimation]) -> dict[str, Path]:
+    """Step 2: the Baseline animation of each showcase crowd, into ``anims`` and saved."""
     from crowdstudy.motion import build_baseline
 
-    anims = {}
-    for stage in (stationary, walking):
+    outputs = {}
+    for stage in stages:
         t0 = time.perf_counter()
         base = build_baseline(design, stage.key, density, duration=duration)
         anims[(stage.key, "Baseline")] = base
         outputs[f"{stage.key} Baseline animation"] = base.save(out / "animations" / f"{stage.key}_{density}_Baseline.npz")
         print(f"{stage.key}: {base.n_characters} characters x {base.n_frames} frames in {time.perf_counter() - t0:.2f} s")
+    return outputs
 
-    # 3. correction ----------------------------------------------------------------------
-    step("Physics correction (Baseline -> Ours)")
+
+def _correction(density: str, out: Path, stages: tuple[Stage, ...],
+                anims: dict[tuple[str, str], CrowdAnimation]) -> dict[str, Path]:
+    """Step 3: the physics correction of each Baseline (Ours), into ``anims`` and saved."""
     from crowdstudy.physics import correct
 
-    for stage in (stationary, walking):
+    outputs = {}
+    for stage in stages:
         t0 = time.perf_counter()
         timings: dict = {}
         ours = correct(anims[(stage.key, "Baseline")], progress=True, timings=timings)
@@ -127,15 +139,17 @@ def run_demo(*, out: Path = Path("demo_out"), design=None, density: str = "D5", 
         ms = timings.get("ms_per_step")
         print(f"{stage.key}: corrected in {time.perf_counter() - t0:.1f} s"
               + (f" ({ms:.2f} ms per simulation step, {ours.meta['physics']['device']})" if ms is not None else ""))
+    return outputs
 
-    # 4. metrics -------------------------------------------------------------------------
+
+def _metrics(out: Path, stages: tuple[Stage, ...], anims: dict[tuple[str, str], CrowdAnimation]) -> dict[str, Path]:
+    """Step 4: overlap, tracking error and jerk of both methods (a table; metrics.json)."""
     # every 10th frame, as the stimulus set's and the bars' overlap (halves this step; on the 1 s
     # D5 clips the Baseline / Ours ratios move 18.0 -> 18.5x and 91 -> 78x against every 5th)
-    step("Metrics: overlap before / after correction (mesh grid 2 cm, every 10th frame)")
     from crowdstudy.metrics import summarize
 
     rows = []
-    for stage in (stationary, walking):
+    for stage in stages:
         base = anims[(stage.key, "Baseline")]
         for method in ("Baseline", "Ours"):
             anim = anims[(stage.key, method)]
@@ -149,15 +163,19 @@ def run_demo(*, out: Path = Path("demo_out"), design=None, density: str = "D5", 
     from crowdstudy.provenance import provenance
 
     metrics_path.write_text(json.dumps({"rows": rows, "provenance": provenance(None)}, indent=2))
-    outputs["metrics"] = metrics_path
+    return {"metrics": metrics_path}
 
-    # 5. rendering -----------------------------------------------------------------------
-    step("Rendering: short videos and the overlap image")
+
+def _renders(design: StudyDesign, density: str, out: Path, stages: tuple[Stage, ...],
+             anims: dict[tuple[str, str], CrowdAnimation], outputs: dict[str, Path]) -> dict[str, Path]:
+    """Step 5: a short video of each crowd and method, the overlap image and the capsule
+    image; colours follow the saved Baseline animations (``outputs``)."""
     from crowdstudy.render import render_frame, render_video
     from crowdstudy.render.renderer import baseline_color_positions
 
+    written = {}
     colours = {}
-    for stage in (stationary, walking):
+    for stage in stages:
         view = stage.viewpoints[0] if stage.key == "walking" else "V3"
         # "Ours" is dressed like its Baseline: colours follow the Baseline's frame-0 positions.
         colours[stage.key] = baseline_color_positions(outputs[f"{stage.key} Baseline animation"])
@@ -165,18 +183,17 @@ def run_demo(*, out: Path = Path("demo_out"), design=None, density: str = "D5", 
             path = out / "videos" / f"{stage.key}_{density}_{view}_{method}.mp4"
             render_video(anims[(stage.key, method)], view, path, width=640, height=360, design=design,
                          progress=False, color_positions=colours[stage.key])
-            outputs[f"{stage.key} {method} video"] = path
-    outputs["overlap image"] = _overlap_image(anims[("stationary", "Baseline")], anims[("stationary", "Ours")],
+            written[f"{stage.key} {method} video"] = path
+    written["overlap image"] = _overlap_image(anims[("stationary", "Baseline")], anims[("stationary", "Ours")],
                                               design, out / "overlap_frame.png", render_frame,
                                               colours["stationary"])
-    outputs["bodies and capsules"] = _capsule_image(anims[("stationary", "Baseline")], design,
+    written["bodies and capsules"] = _capsule_image(anims[("stationary", "Baseline")], design,
                                                     out / "bodies_capsules.png", render_frame, colours["stationary"])
+    return written
 
-    if study:
-        # 6. the study -------------------------------------------------------------------
-        step(f"The study: quick stimulus set, {participants} simulated participants, analysis")
-        outputs.update(_study(design, out, participants, seed, duration))
 
+def _print_outputs(outputs: dict[str, Path]) -> None:
+    """The last lines: every output, and how to run the full study."""
     print("\nDone. Outputs:")
     for name, path in outputs.items():
         print(f"  {name:<32} {path}")
@@ -185,7 +202,6 @@ def run_demo(*, out: Path = Path("demo_out"), design=None, density: str = "D5", 
           "  crowdstudy serve --stimuli stimuli/videos --db sqlite:///study.db          # participants open the printed URL\n"
           "  crowdstudy export --db sqlite:///study.db --out responses.csv --demographics demographics.csv\n"
           "  crowdstudy analyze responses.csv --out analysis_out")
-    return outputs
 
 
 def _overlap_image(base, ours, design, path: Path, render_frame, color_positions) -> Path:
@@ -268,6 +284,7 @@ def _study(design, out: Path, participants: int, seed: int, duration: float) -> 
     participants on a local server, the export and the analysis."""
     from crowdstudy.render import build_stimuli
     from crowdstudy.render.stimuli import PRESETS
+    from crowdstudy.stats.options import AnalysisOptions
     from crowdstudy.stats.pipeline import analyze
     from crowdstudy.study.bots import run_simulation
     from crowdstudy.study.export import export_study
@@ -290,7 +307,7 @@ def _study(design, out: Path, participants: int, seed: int, duration: float) -> 
     responses, demographics = out / "responses.csv", out / "demographics.csv"
     export_study(db_url, responses, demographics)
     analysis_dir = out / "analysis"
-    res = analyze(responses, design, out_dir=analysis_dir, figure_note=" - SIMULATED participants")
+    res = analyze(responses, design, analysis_dir, AnalysisOptions(figure_note=" - SIMULATED participants"))
     print("\n".join(res.summary.splitlines()[:25]))
     return {"stimulus manifest": stimuli_dir / "manifest.csv", "study database": db_path, "responses": responses,
             "demographics": demographics, "analysis report": analysis_dir / "summary.md",

@@ -15,18 +15,29 @@ from __future__ import annotations
 import dataclasses
 import math
 import tomllib
+from collections.abc import Callable
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal, NamedTuple, NoReturn, get_args
 
 from crowdstudy.errors import InvalidInputError
 from crowdstudy.package_data import resource_path
 
 __all__ = [
     "StudyDesign", "Stage", "Viewpoint", "Scenario", "Item", "Stimulus",
-    "load_design", "default_design_path", "read_toml",
+    "load_design", "default_design_path", "read_toml", "parse_design",
+    "ScenarioName", "MotionSource", "CorridorDirection",
 ]
 
-_SCENARIOS = ("concert", "corridor")
+#: The scenarios a stage can show: a stationary concert crowd, people walking a corridor.
+ScenarioName = Literal["concert", "corridor"]
+#: Where a scenario's body motion comes from: motion-capture clips or procedural animation.
+MotionSource = Literal["mocap", "procedural"]
+#: Which way a corridor crowd walks: all one way, or both ways.
+CorridorDirection = Literal["unidirectional", "bidirectional"]
+
+_SCENARIOS: tuple[ScenarioName, ...] = get_args(ScenarioName)
+_MOTION_SOURCES: tuple[MotionSource, ...] = get_args(MotionSource)
+_CORRIDOR_DIRECTIONS: tuple[CorridorDirection, ...] = get_args(CorridorDirection)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -48,15 +59,18 @@ class Viewpoint:
 class Stage:
     key: str            # "stationary" | "walking"
     number: int         # 1, 2 ...
-    scenario: str       # "concert" | "corridor"
+    scenario: ScenarioName
     description: str
     viewpoints: tuple[str, ...]
 
 
 @dataclasses.dataclass(frozen=True)
 class Scenario:
-    """Scenario parameters as a read-only mapping (``scenario["width"]``)."""
-    name: str
+    """Scenario parameters as a read-only mapping (``scenario["width"]``): those of its
+    scenario (a concert's ``stage_distance``, ``margin``, ``tempo``; a corridor's ``width``,
+    ``length``, ``direction`` (:data:`CorridorDirection`), ``preferred_speed``,
+    ``preferred_speed_sd``) and ``motion`` (:data:`MotionSource`)."""
+    name: ScenarioName
     params: dict
 
     def __getitem__(self, key: str) -> Any:
@@ -165,7 +179,7 @@ class _Reader:
     def _key(self, key: str) -> str:
         return f"{self.path}.{key}" if self.path else key
 
-    def fail(self, key: str, msg: str):
+    def fail(self, key: str, msg: str) -> NoReturn:
         raise InvalidInputError(f"{self.source}: key '{self._key(key)}' {msg}")
 
     def get(self, key: str, kind: type | tuple, default: Any = dataclasses.MISSING):
@@ -236,29 +250,58 @@ def read_toml(path: str | Path, missing: str) -> dict:
 
 
 def parse_design(raw: dict, source: str = "<memory>") -> StudyDesign:
-    """Validate an already-parsed design table (see :func:`load_design`)."""
+    """Validate an already-parsed design table (see :func:`load_design`).
+
+    One reader per table, in the file's order; each error names the file and the dotted key."""
     top = _Reader(raw, "", source)
     name = top.get("name", str)
     schema = top.integer("schema", lo=1)
     if schema != 1:
         top.fail("schema", f"is {schema}; this crowdstudy reads schema 1")
     seed = top.integer("seed", lo=0)
+    width, depth = _read_floor(top)
+    densities = _read_densities(top, width * depth)
+    viewpoints = _read_viewpoints(top)
+    methods = _read_methods(top)
+    video = _read_video(top)
+    stages = _read_stages(top, viewpoints)
+    scenarios = _read_scenarios(top, stages, width, depth)
+    points, labels, items = _read_questionnaire(top)
+    composites = _read_composites(top, items)
+    top.close(allowed_extra=("online",))   # the online study's controls: crowdstudy.study.quality
 
+    return StudyDesign(name=name, seed=seed, floor_width=width, floor_depth=depth, densities=densities,
+                       viewpoints=viewpoints, methods=methods, video_width=video.width, video_height=video.height,
+                       duration=video.duration, fps=video.fps, stages=stages, scenarios=scenarios,
+                       likert_points=points, likert_labels=labels, items=items, composites=composites,
+                       source=source, online=raw.get("online"))
+
+
+def _read_floor(top: _Reader) -> tuple[float, float]:
+    """``[floor]``: width and depth (m) of the crowd area."""
     floor = top.table_("floor")
     width = floor.number("width", lo=0, lo_open=True)
     depth = floor.number("depth", lo=0, lo_open=True)
     floor.close()
+    return width, depth
 
+
+def _read_densities(top: _Reader, floor_area: float) -> dict[str, float]:
+    """``[densities]``: level -> characters/m^2, each giving at least one character on the floor."""
     dens = top.table_("densities")
     densities = {}
     for level in dens.table:
         densities[level] = dens.number(level, lo=0, lo_open=True)
-        if round(densities[level] * width * depth) < 1:
-            dens.fail(level, f"gives {densities[level] * width * depth:.2f} characters on the floor; need at least 1")
+        if round(densities[level] * floor_area) < 1:
+            dens.fail(level, f"gives {densities[level] * floor_area:.2f} characters on the floor; need at least 1")
     if not densities:
         top.fail("densities", "must list at least one density level")
     dens.close()
+    return densities
 
+
+def _read_viewpoints(top: _Reader) -> dict[str, Viewpoint]:
+    """``[viewpoints.ID]``: label, azimuth, elevation and field of view (degrees)."""
     vps = top.table_("viewpoints")
     viewpoints = {}
     for vid in vps.table:
@@ -270,11 +313,26 @@ def parse_design(raw: dict, source: str = "<memory>") -> StudyDesign:
     if not viewpoints:
         top.fail("viewpoints", "must define at least one viewpoint")
     vps.close()
+    return viewpoints
 
+
+def _read_methods(top: _Reader) -> tuple[str, ...]:
+    """``[methods]``: ``order``, the methods compared, in the order the analysis reports them."""
     meth = top.table_("methods")
     methods = tuple(meth.strings("order"))
     meth.close()
+    return methods
 
+
+class _Video(NamedTuple):
+    width: int
+    height: int
+    duration: float
+    fps: int
+
+
+def _read_video(top: _Reader) -> _Video:
+    """``[video]``: frame size (even, for H.264 yuv420p), duration (s) and frame rate."""
     vid_t = top.table_("video")
     video_w = vid_t.integer("width", lo=16)
     video_h = vid_t.integer("height", lo=16)
@@ -283,7 +341,11 @@ def parse_design(raw: dict, source: str = "<memory>") -> StudyDesign:
     duration = vid_t.number("duration", lo=0, lo_open=True)
     fps = vid_t.integer("fps", lo=1)
     vid_t.close()
+    return _Video(video_w, video_h, duration, fps)
 
+
+def _read_stages(top: _Reader, viewpoints: dict[str, Viewpoint]) -> tuple[Stage, ...]:
+    """``[stages.KEY]``: number, scenario, description and the viewpoints shown; sorted by number."""
     st_t = top.table_("stages")
     stages = []
     for key in st_t.table:
@@ -303,35 +365,58 @@ def parse_design(raw: dict, source: str = "<memory>") -> StudyDesign:
     if len({s.number for s in stages}) != len(stages):
         top.fail("stages", "have duplicate 'number' values")
     st_t.close()
+    return tuple(sorted(stages, key=lambda s: s.number))
 
+
+def _read_scenarios(top: _Reader, stages: tuple[Stage, ...], width: float, depth: float) -> dict[str, Scenario]:
+    """``[scenarios.NAME]``: the parameters of each scenario (one reader per scenario) and
+    its motion source; every stage's scenario must have a table."""
     sc_t = top.table_("scenarios")
     scenarios = {}
     for sname in sc_t.table:
         if sname not in _SCENARIOS:
             sc_t.fail(sname, f"is not a known scenario ({', '.join(_SCENARIOS)})")
         r = sc_t.table_(sname)
-        if sname == "concert":
-            params = {"stage_distance": r.number("stage_distance", lo=0), "margin": r.number("margin", lo=0),
-                      "tempo": r.number("tempo", lo=40.0, hi=240.0, default=120.0)}
-            if 2 * params["margin"] >= min(width, depth):
-                r.fail("margin", "leaves no room inside the floor area")
-        else:
-            params = {"width": r.number("width", lo=0, lo_open=True), "length": r.number("length", lo=0, lo_open=True),
-                      "direction": r.get("direction", str),
-                      "preferred_speed": r.number("preferred_speed", lo=0, lo_open=True, hi=5.0),
-                      "preferred_speed_sd": r.number("preferred_speed_sd", lo=0)}
+        params = _SCENARIO_PARAMS[sname](r, width, depth)
         params["motion"] = r.get("motion", str, "mocap")
-        if params["motion"] not in ("mocap", "procedural"):
+        if params["motion"] not in _MOTION_SOURCES:
             r.fail("motion", f"must be 'mocap' (motion capture) or 'procedural', got {params['motion']!r}")
-            if params["direction"] not in ("unidirectional", "bidirectional"):
-                r.fail("direction", f"must be 'unidirectional' or 'bidirectional', got {params['direction']!r}")
         r.close()
         scenarios[sname] = Scenario(sname, params)
     for st in stages:
         if st.scenario not in scenarios:
             top.fail("scenarios", f"has no [scenarios.{st.scenario}] table, needed by stage '{st.key}'")
     sc_t.close()
+    return scenarios
 
+
+def _concert_params(r: _Reader, width: float, depth: float) -> dict[str, Any]:
+    """``[scenarios.concert]``: distance to the stage, margin inside the floor, music tempo (bpm)."""
+    params = {"stage_distance": r.number("stage_distance", lo=0), "margin": r.number("margin", lo=0),
+              "tempo": r.number("tempo", lo=40.0, hi=240.0, default=120.0)}
+    if 2 * params["margin"] >= min(width, depth):
+        r.fail("margin", "leaves no room inside the floor area")
+    return params
+
+
+def _corridor_params(r: _Reader, width: float, depth: float) -> dict[str, Any]:
+    """``[scenarios.corridor]``: size (m), walking direction(s) and preferred speed (m/s, mean and SD)."""
+    params = {"width": r.number("width", lo=0, lo_open=True), "length": r.number("length", lo=0, lo_open=True),
+              "direction": r.get("direction", str)}
+    if params["direction"] not in _CORRIDOR_DIRECTIONS:
+        r.fail("direction", f"must be {' or '.join(map(repr, _CORRIDOR_DIRECTIONS))}, got {params['direction']!r}")
+    params["preferred_speed"] = r.number("preferred_speed", lo=0, lo_open=True, hi=5.0)
+    params["preferred_speed_sd"] = r.number("preferred_speed_sd", lo=0)
+    return params
+
+
+#: Each scenario's parameter reader: (its table, floor width, floor depth) -> parameters.
+_SCENARIO_PARAMS: dict[str, Callable[[_Reader, float, float], dict[str, Any]]] = {
+    "concert": _concert_params, "corridor": _corridor_params}
+
+
+def _read_questionnaire(top: _Reader) -> tuple[int, tuple[str, ...], tuple[Item, ...]]:
+    """``[questionnaire]``: scale points, one label per point, and the items (id, text, reverse)."""
     q = top.table_("questionnaire")
     points = q.integer("points", lo=2)
     labels = q.strings("labels")
@@ -342,13 +427,17 @@ def parse_design(raw: dict, source: str = "<memory>") -> StudyDesign:
     for i, it in enumerate(raw_items):
         if not isinstance(it, dict):
             q.fail(f"items[{i}]", "must be a table")
-        ir = _Reader(it, f"questionnaire.items[{i}]", source)
+        ir = _Reader(it, f"questionnaire.items[{i}]", top.source)
         items.append(Item(id=ir.get("id", str), text=ir.get("text", str), reverse=ir.get("reverse", bool)))
         ir.close()
     if not items or len({it.id for it in items}) != len(items):
         q.fail("items", "must be a non-empty list with unique ids")
     q.close()
+    return points, tuple(labels), tuple(items)
 
+
+def _read_composites(top: _Reader, items: tuple[Item, ...]) -> dict[str, tuple[str, ...]]:
+    """``[composites]``: name -> the items averaged into it."""
     comp_t = top.table_("composites")
     composites = {}
     item_ids = {it.id for it in items}
@@ -359,10 +448,4 @@ def parse_design(raw: dict, source: str = "<memory>") -> StudyDesign:
                 comp_t.fail(cname, f"names unknown item {m!r}")
         composites[cname] = tuple(members)
     comp_t.close()
-    top.close(allowed_extra=("online",))   # the online study's controls: crowdstudy.study.quality
-
-    return StudyDesign(name=name, seed=seed, floor_width=width, floor_depth=depth, densities=densities,
-                       viewpoints=viewpoints, methods=methods, video_width=video_w, video_height=video_h,
-                       duration=duration, fps=fps, stages=tuple(sorted(stages, key=lambda s: s.number)),
-                       scenarios=scenarios, likert_points=points, likert_labels=tuple(labels), items=tuple(items),
-                       composites=composites, source=source, online=raw.get("online"))
+    return composites

@@ -13,19 +13,19 @@ so the tests and the first run start with a warm cache. Later runs only check th
 
 from __future__ import annotations
 
-import argparse
 import importlib
 import time
 
-__all__ = ["KERNEL_MODULES", "precompile", "configure", "run"]
+__all__ = ["KERNEL_MODULES", "precompile"]
 
 #: (Python module, the function that defines its kernels or None when importing does) of
-#: every Warp module of the toolkit
+#: every Warp module of the toolkit. Importing a kernel module configures Warp
+#: (:func:`~crowdstudy.warp_runtime.get_warp`: the kernel cache) before its kernels exist.
 KERNEL_MODULES: tuple[tuple[str, str | None], ...] = (
-    ("crowdstudy.physics.kernels", "kernels"),
-    ("crowdstudy.physics.collision_kernels", "collision_kernels"),
-    ("crowdstudy.physics.linear", "solver_kernels"),
-    ("crowdstudy.metrics.kernels", "warp_kernels"),
+    ("crowdstudy.physics.kernels", None),
+    ("crowdstudy.physics.collision_kernels", None),
+    ("crowdstudy.physics.linear", None),
+    ("crowdstudy.metrics.kernels", None),
     ("crowdstudy.body.skinning", "warp_kernels"),
     ("crowdstudy.navigation.orca_kernels", None),
 )
@@ -57,17 +57,3 @@ def precompile(device: str = "cpu", *, workers: int = 2) -> dict[str, float]:
         modules.append(wp.get_module(name))
     wp.force_load(device=device, modules=modules, max_workers=workers)
     return {"modules": len(modules), "seconds": time.perf_counter() - t0}
-
-
-def configure(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--device", default="cpu", help="Warp device to compile for (default cpu; cuda:0 for a GPU)")
-    parser.add_argument("--workers", type=int, default=2, help="modules compiled at once (default 2)")
-
-
-def run(args: argparse.Namespace) -> int:
-    from crowdstudy.warp_runtime import get_warp
-
-    res = precompile(args.device, workers=args.workers)
-    cache = get_warp().config.kernel_cache_dir
-    print(f"precompile: {res['modules']} Warp modules ready on {args.device} in {res['seconds']:.1f} s (cache {cache})")
-    return 0

@@ -26,8 +26,9 @@ from pathlib import Path
 import numpy as np
 
 from crowdstudy.errors import InvalidInputError
+from crowdstudy.scene_meta import check_meta, periodic_length
 
-__all__ = ["CrowdAnimation", "Crowd", "SCHEMA_VERSION", "static_walls_from_meta", "wall_segments"]
+__all__ = ["CrowdAnimation", "Crowd", "SCHEMA_VERSION"]
 
 SCHEMA_VERSION = 1
 
@@ -123,7 +124,10 @@ class CrowdAnimation:
         bodies: N records (dicts): ``model`` (body model id), ``sex``, ``height`` (m),
             ``shape`` (list of shape parameters), plus any model-specific fields.
         clips: N records (dicts): which motion clip(s) drive the character, ``phase``.
-        meta: scenario, density, seed, provenance, ``periodic`` (see module docstring) ...
+        meta: scenario, density, seed, provenance, the scene's geometry, ``periodic``,
+            ``loop``, ``physics`` ...: every key the package writes or reads is listed in
+            :mod:`crowdstudy.scene_meta` and checked (:func:`~crowdstudy.scene_meta.check_meta`)
+            when the animation is made, loaded or saved; other keys are the user's own.
     """
 
     joint_names: tuple[str, ...]
@@ -176,6 +180,7 @@ class CrowdAnimation:
             object.__setattr__(self, field, records)
         if not isinstance(self.meta, dict):
             raise InvalidInputError(f"{cls}.meta: expected a dict, got {type(self.meta).__name__}")
+        check_meta(self.meta, cls)
         root.flags.writeable = False
         rot.flags.writeable = False
         parents.flags.writeable = False
@@ -206,8 +211,7 @@ class CrowdAnimation:
     @property
     def periodic_length(self) -> float | None:
         """Period along x in metres for periodic scenes (corridor), else None."""
-        per = self.meta.get("periodic")
-        return None if not per else float(per["length"])
+        return periodic_length(self.meta)
 
     # -- derived copies ----------------------------------------------------------------
     def replace(self, **changes) -> "CrowdAnimation":
@@ -225,7 +229,10 @@ class CrowdAnimation:
 
     # -- files -------------------------------------------------------------------------
     def save(self, path: str | Path) -> Path:
-        """Write one ``.npz`` (arrays + JSON metadata); identical content gives identical bytes."""
+        """Write one ``.npz`` (arrays + JSON metadata); identical content gives identical bytes.
+        ``meta`` is checked again (:func:`~crowdstudy.scene_meta.check_meta`): it is a dict
+        its owner may have changed since the animation was made."""
+        check_meta(self.meta, f"CrowdAnimation.save({str(path)!r})")
         meta = {"type": "CrowdAnimation", "schema_version": SCHEMA_VERSION, "joint_names": list(self.joint_names),
                 "fps": self.fps, "bodies": list(self.bodies), "clips": list(self.clips), "meta": self.meta}
         return _save_npz(Path(path), {"parents": self.parents, "root_translation": self.root_translation,
@@ -326,8 +333,8 @@ class Crowd:
 
     @property
     def periodic_length(self) -> float | None:
-        per = self.meta.get("periodic")
-        return None if not per else float(per["length"])
+        """Period along x in metres for periodic scenes (corridor), else None."""
+        return periodic_length(self.meta)
 
     def replace(self, **changes) -> "Crowd":
         if "meta" in changes:
@@ -357,44 +364,3 @@ class Crowd:
                        region=arrays.get("region", np.zeros((0, 2))), meta=meta.get("meta", {}))
         except InvalidInputError as exc:
             raise InvalidInputError(f"Crowd file {str(path)!r}: {exc}") from None
-
-
-def static_walls_from_meta(meta: dict) -> np.ndarray:
-    """(M, 2, 2) wall segments (m) of a scene, from ``meta["obstacles"]``: the walls the
-    stage that made the crowd wrote there (the concert's stage front, the corridor walls
-    exactly as its navigation saw them); an empty list means no walls. Nothing is taken
-    from a study design.
-
-    A concert or corridor animation without ``meta["obstacles"]`` (a file written by an
-    older version) is an error: its walls are unknown. A scene of any other scenario (or
-    none) without the key has no walls.
-    """
-    if not isinstance(meta, dict):
-        raise InvalidInputError(f"meta: expected a dict, got {type(meta).__name__}")
-    if "obstacles" not in meta:
-        scenario = meta.get("scenario")
-        if scenario in ("concert", "corridor"):
-            raise InvalidInputError(
-                f"meta['obstacles']: missing from this {scenario} animation, so its walls are unknown "
-                "(written by an older crowdstudy?); regenerate it (crowdstudy layout/navigate, then "
-                "crowdstudy animate, or crowdstudy.motion.build_baseline), or set meta['obstacles'] to "
-                "its wall segments [[[x0, y0], [x1, y1]], ...] in metres ([] for none)")
-        return np.zeros((0, 2, 2))
-    return wall_segments(meta["obstacles"], "meta['obstacles']")
-
-
-def wall_segments(value, name: str) -> np.ndarray:
-    """``value`` as (M, 2, 2) wall segments in the floor plane (m; empty: (0, 2, 2)), or an
-    :class:`~crowdstudy.errors.InvalidInputError` naming ``name``."""
-    try:
-        walls = np.asarray(value, np.float64)
-    except (TypeError, ValueError):
-        raise InvalidInputError(f"{name}: expected (M, 2, 2) wall segments "
-                                "[[[x0, y0], [x1, y1]], ...] in metres") from None
-    if walls.size == 0:
-        return np.zeros((0, 2, 2))
-    if walls.ndim != 3 or walls.shape[1:] != (2, 2):
-        raise InvalidInputError(f"{name}: expected (M, 2, 2) wall segments, got shape {walls.shape}")
-    if not np.all(np.isfinite(walls)):
-        raise InvalidInputError(f"{name}: wall end points must be finite numbers (m)")
-    return walls

@@ -9,12 +9,18 @@ from __future__ import annotations
 
 import functools
 import os
+import re
 import threading
 import time
+from typing import Literal
 
 from crowdstudy.paths import cache_dir
 
-__all__ = ["get_warp", "resolve_device", "host_threads", "run_parallel", "run_together"]
+__all__ = ["DeviceKind", "device_kind", "get_warp", "resolve_device", "host_threads", "run_parallel", "run_together"]
+
+#: The kinds of Warp device: the host ("cpu") or a CUDA GPU ("cuda", "cuda:N").
+DeviceKind = Literal["cpu", "cuda"]
+_DEVICE_NAME = re.compile(r"(cpu|cuda)(:\d+)?")
 
 
 @functools.lru_cache(maxsize=1)
@@ -35,12 +41,27 @@ def get_warp():
     return wp
 
 
+def device_kind(device: str) -> DeviceKind:
+    """The kind of a Warp device name: ``"cpu"``, or ``"cuda"`` for ``"cuda"`` and
+    ``"cuda:N"``; any other name is an :class:`~crowdstudy.errors.InvalidInputError`
+    naming ``device``."""
+    match = _DEVICE_NAME.fullmatch(device) if isinstance(device, str) else None
+    if match is None or (match.group(1) == "cpu" and match.group(2)):
+        from crowdstudy.errors import InvalidInputError
+
+        raise InvalidInputError(f"device: expected 'cpu', 'cuda' or 'cuda:N' (or 'auto'), got {device!r}")
+    return "cpu" if match.group(1) == "cpu" else "cuda"
+
+
 def resolve_device(device: str | None = None) -> str:
     """``"cuda:0"`` when a CUDA device is present and ``device`` is None or ``"auto"``,
-    else ``"cpu"``; an explicit name is checked and returned."""
-    wp = get_warp()
-    if device in (None, "auto"):
+    else ``"cpu"``; an explicit name (``"cpu"``, ``"cuda"``, ``"cuda:N"``,
+    :func:`device_kind`) is checked and returned."""
+    if device is None or device == "auto":
+        wp = get_warp()
         return "cuda:0" if wp.is_cuda_available() else "cpu"
+    device_kind(device)
+    wp = get_warp()
     try:
         wp.get_device(device)
     except Exception as exc:  # warp raises plain RuntimeError/ValueError for unknown devices

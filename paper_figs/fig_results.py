@@ -27,6 +27,7 @@ def main(argv=None) -> int:
     apply_style()
     from crowdstudy.design import load_design
     from crowdstudy.provenance import provenance
+    from crowdstudy.stats.options import AnalysisOptions
     from crowdstudy.stats.pipeline import analyze
     from crowdstudy.stats.synthetic import simulate_responses
 
@@ -40,7 +41,7 @@ def main(argv=None) -> int:
         responses = args.responses
         note = ""
     work = cache_path("results_quick" if args.quick else "results")
-    result = analyze(responses, design, out_dir=work, figures=True, figure_note=note)
+    result = analyze(responses, design, work, AnalysisOptions(figures=True, figure_note=note))
     written = []
     for stage in design.stages:
         produced = [f for f in result.files if f.name == "scores_by_density.png" and f"stage{stage.number}" in str(f)]

@@ -2,9 +2,9 @@
 on this machine's CPU (and its GPU when one is present), beside the paper's reported
 5 ms (20 characters) and 20 ms (60 characters) on a GTX 1080 Ti.
 
-The timings come from ``benchmarks/physics.py`` (the same code as ``crowdstudy bench
-physics``): the D1 scene for 20 characters, the D5 concert for 60, and the D5 scene tiled on
-a larger floor beyond that. Medians over the timed steps; CPU time of the stepping thread
+The timings come from :mod:`crowdstudy.physics.step_timing` (the code ``crowdstudy bench
+physics`` times with): the D1 scene for 20 characters, the D5 concert for 60, and the D5
+scene tiled on a larger floor beyond that. Medians over the timed steps; CPU time of the stepping thread
 (wall-clock time is noisier on a shared machine and is drawn dotted).
 
     .venv/bin/python paper_figs/fig_runtime.py [--quick] [--refresh]
@@ -12,7 +12,6 @@ a larger floor beyond that. Medians over the timed steps; CPU time of the steppi
 
 from __future__ import annotations
 
-import importlib.util
 import json
 import sys
 
@@ -21,27 +20,20 @@ from figstyle import apply_style, cache_path, figure_args, out_path, save_figure
 PAPER = {20: 5.0, 60: 20.0}  # ms per step reported by the paper (GTX 1080 Ti)
 
 
-def _benchmark_module():
-    from crowdstudy.bench import benchmarks_dir
-
-    spec = importlib.util.spec_from_file_location("crowdstudy_benchmarks.physics", benchmarks_dir() / "physics.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
-
-
 def _measure(sizes: list[int], steps: int) -> list[dict]:
-    bench = _benchmark_module()
+    from crowdstudy.design import load_design
+    from crowdstudy.motion.baseline import build_baseline
+    from crowdstudy.physics.step_timing import tile_crowd, time_steps
     from crowdstudy.warp_runtime import get_warp
 
     duration = steps / 60.0 + 0.5
-    d1, d5 = bench._scene("D1", duration), bench._scene("D5", duration)
+    d1, d5 = (build_baseline(load_design(), "stationary", level, duration=duration) for level in ("D1", "D5"))
     devices = ["cpu"] + (["cuda:0"] if get_warp().is_cuda_available() else [])
     rows = []
     for n in sizes:
-        anim = d1 if n == d1.n_characters else d5 if n == d5.n_characters else bench._tile(d5, n)
+        anim = d1 if n == d1.n_characters else d5 if n == d5.n_characters else tile_crowd(d5, n)
         for device in devices:
-            r = bench.time_steps(anim, steps, device=device)
+            r = time_steps(anim, steps, device=device)
             rows.append({"characters": n, "device": device, "cpu_ms": r["total_cpu_ms"],
                          "wall_ms": r["total_wall_ms"], "contacts": r["contacts"]})
             print(f"{n:4d} characters on {device}: {r['total_cpu_ms']:.2f} ms/step (CPU time)", flush=True)

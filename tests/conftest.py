@@ -49,11 +49,3 @@ def saved_figures(monkeypatch):
     monkeypatch.setattr(Figure, "savefig", savefig)
     return figures
 
-
-@pytest.fixture(scope="module")
-def bench():
-    """``benchmarks/physics.py`` (``crowdstudy bench physics``) loaded as a module (the benchmarks
-    are not a package)."""
-    from crowdstudy.bench import load_benchmark
-
-    return load_benchmark("physics")

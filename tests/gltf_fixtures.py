@@ -14,11 +14,11 @@ import math
 
 import numpy as np
 
+from crowdstudy.body.gltf_container import GltfBuilder
+from crowdstudy.body.joint_names import NAME_MAPS
 from crowdstudy.body.rotations import axis_angle_to_matrix, matrix_to_quaternion
 from crowdstudy.body.skeleton import JOINT_INDEX, JOINT_NAMES, NUM_JOINTS, PARENTS, forward_kinematics
 from crowdstudy.gltf.export import add_skinned_mesh
-from crowdstudy.glb import GltfBuilder
-from crowdstudy.body.joint_names import NAME_MAPS
 
 MIXAMO = {ours: "mixamorig:" + name for name, ours in NAME_MAPS["mixamo"].items()}
 #: extra bones: name -> (parent name, our joint near which it sits, offset in m (T-pose, toolkit axes))

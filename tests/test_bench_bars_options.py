@@ -1,12 +1,24 @@
 """``crowdstudy bench physics --bars`` options: a subset of cells and PhysicsConfig changes
-(benchmarks/physics.py), so each setting tried in docs/lab-notes/ has its command."""
+(benchmarks/physics.py, measuring with crowdstudy.physics.acceptance, .stadium and
+.step_timing), so each setting tried in docs/lab-notes/ has its command."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
+import crowdstudy.physics.acceptance as acceptance
+
 LEVELS = ["D1", "D2", "D3", "D4", "D5"]
+
+
+@pytest.fixture(scope="module")
+def bench():
+    """``benchmarks/physics.py`` loaded as a module (the benchmarks are scripts, not a
+    package): its command line and its tables."""
+    from crowdstudy.bench import load_benchmark
+
+    return load_benchmark("physics")
 
 
 def test_cells_name_scenes_and_levels(bench):
@@ -22,7 +34,7 @@ def test_a_bad_cell_is_named(bench, text, bad):
         bench.parse_cells(text, LEVELS)
 
 
-def test_measure_bars_runs_only_the_asked_cells_with_the_asked_config(bench, monkeypatch):
+def test_measure_bars_runs_only_the_asked_cells_with_the_asked_config(monkeypatch):
     """The cell filter and the config reach ``correct()`` (the physics itself is stubbed
     out: this checks the plumbing, the bars' numbers are the benchmark's)."""
     import crowdstudy.physics.corrector as corrector
@@ -38,9 +50,9 @@ def test_measure_bars_runs_only_the_asked_cells_with_the_asked_config(bench, mon
         raise Stop
 
     monkeypatch.setattr(corrector, "correct", fake_correct)
-    cfg = PhysicsConfig(arm_scale=0.5)
+    cfg = PhysicsConfig().with_values(arm_scale=0.5)
     with pytest.raises(Stop):
-        bench.measure_bars(0.2, config=cfg, cells=[("walking", "D2")])
+        acceptance.measure_bars(0.2, config=cfg, cells=[("walking", "D2")])
     assert len(seen) == 1
     stage, level, periodic, config = seen[0]
     assert (stage, level, periodic) == ("walking", "D2", True) and config is cfg
@@ -50,6 +62,9 @@ def test_stadium_runs_take_the_asked_config(bench, monkeypatch):
     """``--stadium N --config K=V`` hands the config to the stadium's ``correct()`` (the crowd
     and the physics are stubbed out: this checks the plumbing)."""
     import crowdstudy.physics.corrector as corrector
+    import crowdstudy.physics.stadium as stadium
+    from crowdstudy.design import load_design
+    from crowdstudy.motion.baseline import build_baseline
 
     seen = []
 
@@ -61,42 +76,27 @@ def test_stadium_runs_take_the_asked_config(bench, monkeypatch):
         raise Stop
 
     monkeypatch.setattr(corrector, "correct", fake_correct)
-    monkeypatch.setattr(bench, "stadium_crowd", lambda n, level, duration: bench._scene("D1", 0.2))
+    monkeypatch.setattr(stadium, "stadium_crowd",
+                        lambda n, level, duration: build_baseline(load_design(), "stationary", "D1", duration=0.2))
     with pytest.raises(Stop):
-        bench.main(["--stadium", "20", "--stadium-seconds", "0.2", "--config", "mesh_skin_max=0.04",
-                    "output_hold=0.8"])
+        bench.main(["--stadium", "20", "--stadium-seconds", "0.2", "--config", "skin.max=0.04",
+                    "output.hold=0.8"])
     assert len(seen) == 1
-    assert seen[0][1].mesh_skin_max == 0.04 and seen[0][1].output_hold == 0.8
+    assert seen[0][1].skin.max == 0.04 and seen[0][1].output.hold == 0.8
 
 
-def test_timed_steps_run_with_the_asked_config(bench):
+def test_timed_steps_run_with_the_asked_config():
     """``--config`` reaches the timed steps too (the cost curve's trial runs): a looser CG
     tolerance takes fewer iterations on the same crowd."""
-    from crowdstudy.physics.config import PhysicsConfig
-
-    crowd = bench._tile(bench._scene("D5", 0.5), 6)
-    loose = bench.time_steps(crowd, 3, config=PhysicsConfig(cg_tolerance=1e-2))
-    tight = bench.time_steps(crowd, 3, config=PhysicsConfig(cg_tolerance=1e-6, cg_max_iterations=400))
-    assert 0 < loose["cg_iterations"] < tight["cg_iterations"]
-
-
-def test_the_seam_bar_applies_to_a_looped_concert_only(bench):
-    """A concert clip too short to hold whole loops is not looped: its last-to-first jump is
-    no seam a viewer sees, so the bar is not checked (the corridor dissolves instead)."""
     from crowdstudy.design import load_design
     from crowdstudy.motion.baseline import build_baseline
+    from crowdstudy.physics.config import PhysicsConfig
+    from crowdstudy.physics.step_timing import tile_crowd, time_steps
 
-    design = load_design()
-    looped = build_baseline(design, "stationary", "D1", duration=2.0, body_model="open")
-    short = build_baseline(design, "stationary", "D1", duration=0.3, body_model="open")
-    assert bench.loop_mode(looped) == "periodic" and bench.loop_mode(short) == "none"
-    row = {"stage": "stationary", "jerk_ratio": 1.0, "hf_share_ours": 0.01, "hf_share_baseline": 0.01,
-           "max_joint_speed_ours": 5.0, "max_joint_speed_baseline": 5.0, "pelvis_p99_ours": 1.0,
-           "pelvis_p99_baseline": 1.0, "foot_slide_p99_ours": 0.01, "mesh_ratio": 0.01, "tracking_cm": 1.0,
-           "seam_ratio_baseline": 7.4, "seam_ratio_ours": 7.5}
-    assert bench.bar_checks({**row, "loop": "periodic"}, 2, 5)["seam"] is False
-    assert "seam" not in bench.bar_checks({**row, "loop": "none"}, 2, 5)
-    assert "seam" not in bench.bar_checks({**row, "stage": "walking", "loop": "dissolve"}, 2, 5)
+    crowd = tile_crowd(build_baseline(load_design(), "stationary", "D5", duration=0.5), 6)
+    loose = time_steps(crowd, 3, config=PhysicsConfig().with_values(cg_tolerance=1e-2))
+    tight = time_steps(crowd, 3, config=PhysicsConfig().with_values(cg_tolerance=1e-6, cg_max_iterations=400))
+    assert 0 < loose["cg_iterations"] < tight["cg_iterations"]
 
 
 def test_seeds_name_the_study_and_integers(bench):
@@ -107,22 +107,22 @@ def test_seeds_name_the_study_and_integers(bench):
             bench.parse_seeds(text)
 
 
-def test_measure_bars_runs_each_cell_on_each_seed(bench, monkeypatch):
+def test_measure_bars_runs_each_cell_on_each_seed(monkeypatch):
     """Cells x seeds, in that order; the plumbing only (one row per call is recorded)."""
     calls = []
 
-    def fake_cell(design, stage, li, level, seed, duration, frame_stride, config):
+    def fake_cell(design, stage, li, level, seed, duration, frame_stride, config, tolerances):
         calls.append((stage, level, seed))
         return {"stage": stage, "level": level, "seed": seed}
 
-    monkeypatch.setattr(bench, "_bars_of_cell", fake_cell)
-    rows = bench.measure_bars(0.2, cells=[("stationary", "D2"), ("walking", "D5")], seeds=[None, 7])
+    monkeypatch.setattr(acceptance, "measure_cell", fake_cell)
+    rows = acceptance.measure_bars(0.2, cells=[("stationary", "D2"), ("walking", "D5")], seeds=[None, 7])
     assert calls == [("stationary", "D2", None), ("stationary", "D2", 7), ("walking", "D5", None), ("walking", "D5", 7)]
     assert [r["seed"] for r in rows] == [None, 7, None, 7]
 
 
 @pytest.mark.parametrize("seed, study", [(None, True), (7, False)])
-def test_a_seed_builds_another_crowd_of_the_cell(bench, monkeypatch, seed, study):
+def test_a_seed_builds_another_crowd_of_the_cell(monkeypatch, seed, study):
     """The seed reaches the Baseline (its layout and clips) and the row says whether the crowd
     is the study's own."""
     import crowdstudy.physics.corrector as corrector
@@ -140,12 +140,12 @@ def test_a_seed_builds_another_crowd_of_the_cell(bench, monkeypatch, seed, study
 
     monkeypatch.setattr(corrector, "correct", fake_correct)
     with pytest.raises(Stop):
-        bench._bars_of_cell(design, "stationary", 1, "D2", seed, 0.2, 10, None)
+        acceptance.measure_cell(design, "stationary", 1, "D2", seed, 0.2, 10, None)
     expected = design.cell_seed(design.stage("stationary"), "D2") if study else seed
     assert seen[0][0] == expected
     if not study:      # another crowd: the characters stand elsewhere
         with pytest.raises(Stop):
-            bench._bars_of_cell(design, "stationary", 1, "D2", None, 0.2, 10, None)
+            acceptance.measure_cell(design, "stationary", 1, "D2", None, 0.2, 10, None)
         assert seen[1][0] != seed and not np.allclose(seen[0][1], seen[1][1])
 
 
@@ -188,21 +188,3 @@ def test_the_seed_figure_draws_each_crowd_and_the_bars(bench, tmp_path):
     assert red.sum() > 100 and blue.sum() > 100
     top, bottom = red[: img.shape[0] // 2], red[img.shape[0] // 2:]
     assert top.any() and bottom.any()          # the overlap bar above, the tracking bars below
-
-
-def test_tile_ratios_are_the_overlap_of_each_neighbourhood(bench):
-    """Characters binned into floor tiles: each tile's summed Ours over summed Baseline; a
-    tile with too few characters, or no Baseline overlap, is left out."""
-    xy = np.array([[0.5, 0.5], [1.0, 2.0], [2.9, 0.1],          # tile (0, 0)
-                   [3.5, 0.5], [5.0, 2.5],                      # tile (1, 0)
-                   [0.5, 3.5],                                  # tile (0, 1): one character
-                   [4.0, 4.0], [5.5, 3.1]])                     # tile (1, 1): no Baseline overlap
-    base = np.array([1.0, 2.0, 1.0, 4.0, 4.0, 9.0, 0.0, 0.0])
-    ours = np.array([0.1, 0.0, 0.1, 0.2, 0.6, 9.0, 0.5, 0.5])
-    ratios = bench.tile_ratios(xy, base, ours, (3.0, 3.0), min_characters=2)
-    assert ratios == pytest.approx([0.05, 0.1])
-    assert bench.tile_ratios(xy, base, ours, (3.0, 3.0), min_characters=1) == pytest.approx([0.05, 0.1, 1.0])
-    whole = bench.tile_ratios(xy, base, ours, (10.0, 10.0), min_characters=1)
-    assert whole == pytest.approx([ours.sum() / base.sum()])
-    with pytest.raises(ValueError, match="xy"):
-        bench.tile_ratios(xy[:, :1], base, ours, (3.0, 3.0), 1)

@@ -1,7 +1,6 @@
 """Benchmark reports record what the results pages print above each table: the command
 line, the machine and the date (crowdstudy.bench.write_report)."""
 
-import argparse
 import json
 
 from crowdstudy import bench
@@ -31,8 +30,7 @@ def test_the_command_is_the_bench_command_line(tmp_path, monkeypatch):
 
     monkeypatch.setattr(bench, "load_benchmark", lambda name: Fake)
     monkeypatch.setattr(bench, "report_path", lambda name: tmp_path / f"{name}.json")
-    args = argparse.Namespace(name="fake", bench_args=["--agents", "60,1000", "--note", "two words"])
-    assert bench.run(args) == 0
+    assert bench.run_benchmarks("fake", ["--agents", "60,1000", "--note", "two words"]) == 0
     report = json.loads(seen["path"].read_text())
     assert report["command"] == "crowdstudy bench fake --agents 60,1000 --note 'two words'"
     assert bench.command_line() != report["command"]       # reset once the benchmark returns

@@ -5,12 +5,11 @@ import dataclasses
 import numpy as np
 import pytest
 
-from crowdstudy.body.rotations import axis_angle_to_matrix, matrix_to_axis_angle
+from crowdstudy.body.rotations import axis_angle_to_matrix, matrix_to_axis_angle, rot_y
 from crowdstudy.body.skeleton import DEFAULT_REST_JOINTS, JOINT_INDEX, PARENTS, forward_kinematics
 from crowdstudy.errors import InvalidInputError
 from crowdstudy.motion import load_amass, load_bvh, load_clip, save_bvh
 from crowdstudy.motion.bvh import parse_bvh
-from crowdstudy.motion.posing import rot_y
 from crowdstudy.motion.rig import ANKLE_HEIGHT
 
 J = JOINT_INDEX
@@ -138,6 +137,12 @@ def test_bad_bvh_files_name_the_file_and_line(tmp_path, small_bvh):
     off.write_text("\n".join(bad))
     with pytest.raises(InvalidInputError, match=r"offset\.bvh: line \d+: field 'OFFSET'"):
         load_bvh(off)
+    # a joint line without its block: no offset, named
+    orphan = tmp_path / "orphan.bvh"
+    joint = next(k for k, l in enumerate(lines) if l.strip().startswith("JOINT"))
+    orphan.write_text("\n".join(lines[:joint] + ["  JOINT Stray"] + lines[joint:]))
+    with pytest.raises(InvalidInputError, match=r"orphan\.bvh: line \d+: field 'OFFSET': missing for joint 'Stray'"):
+        parse_bvh(orphan)
     # not a BVH at all, and a missing file
     text = tmp_path / "notes.bvh"
     text.write_text("hello\n")

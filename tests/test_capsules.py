@@ -202,10 +202,14 @@ def test_capsule_skin_is_the_percentile_capped_and_halved_on_the_hands():
     np.testing.assert_allclose(skin[list(HAND_BONES)], 0.5 * capped[list(HAND_BONES)], atol=1e-12)
     assert skin[5] == 0.0 and skin.max() <= 0.015
     # the physics reads its skin through its configuration
-    cfg = PhysicsConfig(mesh_skin_percentile=50.0, mesh_skin_max=0.03, mesh_skin_hand_scale=0.25)
+    cfg = PhysicsConfig().with_values({"skin.percentile": 50.0, "skin.max": 0.03, "skin.hand_scale": 0.25})
     np.testing.assert_allclose(cfg.mesh_skin(body), capsule_skin(body, 50.0, max_skin=0.03, hand_scale=0.25))
-    assert np.all(PhysicsConfig(mesh_skin_percentile=0.0).mesh_skin(body) == 0.0)
+    assert np.all(PhysicsConfig().with_values({"skin.percentile": 0.0}).mesh_skin(body) == 0.0)
+    # left to the density profile, the skin is its dense end's (what a CrowdCorrector uses)
+    dense = PhysicsConfig().profile.dense
+    np.testing.assert_allclose(PhysicsConfig().mesh_skin(body),
+                               capsule_skin(body, 90.0, max_skin=dense.skin_max, hand_scale=dense.skin_hand_scale))
     with pytest.raises(InvalidInputError, match="hand_scale"):
         capsule_skin(body, hand_scale=-1.0)
-    with pytest.raises(InvalidInputError, match="mesh_skin_max"):
-        PhysicsConfig(mesh_skin_max=-0.01)
+    with pytest.raises(InvalidInputError, match="skin.max"):
+        PhysicsConfig().with_values({"skin.max": -0.01})

@@ -64,7 +64,7 @@ def test_output_file_instead_of_folder_fails_at_once(tmp_path, capsys):
 
 def test_a_bug_keeps_its_traceback(monkeypatch):
     """A plain ValueError (numpy, pandas, a bug) is not turned into a user error."""
-    import crowdstudy.layout.cli as layout_cli
+    import crowdstudy.layout.cli_layout as layout_cli
 
     def broken(args):
         raise ValueError("operands could not be broadcast together")
@@ -75,7 +75,7 @@ def test_a_bug_keeps_its_traceback(monkeypatch):
 
 
 def test_a_bug_prints_a_traceback_and_exits_1(tmp_path):
-    code = ("import sys, crowdstudy.layout.cli as m\n"
+    code = ("import sys, crowdstudy.layout.cli_layout as m\n"
             "def broken(args):\n    raise ValueError('operands could not be broadcast together')\n"
             "m.run = broken\n"
             "from crowdstudy.cli import main\nsys.exit(main(['layout']))\n")

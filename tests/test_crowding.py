@@ -60,31 +60,45 @@ def test_local_density_edge_cases_and_errors():
 
 def test_profile_weight_and_for_density():
     cfg = PhysicsConfig()
-    assert cfg.profile_weight(0.0) == 0.0 == cfg.profile_weight(cfg.sparse_density)
-    assert cfg.profile_weight(cfg.dense_density) == 1.0 == cfg.profile_weight(50.0)
-    mid = 0.5 * (cfg.sparse_density + cfg.dense_density)
+    sp, dp = cfg.profile.sparse, cfg.profile.dense
+    assert cfg.follows_profile and (cfg.skin.max, cfg.skin.hand_scale, cfg.output.hold) == (None, None, None)
+    assert cfg.profile_weight(0.0) == 0.0 == cfg.profile_weight(sp.crowd_density)
+    assert cfg.profile_weight(dp.crowd_density) == 1.0 == cfg.profile_weight(50.0)
+    mid = 0.5 * (sp.crowd_density + dp.crowd_density)
     assert cfg.profile_weight(mid) == pytest.approx(0.5)
 
     sparse, dense, half = cfg.for_density(1.0), cfg.for_density(9.0), cfg.for_density(mid)
-    assert (sparse.mesh_skin_max, sparse.mesh_skin_hand_scale, sparse.output_hold) == (
-        cfg.sparse_mesh_skin_max, cfg.sparse_mesh_skin_hand_scale, cfg.sparse_output_hold)
-    assert (dense.mesh_skin_max, dense.mesh_skin_hand_scale, dense.output_hold) == (
-        cfg.mesh_skin_max, cfg.mesh_skin_hand_scale, cfg.output_hold)
-    assert half.mesh_skin_max == pytest.approx(0.5 * (cfg.sparse_mesh_skin_max + cfg.mesh_skin_max))
-    assert half.output_hold == pytest.approx(0.5 * (cfg.sparse_output_hold + cfg.output_hold))
-    # the resolved copy is final; a fixed configuration is used as it is
-    assert not sparse.crowd_adaptive and sparse.for_density(9.0) == sparse
-    fixed = cfg.replace(crowd_adaptive=False)
-    assert fixed.for_density(1.0) is fixed
+    assert (sparse.skin.max, sparse.skin.hand_scale, sparse.output.hold) == (sp.skin_max, sp.skin_hand_scale,
+                                                                            sp.output_hold)
+    assert (dense.skin.max, dense.skin.hand_scale, dense.output.hold) == (dp.skin_max, dp.skin_hand_scale,
+                                                                         dp.output_hold)
+    assert half.skin.max == pytest.approx(0.5 * (sp.skin_max + dp.skin_max))
+    assert half.output.hold == pytest.approx(0.5 * (sp.output_hold + dp.output_hold))
+    assert cfg.profile.at(mid).skin_max == half.skin.max and cfg.for_dense_crowd() == dense
+    # the resolved copy is final (resolving twice changes nothing); fixed values are kept
+    assert not sparse.follows_profile and sparse.for_density(9.0) is sparse
+    fixed = cfg.with_values({"skin.max": 0.02})
+    assert fixed.for_density(1.0).skin.max == 0.02 and fixed.for_density(1.0).output.hold == sp.output_hold
+    assert fixed.for_density(9.0).skin.max == 0.02 and fixed.for_density(9.0).skin.hand_scale == dp.skin_hand_scale
     # nothing else moves
-    assert sparse.replace(mesh_skin_max=cfg.mesh_skin_max, mesh_skin_hand_scale=cfg.mesh_skin_hand_scale,
-                          output_hold=cfg.output_hold, crowd_adaptive=True) == cfg
+    assert sparse.with_values({"skin.max": None, "skin.hand_scale": None, "output.hold": None}) == cfg
 
-    with pytest.raises(InvalidInputError, match="dense_density"):
-        PhysicsConfig(sparse_density=5.0, dense_density=5.0)
-    PhysicsConfig(sparse_density=5.0, dense_density=5.0, crowd_adaptive=False)      # not used: allowed
+    with pytest.raises(InvalidInputError, match="profile.dense.crowd_density"):
+        cfg.with_values({"profile.sparse.crowd_density": 6.0})
     with pytest.raises(InvalidInputError, match="density"):
         cfg.profile_weight(-1.0)
+
+
+def test_fixing_the_three_values_replaces_the_old_switch():
+    """The skins and hold of the dense end for every crowd (what ``crowd_adaptive=false``
+    did): fix the three fields; the former switch is an error that says so."""
+    cfg = PhysicsConfig()
+    dp = cfg.profile.dense
+    fixed = cfg.with_values({"skin.max": dp.skin_max, "skin.hand_scale": dp.skin_hand_scale,
+                             "output.hold": dp.output_hold})
+    assert not fixed.follows_profile and fixed.for_density(1.0) is fixed and fixed == cfg.for_dense_crowd()
+    with pytest.raises(InvalidInputError, match="crowd_adaptive.*skin.max=0.015 skin.hand_scale=0.5 output.hold=0.6"):
+        cfg.with_values(crowd_adaptive=False)
 
 
 def test_correct_sizes_the_skins_by_the_crowd():
@@ -95,19 +109,20 @@ def test_correct_sizes_the_skins_by_the_crowd():
     from crowdstudy.physics.corrector import correct
 
     clip = build_baseline(load_design(), "stationary", "D1", duration=1.0).frames(0, 4)
-    cfg = PhysicsConfig(settle_time=0.1)
+    cfg = PhysicsConfig().with_values(settle_time=0.1)
+    sp = cfg.profile.sparse
     density = crowd_density(clip)
-    assert density < cfg.sparse_density
+    assert density < sp.crowd_density
 
     ours = correct(clip, cfg, progress=False, device="cpu")
     phys = ours.meta["physics"]
     assert phys["crowd_density"] == pytest.approx(density) and phys["profile_weight"] == 0.0
-    assert phys["config"]["mesh_skin_max"] == cfg.sparse_mesh_skin_max and not phys["config"]["crowd_adaptive"]
+    assert phys["config"]["skin"]["max"] == sp.skin_max and phys["config"]["output"]["hold"] == sp.output_hold
+    assert PhysicsConfig.from_dict(phys["config"]) == cfg.for_density(density)
 
-    by_hand = correct(clip, cfg.replace(crowd_adaptive=False, mesh_skin_max=cfg.sparse_mesh_skin_max,
-                                        mesh_skin_hand_scale=cfg.sparse_mesh_skin_hand_scale,
-                                        output_hold=cfg.sparse_output_hold), progress=False, device="cpu")
-    dense = correct(clip, cfg.replace(crowd_adaptive=False), progress=False, device="cpu")
+    by_hand = correct(clip, cfg.with_values({"skin.max": sp.skin_max, "skin.hand_scale": sp.skin_hand_scale,
+                                             "output.hold": sp.output_hold}), progress=False, device="cpu")
+    dense = correct(clip, cfg.for_dense_crowd(), progress=False, device="cpu")
     assert np.array_equal(ours.joint_rotations, by_hand.joint_rotations)
     assert np.array_equal(ours.root_translation, by_hand.root_translation)
     assert not np.array_equal(ours.joint_rotations, dense.joint_rotations)
@@ -115,6 +130,6 @@ def test_correct_sizes_the_skins_by_the_crowd():
     # the one resolution correct() and the benchmarks' peers share
     used, measured, weight = crowd_config(clip, cfg)
     assert used.as_dict() == phys["config"] and measured == phys["crowd_density"] and weight == 0.0
-    assert crowd_config(clip, cfg.replace(crowd_adaptive=False))[2] is None
+    assert crowd_config(clip, cfg.for_dense_crowd())[2] is None
     with pytest.raises(InvalidInputError, match="config"):
-        crowd_config(clip, {"mesh_skin_max": 0.04})
+        crowd_config(clip, {"skin.max": 0.04})

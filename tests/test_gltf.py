@@ -18,14 +18,16 @@ import numpy as np
 import pytest
 
 from crowdstudy.body import load_body
-from crowdstudy.body.gltf_model import ARM_ELEVATION_LIMIT, node_local_matrix, read_character
+from crowdstudy.body.gltf_container import Z_UP_TO_Y_UP, read_gltf
+from crowdstudy.body.gltf_model import (ARM_ELEVATION_LIMIT, map_skin_joints, node_local_matrix, node_parents,
+                                        node_world_matrices, read_character, read_skin_binds,
+                                        read_skinned_mesh)
 from crowdstudy.body.rotations import axis_angle_to_matrix, quaternion_to_matrix
 from crowdstudy.body.shapes import sample_bodies
 from crowdstudy.body.skeleton import JOINT_INDEX, JOINT_NAMES, PARENTS, forward_kinematics
 from crowdstudy.cli import main
 from crowdstudy.errors import InvalidInputError
-from crowdstudy.glb import read_gltf
-from crowdstudy.gltf.export import Z_UP_TO_Y_UP, build_gltf, character_prefix, export_gltf
+from crowdstudy.gltf.export import build_gltf, character_prefix, export_gltf
 from crowdstudy.scene import CrowdAnimation
 from gltf_fixtures import EXTRA_TARGET, write_mixamo_character
 
@@ -314,6 +316,24 @@ def test_import_reweights_unmapped_joints_to_mapped_ancestors(mixamo):
     assert moved.sum() > 10
     assert np.all(ch.weights[moved, JOINT_INDEX["left_wrist"]] > 0.5)
     np.testing.assert_allclose(ch.weights.sum(axis=1), 1.0, atol=1e-6)
+
+
+def test_import_pieces_read_a_skin_its_joints_and_its_mesh(mixamo):
+    body, path, expected = mixamo
+    gltf = read_gltf(path)
+    parent = node_parents(gltf.doc)
+    joint_map = map_skin_joints(gltf.doc, 0, parent, path)
+    assert joint_map.convention == "mixamo" and not joint_map.missing
+    node = _node_by_name(gltf.doc)
+    assert joint_map.weight_joint(node["mixamorig:LeftHandIndex1"]) == "left_wrist"
+    assert joint_map.weight_joint(node["mixamorig:Hips"]) == "pelvis"
+    binds = read_skin_binds(gltf, joint_map, node_world_matrices(gltf.doc, parent), path)
+    assert sorted(binds) == [0] and binds[0].ibm.shape == (len(joint_map.nodes), 4, 4)
+    mesh = read_skinned_mesh(gltf, binds, 0, path)
+    assert mesh.vertices.shape == (body.n_vertices, 3) and mesh.weights.shape == (body.n_vertices, 24)
+    np.testing.assert_allclose(mesh.weights, read_character(path).weights, atol=1e-6)
+    with pytest.raises(InvalidInputError, match="skin: expected an index"):
+        map_skin_joints(gltf.doc, 1, parent, path)
 
 
 def test_import_texture_and_record(mixamo):

@@ -69,7 +69,7 @@ def _tight():
     """The physics comparison's config, on both sides: CG to 1e-4 (the default stops at 1e-3)."""
     from crowdstudy.physics import PhysicsConfig
 
-    return PhysicsConfig(cg_tolerance=1e-4)
+    return PhysicsConfig().with_values(cg_tolerance=1e-4)
 
 
 def _joint_distance_cm(a, b) -> tuple[float, float]:

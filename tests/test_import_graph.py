@@ -3,7 +3,7 @@
 Every ``import`` / ``from ... import`` statement counts, those inside functions included: a
 function-level import hides a cycle from the interpreter, not from the layering. A
 subpackage (``crowdstudy.body``, ``crowdstudy.render`` ...) is one node of the coarse graph;
-a top-level module (``crowdstudy.scene``, ``crowdstudy.glb`` ...) is its own node.
+a top-level module (``crowdstudy.scene``, ``crowdstudy.tables`` ...) is its own node.
 """
 
 from __future__ import annotations

@@ -39,7 +39,7 @@ DRIVER = textwrap.dedent(r'''
     from crowdstudy.design import default_design_path, load_design
     from crowdstudy.package_data import read_resource, resource_path
     from crowdstudy.paths import cache_root
-    from crowdstudy.render.renderer import _shader_source
+    from crowdstudy.render.gpu import shader_source
     from crowdstudy.study.consent import find_consent_file, load_consent_html
     from crowdstudy.study.server import build_config, default_ui_dir
 
@@ -48,7 +48,7 @@ DRIVER = textwrap.dedent(r'''
     out["design"] = str(default_design_path())
     out["n_stimuli"] = len(design.stimuli())
     out["consent"] = load_consent_html(find_consent_file(None, default_design_path().parent))[:200]
-    out["shaders"] = {n: len(_shader_source(n)) for n in ("lighting.glsl", "display.glsl", "character.vert",
+    out["shaders"] = {n: len(shader_source(n)) for n in ("lighting.glsl", "display.glsl", "character.vert",
                                                           "character.frag", "static.vert", "overlap.frag")}
     out["assets"] = read_resource("crowdstudy.body", "ASSETS.md")[:80]
     out["ui_dir"] = str(default_ui_dir())

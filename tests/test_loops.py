@@ -15,6 +15,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from render_fixtures import crowd_animation, grid_positions, mannequin_loader, mannequin_renderer  # noqa: E402
 
 from crowdstudy.design import load_design  # noqa: E402
+from crowdstudy.metrics import BarTolerances  # noqa: E402
 from crowdstudy.metrics.tracking import joint_positions  # noqa: E402
 from crowdstudy.motion import baseline as baseline_mod  # noqa: E402
 from crowdstudy.motion.baseline import LOOP_DISSOLVE_SECONDS, MAX_LOOP_TEMPO_CHANGE, build_baseline  # noqa: E402
@@ -42,7 +43,11 @@ def _seam_steps(anim):
     return steps.mean(axis=1), float(seam.mean()), steps, seam
 
 
-def _seam_ok(anim, factor: float = 1.5) -> bool:
+#: the seam bar: the loop's last-to-first step at most this many median frame steps
+SEAM_RATIO = BarTolerances().seam_ratio
+
+
+def _seam_ok(anim, factor: float = SEAM_RATIO) -> bool:
     steps, seam, _, _ = _seam_steps(anim)
     return seam <= factor * float(np.median(steps))
 
@@ -52,7 +57,7 @@ def test_concert_baseline_is_periodic(design, concert):
     assert concert.n_frames == n_frames
     assert concert.meta["loop"] == {"mode": "periodic", "frames": n_frames}
     steps, seam, steps_c, seam_c = _seam_steps(concert)
-    assert seam <= 1.5 * np.median(steps)
+    assert seam <= SEAM_RATIO * np.median(steps)
     # frame T-1 -> 0 is the step T-1 -> T of the loop: never larger than the character's own steps
     assert np.all(seam_c <= steps_c.max(axis=0) + 1e-9)
     for rec in concert.clips:

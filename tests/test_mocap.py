@@ -10,7 +10,7 @@ import pytest
 
 from crowdstudy.body import load_body, sample_bodies
 from crowdstudy.body.rotations import axis_angle_to_quaternion, quaternion_to_axis_angle
-from crowdstudy.body.skeleton import DEFAULT_REST_JOINTS, JOINT_INDEX, forward_kinematics
+from crowdstudy.body.skeleton import DEFAULT_REST_JOINTS, JOINT_INDEX, MIRROR_JOINTS, forward_kinematics, mirror_pose
 from crowdstudy.errors import InvalidInputError
 from crowdstudy.motion import animate_stationary, load_bvh
 from crowdstudy.motion.beat import beat_curve, bounce_phase, circular_spread, low_points, warp_to_tempo
@@ -19,7 +19,6 @@ from crowdstudy.motion.library import list_clips, load_clip
 from crowdstudy.motion.loops import find_loop, in_place_positions, make_loop
 from crowdstudy.motion.mocap import clean_take, foot_contacts
 from crowdstudy.motion.mocap_library import CREDIT, MAX_TEMPO_RATIO, TAKES, dance_loop, load_mocap, mocap_names
-from crowdstudy.motion.quaternions import MIRROR_JOINTS, mirror_pose
 from crowdstudy.motion.selfcontact import clear_hands, hand_penetration
 from crowdstudy.scene import Crowd
 

@@ -52,14 +52,16 @@ def crowd():
 
 
 def _whole_crowd(sim_rot, sim_root, ref_rot, ref_root, rest, config):
-    """The output stage as correct() ran it before the blocks: every step on the whole crowd."""
+    """The output stage as correct() ran it before the blocks: every step on the whole crowd
+    (a hold that follows the density profile taken at its dense end, as finish_crowd takes it)."""
+    out = config.for_dense_crowd().output
     rot, root = close_loop(sim_rot, sim_root, N_FRAMES, WARMUP, BLEND)
-    rot, root = smooth_deviation(rot, root, ref_rot, ref_root, config.output_smoothing * FPS, periodic=True,
-                                 root_sigma_frames=config.output_smoothing_root * FPS, hold=config.output_hold)
-    locked = lock_planted_feet(rot, root, ref_rot, ref_root, rest, FPS, planted_speed=config.foot_lock_speed,
+    rot, root = smooth_deviation(rot, root, ref_rot, ref_root, out.smoothing * FPS, periodic=True,
+                                 root_sigma_frames=out.smoothing_root * FPS, hold=out.hold)
+    locked = lock_planted_feet(rot, root, ref_rot, ref_root, rest, FPS, planted_speed=out.foot_lock_speed,
                                periodic=True)
     assert not np.array_equal(locked, rot)                 # the feet were held somewhere
-    rot, report = limit_joint_speed(locked, root, ref_rot, ref_root, rest, FPS, margin=config.speed_limit_margin,
+    rot, report = limit_joint_speed(locked, root, ref_rot, ref_root, rest, FPS, margin=out.speed_limit_margin,
                                     periodic=True)
     assert report.characters and report.fast_samples > 0    # the speed limit had work to do
     return rot, root, report
@@ -79,7 +81,22 @@ def test_blocks_give_the_whole_crowds_animation_and_report(crowd, chunk, threads
     assert rot32.dtype == np.float64 and np.abs(rot32 - rot).max() < 1e-3
 
 
-def test_the_progress_bar_counts_the_blocks_and_changes_nothing(crowd, capsys):
+def test_a_hold_that_follows_the_profile_is_taken_at_its_dense_end(crowd):
+    """Without a crowd to measure, finish_crowd uses the dense end for the fields left to
+    the density profile: the same bytes as the dense end given by hand, not the sparse."""
+    follows = PhysicsConfig()
+    assert follows.output.hold is None
+    dense = follows.with_values({"output.hold": follows.profile.dense.output_hold})
+    sparse = follows.with_values({"output.hold": follows.profile.sparse.output_hold})
+    got = finish_crowd(*crowd, FPS, follows, warmup=WARMUP, blend=BLEND, looped=True)
+    assert np.array_equal(got[0], finish_crowd(*crowd, FPS, dense, warmup=WARMUP, blend=BLEND, looped=True)[0])
+    assert not np.array_equal(got[0], finish_crowd(*crowd, FPS, sparse, warmup=WARMUP, blend=BLEND, looped=True)[0])
+
+
+def test_the_progress_bar_counts_the_blocks_and_changes_nothing(crowd, capsys, monkeypatch):
+    from crowdstudy.progress import PROGRESS_ENV
+
+    monkeypatch.setenv(PROGRESS_ENV, "1")       # captured stderr is no terminal: draw the bar anyway
     config = PhysicsConfig()
     quiet = finish_crowd(*crowd, FPS, config, warmup=WARMUP, blend=BLEND, looped=True, chunk=2, threads=2)
     shown = finish_crowd(*crowd, FPS, config, warmup=WARMUP, blend=BLEND, looped=True, chunk=2, threads=2,
@@ -100,7 +117,8 @@ def test_the_limit_is_the_whole_crowds(crowd):
 
 def test_the_stage_can_be_switched_off_step_by_step(crowd):
     sim_rot, sim_root, ref_rot, ref_root, rest = crowd
-    config = PhysicsConfig(foot_lock=False, speed_limit=False, output_smoothing=0.0, output_smoothing_root=0.0)
+    config = PhysicsConfig().with_values({"output.foot_lock": False, "output.speed_limit": False,
+                                          "output.smoothing": 0.0, "output.smoothing_root": 0.0})
     rot, root, report = finish_crowd(sim_rot, sim_root, ref_rot, ref_root, rest, FPS, config, warmup=WARMUP,
                                      blend=BLEND, looped=True, chunk=3)
     want_rot, want_root = close_loop(sim_rot, sim_root, N_FRAMES, WARMUP, BLEND)

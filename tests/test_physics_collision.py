@@ -9,11 +9,11 @@ from crowdstudy.body.capsules import closest_points_on_segments
 from crowdstudy.body.skeleton import DEFAULT_PELVIS_HEIGHT, DEFAULT_REST_JOINTS, PARENTS, children
 from crowdstudy.errors import InvalidInputError
 from crowdstudy.physics.collision import (KIND_ENVIRONMENT, KIND_GROUND, KIND_INTER, KIND_INTRA, CollisionPipeline,
-                                          Contacts, collision_kernels, sample_static_walls, sweep_pairs)
+                                          Contacts, sample_static_walls, sweep_pairs)
 from crowdstudy.physics.config import PhysicsConfig
 from crowdstudy.physics.model import ModelBuilder
 from crowdstudy.physics.state import Control, State
-from crowdstudy.scene import static_walls_from_meta
+from crowdstudy.scene_meta import static_walls_from_meta
 
 
 def fixture_body():
@@ -61,7 +61,7 @@ def test_ground_contacts_for_capsules_below_the_floor():
 
 
 def test_inter_body_contacts_match_exact_capsule_distance():
-    model, c, _ = detect([[0, 0, 1.2], [0.15, 0.05, 1.2]], cfg=PhysicsConfig(contact_margin=0.0))
+    model, c, _ = detect([[0, 0, 1.2], [0.15, 0.05, 1.2]], cfg=PhysicsConfig().with_values(margin=0.0))
     inter = (c["kind"] == KIND_INTER) & (c["depth"] > 0)
     assert inter.sum() > 5
     a, b = c["body_a"][inter], c["body_b"][inter]
@@ -87,8 +87,10 @@ def test_the_sweep_finds_the_broadphase_kernels_pairs_in_its_order():
     """``sweep_pairs`` (the CPU's broad phase from 200 characters) returns exactly the
     pairs of ``broadphase_kernel`` in the same (i, j) order: random boxes on a crowd's
     floor, with shared lower x (ties) and boxes that touch exactly."""
-    k = collision_kernels()
-    wp = k.wp
+    from crowdstudy.physics import collision_kernels as k
+    from crowdstudy.warp_runtime import get_warp
+
+    wp = get_warp()
     rng = np.random.default_rng(5)
     n = 700
     lo = np.column_stack([rng.uniform(0, 30, n), rng.uniform(0, 12, n), rng.uniform(0, 0.1, n)])
@@ -143,7 +145,7 @@ def test_environment_points_push_away_from_walls():
     walls = np.array([[[-2.0, 0.15], [2.0, 0.15]]])
     pts = sample_static_walls(walls, spacing=0.03)
     assert pts.shape[1] == 3 and pts[:, 2].max() >= 2.0
-    _, c, _ = detect([[0, 0, 1.2]], points=pts, cfg=PhysicsConfig(contact_margin=0.0))
+    _, c, _ = detect([[0, 0, 1.2]], points=pts, cfg=PhysicsConfig().with_values(margin=0.0))
     env = (c["kind"] == KIND_ENVIRONMENT) & (c["depth"] > 0)
     assert env.any()
     assert np.all(c["normal"][env][:, 1] < 0)          # pushed towards -y, away from the wall
@@ -153,7 +155,7 @@ def _wall_depths(pipe, wall_y, spec):
     """The end spheres of every capsule against the plane y = wall_y, free side y < wall_y,
     computed here in numpy from the pipeline's world capsules: sorted depths."""
     model = pipe.model
-    r = model.wp["cap_radius"].numpy() + model.wp["cap_skin"].numpy() + pipe.config.contact_margin
+    r = model.wp["cap_radius"].numpy() + model.wp["cap_skin"].numpy() + pipe.config.contacts.margin
     ends = np.concatenate([pipe.p0w.numpy()[:, 1], pipe.p1w.numpy()[:, 1]])
     depth = np.concatenate([r, r]) - (wall_y - ends)
     return np.sort(depth[depth > -spec])
@@ -167,13 +169,13 @@ def test_walls_are_one_sided_planes_on_the_side_of_the_root():
     rot = np.zeros((1, 24, 3))
     rot[0, 0] = [0.0, 0.0, np.pi / 2]                   # the T-pose's arms along y
     walls = np.array([[[-2.0, 0.15], [2.0, 0.15]]])
-    cfg = PhysicsConfig(contact_margin=0.0)
+    cfg = PhysicsConfig().with_values(margin=0.0)
     _, c, pipe = detect([[0, 0, 1.2]], rot=rot, cfg=cfg, walls=walls)
     env = c["kind"] == KIND_ENVIRONMENT
     assert pipe.n_static_walls == 1 and env.sum() > 4
     assert np.allclose(c["normal"][env], [0.0, -1.0, 0.0], atol=0.0)
     assert c["depth"][env].max() > 0.5                  # a hand 0.6 m through is pushed back, not out
-    assert np.allclose(np.sort(c["depth"][env]), _wall_depths(pipe, 0.15, cfg.speculative_distance), atol=1e-6)
+    assert np.allclose(np.sort(c["depth"][env]), _wall_depths(pipe, 0.15, cfg.contacts.speculative_distance), atol=1e-6)
     # the same wall seen from the other side: a root at y = 0.3 is on the +y side
     _, c2, _ = detect([[0, 0.3, 1.2]], rot=rot, cfg=cfg, walls=walls)
     env2 = c2["kind"] == KIND_ENVIRONMENT
@@ -247,7 +249,7 @@ def test_a_dense_crowd_finds_every_touching_capsule_pair_of_different_characters
     found = {(a, b) for a, b, kind in zip(c["body_a"], c["body_b"], c["kind"]) if kind == KIND_INTER}
     p0, p1 = pipe.p0w.numpy().astype(float), pipe.p1w.numpy().astype(float)
     reach = corr.model.wp["cap_radius"].numpy() + corr.model.wp["cap_skin"].numpy()
-    limit = float(corr.config.contact_margin) + pipe.speculative
+    limit = float(corr.config.contacts.margin) + pipe.speculative
     nj, n = corr.model.n_joints, corr.model.n_characters
     ci, cj = np.triu_indices(n, 1)                        # character pairs less than 3 m apart
     pelvis = p0[::nj]

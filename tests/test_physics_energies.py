@@ -8,6 +8,7 @@ import pytest
 from crowdstudy.body.rotations import axis_angle_to_matrix
 from crowdstudy.body.skeleton import DEFAULT_REST_JOINTS, PARENTS, children
 from crowdstudy.physics import energies as E
+from crowdstudy.warp_runtime import get_warp
 
 RNG = np.random.default_rng(7)
 EPS = 1e-6
@@ -166,7 +167,7 @@ def small_system():
     model = builder.finalize(device="cpu")
     # linear translation springs: their softening beyond a reach is tested on its own
     # (tests/test_physics_smooth.py)
-    cfg = PhysicsConfig(root_translation_reach=0.0)
+    cfg = PhysicsConfig().with_values(root_translation_reach=0.0)
     control = Control(model, n_frames=2)
     rng = np.random.default_rng(3)
     rot = rng.normal(scale=0.2, size=(2, 2, 24, 3))
@@ -175,7 +176,7 @@ def small_system():
     control.advance(0, 0, 0.0)
     control.advance(0, 1, 1.0)
     state = State(model)
-    wp = control.k.wp
+    wp = get_warp()
     nb = model.n_bodies
     f32 = np.float32
     x = (control.t_x.numpy() + rng.normal(scale=0.01, size=(nb, 3))).astype(f32)
@@ -199,7 +200,7 @@ def test_warp_assembly_matches_numpy_reference(small_system):
     from crowdstudy.physics.collision import Contacts
 
     model, cfg, control, state, solver = small_system
-    h = cfg.dt
+    h = cfg.solver.dt
     contacts = Contacts.allocate(0, "cpu")
     solver.assemble(state, control, contacts, h)
     xp, qp = solver.x_pred.numpy().astype(float), solver.q_pred.numpy().astype(float)
@@ -213,10 +214,10 @@ def test_warp_assembly_matches_numpy_reference(small_system):
     kb, db = solver.body_k.numpy(), solver.body_d.numpy()
     kt, dtr = solver.body_kt.numpy(), solver.body_dt.numpy()
     # translational PD on the roots and the feet, and the world-space pose springs on the rest
-    assert np.all(kt[model.body_parent < 0] == cfg.root_translation_stiffness)
-    assert cfg.pose_translation_stiffness > 0 and np.all(kt > 0)
+    assert np.all(kt[model.body_parent < 0] == cfg.control.root_translation_stiffness)
+    assert cfg.control.pose_translation_stiffness > 0 and np.all(kt > 0)
     others = (model.body_parent >= 0) & ~np.isin(model.body_joint, [7, 8, 10, 11])
-    assert np.allclose(kt[others], cfg.pose_translation_stiffness)
+    assert np.allclose(kt[others], cfg.control.pose_translation_stiffness)
     for b in range(nb):
         if kt[b] > 0:
             _, gt, Ht = E.root_translation_energy(xp[b], x_old[b], tx[b], tx_old[b], kt[b], dtr[b] / h**2)
@@ -224,7 +225,7 @@ def test_warp_assembly_matches_numpy_reference(small_system):
             D[b, :3, :3] += Ht
         _, gi, Hi = E.inertia_energy(xp[b], Rp[b], xp[b], Rp[b], model.body_mass[b], model.body_J[b], h)
         # with the feed-forward prediction the animation is taken as supporting itself
-        g[b] += gi + E.gravity_energy(xp[b], model.body_mass[b], 0.0 if cfg.feedforward else cfg.gravity)[1]
+        g[b] += gi + E.gravity_energy(xp[b], model.body_mass[b], 0.0 if cfg.solver.feedforward else cfg.body.gravity)[1]
         D[b] += Hi
         p = model.body_parent[b]
         if p < 0:
@@ -233,7 +234,7 @@ def test_warp_assembly_matches_numpy_reference(small_system):
             D[b, 3:, 3:] += Hc[3:, 3:]
         else:
             _, gj, Hj = E.ball_joint_energy(xp[p], Rp[p], model.anchor_parent[b], xp[b], Rp[b], model.anchor_child[b],
-                                            cfg.joint_stiffness)
+                                            cfg.body.joint_stiffness)
             g[p] += gj[:6]
             g[b] += gj[6:]
             D[p] += Hj[:6, :6]
@@ -261,17 +262,17 @@ def test_fused_pcg_solves_the_assembled_system(small_system):
     from crowdstudy.physics import Solver
 
     model, cfg, control, state, _ = small_system
-    cfg = cfg.replace(cg_tolerance=1e-5, cg_max_iterations=400)   # solved to the exact solution's 5e-3
+    cfg = cfg.with_values(cg_tolerance=1e-5, cg_max_iterations=400)   # solved to the exact solution's 5e-3
     solver = Solver(model, cfg)
     pipe = CollisionPipeline(model, cfg)
     contacts = Contacts.allocate(pipe.default_capacity(), "cpu")
     pipe.collide(state, contacts)
     assert contacts.n_active() > 0
-    solver.assemble(state, control, contacts, cfg.dt)
+    solver.assemble(state, control, contacts, cfg.solver.dt)
     for precond in ("character", "body"):
         solver.preconditioner = precond
         solver.solve(contacts)
-        assert solver.last_cg[1] <= cfg.cg_tolerance or solver.last_cg[0] == cfg.cg_max_iterations
+        assert solver.last_cg[1] <= cfg.solver.cg_tolerance or solver.last_cg[0] == cfg.solver.cg_max_iterations
         x = np.concatenate([solver.dx.numpy(), solver.dw.numpy()], 1).ravel()
         rows, cols, vals, rhs = solver.triplets(contacts)
         A = bsr_from_triplets(rows.numpy(), cols.numpy(), vals.numpy().astype(float), model.n_bodies)
@@ -284,13 +285,13 @@ def test_tree_preconditioner_is_the_inverse_of_each_characters_block(small_syste
     """The character preconditioner (block LDL^T, joint blocks applied from the levers) equals
     the dense inverse of each character's diagonal blocks plus joint couplings."""
     from crowdstudy.physics.collision import CollisionPipeline, Contacts
-    from crowdstudy.physics.linear import bsr_from_triplets
+    from crowdstudy.physics.linear import bsr_from_triplets, tree_precond_kernel
 
     model, cfg, control, state, solver = small_system
     pipe = CollisionPipeline(model, cfg)
     contacts = Contacts.allocate(pipe.default_capacity(), "cpu")
     pipe.collide(state, contacts)
-    solver.assemble(state, control, contacts, cfg.dt)
+    solver.assemble(state, control, contacts, cfg.solver.dt)
     solver._factor_tree()
     nb, nj = model.n_bodies, model.n_joints
     rows, cols, vals, _ = solver.triplets(Contacts.allocate(0, "cpu"))     # bodies and joints only
@@ -302,9 +303,9 @@ def test_tree_preconditioner_is_the_inverse_of_each_characters_block(small_syste
     xw, yw = wp.array(x, dtype=wp.spatial_vector), wp.array(y, dtype=wp.spatial_vector)
     z = wp.zeros(nb, dtype=wp.spatial_vector)
     work = wp.zeros(nb, dtype=wp.spatial_vector)
-    wp.launch(solver.ks.tree_precond_kernel, model.n_characters,
+    wp.launch(tree_precond_kernel, model.n_characters,
               [nj, model.wp["body_parent"], solver.tree_dinv, solver.tree_l, solver.lever_p, solver.lever_c,
-               solver.ctrl_c, float(cfg.joint_stiffness), xw, yw, z, 0.5, 2.0, work])
+               solver.ctrl_c, float(cfg.body.joint_stiffness), xw, yw, z, 0.5, 2.0, work])
     m = 6 * nj
     for c in range(model.n_characters):
         sl = slice(c * m, (c + 1) * m)
@@ -319,7 +320,7 @@ def test_warp_off_diagonal_joint_blocks_match_numpy_reference(small_system):
     from crowdstudy.physics.collision import Contacts
 
     model, cfg, control, state, solver = small_system
-    h = cfg.dt
+    h = cfg.solver.dt
     contacts = Contacts.allocate(0, "cpu")
     solver.assemble(state, control, contacts, h)
     rows, cols, vals, _ = solver.triplets(contacts)
@@ -332,7 +333,7 @@ def test_warp_off_diagonal_joint_blocks_match_numpy_reference(small_system):
         if p < 0:
             continue
         _, _, Hj = E.ball_joint_energy(xp[p], Rp[p], model.anchor_parent[b], xp[b], Rp[b], model.anchor_child[b],
-                                       cfg.joint_stiffness)
+                                       cfg.body.joint_stiffness)
         _, _, Hc = E.control_energy(Rp[p], Rp[b], np.eye(3), np.eye(3), kb[b], db[b] / h**2)
         expected = Hj[:6, 6:].copy()
         expected[3:, 3:] += Hc[:3, 3:]
@@ -350,7 +351,7 @@ def test_warp_contact_assembly_matches_numpy_reference(small_system):
 
     model, cfg, control, state, solver = small_system
     # the plain penalty (k/2) depth^2: the activation band is tested on its own below
-    cfg = cfg.replace(contact_activation=0.0)
+    cfg = cfg.with_values({"contacts.activation": 0.0})
     solver = Solver(model, cfg)
     still = State(model)                      # same pose, zero velocity: prediction == state
     still.x.assign(state.x)
@@ -359,9 +360,9 @@ def test_warp_contact_assembly_matches_numpy_reference(small_system):
     contacts = Contacts.allocate(pipe.default_capacity(), "cpu")
     pipe.collide(still, contacts)
     c = contacts.to_numpy()
-    solver.assemble(still, control, Contacts.allocate(0, "cpu"), cfg.dt)
+    solver.assemble(still, control, Contacts.allocate(0, "cpu"), cfg.solver.dt)
     g0 = np.concatenate([solver.grad_t.numpy(), solver.grad_r.numpy()], 1).astype(float)
-    solver.assemble(still, control, contacts, cfg.dt)
+    solver.assemble(still, control, contacts, cfg.solver.dt)
     g1 = np.concatenate([solver.grad_t.numpy(), solver.grad_r.numpy()], 1).astype(float)
     x, R = still.x.numpy().astype(float), _quat_to_mat(still.q.numpy())
     expected = np.zeros_like(g0)
@@ -373,13 +374,13 @@ def test_warp_contact_assembly_matches_numpy_reference(small_system):
             depth = c["depth"][i]
             if depth > 0:
                 lever = c["lever_a"][i]
-                expected[a] += cfg.ground_stiffness * depth * np.concatenate([-np.array([0, 0, 1.0]),
+                expected[a] += cfg.contacts.ground_stiffness * depth * np.concatenate([-np.array([0, 0, 1.0]),
                                                                               -np.cross(lever, [0, 0, 1.0])])
                 kinds.add(kind)
             continue
-        margin = cfg.contact_margin if kind == KIND_INTER else 0.0
-        k = cfg.contact_stiffness if kind == KIND_INTER else cfg.intra_stiffness
-        stiffening = cfg.contact_stiffening_depth if kind == KIND_INTER else 0.0
+        margin = cfg.contacts.margin if kind == KIND_INTER else 0.0
+        k = cfg.contacts.stiffness if kind == KIND_INTER else cfg.contacts.intra_stiffness
+        stiffening = cfg.contacts.stiffening_depth if kind == KIND_INTER else 0.0
         _, g, _, depth = E.contact_energy(x[a], R[a], seg[a], model.cap_radius[a] + margin, x[b], R[b], seg[b],
                                           model.cap_radius[b], k, stiffening)
         expected[a] += g[:6]
@@ -397,7 +398,7 @@ def test_ground_contact_friction_gradient():
     builder = ModelBuilder()
     builder.add_character(*vars(fixture_body()).values())
     model = builder.finalize(device="cpu")
-    cfg = PhysicsConfig(ground_friction=1500.0, contact_activation=0.0)
+    cfg = PhysicsConfig().with_values({"contacts.ground_friction": 1500.0, "contacts.activation": 0.0})
     control = Control(model)
     control.set_frames(np.zeros((1, 24, 3)), np.array([[0.0, 0.0, 0.95]]))
     control.advance(0, 0, 0.0)
@@ -405,7 +406,7 @@ def test_ground_contact_friction_gradient():
     state = State(model)
     state.x.assign(control.t_x)
     state.q.assign(control.t_glob)
-    wp = control.k.wp
+    wp = get_warp()
     vel = np.array([0.2, -0.1, 0.0])
     state.v.assign(wp.array(np.tile(vel, (model.n_bodies, 1)).astype(np.float32), dtype=wp.vec3))
     pipe = CollisionPipeline(model, cfg)
@@ -413,9 +414,9 @@ def test_ground_contact_friction_gradient():
     pipe.collide(state, contacts)
     c = contacts.to_numpy()
     solver = Solver(model, cfg)
-    solver.assemble(state, control, Contacts.allocate(0, "cpu"), cfg.dt)
+    solver.assemble(state, control, Contacts.allocate(0, "cpu"), cfg.solver.dt)
     g0 = np.concatenate([solver.grad_t.numpy(), solver.grad_r.numpy()], 1).astype(float)
-    solver.assemble(state, control, contacts, cfg.dt)
+    solver.assemble(state, control, contacts, cfg.solver.dt)
     g1 = np.concatenate([solver.grad_t.numpy(), solver.grad_r.numpy()], 1).astype(float)
     expected = np.zeros_like(g0)
     up = np.array([0.0, 0.0, 1.0])
@@ -423,13 +424,14 @@ def test_ground_contact_friction_gradient():
     for i in np.nonzero(c["kind"] == KIND_GROUND)[0]:
         a, lever = c["body_a"][i], c["lever_a"][i].astype(float)
         u = np.concatenate([-up, -np.cross(lever, up)])
-        depth = c["depth"][i] + cfg.dt * u[:3] @ vel
+        depth = c["depth"][i] + cfg.solver.dt * u[:3] @ vel
         if depth <= 0:
             continue
         n_active += 1
         vt = vel - (vel @ up) * up
-        expected[a] += cfg.ground_stiffness * depth * u
-        expected[a] += np.concatenate([cfg.ground_friction * vt, np.cross(lever, cfg.ground_friction * vt)])
+        expected[a] += cfg.contacts.ground_stiffness * depth * u
+        friction = cfg.contacts.ground_friction * vt
+        expected[a] += np.concatenate([friction, np.cross(lever, friction)])
     assert n_active >= 2
     np.testing.assert_allclose(g1 - g0, expected, atol=1e-3 * np.abs(expected).max())
 
@@ -462,14 +464,14 @@ def test_stance_foot_anchor_assembly_matches_reference():
     builder = ModelBuilder()
     builder.add_character(*vars(fixture_body()).values())
     model = builder.finalize(device="cpu")
-    cfg = PhysicsConfig(foot_anchor_damping=40.0)
-    h = cfg.dt
-    slip = cfg.foot_anchor_max_force / cfg.foot_anchor_stiffness
+    cfg = PhysicsConfig().with_values({"feet.anchor_damping": 40.0})
+    h = cfg.solver.dt
+    slip = cfg.feet.anchor_max_force / cfg.feet.anchor_stiffness
     control = Control(model)
     control.set_frames(np.zeros((1, 24, 3)), np.array([[0.0, 0.0, 0.95]]))
     control.advance(0, 0, 0.0)
     control.hold()
-    wp = control.k.wp
+    wp = get_warp()
     state = State(model)
     tx = control.t_x.numpy().astype(float)
     shift = np.zeros_like(tx)
@@ -487,21 +489,21 @@ def test_stance_foot_anchor_assembly_matches_reference():
         return s, s.grad_t.numpy().astype(float), s.hess_a.numpy().astype(float)
 
     on, g1, A1 = assembled(cfg)
-    _, g0, A0 = assembled(cfg.replace(foot_anchor_stiffness=0.0))
+    _, g0, A0 = assembled(cfg.with_values({"feet.anchor_stiffness": 0.0}))
     x_pred, x_old = on.x_pred.numpy().astype(float), state.x.numpy().astype(float)
     kt, dh2 = on.body_kt.numpy().astype(float), on.body_dt.numpy().astype(float) / h**2
     exp_g, exp_A = np.zeros_like(g0), np.zeros_like(A0)
     offsets = on.foot_offset.numpy().astype(float)
     for j, b in enumerate(feet):
-        w = E.foot_planted_weight(tx[b], tx[b], h, cfg.foot_planted_speed)
+        w = E.foot_planted_weight(tx[b], tx[b], h, cfg.feet.planted_speed)
         assert w == 1.0
         off = E.foot_anchor_update(x_old[b], tx[b], np.zeros(3), w, slip)
         if j == 3:                                           # pushed 30 cm: it steps, no anchor
             assert on.foot_stepping.numpy()[b] == 1
             continue
         np.testing.assert_allclose(offsets[b], off, atol=1e-6)
-        _, g, H = E.foot_anchor_energy(x_pred[b], x_old[b], tx[b], tx[b], off, w, cfg.foot_anchor_stiffness,
-                                       cfg.foot_anchor_damping, h, kt[b], dh2[b])
+        _, g, H = E.foot_anchor_energy(x_pred[b], x_old[b], tx[b], tx[b], off, w, cfg.feet.anchor_stiffness,
+                                       cfg.feet.anchor_damping, h, kt[b], dh2[b])
         exp_g[b], exp_A[b] = g, H
     assert np.linalg.norm(offsets[8, :2] - shift[8, :2]) == pytest.approx(slip, rel=1e-3)  # dragged
     np.testing.assert_allclose(offsets[7], 0.0, atol=1e-7)                               # held
@@ -530,16 +532,16 @@ def test_arm_and_trunk_scales_set_the_pd_gains_of_exactly_their_joints(small_sys
     pelvis = [JOINT_INDEX[n] for n in ("pelvis", "left_hip", "right_hip", "spine1")]
     feet = [JOINT_INDEX[n] for n in ("left_ankle", "right_ankle", "left_foot", "right_foot")]
     expect = np.ones(len(joint))
-    for idx, scale in ((arms, 0.5), (trunk, 4.0), (pelvis, cfg.pelvis_scale), (feet, cfg.feet_scale)):
+    for idx, scale in ((arms, 0.5), (trunk, 4.0), (pelvis, cfg.control.pelvis_scale), (feet, cfg.control.feet_scale)):
         expect[np.isin(joint, idx)] = scale
     assert np.isin(joint, [JOINT_INDEX["left_knee"], JOINT_INDEX["right_knee"]]).sum() == 4   # two characters
-    solver = Solver(model, cfg.replace(arm_scale=0.5, trunk_scale=4.0))
-    np.testing.assert_allclose(solver.body_k.numpy(), cfg.stiffness * expect, rtol=1e-6)
-    np.testing.assert_allclose(solver.body_d.numpy(), cfg.damping * expect, rtol=1e-6)
+    solver = Solver(model, cfg.with_values(arm_scale=0.5, trunk_scale=4.0))
+    np.testing.assert_allclose(solver.body_k.numpy(), cfg.control.stiffness * expect, rtol=1e-6)
+    np.testing.assert_allclose(solver.body_d.numpy(), cfg.control.damping * expect, rtol=1e-6)
     default = Solver(model, cfg)
     expect[np.isin(joint, arms)] = 0.25               # the defaults: soft arms (held by the pose springs)
     expect[np.isin(joint, trunk)] = 1.0               # and the paper's single body k for the trunk
-    np.testing.assert_allclose(default.body_k.numpy(), cfg.stiffness * expect, rtol=1e-6)
+    np.testing.assert_allclose(default.body_k.numpy(), cfg.control.stiffness * expect, rtol=1e-6)
 
 
 def test_set_frames_gathers_the_asked_frames_in_blocks(monkeypatch):

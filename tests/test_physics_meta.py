@@ -13,7 +13,7 @@ from crowdstudy.design import default_design_path, load_design
 from crowdstudy.errors import InvalidInputError
 from crowdstudy.physics.collision import KIND_ENVIRONMENT
 from crowdstudy.physics.config import PhysicsConfig
-from crowdstudy.scene import static_walls_from_meta
+from crowdstudy.scene_meta import static_walls_from_meta
 
 
 def _custom_design(folder: Path, name: str, pattern: str, replacement: str):

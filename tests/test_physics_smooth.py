@@ -40,7 +40,7 @@ def _single_contact_gradient(depth: float, activation: float, k: float = 3.0e4, 
     builder = ModelBuilder()
     builder.add_character(*vars(fixture_body()).values())
     model = builder.finalize(device="cpu")
-    cfg = PhysicsConfig(contact_activation=activation, contact_stiffening_depth=stiffening)
+    cfg = PhysicsConfig().with_values(activation=activation, stiffening_depth=stiffening)
     control = Control(model)
     control.set_frames(np.zeros((1, 24, 3)), np.array([[0.0, 0.0, 1.0]]))
     control.advance(0, 0, 0.0)
@@ -50,7 +50,7 @@ def _single_contact_gradient(depth: float, activation: float, k: float = 3.0e4, 
     state.q.assign(control.t_glob)
     solver = Solver(model, cfg)
     empty = Contacts.allocate(0, "cpu")
-    solver.assemble(state, control, empty, cfg.dt)
+    solver.assemble(state, control, empty, cfg.solver.dt)
     g0 = solver.grad_t.numpy()[0].astype(float)
     c = Contacts.allocate(1, "cpu")
     c.count.assign(wp.array([1], dtype=wp.int32))
@@ -60,7 +60,7 @@ def _single_contact_gradient(depth: float, activation: float, k: float = 3.0e4, 
     c.depth.assign(wp.array([depth], dtype=wp.float32))
     c.stiffness.assign(wp.array([k], dtype=wp.float32))
     c.kind.assign(wp.array([kind], dtype=wp.int32))
-    solver.assemble(state, control, c, cfg.dt)
+    solver.assemble(state, control, c, cfg.solver.dt)
     g1 = solver.grad_t.numpy()[0].astype(float)
     return g1 - g0, float(solver.k_eff.numpy()[0])
 
@@ -114,7 +114,8 @@ def test_self_overlap_of_the_animation_is_not_fought(bodies):
     rot = _folded_arm()
     errors = {}
     for relative in (True, False):
-        corr = CrowdCorrector(body, device="cpu", config=PhysicsConfig(target_relative_self_contacts=relative))
+        cfg = PhysicsConfig().with_values(target_relative_self=relative)
+        corr = CrowdCorrector(body, device="cpu", config=cfg)
         corr.reset(rot, root)
         for _ in range(20):
             out_rot, out_root = corr.step(rot, root)
@@ -145,7 +146,7 @@ def test_feedforward_reproduces_an_animation_without_contacts(bodies):
     rot, root = _moving_pose(45, fps, body[0])
     worst = {}
     for ff in (True, False):
-        corr = CrowdCorrector(body, device="cpu", fps=fps, config=PhysicsConfig(feedforward=ff))
+        corr = CrowdCorrector(body, device="cpu", fps=fps, config=PhysicsConfig().with_values(feedforward=ff))
         corr.reset(rot[0], root[0])
         err = 0.0
         for f in range(1, len(rot)):
@@ -168,7 +169,7 @@ def _release_curve(dt: float, signed: bool = False, **config):
     # the paper's controller: the defaults' stiff root spring (3e5 N/m) is overdamped by the
     # implicit step itself at 1/60 s, which hides the damping term this measures
     corr = CrowdCorrector(body, device="cpu", fps=30.0,
-                          config=PhysicsConfig.paper_controller(dt=dt, feedforward=True, foot_anchor_stiffness=0.0,
+                          config=PhysicsConfig.paper_controller(dt=dt, feedforward=True, anchor_stiffness=0.0,
                                                                 ground_stiffness=0.0, **config))
     rot = np.zeros((1, 24, 3))
     root = np.array([[0.0, 0.0, body[0].pelvis_height + 0.2]])
@@ -201,10 +202,11 @@ def test_the_pose_damper_stops_a_pushed_body_overshooting():
     pushed 10 cm back without swinging through its target; undamped, the same 8 kN/m springs
     throw it past. On the 20 s concert D5 cell the damper took the overlap left from 4.8 % to
     3.7 % of the Baseline's at the same tracking (docs/lab-notes/correction-history.md, "Damped pose springs")."""
-    springs = {"pose_translation_stiffness": PhysicsConfig().pose_translation_stiffness}
+    defaults = PhysicsConfig().control
+    springs = {"pose_translation_stiffness": defaults.pose_translation_stiffness}
     undamped = _release_curve(1.0 / 60.0, signed=True, pose_translation_damping_scale=0.0, **springs)
     damped = _release_curve(1.0 / 60.0, signed=True,
-                            pose_translation_damping_scale=PhysicsConfig().pose_translation_damping_scale, **springs)
+                            pose_translation_damping_scale=defaults.pose_translation_damping_scale, **springs)
     assert undamped.min() < -0.005, undamped         # swings past the target (8 mm measured)
     assert damped.min() > -1e-4, damped              # settles from one side ...
     assert np.all(np.diff(damped) <= 1e-5), damped   # ... coming closer every frame
@@ -441,8 +443,8 @@ def _two_fixture_characters(ahead_dy: float, config: PhysicsConfig):
 
 
 def test_a_crossing_the_animation_completes_is_let_through():
-    cfg = PhysicsConfig(contact_pass_ahead=1.0 / 30.0, intra_body=False)
-    k = cfg.contact_stiffness
+    cfg = PhysicsConfig().with_values(pass_ahead=1.0 / 30.0, intra_body=False)
+    k = cfg.contacts.stiffness
     # still overlapping one frame ahead (a lasting overlap): every contact pushes at full stiffness
     held, depth = _two_fixture_characters(0.0, cfg)
     assert len(held) > 3 and (depth > 0).any() and np.all(held == pytest.approx(k))
@@ -454,7 +456,7 @@ def test_a_crossing_the_animation_completes_is_let_through():
     through, _ = _two_fixture_characters(-0.68, cfg)
     assert len(through) == len(held) and np.all(through == 0.0)
     # only where the look-ahead is on
-    off, _ = _two_fixture_characters(-0.68, cfg.replace(contact_pass_ahead=0.0))
+    off, _ = _two_fixture_characters(-0.68, cfg.with_values(pass_ahead=0.0))
     assert np.all(off == pytest.approx(k))
     # the pass fades in over contact_pass_width (2 cm): barely apart on the other side, a part of k
     partial, _ = _two_fixture_characters(-0.39, cfg)
@@ -482,30 +484,30 @@ def _translation_gradient(config: PhysicsConfig, shift: np.ndarray) -> np.ndarra
     state = State(model)
     state.x.assign(wp.array(control.t_x.numpy() + shift.astype(np.float32), dtype=wp.vec3))
     state.q.assign(control.t_glob)
-    solver = Solver(model, config.replace(foot_anchor_stiffness=0.0))
-    solver.assemble(state, control, Contacts.allocate(0, "cpu"), config.dt)
+    solver = Solver(model, config.with_values(anchor_stiffness=0.0))
+    solver.assemble(state, control, Contacts.allocate(0, "cpu"), config.solver.dt)
     return solver.grad_t.numpy().astype(float)
 
 
 def test_translation_springs_soften_beyond_their_reach():
     e = np.array([0.05, 0.0, 0.0])
-    base = PhysicsConfig(root_translation_stiffness=3e5, root_translation_reach=0.0, feet_translation_stiffness=0.0,
-                         pose_translation_stiffness=0.0)
+    base = PhysicsConfig().with_values(root_translation_stiffness=3e5, root_translation_reach=0.0,
+                                       feet_translation_stiffness=0.0, pose_translation_stiffness=0.0)
     linear = _translation_gradient(base, e)
     np.testing.assert_allclose(linear[0], 3e5 * e, rtol=1e-4, atol=0.05)   # the root: k e (N)
-    soft = _translation_gradient(base.replace(root_translation_reach=0.01, root_translation_far_stiffness=1e4), e)
+    soft = _translation_gradient(base.with_values(root_translation_reach=0.01, root_translation_far_stiffness=1e4), e)
     k_eff = 1e4 + (3e5 - 1e4) / np.sqrt(1.0 + (0.05 / 0.01) ** 2)
     np.testing.assert_allclose(soft[0], k_eff * e, rtol=1e-4, atol=0.05)
     # near the animation the softened spring is as stiff as the linear one
     small = np.array([0.0005, 0.0, 0.0])
-    np.testing.assert_allclose(_translation_gradient(base.replace(root_translation_reach=0.01), small)[0],
+    np.testing.assert_allclose(_translation_gradient(base.with_values(root_translation_reach=0.01), small)[0],
                                3e5 * small, rtol=2e-3, atol=0.05)
     # the pose springs of the other bodies (here the right hand, joint 23) saturate at k r
-    posed = base.replace(pose_translation_stiffness=2000.0)
+    posed = base.with_values(pose_translation_stiffness=2000.0)
     hand = _translation_gradient(posed, e)[23] - linear[23]
     np.testing.assert_allclose(hand, 2000.0 * e, rtol=1e-3, atol=0.05)
     far = np.array([0.5, 0.0, 0.0])
-    capped = _translation_gradient(posed.replace(pose_translation_reach=0.03), far)[23] \
+    capped = _translation_gradient(posed.with_values(pose_translation_reach=0.03), far)[23] \
         - _translation_gradient(base, far)[23]
     assert capped[0] == pytest.approx(2000.0 * 0.5 / np.sqrt(1.0 + (0.5 / 0.03) ** 2), rel=1e-3)
     assert capped[0] < 2000.0 * 0.03                                   # at most k r

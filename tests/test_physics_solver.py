@@ -26,7 +26,7 @@ def standing_root(bodies, xy):
 
 
 def inter_depth(corr):
-    pipe = CollisionPipeline(corr.model, corr.config.replace(contact_margin=0.0))
+    pipe = CollisionPipeline(corr.model, corr.config.with_values(margin=0.0))
     contacts = Contacts.allocate(pipe.default_capacity(), "cpu")
     pipe.collide(corr.state, contacts)
     c = contacts.to_numpy()
@@ -67,7 +67,7 @@ def test_overlapping_characters_separate(bodies):
 
 
 def test_reset_with_settle_starts_resolved(bodies):
-    corr = CrowdCorrector(bodies[:2], device="cpu", config=PhysicsConfig(settle_time=0.3))
+    corr = CrowdCorrector(bodies[:2], device="cpu", config=PhysicsConfig().with_values(settle_time=0.3))
     root = standing_root(bodies[:2], [(0.0, 0.0), (0.2, 0.05)])
     rot = np.zeros((2, 24, 3))
     corr.reset(rot, root)
@@ -82,7 +82,7 @@ def test_linear_solvers_agree(bodies):
     results = {}
     for name in ("fused", "scipy", "warp"):
         corr = CrowdCorrector(bodies[:2], device="cpu", linear_solver=name,
-                              config=PhysicsConfig(cg_tolerance=1e-6, cg_max_iterations=400))
+                              config=PhysicsConfig().with_values(cg_tolerance=1e-6, cg_max_iterations=400))
         root = standing_root(bodies[:2], [(0.0, 0.0), (0.25, 0.0)])
         corr.reset(np.zeros((2, 24, 3)), root)
         _, r = corr.step(np.zeros((2, 24, 3)), root + [0.0, 0.02, 0.0])
@@ -178,18 +178,18 @@ def test_cli_correct_round_trip(tmp_path, records, bodies):
                "--config", "damping=0.01"])
     assert rc == 0
     out = CrowdAnimation.load(tmp_path / "out.npz")
-    assert out.meta["method"] == "Ours" and out.meta["physics"]["config"]["damping"] == 0.01
+    assert out.meta["method"] == "Ours" and out.meta["physics"]["config"]["control"]["damping"] == 0.01
 
 
 def test_bad_inputs_name_the_argument(bodies):
     from crowdstudy.physics.model import ModelBuilder
 
-    with pytest.raises(ValueError, match="dt"):
-        PhysicsConfig(dt=-1.0)
-    with pytest.raises(ValueError, match="unknown key 'stifness'"):
-        PhysicsConfig.from_strings(["stifness=3"])
+    with pytest.raises(ValueError, match="solver.dt"):
+        PhysicsConfig().with_values(dt=-1.0)
+    with pytest.raises(ValueError, match="unknown PhysicsConfig field 'stifness'"):
+        PhysicsConfig.from_overrides({"stifness": "3"}, strings=True)
     with pytest.raises(ValueError, match="damping"):
-        PhysicsConfig.from_strings(["damping=abc"])
+        PhysicsConfig.from_overrides({"damping": "abc"}, strings=True)
     with pytest.raises(ValueError, match="anim"):
         correct("not an animation")
     with pytest.raises(ValueError, match="linear_solver"):
@@ -211,15 +211,13 @@ def test_real_scene_d1_meets_the_overlap_and_tracking_bars():
     """Short clip (2 s) of the study's stationary D1 cell: mesh overlap <= 15 % of the
     Baseline's, tracking error within the D1 bar's 1.5 cm (the full 20 s clips are measured by
     ``crowdstudy bench physics --bars``). A clip this short is a smoke test, not the bar: two
-    pairs make nearly all of a D1 cell's overlap. With the damped pose springs of 2026-12-04
-    it keeps 12.9 % (every 6th frame; 10.2 % every 2nd) at 0.79 cm, the springs before them
-    6.2 % (7.4 %) at 1.16 cm; on 8 s 15.4 % against 16.5 %, and on the 20 s MakeHuman cell
-    2.4 % against 4.8 %. Earlier: a 1 s clip, five frames measured, 8 % with the
-    earlier output stage (0.08 s low-pass), 13 % with a 0.05 s one, 7 % and 3 % on 2 s.
-    On the generated mannequins, whose meshes the capsules fit closely (IoU about 0.81); the
+    pairs make nearly all of a D1 cell's overlap, hence a bound looser than the full clip's
+    5 % bar (how this clip's numbers moved is in the correction's history under docs/). On the
+    generated mannequins, whose meshes the capsules fit closely (IoU about 0.81); the
     MakeHuman bodies (IoU about 0.76) keep 16 % of this clip's Baseline mesh overlap: the
     mesh beyond capsule + skin is not pushed (issue #11)."""
     from crowdstudy.design import load_design
+    from crowdstudy.metrics import BarTolerances
     from crowdstudy.metrics.overlap import overlap_volume
     from crowdstudy.metrics.tracking import tracking_error
     from crowdstudy.motion.baseline import build_baseline
@@ -231,7 +229,7 @@ def test_real_scene_d1_meets_the_overlap_and_tracking_bars():
     oo = overlap_volume(ours, geometry="mesh", frames=frames).mean
     assert ob > 0
     assert oo <= 0.15 * ob
-    assert tracking_error(ours, base) < 1.5
+    assert tracking_error(ours, base) < BarTolerances().tracking_sparsest_cm      # the D1 bar
     from crowdstudy.body.skeleton import forward_kinematics
     from crowdstudy.physics.corrector import load_bodies
 
@@ -256,10 +254,10 @@ def test_the_default_cg_tolerance_tracks_as_a_tight_solve_does():
     from crowdstudy.motion.baseline import build_baseline
 
     base = build_baseline(load_design(), "stationary", "D5", duration=0.5, body_model="open")
-    assert PhysicsConfig().cg_tolerance == 3e-3
+    assert PhysicsConfig().solver.cg_tolerance == 3e-3
     default = tracking_error(correct(base, progress=False), base)
-    tight = tracking_error(correct(base, PhysicsConfig(cg_tolerance=1e-5, cg_max_iterations=400), progress=False),
-                           base)
+    tight_cfg = PhysicsConfig().with_values(cg_tolerance=1e-5, cg_max_iterations=400)
+    tight = tracking_error(correct(base, tight_cfg, progress=False), base)
     assert tight > 2.0                          # a dense cell: the contacts move the crowd
     assert abs(default - tight) <= 0.06, (default, tight)
 
@@ -282,7 +280,8 @@ def test_a_dense_crowd_held_in_place_tracks_closer():
 
     base = build_baseline(load_design(), "stationary", "D5", duration=0.5, body_model="open")
     held = tracking_parts(correct(base, progress=False), base)
-    spread = tracking_parts(correct(base, PhysicsConfig(root_translation_far_stiffness=1e4), progress=False), base)
+    soft = PhysicsConfig().with_values(root_translation_far_stiffness=1e4)
+    spread = tracking_parts(correct(base, soft, progress=False), base)
     assert spread.placement_cm > 2.5                               # the soft root lets the crowd spread
     assert held.total_cm <= spread.total_cm - 0.35, (held, spread)
     assert held.placement_cm <= spread.placement_cm - 0.45, (held, spread)

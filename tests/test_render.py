@@ -209,8 +209,7 @@ def test_corridor_draws_periodic_copies(design):
     with mannequin_renderer(anim, design) as r:
         r.set_view("V4")
         img = r.render(2)
-        shifts = {round(float(s), 2) for gl in r._gl_groups for s in
-                  np.frombuffer(gl["inst"].read(), dtype=[("c", "<i4"), ("m", "<i4"), ("s", "<f4")])[:gl["count"]]["s"]}
+        shifts = {round(float(s), 2) for gl in r.character_resources.groups for s in r.characters.instances(gl)["s"]}
         wrapped = r.character_positions(2)
     assert {-4.5, 0.0} <= shifts                               # the copy across the seam is drawn
     assert np.all(np.abs(wrapped[:, 0]) <= 2.25)               # unwrapped positions are wrapped for drawing
@@ -349,7 +348,7 @@ def test_level_of_detail_and_culling_keep_the_picture(concert, design):
 def test_floor_split_is_exact(concert, design, monkeypatch):
     """The ground is drawn in two parts, only the part that can receive a character's
     shadow with the shadow lookup: same area, same picture as shading it all."""
-    from crowdstudy.render.renderer import CrowdRenderer
+    from crowdstudy.render import assets
     from crowdstudy.render.scene import build_environment, split_floor
 
     for scenario in ("concert", "corridor"):
@@ -366,9 +365,9 @@ def test_floor_split_is_exact(concert, design, monkeypatch):
     with mannequin_renderer(concert, design) as split:
         split.set_view("V2")
         a = split.render(2).astype(int)
-        x0, y0, x1, y1 = split._shadow_receivers()
+        x0, y0, x1, y1 = assets.shadow_receivers(split.anim, split.lighting)
         assert x1 - x0 < 12 and y1 - y0 < 12  # a few metres around the crowd, not the 80 m ground
-    monkeypatch.setattr(CrowdRenderer, "_shadow_receivers", lambda self: (-1e3, -1e3, 1e3, 1e3))
+    monkeypatch.setattr(assets, "shadow_receivers", lambda anim, lighting: (-1e3, -1e3, 1e3, 1e3))
     with mannequin_renderer(concert, design) as whole:
         whole.set_view("V2")
         b = whole.render(2).astype(int)

@@ -22,7 +22,7 @@ def design():
 
 
 def test_lod_level_by_screen_size_is_monotone_and_deterministic():
-    from crowdstudy.render.renderer import lod_levels
+    from crowdstudy.render.assets import lod_levels
     pixels = np.linspace(2000.0, 1.0, 500)               # characters ever smaller on screen
     levels = lod_levels(pixels)
     assert np.all(np.diff(levels) >= 0), "a smaller character got a finer mesh"
@@ -35,18 +35,18 @@ def test_lod_level_by_screen_size_is_monotone_and_deterministic():
 def test_renderer_draws_each_character_at_its_screen_size_level(design):
     """A crowd seen from V1: the near characters use finer meshes than the far ones, and
     every visible character is drawn exactly once."""
-    from crowdstudy.render.renderer import lod_levels
+    from crowdstudy.render.assets import lod_levels
     anim = crowd_animation(grid_positions(12, margin=0.45), n_frames=1)
     with mannequin_renderer(anim, design, width=1920, height=1080, msaa=0, shadows=False, max_faces=1200) as r:
         r.set_view("V1")
-        r._prepare(0)
+        r.prepare(0)
         by_level = {}
-        for gl in r._gl_groups:
-            by_level[gl["level"]] = by_level.get(gl["level"], 0) + gl["count"]
+        for gl in r.character_resources.groups:
+            by_level[gl.level] = by_level.get(gl.level, 0) + gl.count
         eye = np.asarray(r.camera.eye)
         focal = r.height / (2.0 * np.tan(np.radians(r.camera.fov) / 2.0))
         size = focal * 1.8 / np.linalg.norm(r.character_positions(0) - eye, axis=1)
-        expected = np.bincount(lod_levels(size, len(r._lods)), minlength=len(r._lods))
+        expected = np.bincount(lod_levels(size, len(r.meshes.lods)), minlength=len(r.meshes.lods))
     assert sum(by_level.values()) == anim.n_characters
     assert [by_level.get(k, 0) for k in range(len(expected))] == expected.tolist()
     assert len(np.flatnonzero(expected)) >= 2, "the scene should span two levels of detail"
@@ -61,14 +61,14 @@ def test_static_layers_give_the_per_frame_picture(design, view):
     with mannequin_renderer(anim, design, msaa=4) as layered, mannequin_renderer(anim, design, msaa=4, static_layer=False) as plain:
         for r in (layered, plain):
             r.set_view(view)
-        assert layered._layer_phases() == 15 and "cut_figures" in layered._layer_parts
-        assert not plain._layer_parts
+        assert layered.layers.phases() == 15 and "cut_figures" in layered.layers.parts
+        assert not plain.layers.parts
         for f in (0, 7, 15, 19):
             a, b = layered.render(f).astype(int), plain.render(f).astype(int)
             diff = np.abs(a - b).max(axis=2)
             assert np.mean(diff > 0) < 2e-3, f"frame {f}: {np.mean(diff > 0):.4f} of the pixels differ"
             assert np.mean(diff > 2) < 1e-3
-        assert len(layered._layers) == len({f % 15 for f in (0, 7, 15, 19)})   # drawn on first use
+        assert len(layered.layers.layers) == len({f % 15 for f in (0, 7, 15, 19)})   # drawn on first use
 
 
 def test_static_layers_follow_the_camera_and_the_corridor_walls(design):
@@ -77,7 +77,7 @@ def test_static_layers_follow_the_camera_and_the_corridor_walls(design):
     anim = crowd_animation(grid_positions(6, extent=(4.0, 3.0), margin=0.45), n_frames=3, scenario="corridor",
                            period=4.0, velocity=(1.0, 0.0))
     with mannequin_renderer(anim, design) as layered, mannequin_renderer(anim, design, static_layer=False) as plain:
-        assert "walls" not in layered._layer_parts
+        assert "walls" not in layered.layers.parts
         for view in ("V3", "V4"):
             for r in (layered, plain):
                 r.set_view(view)
@@ -93,12 +93,12 @@ def test_draw_layers_draws_each_beat_phase_once(design):
             r.draw_layers()
         r.set_view("V2")
         assert r.draw_layers() == 15
-        assert len(r._layers) == 15 and len(r._layers_drawn) == 15
+        assert len(r.layers.layers) == 15 and len(r.layers.drawn) == 15
         before = r.render(1)
         r.set_view("V2")                       # the same camera again: layers drawn anew
-        assert not r._layers_drawn
+        assert not r.layers.drawn
         assert np.array_equal(r.render(1), before)
-        assert len(r._layers) == 15            # ... into the same framebuffers
+        assert len(r.layers.layers) == 15            # ... into the same framebuffers
 
 
 def test_shader_variants_equal_the_branching_program(design):
@@ -108,7 +108,7 @@ def test_shader_variants_equal_the_branching_program(design):
     with mannequin_renderer(anim, design) as r:
         r.set_view("V1")
         a = r.render(0)
-        r._char_variants = {}
+        r.characters.per_kind = False
         b = r.render(0)
     assert np.array_equal(a, b)
 
@@ -150,18 +150,18 @@ def test_pipelined_encode_gives_the_serial_bytes(design, tmp_path):
 def test_overlap_bisection_marks_the_pixels_of_the_full_scan(design, monkeypatch):
     """overlap.frag bisects a hidden fragment's sorted candidates to the visible character's
     capsules; compiled to scan them all (OVERLAP_SCAN_ALL), it marks the same pixels."""
-    import crowdstudy.render.renderer as renderer_module
+    import crowdstudy.render.gpu as gpu_module
     anim = crowd_animation(grid_positions(16, extent=(1.6, 1.6), margin=0.2, seed=3), n_frames=2)
     masks = []
     for scan_all in (False, True):
         if scan_all:
-            compile_program = renderer_module._program
+            compile_program = gpu_module.compile_program
 
             def with_define(ctx, vert, frag, **kw):
                 if frag == "overlap.frag":
                     kw["defines"] = (*kw.get("defines", ()), "OVERLAP_SCAN_ALL")
                 return compile_program(ctx, vert, frag, **kw)
-            monkeypatch.setattr(renderer_module, "_program", with_define)
+            monkeypatch.setattr(gpu_module, "compile_program", with_define)
         with mannequin_renderer(anim, design, width=384, height=216) as r:
             r.set_view("V3")
             masks.append([r.overlap(f, image=False).mask for f in (0, 1)])
@@ -182,9 +182,9 @@ def test_taking_the_character_pass_apart_leaves_the_renderer_as_it_was(design):
     with mannequin_renderer(anim, design) as r:
         r.set_view("V1")
         before = r.render(1)
-        keys = [set(gl["vaos"]) for gl in r._gl_groups]
+        keys = [set(gl.vaos) for gl in r.character_resources.groups]
         parts = probe._character_parts(r, 1, reps=1)
-        assert [set(gl["vaos"]) for gl in r._gl_groups] == keys
+        assert [set(gl.vaos) for gl in r.character_resources.groups] == keys
         assert r.ctx.scissor == (0, 0, r.width, r.height) or r.ctx.scissor is None
         after = r.render(1)
     assert set(parts) == {"full", "vertex+setup", "constant-colour fragments", "fragments", "shading"}

@@ -82,7 +82,7 @@ def test_the_split_pcg_solves_what_the_fused_one_solves(concert, monkeypatch):
     # summation order of its dot products: solved tightly, both reach the same states
     from crowdstudy.physics.config import PhysicsConfig
 
-    tight = PhysicsConfig(cg_tolerance=1e-6, cg_max_iterations=400)
+    tight = PhysicsConfig().with_values(cg_tolerance=1e-6, cg_max_iterations=400)
     fused = _run(concert, monkeypatch, "1", split_pcg=False, config=tight)
     split = _run(concert, monkeypatch, "2", split_pcg=True, config=tight)
     assert any((c["kind"] == 2).any() for _, c in fused[1])
@@ -152,3 +152,17 @@ def test_run_together_meets_at_a_barrier_or_declines(monkeypatch):
 
     with pytest.raises(ZeroDivisionError):
         run_together(waits, fails)
+
+
+def test_device_names_are_cpu_cuda_or_cuda_n():
+    from crowdstudy.physics.solver import LINEAR_SOLVERS, PRECONDITIONERS
+    from crowdstudy.warp_runtime import device_kind, resolve_device
+
+    assert [device_kind(d) for d in ("cpu", "cuda", "cuda:0", "cuda:12")] == ["cpu", "cuda", "cuda", "cuda"]
+    for bad in ("gpu", "cpu:0", "cuda:", "CUDA", "", None):
+        with pytest.raises(InvalidInputError, match="device: expected 'cpu', 'cuda' or 'cuda:N'"):
+            device_kind(bad)
+    with pytest.raises(InvalidInputError, match="device"):
+        resolve_device("gpu0")
+    assert resolve_device("cpu") == "cpu"
+    assert LINEAR_SOLVERS == ("fused", "warp", "scipy") and PRECONDITIONERS == ("character", "body")

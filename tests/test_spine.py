@@ -83,13 +83,33 @@ def test_design_matches_paper():
     (lambda r: r["stages"]["walking"].__setitem__("viewpoints", ["V9"]), "V9"),
     (lambda r: r["video"].__setitem__("fps", 2.5), "video.fps"),
     (lambda r: r["scenarios"]["corridor"].__setitem__("speed", 1.0), "scenarios.corridor.speed"),
+    (lambda r: r["scenarios"]["corridor"].__setitem__("direction", "sideways"), "scenarios.corridor.direction"),
+    (lambda r: r["scenarios"]["concert"].__setitem__("motion", "keyframes"), "scenarios.concert.motion"),
+    (lambda r: r["scenarios"].__setitem__("stadium", {}), "scenarios.stadium"),
+    (lambda r: r["stages"]["walking"].__setitem__("scenario", "stadium"), "stages.walking.scenario"),
+    (lambda r: r["video"].__setitem__("width", 641), "video.width"),
+    (lambda r: r["questionnaire"]["labels"].pop(), "questionnaire.labels"),
+    (lambda r: r["questionnaire"]["items"][2].__setitem__("reverse", "yes"), r"questionnaire.items[2].reverse"),
+    (lambda r: r["composites"].__setitem__("QXX", ["Q1", "Q9"]), "composites.QXX"),
 ])
 def test_design_errors_name_key(edit, needle):
     from crowdstudy.design import default_design_path
     raw = tomllib.loads(default_design_path().read_text())
     edit(raw)
-    with pytest.raises(InvalidInputError, match=needle.replace(".", r"\.")):
+    with pytest.raises(InvalidInputError, match=needle.replace(".", r"\.").replace("[", r"\[")):
         parse_design(raw, "study.toml")
+
+
+def test_design_corridor_direction_is_checked():
+    from crowdstudy.design import default_design_path
+    raw = tomllib.loads(default_design_path().read_text())
+    raw["scenarios"]["corridor"]["direction"] = "sideways"
+    with pytest.raises(InvalidInputError) as info:
+        parse_design(raw, "study.toml")
+    assert str(info.value) == ("study.toml: key 'scenarios.corridor.direction' must be 'unidirectional' or "
+                               "'bidirectional', got 'sideways'")
+    raw["scenarios"]["corridor"]["direction"] = "bidirectional"
+    assert parse_design(raw, "study.toml").scenarios["corridor"]["direction"] == "bidirectional"
 
 
 def test_rotation_conversions_roundtrip():

@@ -13,6 +13,7 @@ from crowdstudy.design import load_design
 from crowdstudy.errors import InvalidInputError
 from crowdstudy.stats._data import cell_matrix
 from crowdstudy.stats.figures import method_figure, stars_caption
+from crowdstudy.stats.options import AnalysisOptions
 from crowdstudy.stats.pipeline import analyze
 from crowdstudy.stats.scoring import cell_means, composite_scores
 from crowdstudy.stats.synthetic import ResponseModel, simulate_responses
@@ -29,9 +30,9 @@ def walk(design):
     return simulate_responses(design, 6, seed=11, stages=[2])
 
 
-def _run(df, design, **kw):
-    kw.setdefault("composites", ["QCR"])
-    return analyze(df, design, None, figures=False, **kw)
+def _run(df, design, participants=None, **kw):
+    kw.setdefault("composites", ("QCR",))
+    return analyze(df, design, None, AnalysisOptions(figures=False, **kw), participants=participants)
 
 
 def test_a_repeated_answer_is_refused_naming_participant_cell_and_rows(design, walk):
@@ -83,7 +84,7 @@ def test_a_missing_cell_names_file_stage_and_participant(design, walk, tmp_path)
     csv = tmp_path / "responses.csv"
     walk.drop(walk.index[(walk.participant_id == "sim-002")][:1]).to_csv(csv, index=False)
     with pytest.raises(InvalidInputError, match=rf"{csv}: stage 2 \(corridor\), QCR: subject 'sim-002' has no"):
-        analyze(csv, design, None, composites=["QCR"], figures=False)
+        analyze(csv, design, None, AnalysisOptions(composites=("QCR",), figures=False))
 
 
 def test_identical_scores_report_no_effect(design, walk):
@@ -126,7 +127,8 @@ def test_participants_csv_excludes_and_counts_reasons(design, walk, tmp_path):
     # an explicit --participants file; nobody excluded
     other = tmp_path / "people.csv"
     _participants(walk, {}).to_csv(other, index=False)
-    res = analyze(folder / "responses.csv", design, None, figures=False, composites=["QCR"], participants=other)
+    res = analyze(folder / "responses.csv", design, None, AnalysisOptions(figures=False, composites=("QCR",)),
+                  participants=other)
     assert "none of 6 participants excluded" in res.summary
     assert res.results[(2, "QCR")].anova["n_subjects"].iloc[0] == 6
 
@@ -151,7 +153,7 @@ def test_simulated_data_are_labelled_and_the_stars_explained(design, tmp_path):
     csv = tmp_path / "responses.csv"
     df.to_csv(csv, index=False)
     (tmp_path / "responses.json").write_text(json.dumps({"simulated": True, "note": "bots"}))
-    res = analyze(csv, design, tmp_path / "a", composites=["QCR"], stars="omnibus")
+    res = analyze(csv, design, tmp_path / "a", AnalysisOptions(composites=("QCR",), stars="omnibus"))
     table = res.results[(2, "QCR")].anova.set_index("Source")
     assert not (table.loc[[s for s in table.index if "Method" in s], "p"] < 0.05).any()   # no Method effect
     assert "SIMULATED data" in res.summary and "Figure stars omitted" in res.summary
@@ -162,7 +164,7 @@ def test_simulated_data_are_labelled_and_the_stars_explained(design, tmp_path):
     assert json.loads((tmp_path / "a" / "analysis.json").read_text())["simulated"] is True
     # without the sidecar: not labelled; "always" draws whatever the per-cell tests give
     (tmp_path / "responses.json").unlink()
-    res = analyze(csv, design, tmp_path / "b", composites=["QCR"], stars="always", figures=False)
+    res = analyze(csv, design, tmp_path / "b", AnalysisOptions(composites=("QCR",), stars="always", figures=False))
     record = json.loads((tmp_path / "b" / "analysis.json").read_text())
     assert "SIMULATED" not in res.summary and record["simulated"] is False
     cells = res.results[(2, "QCR")].method_by_cell

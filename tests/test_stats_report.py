@@ -10,6 +10,7 @@ from crowdstudy.cli import main as cli_main
 from crowdstudy.design import load_design
 from crowdstudy.errors import InvalidInputError
 from crowdstudy.stats._data import cell_matrix
+from crowdstudy.stats.options import AnalysisOptions
 from crowdstudy.stats.pipeline import analyze
 from crowdstudy.stats.power import power_analysis
 from crowdstudy.stats.report import (apa_effect, apa_summary, descriptives_from_cells, format_p, stars, to_latex,
@@ -67,7 +68,7 @@ def test_descriptives_by_hand(design, responses):
 
 
 def test_analyze_writes_the_report(design, responses, tmp_path):
-    res = analyze(responses, design, tmp_path, stages=[2], composites=["QCR"])
+    res = analyze(responses, design, tmp_path, AnalysisOptions(stages=(2,), composites=("QCR",)))
     r = res.results[(2, "QCR")]
     assert list(r.anova["Source"])[:3] == ["Density", "Viewpoint", "Method"]
     assert r.anova.set_index("Source").at["Method", "p"] < 0.05        # the simulated effect is found
@@ -90,8 +91,8 @@ def test_analyze_writes_the_report(design, responses, tmp_path):
 def test_analyze_listwise_deletion(design, responses):
     holes = responses.drop(responses.index[(responses.participant_id == "sim-003") & (responses.stage == 2)][:1])
     with pytest.raises(InvalidInputError, match="sim-003"):
-        analyze(holes, design, None, stages=[2], composites=["QCR"])
-    res = analyze(holes, design, None, stages=[2], composites=["QCR"], missing="drop")
+        analyze(holes, design, None, AnalysisOptions(stages=(2,), composites=("QCR",)))
+    res = analyze(holes, design, None, AnalysisOptions(stages=(2,), composites=("QCR",), missing="drop"))
     assert res.results[(2, "QCR")].anova.attrs["dropped_subjects"] == ["sim-003"]
     assert "listwise deletion" in res.summary
 
@@ -137,7 +138,8 @@ def test_single_viewpoint_design_and_determinism(tmp_path):
     raw["stages"]["walking"]["viewpoints"] = ["V4"]
     one_view = parse_design(raw)
     df = simulate_responses(one_view, 6, seed=2, stages=[2])
-    runs = [analyze(df, one_view, tmp_path / f"run{i}", composites=["QCA"], figures=False) for i in range(2)]
+    runs = [analyze(df, one_view, tmp_path / f"run{i}", AnalysisOptions(composites=("QCA",), figures=False))
+            for i in range(2)]
     table = runs[0].results[(2, "QCA")].anova
     assert list(table["Source"]) == ["Density", "Method", "Density:Method"]   # Viewpoint left out
     assert len(runs[0].results[(2, "QCA")].method_by_cell) == 5

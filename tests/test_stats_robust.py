@@ -98,13 +98,14 @@ def test_analyze_reports_the_robustness_checks(tmp_path):
     import json
 
     from crowdstudy.design import load_design
+    from crowdstudy.stats.options import AnalysisOptions
     from crowdstudy.stats.pipeline import analyze
     from crowdstudy.stats.synthetic import simulate_responses
 
     design = load_design()
     df = simulate_responses(design, 6, seed=5, stages=[2])
     holes = df.drop(df.index[(df.participant_id == "sim-004")][:3])            # sim-004 lacks 3 cells
-    res = analyze(holes, design, tmp_path, composites=["QCR"], missing="drop", figures=False)
+    res = analyze(holes, design, tmp_path, AnalysisOptions(composites=("QCR",), missing="drop", figures=False))
     assert res.results[(2, "QCR")].anova["n_subjects"].iloc[0] == 5
     record = json.loads((tmp_path / "analysis.json").read_text())["results"][0]["robustness"]
     assert record["mixed_model"]["n_participants"] == 6 and record["mixed_model"]["n_incomplete"] == 1

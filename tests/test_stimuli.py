@@ -136,7 +136,7 @@ def test_resume_remakes_exactly_what_a_change_affects(tiny_design, tmp_path, mon
 
     monkeypatch.setattr(stimuli_module, "animation_job", fake_animation_job)
     before = stamps()
-    physics = PhysicsConfig().replace(damping=0.007)
+    physics = PhysicsConfig().with_values(damping=0.007)
     second = {r["stimulus_id"]: r for r in build_stimuli(tiny_design, out, physics=physics, **kw)["stimuli"]}
     assert sorted(jobs) == [("S1-D1", ["Ours"]), ("S2-D1", ["Ours"])]
     remade = {sid for sid, t in stamps().items() if t != before[sid]}

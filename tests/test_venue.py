@@ -82,19 +82,15 @@ def test_cutaway_leaves_every_sight_line_to_the_crowd_free(design, venue, view):
 
 @pytest.mark.parametrize("view", ["V1", "V2", "V3", "V4"])
 def test_venue_hides_no_character_and_fills_the_background(design, view):
-    from crowdstudy.render.scene import Environment
-    from crowdstudy.render.venue import Elements
     anim = crowd_animation(grid_positions(12, margin=0.45), n_frames=2)
     away = anim.replace(root_translation=anim.root_translation + [0, 0, -50.0])
     images = {}
     for name, a in (("crowd", anim), ("empty", away)):
         for bare in (False, True):
             with mannequin_renderer(a, design) as r:
-                if bare:  # the same scene without the venue's cut-away elements
-                    r.env = Environment(**{**r.env.__dict__, "cutaway": Elements.join([])})
-                    r._cut_ibo = None
-                    r._cut_count = 0
                 r.set_view(view)
+                if bare:  # the same scene without the venue's cut-away elements
+                    r.set_cutaway([])
                 images[name, bare] = r.render(1).astype(int)
     mask = np.abs(images["crowd", True] - images["empty", True]).sum(axis=2) > 30   # the characters' pixels
     for axis in (0, 1):  # ... less their anti-aliased edges, which blend with the background
@@ -170,7 +166,7 @@ def test_frustum_culling_of_the_venue_keeps_the_picture(design):
     anim = crowd_animation(grid_positions(4, margin=0.45), n_frames=1)
     with mannequin_renderer(anim, design) as r:
         r.set_view("V4")
-        culled = r._cut_count
+        culled = r.environment.cut_count
         a = r.render(0).astype(int)
         every = visible_indices(r.env.cutaway, r.camera.eye, r.env.extent)
         r.set_cutaway(every)

@@ -59,8 +59,9 @@ _TORSO = (0, 3, 6, 9)
 #: the palm and finger bones of the 24-joint skeleton (left/right wrist, left/right hand)
 HAND_BONES = tuple(JOINT_INDEX[name] for name in ("left_wrist", "right_wrist", "left_hand", "right_hand"))
 _FEET = {7: 10, 8: 11, 10: 10, 11: 11}  # bone -> the joint its floor direction points to
-#: :func:`capsule_skin`'s defaults, which the physics (``PhysicsConfig.mesh_skin_*``) and the
-#: separation floor (``crowdstudy.metrics.floor``) take as theirs
+#: :func:`capsule_skin`'s defaults, which the physics (``PhysicsConfig.skin.percentile`` and
+#: the dense end of ``PhysicsConfig.profile``) and the separation floor
+#: (``crowdstudy.metrics.floor``) take as theirs
 SKIN_PERCENTILE, SKIN_MAX, SKIN_HAND_SCALE = 90.0, 0.015, 0.5
 
 
@@ -479,7 +480,7 @@ def capsule_skin(body, percentile: float = SKIN_PERCENTILE, max_skin: float = SK
     The skin grows the capsule in every direction, while what reaches beyond a capsule is
     mostly one protrusion: the thumb and spread fingers beside a hand's capsule (2-4 cm on
     the MakeHuman bodies at the 90th percentile), a chest or a shoulder blade beside the
-    upper trunk's (up to 4 cm). ``max_skin`` caps it (0.04 until 2026-12-05), and the palm
+    upper trunk's (up to 4 cm). ``max_skin`` caps it, and the palm
     and finger bones (``left/right_wrist``, ``left/right_hand`` of a 24-joint skeleton)
     take ``hand_scale`` of their skin: a hand 3-4 cm thick had a contact sphere 12-14 cm
     across and stopped 3-5 cm short of a back it was pressed on (docs/lab-notes/correction-history.md,

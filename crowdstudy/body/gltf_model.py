@@ -29,6 +29,11 @@ Steps (:func:`read_character`):
    that limit by a turn about the forward axis (in the coronal plane); thighs and shins
    more than ``LEG_TILT_LIMIT`` from vertical are brought to it. The mesh follows by linear blend skinning with the 24-joint weights. A file already
    in the toolkit's convention (a crowdstudy export) passes through unchanged.
+
+The steps are public pieces for importers of other files: :func:`map_skin_joints` (step 2's
+mapping and step 3's weight targets), :func:`read_skin_binds` (a skin's bind pose, step 1)
+and :func:`read_skinned_mesh` (the meshes bound to those skins, merged, step 1), on the
+node tree of :func:`node_parents` and :func:`node_world_matrices`.
 """
 
 from __future__ import annotations
@@ -40,15 +45,17 @@ from pathlib import Path
 
 import numpy as np
 
+from crowdstudy.body.gltf_container import Z_UP_TO_Y_UP, GltfFile, read_gltf
 from crowdstudy.body.joint_names import VRM_BONES, match_names
 from crowdstudy.body.model import Body, check_fields
 from crowdstudy.body.rotations import axis_angle_to_matrix, quaternion_to_matrix, rotation_between
 from crowdstudy.body.skeleton import JOINT_INDEX, JOINT_NAMES, NUM_JOINTS, PARENTS, forward_kinematics
 from crowdstudy.errors import InvalidInputError
-from crowdstudy.glb import Z_UP_TO_Y_UP, GltfFile, read_gltf
 
 __all__ = ["GltfCharacter", "read_character", "load_gltf_body", "node_local_matrix", "RECORD_FIELDS",
-           "ARM_ELEVATION_LIMIT", "LEG_TILT_LIMIT", "OPTIONAL_JOINTS"]
+           "ARM_ELEVATION_LIMIT", "LEG_TILT_LIMIT", "OPTIONAL_JOINTS", "SkinJointMap", "map_skin_joints",
+           "SkinBind", "read_skin_binds", "SkinnedMesh", "read_skinned_mesh", "node_parents",
+           "node_world_matrices"]
 
 #: Fields a ``{"model": "gltf"}`` body record may hold.
 RECORD_FIELDS = ("model", "path", "skin", "height", "sex")
@@ -103,7 +110,8 @@ def node_local_matrix(node: dict) -> np.ndarray:
     return m
 
 
-def _parents(doc: dict) -> np.ndarray:
+def node_parents(doc: dict) -> np.ndarray:
+    """(nodes,) int64 parent node index of every node of a glTF document (-1 for roots)."""
     nodes = doc.get("nodes", [])
     parent = np.full(len(nodes), -1, dtype=np.int64)
     for i, node in enumerate(nodes):
@@ -112,7 +120,9 @@ def _parents(doc: dict) -> np.ndarray:
     return parent
 
 
-def _world_matrices(doc: dict, parent: np.ndarray) -> np.ndarray:
+def node_world_matrices(doc: dict, parent: np.ndarray) -> np.ndarray:
+    """(nodes, 4, 4) float64 world transforms of every node in the document's default pose
+    (no animation applied); ``parent`` from :func:`node_parents`."""
     nodes = doc.get("nodes", [])
     local = [node_local_matrix(n) for n in nodes]
     world: list[np.ndarray | None] = [None] * len(nodes)
@@ -196,16 +206,82 @@ def read_character(path: str | Path, *, skin: int = 0, height: float | None = No
     """
     path = Path(path)
     gltf = read_gltf(path)
-    doc = gltf.doc
+    _check_skin(gltf.doc, skin, path)
+    parent = node_parents(gltf.doc)
+    world = node_world_matrices(gltf.doc, parent)
+    joint_map = map_skin_joints(gltf.doc, skin, parent, path)
+    binds = read_skin_binds(gltf, joint_map, world, path)
+    mesh = read_skinned_mesh(gltf, binds, skin, path)
+    v, joints = _upright(mesh.vertices, binds[skin], joint_map)
+    v, new_joints = _straighten_rest_pose(v, joints, mesh.weights)
+    if height is not None:
+        scale = float(height) / float(v[:, 2].max() - v[:, 2].min())
+        v, new_joints = v * scale, new_joints * scale
+    uv, texture = _merge_uv(path, gltf, mesh.uvs, mesh.images)
+    return GltfCharacter(vertices=v, faces=mesh.faces, weights=mesh.weights.astype(np.float32), joints=new_joints,
+                         uv=uv, texture=texture,
+                         joint_map={joint_map.names[k]: val for k, val in joint_map.node_map.items()},
+                         unmapped=joint_map.unmapped, synthesized=list(joint_map.missing),
+                         convention=joint_map.convention, sha256=hashlib.sha256(path.read_bytes()).hexdigest())
+
+
+def _check_skin(doc: dict, skin: int, path: Path) -> None:
+    """``skin`` must index one of the file's skins."""
     skins = doc.get("skins", [])
     if not skins:
         raise InvalidInputError(f"glTF file {path}: no skin (a rigged character needs a skinned mesh)")
     if not isinstance(skin, (int, np.integer)) or not 0 <= skin < len(skins):
         raise InvalidInputError(f"skin: expected an index in 0..{len(skins) - 1} for {path}, got {skin!r}")
+
+
+@dataclasses.dataclass(frozen=True)
+class SkinJointMap:
+    """How the joints of one glTF skin map to the 24-joint skeleton.
+
+    Attributes:
+        skin: the skin's index in the file; nodes: its joints' node indices, in skin order.
+        parent: (nodes in the file,) int64 parent node of every node (-1 for roots).
+        names: {node: the node's name in the file}.
+        node_map: {node: our joint name} for the skin joints that have a counterpart.
+        convention: the naming convention matched ("mixamo", "vrm-extension", ...).
+        missing: our (optional) joints with no counterpart, in skeleton order.
+        unmapped: {file name: our joint that takes its weights} for the other skin joints.
+    """
+
+    skin: int
+    nodes: tuple[int, ...]
+    parent: np.ndarray
+    names: dict[int, str]
+    node_map: dict[int, str]
+    convention: str
+    missing: tuple[str, ...]
+    unmapped: dict[str, str]
+
+    def weight_joint(self, node: int) -> str:
+        """Our joint that takes the skin weights of file node ``node``: its nearest mapped
+        ancestor (itself when mapped), ``pelvis`` above the mapped joints."""
+        return _nearest_mapped(node, self.node_map, self.parent)
+
+
+def _nearest_mapped(node: int, node_map: dict[int, str], parent: np.ndarray) -> str:
+    """Our joint of ``node``'s nearest ancestor in ``node_map`` (itself included), else "pelvis"."""
+    k = node
+    while k >= 0:
+        if k in node_map:
+            return node_map[k]
+        k = int(parent[k])
+    return "pelvis"
+
+
+def map_skin_joints(doc: dict, skin: int, parent: np.ndarray, path: Path) -> SkinJointMap:
+    """Map the joints of skin ``skin`` of the glTF document ``doc`` (read from ``path``) to
+    the 24-joint skeleton: a VRM humanoid table when it names at least 15 of them, else the
+    joint names (:func:`~crowdstudy.body.joint_names.match_names`). ``parent``: (nodes,)
+    parent node of every node. Raises InvalidInputError when a required joint has no
+    counterpart or the mapped joints' hierarchy differs from the skeleton's."""
+    _check_skin(doc, skin, path)
     nodes = doc.get("nodes", [])
-    parent = _parents(doc)
-    world = _world_matrices(doc, parent)
-    skin_joints = [int(j) for j in skins[skin]["joints"]]
+    skin_joints = [int(j) for j in doc["skins"][skin]["joints"]]
     joint_set = set(skin_joints)
     names = {j: str(nodes[j].get("name", f"node{j}")) for j in skin_joints}
     node_map = _vrm_map(doc)
@@ -220,30 +296,44 @@ def read_character(path: str | Path, *, skin: int = 0, height: float | None = No
         raise InvalidInputError(
             f"glTF file {path}: skin {skin} has no joint for {', '.join(required)} (best naming match: "
             f"{convention or 'none'}; joint names seen: {', '.join(list(names.values())[:12])}...)")
-
-    # --- weights of the 24 joints (nearest mapped ancestor) --------------------------
-    def mapped_ancestor(node: int) -> str:
-        k = node
-        while k >= 0:
-            if k in node_map:
-                return node_map[k]
-            k = int(parent[k])
-        return "pelvis"
-
-    unmapped = {names[j]: mapped_ancestor(j) for j in skin_joints if j not in node_map}
+    unmapped = {names[j]: _nearest_mapped(j, node_map, parent) for j in skin_joints if j not in node_map}
     _check_hierarchy(path, node_map, parent, found)
+    return SkinJointMap(skin=skin, nodes=tuple(skin_joints), parent=parent, names=names, node_map=node_map,
+                        convention=convention, missing=tuple(missing), unmapped=unmapped)
 
-    # --- geometry in the bind pose ------------------------------------------------
-    # Bind-space vertices and joints (inverse bind matrices) are carried to the file's
-    # world by A = J_r IBM_r of the skin's pelvis joint r, so a default pose that differs
-    # from the bind pose (an animated file) does not deform the character. Every skin whose
-    # joints all belong to the chosen skeleton is merged (Blender and Ready Player Me write
-    # one skin per mesh over the same bones).
-    pelvis_node = next(k for k, val in node_map.items() if val == "pelvis")
-    per_skin = {}
-    for s_idx, sk in enumerate(skins):
+
+@dataclasses.dataclass(frozen=True)
+class SkinBind:
+    """The bind pose of one glTF skin.
+
+    Attributes:
+        joints: the skin's joint node indices (K), in skin order.
+        ibm: (K, 4, 4) float64 inverse bind matrices.
+        to_world: (4, 4) float64 bind space -> the file's world: ``J_r IBM_r`` of the skin's
+            pelvis joint r (its first joint when the pelvis is not in it).
+        target: (K,) int64 our joint index that takes each skin joint's weights.
+    """
+
+    joints: list[int]
+    ibm: np.ndarray
+    to_world: np.ndarray
+    target: np.ndarray
+
+
+def read_skin_binds(gltf: GltfFile, joint_map: SkinJointMap, world: np.ndarray, path: Path) -> dict[int, SkinBind]:
+    """{skin index: :class:`SkinBind`} of the mapped skin and of every other skin whose joints
+    all belong to its skeleton (Blender and Ready Player Me write one skin per mesh over
+    the same bones). ``world``: (nodes, 4, 4) world matrices of the file's default pose.
+
+    Bind-space vertices and joints are carried to the file's world by ``J_r IBM_r``, so a
+    default pose that differs from the bind pose (an animated file) does not deform the
+    character."""
+    joint_set = set(joint_map.nodes)
+    pelvis_node = next(k for k, val in joint_map.node_map.items() if val == "pelvis")
+    out = {}
+    for s_idx, sk in enumerate(gltf.doc["skins"]):
         sj = [int(j) for j in sk["joints"]]
-        if s_idx != skin and not set(sj) <= joint_set:
+        if s_idx != joint_map.skin and not set(sj) <= joint_set:
             continue
         ibm = (gltf.accessor(sk["inverseBindMatrices"]).astype(np.float64)
                if "inverseBindMatrices" in sk else np.tile(np.eye(4), (len(sj), 1, 1)))
@@ -251,63 +341,106 @@ def read_character(path: str | Path, *, skin: int = 0, height: float | None = No
             raise InvalidInputError(
                 f"glTF file {path}: skin {s_idx} has {len(sj)} joints but {len(ibm)} inverse bind matrices")
         r = sj.index(pelvis_node) if pelvis_node in sj else 0
-        to_world = world[sj[r]] @ ibm[r]
-        per_skin[s_idx] = (to_world, np.array([JOINT_INDEX[mapped_ancestor(j)] for j in sj]), ibm, sj)
+        out[s_idx] = SkinBind(joints=sj, ibm=ibm, to_world=world[sj[r]] @ ibm[r],
+                              target=np.array([JOINT_INDEX[joint_map.weight_joint(j)] for j in sj]))
+    return out
+
+
+@dataclasses.dataclass
+class SkinnedMesh:
+    """The triangle meshes bound to a set of skins, merged, in the file's world (glTF axes).
+
+    Attributes:
+        vertices: (V, 3) float64 metres; faces: (F, 3) int32.
+        weights: (V, 24) float64 skin weights of our joints, rows summing to 1.
+        uvs: per primitive, its (V_p, 2) TEXCOORD_0 or None; images: per primitive, the
+            index of its base-colour image or None.
+    """
+
+    vertices: np.ndarray
+    faces: np.ndarray
+    weights: np.ndarray
+    uvs: list
+    images: list
+
+
+def read_skinned_mesh(gltf: GltfFile, binds: dict[int, SkinBind], skin: int, path: Path) -> SkinnedMesh:
+    """Every triangle primitive of the meshes whose node uses one of the skins ``binds``,
+    in the bind pose; ``skin`` names the chosen skin in the error when there is none."""
+    doc = gltf.doc
     verts, faces, weights, uvs, images = [], [], [], [], []
     offset = 0
-    for node in nodes:
-        if "mesh" not in node or node.get("skin") not in per_skin:
+    for node in doc.get("nodes", []):
+        if "mesh" not in node or node.get("skin") not in binds:
             continue
-        to_world, target = per_skin[node["skin"]][:2]
+        bind = binds[node["skin"]]
         for prim in doc["meshes"][node["mesh"]]["primitives"]:
             if prim.get("mode", 4) != 4:
                 continue
-            attrs = prim["attributes"]
-            if "JOINTS_0" not in attrs or "WEIGHTS_0" not in attrs:
-                raise InvalidInputError(f"glTF file {path}: mesh {node['mesh']} has no JOINTS_0/WEIGHTS_0")
-            p = gltf.accessor(attrs["POSITION"]).astype(np.float64)
-            wsum = np.zeros((len(p), NUM_JOINTS))
-            k = 0
-            while f"JOINTS_{k}" in attrs:
-                ji = gltf.accessor(attrs[f"JOINTS_{k}"]).astype(np.int64)
-                wi = gltf.accessor(attrs[f"WEIGHTS_{k}"]).astype(np.float64)
-                if ji.max(initial=0) >= len(target):
-                    raise InvalidInputError(f"glTF file {path}: JOINTS_{k} refers past the skin's {len(target)} joints")
-                for c in range(ji.shape[1]):
-                    np.add.at(wsum, (np.arange(len(p)), target[ji[:, c]]), wi[:, c])
-                k += 1
-            total = wsum.sum(axis=1, keepdims=True)
-            if np.any(total <= 0):
-                raise InvalidInputError(f"glTF file {path}: vertices of mesh {node['mesh']} without skin weights")
-            verts.append(p @ to_world[:3, :3].T + to_world[:3, 3])
-            weights.append(wsum / total)
+            p, w = _primitive_vertices(gltf, prim, node["mesh"], bind, path)
+            verts.append(p @ bind.to_world[:3, :3].T + bind.to_world[:3, 3])
+            weights.append(w)
             idx = (gltf.accessor(prim["indices"]).astype(np.int64) if "indices" in prim
                    else np.arange(len(p)))
             faces.append(idx.reshape(-1, 3) + offset)
             offset += len(p)
+            attrs = prim["attributes"]
             uvs.append(gltf.accessor(attrs["TEXCOORD_0"]).astype(np.float64) if "TEXCOORD_0" in attrs else None)
             images.append(_base_color_image(doc, prim))
     if not verts:
         raise InvalidInputError(f"glTF file {path}: no triangle mesh bound to skin {skin}")
-    v = np.concatenate(verts)
-    f = np.concatenate(faces).astype(np.int32)
-    w = np.concatenate(weights)
+    return SkinnedMesh(vertices=np.concatenate(verts), faces=np.concatenate(faces).astype(np.int32),
+                       weights=np.concatenate(weights), uvs=uvs, images=images)
 
-    # --- joints, axes, facing -----------------------------------------------------
+
+def _primitive_vertices(gltf: GltfFile, prim: dict, mesh: int, bind: SkinBind,
+                        path: Path) -> tuple[np.ndarray, np.ndarray]:
+    """A primitive's bind-space positions (V, 3) float64 and its weights (V, 24) of our
+    joints (every JOINTS_k / WEIGHTS_k set summed onto the joints that take them), rows
+    normalised to sum 1."""
+    attrs = prim["attributes"]
+    if "JOINTS_0" not in attrs or "WEIGHTS_0" not in attrs:
+        raise InvalidInputError(f"glTF file {path}: mesh {mesh} has no JOINTS_0/WEIGHTS_0")
+    p = gltf.accessor(attrs["POSITION"]).astype(np.float64)
+    wsum = np.zeros((len(p), NUM_JOINTS))
+    k = 0
+    while f"JOINTS_{k}" in attrs:
+        ji = gltf.accessor(attrs[f"JOINTS_{k}"]).astype(np.int64)
+        wi = gltf.accessor(attrs[f"WEIGHTS_{k}"]).astype(np.float64)
+        if ji.max(initial=0) >= len(bind.target):
+            raise InvalidInputError(f"glTF file {path}: JOINTS_{k} refers past the skin's {len(bind.target)} joints")
+        for c in range(ji.shape[1]):
+            np.add.at(wsum, (np.arange(len(p)), bind.target[ji[:, c]]), wi[:, c])
+        k += 1
+    total = wsum.sum(axis=1, keepdims=True)
+    if np.any(total <= 0):
+        raise InvalidInputError(f"glTF file {path}: vertices of mesh {mesh} without skin weights")
+    return p, wsum / total
+
+
+def _upright(vertices: np.ndarray, bind: SkinBind, joint_map: SkinJointMap) -> tuple[np.ndarray, np.ndarray]:
+    """Vertices (V, 3) in the file's world and the skin's bind pose -> the toolkit's rest
+    frame (Z up, facing +y, pelvis at the origin, metres): the vertices and the (24, 3)
+    joints, missing optional joints placed from their neighbours."""
     conv = Z_UP_TO_Y_UP.T  # glTF -> toolkit
-    v = v @ conv.T
-    to_world, _, ibm, sj = per_skin[skin]
-    bind = to_world @ np.linalg.inv(ibm)  # (K, 4, 4) joints at bind time, file world
-    pos = {name: conv @ bind[sj.index(node)][:3, 3] for node, name in node_map.items()}
+    v = vertices @ conv.T
+    bind_joints = bind.to_world @ np.linalg.inv(bind.ibm)  # (K, 4, 4) joints at bind time, file world
+    pos = {name: conv @ bind_joints[bind.joints.index(node)][:3, 3] for node, name in joint_map.node_map.items()}
+    missing = joint_map.missing
     _synthesize(pos, [j for j in JOINT_NAMES if j in missing and j not in ("left_foot", "right_foot")])
     frame = _upright_frame(pos)
     pelvis = pos["pelvis"].copy()
     v = (v - pelvis) @ frame.T
     pos = {k: frame @ (p - pelvis) for k, p in pos.items()}
     _synthesize(pos, [j for j in ("left_foot", "right_foot") if j in missing])
-    joints = np.stack([pos[j] for j in JOINT_NAMES])
+    return v, np.stack([pos[j] for j in JOINT_NAMES])
 
-    # --- rest pose: arms near horizontal, legs near vertical -----------------------
+
+def _straighten_rest_pose(vertices: np.ndarray, joints: np.ndarray,
+                          weights: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The rest pose with arms near horizontal and legs near vertical (:func:`_rest_fix`),
+    the mesh following by linear blend skinning: vertices (V, 3), joints (24, 3) m and
+    weights (V, 24) -> ``(vertices, joints)``."""
     local = np.tile(np.eye(3), (NUM_JOINTS, 1, 1))
     for jname, child, kind in _STRAIGHTEN:
         j, c = JOINT_INDEX[jname], JOINT_INDEX[child]
@@ -320,17 +453,8 @@ def read_character(path: str | Path, *, skin: int = 0, height: float | None = No
     lbs = np.zeros((NUM_JOINTS, 3, 4))
     lbs[:, :, :3] = glob
     lbs[:, :, 3] = new_joints - np.einsum("jab,jb->ja", glob, joints)
-    blended = np.einsum("vj,jab->vab", w, lbs)
-    v = np.einsum("vab,vb->va", blended[:, :, :3], v) + blended[:, :, 3]
-    if height is not None:
-        scale = float(height) / float(v[:, 2].max() - v[:, 2].min())
-        v, new_joints = v * scale, new_joints * scale
-
-    uv, texture = _merge_uv(path, gltf, uvs, images)
-    return GltfCharacter(vertices=v, faces=f, weights=w.astype(np.float32), joints=new_joints, uv=uv,
-                         texture=texture, joint_map={names[k]: val for k, val in node_map.items()},
-                         unmapped=unmapped, synthesized=[j for j in missing], convention=convention,
-                         sha256=hashlib.sha256(path.read_bytes()).hexdigest())
+    blended = np.einsum("vj,jab->vab", weights, lbs)
+    return np.einsum("vab,vb->va", blended[:, :, :3], vertices) + blended[:, :, 3], new_joints
 
 
 def _check_hierarchy(path: Path, node_map: dict[int, str], parent: np.ndarray, found: set[str]) -> None:

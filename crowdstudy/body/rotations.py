@@ -1,8 +1,16 @@
-"""Rotation conversions, vectorised over any leading batch shape.
+"""Every rotation and quaternion helper of the toolkit, vectorised over any leading batch shape.
 
-Conventions (docs/concepts/conventions.md): quaternions are scalar-last ``(x, y, z, w)``; files store
-rotations as axis-angle vectors (angle = norm, in radians); matrices act on column
-vectors (``v_world = R @ v_local``).
+Conventions: quaternions are scalar-last ``(x, y, z, w)``; files store rotations as
+axis-angle vectors (the angle is the norm, in radians); matrices act on column vectors
+(``v_world = R @ v_local``); the Hamilton product ``a * b`` applies ``b`` first.
+
+The module holds the conversions between axis-angle, matrices and quaternions, the
+elementary rotations about the coordinate axes (:func:`rot_x`, :func:`rot_y`,
+:func:`rot_z`, :func:`yaw_roll_pitch`), and the quaternion algebra that clip sampling,
+blending and the physics output need (:func:`quat_multiply`, :func:`quat_conjugate`,
+:func:`quat_rotate`, :func:`quat_nearest_sign`, :func:`quat_align_signs`,
+:func:`quat_blend`, :func:`quat_about_z`). It imports nothing else of the package but
+its error type, so every layer can use it.
 """
 
 from __future__ import annotations
@@ -21,6 +29,17 @@ __all__ = [
     "rotation_between",
     "rodrigues_rows",
     "skew",
+    "rot_x",
+    "rot_y",
+    "rot_z",
+    "yaw_roll_pitch",
+    "quat_multiply",
+    "quat_conjugate",
+    "quat_rotate",
+    "quat_nearest_sign",
+    "quat_align_signs",
+    "quat_blend",
+    "quat_about_z",
 ]
 
 
@@ -199,3 +218,108 @@ def rotation_between(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     sin = np.linalg.norm(cross, axis=-1, keepdims=True)
     angle = np.arctan2(sin, np.sum(a * b, axis=-1, keepdims=True))
     return axis_angle_to_matrix(np.where(sin >= 1e-12, cross / np.maximum(sin, 1e-12) * angle, 0.0))
+
+
+# -- elementary rotations -------------------------------------------------------------
+
+def _rot(axis: int, angle: np.ndarray) -> np.ndarray:
+    """(...,) radians -> (..., 3, 3) rotation about coordinate axis ``axis`` (0 x, 1 y, 2 z)."""
+    a = np.asarray(angle, dtype=np.float64)
+    c, s = np.cos(a), np.sin(a)
+    out = np.zeros(a.shape + (3, 3))
+    i, j = [(1, 2), (2, 0), (0, 1)][axis]
+    out[..., axis, axis] = 1.0
+    out[..., i, i] = c
+    out[..., j, j] = c
+    out[..., i, j] = -s
+    out[..., j, i] = s
+    return out
+
+
+def rot_x(angle: np.ndarray) -> np.ndarray:
+    """(...,) radians -> (..., 3, 3) rotation about +x."""
+    return _rot(0, angle)
+
+
+def rot_y(angle: np.ndarray) -> np.ndarray:
+    """(...,) radians -> (..., 3, 3) rotation about +y."""
+    return _rot(1, angle)
+
+
+def rot_z(angle: np.ndarray) -> np.ndarray:
+    """(...,) radians -> (..., 3, 3) rotation about +z."""
+    return _rot(2, angle)
+
+
+def yaw_roll_pitch(yaw: np.ndarray, roll: np.ndarray, pitch: np.ndarray) -> np.ndarray:
+    """``Rz(yaw) Ry(roll) Rx(pitch)`` (..., 3, 3) for a body facing +y, angles (...,) in
+    radians (broadcast together): pitch leans forward/back about the lateral x axis, roll
+    tilts sideways about the forward y axis, yaw turns about z."""
+    yaw, roll, pitch = np.broadcast_arrays(*(np.asarray(v, dtype=np.float64) for v in (yaw, roll, pitch)))
+    return rot_z(yaw) @ rot_y(roll) @ rot_x(pitch)
+
+
+# -- quaternion algebra ---------------------------------------------------------------
+
+def quat_multiply(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Hamilton product ``a * b`` of (..., 4) quaternions (rotation b first, then a)."""
+    ax, ay, az, aw = np.moveaxis(np.asarray(a, dtype=np.float64), -1, 0)
+    bx, by, bz, bw = np.moveaxis(np.asarray(b, dtype=np.float64), -1, 0)
+    return np.stack([aw * bx + ax * bw + ay * bz - az * by,
+                     aw * by - ax * bz + ay * bw + az * bx,
+                     aw * bz + ax * by - ay * bx + az * bw,
+                     aw * bw - ax * bx - ay * by - az * bz], axis=-1)
+
+
+def quat_conjugate(q: np.ndarray) -> np.ndarray:
+    """Conjugate of (..., 4) quaternions: the inverse rotation of unit quaternions."""
+    out = np.array(q, dtype=np.float64, copy=True)
+    out[..., :3] *= -1.0
+    return out
+
+
+def quat_rotate(q: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """Vectors ``v`` (..., 3) rotated by unit quaternions ``q`` (..., 4): ``q v q*`` with v
+    taken as the pure quaternion ``(v, 0)``; returns (..., 3)."""
+    v = np.asarray(v, dtype=np.float64)
+    vq = np.concatenate([v, np.zeros(v.shape[:-1] + (1,))], -1)
+    return quat_multiply(quat_multiply(q, vq), quat_conjugate(q))[..., :3]
+
+
+def quat_nearest_sign(q: np.ndarray, ref: np.ndarray) -> np.ndarray:
+    """``q`` or ``-q`` (the same rotation), whichever lies in the hemisphere of ``ref``
+    (non-negative dot product): (..., 4) and (..., 4) broadcast together -> (..., 4)."""
+    q = np.asarray(q, dtype=np.float64)
+    return np.where(np.sum(q * ref, axis=-1, keepdims=True) < 0.0, -q, q)
+
+
+def quat_align_signs(q: np.ndarray, axis: int = 0) -> np.ndarray:
+    """(..., 4) quaternions with signs flipped along ``axis`` (time) so that neighbours lie
+    in the same hemisphere (each takes the sign nearest its already aligned predecessor)."""
+    q = np.moveaxis(np.array(q, dtype=np.float64, copy=True), axis, 0)
+    for i in range(1, q.shape[0]):
+        flip = np.sum(q[i] * q[i - 1], axis=-1) < 0.0
+        q[i][flip] *= -1.0
+    return np.moveaxis(q, 0, axis)
+
+
+def quat_blend(a: np.ndarray, b: np.ndarray, weight: np.ndarray) -> np.ndarray:
+    """Normalised linear blend (nlerp) ``(1 - w) a + w b`` on the shortest arc.
+
+    a, b: (..., 4); weight: broadcastable to (..., 1) or (...,), in [0, 1] (a weight with
+    one dimension less than ``a`` gets a trailing axis).
+    """
+    a = np.asarray(a, dtype=np.float64)
+    w = np.asarray(weight, dtype=np.float64)
+    if w.ndim == a.ndim - 1:
+        w = w[..., None]
+    b = quat_nearest_sign(b, a)
+    out = (1.0 - w) * a + w * b
+    return out / np.linalg.norm(out, axis=-1, keepdims=True)
+
+
+def quat_about_z(angle: np.ndarray) -> np.ndarray:
+    """(...,) yaw angles (radians, about +z) -> (..., 4) quaternions."""
+    half = 0.5 * np.asarray(angle, dtype=np.float64)
+    zeros = np.zeros_like(half)
+    return np.stack([zeros, zeros, np.sin(half), np.cos(half)], axis=-1)

@@ -1,6 +1,6 @@
 """The 24-joint kinematic tree (SMPL-compatible) and forward kinematics.
 
-Rest pose conventions (docs/concepts/conventions.md, plus the choices made here):
+Rest pose conventions (the toolkit's frame: metres, radians, Z up):
 
 * Z up, floor at z = 0 in world space; in the *rest* (T-pose) the character faces **+y**,
   so its right-hand side is **+x** and its left-hand side **-x**; arms are horizontal.
@@ -34,6 +34,8 @@ __all__ = [
     "forward_kinematics",
     "joint_index",
     "children",
+    "MIRROR_JOINTS",
+    "mirror_pose",
 ]
 
 JOINT_NAMES: tuple[str, ...] = (
@@ -103,6 +105,23 @@ def children(parents: np.ndarray = PARENTS) -> list[list[int]]:
         if p >= 0:
             out[int(p)].append(j)
     return out
+
+
+#: Joint index -> its mirror image (left <-> right), for :func:`mirror_pose`.
+MIRROR_JOINTS: np.ndarray = np.array([JOINT_INDEX[n.replace("left_", "#").replace("right_", "left_").replace("#", "right_")]
+                                      for n in JOINT_NAMES])
+
+
+def mirror_pose(quat: np.ndarray, root: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """A pose mirrored left <-> right across the character's sagittal plane (x -> -x):
+    quaternions (..., 24, 4) xyzw (joint 0 global, the others local) and root positions
+    (..., 3) metres. A reflection M = diag(-1, 1, 1) turns a rotation R into M R M, i.e. the
+    quaternion (x, y, z, w) into (x, -y, -z, w), and each joint takes its mirror joint's."""
+    q = np.array(quat, dtype=np.float64, copy=True)[..., MIRROR_JOINTS, :]
+    q[..., 1:3] *= -1.0
+    r = np.array(root, dtype=np.float64, copy=True)
+    r[..., 0] *= -1.0
+    return q, r
 
 
 def forward_kinematics(rest_joints: np.ndarray, joint_rotations: np.ndarray,

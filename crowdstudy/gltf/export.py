@@ -39,16 +39,16 @@ from pathlib import Path
 
 import numpy as np
 
-from crowdstudy.body.rotations import axis_angle_to_quaternion
+from crowdstudy.body.gltf_container import ARRAY_BUFFER, ELEMENT_ARRAY_BUFFER, Z_UP_TO_Y_UP, GltfBuilder
+from crowdstudy.body.rotations import axis_angle_to_quaternion, quat_align_signs
 from crowdstudy.body.skeleton import JOINT_NAMES, NUM_JOINTS, PARENTS
 from crowdstudy.errors import InvalidInputError
-from crowdstudy.glb import ARRAY_BUFFER, ELEMENT_ARRAY_BUFFER, Z_UP_TO_Y_UP, GltfBuilder
 from crowdstudy.render.bodies import region_scores, vertex_normals
 
-__all__ = ["export_gltf", "build_gltf", "Z_UP_TO_Y_UP", "WORLD_ROTATION", "character_prefix",
+__all__ = ["export_gltf", "build_gltf", "WORLD_ROTATION", "character_prefix",
            "add_skinned_mesh", "encode_png"]
 
-#: ``Z_UP_TO_Y_UP`` (:mod:`crowdstudy.glb`) as the quaternion ``(x, y, z, w)`` of the
+#: ``Z_UP_TO_Y_UP`` (:mod:`crowdstudy.body.gltf_container`) as the quaternion ``(x, y, z, w)`` of the
 #: ``crowdstudy_world`` node.
 WORLD_ROTATION = (0.0, math.sqrt(0.5), math.sqrt(0.5), 0.0)
 WORLD_NODE = "crowdstudy_world"
@@ -135,17 +135,6 @@ def add_skinned_mesh(builder: GltfBuilder, *, name: str, vertices: np.ndarray, f
     return builder.add("nodes", {"name": name, "mesh": mesh, "skin": builder.add("skins", skin)})
 
 
-def _continuous(quats: np.ndarray) -> np.ndarray:
-    """Flip signs along axis 0 so consecutive quaternions have a non-negative dot product
-    (the shortest path for LINEAR interpolation)."""
-    q = np.array(quats, dtype=np.float64)
-    if len(q) > 1:
-        dots = np.einsum("t...c,t...c->t...", q[1:], q[:-1])
-        flips = np.cumprod(np.where(dots < 0, -1.0, 1.0), axis=0)
-        q[1:] *= flips[..., None]
-    return q
-
-
 def _vertex_colors(anim, bodies) -> list[np.ndarray]:
     """Per-vertex linear RGB of each body: the renderer's colour regions and palette
     (the same seed and frame-0 positions as ``crowdstudy render``)."""
@@ -192,7 +181,8 @@ def build_gltf(anim, *, bodies=None, colors: bool = True, progress: bool = False
         seed=anim.meta.get("seed"), source="CrowdAnimation", n_characters=n, n_frames=t, fps=anim.fps,
         up_axis_conversion="glTF (x, y, z) = (-x_toolkit, z_toolkit, y_toolkit)")}
     world = b.add("nodes", {"name": WORLD_NODE, "rotation": list(WORLD_ROTATION), "children": []})
-    quats = _continuous(axis_angle_to_quaternion(anim.joint_rotations))  # (T, N, J, 4)
+    # signs continuous in time: glTF's LINEAR interpolation takes the short arc
+    quats = quat_align_signs(axis_angle_to_quaternion(anim.joint_rotations), axis=0)  # (T, N, J, 4)
     roots = anim.root_translation
     times = (np.arange(t, dtype=np.float64) / anim.fps).astype(np.float32)
     anim_doc = {"name": "crowd", "channels": [], "samplers": []}
@@ -201,9 +191,9 @@ def build_gltf(anim, *, bodies=None, colors: bool = True, progress: bool = False
     index_accessors: dict[str, int] = {}  # bodies of one template share faces
     iterator = range(n)
     if progress:
-        from tqdm import tqdm
+        from crowdstudy.progress import progress_bar
 
-        iterator = tqdm(iterator, desc="glTF characters", unit="char")
+        iterator = progress_bar(iterator, desc="glTF characters", unit="char")
     for i in iterator:
         body = bodies[i]
         prefix = character_prefix(i, n)

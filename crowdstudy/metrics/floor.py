@@ -28,7 +28,7 @@ from crowdstudy.body.skeleton import ARM_JOINTS, JOINT_INDEX
 from crowdstudy.errors import InvalidInputError
 from crowdstudy.metrics.overlap import capsules_world, frame_indices, resolve_bodies
 from crowdstudy.metrics.walls import beyond_wall
-from crowdstudy.scene import static_walls_from_meta
+from crowdstudy.scene_meta import static_walls_from_meta
 
 __all__ = ["SeparationFloor", "separation_floor"]
 
@@ -140,10 +140,10 @@ def separation_floor(anim, *, frames: Any = "every:30", bodies: Sequence | None 
         skin_percentile: each capsule is inflated by how far its mesh reaches beyond it
             (:func:`crowdstudy.body.capsules.capsule_skin`, the physics' default 90),
             at most ``skin_max`` m and ``hand_skin_scale`` of it on the palm and finger
-            bones (the physics' ``mesh_skin_max`` and ``mesh_skin_hand_scale``: its dense
-            profile, which a crowd as dense as concert D5 is corrected with; a sparser
-            crowd's skins are thicker, ``PhysicsConfig.for_density``) ...
-        margin: ... plus this many metres (the physics' ``contact_margin``).
+            bones (the physics' ``skin.max`` and ``skin.hand_scale`` at the dense end of its
+            density profile, which a crowd as dense as concert D5 is corrected with; a
+            sparser crowd's skins are thicker, ``PhysicsConfig.for_density``) ...
+        margin: ... plus this many metres (the physics' ``contacts.margin``).
         walls: also push capsules back behind the scene's walls (``meta["obstacles"]``), to
             the side of their character's root, as the physics does.
         tolerance: m; the projection stops when no pair overlaps by more than this.
@@ -161,80 +161,141 @@ def separation_floor(anim, *, frames: Any = "every:30", bodies: Sequence | None 
     body_objs = resolve_bodies(anim, bodies)
     n, n_j = anim.n_characters, anim.n_joints
     period = anim.periodic_length
-    radius = np.stack([np.asarray(b.capsules.radius, np.float64) for b in body_objs])
-    skin = np.stack([capsule_skin(b, skin_percentile, max_skin=skin_max, hand_scale=hand_skin_scale)
-                     for b in body_objs])
-    real = radius > 1e-3                                # zero-radius capsules take no part
-    r = np.where(real, radius + skin + margin, 0.0)
+    real, r = _inflated_radii(body_objs, skin_percentile, skin_max, hand_skin_scale, margin)
     segs = static_walls_from_meta(anim.meta) if walls else np.zeros((0, 2, 2))
     out = np.zeros((len(idx), n, n_j))
     residual = np.zeros(len(idx))
     rounds = np.zeros(len(idx), np.int64)
     contact = np.zeros((len(idx), n))
     partner = np.full((len(idx), n), -1, np.int64)
-    aj, bj = (a.ravel() for a in np.meshgrid(np.arange(n_j), np.arange(n_j), indexing="ij"))
     for k, f in enumerate(idx):
-        start = np.empty((n, n_j, 3))
-        end = np.empty((n, n_j, 3))
-        for c, body in enumerate(body_objs):
-            s, e, _ = capsules_world(body, anim.joint_rotations[f:f + 1, c], anim.root_translation[f:f + 1, c])
-            start[c], end[c] = s[0], e[0]
+        start, end = _frame_capsules(anim, body_objs, f)
         root = anim.root_translation[f]
-        ci, cj, shift = _pairs(root[:, :2], period, reach=2.5)
-        pa_c, pb_c = np.repeat(ci, len(aj)), np.repeat(cj, len(aj))
-        pa_j, pb_j = np.tile(aj, len(ci)), np.tile(bj, len(ci))
-        off = np.zeros((len(pa_c), 3))
-        off[:, 0] = np.repeat(shift, len(aj))
-        keep = real[pa_c, pa_j] & real[pb_c, pb_j]
-        pa_c, pb_c, pa_j, pb_j, off = pa_c[keep], pb_c[keep], pa_j[keep], pb_j[keep], off[keep]
-        reach = r[pa_c, pa_j] + r[pb_c, pb_j]
+        all_pairs = _capsule_pairs(root, period, real, r, n_j)
         # the projection works on the pairs near enough to meet (culled from the Baseline's
         # pose); every pair is checked again, and the set renewed, before it stops
-        all_pairs = (pa_c, pb_c, pa_j, pb_j, off, reach)
-        move = np.zeros((n, n_j, 3))
-        (pa_c, pb_c, pa_j, pb_j, off, reach), _, depth0 = _near_pairs(all_pairs, start, end, move)
+        near, _, depth0 = _near_pairs(all_pairs, start, end, np.zeros((n, n_j, 3)))
         contact[k], partner[k] = _deepest_partner(all_pairs[0], all_pairs[1], depth0, n)
-        deepest = 0.0
-        for it in range(int(max_iterations)):
-            acc = np.zeros((n, n_j, 3))
-            cnt = np.zeros((n, n_j))
-            a0, a1 = start[pa_c, pa_j] + move[pa_c, pa_j], end[pa_c, pa_j] + move[pa_c, pa_j]
-            b0, b1 = start[pb_c, pb_j] + move[pb_c, pb_j] + off, end[pb_c, pb_j] + move[pb_c, pb_j] + off
-            s, t, dist = closest_points_on_segments(a0, a1, b0, b1)
-            depth = reach - dist
-            hit = depth > tolerance
-            deepest = float(depth.max(initial=0.0))
-            if hit.any():
-                pa = a0[hit] + s[hit, None] * (a1[hit] - a0[hit])
-                pb = b0[hit] + t[hit, None] * (b1[hit] - b0[hit])
-                normal = _unit(pa - pb)
-                push = 0.5 * depth[hit, None] * normal
-                np.add.at(acc, (pa_c[hit], pa_j[hit]), push)
-                np.add.at(cnt, (pa_c[hit], pa_j[hit]), 1.0)
-                np.add.at(acc, (pb_c[hit], pb_j[hit]), -push)
-                np.add.at(cnt, (pb_c[hit], pb_j[hit]), 1.0)
-            wall_hit = False
-            for wall in segs:
-                depth_w, normal = _wall_depth(start + move, end + move, r, root, wall, period)
-                over = depth_w > tolerance
-                if over.any():
-                    wall_hit = True
-                    deepest = max(deepest, float(depth_w.max()))
-                    push = np.zeros((n, 1, 3))
-                    push[:, 0, :2] = normal                      # towards the root's side
-                    acc += np.where(over, depth_w, 0.0)[..., None] * push
-                    cnt += over
-            if not hit.any() and not wall_hit:
-                (pa_c, pb_c, pa_j, pb_j, off, reach), worst, _ = _near_pairs(all_pairs, start, end, move)
-                if worst <= tolerance:
-                    break
-                continue                                  # a culled pair met: go on with the renewed set
-            move += acc / np.maximum(cnt, 1.0)[..., None]
+        move, deepest, rounds[k] = _project(near, all_pairs, start, end, r, root, segs, period, tolerance,
+                                            int(max_iterations))
         out[k] = np.linalg.norm(move, axis=-1)
         residual[k] = max(deepest, 0.0)
-        rounds[k] = it + 1
     return SeparationFloor(per_joint=out, frames=idx, residual=residual, iterations=rounds,
                            contact_depth=contact, partner=partner)
+
+
+#: Capsule pairs between characters, parallel (P,) arrays: ``(char_a, char_b, joint_a,
+#: joint_b, offset (P, 3) m added to b (the periodic image), reach m (sum of the inflated
+#: radii))``.
+_Pairs = tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]
+
+
+def _inflated_radii(body_objs: Sequence, skin_percentile: float, skin_max: float, hand_skin_scale: float,
+                    margin: float) -> tuple[np.ndarray, np.ndarray]:
+    """(N, J) which capsules take part (radius above 1 mm) and their radii (m) inflated by
+    the mesh skin (:func:`~crowdstudy.body.capsules.capsule_skin`) and ``margin``, 0 for
+    those left out."""
+    radius = np.stack([np.asarray(b.capsules.radius, np.float64) for b in body_objs])
+    skin = np.stack([capsule_skin(b, skin_percentile, max_skin=skin_max, hand_scale=hand_skin_scale)
+                     for b in body_objs])
+    real = radius > 1e-3                                # zero-radius capsules take no part
+    return real, np.where(real, radius + skin + margin, 0.0)
+
+
+def _frame_capsules(anim, body_objs: Sequence, f: int) -> tuple[np.ndarray, np.ndarray]:
+    """The capsule axes' start and end points (N, J, 3) m of every character at frame ``f``."""
+    n, n_j = anim.n_characters, anim.n_joints
+    start = np.empty((n, n_j, 3))
+    end = np.empty((n, n_j, 3))
+    for c, body in enumerate(body_objs):
+        s, e, _ = capsules_world(body, anim.joint_rotations[f:f + 1, c], anim.root_translation[f:f + 1, c])
+        start[c], end[c] = s[0], e[0]
+    return start, end
+
+
+def _capsule_pairs(root: np.ndarray, period: float | None, real: np.ndarray, r: np.ndarray, n_j: int) -> _Pairs:
+    """Every pair of taking-part capsules of two characters whose roots (N, 3) m are
+    within 2.5 m (minimum image along x when ``period``); ``r`` (N, J) inflated radii."""
+    aj, bj = (a.ravel() for a in np.meshgrid(np.arange(n_j), np.arange(n_j), indexing="ij"))
+    ci, cj, shift = _pairs(root[:, :2], period, reach=2.5)
+    pa_c, pb_c = np.repeat(ci, len(aj)), np.repeat(cj, len(aj))
+    pa_j, pb_j = np.tile(aj, len(ci)), np.tile(bj, len(ci))
+    off = np.zeros((len(pa_c), 3))
+    off[:, 0] = np.repeat(shift, len(aj))
+    keep = real[pa_c, pa_j] & real[pb_c, pb_j]
+    pa_c, pb_c, pa_j, pb_j, off = pa_c[keep], pb_c[keep], pa_j[keep], pb_j[keep], off[keep]
+    return pa_c, pb_c, pa_j, pb_j, off, r[pa_c, pa_j] + r[pb_c, pb_j]
+
+
+def _project(near: _Pairs, all_pairs: _Pairs, start: np.ndarray, end: np.ndarray, r: np.ndarray,
+             root: np.ndarray, segs: np.ndarray, period: float | None, tolerance: float,
+             max_iterations: int) -> tuple[np.ndarray, float, int]:
+    """Jacobi projection of one frame: every round, each overlapping pair of ``near`` is
+    pushed apart half each and each capsule beyond a wall back, the pushes on a capsule
+    averaged; when nothing overlaps, ``all_pairs`` are checked again (the near set renewed)
+    and it stops if none overlaps by more than ``tolerance`` m. Capsules (N, J, 3) from
+    ``start`` to ``end``. Returns the displacement (N, J, 3) m, the deepest overlap left
+    (m) and the rounds used."""
+    n, n_j = start.shape[:2]
+    move = np.zeros((n, n_j, 3))
+    deepest = 0.0
+    for it in range(max_iterations):
+        acc = np.zeros((n, n_j, 3))
+        cnt = np.zeros((n, n_j))
+        hit, deepest = _push_pairs(near, start, end, move, tolerance, acc, cnt)
+        wall_hit, deepest = _push_walls(segs, start + move, end + move, r, root, period, tolerance, acc, cnt,
+                                        deepest)
+        if not hit and not wall_hit:
+            near, worst, _ = _near_pairs(all_pairs, start, end, move)
+            if worst <= tolerance:
+                break
+            continue                                  # a culled pair met: go on with the renewed set
+        move += acc / np.maximum(cnt, 1.0)[..., None]
+    return move, deepest, it + 1
+
+
+def _push_pairs(pairs: _Pairs, start: np.ndarray, end: np.ndarray, move: np.ndarray, tolerance: float,
+                acc: np.ndarray, cnt: np.ndarray) -> tuple[bool, float]:
+    """Add to ``acc`` (N, J, 3) the half-depth pushes (m) apart of the ``pairs`` overlapping
+    by more than ``tolerance`` m with the capsules moved by ``move``, and count them in
+    ``cnt`` (N, J); returns whether any did and the deepest overlap (m, 0 when none)."""
+    pa_c, pb_c, pa_j, pb_j, off, reach = pairs
+    a0, a1 = start[pa_c, pa_j] + move[pa_c, pa_j], end[pa_c, pa_j] + move[pa_c, pa_j]
+    b0, b1 = start[pb_c, pb_j] + move[pb_c, pb_j] + off, end[pb_c, pb_j] + move[pb_c, pb_j] + off
+    s, t, dist = closest_points_on_segments(a0, a1, b0, b1)
+    depth = reach - dist
+    hit = depth > tolerance
+    if hit.any():
+        pa = a0[hit] + s[hit, None] * (a1[hit] - a0[hit])
+        pb = b0[hit] + t[hit, None] * (b1[hit] - b0[hit])
+        normal = _unit(pa - pb)
+        push = 0.5 * depth[hit, None] * normal
+        np.add.at(acc, (pa_c[hit], pa_j[hit]), push)
+        np.add.at(cnt, (pa_c[hit], pa_j[hit]), 1.0)
+        np.add.at(acc, (pb_c[hit], pb_j[hit]), -push)
+        np.add.at(cnt, (pb_c[hit], pb_j[hit]), 1.0)
+    return bool(hit.any()), float(depth.max(initial=0.0))
+
+
+def _push_walls(segs: np.ndarray, start: np.ndarray, end: np.ndarray, r: np.ndarray, root: np.ndarray,
+                period: float | None, tolerance: float, acc: np.ndarray, cnt: np.ndarray,
+                deepest: float) -> tuple[bool, float]:
+    """Add to ``acc`` (N, J, 3) the pushes (m) back behind each wall of ``segs`` (W, 2, 2)
+    of the capsules (N, J, 3) from ``start`` to ``end`` reaching beyond it by more than
+    ``tolerance`` m, towards their root's side, and count them in ``cnt`` (N, J); returns
+    whether any did and ``deepest`` raised to the deepest reach (m)."""
+    wall_hit = False
+    for wall in segs:
+        depth_w, normal = _wall_depth(start, end, r, root, wall, period)
+        over = depth_w > tolerance
+        if over.any():
+            wall_hit = True
+            deepest = max(deepest, float(depth_w.max()))
+            push = np.zeros((len(root), 1, 3))
+            push[:, 0, :2] = normal                      # towards the root's side
+            acc += np.where(over, depth_w, 0.0)[..., None] * push
+            cnt += over
+    return wall_hit, deepest
 
 
 def _near_pairs(pairs, start, end, move):

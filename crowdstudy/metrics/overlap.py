@@ -463,9 +463,9 @@ def overlap_volume(anim, *, resolution: float = 0.02, geometry: str = "mesh", fr
         batch_pose = _batch_poser(body_objs, backend)
     bar = None
     if progress:
-        from tqdm import tqdm
+        from crowdstudy.progress import progress_bar
 
-        bar = tqdm(total=len(idx), desc=f"overlap ({geometry})", unit="frame", leave=False)
+        bar = progress_bar(total=len(idx), desc=f"overlap ({geometry})", unit="frame", leave=False)
     for c0 in range(0, len(idx), _FRAME_CHUNK):
         chunk = idx[c0:c0 + _FRAME_CHUNK]
         rot = anim.joint_rotations[chunk]  # (C, N, J, 3)

@@ -35,6 +35,7 @@ from crowdstudy.body.skeleton import JOINT_INDEX
 from crowdstudy.errors import InvalidInputError
 from crowdstudy.metrics.overlap import resolve_bodies
 from crowdstudy.metrics.tracking import check_reference, joint_positions
+from crowdstudy.scene_meta import loop_mode
 
 __all__ = ["FOOT_JOINTS", "SLIDE_THRESHOLD_M_S", "PeakSpeed", "FootSlide", "SeamJump", "SmoothnessResult",
            "joint_jerk", "high_frequency_share", "joint_speeds", "peak_joint_speed", "pelvis_acceleration_p99", "foot_slide",
@@ -571,7 +572,7 @@ def smoothness(anim, reference=None, *, bodies: Sequence | None = None, cutoff_h
     result = smoothness_from_positions(pos, anim.root_translation, anim.fps,
                                        reference_pos=ref_pos, periodic_length=anim.periodic_length,
                                        cutoff_hz=cutoff_hz, planted_speed=planted_speed, planted_height=planted_height)
-    if (anim.meta.get("loop") or {}).get("mode") == "dissolve":
+    if loop_mode(anim.meta) == "dissolve":
         # the video loops by a cross-dissolve of frames [T, T + D) into its first frames
         # (crowdstudy.render.video): a fading ghost, not a joint trajectory, so its seam is
         # measured in pixels (crowdstudy.render.seam), not here

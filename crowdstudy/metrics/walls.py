@@ -1,7 +1,7 @@
 """How far the characters' skin reaches through the scene's walls.
 
 The walls are those of the animation's meta (``meta["obstacles"]``, read by
-:func:`crowdstudy.scene.static_walls_from_meta`): vertical walls standing on
+:func:`crowdstudy.scene_meta.static_walls_from_meta`): vertical walls standing on
 floor segments, seen from the side each character's root stands on, as the physics sees
 them (``wall_kernel``). A character's depth at a frame is the largest distance by which any
 vertex of its posed body mesh lies beyond a wall's face (0 when none does), counted where
@@ -18,7 +18,7 @@ import numpy as np
 
 from crowdstudy.errors import InvalidInputError
 from crowdstudy.metrics.overlap import frame_indices, resolve_bodies
-from crowdstudy.scene import static_walls_from_meta
+from crowdstudy.scene_meta import static_walls_from_meta
 
 __all__ = ["WallPenetration", "wall_penetration", "beyond_wall"]
 

@@ -17,18 +17,20 @@ body. Both functions return a :class:`~crowdstudy.scene.CrowdAnimation`;
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 
 from crowdstudy.body import load_body
-from crowdstudy.body.rotations import axis_angle_to_quaternion, quaternion_to_axis_angle
-from crowdstudy.body.skeleton import DEFAULT_PELVIS_HEIGHT, JOINT_INDEX, JOINT_NAMES, PARENTS
+from crowdstudy.body.rotations import (axis_angle_to_quaternion, quat_about_z, quat_conjugate, quat_multiply,
+                                       quat_nearest_sign, quaternion_to_axis_angle)
+from crowdstudy.body.skeleton import DEFAULT_PELVIS_HEIGHT, JOINT_INDEX, JOINT_NAMES, PARENTS, mirror_pose
 from crowdstudy.errors import InvalidInputError
 from crowdstudy.motion.clip import MotionClip
 from crowdstudy.motion.legs import plant_legs
 from crowdstudy.motion.library import list_clips, load_clip, walk_clips
 from crowdstudy.motion.mocap_library import dance_loop, idle_loop
 from crowdstudy.motion.selfcontact import clear_hands
-from crowdstudy.motion.quaternions import mirror_pose, quat_about_z, quat_conjugate, quat_multiply
 from crowdstudy.provenance import provenance
 from crowdstudy.scene import Crowd, CrowdAnimation
 
@@ -44,7 +46,7 @@ _MIN_STRIDE_FACTOR = 0.5
 #: Speeds below this (m/s) keep the previous facing direction.
 _TURN_SPEED = 0.15
 #: Largest tempo change (fraction) a dance clip may take so that a whole number of its
-#: loops fills the animation (docs/concepts/methods.md: concert stimuli are exactly periodic); the 15
+#: loops fills the animation (concert stimuli are exactly periodic); the 15
 #: shipped clips need at most 11.1 % at 20 s / 30 fps. Beyond it the clip keeps its own
 #: length and the animation is not periodic (short test durations).
 MAX_LOOP_TEMPO_CHANGE = 0.12
@@ -189,13 +191,63 @@ def animate_stationary(crowd: Crowd, *, duration: float = 20.0, fps: float = 30.
     if not isinstance(crowd, Crowd):
         raise InvalidInputError(f"crowd: expected a Crowd, got {type(crowd).__name__}")
     fps, n_frames = _check_timing(duration, fps)
+    amplitude = _check_dance_options(amplitude, mirror)
+    n = crowd.n_agents
+    names = list(clip_names) if clip_names is not None else list_clips("dance", default_only=True)
+    clips = _dance_clips(names, tempo, fps, n_frames)
+    rng = _rng(seed, 1)
+    dancers = _draw_dancers(rng, clips, n, yaw_jitter, mirror, amplitude)
+    if crowd.headings is not None:                 # face the crowd's headings (the stage: +y)
+        dancers.yaw = dancers.yaw + crowd.headings[0] - np.pi / 2
+    bodies = _bodies(n, seed, bodies)
+    rest, scale, ankle_height = _body_geometry(bodies)
+    xy = crowd.positions[0]
+    rot = np.empty((n_frames, n, len(JOINT_NAMES), 3))
+    root = np.empty((n_frames, n, 3))
+    periodic = True
+    for k, clip in enumerate(clips):
+        members = np.flatnonzero(dancers.choice == k)
+        if members.size == 0:
+            continue
+        loop = _dance_schedule(clip, dancers.phase[members], rng, fps, n_frames)
+        periodic &= loop.periodic
+        dancers.tempo_ratio[members] = loop.tempo_ratio
+        if loop.beat_offset is not None:
+            dancers.beat_offset[members] = loop.beat_offset
+        dancers.loop_frames[members] = loop.n_loop / loop.step
+        rot[:, members], root[:, members] = _dance_poses(clip, loop, n_frames, dancers, members, xy[members],
+                                                         scale[members])
+        dancers.phase[members] = loop.start * clip.duration / loop.n_loop
+    rot = plant_legs(rot, root, rest, scale, ankle_height)
+    if clear_self_contact:                     # hands out of each character's own (wider) body
+        rot = clear_hands(rot, root, [load_body(b) for b in bodies], fps)
+    out_meta = {"method": "Baseline", "scenario": crowd.meta.get("scenario", "concert"),
+                "tempo": None if tempo is None else float(tempo),
+                "provenance": provenance(seed if not isinstance(seed, np.random.Generator) else None)}
+    out_meta.update({k: crowd.meta[k] for k in ("floor", "stage_distance", "stage_front", "obstacles")
+                     if k in crowd.meta})     # the scene's static geometry, for the later stages
+    out_meta.update(meta or {})
+    loop_meta = {"mode": "periodic", "frames": int(n_frames)} if periodic else {"mode": "none"}
+    return CrowdAnimation(joint_names=JOINT_NAMES, parents=PARENTS, root_translation=root, joint_rotations=rot,
+                          fps=fps, bodies=tuple(bodies), clips=_dance_records(names, dancers, scale),
+                          meta={"loop": loop_meta, **out_meta})
+
+
+def _check_dance_options(amplitude: tuple[float, float], mirror: float) -> tuple[float, float]:
+    """The (low, high) upper-body amplitude range of :func:`animate_stationary`, checked
+    together with its mirroring probability."""
     lo_amp, hi_amp = (float(a) for a in amplitude)
     if not (0.0 < lo_amp <= hi_amp <= 2.0):
         raise InvalidInputError(f"amplitude: expected 0 < low <= high <= 2, got {amplitude!r}")
     if not 0.0 <= float(mirror) <= 1.0:
         raise InvalidInputError(f"mirror: expected a probability in [0, 1], got {mirror!r}")
-    n = crowd.n_agents
-    names = list(clip_names) if clip_names is not None else list_clips("dance", default_only=True)
+    return lo_amp, hi_amp
+
+
+def _dance_clips(names: list[str], tempo: float | None, fps: float, n_frames: int) -> list[MotionClip]:
+    """The clips called ``names``, motion-captured ones made into loops of ``n_frames`` at
+    ``fps``: idle takes (and every take when ``tempo`` is None) at their own tempo, dances
+    time-warped onto the beat of ``tempo`` bpm."""
     if not names:
         raise InvalidInputError("clip_names: expected at least one dance clip")
     clips = []
@@ -205,86 +257,115 @@ def animate_stationary(crowd: Crowd, *, duration: float = 20.0, fps: float = 30.
             clip = idle_loop(name, fps, n_frames) if clip.meta.get("idle") or tempo is None else \
                 dance_loop(name, float(tempo), fps, n_frames / fps)
         clips.append(clip)
-    rng = _rng(seed, 1)
+    return clips
+
+
+@dataclasses.dataclass
+class _Dancers:
+    """Per-dancer choices of :func:`animate_stationary`, (N,) arrays: the random draws
+    (``choice`` clip index, ``phase`` s into the clip, ``yaw`` rad about +z from facing +y,
+    ``mirrored``, ``amp`` upper-body scale) and what the clip's loop makes of them
+    (``tempo_ratio`` played / natural speed, ``loop_frames`` frames per loop,
+    ``beat_offset`` whole beats into the loop, -1 without beats)."""
+
+    choice: np.ndarray
+    phase: np.ndarray
+    yaw: np.ndarray
+    mirrored: np.ndarray
+    amp: np.ndarray
+    tempo_ratio: np.ndarray
+    loop_frames: np.ndarray
+    beat_offset: np.ndarray
+
+
+def _draw_dancers(rng: np.random.Generator, clips: list[MotionClip], n: int, yaw_jitter: float, mirror: float,
+                  amplitude: tuple[float, float]) -> _Dancers:
+    """The random draws of ``n`` dancers, in this order: clips dealt so each is used about
+    equally often, phases, yaws (clipped at 2.5 ``yaw_jitter``), mirroring, amplitudes."""
     choice = rng.permutation(np.resize(np.arange(len(clips)), n))
     phase = rng.uniform(0.0, 1.0, n) * np.array([clips[c].duration for c in choice])
     yaw = np.clip(rng.normal(0.0, yaw_jitter, n), -2.5 * yaw_jitter, 2.5 * yaw_jitter) if yaw_jitter > 0 \
         else np.zeros(n)
     mirrored = rng.uniform(0.0, 1.0, n) < float(mirror)
-    amp = rng.uniform(lo_amp, hi_amp, n)
-    beat_offset = np.full(n, -1, dtype=np.int64)
-    if crowd.headings is not None:                 # face the crowd's headings (the stage: +y)
-        yaw = yaw + crowd.headings[0] - np.pi / 2
-    bodies = _bodies(n, seed, bodies)
-    rest, scale, ankle_height = _body_geometry(bodies)
-    xy = crowd.positions[0]
-    rot = np.empty((n_frames, n, len(JOINT_NAMES), 3))
-    root = np.empty((n_frames, n, 3))
-    tempo_ratio = np.ones(n)
-    loop_frames = np.ones(n)
-    periodic = True
-    frames = np.arange(n_frames)
-    for k, clip in enumerate(clips):
-        members = np.flatnonzero(choice == k)
-        if members.size == 0:
-            continue
-        if clip.meta.get("mocap"):
-            # a loop of whole frames (whole bars for dances), each dancer from its own beat
-            n_loop, step = clip.n_frames, 1
-            periodic &= n_frames % n_loop == 0
-            tempo_ratio[members] = clip.meta.get("tempo_ratio", 1.0)
-            bf = int(clip.meta.get("beat_frames", 1))
-            start = bf * rng.integers(0, max(1, n_loop // bf), members.size)
-            if "beat_frames" in clip.meta:
-                beat_offset[members] = start // bf
-        else:
-            # A whole number of loops in the T frames (time-warped to fit: frame T would be
-            # frame 0), sampled on a table of n_loop phases advanced `step` entries per frame.
-            cycles = loop_cycles(clip.duration * fps, n_frames)
-            if cycles:
-                g = int(np.gcd(n_frames, cycles))
-                n_loop, step = n_frames // g, cycles // g                       # n_loop / step = T / cycles
-            else:                                  # shorter than a loop: the natural length
-                periodic = False
-                n_loop, step = max(4, int(round(clip.duration * fps))), 1
-            tempo_ratio[members] = clip.duration * fps * step / n_loop
-            start = np.floor(phase[members] / clip.duration * n_loop).astype(np.int64)
-        loop_frames[members] = n_loop / step
-        quat_table, root_table = clip.loop_table(n_loop)
-        idx = (start[None, :] + step * frames[:, None]) % n_loop                # (T, M)
-        quat = quat_table[idx]                                                  # (T, M, 24, 4)
-        local = root_table[idx]
-        flip = mirrored[members]
-        if flip.any():
-            quat[:, flip], local[:, flip] = mirror_pose(quat[:, flip], local[:, flip])
-        quat = _scale_upper_body(quat, quat_table, amp[members])
-        rot[:, members] = quaternion_to_axis_angle(quat)
-        y = np.broadcast_to(yaw[members], idx.shape)
-        q0 = quat_multiply(quat_about_z(y), quat[..., 0, :])
-        rot[:, members, 0] = quaternion_to_axis_angle(q0)
-        local = local * scale[members][None, :, None]
-        c, s_ = np.cos(y), np.sin(y)
-        root[:, members, 0] = xy[members, 0] + c * local[..., 0] - s_ * local[..., 1]
-        root[:, members, 1] = xy[members, 1] + s_ * local[..., 0] + c * local[..., 1]
-        root[:, members, 2] = local[..., 2]
-        phase[members] = start * clip.duration / n_loop
-    rot = plant_legs(rot, root, rest, scale, ankle_height)
-    if clear_self_contact:                     # hands out of each character's own (wider) body
-        rot = clear_hands(rot, root, [load_body(b) for b in bodies], fps)
-    records = tuple({"kind": "dance", "clips": [names[c]], "weights": [1.0], "phase": float(ph),
-                     "yaw": float(y), "scale": float(s), "tempo": float(tp), "loop_frames": float(lf),
-                     "mirrored": bool(mi), "amplitude": float(am), "beat_offset": int(bo)}
-                    for c, ph, y, s, tp, lf, mi, am, bo in zip(choice, phase, yaw, scale, tempo_ratio, loop_frames,
-                                                              mirrored, amp, beat_offset))
-    out_meta = {"method": "Baseline", "scenario": crowd.meta.get("scenario", "concert"),
-                "tempo": None if tempo is None else float(tempo),
-                "provenance": provenance(seed if not isinstance(seed, np.random.Generator) else None)}
-    out_meta.update({k: crowd.meta[k] for k in ("floor", "stage_distance", "stage_front", "obstacles")
-                     if k in crowd.meta})     # the scene's static geometry, for the later stages
-    out_meta.update(meta or {})
-    loop = {"mode": "periodic", "frames": int(n_frames)} if periodic else {"mode": "none"}
-    return CrowdAnimation(joint_names=JOINT_NAMES, parents=PARENTS, root_translation=root, joint_rotations=rot,
-                          fps=fps, bodies=tuple(bodies), clips=records, meta={"loop": loop, **out_meta})
+    amp = rng.uniform(amplitude[0], amplitude[1], n)
+    return _Dancers(choice=choice, phase=phase, yaw=yaw, mirrored=mirrored, amp=amp, tempo_ratio=np.ones(n),
+                    loop_frames=np.ones(n), beat_offset=np.full(n, -1, dtype=np.int64))
+
+
+@dataclasses.dataclass(frozen=True)
+class _DanceLoop:
+    """How M dancers play one clip: a table of ``n_loop`` phases of the loop advanced
+    ``step`` entries per frame from ``start`` (M,) int64; ``tempo_ratio`` played / natural
+    speed; ``beat_offset`` (M,) whole beats into the loop (None without beats);
+    ``periodic``: whether the loop divides the animation's frames."""
+
+    n_loop: int
+    step: int
+    start: np.ndarray
+    tempo_ratio: float
+    beat_offset: np.ndarray | None
+    periodic: bool
+
+
+def _dance_schedule(clip: MotionClip, phase: np.ndarray, rng: np.random.Generator, fps: float,
+                    n_frames: int) -> _DanceLoop:
+    """The loop of ``clip`` for its M dancers at ``phase`` (M,) seconds: a motion-captured
+    loop is played frame by frame from a random whole beat (drawn from ``rng``); a
+    procedural one is time-warped so a whole number of loops fills ``n_frames``."""
+    if clip.meta.get("mocap"):
+        # a loop of whole frames (whole bars for dances), each dancer from its own beat
+        n_loop = clip.n_frames
+        bf = int(clip.meta.get("beat_frames", 1))
+        start = bf * rng.integers(0, max(1, n_loop // bf), phase.size)
+        return _DanceLoop(n_loop=n_loop, step=1, start=start, tempo_ratio=clip.meta.get("tempo_ratio", 1.0),
+                          beat_offset=start // bf if "beat_frames" in clip.meta else None,
+                          periodic=n_frames % n_loop == 0)
+    # A whole number of loops in the T frames (time-warped to fit: frame T would be
+    # frame 0), sampled on a table of n_loop phases advanced `step` entries per frame.
+    cycles = loop_cycles(clip.duration * fps, n_frames)
+    if cycles:
+        g = int(np.gcd(n_frames, cycles))
+        n_loop, step = n_frames // g, cycles // g                       # n_loop / step = T / cycles
+    else:                                  # shorter than a loop: the natural length
+        n_loop, step = max(4, int(round(clip.duration * fps))), 1
+    return _DanceLoop(n_loop=n_loop, step=step, start=np.floor(phase / clip.duration * n_loop).astype(np.int64),
+                      tempo_ratio=clip.duration * fps * step / n_loop, beat_offset=None, periodic=bool(cycles))
+
+
+def _dance_poses(clip: MotionClip, loop: _DanceLoop, n_frames: int, dancers: _Dancers, members: np.ndarray,
+                 xy: np.ndarray, scale: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The M dancers ``members`` of ``clip`` over ``n_frames`` frames: joint rotations
+    (T, M, 24, 3) axis-angle and pelvis positions (T, M, 3) m, mirrored and amplitude-scaled
+    as drawn, turned by their yaw and standing at ``xy`` (M, 2) m; ``scale`` (M,) leg scales."""
+    quat_table, root_table = clip.loop_table(loop.n_loop)
+    idx = (loop.start[None, :] + loop.step * np.arange(n_frames)[:, None]) % loop.n_loop   # (T, M)
+    quat = quat_table[idx]                                                  # (T, M, 24, 4)
+    local = root_table[idx]
+    flip = dancers.mirrored[members]
+    if flip.any():
+        quat[:, flip], local[:, flip] = mirror_pose(quat[:, flip], local[:, flip])
+    quat = _scale_upper_body(quat, quat_table, dancers.amp[members])
+    rot = quaternion_to_axis_angle(quat)
+    y = np.broadcast_to(dancers.yaw[members], idx.shape)
+    q0 = quat_multiply(quat_about_z(y), quat[..., 0, :])
+    rot[:, :, 0] = quaternion_to_axis_angle(q0)
+    local = local * scale[None, :, None]
+    c, s_ = np.cos(y), np.sin(y)
+    root = np.empty(local.shape)
+    root[..., 0] = xy[:, 0] + c * local[..., 0] - s_ * local[..., 1]
+    root[..., 1] = xy[:, 1] + s_ * local[..., 0] + c * local[..., 1]
+    root[..., 2] = local[..., 2]
+    return rot, root
+
+
+def _dance_records(names: list[str], dancers: _Dancers, scale: np.ndarray) -> tuple[dict, ...]:
+    """``CrowdAnimation.clips`` of the dancers (see :func:`animate_stationary`)."""
+    d = dancers
+    return tuple({"kind": "dance", "clips": [names[c]], "weights": [1.0], "phase": float(ph),
+                  "yaw": float(y), "scale": float(s), "tempo": float(tp), "loop_frames": float(lf),
+                  "mirrored": bool(mi), "amplitude": float(am), "beat_offset": int(bo)}
+                 for c, ph, y, s, tp, lf, mi, am, bo in zip(d.choice, d.phase, d.yaw, scale, d.tempo_ratio,
+                                                           d.loop_frames, d.mirrored, d.amp, d.beat_offset))
 
 
 def _scale_upper_body(quat: np.ndarray, table: np.ndarray, amp: np.ndarray) -> np.ndarray:
@@ -292,7 +373,7 @@ def _scale_upper_body(quat: np.ndarray, table: np.ndarray, amp: np.ndarray) -> n
     loop's mean pose (per joint, the normalised mean of ``table`` (S, 24, 4))."""
     if np.allclose(amp, 1.0):
         return quat
-    mean = np.sum(table * np.where(np.sum(table * table[:1], -1, keepdims=True) < 0, -1.0, 1.0), axis=0)
+    mean = np.sum(quat_nearest_sign(table, table[:1]), axis=0)
     mean /= np.linalg.norm(mean, axis=-1, keepdims=True)                     # (24, 4)
     out = quat.copy()
     j = _UPPER_BODY
@@ -422,16 +503,7 @@ def animate_walking(crowd: Crowd, *, fps: float | None = None, seed=0, bodies: l
         "mean_speed"}``; ``meta["periodic"]`` copied from the crowd; ``meta["loop"] =
         {"mode": "dissolve", "frames": D, "video_frames": T}`` (``{"mode": "none"}`` when D = 0).
     """
-    from scipy.ndimage import gaussian_filter1d
-
-    if not isinstance(crowd, Crowd):
-        raise InvalidInputError(f"crowd: expected a Crowd, got {type(crowd).__name__}")
-    if crowd.n_frames < 2:
-        raise InvalidInputError("crowd: walking needs trajectories with at least 2 frames, got a layout (T = 1)")
-    fps_out = crowd.fps if fps is None else float(fps)
-    if not np.isfinite(fps_out) or fps_out <= 0:
-        raise InvalidInputError(f"fps: expected a positive frame rate, got {fps!r}")
-    pos = crowd.positions if fps_out == crowd.fps else _resample_track(crowd.positions, crowd.fps, fps_out)
+    fps_out, pos = _walking_track(crowd, fps)
     n_frames, n = pos.shape[:2]
     if isinstance(dissolve_frames, bool) or not isinstance(dissolve_frames, (int, np.integer)) \
             or not 0 <= dissolve_frames <= n_frames // 2:
@@ -441,63 +513,11 @@ def animate_walking(crowd: Crowd, *, fps: float | None = None, seed=0, bodies: l
     phase0 = rng.uniform(0.0, 1.0, n)
     bodies = _bodies(n, seed, bodies)
     rest, scale, ankle_height = _body_geometry(bodies)
-
-    vel = np.gradient(pos, 1.0 / fps_out, axis=0) if n_frames > 2 else np.repeat(np.diff(pos, axis=0) * fps_out, 2, 0)
-    if velocity_smoothing > 0:
-        vel = gaussian_filter1d(vel, velocity_smoothing * fps_out, axis=0, mode="nearest")
-    speed = np.linalg.norm(vel, axis=-1)                                   # (T, N)
-    if facing not in ("auto", "crowd", "motion"):
-        raise InvalidInputError(f"facing: expected 'auto', 'crowd' or 'motion', got {facing!r}")
-    if facing == "crowd" and crowd.headings is None:
-        raise InvalidInputError("facing: 'crowd' needs a crowd with headings; this one has none")
-    if facing != "motion" and crowd.headings is not None:
-        heads = np.unwrap(crowd.headings, axis=0)
-        if fps_out != crowd.fps:
-            heads = _resample_track(heads[..., None], crowd.fps, fps_out)[..., 0]
-        heading = gaussian_filter1d(heads, heading_smoothing / 3 * fps_out, axis=0, mode="nearest") \
-            if heading_smoothing > 0 and n_frames > 1 else heads
-    else:
-        initial = crowd.headings[0] if crowd.headings is not None else np.full(n, np.pi / 2)
-        heading = _headings(vel, speed, initial, fps_out, heading_smoothing)
-
+    vel, speed = _walking_velocity(pos, fps_out, velocity_smoothing)
+    heading = _walking_heading(crowd, facing, vel, speed, fps_out, heading_smoothing)
     walks = _check_walks(walk_clips() if walks is None else walks)
-    clip_speeds = np.array([c.speed for c in walks])
-    strides = np.array([c.meta["stride_length"] for c in walks])
-    weights = gait_blend(speed / scale, clip_speeds)                        # (T, N, K)
-    stride = (weights @ strides) * scale                                    # (T, N) metres per cycle
-    # Below the slowest clip, strides shorten (as in slow human walking: about 75 steps
-    # per minute at 0.5 m/s rather than a slow-motion 0.8 m/s gait); the foot locking in
-    # plant_legs keeps the planted feet still while the legs take the shorter steps.
-    stride = stride * np.sqrt(np.clip(speed / scale / clip_speeds[0], _MIN_STRIDE_FACTOR ** 2, 1.0))
-    step = np.linalg.norm(np.diff(pos, axis=0), axis=-1)                    # (T-1, N)
-    dphase = step / (0.5 * (stride[1:] + stride[:-1]))
-    phase = phase0 + np.concatenate([np.zeros((1, n)), np.cumsum(dphase, axis=0)], axis=0)
-
-    # Dense per-phase tables of the 4 clips; each frame blends the two active clips,
-    # each linearly interpolated between neighbouring table entries (nlerp).
-    tables = [c.loop_table(_GAIT_SAMPLES) for c in walks]
-    quat_tab = np.stack([q for q, _ in tables])                             # (K, S, J, 4)
-    root_tab = np.stack([r for _, r in tables])                             # (K, S, 3)
-    lo = np.clip(np.argmax(weights > 0, axis=-1), 0, len(walks) - 2)
-    w_hi = np.take_along_axis(weights, (lo + 1)[..., None], axis=-1)[..., 0]
-    # a clip of c gait cycles spans c units of the gait phase (every cycle starts at a left heel strike)
-    cycles = np.array([float(c.meta.get("cycles", 1)) for c in walks])
-    terms = []
-    for k, w_k in ((lo, 1.0 - w_hi), (lo + 1, w_hi)):
-        u = np.mod(phase, cycles[k]) / cycles[k] * _GAIT_SAMPLES
-        i0 = np.floor(u).astype(np.int64) % _GAIT_SAMPLES
-        f = u - np.floor(u)
-        terms += [((k, i0), w_k * (1.0 - f)), ((k, (i0 + 1) % _GAIT_SAMPLES), w_k * f)]
-    ref = quat_tab[terms[0][0]]
-    quat = np.zeros_like(ref)
-    root_local = np.zeros((n_frames, n, 3))
-    for n_term, ((k, i), w) in enumerate(terms):
-        q = quat_tab[k, i]
-        if n_term:
-            q = np.where((np.einsum("...c,...c->...", q, ref) < 0.0)[..., None], -q, q)
-        quat += w[..., None, None] * q
-        root_local += w[..., None] * root_tab[k, i]
-    quat /= np.sqrt(np.einsum("...c,...c->...", quat, quat))[..., None]
+    weights, phase = _gait_phase(pos, speed, scale, walks, phase0)
+    quat, root_local = _blend_gaits(walks, weights, phase)
     rot, root = _place(quat, root_local, heading - np.pi / 2, pos, np.broadcast_to(scale, (n_frames, n)))
     # Foot locking holds each foot from its heel strike (less the clips' ``lock_lead``: a
     # procedural foot is over its landing spot before it comes down) through the flat
@@ -520,6 +540,106 @@ def animate_walking(crowd: Crowd, *, fps: float | None = None, seed=0, bodies: l
         if dissolve_frames else {"mode": "none"}
     return CrowdAnimation(joint_names=JOINT_NAMES, parents=PARENTS, root_translation=root, joint_rotations=rot,
                           fps=fps_out, bodies=tuple(bodies), clips=records, meta={"loop": loop, **out_meta})
+
+
+def _walking_track(crowd: Crowd, fps: float | None) -> tuple[float, np.ndarray]:
+    """The output frame rate (default the crowd's) and the crowd's positions (T, N, 2) m
+    linearly resampled to it."""
+    if not isinstance(crowd, Crowd):
+        raise InvalidInputError(f"crowd: expected a Crowd, got {type(crowd).__name__}")
+    if crowd.n_frames < 2:
+        raise InvalidInputError("crowd: walking needs trajectories with at least 2 frames, got a layout (T = 1)")
+    fps_out = crowd.fps if fps is None else float(fps)
+    if not np.isfinite(fps_out) or fps_out <= 0:
+        raise InvalidInputError(f"fps: expected a positive frame rate, got {fps!r}")
+    pos = crowd.positions if fps_out == crowd.fps else _resample_track(crowd.positions, crowd.fps, fps_out)
+    return fps_out, pos
+
+
+def _walking_velocity(pos: np.ndarray, fps: float, smoothing: float) -> tuple[np.ndarray, np.ndarray]:
+    """Velocities (T, N, 2) m/s of the positions ``pos`` (T, N, 2) m at ``fps`` (central
+    differences, Gaussian-smoothed over ``smoothing`` s) and their speeds (T, N) m/s."""
+    from scipy.ndimage import gaussian_filter1d
+
+    n_frames = pos.shape[0]
+    vel = np.gradient(pos, 1.0 / fps, axis=0) if n_frames > 2 else np.repeat(np.diff(pos, axis=0) * fps, 2, 0)
+    if smoothing > 0:
+        vel = gaussian_filter1d(vel, smoothing * fps, axis=0, mode="nearest")
+    return vel, np.linalg.norm(vel, axis=-1)
+
+
+def _walking_heading(crowd: Crowd, facing: str, vel: np.ndarray, speed: np.ndarray, fps: float,
+                     smoothing: float) -> np.ndarray:
+    """(T, N) facing angles (rad from +x) at ``fps``: the crowd's headings (``facing``
+    "crowd", or "auto" when it has them) smoothed over ``smoothing / 3`` s, else the
+    direction of the velocity ``vel`` (T, N, 2) smoothed over ``smoothing`` s."""
+    from scipy.ndimage import gaussian_filter1d
+
+    if facing not in ("auto", "crowd", "motion"):
+        raise InvalidInputError(f"facing: expected 'auto', 'crowd' or 'motion', got {facing!r}")
+    if facing == "crowd" and crowd.headings is None:
+        raise InvalidInputError("facing: 'crowd' needs a crowd with headings; this one has none")
+    n_frames, n = speed.shape
+    if facing != "motion" and crowd.headings is not None:
+        heads = np.unwrap(crowd.headings, axis=0)
+        if fps != crowd.fps:
+            heads = _resample_track(heads[..., None], crowd.fps, fps)[..., 0]
+        return gaussian_filter1d(heads, smoothing / 3 * fps, axis=0, mode="nearest") \
+            if smoothing > 0 and n_frames > 1 else heads
+    initial = crowd.headings[0] if crowd.headings is not None else np.full(n, np.pi / 2)
+    return _headings(vel, speed, initial, fps, smoothing)
+
+
+def _gait_phase(pos: np.ndarray, speed: np.ndarray, scale: np.ndarray, walks: list[MotionClip],
+                phase0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Blend weights (T, N, K) of the K walking clips at each character's speed (T, N) m/s
+    over its leg scale (N,), and the gait phase (T, N) in cycles from ``phase0`` (N,): the
+    distance walked (from the positions ``pos`` (T, N, 2) m) over the blended stride."""
+    clip_speeds = np.array([c.speed for c in walks])
+    strides = np.array([c.meta["stride_length"] for c in walks])
+    weights = gait_blend(speed / scale, clip_speeds)                        # (T, N, K)
+    stride = (weights @ strides) * scale                                    # (T, N) metres per cycle
+    # Below the slowest clip, strides shorten (as in slow human walking: about 75 steps
+    # per minute at 0.5 m/s rather than a slow-motion 0.8 m/s gait); the foot locking in
+    # plant_legs keeps the planted feet still while the legs take the shorter steps.
+    stride = stride * np.sqrt(np.clip(speed / scale / clip_speeds[0], _MIN_STRIDE_FACTOR ** 2, 1.0))
+    step = np.linalg.norm(np.diff(pos, axis=0), axis=-1)                    # (T-1, N)
+    dphase = step / (0.5 * (stride[1:] + stride[:-1]))
+    n = pos.shape[1]
+    return weights, phase0 + np.concatenate([np.zeros((1, n)), np.cumsum(dphase, axis=0)], axis=0)
+
+
+def _blend_gaits(walks: list[MotionClip], weights: np.ndarray, phase: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The in-place walking pose at gait ``phase`` (T, N) cycles blending the clips by
+    ``weights`` (T, N, K): quaternions (T, N, 24, 4) and clip root positions (T, N, 3) m.
+
+    Dense per-phase tables of the clips; each frame blends the two active clips, each
+    linearly interpolated between neighbouring table entries (nlerp, signs taken nearest
+    the first term's)."""
+    tables = [c.loop_table(_GAIT_SAMPLES) for c in walks]
+    quat_tab = np.stack([q for q, _ in tables])                             # (K, S, J, 4)
+    root_tab = np.stack([r for _, r in tables])                             # (K, S, 3)
+    lo = np.clip(np.argmax(weights > 0, axis=-1), 0, len(walks) - 2)
+    w_hi = np.take_along_axis(weights, (lo + 1)[..., None], axis=-1)[..., 0]
+    # a clip of c gait cycles spans c units of the gait phase (every cycle starts at a left heel strike)
+    cycles = np.array([float(c.meta.get("cycles", 1)) for c in walks])
+    terms = []
+    for k, w_k in ((lo, 1.0 - w_hi), (lo + 1, w_hi)):
+        u = np.mod(phase, cycles[k]) / cycles[k] * _GAIT_SAMPLES
+        i0 = np.floor(u).astype(np.int64) % _GAIT_SAMPLES
+        f = u - np.floor(u)
+        terms += [((k, i0), w_k * (1.0 - f)), ((k, (i0 + 1) % _GAIT_SAMPLES), w_k * f)]
+    ref = quat_tab[terms[0][0]]
+    quat = np.zeros_like(ref)
+    root_local = np.zeros(phase.shape + (3,))
+    for n_term, ((k, i), w) in enumerate(terms):
+        q = quat_tab[k, i]
+        if n_term:
+            q = np.where((np.einsum("...c,...c->...", q, ref) < 0.0)[..., None], -q, q)
+        quat += w[..., None, None] * q
+        root_local += w[..., None] * root_tab[k, i]
+    quat /= np.sqrt(np.einsum("...c,...c->...", quat, quat))[..., None]
+    return quat, root_local
 
 
 def build_baseline(design, stage, level: str, *, duration: float | None = None, fps: float | None = None,

@@ -23,6 +23,7 @@ CMU names) for other tools; reading it back gives the same joint positions.
 
 from __future__ import annotations
 
+import dataclasses
 from pathlib import Path
 
 import numpy as np
@@ -129,6 +130,16 @@ def _number(tok: str, path, line: int, field: str) -> float:
 def parse_bvh(path: str | Path) -> BvhSkeleton:
     """Read a BVH file (``.bvh``, or gzipped ``.bvh.gz``: hierarchy and motion) without interpreting it."""
     path = Path(path)
+    lines = _read_lines(path)
+    hierarchy, i = _parse_hierarchy(lines, path)
+    n_channels = sum(len(c) for c in hierarchy.channels)
+    frame_time, motion = _parse_motion(lines, i, n_channels, path)
+    return BvhSkeleton(hierarchy.names, hierarchy.parents, hierarchy.offsets, hierarchy.channels, hierarchy.ends,
+                       frame_time, motion, str(path))
+
+
+def _read_lines(path: Path) -> list[str]:
+    """The lines of a BVH file, plain or gzipped (``.gz``), decoded as strict UTF-8."""
     if not path.is_file():
         raise InvalidInputError(f"BVH file {str(path)!r} does not exist")
     try:
@@ -136,122 +147,171 @@ def parse_bvh(path: str | Path) -> BvhSkeleton:
             import gzip
 
             with gzip.open(path, "rt", encoding="utf-8", errors="strict") as fh:
-                lines = fh.read().splitlines()
-        else:
-            lines = path.read_text(encoding="utf-8", errors="strict").splitlines()
+                return fh.read().splitlines()
+        return path.read_text(encoding="utf-8", errors="strict").splitlines()
     except (UnicodeDecodeError, OSError, EOFError) as exc:
         raise InvalidInputError(f"BVH file {path}: not a text file ({exc})") from None
-    names, parents, offsets, channels, ends = [], [], [], [], []
-    stack: list[int] = []
-    pending: int | None = None      # joint whose '{' is expected
-    in_end = False
+
+
+#: the ``stack`` / ``pending`` entry of an End Site block in :class:`_Hierarchy`
+_END_SITE = -2
+
+
+@dataclasses.dataclass
+class _Hierarchy:
+    """The HIERARCHY section read line by line: the joints in file order (names, parent
+    indices, offsets and end-site offsets in file units, channel names) and the state of
+    the braces (``stack`` of open blocks, joint indices or :data:`_END_SITE`)."""
+
+    path: Path
+    names: list[str] = dataclasses.field(default_factory=list)
+    parents: list[int] = dataclasses.field(default_factory=list)
+    offsets: list[list[float] | None] = dataclasses.field(default_factory=list)
+    channels: list[list[str]] = dataclasses.field(default_factory=list)
+    ends: list[list[float]] = dataclasses.field(default_factory=list)
+    stack: list[int] = dataclasses.field(default_factory=list)
+    pending: int | None = None      # the block whose '{' is expected
+    in_end: bool = False
+
+    def read(self, toks: list[str], n: int) -> None:
+        """Take one non-blank line (its tokens, ``n`` its 1-based number) of the hierarchy."""
+        key = toks[0]
+        if key in ("ROOT", "JOINT"):
+            self._joint(key, toks, n)
+        elif key == "End":
+            if not self.stack:
+                _fail(self.path, n, "field 'End Site': outside of a joint block")
+            self.in_end = True
+            self.pending = _END_SITE
+        elif key == "{":
+            if self.pending is None:
+                _fail(self.path, n, "unexpected '{'")
+            self.stack.append(self.pending)
+            self.pending = None
+        elif key == "}":
+            self._close(n)
+        elif key == "OFFSET":
+            self._offset(toks, n)
+        elif key == "CHANNELS":
+            self._channels(toks, n)
+        else:
+            _fail(self.path, n, f"unknown keyword {key!r} in the hierarchy")
+
+    def _joint(self, key: str, toks: list[str], n: int) -> None:
+        if len(toks) < 2:
+            _fail(self.path, n, f"field '{key}': missing the joint name")
+        if key == "ROOT" and (self.names or self.stack):
+            _fail(self.path, n, "field 'ROOT': only one root is supported")
+        if key == "JOINT" and not self.stack:
+            _fail(self.path, n, "field 'JOINT': outside of a joint block")
+        name = " ".join(toks[1:])
+        if name in self.names:
+            _fail(self.path, n, f"field '{key}': duplicate joint name {name!r}")
+        self.names.append(name)
+        self.parents.append(self.stack[-1] if self.stack else -1)
+        self.offsets.append(None)
+        self.channels.append([])
+        self.ends.append([np.nan] * 3)
+        self.pending = len(self.names) - 1
+
+    def _close(self, n: int) -> None:
+        if not self.stack:
+            _fail(self.path, n, "unbalanced '}'")
+        top = self.stack.pop()
+        if top == _END_SITE:
+            self.in_end = False
+        elif self.offsets[top] is None:
+            _fail(self.path, n, f"field 'OFFSET': missing for joint {self.names[top]!r}")
+
+    def _offset(self, toks: list[str], n: int) -> None:
+        if len(toks) != 4:
+            _fail(self.path, n, f"field 'OFFSET': expected 3 numbers, got {len(toks) - 1}")
+        vals = [_number(t, self.path, n, "OFFSET") for t in toks[1:]]
+        if self.in_end:
+            self.ends[self.stack[-2] if len(self.stack) >= 2 else self.stack[-1]] = vals
+        else:
+            self.offsets[self.stack[-1]] = vals
+
+    def _channels(self, toks: list[str], n: int) -> None:
+        if self.in_end or not self.stack:
+            _fail(self.path, n, "field 'CHANNELS': not inside a joint")
+        try:
+            count = int(toks[1])
+        except (IndexError, ValueError):
+            _fail(self.path, n, "field 'CHANNELS': expected a channel count")
+        chans = toks[2:]
+        if len(chans) != count:
+            _fail(self.path, n, f"field 'CHANNELS': count says {count}, lists {len(chans)}")
+        bad = [c for c in chans if c not in _CHANNELS]
+        if bad:
+            _fail(self.path, n, f"field 'CHANNELS': unknown channel {bad[0]!r} (expected X/Y/Z position/rotation)")
+        self.channels[self.stack[-1]] = chans
+
+
+def _parse_hierarchy(lines: list[str], path: Path) -> tuple[_Hierarchy, int]:
+    """The HIERARCHY section (after any blank lines at the top) up to its MOTION line;
+    returns it and the index of the line after MOTION."""
     i = 0
-    # skip blank lines at the top
     while i < len(lines) and not lines[i].strip():
         i += 1
     if i >= len(lines) or lines[i].strip() != "HIERARCHY":
         _fail(path, i + 1 if i < len(lines) else None, "field 'HIERARCHY': expected the file to start with it")
-    i += 1
+    hierarchy = _Hierarchy(path)
     motion_line = None
-    while i < len(lines):
+    for i in range(i + 1, len(lines)):
         toks = lines[i].split()
-        n = i + 1
-        i += 1
         if not toks:
             continue
-        key = toks[0]
-        if key in ("ROOT", "JOINT"):
-            if len(toks) < 2:
-                _fail(path, n, f"field '{key}': missing the joint name")
-            if key == "ROOT" and (names or stack):
-                _fail(path, n, "field 'ROOT': only one root is supported")
-            if key == "JOINT" and not stack:
-                _fail(path, n, "field 'JOINT': outside of a joint block")
-            name = " ".join(toks[1:])
-            if name in names:
-                _fail(path, n, f"field '{key}': duplicate joint name {name!r}")
-            names.append(name)
-            parents.append(stack[-1] if stack else -1)
-            offsets.append(None)
-            channels.append([])
-            ends.append([np.nan] * 3)
-            pending = len(names) - 1
-        elif key == "End":
-            if not stack:
-                _fail(path, n, "field 'End Site': outside of a joint block")
-            in_end = True
-            pending = -2
-        elif key == "{":
-            if pending is None:
-                _fail(path, n, "unexpected '{'")
-            stack.append(pending)
-            pending = None
-        elif key == "}":
-            if not stack:
-                _fail(path, n, "unbalanced '}'")
-            top = stack.pop()
-            if top == -2:
-                in_end = False
-            elif offsets[top] is None:
-                _fail(path, n, f"field 'OFFSET': missing for joint {names[top]!r}")
-        elif key == "OFFSET":
-            if len(toks) != 4:
-                _fail(path, n, f"field 'OFFSET': expected 3 numbers, got {len(toks) - 1}")
-            vals = [_number(t, path, n, "OFFSET") for t in toks[1:]]
-            if in_end:
-                ends[stack[-2] if len(stack) >= 2 else stack[-1]] = vals
-            else:
-                offsets[stack[-1]] = vals
-        elif key == "CHANNELS":
-            if in_end or not stack:
-                _fail(path, n, "field 'CHANNELS': not inside a joint")
-            try:
-                count = int(toks[1])
-            except (IndexError, ValueError):
-                _fail(path, n, "field 'CHANNELS': expected a channel count")
-            chans = toks[2:]
-            if len(chans) != count:
-                _fail(path, n, f"field 'CHANNELS': count says {count}, lists {len(chans)}")
-            bad = [c for c in chans if c not in _CHANNELS]
-            if bad:
-                _fail(path, n, f"field 'CHANNELS': unknown channel {bad[0]!r} (expected X/Y/Z position/rotation)")
-            channels[stack[-1]] = chans
-        elif key == "MOTION":
-            motion_line = n
+        if toks[0] == "MOTION":
+            motion_line = i + 1
             break
-        else:
-            _fail(path, n, f"unknown keyword {key!r} in the hierarchy")
+        hierarchy.read(toks, i + 1)
     if motion_line is None:
         _fail(path, None, "field 'MOTION': missing (truncated file?)")
-    if stack:
-        _fail(path, motion_line, f"the hierarchy is not closed (joint {names[stack[-1]]!r} has no '}}')")
-    if not names:
+    if hierarchy.stack:
+        _fail(path, motion_line, f"the hierarchy is not closed (joint {hierarchy.names[hierarchy.stack[-1]]!r} "
+                                 "has no '}')")
+    if not hierarchy.names:
         _fail(path, motion_line, "the hierarchy has no joints")
+    for name, offset in zip(hierarchy.names, hierarchy.offsets):
+        if offset is None:          # a joint line without its block
+            _fail(path, motion_line, f"field 'OFFSET': missing for joint {name!r}")
+    return hierarchy, motion_line
 
-    def header(key: str) -> tuple[str, int]:
-        nonlocal i
-        while i < len(lines) and not lines[i].strip():
-            i += 1
-        if i >= len(lines):
-            _fail(path, None, f"field {key!r}: missing (truncated file?)")
-        text, n = lines[i].strip(), i + 1
+
+def _motion_header(lines: list[str], i: int, key: str, path: Path) -> tuple[str, int, int]:
+    """The value after ``key`` on the first non-blank line from index ``i``: returns
+    ``(value, its 1-based line number, the index of the next line)``."""
+    while i < len(lines) and not lines[i].strip():
         i += 1
-        if not text.startswith(key):
-            _fail(path, n, f"field {key!r}: expected it here, got {text[:40]!r}")
-        return text[len(key):].strip(), n
+    if i >= len(lines):
+        _fail(path, None, f"field {key!r}: missing (truncated file?)")
+    text, n = lines[i].strip(), i + 1
+    if not text.startswith(key):
+        _fail(path, n, f"field {key!r}: expected it here, got {text[:40]!r}")
+    return text[len(key):].strip(), n, i + 1
 
-    value, n = header("Frames:")
+
+def _parse_motion(lines: list[str], i: int, n_channels: int, path: Path) -> tuple[float, np.ndarray]:
+    """The MOTION section from line index ``i``: ``(frame_time seconds, motion (F, C) channel
+    values)``, C = ``n_channels`` (degrees for rotations, file units for positions)."""
+    value, n, i = _motion_header(lines, i, "Frames:", path)
     try:
         n_frames = int(value)
     except ValueError:
         _fail(path, n, f"field 'Frames': expected an integer, got {value!r}")
     if n_frames < 1:
         _fail(path, n, f"field 'Frames': expected at least 1 frame, got {n_frames}")
-    value, n = header("Frame Time:")
+    value, n, i = _motion_header(lines, i, "Frame Time:", path)
     frame_time = _number(value, path, n, "Frame Time")
     if frame_time <= 0:
         _fail(path, n, f"field 'Frame Time': expected a positive number of seconds, got {value!r}")
-    n_channels = sum(len(c) for c in channels)
+    return frame_time, _read_frames(lines, i, n_frames, n_channels, path)
+
+
+def _read_frames(lines: list[str], i: int, n_frames: int, n_channels: int, path: Path) -> np.ndarray:
+    """``n_frames`` rows of ``n_channels`` finite numbers from line index ``i`` on (blank lines
+    skipped, lines after the last frame ignored) -> (n_frames, n_channels) float64."""
     rows = []
     while i < len(lines) and len(rows) < n_frames:
         text = lines[i]
@@ -272,8 +332,7 @@ def parse_bvh(path: str | Path) -> BvhSkeleton:
         rows.append(row)
     if len(rows) < n_frames:
         _fail(path, len(lines), f"field 'Frames' says {n_frames} frames, the file has {len(rows)} (truncated?)")
-    motion = np.stack(rows) if n_channels else np.zeros((n_frames, 0))
-    return BvhSkeleton(names, parents, offsets, channels, ends, frame_time, motion, str(path))
+    return np.stack(rows) if n_channels else np.zeros((n_frames, 0))
 
 
 def _is_float(tok: str) -> bool:

@@ -20,14 +20,25 @@ import functools
 
 import numpy as np
 
-from crowdstudy.body.rotations import axis_angle_to_quaternion, quaternion_to_axis_angle
+from crowdstudy.body.rotations import (axis_angle_to_quaternion, quat_align_signs, quat_nearest_sign,
+                                       quaternion_to_axis_angle)
 from crowdstudy.body.skeleton import DEFAULT_REST_JOINTS, NUM_JOINTS, forward_kinematics
 from crowdstudy.errors import InvalidInputError
-from crowdstudy.motion.quaternions import catmull_rom_weights, quat_align_signs
 
-__all__ = ["MotionClip", "seam_discontinuity"]
+__all__ = ["MotionClip", "catmull_rom_weights", "seam_discontinuity"]
 
 _KINDS = ("dance", "walk", "mocap")
+
+
+def catmull_rom_weights(frac: np.ndarray) -> np.ndarray:
+    """Weights (..., 4) of the samples i-1, i, i+1, i+2 for a uniform Catmull-Rom spline
+    evaluated at ``i + frac`` (frac (...,) in [0, 1)); C1 across samples, exact at them."""
+    u = np.asarray(frac, dtype=np.float64)
+    u2, u3 = u * u, u * u * u
+    return np.stack([-0.5 * u3 + u2 - 0.5 * u,
+                     1.5 * u3 - 2.5 * u2 + 1.0,
+                     -1.5 * u3 + 2.0 * u2 + 0.5 * u,
+                     0.5 * u3 - 0.5 * u2], axis=-1)
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -132,8 +143,7 @@ class MotionClip:
         idx, frac = self._neighbours(times)
         weights = catmull_rom_weights(frac)                        # (..., 4)
         q = self.quaternions[idx]                                 # (..., 4, J, 4)
-        ref = q[..., 1:2, :, :]
-        q = np.where(np.sum(q * ref, axis=-1, keepdims=True) < 0.0, -q, q)
+        q = quat_nearest_sign(q, q[..., 1:2, :, :])
         quat = np.einsum("...k,...kjc->...jc", weights, q)
         quat /= np.linalg.norm(quat, axis=-1, keepdims=True)
         root = np.einsum("...k,...kc->...c", weights, self.root_translation[idx])

@@ -20,11 +20,10 @@ import dataclasses
 
 import numpy as np
 
-from crowdstudy.body.rotations import quaternion_to_axis_angle
+from crowdstudy.body.rotations import quat_align_signs, quat_blend, quaternion_to_axis_angle
 from crowdstudy.errors import InvalidInputError
 from crowdstudy.motion.clip import MotionClip
 from crowdstudy.motion.posing import smoothstep5
-from crowdstudy.motion.quaternions import quat_align_signs
 
 __all__ = ["LoopChoice", "find_loop", "make_loop", "in_place_positions"]
 
@@ -106,11 +105,7 @@ def make_loop(clip: MotionClip, start: int, length: int, blend: int, *, name: st
         i = np.arange(length - blend, length)
         w = smoothstep5((i - (length - blend) + 1) / (blend + 1))        # -> 1 at the seam
         src = i - length + start                                         # frames before `start`
-        q_prev = clip.quaternions[src]
-        q_cur = quat[i]
-        q_prev = np.where(np.sum(q_prev * q_cur, axis=-1, keepdims=True) < 0.0, -q_prev, q_prev)
-        q = (1.0 - w)[:, None, None] * q_cur + w[:, None, None] * q_prev
-        quat[i] = q / np.linalg.norm(q, axis=-1, keepdims=True)
+        quat[i] = quat_blend(quat[i], clip.quaternions[src], w[:, None])
         root[i] = (1.0 - w)[:, None] * root[i] + w[:, None] * clip.root_translation[src]
     quat = quat_align_signs(quat, axis=0)
     info = {"loop_source": {"start": int(start), "length": int(length), "blend": int(blend)}}

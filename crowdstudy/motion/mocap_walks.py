@@ -261,9 +261,9 @@ def _hold_foot_yaw(rot: np.ndarray, root: np.ndarray, ev: dict) -> np.ndarray:
     the heading (yaw) they have at the heel rise: a captured foot turning about its planted
     ankle would make the ball of the foot slide. The correction fades in over the last
     40 % of the swing before (quintic smoothstep) and is zero from the heel rise on."""
-    from crowdstudy.body.rotations import matrix_to_axis_angle
+    from crowdstudy.body.rotations import matrix_to_axis_angle, rot_z
     from crowdstudy.body.skeleton import PARENTS, forward_kinematics
-    from crowdstudy.motion.posing import rot_z, smoothstep5
+    from crowdstudy.motion.posing import smoothstep5
 
     glob, pos = forward_kinematics(DEFAULT_REST_JOINTS, rot, root)
     out = rot.copy()

@@ -1,4 +1,4 @@
-"""Building blocks for clips: elementary rotations, analytic two-bone IK and time profiles.
+"""Building blocks for clips: analytic two-bone IK and time profiles.
 
 All functions are vectorised over a leading batch (frames). Rotation matrices act on
 column vectors; a joint's *local* rotation is relative to its parent's global frame. The
@@ -10,43 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["rot_x", "rot_y", "rot_z", "yaw_roll_pitch", "hinge_frame", "two_bone_ik", "smoothstep5",
-           "lift_profile", "planted_runs", "hold_peaks"]
-
-
-def _rot(axis: int, angle: np.ndarray) -> np.ndarray:
-    a = np.asarray(angle, dtype=np.float64)
-    c, s = np.cos(a), np.sin(a)
-    out = np.zeros(a.shape + (3, 3))
-    i, j = [(1, 2), (2, 0), (0, 1)][axis]
-    out[..., axis, axis] = 1.0
-    out[..., i, i] = c
-    out[..., j, j] = c
-    out[..., i, j] = -s
-    out[..., j, i] = s
-    return out
-
-
-def rot_x(angle: np.ndarray) -> np.ndarray:
-    """(...,) radians -> (..., 3, 3) rotation about +x."""
-    return _rot(0, angle)
-
-
-def rot_y(angle: np.ndarray) -> np.ndarray:
-    """(...,) radians -> (..., 3, 3) rotation about +y."""
-    return _rot(1, angle)
-
-
-def rot_z(angle: np.ndarray) -> np.ndarray:
-    """(...,) radians -> (..., 3, 3) rotation about +z."""
-    return _rot(2, angle)
-
-
-def yaw_roll_pitch(yaw, roll, pitch) -> np.ndarray:
-    """``Rz(yaw) Ry(roll) Rx(pitch)`` for a body facing +y: pitch leans forward/back about
-    the lateral x axis, roll tilts sideways about the forward y axis, yaw turns about z."""
-    yaw, roll, pitch = np.broadcast_arrays(*(np.asarray(v, dtype=np.float64) for v in (yaw, roll, pitch)))
-    return rot_z(yaw) @ rot_y(roll) @ rot_x(pitch)
+__all__ = ["hinge_frame", "two_bone_ik", "smoothstep5", "lift_profile", "planted_runs", "hold_peaks"]
 
 
 def _unit(v: np.ndarray) -> np.ndarray:

@@ -13,11 +13,10 @@ import dataclasses
 
 import numpy as np
 
-from crowdstudy.body.rotations import matrix_to_axis_angle
-from crowdstudy.body.rotations import axis_angle_to_matrix
+from crowdstudy.body.rotations import axis_angle_to_matrix, matrix_to_axis_angle, rot_y
 from crowdstudy.body.skeleton import (DEFAULT_PELVIS_HEIGHT, DEFAULT_REST_JOINTS, JOINT_INDEX, NUM_JOINTS,
                                       forward_kinematics)
-from crowdstudy.motion.posing import rot_y, two_bone_ik
+from crowdstudy.motion.posing import two_bone_ik
 
 __all__ = ["PoseControls", "assemble_pose", "max_pelvis_height", "REST", "ANKLE_HEIGHT", "FOOT_HEIGHT",
            "LEG_LENGTH", "ARM_REACH"]

@@ -25,7 +25,7 @@ import numpy as np
 
 from crowdstudy.body.capsules import closest_points_on_segments, posed_capsules, segment_distance, touching_pairs
 from crowdstudy.body.rotations import (axis_angle_to_matrix, matrix_to_axis_angle, matrix_to_quaternion,
-                                       quaternion_to_matrix)
+                                       quat_blend, quaternion_to_matrix)
 from crowdstudy.body.skeleton import JOINT_INDEX, JOINT_NAMES, NUM_JOINTS, forward_kinematics
 from crowdstudy.motion.posing import hold_peaks, smoothstep5, two_bone_ik
 
@@ -157,7 +157,4 @@ def _solve_arms(rot: np.ndarray, root: np.ndarray, rest: np.ndarray, offset: np.
 
 def _blend(a: np.ndarray, b: np.ndarray, w: np.ndarray) -> np.ndarray:
     """Rotation matrices (T, 3, 3) from ``a`` (w = 0) to ``b`` (w = 1), through quaternion nlerp."""
-    qa, qb = matrix_to_quaternion(a), matrix_to_quaternion(b)
-    qb = np.where(np.sum(qa * qb, axis=-1, keepdims=True) < 0, -qb, qb)
-    q = (1.0 - w[..., 0]) * qa + w[..., 0] * qb
-    return quaternion_to_matrix(q / np.linalg.norm(q, axis=-1, keepdims=True))
+    return quaternion_to_matrix(quat_blend(matrix_to_quaternion(a), matrix_to_quaternion(b), w[..., 0]))

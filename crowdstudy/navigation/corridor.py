@@ -38,6 +38,7 @@ the frame), headings (T, N) from :func:`smooth_headings`.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 import numbers
 
@@ -176,6 +177,84 @@ def corridor_crowd(design, level: str, seed, *, duration: float | None = None, f
         wall segments [[[x0, y0], [x1, y1]], ...] m exactly as ORCA saw them (the section's
         walls extended by one period on each side).
     """
+    setup = _corridor_setup(design, level, seed, duration=duration, fps=fps, direction=direction, warm_up=warm_up,
+                            params=params)
+    n, fps, n_frames, substeps = setup.n, setup.fps, setup.n_frames, setup.substeps
+    signs, pos, speeds = _initial_agents(setup)
+    lane_y = -signs * setup.width / 4 if setup.direction == "bidirectional" else None
+    preferred = functools.partial(_preferred_velocities, signs=signs, speeds=speeds, lane_y=lane_y)
+    walls_section, walls_sim = _corridor_walls(setup.x0, setup.length, setup.half_w)
+    sim = ORCASimulator(pos, setup.r_sim, speeds + 0.3, params=setup.orca, obstacles=walls_sim,
+                        periodic=(setup.x0, setup.length), device=device)
+
+    warm_frames = int(round(warm_up * fps))
+    bar = None
+    if progress:
+        from crowdstudy.progress import progress_bar
+
+        bar = progress_bar(total=warm_frames + n_frames, desc=f"corridor {level}", unit="frame", leave=False)
+    for _ in range(warm_frames):
+        sim.set_preferred_velocities(preferred(sim.positions))
+        sim.step(substeps)
+        if bar:
+            bar.update(1)
+    positions = np.empty((n_frames + 1, n, 2))
+    positions[0] = sim.positions
+    for t in range(n_frames):
+        sim.set_preferred_velocities(preferred(positions[t]))
+        sim.step(substeps)
+        positions[t + 1] = sim.positions
+        if bar:
+            bar.update(1)
+    if bar:
+        bar.close()
+    return _corridor_result(setup, positions, signs, speeds, walls_section, walls_sim)
+
+
+@dataclasses.dataclass(frozen=True)
+class _CorridorSetup:
+    """The checked settings of one corridor crowd and what follows from them: ``n``
+    agents of disc ``radius`` (m; ``r_sim`` as simulated) at ``density`` (1/m^2) in a
+    ``length`` x ``width`` m section, ``n_frames`` frames at ``fps`` of ``substeps`` ORCA
+    steps each, ``warm_up`` s before frame 0; preferred speeds about ``v_mean`` m/s (the
+    design's ``v0`` times ``speed_factor``) with sd ``v_sd * speed_factor``; ``rng`` draws
+    the layout and the speeds; ``seed_value`` the int seed (None for a Generator)."""
+
+    level: str
+    n: int
+    density: float
+    radius: float
+    r_sim: float
+    width: float
+    length: float
+    direction: str
+    v0: float
+    v_sd: float
+    speed_factor: float
+    v_mean: float
+    fps: float
+    n_frames: int
+    substeps: int
+    warm_up: float
+    orca: ORCAParams
+    rng: np.random.Generator
+    seed_value: int | None
+
+    @property
+    def x0(self) -> float:
+        """The section's -x end, m (it is centred on the origin)."""
+        return -self.length / 2
+
+    @property
+    def half_w(self) -> float:
+        """Half the corridor's width, m: the walls are at y = +-half_w."""
+        return self.width / 2
+
+
+def _corridor_setup(design, level: str, seed, *, duration: float | None, fps: float | None, direction: str | None,
+                    warm_up: float, params: ORCAParams | None) -> _CorridorSetup:
+    """The arguments of :func:`corridor_crowd` checked (InvalidInputError naming the
+    argument) and resolved against the design's ``[scenarios.corridor]``."""
     if level not in design.densities:
         raise InvalidInputError(f"level: unknown density level {level!r}; "
                                 f"expected one of {', '.join(design.densities)}")
@@ -198,67 +277,66 @@ def corridor_crowd(design, level: str, seed, *, duration: float | None = None, f
         rng, seed_value = np.random.default_rng(int(seed)), int(seed)
     else:
         raise InvalidInputError(f"seed: expected a non-negative integer or numpy Generator, got {seed!r}")
-
-    n = design.n_characters(level)
     density = float(design.densities[level])
     radius = disc_radius(density)
-    r_sim = SAFETY_MARGIN * radius
-    x0, half_w = -length / 2, width / 2
-    n_frames = max(1, int(round(duration * fps)))
     substeps = max(1, int(math.ceil((1.0 / fps) / _MAX_SUBSTEP - 1e-9)))
-    dt = 1.0 / (fps * substeps)
     base = params or ORCAParams(neighbor_dist=min(1.5, 0.45 * length), max_neighbors=10, time_horizon=1.0,
                                 time_horizon_obst=0.5)
-    orca = dataclasses.replace(base, time_step=dt)
+    factor = speed_factor(density)
+    return _CorridorSetup(level=level, n=design.n_characters(level), density=density, radius=radius,
+                          r_sim=SAFETY_MARGIN * radius, width=width, length=length, direction=direction, v0=v0,
+                          v_sd=v_sd, speed_factor=factor, v_mean=v0 * factor, fps=fps,
+                          n_frames=max(1, int(round(duration * fps))), substeps=substeps, warm_up=warm_up,
+                          orca=dataclasses.replace(base, time_step=1.0 / (fps * substeps)), rng=rng,
+                          seed_value=seed_value)
 
-    # initial positions: Poisson disk in the section, then separated (periodic along x)
-    layout = poisson_disk((length, width), n, seed=rng, margin=r_sim)
+
+def _initial_agents(s: _CorridorSetup) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Walking directions (N,) +-1 along x, start positions (N, 2) m and preferred speeds
+    (N,) m/s: a Poisson-disk set in the section (each direction in its own half when
+    bidirectional, the +y half walking towards -x) separated until no two simulated discs
+    overlap, then speeds ~ Normal(v_mean, v_sd * speed_factor) clipped to [0.5, 1.5] v_mean."""
+    n, r_sim = s.n, s.r_sim
+    layout = poisson_disk((s.length, s.width), n, seed=s.rng, margin=r_sim)
     signs = np.ones(n)
-    if direction == "bidirectional":
+    if s.direction == "bidirectional":
         order = np.argsort(layout.points[:, 1], kind="stable")
         signs[order[n - n // 2:]] = -1.0           # the +y half walks towards -x
-    pos = _separate(layout.points, 2 * r_sim, x0, length, half_w - r_sim * 1.001,
-                    lanes=signs if direction == "bidirectional" else None)
-    factor = speed_factor(density)
-    v_mean = v0 * factor
-    speeds = np.clip(rng.normal(v_mean, v_sd * factor, n), 0.5 * v_mean, 1.5 * v_mean)
-    lane_y = -signs * width / 4 if direction == "bidirectional" else None
+    pos = _separate(layout.points, 2 * r_sim, s.x0, s.length, s.half_w - r_sim * 1.001,
+                    lanes=signs if s.direction == "bidirectional" else None)
+    v_mean = s.v_mean
+    speeds = np.clip(s.rng.normal(v_mean, s.v_sd * s.speed_factor, n), 0.5 * v_mean, 1.5 * v_mean)
+    return signs, pos, speeds
 
-    def preferred(current: np.ndarray) -> np.ndarray:
-        vy = np.zeros(n)
-        if lane_y is not None:     # keep right: a gentle pull towards the own half's centre line
-            vy = np.clip(_LANE_GAIN * (lane_y - current[:, 1]), -_LANE_CLIP * speeds, _LANE_CLIP * speeds)
-        vx = signs * np.sqrt(np.maximum(speeds ** 2 - vy ** 2, 0.0))
-        return np.stack([vx, vy], axis=1)
 
+def _preferred_velocities(current: np.ndarray, *, signs: np.ndarray, speeds: np.ndarray,
+                          lane_y: np.ndarray | None) -> np.ndarray:
+    """(N, 2) m/s preferred velocities at positions ``current`` (N, 2) m: ``speeds`` (N,)
+    along ``signs`` (N,) +-x; with ``lane_y`` (N,) m, a gentle lateral pull towards that
+    line (keep right), at most ``_LANE_CLIP`` of the speed."""
+    vy = np.zeros(len(signs))
+    if lane_y is not None:     # keep right: a gentle pull towards the own half's centre line
+        vy = np.clip(_LANE_GAIN * (lane_y - current[:, 1]), -_LANE_CLIP * speeds, _LANE_CLIP * speeds)
+    vx = signs * np.sqrt(np.maximum(speeds ** 2 - vy ** 2, 0.0))
+    return np.stack([vx, vy], axis=1)
+
+
+def _corridor_walls(x0: float, length: float, half_w: float) -> tuple[np.ndarray, np.ndarray]:
+    """The walls (2, 2, 2) m of the section ``[x0, x0 + length]`` at y = +-half_w, and the
+    same walls extended by one period on each side, as ORCA sees them."""
     walls_section = np.array([[[x0, -half_w], [x0 + length, -half_w]], [[x0, half_w], [x0 + length, half_w]]])
     walls_sim = walls_section.copy()
     walls_sim[:, 0, 0] -= length
     walls_sim[:, 1, 0] += length
-    sim = ORCASimulator(pos, r_sim, speeds + 0.3, params=orca, obstacles=walls_sim, periodic=(x0, length),
-                        device=device)
+    return walls_section, walls_sim
 
-    warm_frames = int(round(warm_up * fps))
-    bar = None
-    if progress:
-        from tqdm import tqdm
 
-        bar = tqdm(total=warm_frames + n_frames, desc=f"corridor {level}", unit="frame", leave=False)
-    for _ in range(warm_frames):
-        sim.set_preferred_velocities(preferred(sim.positions))
-        sim.step(substeps)
-        if bar:
-            bar.update(1)
-    positions = np.empty((n_frames + 1, n, 2))
-    positions[0] = sim.positions
-    for t in range(n_frames):
-        sim.set_preferred_velocities(preferred(positions[t]))
-        sim.step(substeps)
-        positions[t + 1] = sim.positions
-        if bar:
-            bar.update(1)
-    if bar:
-        bar.close()
+def _corridor_result(s: _CorridorSetup, positions: np.ndarray, signs: np.ndarray, speeds: np.ndarray,
+                     walls_section: np.ndarray, walls_sim: np.ndarray) -> Crowd:
+    """The :class:`Crowd` of the simulated ``positions`` (T + 1, N, 2) m (frame -1 first):
+    mean velocities over each frame, frame 0 shifted by whole periods into the section,
+    smoothed headings and the meta of :func:`corridor_crowd`."""
+    fps, length, width, x0, half_w = s.fps, s.length, s.width, s.x0, s.half_w
     velocities = np.diff(positions, axis=0) * fps        # mean velocity over each frame
     positions = positions[1:]
     # shift each agent by whole periods so frame 0 lies in the section (still unwrapped in time)
@@ -266,18 +344,19 @@ def corridor_crowd(design, level: str, seed, *, duration: float | None = None, f
     headings = smooth_headings(velocities, fps, initial=np.where(signs > 0, 0.0, np.pi))
     region = np.array([[x0, -half_w], [x0 + length, -half_w], [x0 + length, half_w], [x0, half_w]])
     meta = {
-        "scenario": "corridor", "density_level": level, "density": density, "n_characters": n, "seed": seed_value,
-        "width": width, "length": length, "direction": direction, "directions": signs.astype(int).tolist(),
-        "radius": radius, "simulated_radius": r_sim, "preferred_speed": v_mean, "speed_factor": factor,
-        "preferred_speeds": speeds.tolist(), "warm_up": float(warm_up), "substeps": substeps,
-        "orca": dataclasses.asdict(orca), "periodic": {"axis": 0, "length": length},
+        "scenario": "corridor", "density_level": s.level, "density": s.density, "n_characters": s.n,
+        "seed": s.seed_value, "width": width, "length": length, "direction": s.direction,
+        "directions": signs.astype(int).tolist(), "radius": s.radius, "simulated_radius": s.r_sim,
+        "preferred_speed": s.v_mean, "speed_factor": s.speed_factor, "preferred_speeds": speeds.tolist(),
+        "warm_up": float(s.warm_up), "substeps": s.substeps, "orca": dataclasses.asdict(s.orca),
+        "periodic": {"axis": 0, "length": length},
         # the scene's static geometry, read by later stages instead of a design
         "floor": {"width": length, "depth": width}, "corridor_width": width, "corridor_length": length,
         "obstacles": walls_sim.tolist(),
-        "provenance": provenance(seed_value, stage="navigation"),
+        "provenance": provenance(s.seed_value, stage="navigation"),
     }
-    return Crowd(positions=positions, radius=np.full(n, radius), fps=fps, velocities=velocities, headings=headings,
-                 obstacles=walls_section, region=region, meta=meta)
+    return Crowd(positions=positions, radius=np.full(s.n, s.radius), fps=fps, velocities=velocities,
+                 headings=headings, obstacles=walls_section, region=region, meta=meta)
 
 
 def trajectory_summary(crowd: Crowd, tolerance: float = 0.01) -> dict:

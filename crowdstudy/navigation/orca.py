@@ -121,7 +121,7 @@ class ORCASimulator:
 
     def __init__(self, positions, radius, max_speed, *, params: ORCAParams | None = None, obstacles=None,
                  periodic: tuple[float, float] | None = None, velocities=None, device: str | None = "cpu"):
-        from crowdstudy.warp_runtime import resolve_device
+        from crowdstudy.warp_runtime import get_warp, resolve_device
 
         pos = np.asarray(positions, dtype=np.float64)
         if pos.ndim != 2 or pos.shape[1] != 2 or pos.shape[0] < 1:
@@ -151,13 +151,12 @@ class ORCASimulator:
             raise InvalidInputError(f"velocities: expected finite values of shape {pos.shape}, got {vel.shape}")
         self.n = n
         self.device = resolve_device(device)
-        from crowdstudy.navigation import orca_kernels as kern
+        from crowdstudy.navigation import orca_kernels
 
-        self._k = kern
-        wp = kern.wp
+        wp = get_warp()
         self._wp = wp
         dev = self.device
-        wp.load_module(kern, device=dev)        # compile (or load from the cache) before the first step
+        wp.load_module(orca_kernels, device=dev)    # compile (or load from the cache) before the first step
         f32 = np.float32
         self._pos = wp.array(pos.astype(f32), dtype=wp.vec2, device=dev)
         self._vel = wp.array(vel.astype(f32), dtype=wp.vec2, device=dev)
@@ -245,7 +244,9 @@ class ORCASimulator:
     def _record_launches(self, origin_v, inv_v, nx: int, ny: int) -> None:
         """Record the three kernel launches once; later steps only update the grid values
         (replaying a recorded launch skips Warp's per-call argument packing)."""
-        wp, k, p, dev = self._wp, self._k, self.params, self.device
+        from crowdstudy.navigation import orca_kernels as k
+
+        wp, p, dev = self._wp, self.params, self.device
         x0, length = self.periodic if self.periodic is not None else (0.0, 1.0)
         periodic = 0 if self.periodic is None else 1
         self._cmd_keys = wp.launch(k.cell_keys, dim=self.n, device=dev, record_cmd=True, inputs=[

@@ -5,7 +5,8 @@ Every bone of every character is a rigid capsule body; one implicit-Euler step s
 iteration and preconditioned CG (Warp kernels, CPU or CUDA). Entry points:
 
 * :func:`correct` (offline, Baseline -> Ours) and :class:`CrowdCorrector` (online);
-* :class:`PhysicsConfig` (parameters, the paper's defaults);
+* :class:`PhysicsConfig` (parameters in sections, the paper's defaults; set by name from
+  a TOML file or ``--config KEY=VALUE``, :mod:`crowdstudy.physics.config_file`);
 * :class:`ModelBuilder` / :class:`Model`, :class:`State`, :class:`Control`,
   :class:`Solver` (``step(state_in, state_out, control, contacts, dt)``),
   :class:`CollisionPipeline` / :class:`Contacts`;

@@ -40,9 +40,8 @@ import dataclasses
 
 import numpy as np
 
-from crowdstudy.physics.collision_kernels import collision_kernels
-from crowdstudy.scene import wall_segments
-from crowdstudy.warp_runtime import host_threads, run_parallel
+from crowdstudy.scene_meta import wall_segments
+from crowdstudy.warp_runtime import get_warp, host_threads, run_parallel
 
 __all__ = ["Contacts", "CollisionPipeline", "sample_static_walls", "sweep_pairs",
            "KIND_GROUND", "KIND_ENVIRONMENT", "KIND_INTER", "KIND_INTRA"]
@@ -65,8 +64,8 @@ def launch_sweep(char_lo, char_hi, order, sorted_lo_x, pair_count, pair_capacity
     """Launch ``sweep_kernel`` on the CPU: ``char_lo``, ``char_hi`` the boxes' corners (CPU
     Warp arrays of vec3, m, read here as numpy too); ``order`` and ``sorted_lo_x`` Warp
     scratch arrays of length n."""
-    k = collision_kernels()
-    wp = k.wp
+    from crowdstudy.physics.collision_kernels import sweep_kernel
+
     lo = char_lo.numpy()
     idx = np.argsort(lo[:, 0], kind="stable")
     order.numpy()[:] = idx
@@ -74,15 +73,15 @@ def launch_sweep(char_lo, char_hi, order, sorted_lo_x, pair_count, pair_capacity
     hi = char_hi.numpy()
     reach = float(np.max(hi[:, 0] - lo[:, 0])) + 1e-3 if len(lo) else 0.0
     pair_count.zero_()
-    wp.launch(k.sweep_kernel, len(lo), [char_lo, char_hi, order, sorted_lo_x, reach, pair_count, pair_capacity,
-                                         pair_i, pair_j, pair_shift], device="cpu")
+    get_warp().launch(sweep_kernel, len(lo), [char_lo, char_hi, order, sorted_lo_x, reach, pair_count,
+                                              pair_capacity, pair_i, pair_j, pair_shift], device="cpu")
 
 
 def sweep_pairs(lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The pairs (i < j) of overlapping boxes (``lo``, ``hi``: (n, 3) corners, m) in (i, j)
     order by ``sweep_kernel`` on the CPU: the pairs and the order of ``broadphase_kernel``
     without a period (closed intervals, the kernel's comparisons)."""
-    wp = collision_kernels().wp
+    wp = get_warp()
     lo = np.ascontiguousarray(lo, np.float32)
     hi = np.ascontiguousarray(hi, np.float32)
     n = len(lo)
@@ -156,8 +155,6 @@ class Contacts:
 
     @classmethod
     def allocate(cls, capacity: int, device: str) -> "Contacts":
-        from crowdstudy.warp_runtime import get_warp
-
         wp = get_warp()
         return cls(capacity=int(capacity), count=wp.zeros(1, dtype=wp.int32, device=device),
                    body_a=wp.zeros(capacity, dtype=wp.int32, device=device),
@@ -192,20 +189,19 @@ class CollisionPipeline:
         static_points: (P, 3) metres, point samples of static objects (or None).
         period: length (m) of the periodic x axis, or None.
         static_walls: (M, 2, 2) metres, vertical walls standing on the floor (segments in
-            the floor plane, e.g. :func:`crowdstudy.scene.static_walls_from_meta`), or None: one-sided plane
-            contacts of every capsule end (``wall_kernel``, stiffness ``config.wall_stiffness``).
+            the floor plane, e.g. :func:`crowdstudy.scene_meta.static_walls_from_meta`), or None: one-sided plane
+            contacts of every capsule end (``wall_kernel``, stiffness ``config.contacts.wall_stiffness``).
     """
 
     def __init__(self, model, config, *, static_points: np.ndarray | None = None, period: float | None = None,
                  static_walls: np.ndarray | None = None):
         self.model = model
         self.config = config
-        self.k = collision_kernels()
-        wp = self.k.wp
+        wp = get_warp()
         dev = model.device
         n, nb = model.n_characters, model.n_bodies
         self.period = float(period or 0.0)
-        self.speculative = float(config.speculative_distance)
+        self.speculative = float(config.contacts.speculative_distance)
         self.p0w = wp.zeros(nb, dtype=wp.vec3, device=dev)
         self.p1w = wp.zeros(nb, dtype=wp.vec3, device=dev)
         self.centre = wp.zeros(nb, dtype=wp.vec3, device=dev)     # capsule midpoints (m)
@@ -219,8 +215,8 @@ class CollisionPipeline:
         self.p1t = wp.zeros(nb, dtype=wp.vec3, device=dev)
         self.t_lo = wp.zeros(n, dtype=wp.vec3, device=dev)
         self.t_hi = wp.zeros(n, dtype=wp.vec3, device=dev)
-        # ... and in the look-ahead pose (config.contact_pass_ahead)
-        self.pass_on = bool(config.contact_pass_ahead > 0 and config.contact_pass_width > 0)
+        # ... and in the look-ahead pose (config.contacts.pass_ahead)
+        self.pass_on = bool(config.contacts.pass_ahead > 0 and config.contacts.pass_width > 0)
         na = nb if self.pass_on else 1
         self.p0a = wp.zeros(na, dtype=wp.vec3, device=dev)
         self.p1a = wp.zeros(na, dtype=wp.vec3, device=dev)
@@ -249,24 +245,35 @@ class CollisionPipeline:
         self._split = 0.75        # share of the narrow-phase threads run by the first host thread
 
     def default_capacity(self) -> int:
-        return int(self.config.max_contacts_per_character) * self.model.n_characters + 2 * self.model.n_bodies
+        return int(self.config.contacts.max_per_character) * self.model.n_characters + 2 * self.model.n_bodies
 
     def collide(self, state, contacts: Contacts, control=None) -> None:
         """Fill ``contacts`` from ``state`` (positions/orientations at the start of the step).
 
         ``control`` (:class:`~crowdstudy.physics.state.Control`, advanced to this step): with
-        ``config.target_relative_self_contacts``, ground and intra-body contacts count only
+        ``config.contacts.target_relative_self``, ground and intra-body contacts count only
         the depth beyond the target pose's own (see ``intra_kernel``)."""
-        k, wp, m, cfg = self.k, self.k.wp, self.model, self.config
+        cfg = self.config
+        margin = float(cfg.contacts.margin)
+        contacts.count.zero_()
+        relative = int(bool(cfg.contacts.target_relative_self) and control is not None)
+        pass_on = int(self.pass_on and control is not None)
+        self._capsule_poses(state, control, relative, pass_on, margin)
+        self._static_contacts(state, contacts, control, relative, margin)
+        n_pairs = self._character_pairs()
+        self._pair_contacts(state, contacts, relative, pass_on, margin, n_pairs)
+
+    def _capsule_poses(self, state, control, relative: int, pass_on: int, margin: float) -> None:
+        """World capsules, their midpoints and half lengths, and the character AABBs (grown
+        by ``margin`` plus the speculative distance, m) of ``state``; with ``relative`` the
+        same in the target pose, with ``pass_on`` in the look-ahead pose (``control``)."""
+        from crowdstudy.physics import collision_kernels as k
+
+        wp, m = get_warp(), self.model
         dev = m.device
         W = m.wp
-        nj, n, nb = m.n_joints, m.n_characters, m.n_bodies
+        nj, n = m.n_joints, m.n_characters
         spec = self.speculative
-        margin = float(cfg.contact_margin)
-        contacts.count.zero_()
-        out = [contacts.count, contacts.capacity, *contacts.buffers()]
-        relative = int(bool(cfg.target_relative_self_contacts) and control is not None)
-        pass_on = int(self.pass_on and control is not None)
 
         def capsules_now() -> None:         # the state's capsules and character AABBs
             wp.launch(k.capsules_world_kernel, n, [state.x, state.q, W["cap_p0"], W["cap_p1"], W["cap_radius"],
@@ -289,23 +296,44 @@ class CollisionPipeline:
         else:
             capsules_now()
             capsules_target()
-        band = float(cfg.contact_activation)
-        if cfg.ground_stiffness > 0:
+
+    def _static_contacts(self, state, contacts: Contacts, control, relative: int, margin: float) -> None:
+        """The contacts with the ground, the point-sampled static objects and the walls
+        (needs :meth:`_capsule_poses` first)."""
+        from crowdstudy.physics import collision_kernels as k
+
+        wp, m, cfg = get_warp(), self.model, self.config
+        dev = m.device
+        W = m.wp
+        nj, nb = m.n_joints, m.n_bodies
+        spec = self.speculative
+        out = [contacts.count, contacts.capacity, *contacts.buffers()]
+        band = float(cfg.contacts.activation)
+        if cfg.contacts.ground_stiffness > 0:
             wp.launch(k.ground_kernel, nb, [state.x, self.p0w, self.p1w, W["cap_radius"], relative, self.p0t,
-                                            self.p1t, band, spec, float(cfg.ground_stiffness), *out], device=dev)
-        if self.bvh is not None and self.static_enabled and cfg.environment_stiffness > 0:
+                                            self.p1t, band, spec, float(cfg.contacts.ground_stiffness), *out], device=dev)
+        if self.bvh is not None and self.static_enabled and cfg.contacts.environment_stiffness > 0:
             wp.launch(k.environment_kernel, nb, [state.x, self.p0w, self.p1w, W["cap_radius"], W["cap_skin"],
                                                  W["body_char"],
                                                  self.char_lo, self.char_hi, self.bvh.id, self.points, self.env_lo,
                                                  self.env_hi, self.period, margin, spec,
-                                                 float(cfg.environment_stiffness), *out], device=dev)
-        if self.walls is not None and self.static_enabled and cfg.wall_stiffness > 0:
+                                                 float(cfg.contacts.environment_stiffness), *out], device=dev)
+        if self.walls is not None and self.static_enabled and cfg.contacts.wall_stiffness > 0:
             side = control.t_x if control is not None else state.x      # whose root gives each wall's free side
             wp.launch(k.wall_kernel, nb, [state.x, self.p0w, self.p1w, W["cap_radius"], W["cap_skin"], W["body_char"],
-                                          nj, side, self.walls, self.period, margin, spec, float(cfg.wall_stiffness),
+                                          nj, side, self.walls, self.period, margin, spec, float(cfg.contacts.wall_stiffness),
                                           *out], device=dev)
+
+    def _character_pairs(self) -> int:
+        """The broad phase: the overlapping character AABBs into ``pair_i``, ``pair_j``,
+        ``pair_shift`` (needs :meth:`_capsule_poses` first); returns how many were kept (the
+        surplus over ``pair_capacity`` is counted in ``dropped_pairs``)."""
+        from crowdstudy.physics import collision_kernels as k
+
+        wp, m, cfg = get_warp(), self.model, self.config
+        dev, n = m.device, m.n_characters
         n_pairs = 0
-        if n > 1 and cfg.contact_stiffness > 0:
+        if n > 1 and cfg.contacts.stiffness > 0:
             if dev == "cpu" and self.period <= 0.0 and n >= _MIN_CHARACTERS_SWEEP:
                 if self._sweep_scratch is None:
                     self._sweep_scratch = (wp.zeros(n, dtype=wp.int32, device=dev),
@@ -321,23 +349,38 @@ class CollisionPipeline:
             if n_pairs > self.pair_capacity:
                 self.dropped_pairs += n_pairs - self.pair_capacity
                 n_pairs = self.pair_capacity
+        return n_pairs
+
+    def _pair_contacts(self, state, contacts: Contacts, relative: int, pass_on: int, margin: float,
+                       n_pairs: int) -> None:
+        """The inter-body contacts of the first ``n_pairs`` character pairs (the narrow
+        phase) and the intra-body contacts, appended to ``contacts``: on the CPU with two
+        host threads, split over both (see below)."""
+        from crowdstudy.physics import collision_kernels as k
+
+        wp, m, cfg = get_warp(), self.model, self.config
+        dev = m.device
+        W = m.wp
+        nj = m.n_joints
+        spec = self.speculative
+        band = float(cfg.contacts.activation)
         n_intra = W["intra_pairs"].shape[0]
-        intra_on = bool(cfg.intra_body and n_intra and cfg.intra_stiffness > 0)
+        intra_on = bool(cfg.contacts.intra_body and n_intra and cfg.contacts.intra_stiffness > 0)
 
         def narrow(buf, lo: int, hi: int) -> None:     # the pairs [lo, hi) into buf
             if hi > lo:
                 wp.launch(k.narrowphase_kernel, hi - lo,
                           [state.x, self.p0w, self.p1w, W["cap_radius"], W["cap_skin"], self.centre, self.half,
                            self.char_lo, self.char_hi, self.pair_i, self.pair_j, self.pair_shift, nj, margin, spec,
-                           float(cfg.contact_stiffness), buf.count, buf.capacity, *buf.buffers(), int(lo),
-                           pass_on, self.p0a, self.p1a, float(cfg.contact_pass_width)],
+                           float(cfg.contacts.stiffness), buf.count, buf.capacity, *buf.buffers(), int(lo),
+                           pass_on, self.p0a, self.p1a, float(cfg.contacts.pass_width)],
                           device=dev)
 
         def intra(buf) -> None:
             if intra_on:
                 wp.launch(k.intra_kernel, n_intra, [state.x, self.p0w, self.p1w, W["cap_radius"], self.centre,
                                                     self.half, W["intra_pairs"], relative, self.p0t, self.p1t,
-                                                    band, spec, float(cfg.intra_stiffness), buf.count,
+                                                    band, spec, float(cfg.contacts.intra_stiffness), buf.count,
                                                     buf.capacity, *buf.buffers()], device=dev)
 
         total = n_pairs

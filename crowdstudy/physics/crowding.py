@@ -5,12 +5,8 @@ to its k-th nearest neighbour's (characters per m^2), taken over sampled frames 
 median kept; a crowd's density is the median of its characters'. Measured on the
 animation itself, so the study's cells, a stadium floor and a user's own crowd are
 treated alike, whatever their meta says. A periodic scene (the corridor) measures across
-its seam along x.
-
-On the study's own crowds (2026-12-05) the measure gives 2.0 / 2.5 / 4.5 / 5.6 / 6.6 per
-m^2 for the concert's D1-D5 and 2.0 / 3.1 / 4.9 / 5.5 / 6.6 for the corridor's (the
-design's 2.22-6.66; the floor's edges have fewer neighbours), and a 1,000-character D3
-stadium 4.2.
+its seam along x. The measure runs a little below a design's nominal density on a small
+floor: the characters at its edges have fewer neighbours.
 """
 
 from __future__ import annotations
@@ -83,11 +79,11 @@ def crowd_config(anim, config: PhysicsConfig | None = None) -> tuple[PhysicsConf
     """The configuration ``anim``'s crowd is corrected with, as
     :func:`~crowdstudy.physics.corrector.correct` uses it: ``(config.for_density(density),
     density, profile weight)``, the density its :func:`crowd_density` (characters per m^2)
-    and the weight None when ``config.crowd_adaptive`` is off (``config`` None: the
-    defaults)."""
-    config = config or PhysicsConfig()
+    and the weight None when no field of ``config`` follows the density profile
+    (``config.follows_profile``; ``config`` None: the defaults)."""
+    config = PhysicsConfig() if config is None else config
     if not isinstance(config, PhysicsConfig):
         raise InvalidInputError(f"config: expected a PhysicsConfig, got {type(config).__name__}")
     density = crowd_density(anim)
-    weight = config.profile_weight(density) if config.crowd_adaptive else None
+    weight = config.profile_weight(density) if config.follows_profile else None
     return config.for_density(density), density, weight

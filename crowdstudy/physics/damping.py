@@ -67,7 +67,7 @@ def damping_study(dampings=(0.0, 0.006, 0.06), *, release_time: float = 3.5, dur
         duration: s simulated.
         push: m, how far behind its animation the character is held.
         body: a body model (rest_joints, capsules); default a sampled male body.
-        config: base :class:`PhysicsConfig` (its ``damping`` is replaced); default
+        config: base :class:`PhysicsConfig` (its ``control.damping`` is replaced); default
             :meth:`PhysicsConfig.paper_controller`, the paper's joint-space controller.
         device: Warp device.
 
@@ -99,10 +99,10 @@ def damping_study(dampings=(0.0, 0.006, 0.06), *, release_time: float = 3.5, dur
     points = np.stack([gx.ravel(), np.full(gx.size, front + 0.01), gz.ravel()], 1)
     out: dict = {"release_time": release_time, "push": push, "target": 0.0, "position": {}, "metrics": {}}
     steps_per_frame = 2
-    fps = 1.0 / (base.dt * steps_per_frame)
+    fps = 1.0 / (base.solver.dt * steps_per_frame)
     n_frames = int(round(duration * fps))
     for d in dampings:
-        cfg = base.replace(damping=float(d))
+        cfg = base.with_values({"control.damping": float(d)})
         corr = CrowdCorrector([body], config=cfg, device=device, fps=fps, static_points=points)
         corr.reset(rot, root)
         # start held back: place the bodies `push` behind the animation

@@ -127,7 +127,7 @@ def foot_anchor_energy(x, x_old, target, target_old, offset, w, k, c, h, kt, dh2
 def contact_energy(xa, Ra, seg_a, ra, xb, Rb, seg_b, rb, k, stiffening=0.0):
     """Penalty (k/2) depth^2 between capsule a and capsule b (depth = r_a + r_b - distance),
     plus k depth^3 / (3 d0) with ``stiffening`` = d0 > 0 (m; the inter-body contacts'
-    ``PhysicsConfig.contact_stiffening_depth``).
+    ``PhysicsConfig.contacts.stiffening_depth``).
 
     Args: x (3,) m, R (3, 3), seg (2, 3) segment end points in the body frame (m), r m, k N/m.
     Returns ``(E, gradient (12,), Gauss-Newton Hessian phi''(d) u u^T (12, 12), depth)``, zero

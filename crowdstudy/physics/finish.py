@@ -6,11 +6,11 @@ of every character. Three steps turn it into the "Ours" animation, each on plain
 * :func:`close_loop`: for a periodic input (a concert stimulus that loops), the correction
   was simulated past one period; the first frames of the output are cross-faded from the
   continuation of the last frame, so frame T-1 -> frame 0 continues the motion.
-* :func:`smooth_deviation`: a zero-phase Gaussian low-pass (``PhysicsConfig.output_smoothing``
-  seconds, ``output_smoothing_root`` for the root) of the DEVIATION from the input
+* :func:`smooth_deviation`: a zero-phase Gaussian low-pass (``PhysicsConfig.output.smoothing``
+  seconds, ``output.smoothing_root`` for the root) of the DEVIATION from the input
   animation (joint rotations relative to the input's, ``R = R^ exp([delta]x)``, and the
   root offset), never of the animation itself, so the input's own motion keeps every
-  detail; each deviation is first held at its peak over +-``output_hold`` kernel widths, so
+  detail; each deviation is first held at its peak over +-``output.hold`` kernel widths, so
   the separation a contact needed is kept while the correction eases in and out around it;
   circular for periodic clips. The residual overlap is measured after this stage
   (``crowdstudy bench physics --bars``).
@@ -25,11 +25,11 @@ from __future__ import annotations
 import numpy as np
 
 from crowdstudy.body.rotations import (axis_angle_to_quaternion, matrix_to_axis_angle, matrix_to_quaternion,
-                                       quaternion_to_axis_angle, quaternion_to_matrix, rotation_between)
+                                       quat_blend, quat_conjugate, quat_multiply, quaternion_to_axis_angle,
+                                       quaternion_to_matrix, rotation_between)
 from crowdstudy.body.skeleton import JOINT_INDEX, PARENTS, forward_kinematics
 from crowdstudy.errors import InvalidInputError
 from crowdstudy.motion.posing import hold_peaks, planted_runs, smoothstep5, two_bone_ik
-from crowdstudy.motion.quaternions import quat_blend, quat_conjugate, quat_multiply
 
 __all__ = ["close_loop", "smooth_deviation", "lock_planted_feet", "planted_frames"]
 

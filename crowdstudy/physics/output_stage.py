@@ -91,9 +91,12 @@ def finish_crowd(sim_rot: np.ndarray, sim_root: np.ndarray, ref_rot: np.ndarray,
         ref_rot: (T, N, J, 3) rad, the input; ref_root: (T, N, 3) m.
         rest_joints: (N, J, 3) m.
         fps: Hz.
-        config: the physics configuration: ``output_smoothing``, ``output_smoothing_root``,
-            ``output_hold``, ``foot_lock``, ``foot_lock_speed``, ``speed_limit``,
-            ``speed_limit_margin``.
+        config: the physics configuration: its ``output`` section (``smoothing``,
+            ``smoothing_root``, ``hold``, ``foot_lock``, ``foot_lock_speed``, ``speed_limit``,
+            ``speed_limit_margin``); a ``hold`` that follows the density profile (None) is
+            taken at its dense end (:meth:`~crowdstudy.physics.config.PhysicsConfig.for_dense_crowd`;
+            :func:`~crowdstudy.physics.corrector.correct` passes a configuration resolved
+            for its crowd).
         warmup, blend, looped: the loop's frames simulated before and after the clip
             (:func:`~crowdstudy.physics.finish.close_loop`); ``looped``: the clip is periodic.
         periodic_length: m, the scene's period along x, or None.
@@ -120,9 +123,10 @@ def finish_crowd(sim_rot: np.ndarray, sim_root: np.ndarray, ref_rot: np.ndarray,
     if chunk < 1:
         raise InvalidInputError(f"chunk: expected a positive number of characters, got {chunk!r}")
     threads = host_threads() if threads is None else max(1, int(threads))
+    out_cfg = config.for_dense_crowd().output
     limit = None
-    if config.speed_limit:
-        limit = crowd_speed_limit(ref_rot, ref_root, rest, fps, config.speed_limit_margin,
+    if out_cfg.speed_limit:
+        limit = crowd_speed_limit(ref_rot, ref_root, rest, fps, out_cfg.speed_limit_margin,
                                   periodic_length=periodic_length, chunk=chunk, threads=threads)
     out_rot = np.empty(ref_rot.shape)
     out_root = np.empty(ref_root.shape)
@@ -134,13 +138,13 @@ def finish_crowd(sim_rot: np.ndarray, sim_root: np.ndarray, ref_rot: np.ndarray,
         r_rot, r_root, r_rest = ref_rot[:, c0:c1], ref_root[:, c0:c1], rest[c0:c1]
         if looped:
             rot, root = close_loop(rot, root, n_frames, warmup, blend)
-        rot, root = smooth_deviation(rot, root, r_rot, r_root, config.output_smoothing * fps, periodic=looped,
-                                     root_sigma_frames=config.output_smoothing_root * fps, hold=config.output_hold)
+        rot, root = smooth_deviation(rot, root, r_rot, r_root, out_cfg.smoothing * fps, periodic=looped,
+                                     root_sigma_frames=out_cfg.smoothing_root * fps, hold=out_cfg.hold)
         # the input's kinematics, once for the foot lock and the speed limit
         r_fk = forward_kinematics(r_rest[None], r_rot, r_root, parents=PARENTS) \
-            if config.foot_lock or limit is not None else None
-        if config.foot_lock:
-            rot = lock_planted_feet(rot, root, r_rot, r_root, r_rest, fps, planted_speed=config.foot_lock_speed,
+            if out_cfg.foot_lock or limit is not None else None
+        if out_cfg.foot_lock:
+            rot = lock_planted_feet(rot, root, r_rot, r_root, r_rest, fps, planted_speed=out_cfg.foot_lock_speed,
                                     periodic=looped, ref_kinematics=r_fk)
         report = None
         if limit is not None:
@@ -153,9 +157,9 @@ def finish_crowd(sim_rot: np.ndarray, sim_root: np.ndarray, ref_rot: np.ndarray,
     blocks = _blocks(n_chars, chunk)
     bar = None
     if progress:
-        from tqdm import tqdm
+        from crowdstudy.progress import progress_bar
 
-        bar = tqdm(total=len(blocks), desc="output stage", unit="block", leave=False)
+        bar = progress_bar(total=len(blocks), desc="output stage", unit="block", leave=False)
     try:
         done = _map(block, blocks, threads, bar)
     finally:

@@ -31,34 +31,44 @@ Linear solvers (``linear_solver``):
 
 * ``"fused"``: the whole PCG in ONE Warp kernel launch (a single thread loops over the
   blocks). Warp's CPU kernels run on one thread anyway, so this removes every
-  per-iteration launch; the fastest on CPU (measured in ``benchmarks/physics.py``).
+  per-iteration launch; the fastest on CPU.
 * ``"warp"``: a ``warp.sparse`` BSR matrix (6x6 blocks) assembled on the device and
   ``warp.optim.linear.cg`` with the same preconditioner (as a ``LinearOperator``): the
-  CUDA default (untested on a GPU here; the same code path is tested on the CPU).
+  CUDA default (the CPU tests run the same code path; ``tests/test_gpu.py`` runs it on a
+  CUDA device where there is one).
 * ``"scipy"``: the same BSR matrix on the host and ``scipy.sparse.linalg.cg`` with the 6x6
   block Jacobi (benchmark peer).
 
-Measured on the 2-core CPU (60 characters, D5, one assembled step; ``crowdstudy bench
-physics``): fused + character preconditioner 1.5 ms (13 iterations), fused + 6x6 block
-Jacobi 4.2 ms (hits the 60-iteration cap), scipy 20 ms, ``warp.optim.linear.cg`` 300 ms
-(its per-iteration launches and the BSR rebuild dominate on CPU).
+``crowdstudy bench physics`` times them. On a CPU the fused PCG with the character
+preconditioner wins: with the 6x6 block Jacobi it needs several times the iterations (it
+may stop at the iteration cap); scipy is an order of magnitude slower, and
+``warp.optim.linear.cg`` two (its per-iteration launches and the BSR rebuild dominate).
+
+The Warp kernels live in :mod:`crowdstudy.physics.kernels` (bodies) and
+:mod:`crowdstudy.physics.linear` (contacts and linear algebra); the methods that launch
+them import those modules, so importing this one does not import Warp.
 """
 
 from __future__ import annotations
 
 import threading
 import time
+from typing import Literal, get_args
 
 import numpy as np
 
 from crowdstudy.errors import InvalidInputError
-from crowdstudy.physics.linear import bsr_from_triplets, solver_kernels
 from crowdstudy.physics.model import GROUP_ARM, GROUP_FEET, GROUP_PELVIS, GROUP_TRUNK
-from crowdstudy.warp_runtime import host_threads, run_parallel, run_together
+from crowdstudy.warp_runtime import device_kind, get_warp, host_threads, run_parallel, run_together
 
-__all__ = ["Solver", "LINEAR_SOLVERS"]
+__all__ = ["Solver", "LinearSolver", "LINEAR_SOLVERS", "Preconditioner", "PRECONDITIONERS"]
 
-LINEAR_SOLVERS = ("fused", "warp", "scipy")
+#: The CG implementations (module docstring).
+LinearSolver = Literal["fused", "warp", "scipy"]
+LINEAR_SOLVERS: tuple[LinearSolver, ...] = get_args(LinearSolver)
+#: The CG preconditioners (module docstring).
+Preconditioner = Literal["character", "body"]
+PRECONDITIONERS: tuple[Preconditioner, ...] = get_args(Preconditioner)
 #: joints whose bodies get the optional absolute translation PD (the feet: ankle and toe bodies)
 FEET_TRANSLATION_JOINTS = (7, 8, 10, 11)
 
@@ -70,8 +80,8 @@ _MIN_CHARACTERS_PER_THREAD = 16
 _MIN_CHARACTERS_SPLIT_ASSEMBLY = 200
 #: from this many characters on, the CPU PCG runs split over the two halves of the crowd
 #: (``Solver._solve_split``); below, its per-iteration hand-overs cost more than the second
-#: core saves (measured 2026-12-04: 60 characters 10.4 ms per step against 4.5, 200 14.3 against
-#: 13.1, 1,000 47.4-49.2 against 51.7-53.3, two host threads)
+#: core saves (on two host threads the split still loses at a couple of hundred characters
+#: and wins at a thousand)
 _MIN_CHARACTERS_SPLIT_PCG = 500
 
 
@@ -88,24 +98,20 @@ class Solver:
     After each step :attr:`last_cg` holds ``(iterations, relative residual)``.
     """
 
-    def __init__(self, model, config, *, linear_solver: str | None = None, profile: bool = False,
-                 preconditioner: str = "character"):
-        from crowdstudy.physics.kernels import kernels
-
+    def __init__(self, model, config, *, linear_solver: LinearSolver | None = None, profile: bool = False,
+                 preconditioner: Preconditioner = "character"):
         self.model = model
         self.config = config
-        self.kb = kernels()
-        self.ks = solver_kernels()
-        wp = self.kb.wp
+        wp = get_warp()
         self.wp = wp
         dev = model.device
         if linear_solver is None:
-            linear_solver = "fused" if dev == "cpu" else "warp"
+            linear_solver = "fused" if device_kind(dev) == "cpu" else "warp"
         if linear_solver not in LINEAR_SOLVERS:
             raise InvalidInputError(f"linear_solver: expected one of {LINEAR_SOLVERS}, got {linear_solver!r}")
         self.linear_solver = linear_solver
-        if preconditioner not in ("character", "body"):
-            raise InvalidInputError(f"preconditioner: expected 'character' or 'body', got {preconditioner!r}")
+        if preconditioner not in PRECONDITIONERS:
+            raise InvalidInputError(f"preconditioner: expected one of {PRECONDITIONERS}, got {preconditioner!r}")
         self.preconditioner = preconditioner
         self.profile = profile
         self.timings = {"assembly": 0.0, "solve": 0.0, "update": 0.0}
@@ -130,21 +136,22 @@ class Solver:
         self.tree_work, self.tree_dinv, self.tree_l = s6(), s6(), s6()
         self.y6 = wp.zeros(nb, dtype=wp.spatial_vector, device=dev)
         groups = model.body_group
+        ctl = config.control
         scale = np.select([groups == GROUP_PELVIS, groups == GROUP_FEET, groups == GROUP_ARM, groups == GROUP_TRUNK],
-                          [config.pelvis_scale, config.feet_scale, config.arm_scale, config.trunk_scale], 1.0)
-        self.body_k = wp.array((config.stiffness * scale).astype(np.float32), dtype=wp.float32, device=dev)
-        self.body_d = wp.array((config.damping * scale).astype(np.float32), dtype=wp.float32, device=dev)
+                          [ctl.pelvis_scale, ctl.feet_scale, ctl.arm_scale, ctl.trunk_scale], 1.0)
+        self.body_k = wp.array((ctl.stiffness * scale).astype(np.float32), dtype=wp.float32, device=dev)
+        self.body_d = wp.array((ctl.damping * scale).astype(np.float32), dtype=wp.float32, device=dev)
         root = model.body_parent < 0
         feet = np.isin(model.body_joint, FEET_TRANSLATION_JOINTS)
-        kt = np.where(root, config.root_translation_stiffness,
-                      np.where(feet, config.feet_translation_stiffness, config.pose_translation_stiffness))
-        dtr = config.damping * np.where(root, config.root_translation_damping_scale,
-                                        np.where(feet, config.feet_translation_damping_scale,
-                                                 config.pose_translation_damping_scale))
+        kt = np.where(root, ctl.root_translation_stiffness,
+                      np.where(feet, ctl.feet_translation_stiffness, ctl.pose_translation_stiffness))
+        dtr = ctl.damping * np.where(root, ctl.root_translation_damping_scale,
+                                     np.where(feet, ctl.feet_translation_damping_scale,
+                                              ctl.pose_translation_damping_scale))
         self.body_kt = wp.array(kt.astype(np.float32), dtype=wp.float32, device=dev)
         self.body_dt = wp.array(dtr.astype(np.float32), dtype=wp.float32, device=dev)
-        reach = np.where(root, config.root_translation_reach, np.where(feet, 0.0, config.pose_translation_reach))
-        far = np.where(root, config.root_translation_far_stiffness, 0.0)
+        reach = np.where(root, ctl.root_translation_reach, np.where(feet, 0.0, ctl.pose_translation_reach))
+        far = np.where(root, ctl.root_translation_far_stiffness, 0.0)
         self.body_reach = wp.array(reach.astype(np.float32), dtype=wp.float32, device=dev)
         self.body_kt_far = wp.array(far.astype(np.float32), dtype=wp.float32, device=dev)
         self.feet_index = wp.array(np.nonzero(feet)[0].astype(np.int32), dtype=wp.int32, device=dev)
@@ -182,11 +189,13 @@ class Solver:
 
     def assemble(self, state_in, control, contacts, dt: float) -> None:
         """Prediction, gradient and diagonal Hessian blocks (bodies, then contacts)."""
-        wp, kb, ks, m, cfg = self.wp, self.kb, self.ks, self.model, self.config
+        from crowdstudy.physics import kernels as kb, linear as ks
+
+        wp, m, cfg = self.wp, self.model, self.config
         W, dev = m.wp, m.device
         self._contact_buffers(contacts.capacity)
-        ff = bool(cfg.feedforward)
-        damp_scale = float(dt) / float(cfg.damping_reference_dt)
+        ff = bool(cfg.solver.feedforward)
+        damp_scale = float(dt) / float(cfg.solver.damping_reference_dt)
         def bodies(lo: int, hi: int) -> None:    # prediction and body terms of bodies [lo, hi)
             if hi <= lo:
                 return
@@ -202,21 +211,21 @@ class Solver:
                       [self.x_pred, self.q_pred, state_in.x, state_in.q, control.t_rel, control.t_rel_old,
                        control.t_x, control.t_x_old, W["body_mass"], W["body_J"], W["body_parent"],
                        W["body_children"], self.body_k, self.body_d, self.body_kt, self.body_dt, self.body_reach,
-                       self.body_kt_far, float(dt), 0.0 if ff else float(cfg.gravity),
-                       float(cfg.joint_stiffness), damp_scale, self.grad_t, self.grad_r, self.hess_a, self.hess_b,
+                       self.body_kt_far, float(dt), 0.0 if ff else float(cfg.body.gravity),
+                       float(cfg.body.joint_stiffness), damp_scale, self.grad_t, self.grad_r, self.hess_a, self.hess_b,
                        self.hess_c, self.lever_p, self.lever_c, self.ctrl_c, self.ctrl_g, int(lo)], device=dev)
 
-        n_feet = self.feet_index.shape[0] if cfg.foot_anchor_stiffness > 0 else 0
+        n_feet = self.feet_index.shape[0] if cfg.feet.anchor_stiffness > 0 else 0
 
         def feet(f0: int, f1: int) -> None:     # the stance anchors of feet [f0, f1) (feet_index order)
             if f1 > f0:
                 wp.launch(kb.foot_anchor_kernel, f1 - f0,
                           [self.feet_index, self.x_pred, state_in.x, control.t_x, control.t_x_old, self.foot_offset,
                            self.foot_weight, self.foot_stepping, self.body_kt, self.body_dt, float(dt), damp_scale,
-                           float(cfg.foot_planted_speed),
-                           float(cfg.foot_anchor_stiffness), float(cfg.foot_anchor_damping),
-                           float(cfg.foot_anchor_max_force), float(cfg.foot_release_distance),
-                           float(cfg.foot_rejoin_distance), self.grad_t, self.hess_a, int(f0)],
+                           float(cfg.feet.planted_speed),
+                           float(cfg.feet.anchor_stiffness), float(cfg.feet.anchor_damping),
+                           float(cfg.feet.anchor_max_force), float(cfg.feet.release_distance),
+                           float(cfg.feet.rejoin_distance), self.grad_t, self.hess_a, int(f0)],
                           device=dev)
 
         def contact_terms(n_threads: int, contact_list, use_list: int, lo: int, hi: int) -> None:
@@ -224,9 +233,9 @@ class Solver:
                 wp.launch(ks.contact_assemble_kernel, n_threads,
                           [contacts.count, contacts.capacity, contacts.body_a, contacts.body_b, contacts.normal,
                            contacts.depth, contacts.lever_a, contacts.lever_b, contacts.stiffness, contacts.kind,
-                           float(cfg.ground_friction), float(cfg.contact_activation),
-                           float(cfg.contact_release_distance), float(cfg.contact_release_width),
-                           float(cfg.contact_stiffening_depth), m.n_joints,
+                           float(cfg.contacts.ground_friction), float(cfg.contacts.activation),
+                           float(cfg.contacts.release_distance), float(cfg.contacts.release_width),
+                           float(cfg.contacts.stiffening_depth), m.n_joints,
                            state_in.x, control.t_x,
                            state_in.v,
                            state_in.w, float(dt), self.grad_t, self.grad_r, self.hess_a, self.hess_b, self.hess_c,
@@ -279,7 +288,9 @@ class Solver:
 
     def solve(self, contacts) -> None:
         """Solve H [dx; dw] = -g into ``self.dx``, ``self.dw``."""
-        wp, ks, m, cfg = self.wp, self.ks, self.model, self.config
+        from crowdstudy.physics import linear as ks
+
+        wp, m, cfg = self.wp, self.model, self.config
         dev, nb = m.device, m.n_bodies
         if self.linear_solver == "fused" and self._split_pcg():
             self._solve_split(contacts)         # factorises each half's characters with its start
@@ -294,9 +305,9 @@ class Solver:
                       [nb, contacts.count, contacts.capacity, self.hess_a, self.hess_b, self.hess_c, self.p_tt,
                        self.p_tr, self.p_rr, mode, self.tree_dinv, self.tree_l, self.y6,
                        m.wp["body_parent"], self.lever_p, self.lever_c, self.ctrl_c,
-                       float(cfg.joint_stiffness), contacts.body_a, contacts.body_b, self.u_at, self.u_ar,
-                       self.u_bt, self.u_br, self.k_eff, self.grad_t, self.grad_r, float(cfg.cg_tolerance),
-                       int(cfg.cg_max_iterations), self.dx, self.dw, *self.work, self.stats], device=dev)
+                       float(cfg.body.joint_stiffness), contacts.body_a, contacts.body_b, self.u_at, self.u_ar,
+                       self.u_bt, self.u_br, self.k_eff, self.grad_t, self.grad_r, float(cfg.solver.cg_tolerance),
+                       int(cfg.solver.cg_max_iterations), self.dx, self.dw, *self.work, self.stats], device=dev)
             st = self.stats.numpy()
             self.last_cg = (int(st[0]), float(st[1]))
         else:
@@ -308,7 +319,9 @@ class Solver:
 
     def triplets(self, contacts):
         """The whole system as BSR triplets (rows, cols, 6x6 values) and the rhs (B,) vec6."""
-        wp, ks, m, cfg = self.wp, self.ks, self.model, self.config
+        from crowdstudy.physics import linear as ks
+
+        wp, m, cfg = self.wp, self.model, self.config
         dev, nb = m.device, m.n_bodies
         cap = contacts.capacity
         n_trip = 3 * nb + 2 * cap
@@ -321,7 +334,7 @@ class Solver:
             self._trip_n = n_trip
         wp.launch(ks.triplets_bodies_kernel, nb,
                   [nb, self.hess_a, self.hess_b, self.hess_c, m.wp["body_parent"], self.lever_p, self.lever_c,
-                   self.ctrl_c, float(cfg.joint_stiffness), self.grad_t, self.grad_r, self._rows, self._cols,
+                   self.ctrl_c, float(cfg.body.joint_stiffness), self.grad_t, self.grad_r, self._rows, self._cols,
                    self._vals, self._rhs], device=dev)
         if cap:
             wp.launch(ks.triplets_contacts_kernel, cap,
@@ -357,12 +370,25 @@ class Solver:
         dot products in a fixed order and computes alpha and beta in float32. A row's
         matrix-vector product is the fused kernel's term for term; the dot products differ
         from the fused kernel's in their summation order only."""
-        m, cfg = self.model, self.config
+        m = self.model
         cut = (m.n_characters // 2) * m.n_joints
+        init, matvec, update = self._split_commands(contacts, cut)
+        # each half factorises its characters' tree blocks, then starts its PCG rows
+        half = m.n_characters // 2
+        run_parallel(lambda: (self._factor_range(0, half), init[0].launch()),
+                     lambda: (self._factor_range(half, m.n_characters), init[1].launch()))
+        s = self.split_sums.numpy()
+        it, rel = self._split_iterations(matvec, update, np.float32(s[0]) + np.float32(s[4]),
+                                         np.float32(s[1]) + np.float32(s[5]))
+        self.last_cg = (it, float(rel))
+
+    def _split_commands(self, contacts, cut: int) -> tuple[list, list, list]:
+        """The split PCG's recorded launches (see :meth:`_record_split`) for the halves
+        split at body ``cut``, with this step's body-body contact lists and their counts
+        set."""
+        m, cfg = self.model, self.config
         halves = ((0, 0, cut), (1, cut, m.n_bodies))
-        sums = self.split_sums
-        f32 = np.float32
-        levers = (self.lever_p, self.lever_c, self.ctrl_c, float(cfg.joint_stiffness))   # the joint blocks
+        levers = (self.lever_p, self.lever_c, self.ctrl_c, float(cfg.body.joint_stiffness))   # the joint blocks
         # the body-body contacts of each half (a contact across the cut is in both)
         n_act = contacts.n_active()
         a = contacts.body_a.numpy()[:n_act]
@@ -382,22 +408,18 @@ class Solver:
         for part, n_list in enumerate(counts):
             for cmd in matvec[part]:
                 cmd.set_param_at_index(4, n_list)
+        return init, matvec, update
 
-        def both(cmds, value=None) -> None:
-            if value is not None:
-                for cmd in cmds:
-                    cmd.set_param_at_index(3, value)
-            run_parallel(cmds[0].launch, cmds[1].launch)
-
-        # each half factorises its characters' tree blocks, then starts its PCG rows
-        half = m.n_characters // 2
-        run_parallel(lambda: (self._factor_range(0, half), init[0].launch()),
-                     lambda: (self._factor_range(half, m.n_characters), init[1].launch()))
-        s = sums.numpy()
-        bnorm2 = f32(s[0]) + f32(s[4])
-        rz0 = f32(s[1]) + f32(s[5])
-        tol = f32(cfg.cg_tolerance)
-        max_it = int(cfg.cg_max_iterations)
+    def _split_iterations(self, matvec, update, bnorm2: np.float32, rz0: np.float32) -> tuple[int, np.float32]:
+        """The split PCG's iterations from |r|^2 = ``bnorm2`` and r.z = ``rz0`` (float32, as
+        the fused kernel); returns (iterations, |r| / |b|). On two threads each half
+        iterates on its own thread and meets the other at a barrier after each phase (one
+        wake-up a phase, where handing each phase over costs two); else both halves phase
+        by phase from this thread: the same arithmetic either way."""
+        cfg, sums = self.config, self.split_sums
+        f32 = np.float32
+        tol = f32(cfg.solver.cg_tolerance)
+        max_it = int(cfg.solver.cg_max_iterations)
 
         def iterate(phase) -> tuple[int, np.float32]:
             """The PCG iterations; ``phase(cmds, buf, value)`` runs one phase (``matvec`` or
@@ -427,9 +449,6 @@ class Solver:
                 buf = 1 - buf
             return it, rel
 
-        # two threads at once, each iterating its half and meeting the other at a barrier
-        # after each phase (one wake-up a phase, where handing each phase over costs two);
-        # else both halves phase by phase from this thread: the same arithmetic either way
         barrier = threading.Barrier(2)
         result = []
 
@@ -449,15 +468,22 @@ class Solver:
             if part == 0:
                 result.append(out)
 
+        def both(cmds, buf, value) -> None:     # one phase of both halves, from this thread
+            pair = [cmds[0][buf], cmds[1][buf]]
+            for cmd in pair:
+                cmd.set_param_at_index(3, value)
+            run_parallel(pair[0].launch, pair[1].launch)
+
         if not run_together(lambda: half_loop(0), lambda: half_loop(1)):
-            result.append(iterate(lambda cmds, buf, value: both([cmds[0][buf], cmds[1][buf]], value)))
-        it, rel = result[0]
-        self.last_cg = (it, float(rel))
+            result.append(iterate(both))
+        return result[0]
 
     def _record_split(self, contacts, halves, levers):
         """The split PCG's launches (init, matvec and update of each half; the two
         direction buffers alternate), recorded for ``_solve_split``."""
-        wp, ks, m, cfg = self.wp, self.ks, self.model, self.config
+        from crowdstudy.physics import linear as ks
+
+        wp, m, cfg = self.wp, self.model, self.config
         dev = m.device
         r_t, r_r, z_t, z_r, p_t, p_r, q_t, q_r = self.work
         po_t, po_r = self.work_split
@@ -476,7 +502,7 @@ class Solver:
             for (pot, por), (pnt, pnr) in (((po_t, po_r), (p_t, p_r)), ((p_t, p_r), (po_t, po_r))):
                 mv.append(record(ks.pcg_split_matvec_kernel,
                                  [lo, hi, part, 0.0, 0, lst, self.hess_a, self.hess_b, self.hess_c, parent,
-                                  self.lever_p, self.lever_c, self.ctrl_c, float(cfg.joint_stiffness),
+                                  self.lever_p, self.lever_c, self.ctrl_c, float(cfg.body.joint_stiffness),
                                   contacts.body_a, contacts.body_b, self.u_at, self.u_ar, self.u_bt, self.u_br,
                                   self.k_eff, z_t, z_r, pot, por, pnt, pnr, q_t, q_r, sums]))
                 up.append(record(ks.pcg_split_update_kernel,
@@ -489,11 +515,13 @@ class Solver:
 
     def _factor_range(self, c0: int, c1: int) -> None:
         """The tree preconditioner's factors of characters [c0, c1)."""
+        from crowdstudy.physics import linear as ks
+
         m, cfg = self.model, self.config
         if c1 > c0:
-            self.wp.launch(self.ks.tree_factor_kernel, c1 - c0,
+            self.wp.launch(ks.tree_factor_kernel, c1 - c0,
                            [m.n_joints, self.hess_a, self.hess_b, self.hess_c, m.wp["body_parent"],
-                            self.lever_p, self.lever_c, self.ctrl_c, float(cfg.joint_stiffness), self.tree_work,
+                            self.lever_p, self.lever_c, self.ctrl_c, float(cfg.body.joint_stiffness), self.tree_work,
                             self.tree_dinv, self.tree_l, int(c0)], device=m.device)
 
     def _factor_tree(self) -> None:
@@ -502,6 +530,8 @@ class Solver:
     def _solve_warp(self, rows, cols, vals, rhs) -> None:
         import warp.optim.linear as wl
         import warp.sparse as wsp
+
+        from crowdstudy.physics import linear as ks
 
         wp, cfg, m = self.wp, self.config, self.model
         nb = m.n_bodies
@@ -513,24 +543,26 @@ class Solver:
             work = self.y6
 
             def matvec(x, y, z, alpha, beta):
-                wp.launch(self.ks.tree_precond_kernel, m.n_characters,
+                wp.launch(ks.tree_precond_kernel, m.n_characters,
                           [m.n_joints, m.wp["body_parent"], self.tree_dinv, self.tree_l, self.lever_p,
-                           self.lever_c, self.ctrl_c, float(cfg.joint_stiffness), x, y, z,
+                           self.lever_c, self.ctrl_c, float(cfg.body.joint_stiffness), x, y, z,
                            float(alpha), float(beta), work], device=m.device)
 
             precond = wl.LinearOperator(self._bsr.shape, self._bsr.dtype, self._bsr.device, matvec)
         else:
             precond = wl.preconditioner(self._bsr, ptype="block_jacobi_sequential")
         self._x6.zero_()
-        it, res, atol = wl.cg(self._bsr, rhs, self._x6, tol=float(cfg.cg_tolerance),
-                              maxiter=int(cfg.cg_max_iterations), M=precond, check_every=5, use_cuda_graph=False)
-        wp.launch(self.ks.unpack_kernel, nb, [self._x6, self.dx, self.dw], device=m.device)
+        it, res, atol = wl.cg(self._bsr, rhs, self._x6, tol=float(cfg.solver.cg_tolerance),
+                              maxiter=int(cfg.solver.cg_max_iterations), M=precond, check_every=5, use_cuda_graph=False)
+        wp.launch(ks.unpack_kernel, nb, [self._x6, self.dx, self.dw], device=m.device)
         # cg returns the absolute residual and atol = tol * |b|: report |r| / |b| like the others
-        rel = float(res) * float(cfg.cg_tolerance) / float(atol) if float(atol) > 0 else float(res)
+        rel = float(res) * float(cfg.solver.cg_tolerance) / float(atol) if float(atol) > 0 else float(res)
         self.last_cg = (int(it), rel)
 
     def _solve_scipy(self, rows, cols, vals, rhs) -> None:
         import scipy.sparse.linalg as spl
+
+        from crowdstudy.physics.linear import bsr_from_triplets
 
         wp, cfg, nb = self.wp, self.config, self.model.n_bodies
         r, c, v, b = rows.numpy(), cols.numpy(), vals.numpy().astype(np.float64), rhs.numpy().astype(np.float64)
@@ -539,7 +571,7 @@ class Solver:
         M = spl.LinearOperator(A.shape, matvec=lambda x: np.einsum("bij,bj->bi", inv, x.reshape(nb, 6)).ravel(),
                                dtype=np.float64)
         counter = [0]
-        x, _ = spl.cg(A, b.ravel(), rtol=float(cfg.cg_tolerance), maxiter=int(cfg.cg_max_iterations), M=M,
+        x, _ = spl.cg(A, b.ravel(), rtol=float(cfg.solver.cg_tolerance), maxiter=int(cfg.solver.cg_max_iterations), M=M,
                       callback=lambda _x: counter.__setitem__(0, counter[0] + 1))
         x = x.reshape(nb, 6).astype(np.float32)
         self.dx.assign(wp.array(np.ascontiguousarray(x[:, :3]), dtype=wp.vec3, device=self.model.device))
@@ -548,24 +580,26 @@ class Solver:
         self.last_cg = (counter[0], float(res))
 
     def update(self, state_in, state_out, dt: float) -> None:
+        from crowdstudy.physics import kernels as kb
+
         wp, m = self.wp, self.model
 
         def update(c0: int, c1: int) -> None:
             lo, hi = c0 * m.n_joints, c1 * m.n_joints
             if hi > lo:
-                wp.launch(self.kb.update_kernel, hi - lo, [self.x_pred, self.q_pred, state_in.x, state_in.q, self.dx,
-                                                           self.dw, float(dt), state_out.x, state_out.q, state_out.v,
-                                                           state_out.w, int(lo)], device=m.device)
+                wp.launch(kb.update_kernel, hi - lo, [self.x_pred, self.q_pred, state_in.x, state_in.q, self.dx,
+                                                      self.dw, float(dt), state_out.x, state_out.q, state_out.v,
+                                                      state_out.w, int(lo)], device=m.device)
 
         self._split_characters(update)
 
     def step(self, state_in, state_out, control, contacts, dt: float | None = None) -> None:
-        """Advance ``state_in`` by ``dt`` (s, default config.dt) into ``state_out``.
+        """Advance ``state_in`` by ``dt`` (s, default config.solver.dt) into ``state_out``.
 
         ``control`` holds the target of this step and of the previous one (advance it
         first); ``contacts`` were detected on ``state_in``.
         """
-        dt = float(self.config.dt if dt is None else dt)
+        dt = float(self.config.solver.dt if dt is None else dt)
         if not dt > 0:
             raise InvalidInputError(f"dt: expected a positive time step, got {dt!r}")
         t0 = time.perf_counter()

@@ -28,11 +28,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from crowdstudy.body.rotations import axis_angle_to_quaternion, quaternion_to_axis_angle
+from crowdstudy.body.rotations import (axis_angle_to_quaternion, quat_conjugate, quat_multiply,
+                                       quaternion_to_axis_angle)
 from crowdstudy.body.skeleton import JOINT_INDEX, PARENTS, forward_kinematics
 from crowdstudy.errors import InvalidInputError
 from crowdstudy.metrics import joint_speeds
-from crowdstudy.motion.quaternions import quat_conjugate, quat_multiply
 from crowdstudy.physics.finish import planted_frames
 
 __all__ = ["SpeedLimitReport", "limit_joint_speed", "fastest_reference_joint", "UPPER_CHAIN_STOP"]
@@ -148,14 +148,7 @@ def limit_joint_speed(rot: np.ndarray, root: np.ndarray, ref_rot: np.ndarray, re
         ``(rot, report)``: new joint rotations (the input's where nothing was too fast) and a
         :class:`SpeedLimitReport`.
     """
-    rot = np.asarray(rot, np.float64)
-    ref_rot = np.asarray(ref_rot, np.float64)
-    root = np.asarray(root, np.float64)
-    ref_root = np.asarray(ref_root, np.float64)
-    if rot.shape != ref_rot.shape or rot.ndim != 4 or root.shape != rot.shape[:2] + (3,) \
-            or ref_root.shape != root.shape:
-        raise InvalidInputError(f"rot, ref_rot (T, N, J, 3) and root, ref_root (T, N, 3): got {rot.shape}, "
-                                f"{ref_rot.shape}, {root.shape}, {ref_root.shape}")
+    rot, root, ref_rot, ref_root = _checked_motions(rot, root, ref_rot, ref_root)
     if fps <= 0 or margin < 0 or sigma0 <= 0 or growth <= 1.0 or max_rounds < 1:
         raise InvalidInputError(f"fps > 0, margin >= 0, sigma0 > 0, growth > 1 and max_rounds >= 1 expected: got "
                                 f"{fps!r}, {margin!r}, {sigma0!r}, {growth!r}, {max_rounds!r}")
@@ -174,49 +167,14 @@ def limit_joint_speed(rot: np.ndarray, root: np.ndarray, ref_rot: np.ndarray, re
     out = rot.copy()
     if not n_fast or n_frames < 3:
         return out, SpeedLimitReport(float(limit), n_fast, (), 0, before, before, n_fast)
-    from scipy.ndimage import gaussian_filter1d
-
-    mode = "wrap" if periodic else "nearest"
+    settings = _Retiming(fps=fps, limit=limit, sigma0=sigma0, growth=growth, max_rounds=max_rounds,
+                         periodic=periodic, periodic_length=periodic_length)
     q_ref = axis_angle_to_quaternion(ref_rot)
     touched, most_rounds = [], 0
     for c in np.unique(np.nonzero(fast)[1]):
-        q_ref_c = q_ref[:, c]
-        delta = quaternion_to_axis_angle(quat_multiply(quat_conjugate(q_ref_c), axis_angle_to_quaternion(out[:, c])))
         # a leg is re-timed only while its foot swings: planted frames keep the foot hold
-        free = [~(planted_frames(ref_pos[:, c, leg[2]], fps, planted_speed, planted_height, periodic)
-                  | planted_frames(ref_pos[:, c, leg[3]], fps, planted_speed, planted_height, periodic))
-                for leg in _LEGS]
-        sigma, rounds = sigma0, 0
-        spd = speed[:, c]
-        while rounds < max_rounds:
-            steps, joints = np.nonzero(spd > limit)
-            if not steps.size:
-                break
-            w = _window(steps, n_frames, 2.0 * sigma, periodic)
-            groups = {}                                   # chain joints by their window
-            for jt in np.unique(joints):
-                side = _leg_side(int(jt))
-                groups.setdefault(side, set()).update(_chain(int(jt)))
-            moved = False
-            for side, chain in groups.items():
-                idx = sorted(chain)
-                wk = w if side < 0 else w * free[side]
-                frames = np.nonzero(wk > 0)[0]
-                if not idx or not frames.size:
-                    continue
-                moved = True
-                low = gaussian_filter1d(delta[:, idx], sigma, axis=0, mode=mode)[frames]
-                blend = wk[frames, None, None]
-                delta[np.ix_(frames, idx)] = (1.0 - blend) * delta[np.ix_(frames, idx)] + blend * low
-                # only what was re-timed is written back (elsewhere the input, bit for bit)
-                q_new = quat_multiply(q_ref_c[np.ix_(frames, idx)], axis_angle_to_quaternion(delta[np.ix_(frames, idx)]))
-                out[frames[:, None], c, np.asarray(idx)[None, :]] = quaternion_to_axis_angle(q_new)
-            if not moved:             # only the root, pelvis or spine1, or planted legs, are fast
-                break
-            rounds += 1
-            _, pc = forward_kinematics(rest[c][None], out[:, c], root[:, c], parents=PARENTS)
-            spd = joint_speeds(pc, fps, periodic_length=periodic_length, seam=periodic)
-            sigma *= growth
+        free = _swing_frames(ref_pos[:, c], fps, planted_speed, planted_height, periodic)
+        rounds, spd = _retime_character(out, int(c), q_ref[:, c], speed[:, c], free, rest[c], root[:, c], settings)
         if rounds:
             touched.append(int(c))
             most_rounds = max(most_rounds, rounds)
@@ -224,3 +182,96 @@ def limit_joint_speed(rot: np.ndarray, root: np.ndarray, ref_rot: np.ndarray, re
     after = float(speed.max())
     return out, SpeedLimitReport(float(limit), n_fast, tuple(touched), most_rounds, before, after,
                                  int((speed > limit).sum()))
+
+
+def _checked_motions(rot: np.ndarray, root: np.ndarray, ref_rot: np.ndarray,
+                     ref_root: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The output and reference motions of :func:`limit_joint_speed` as float64, their
+    shapes checked: rotations (T, N, J, 3) rad, roots (T, N, 3) m."""
+    rot = np.asarray(rot, np.float64)
+    ref_rot = np.asarray(ref_rot, np.float64)
+    root = np.asarray(root, np.float64)
+    ref_root = np.asarray(ref_root, np.float64)
+    if rot.shape != ref_rot.shape or rot.ndim != 4 or root.shape != rot.shape[:2] + (3,) \
+            or ref_root.shape != root.shape:
+        raise InvalidInputError(f"rot, ref_rot (T, N, J, 3) and root, ref_root (T, N, 3): got {rot.shape}, "
+                                f"{ref_rot.shape}, {root.shape}, {ref_root.shape}")
+    return rot, root, ref_rot, ref_root
+
+
+@dataclass(frozen=True)
+class _Retiming:
+    """The settings of :func:`limit_joint_speed`'s rounds: ``fps`` Hz, ``limit`` m/s, the
+    first low-pass kernel ``sigma0`` frames widened by ``growth`` each round, at most
+    ``max_rounds``; ``periodic`` clip and the scene's ``periodic_length`` m (or None)."""
+
+    fps: float
+    limit: float
+    sigma0: float
+    growth: float
+    max_rounds: int
+    periodic: bool
+    periodic_length: float | None
+
+
+def _swing_frames(ref_pos: np.ndarray, fps: float, planted_speed: float, planted_height: float,
+                  periodic: bool) -> list[np.ndarray]:
+    """Per leg (left, right), the (T,) frames where neither the reference's ankle nor its
+    ball is planted; ``ref_pos`` (T, 24, 3) m, one character's joints."""
+    return [~(planted_frames(ref_pos[:, leg[2]], fps, planted_speed, planted_height, periodic)
+              | planted_frames(ref_pos[:, leg[3]], fps, planted_speed, planted_height, periodic))
+            for leg in _LEGS]
+
+
+def _retime_character(out: np.ndarray, c: int, q_ref: np.ndarray, speed: np.ndarray, free: list[np.ndarray],
+                      rest: np.ndarray, root: np.ndarray, settings: _Retiming) -> tuple[int, np.ndarray]:
+    """Re-time character ``c``'s deviation from its reference (quaternions ``q_ref`` (T, 24,
+    4)) in ``out`` (T, N, 24, 3) rad, in place, round by round with a wider kernel until no
+    joint is faster than the limit. ``speed`` (T', 24) m/s its joint speeds now, ``free``
+    its legs' swing frames, ``rest`` (24, 3) and ``root`` (T, 3) m. Returns the rounds
+    used and the joint speeds after them."""
+    delta = quaternion_to_axis_angle(quat_multiply(quat_conjugate(q_ref), axis_angle_to_quaternion(out[:, c])))
+    n_frames = out.shape[0]
+    sigma, rounds = settings.sigma0, 0
+    while rounds < settings.max_rounds:
+        steps, joints = np.nonzero(speed > settings.limit)
+        if not steps.size:
+            break
+        w = _window(steps, n_frames, 2.0 * sigma, settings.periodic)
+        groups: dict[int, set[int]] = {}                    # chain joints by their window
+        for jt in np.unique(joints):
+            side = _leg_side(int(jt))
+            groups.setdefault(side, set()).update(_chain(int(jt)))
+        if not _retime_chains(out, c, delta, q_ref, w, groups, free, sigma, settings.periodic):
+            break                     # only the root, pelvis or spine1, or planted legs, are fast
+        rounds += 1
+        _, pc = forward_kinematics(rest[None], out[:, c], root, parents=PARENTS)
+        speed = joint_speeds(pc, settings.fps, periodic_length=settings.periodic_length, seam=settings.periodic)
+        sigma *= settings.growth
+    return rounds, speed
+
+
+def _retime_chains(out: np.ndarray, c: int, delta: np.ndarray, q_ref: np.ndarray, w: np.ndarray,
+                   groups: dict[int, set[int]], free: list[np.ndarray], sigma: float, periodic: bool) -> bool:
+    """One round for character ``c``: each chain of ``groups`` ({leg side or -1: joints})
+    has its deviation ``delta`` (T, 24, 3) rad blended, by the window ``w`` (T,) (times its
+    leg's swing frames), towards its Gaussian low-pass of ``sigma`` frames; ``delta`` and
+    the re-timed rotations of ``out`` are updated in place. Returns whether any moved."""
+    from scipy.ndimage import gaussian_filter1d
+
+    mode = "wrap" if periodic else "nearest"
+    moved = False
+    for side, chain in groups.items():
+        idx = sorted(chain)
+        wk = w if side < 0 else w * free[side]
+        frames = np.nonzero(wk > 0)[0]
+        if not idx or not frames.size:
+            continue
+        moved = True
+        low = gaussian_filter1d(delta[:, idx], sigma, axis=0, mode=mode)[frames]
+        blend = wk[frames, None, None]
+        delta[np.ix_(frames, idx)] = (1.0 - blend) * delta[np.ix_(frames, idx)] + blend * low
+        # only what was re-timed is written back (elsewhere the input, bit for bit)
+        q_new = quat_multiply(q_ref[np.ix_(frames, idx)], axis_angle_to_quaternion(delta[np.ix_(frames, idx)]))
+        out[frames[:, None], c, np.asarray(idx)[None, :]] = quaternion_to_axis_angle(q_new)
+    return moved

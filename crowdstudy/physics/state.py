@@ -6,7 +6,7 @@ import numpy as np
 
 from crowdstudy.body.rotations import axis_angle_to_quaternion
 from crowdstudy.errors import InvalidInputError
-from crowdstudy.warp_runtime import host_threads, run_parallel
+from crowdstudy.warp_runtime import get_warp, host_threads, run_parallel
 
 __all__ = ["State", "Control"]
 
@@ -24,8 +24,6 @@ class State:
     """
 
     def __init__(self, model):
-        from crowdstudy.warp_runtime import get_warp
-
         wp = get_warp()
         nb, dev = model.n_bodies, model.device
         self.x = wp.zeros(nb, dtype=wp.vec3, device=dev)
@@ -55,15 +53,12 @@ class Control:
     continues the animation's own motion: its velocity change over the last two steps).
     With ``ahead_frames`` > 0 :meth:`advance` also computes the target that many frames
     later (clamped to the last uploaded frame): ``t_glob_ahead``, ``t_x_ahead`` (the
-    contacts' look-ahead, ``PhysicsConfig.contact_pass_ahead``).
+    contacts' look-ahead, ``PhysicsConfig.contacts.pass_ahead``).
     """
 
     def __init__(self, model, n_frames: int = 2):
-        from crowdstudy.physics.kernels import kernels
-
         self.model = model
-        self.k = kernels()
-        wp = self.k.wp
+        wp = get_warp()
         nb, n, dev = model.n_bodies, model.n_characters, model.device
         self.anim_q = wp.zeros((n_frames, nb), dtype=wp.quat, device=dev)
         self.anim_root = wp.zeros((n_frames, n), dtype=wp.vec3, device=dev)
@@ -104,7 +99,7 @@ class Control:
         f = len(frames)
         if start < 0 or start + f > self.anim_q.shape[0]:
             raise InvalidInputError(f"start: frames [{start}, {start + f}) do not fit the {self.anim_q.shape[0]} slots")
-        wp = self.k.wp
+        wp = get_warp()
         # a few frames at a time: no float64 quaternion copy of the whole clip
         step = max(1, _UPLOAD_ROTATIONS // max(1, m.n_bodies))
         for f0 in range(0, f, step):
@@ -117,25 +112,28 @@ class Control:
     def advance(self, f0: int, f1: int, alpha: float) -> None:
         """Shift the targets (current -> old -> older) and compute the target between frames
         f0 and f1."""
+        from crowdstudy.physics.kernels import targets_kernel
+
         self.t_rel, self.t_rel_old = self.t_rel_old, self.t_rel
         self.t_glob, self.t_glob_old, self.t_glob_older = self.t_glob_older, self.t_glob, self.t_glob_old
         self.t_x, self.t_x_old, self.t_x_older = self.t_x_older, self.t_x, self.t_x_old
         m = self.model
+        wp = get_warp()
         args = [m.n_joints, m.wp["body_parent"], m.wp["anchor_parent"], m.wp["anchor_child"]]
 
         def current() -> None:
-            self.k.wp.launch(self.k.targets_kernel, m.n_characters,
-                             [self.anim_q, self.anim_root, int(f0), int(f1), float(alpha), *args,
-                              self.t_rel, self.t_glob, self.t_x], device=m.device)
+            wp.launch(targets_kernel, m.n_characters,
+                      [self.anim_q, self.anim_root, int(f0), int(f1), float(alpha), *args,
+                       self.t_rel, self.t_glob, self.t_x], device=m.device)
 
         def ahead() -> None:
             last = self.anim_q.shape[0] - 1
             at = min(f0 + alpha * (f1 - f0) + self.ahead_frames, float(last))
             g0 = int(np.floor(at))
             g1 = min(g0 + 1, last)
-            self.k.wp.launch(self.k.targets_kernel, m.n_characters,
-                             [self.anim_q, self.anim_root, g0, g1, float(at - g0), *args,
-                              self.t_rel_ahead, self.t_glob_ahead, self.t_x_ahead], device=m.device)
+            wp.launch(targets_kernel, m.n_characters,
+                      [self.anim_q, self.anim_root, g0, g1, float(at - g0), *args,
+                       self.t_rel_ahead, self.t_glob_ahead, self.t_x_ahead], device=m.device)
 
         if self.ahead_frames <= 0:
             current()

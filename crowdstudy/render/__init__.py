@@ -7,6 +7,13 @@ Public API (heavy modules are imported on first use, so ``import crowdstudy.rend
 * :func:`render_video` (``crowdstudy.render.video``)
 * :func:`build_stimuli` (``crowdstudy.render.stimuli``)
 * :class:`CrowdRenderer`, :class:`Camera`, :func:`free_camera`
+
+The renderer is built in three layers: CPU assets (``assets``: options, bodies, colours and
+looks, dressing and levels of detail, the light, the environment's parts; plain numpy), GPU
+resources made from them (``gpu``: programs, textures, buffers, the shadow map, the colour
+targets with MSAA) and the passes that draw a frame (``passes``: shadow, characters,
+environment, static layers, colour; ``overlap_view``: the overlap view's id and overlap
+passes). ``renderer.CrowdRenderer`` wires them together.
 """
 
 from __future__ import annotations

@@ -20,12 +20,16 @@ by the pixels covered by characters instead.
 from __future__ import annotations
 
 import dataclasses
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from crowdstudy.errors import InvalidInputError
 
-__all__ = ["OverlapFrame", "OverlapPass", "capsules_from_skinning", "RED"]
+if TYPE_CHECKING:
+    from crowdstudy.render.passes import CharacterPass
+
+__all__ = ["OverlapFrame", "OverlapPass", "overlap_frame", "capsules_from_skinning", "RED"]
 
 RED = np.array([225, 25, 30], dtype=np.float32)
 _MAX_CANDIDATES = 160
@@ -98,84 +102,86 @@ def _candidates(start, end, radius, period: float | None) -> np.ndarray:
 
 
 class OverlapPass:
-    """GPU resources of the overlap view for one :class:`CrowdRenderer`."""
+    """The id and overlap passes of the overlap view, drawn with a renderer's
+    :class:`~crowdstudy.render.passes.CharacterPass` (its instances as the camera's
+    colour pass left them) into their own ``width`` x ``height`` targets."""
 
-    def __init__(self, renderer):
+    def __init__(self, ctx, characters: CharacterPass, width: int, height: int, n_characters: int):
         import moderngl
 
-        self.r = renderer
-        ctx = renderer.ctx
-        size = (renderer.width, renderer.height)
-        n = renderer.anim.n_characters
+        self.ctx, self.characters, self.width, self.height = ctx, characters, width, height
+        size = (width, height)
         self.tex_ids = ctx.texture(size, 2, dtype="f4")
         self.depth_ids = ctx.depth_renderbuffer(size)
         self.fbo_ids = ctx.framebuffer(color_attachments=[self.tex_ids], depth_attachment=self.depth_ids)
         self.tex_mask = ctx.texture(size, 1, dtype="f1")
         self.fbo_mask = ctx.framebuffer(color_attachments=[self.tex_mask])
-        self.tex_caps = ctx.texture((48, n), 4, dtype="f4")
-        self.tex_cand = ctx.texture((_MAX_CANDIDATES + 1, n), 1, dtype="f4")
+        self.tex_caps = ctx.texture((48, n_characters), 4, dtype="f4")
+        self.tex_cand = ctx.texture((_MAX_CANDIDATES + 1, n_characters), 1, dtype="f4")
         for tex in (self.tex_ids, self.tex_mask, self.tex_caps, self.tex_cand):
             tex.filter = (moderngl.NEAREST, moderngl.NEAREST)
-        prog = renderer.prog_overlap
+        prog = characters.programs.overlap
         for name, unit in (("u_ids", 4), ("u_capsules", 5), ("u_candidates", 6)):
             prog[name].value = unit
-        prog["u_period"].value = float(renderer.period or 0.0)
+        prog["u_period"].value = float(characters.period or 0.0)
 
-    def run(self, frame: int, *, tolerance: float = 0.005, image: bool = True) -> OverlapFrame:
-        """The overlap view of ``frame``; ``image`` False: only its mask and fractions (the
-        frame's normal look is not rendered; ``OverlapFrame.image`` is None)."""
+    def run(self, vp: np.ndarray, capsules: tuple[np.ndarray, np.ndarray, np.ndarray], *,
+            tolerance: float = 0.005) -> tuple[np.ndarray, int]:
+        """The overlapping pixels seen through ``vp`` (world-to-clip) of the world
+        ``capsules`` (start, end, radius; :func:`capsules_from_skinning`), fragments deeper
+        than ``tolerance`` m inside another character counting: ``(mask, crowd_pixels)``,
+        the (H, W) bool mask (first row at the top) and how many pixels show a character."""
         import moderngl
 
-        r = self.r
-        if image:
-            raw = r.render_raw(frame)  # normal look; also loads the frame's bones and instances
-            picture = np.frombuffer(raw, np.uint8).reshape(r.height, r.width, 3)[::-1].astype(np.float32)
-        else:
-            r._load_frame(frame)
-            r._prepare(frame, upload=False)   # the camera's instances, as render_raw leaves them
-        start, end, radius = capsules_from_skinning(r.bodies, r.skinning(frame))
+        start, end, radius = capsules
         caps = np.zeros((start.shape[0], 24, 2, 4), np.float32)
         caps[:, :, 0, :3], caps[:, :, 0, 3] = start, radius
         caps[:, :, 1, :3], caps[:, :, 1, 3] = end, np.arange(start.shape[0])[:, None]
         self.tex_caps.write(caps.tobytes())
-        self.tex_cand.write(_candidates(start, end, radius, r.period).tobytes())
-        vp = r.camera.view_projection(r.width / r.height)
-        ctx = r.ctx
-        ctx.viewport = (0, 0, r.width, r.height)
+        self.tex_cand.write(_candidates(start, end, radius, self.characters.period).tobytes())
+        ctx, view = self.ctx, (0, 0, self.width, self.height)
+        ctx.viewport = view
         # pass 1: visible character ids
         self.fbo_ids.use()
-        ctx.viewport = (0, 0, r.width, r.height)
+        ctx.viewport = view
         self.fbo_ids.clear(-1.0, -1.0, 0.0, 0.0, depth=1.0)
         ctx.enable(moderngl.DEPTH_TEST)
         ctx.disable(moderngl.CULL_FACE)
-        r._draw_characters(r.prog_id, vp)
+        self.characters.draw(self.characters.programs.id, vp)
         # pass 2: overlapping fragments, no depth test
         self.fbo_mask.use()
-        ctx.viewport = (0, 0, r.width, r.height)
+        ctx.viewport = view
         self.fbo_mask.clear(0.0, 0.0, 0.0, 0.0)
         ctx.disable(moderngl.DEPTH_TEST)
         self.tex_ids.use(4)
         self.tex_caps.use(5)
         self.tex_cand.use(6)
-        r.prog_overlap["u_tolerance"].value = float(tolerance)
-        r._draw_characters(r.prog_overlap, vp)
+        self.characters.programs.overlap["u_tolerance"].value = float(tolerance)
+        self.characters.draw(self.characters.programs.overlap, vp)
         ctx.enable(moderngl.DEPTH_TEST)
         mask = np.frombuffer(self.fbo_mask.read(components=1, alignment=1), np.uint8)
-        mask = mask.reshape(r.height, r.width)[::-1] > 127
+        mask = mask.reshape(self.height, self.width)[::-1] > 127
         ids = np.frombuffer(self.fbo_ids.read(components=1, dtype="f4", alignment=1), np.float32)
-        crowd_pixels = int(np.count_nonzero(ids > -0.5))
-        n_red = int(np.count_nonzero(mask))
-        out = None
-        if image:
-            # desaturate the scene so no red shirt can be taken for an overlap, then paint red
-            luma = picture @ np.array([0.299, 0.587, 0.114], np.float32)
-            picture = 0.3 * picture + 0.7 * (0.85 * luma[..., None] + 30.0)
-            picture[mask] = 0.15 * picture[mask] + 0.85 * RED
-            out = np.clip(picture, 0, 255).astype(np.uint8)
-        return OverlapFrame(image=out, mask=mask, red_fraction=n_red / mask.size,
-                            crowd_fraction=n_red / crowd_pixels if crowd_pixels else 0.0)
+        return mask, int(np.count_nonzero(ids > -0.5))
 
     def release(self) -> None:
         for o in (self.fbo_ids, self.depth_ids, self.tex_ids, self.fbo_mask, self.tex_mask, self.tex_caps,
                   self.tex_cand):
             o.release()
+
+
+def overlap_frame(picture: np.ndarray | None, mask: np.ndarray, crowd_pixels: int) -> OverlapFrame:
+    """The overlap view's frame from the normal ``picture`` ((H, W, 3) uint8, or None for
+    the mask alone), the ``mask`` of overlapping pixels and the pixels showing a character:
+    the picture desaturated (so no red shirt can be taken for an overlap) with the masked
+    pixels painted red."""
+    n_red = int(np.count_nonzero(mask))
+    out = None
+    if picture is not None:
+        picture = picture.astype(np.float32)
+        luma = picture @ np.array([0.299, 0.587, 0.114], np.float32)
+        picture = 0.3 * picture + 0.7 * (0.85 * luma[..., None] + 30.0)
+        picture[mask] = 0.15 * picture[mask] + 0.85 * RED
+        out = np.clip(picture, 0, 255).astype(np.uint8)
+    return OverlapFrame(image=out, mask=mask, red_fraction=n_red / mask.size,
+                        crowd_fraction=n_red / crowd_pixels if crowd_pixels else 0.0)

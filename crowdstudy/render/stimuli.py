@@ -121,7 +121,7 @@ def _physics_config(physics):
     if physics is None:
         return PhysicsConfig()
     if isinstance(physics, dict):
-        return PhysicsConfig().replace(**physics)
+        return PhysicsConfig.from_overrides(physics, where="physics")
     if not isinstance(physics, PhysicsConfig):
         raise InvalidInputError(f"physics: expected a PhysicsConfig or a dict of its fields, got {type(physics).__name__}")
     return physics
@@ -173,7 +173,7 @@ def digest_inputs(design, stimulus, settings: dict, *, physics=None, method: str
     out = {"cell": cell, "duration": settings["duration"], "fps": settings["fps"],
            "metric_frames": settings["metric_frames"], "method": method, **_shared_inputs()}
     if method != "Baseline":
-        out["physics"] = dataclasses.asdict(_physics_config(physics))
+        out["physics"] = _physics_config(physics).as_dict()
         out["baseline"] = animation_digest(design, stimulus, settings, method="Baseline")
     return out
 
@@ -441,8 +441,9 @@ def build_stimuli(design, out_dir, *, preset: str = "full", duration: float | No
         workers: local worker processes (default: one per 4 CPUs, at least 1; 0 = run in
             this process).
         body_loader: record -> Body override (tests); default ``crowdstudy.body.load_body``.
-        physics: the :class:`~crowdstudy.physics.PhysicsConfig` (or a dict of its fields) of
-            "Ours"; None = the defaults.
+        physics: the :class:`~crowdstudy.physics.PhysicsConfig` (or a dict of its fields,
+            :meth:`~crowdstudy.physics.PhysicsConfig.from_overrides`) of "Ours"; None = the
+            defaults.
     Returns:
         The manifest dict (also written to ``out_dir/manifest.json`` and ``.csv``).
     """
@@ -488,7 +489,7 @@ def _cell_name(stim) -> str:
 
 
 def _build_animations(design, out_dir: Path, settings, todo, runner: _Runner, progress: bool, physics) -> dict:
-    from tqdm import tqdm
+    from crowdstudy.progress import progress_bar
 
     folder = out_dir / "animations"
     cells: dict[str, tuple] = {}  # cell -> (a stimulus of it, methods its videos need)
@@ -514,7 +515,7 @@ def _build_animations(design, out_dir: Path, settings, todo, runner: _Runner, pr
             else:
                 job["baseline"] = str(folder / f"{cell}-Baseline.npz")
         jobs.append(job)
-    bar = tqdm(total=len(jobs), desc="cell animations", unit="cell", disable=not progress or not jobs)
+    bar = progress_bar(total=len(jobs), desc="cell animations", unit="cell", enabled=progress and bool(jobs))
     for job, res in runner.run(animation_job, jobs):
         for name, content in res["files"].items():
             if isinstance(content, (bytes, bytearray)):
@@ -530,8 +531,7 @@ def _build_animations(design, out_dir: Path, settings, todo, runner: _Runner, pr
 
 def _render_videos(design, out_dir: Path, preset: str, settings, todo, rows: dict, order, metrics, runner: _Runner,
                    progress: bool, body_loader, digests: dict) -> None:
-    from tqdm import tqdm
-
+    from crowdstudy.progress import progress_bar
     from crowdstudy.render.video import sha256_file
 
     from crowdstudy.render.renderer import baseline_color_positions
@@ -554,7 +554,7 @@ def _render_videos(design, out_dir: Path, preset: str, settings, todo, rows: dic
             job["animation"] = str(anim_path)
             job["out"] = str(out_dir / "videos" / f"{s.stimulus_id}.mp4")
         jobs.append(job)
-    bar = tqdm(total=len(jobs), desc="stimulus videos", unit="video", disable=not progress or not jobs)
+    bar = progress_bar(total=len(jobs), desc="stimulus videos", unit="video", enabled=progress and bool(jobs))
     for job, res in runner.run(video_job, jobs):
         s = job["stimulus"]
         rel = f"videos/{s['stimulus_id']}.mp4"

@@ -278,8 +278,7 @@ def render_video(anim, viewpoint, out_path, *, width: int | None = None, height:
         everything encoded) and "red" (the overlap view's samples): ``{stage}_wall_s``,
         ``{stage}_cpu_s``).
     """
-    from tqdm import tqdm
-
+    from crowdstudy.progress import progress_bar
     from crowdstudy.render.renderer import CrowdRenderer
 
     if design is None:
@@ -302,42 +301,11 @@ def render_video(anim, viewpoint, out_path, *, width: int | None = None, height:
         clock.lap("setup")
         writer = VideoWriter(out_path, width, height, fps, crf=crf, preset=preset, bottom_up=not overlap_view)
         try:
-            bar = tqdm(range(len(plan)), desc=out_path.name, unit="frame", disable=not progress, leave=False)
-            # the seam's dissolve partners (frames past the video) first, held in memory
+            bar = progress_bar(range(len(plan)), desc=out_path.name, unit="frame", enabled=progress, leave=False)
             if overlap_view:
-                later = {int(k): renderer.overlap(int(k)).image for k in plan.partner[plan.partner >= 0]}
-                for i in bar:
-                    frame = renderer.overlap(int(plan.source[i]))
-                    red.append(frame.red_fraction)
-                    image = frame.image if plan.partner[i] < 0 else \
-                        blend_frames(frame.image, later[int(plan.partner[i])], plan.weight[i])
-                    writer.write(image)
+                red += _write_overlap_frames(renderer, plan, writer, bar)
             else:
-                later = {int(k): renderer.render_raw(int(k)) for k in plan.partner[plan.partner >= 0]}
-                # two pixel-pack buffers: frame k is read back while frame k+1 renders
-                pbos = [renderer.ctx.buffer(reserve=width * height * 3) for _ in range(2)]
-                try:
-                    pending = None
-                    for i in bar:
-                        src = int(plan.source[i])
-                        if plan.partner[i] >= 0:           # a dissolve frame: rendered synchronously
-                            if pending is not None:
-                                writer.write(pbos[pending].read())
-                                pending = None
-                            writer.write(blend_frames(renderer.render_raw(src), later[int(plan.partner[i])],
-                                                      plan.weight[i]))
-                            continue
-                        renderer.render_into(src, pbos[i % 2])
-                        if i == 0:
-                            clock.lap("first_frame")   # and the programs' first use (llvmpipe compiles them)
-                        if pending is not None:
-                            writer.write(pbos[pending].read())
-                        pending = i % 2
-                    if pending is not None:
-                        writer.write(pbos[pending].read())
-                finally:
-                    for pbo in pbos:
-                        pbo.release()
+                _write_frames(renderer, plan, writer, bar, clock)
             writer.close()
         except BaseException:
             writer.abort()
@@ -353,6 +321,51 @@ def render_video(anim, viewpoint, out_path, *, width: int | None = None, height:
             "seconds_per_frame": seconds / len(plan), "red_fraction": red,
             "mean_red_fraction": float(np.mean(red)) if red else None, "dissolve_frames": plan.n_blended,
             "timings": clock.laps}
+
+
+def _write_overlap_frames(renderer, plan: FramePlan, writer: VideoWriter, frames) -> list[float]:
+    """Write the overlap view of each video frame in ``frames`` (indices into ``plan``, a
+    progress bar); the red fraction of each. The seam's dissolve partners (frames past the
+    video) are rendered first and held in memory."""
+    red = []
+    later = {int(k): renderer.overlap(int(k)).image for k in plan.partner[plan.partner >= 0]}
+    for i in frames:
+        frame = renderer.overlap(int(plan.source[i]))
+        red.append(frame.red_fraction)
+        image = frame.image if plan.partner[i] < 0 else \
+            blend_frames(frame.image, later[int(plan.partner[i])], plan.weight[i])
+        writer.write(image)
+    return red
+
+
+def _write_frames(renderer, plan: FramePlan, writer: VideoWriter, frames, clock: _Clock) -> None:
+    """Write each video frame in ``frames`` (indices into ``plan``, a progress bar) through
+    two pixel-pack buffers: frame k is read back while frame k+1 renders. The seam's
+    dissolve partners are rendered first and held in memory; a dissolve frame is rendered
+    synchronously. ``clock`` laps "first_frame" after the first."""
+    later = {int(k): renderer.render_raw(int(k)) for k in plan.partner[plan.partner >= 0]}
+    pbos = [renderer.ctx.buffer(reserve=renderer.width * renderer.height * 3) for _ in range(2)]
+    try:
+        pending = None
+        for i in frames:
+            src = int(plan.source[i])
+            if plan.partner[i] >= 0:           # a dissolve frame: rendered synchronously
+                if pending is not None:
+                    writer.write(pbos[pending].read())
+                    pending = None
+                writer.write(blend_frames(renderer.render_raw(src), later[int(plan.partner[i])], plan.weight[i]))
+                continue
+            renderer.render_into(src, pbos[i % 2])
+            if i == 0:
+                clock.lap("first_frame")   # and the programs' first use (llvmpipe compiles them)
+            if pending is not None:
+                writer.write(pbos[pending].read())
+            pending = i % 2
+        if pending is not None:
+            writer.write(pbos[pending].read())
+    finally:
+        for pbo in pbos:
+            pbo.release()
 
 
 class _Clock:

@@ -1,4 +1,5 @@
-"""Statistics of the perceptual study (docs/guides/analysis.md).
+"""Statistics of the perceptual study: from exported responses to the paper's tables,
+figures and APA summary.
 
 - :mod:`~crowdstudy.stats.scoring`: validate responses.csv, reverse negative items,
   item-pair reliability, composites, per participant x cell means.
@@ -12,8 +13,13 @@
   polynomial contrasts; :mod:`~crowdstudy.stats.robust`: mixed model (incomplete
   participants kept) and rank tests of Method.
 - :mod:`~crowdstudy.stats.assumptions`: Shapiro-Wilk and Q-Q plots of residuals per cell.
-- :mod:`~crowdstudy.stats.report`, :mod:`~crowdstudy.stats.figures`,
-  :mod:`~crowdstudy.stats.pipeline`: tables, APA text, paper-style figures, ``analyze``.
+- :mod:`~crowdstudy.stats.report`, :mod:`~crowdstudy.stats.figures`: table formats, APA
+  text, paper-style figures.
+- :mod:`~crowdstudy.stats.pipeline`: ``analyze`` (what ``crowdstudy analyze`` runs) as
+  load -> ``compute`` -> write; :mod:`~crowdstudy.stats.options`: its settings
+  (``AnalysisOptions``); :mod:`~crowdstudy.stats.results`: what it computes;
+  :mod:`~crowdstudy.stats.summary`, :mod:`~crowdstudy.stats.writers`: summary.md, the
+  tables, figures and analysis.json.
 - :mod:`~crowdstudy.stats.inputs`: reading responses.csv, its sidecar and participants.csv.
 - :mod:`~crowdstudy.stats.synthetic`, :mod:`~crowdstudy.stats.power`,
   :mod:`~crowdstudy.stats.pilot`: simulated participants, Monte-Carlo power, the

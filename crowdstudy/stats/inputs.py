@@ -9,6 +9,8 @@ participants table of the study export, with errors that name the file.
   export (columns ``participant``, ``excluded`` 0/1, ``exclusion_reason``: rule names
   separated by ";"); excluded participants are dropped before the analysis and counted per
   reason.
+- :func:`load_responses`: all of the above for one analysis: the validated, complete
+  responses with their source, simulated mark and exclusions (:class:`LoadedResponses`).
 """
 
 from __future__ import annotations
@@ -16,14 +18,16 @@ from __future__ import annotations
 import dataclasses
 import json
 from pathlib import Path
+from typing import Literal
 
 import pandas as pd
 
 from crowdstudy.errors import InvalidInputError
 from crowdstudy.stats._data import plain, row_label
+from crowdstudy.stats.scoring import check_complete, validate_responses
 
 __all__ = ["read_csv_file", "read_sidecar", "read_participants", "apply_exclusions", "Exclusions",
-           "PARTICIPANT_COLUMNS"]
+           "PARTICIPANT_COLUMNS", "LoadedResponses", "load_responses"]
 
 #: Columns participants.csv must have (others are kept and ignored).
 PARTICIPANT_COLUMNS = ("participant", "excluded", "exclusion_reason")
@@ -141,3 +145,54 @@ def apply_exclusions(responses: pd.DataFrame, participants: pd.DataFrame, source
         raise InvalidInputError(f"{source}: every participant of the responses is excluded; nothing to analyse")
     return kept, Exclusions(source=source, listed=int(len(participants)), excluded=tuple(sorted(dropped)),
                             reasons=reasons)
+
+
+@dataclasses.dataclass(frozen=True)
+class LoadedResponses:
+    """Responses ready for the analysis: ``data`` validated against the design, excluded
+    participants dropped, every stage present complete; ``source``: the file (or
+    "responses" for a DataFrame); ``simulated`` and ``note``: from the sidecar (or the
+    caller); ``exclusions``: None without a participants table."""
+    data: pd.DataFrame
+    source: str
+    simulated: bool
+    note: str
+    exclusions: Exclusions | None
+
+
+def load_responses(responses: pd.DataFrame | str | Path, design, *,
+                   participants: str | Path | pd.DataFrame | Literal[False] | None = None,
+                   simulated: bool | None = None) -> LoadedResponses:
+    """Read and check the responses of one analysis.
+
+    ``responses``: a DataFrame in the responses.csv schema (``attrs["simulated"]`` marks
+    it simulated) or a path to the CSV (its sidecar ``STEM.json`` is read). ``participants``:
+    participants.csv (path or DataFrame; None: participants.csv beside a responses path
+    when it exists; False: none). ``simulated``: overrides the sidecar.
+
+    Each participant must answer each stimulus once (a repeated answer is an error naming
+    participant, cell and rows) and every stage present must have all its design levels.
+    """
+    side: dict = {}
+    source = "responses"
+    path = None
+    if isinstance(responses, (str, Path)):
+        path = Path(responses)
+        source = str(path)
+        side = read_sidecar(path)
+        responses = read_csv_file(path, "responses")
+    elif not isinstance(responses, pd.DataFrame):
+        raise InvalidInputError(f"responses must be a DataFrame or a path, got {type(responses).__name__}")
+    else:
+        side = {"simulated": True} if responses.attrs.get("simulated") else {}
+    if participants is None and path is not None and (path.parent / "participants.csv").is_file():
+        participants = path.parent / "participants.csv"
+    data = validate_responses(responses.reset_index(drop=True), design, source=source)
+    excl = None
+    if participants is not None and participants is not False:
+        psrc = "participants" if isinstance(participants, pd.DataFrame) else str(participants)
+        data, excl = apply_exclusions(data, read_participants(participants), psrc)
+    check_complete(data, design, source=source)      # rows named by their index: the file's data rows
+    is_sim = bool(side.get("simulated", False)) if simulated is None else bool(simulated)
+    note = str(side["note"]) if side.get("note") else ""
+    return LoadedResponses(data=data, source=source, simulated=is_sim, note=note, exclusions=excl)

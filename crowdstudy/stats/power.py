@@ -22,14 +22,13 @@ import pandas as pd
 from crowdstudy.errors import InvalidInputError
 from crowdstudy.stats._data import cell_matrix
 from crowdstudy.stats.anova import anova_from_cells
-from crowdstudy.stats.scoring import cell_means, composite_scores
+from crowdstudy.stats.scoring import FACTORS, cell_means, composite_scores
 from crowdstudy.stats.synthetic import ResponseModel, simulate_responses
 
 __all__ = ["power_analysis", "PowerResult", "DEFAULT_EFFECTS", "method_points", "clopper_pearson"]
 
 #: Effects whose power is reported by default.
 DEFAULT_EFFECTS = ("Method", "Density:Method")
-_FACTORS = ["Density", "Viewpoint", "Method"]
 
 
 def clopper_pearson(hits: int, n: int, level: float = 0.95) -> tuple[float, float]:
@@ -113,8 +112,8 @@ def power_analysis(design, n_participants: int, *, model: ResponseModel | None =
     seeds = np.random.SeedSequence(int(seed)).generate_state(int(sims), dtype=np.uint32)
     iterator = range(int(sims))
     if progress:
-        from tqdm import tqdm
-        iterator = tqdm(iterator, desc="power", unit="study", leave=False)
+        from crowdstudy.progress import progress_bar
+        iterator = progress_bar(iterator, desc="power", unit="study", leave=False)
     pvals = np.full((int(sims), len(comps) * len(effects)), np.nan)
     np2 = np.full_like(pvals, np.nan)
     dzs = np.full((int(sims), len(comps)), np.nan)
@@ -123,7 +122,7 @@ def power_analysis(design, n_participants: int, *, model: ResponseModel | None =
         scored = composite_scores(raw, design)
         for ci, comp in enumerate(comps):
             long = cell_means(scored, comp, design, stage=stage)
-            cm = cell_matrix(long, comp, _FACTORS, "participant_id")
+            cm = cell_matrix(long, comp, list(FACTORS), "participant_id")
             table = anova_from_cells(cm, correction=correction, alpha=alpha).set_index("Source")
             grid = cm.values.reshape(len(cm.subjects), -1, cm.shape[-1])
             diff = grid[:, :, -1].mean(axis=1) - grid[:, :, 0].mean(axis=1)

@@ -1,10 +1,10 @@
 """Scoring of questionnaire answers: validation of responses.csv, reversal of the negative
 items, item-pair reliability, composite scores and per participant x cell means.
 
-The paper's rule (docs/concepts/study-design.md, "questionnaire"): ``Q' = 7 - Q`` for the negative items Q2, Q4,
-Q6 (in general ``likert_points + 1 - Q`` for every item with ``reverse = true`` in the
-design), reliability of each pair checked first, then QCR = (Q1 + Q2')/2,
-QCA = (Q3 + Q4')/2, QOR = (Q5 + Q6')/2 (the design's ``[composites]``).
+The paper's rule: ``Q' = 7 - Q`` for the negative items Q2, Q4, Q6 (in general
+``likert_points + 1 - Q`` for every item with ``reverse = true`` in the design),
+reliability of each pair checked first, then QCR = (Q1 + Q2')/2, QCA = (Q3 + Q4')/2,
+QOR = (Q5 + Q6')/2 (the design's ``[composites]``).
 """
 
 from __future__ import annotations
@@ -16,10 +16,12 @@ from crowdstudy.errors import InvalidInputError
 from crowdstudy.stats._data import plain, row_label
 
 __all__ = ["validate_responses", "check_complete", "reverse_items", "item_reliability", "composite_scores", "cell_means",
-           "FACTOR_COLUMNS", "REQUIRED_COLUMNS"]
+           "FACTOR_COLUMNS", "FACTORS", "REQUIRED_COLUMNS"]
 
 #: responses.csv column -> factor name used in the analysis tables.
 FACTOR_COLUMNS = {"density_level": "Density", "viewpoint": "Viewpoint", "method": "Method"}
+#: The within factors of the study's ANOVA, in order (the columns :func:`cell_means` names).
+FACTORS = tuple(FACTOR_COLUMNS.values())
 #: Columns an analysis needs (the item columns come from the design).
 REQUIRED_COLUMNS = ("participant_id", "stage", "scenario", "density_level", "viewpoint", "method")
 

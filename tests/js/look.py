@@ -19,7 +19,8 @@ from pathlib import Path
 
 import numpy as np
 
-from crowdstudy.gltf.export import Z_UP_TO_Y_UP, export_gltf
+from crowdstudy.body.gltf_container import Z_UP_TO_Y_UP
+from crowdstudy.gltf.export import export_gltf
 from crowdstudy.scene import CrowdAnimation
 
 JS = Path(__file__).resolve().parent

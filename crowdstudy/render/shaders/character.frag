@@ -1,6 +1,7 @@
 // Region-coloured bodies: u_colors, RGBA32F, width 6 (colour regions), one row per character
-// (linear RGB albedo), lit per vertex. Textured bodies: u_albedo, one sRGB layer per
-// character on the body's UVs, lit per pixel.
+// (linear RGB albedo), lit per vertex (v_diffuse, v_add), the region chosen per pixel.
+// Textured bodies: u_albedo, one layer per character on the body's UVs (sqrt of linear RGB),
+// lit per pixel with the shadow factor interpolated from the vertices (v_shadow).
 uniform sampler2D u_colors;
 uniform sampler2DArray u_albedo;
 uniform int u_textured;

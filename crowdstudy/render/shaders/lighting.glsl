@@ -3,7 +3,8 @@
 // light_terms() returns colour = albedo * diffuse + add. Textured characters evaluate it
 // per pixel with the shadow factor interpolated from the vertices (shadow_factor(), 4 taps
 // per vertex of a dense mesh: soft edges without 4 lookups per MSAA sample); the region-
-// coloured mannequins per vertex; the floor per pixel.
+// coloured mannequins per vertex; the floor and the corridor's walls per pixel; the venue's
+// cut-away elements per vertex, without shadows (static.vert).
 uniform vec3 u_light_dir;        // unit vector towards the key light
 uniform vec3 u_light_color;
 uniform vec3 u_sky_color;

@@ -2,9 +2,10 @@
 // Pattern (in_color.a): 0 plain, 1 floor tiles, 2 emissive, 3 + phase (phase in [0, 1)) a
 // figure of the surrounding audience, standing on z = 0, that bobs on the beat: a vertex
 // at height z rises by u_bob_amplitude * min(z / 1.7 m, 1) * (0.5 - 0.5 cos(2 pi (beat + phase))).
-// VERTEX_LIT (the venue's figures, stage and walls): lit per vertex, like the characters
-// (llvmpipe shades every MSAA sample, so per-pixel lighting of a thousand small figures
-// would cost several times the crowd); the floor is lit per pixel.
+// VERTEX_LIT (the venue's cut-away elements: hall walls, stage, fittings, audience figures):
+// lit per vertex, without shadows, like the region-coloured mannequins (llvmpipe shades
+// every MSAA sample, so per-pixel lighting of a thousand small figures would cost several
+// times the crowd); the floor and the corridor's walls are lit per pixel.
 uniform mat4 u_view_proj;
 uniform float u_beat;            // beats elapsed since frame 0 (tempo * time)
 uniform float u_bob_amplitude;   // m

@@ -81,13 +81,13 @@ def run(args: argparse.Namespace) -> int:
     cells = [(st, level) for st in stages for level in levels]
     if len(cells) > 1 and out.suffix == ".npz":
         raise InvalidInputError(f"--out: {len(cells)} animations need a directory, got the file {str(out)!r}")
-    from tqdm import tqdm
-
     from crowdstudy.motion.baseline import build_baseline
+    from crowdstudy.progress import progress_bar
 
-    for st, level in tqdm(cells, desc="animate", unit="cell", file=sys.stderr, disable=len(cells) == 1):
+    bar = progress_bar(cells, desc="animate", unit="cell", file=sys.stderr, enabled=len(cells) > 1)
+    for st, level in bar:
         anim = build_baseline(design, st.key, level, duration=args.duration, fps=args.fps, seed=args.seed)
         path = out if out.suffix == ".npz" else out / f"S{st.number}-{level}-Baseline.npz"
         anim.save(path)
-        tqdm.write(_summary(anim, path), file=sys.stdout)
+        bar.write(_summary(anim, path), file=sys.stdout)
     return 0

@@ -40,6 +40,7 @@ def configure(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     from crowdstudy.design import load_design
     from crowdstudy.paths import check_output_dir
+    from crowdstudy.stats.options import AnalysisOptions
     from crowdstudy.stats.pipeline import analyze
 
     path = Path(args.responses)
@@ -49,11 +50,10 @@ def run(args: argparse.Namespace) -> int:
         raise InvalidInputError(f"--alpha must be in (0, 1), got {args.alpha}")
     design = load_design(args.design)
     check_output_dir(args.out, "--out")
-    correction = {"auto": "auto", "always": True, "never": False}[args.correction]
-    result = analyze(path, design, args.out, correction=correction, alpha=args.alpha, effsize=args.effsize,
-                     missing=args.missing, adjust=args.adjust, error=args.error_bars, stages=args.stage,
-                     figures=not args.no_figures, progress=True, participants=args.participants,
-                     stars=args.stars)
+    options = AnalysisOptions(correction=args.correction, alpha=args.alpha, effsize=args.effsize,
+                              missing=args.missing, adjust=args.adjust, error_bars=args.error_bars,
+                              stages=args.stage, figures=not args.no_figures, stars=args.stars)
+    result = analyze(path, design, args.out, options, progress=True, participants=args.participants)
     print(result.summary)
     print(f"wrote {len(result.files)} files to {args.out}")
     return 0

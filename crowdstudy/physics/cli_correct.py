@@ -14,17 +14,18 @@ __all__ = ["configure", "run"]
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
+    from crowdstudy.physics.config_file import add_config_option
+    from crowdstudy.physics.solver import LINEAR_SOLVERS
+
     parser.add_argument("input", help="CrowdAnimation .npz (the Baseline)")
     parser.add_argument("output", help="corrected CrowdAnimation .npz to write (Ours); the run's timings go to "
                                        "the sidecar OUTPUT_STEM.timings.json beside it")
-    parser.add_argument("--device", default=None, help="Warp device: cpu or cuda:0 (default: CUDA when present)")
-    parser.add_argument("--config", nargs="*", default=[], metavar="KEY=VALUE",
-                        help="PhysicsConfig overrides, e.g. damping=0.006 contact_stiffness=3e4; the skins and "
-                             "hold follow the crowd's density (sparse_* below sparse_density, the plain fields "
-                             "above dense_density); crowd_adaptive=false uses the plain fields for any crowd")
+    parser.add_argument("--device", default=None,
+                        help="Warp device: cpu, cuda or cuda:N (default: CUDA when present)")
+    add_config_option(parser, "e.g. --config physics.toml control.damping=0.006 contacts.stiffness=3e4")
     parser.add_argument("--frames", type=int, default=None,
                         help="correct only the first FRAMES frames (2 .. the clip's frame count)")
-    parser.add_argument("--linear-solver", choices=("fused", "warp", "scipy"), default=None,
+    parser.add_argument("--linear-solver", choices=LINEAR_SOLVERS, default=None,
                         help="CG implementation (default: fused on CPU, warp on CUDA)")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
 
@@ -32,14 +33,14 @@ def configure(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     from crowdstudy.errors import InvalidInputError
     from crowdstudy.paths import check_output_path, timings_path
-    from crowdstudy.physics.config import PhysicsConfig
+    from crowdstudy.physics.config_file import config_from_cli
     from crowdstudy.physics.corrector import correct
     from crowdstudy.scene import CrowdAnimation
 
     # every check before the long run: the output paths, the config, the input, --frames
     output = check_output_path(args.output, "output")
     sidecar = check_output_path(timings_path(output), "output (timings sidecar)")
-    config = PhysicsConfig.from_strings(args.config)
+    config = config_from_cli(args.config)
     anim = CrowdAnimation.load(args.input)
     if args.frames is not None:
         if args.frames < 2:
@@ -58,7 +59,7 @@ def run(args: argparse.Namespace) -> int:
               "substeps_per_frame": phys["substeps_per_frame"],
               # how crowded the input is and the skins and hold it was corrected with
               "crowd_density": round(phys["crowd_density"], 3), "profile_weight": phys["profile_weight"],
-              "mesh_skin_max": phys["config"]["mesh_skin_max"], "output_hold": phys["config"]["output_hold"],
+              "mesh_skin_max": phys["config"]["skin"]["max"], "output_hold": phys["config"]["output"]["hold"],
               **timings}
     sidecar.write_text(json.dumps(record, indent=2, sort_keys=True) + "\n")
     ms = timings.get("ms_per_step")

@@ -1,6 +1,8 @@
 """A small binary glTF 2.0 (.glb) writer and reader on numpy arrays (the container format
 only: :mod:`crowdstudy.gltf.export` writes crowds with it, :mod:`crowdstudy.body.gltf_model`
-reads characters).
+reads characters). It sits in :mod:`crowdstudy.body`, the lowest of its two users, so that
+the body models can read glTF characters without importing :mod:`crowdstudy.gltf`, which
+imports the bodies.
 
 Writer: :class:`GltfBuilder` collects the JSON document and one binary buffer; each
 ``accessor(...)`` call appends a 4-byte aligned buffer view. ``to_glb()`` gives the bytes

@@ -1,16 +1,26 @@
-"""The MuJoCo peer of ``crowdstudy bench physics`` is set up like Ours (benchmarks/physics.py):
+"""The MuJoCo peer of the correction (crowdstudy.physics.mujoco_peer) is set up like Ours:
 same inter-body geometry (radius + mesh skin + margin), same self pairs, same interpolated
-targets, and the same conversion back to a CrowdAnimation."""
+targets, and the same conversion back to a CrowdAnimation; without mujoco it names the extra
+to install."""
 
 from __future__ import annotations
 
+import dataclasses
+import sys
 
 import numpy as np
 import pytest
 
-mujoco = pytest.importorskip("mujoco", reason="mujoco is not installed (pip install -e .[peers])")
+from crowdstudy.errors import InvalidInputError, MissingDependencyError
+from crowdstudy.physics.mujoco_peer import (MUJOCO_SETTINGS, MujocoScene, check_timeconsts, mujoco_peer,
+                                            rigid_to_animation)
 
 N_FRAMES = 10
+
+
+@pytest.fixture
+def mujoco():
+    return pytest.importorskip("mujoco", reason="mujoco is not installed (pip install -e .[peers])")
 
 
 def _tiny(kind: str, chars=(0, 1, 2), spread: float = 0.0):
@@ -42,17 +52,17 @@ def _ours(anim):
 
 
 @pytest.mark.parametrize("kind", ["concert", "corridor"])
-def test_same_geometry_and_self_pairs(bench, kind):
+def test_same_geometry_and_self_pairs(mujoco, kind):
     anim = _tiny(kind)
-    scene = bench.MujocoScene(anim)
+    scene = MujocoScene(anim)
     corr = _ours(anim)
     m, cfg = corr.model, corr.config
     n, nj = anim.n_characters, anim.n_joints
     # inter-body (hull) capsules: radius + mesh skin, plus the contact margin, body by body
-    ours = (m.cap_radius + m.cap_skin + cfg.contact_margin).reshape(n, nj)
+    ours = (m.cap_radius + m.cap_skin + cfg.contacts.margin).reshape(n, nj)
     np.testing.assert_allclose(scene.inter_body_radius(), ours, atol=1e-7)
     assert np.all(m.cap_skin.reshape(n, nj).max(1) > 0)          # the skin is really there
-    np.testing.assert_allclose(scene.model.geom_margin[scene.hull_geom], cfg.contact_margin)
+    np.testing.assert_allclose(scene.model.geom_margin[scene.hull_geom], cfg.contacts.margin)
     # ground and self contacts on the bare capsule, no margin; masses from the bare capsule
     np.testing.assert_allclose(scene.model.geom_size[scene.core_geom, 0], m.cap_radius.reshape(n, nj), atol=1e-7)
     assert np.all(scene.model.geom_margin[scene.core_geom] == 0)
@@ -70,7 +80,7 @@ def test_same_geometry_and_self_pairs(bench, kind):
     assert len(scene.ghost_shift) == (2 if kind == "corridor" else 0)
     # each box's face is the wall and it lies behind it, away from the crowd (ours: one-sided
     # planes facing the roots): the roots' side of every box face is empty
-    from crowdstudy.scene import static_walls_from_meta
+    from crowdstudy.scene_meta import static_walls_from_meta
 
     roots = anim.root_translation[0, :, :2]
     for gid, ((x0, y0), (x1, y1)) in zip(walls, static_walls_from_meta(anim.meta)):
@@ -83,11 +93,11 @@ def test_same_geometry_and_self_pairs(bench, kind):
         assert np.all(np.sign((roots - [x0, y0]) @ normal) == -np.sign(offset))
 
 
-def test_half_step_targets_equal_ours(bench):
+def test_half_step_targets_equal_ours(mujoco):
     from crowdstudy.body.rotations import quaternion_to_matrix
 
     anim = _tiny("corridor")
-    scene = bench.MujocoScene(anim)
+    scene = MujocoScene(anim)
     corr = _ours(anim)
     m = corr.model
     n, nj = anim.n_characters, anim.n_joints
@@ -105,7 +115,7 @@ def test_half_step_targets_equal_ours(bench):
     assert q_mj.shape == (n * nj, 4)
 
 
-def test_conversion_back_same_as_ours_and_tracks(bench):
+def test_conversion_back_same_as_ours_and_tracks(mujoco):
     from crowdstudy.metrics import tracking_error
 
     anim = _tiny("concert", spread=3.0)
@@ -121,32 +131,40 @@ def test_conversion_back_same_as_ours_and_tracks(bench):
     from crowdstudy.body.rotations import quaternion_to_matrix
 
     pelvis = (x + np.einsum("bij,bj->bi", quaternion_to_matrix(q.reshape(-1, 4)), corr.model.anchor_child))
-    r_np, root_np = bench.rigid_to_animation(q, pelvis.reshape(anim.n_characters, anim.n_joints, 3)[:, 0])
+    r_np, root_np = rigid_to_animation(q, pelvis.reshape(anim.n_characters, anim.n_joints, 3)[:, 0])
     np.testing.assert_allclose(r_np.reshape(-1, 3), rot.numpy()[0], atol=2e-5)
     np.testing.assert_allclose(root_np, root.numpy()[0], atol=2e-6)
     # an unperturbed MuJoCo run (characters 3 m apart) converted back tracks its input
-    scene = bench.MujocoScene(anim)
+    scene = MujocoScene(anim)
     r0, root0 = scene.read()
     np.testing.assert_allclose(root0, anim.root_translation[0], atol=1e-9)
     assert tracking_error(anim.replace(joint_rotations=np.repeat(r0[None], N_FRAMES, 0),
                                        root_translation=np.repeat(root0[None], N_FRAMES, 0)),
                           anim.replace(joint_rotations=np.repeat(anim.joint_rotations[:1], N_FRAMES, 0),
                                        root_translation=np.repeat(anim.root_translation[:1], N_FRAMES, 0))) < 1e-6
-    mj, timing = bench.mujoco_peer(anim)
+    mj, timing = mujoco_peer(anim)
     assert not timing["unstable"] and timing["steps_per_60th"] == 1.0
     assert mj.meta["method"] == "MuJoCo" and mj.n_frames == anim.n_frames
     assert tracking_error(mj, anim) < 3.0
 
 
-def test_every_tuning_is_one_mujoco_runs_as_written(bench):
+def test_every_tuning_is_one_mujoco_runs_as_written(mujoco):
     """MuJoCo clamps a solref time constant under two steps to two steps without a word (a
     weld at 0.02 s and one at 0.03 s ran the same model at 1/60 s): every tuning of the
-    benchmark keeps its welds and contacts at or above two of its steps, and one that does
+    peer keeps its welds and contacts at or above two of its steps, and one that does
     not is refused, naming the field."""
-    assert len(bench.MUJOCO_SETTINGS) == 4
-    for st in bench.MUJOCO_SETTINGS.values():
-        bench.check_timeconsts(st, 1.0 / (30.0 * st["substeps"]))
-    too_stiff = dict(bench.MUJOCO_SETTINGS["weld0.05"], weld_solref=(0.02, 1.0))
-    with pytest.raises(ValueError, match="weld_solref"):
-        bench.MujocoScene(_tiny("concert", chars=(0,)), setting=too_stiff)
-    bench.MujocoScene(_tiny("concert", chars=(0,)), setting=dict(too_stiff, substeps=4))   # 1/120 s: 2 steps
+    assert len(MUJOCO_SETTINGS) == 4
+    for st in MUJOCO_SETTINGS.values():
+        check_timeconsts(st, 1.0 / (30.0 * st.substeps))
+    too_stiff = dataclasses.replace(MUJOCO_SETTINGS["weld0.05"], weld_solref=(0.02, 1.0))
+    with pytest.raises(InvalidInputError, match="weld_solref"):
+        MujocoScene(_tiny("concert", chars=(0,)), setting=too_stiff)
+    MujocoScene(_tiny("concert", chars=(0,)), setting=dataclasses.replace(too_stiff, substeps=4))   # 1/120 s: 2 steps
+    with pytest.raises(InvalidInputError, match="setting"):
+        MujocoScene(_tiny("concert", chars=(0,)), setting="weld0.07")
+
+
+def test_without_mujoco_the_peer_names_the_extra(monkeypatch):
+    monkeypatch.setitem(sys.modules, "mujoco", None)          # import mujoco raises ImportError
+    with pytest.raises(MissingDependencyError, match=r"pip install 'crowdstudy\[peers\]'"):
+        MujocoScene(_tiny("concert", chars=(0,)))

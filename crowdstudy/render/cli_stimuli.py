@@ -13,6 +13,8 @@ __all__ = ["configure", "run"]
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
+    from crowdstudy.physics.config_file import add_config_option
+
     parser.add_argument("--design", help="study design TOML (default stimuli/study.toml)")
     parser.add_argument("--out", required=True, help="output folder (videos/, animations/, manifest.json/.csv)")
     parser.add_argument("--preset", choices=("quick", "full"), default="full",
@@ -21,21 +23,20 @@ def configure(parser: argparse.ArgumentParser) -> None:
                         help="seconds per video instead of the preset's (a short pilot set; at most the design's)")
     parser.add_argument("--scheduler", help="Dask distributed scheduler address, tcp://HOST:PORT")
     parser.add_argument("--workers", type=int, help="local worker processes (default one per 4 CPUs; 0 = in process)")
-    parser.add_argument("--config", nargs="*", default=[], metavar="KEY=VALUE",
-                        help="physics parameters of Ours, as for `crowdstudy correct --config`; a change "
-                             "re-makes the Ours animations and videos on resume")
+    add_config_option(parser, "the physics of Ours, as for `crowdstudy correct --config`; a change re-makes the "
+                              "Ours animations and videos on resume")
     parser.add_argument("--quiet", action="store_true", help="no progress bars")
 
 
 def run(args: argparse.Namespace) -> int:
     from crowdstudy.design import load_design
     from crowdstudy.paths import check_output_dir
-    from crowdstudy.physics.config import PhysicsConfig
+    from crowdstudy.physics.config_file import config_from_cli
     from crowdstudy.render.stimuli import build_stimuli
 
     check_output_dir(args.out, "--out")
     design = load_design(args.design)
-    physics = PhysicsConfig.from_strings(args.config)
+    physics = config_from_cli(args.config)
     manifest = build_stimuli(design, args.out, preset=args.preset, duration=args.duration, scheduler=args.scheduler,
                              workers=args.workers, progress=not args.quiet, physics=physics)
     print(f"stimuli: {len(manifest['stimuli'])} videos listed in {args.out}/manifest.json and manifest.csv")
