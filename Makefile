@@ -7,7 +7,7 @@ export WARP_CACHE_PATH := $(CURDIR)/build/warp-cache
 export MPLBACKEND := Agg
 export PYTHONUNBUFFERED := 1
 
-.PHONY: setup demo test test-fast figures bench constraints clean
+.PHONY: setup demo test test-fast figures bench docs results constraints clean
 
 setup:
 	@bash scripts/setup.sh
@@ -28,6 +28,23 @@ figures: setup
 
 bench: setup
 	$(VENV)/bin/crowdstudy bench all
+
+# The documentation site, offline, into build/site (open build/site/index.html). Warnings
+# are errors. The CLI, API, file-format and results pages are generated at build time
+# (scripts/docs_hooks.py, scripts/results_pages.py).
+docs: setup
+	NO_MKDOCS_2_WARNING=1 $(VENV)/bin/mkdocs build --strict --quiet
+	@echo "[docs] built build/site/index.html"
+
+# Publish benchmark reports in the docs: copy build/bench/NAME.json (from `crowdstudy bench
+# NAME`) to docs/results/data/ for each NAME in RESULTS (default: the ones published already).
+RESULTS ?= $(basename $(notdir $(wildcard docs/results/data/*.json)))
+results:
+	@mkdir -p docs/results/data
+	@for name in $(RESULTS); do \
+	    test -f build/bench/$$name.json || { echo "[results] build/bench/$$name.json missing: run crowdstudy bench first" >&2; exit 1; }; \
+	    cp build/bench/$$name.json docs/results/data/$$name.json && echo "[results] docs/results/data/$$name.json"; \
+	done
 
 # Re-resolve the newest allowed versions into constraints.txt (then `make test`, commit it).
 constraints:

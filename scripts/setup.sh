@@ -39,8 +39,8 @@ if [ ! -x .venv/bin/python ]; then
     echo "[setup] creating .venv"
     python3 -m venv .venv
 fi
-# constraints.txt pins every dependency to the versions tested together (README: "Pinned
-# versions" says how to upgrade it); a change to it or to pyproject.toml re-runs pip.
+# constraints.txt pins every dependency to the versions tested together (docs/getting-started.md,
+# "Pinned versions", says how to upgrade it); a change to it or to pyproject.toml re-runs pip.
 if [ ! -f "$STAMP_DIR/pip" ] || [ pyproject.toml -nt "$STAMP_DIR/pip" ] || \
    { [ -f constraints.txt ] && [ constraints.txt -nt "$STAMP_DIR/pip" ]; }; then
     echo "[setup] installing Python dependencies into .venv (first time takes a few minutes)"

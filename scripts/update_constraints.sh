@@ -12,7 +12,7 @@ python3 -m venv "$LOCK_VENV"
 {
     echo "# Versions tested together (Linux x86_64, Python $("$LOCK_VENV/bin/python" -c 'import sys; print(*sys.version_info[:2], sep=".")')),"
     echo "# used by scripts/setup.sh: pip install -c constraints.txt -e \".[all]\"."
-    echo "# Regenerate with scripts/update_constraints.sh (README: \"Pinned versions\")."
+    echo "# Regenerate with scripts/update_constraints.sh (docs/getting-started.md: \"Pinned versions\")."
     "$LOCK_VENV/bin/python" -m pip freeze --all --exclude-editable --exclude pip
 } > constraints.txt.new
 mv constraints.txt.new constraints.txt

@@ -26,7 +26,8 @@ def pytest_collection_modifyitems(session, config, items):
 
 @pytest.fixture
 def shared_dir() -> Path:
-    """``../shared`` beside the checkout; tests that need it skip when it is absent."""
+    """The folder beside the checkout whose ``data/`` holds the raw data (``../shared/data``: the
+    CMU takes); tests that need it skip when it is absent."""
     if not SHARED.is_dir():
         pytest.skip("../shared is not present beside the checkout")
     return SHARED

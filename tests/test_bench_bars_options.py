@@ -1,6 +1,6 @@
 """``crowdstudy bench physics --bars`` options: a subset of cells and PhysicsConfig changes
 (benchmarks/physics.py, measuring with crowdstudy.physics.acceptance, .stadium and
-.step_timing), so each tried setting in the README has its command."""
+.step_timing), so each setting tried in docs/lab-notes/ has its command."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Looping stimuli (DESIGN.md, "What a stimulus must be"): the concert Baseline is exactly
+"""Looping stimuli (docs/concepts/methods.md, "What a stimulus must be"): the concert Baseline is exactly
 periodic over the stimulus duration; the corridor's seam is a short cross-dissolve of
 frames past the video into its first frames; the pixel seam measure finds a jump."""
 

@@ -201,7 +201,7 @@ def test_the_pose_damper_stops_a_pushed_body_overshooting():
     default: 360 N s/m against the body's velocity relative to the animation's) brings a body
     pushed 10 cm back without swinging through its target; undamped, the same 8 kN/m springs
     throw it past. On the 20 s concert D5 cell the damper took the overlap left from 4.8 % to
-    3.7 % of the Baseline's at the same tracking (docs/correction-history.md, "Damped pose springs")."""
+    3.7 % of the Baseline's at the same tracking (docs/lab-notes/correction-history.md, "Damped pose springs")."""
     defaults = PhysicsConfig().control
     springs = {"pose_translation_stiffness": defaults.pose_translation_stiffness}
     undamped = _release_curve(1.0 / 60.0, signed=True, pose_translation_damping_scale=0.0, **springs)

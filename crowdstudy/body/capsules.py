@@ -483,7 +483,7 @@ def capsule_skin(body, percentile: float = SKIN_PERCENTILE, max_skin: float = SK
     upper trunk's (up to 4 cm). ``max_skin`` caps it, and the palm
     and finger bones (``left/right_wrist``, ``left/right_hand`` of a 24-joint skeleton)
     take ``hand_scale`` of their skin: a hand 3-4 cm thick had a contact sphere 12-14 cm
-    across and stopped 3-5 cm short of a back it was pressed on (docs/correction-history.md,
+    across and stopped 3-5 cm short of a back it was pressed on (docs/lab-notes/correction-history.md,
     "Where concert D5's tracking goes").
     """
     if max_skin < 0 or hand_scale < 0:

@@ -1,6 +1,6 @@
 """Contact sheets: a row per character, 8 frames over 2 s, a camera that follows it.
 
-The way to look at motion (DESIGN.md, "What a stimulus must be"): :func:`animation_sheet`
+The way to look at motion (docs/concepts/methods.md, "What a stimulus must be"): :func:`animation_sheet`
 renders chosen characters of a crowd animation (Baseline beside Ours: call it on both with
 the same characters and frames), :func:`clip_sheet` renders shipped clips on a row of
 bodies (``crowdstudy sheet --clips twist,macarena``). The camera stands ``distance`` m in
