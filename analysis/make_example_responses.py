@@ -27,11 +27,15 @@ def main():
     model = ResponseModel.for_design(design)
     df = simulate_responses(design, N, model, seed=SEED)
     df.to_csv(HERE / "example_responses.csv", index=False, lineterminator="\n")
-    meta = {"simulated": True,
-            "note": "SIMULATED responses from crowdstudy.stats.synthetic, not data from real participants",
-            "participants": N, "trials": len(df), "design": "stimuli/study.toml",
-            "model": {k: (dict(v) if isinstance(v, dict) else v) for k, v in dataclasses.asdict(model).items()},
-            "provenance": provenance(SEED, generator="analysis/make_example_responses.py")}
+    meta = {
+        "simulated": True,
+        "note": "SIMULATED responses from crowdstudy.stats.synthetic, not data from real participants",
+        "participants": N,
+        "trials": len(df),
+        "design": "stimuli/study.toml",
+        "model": {k: (dict(v) if isinstance(v, dict) else v) for k, v in dataclasses.asdict(model).items()},
+        "provenance": provenance(SEED, generator="analysis/make_example_responses.py"),
+    }
     (HERE / "example_responses.json").write_text(json.dumps(meta, indent=2, default=list) + "\n")
     print(f"wrote {HERE / 'example_responses.csv'} ({len(df)} rows)")
 

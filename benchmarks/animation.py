@@ -59,13 +59,13 @@ def _walking_crowd(n: int, duration: float, fps: float, seed: int):
 
 def _naive_stationary(crowd, duration, fps, seed, bodies):
     """Per-frame, per-character loop (the peer)."""
+    from crowdstudy.body.rotations import quat_about_z, quat_multiply, quaternion_to_axis_angle
     from crowdstudy.motion import list_clips
     from crowdstudy.motion.baseline import DEFAULT_TEMPO, body_scales
     from crowdstudy.motion.mocap_library import dance_loop
-    from crowdstudy.body.rotations import quat_about_z, quat_multiply, quaternion_to_axis_angle
 
     names = list_clips("dance", default_only=True)
-    loops = {name: dance_loop(name, DEFAULT_TEMPO, fps, duration) for name in names}   # the same loops as ours
+    loops = {name: dance_loop(name, DEFAULT_TEMPO, fps, duration) for name in names}  # the same loops as ours
     rng = np.random.default_rng(seed)
     n = crowd.n_agents
     choice = rng.integers(len(names), size=n)
@@ -83,15 +83,18 @@ def _naive_stationary(crowd, duration, fps, seed, bodies):
             q[0] = quat_multiply(quat_about_z(np.array(yaw[i])), q[0])
             rot[f, i] = quaternion_to_axis_angle(q)
             c, s = np.cos(yaw[i]), np.sin(yaw[i])
-            root[f, i] = [crowd.positions[0, i, 0] + scale[i] * (c * r[0] - s * r[1]),
-                          crowd.positions[0, i, 1] + scale[i] * (s * r[0] + c * r[1]), scale[i] * r[2]]
+            root[f, i] = [
+                crowd.positions[0, i, 0] + scale[i] * (c * r[0] - s * r[1]),
+                crowd.positions[0, i, 1] + scale[i] * (s * r[0] + c * r[1]),
+                scale[i] * r[2],
+            ]
     return rot, root
 
 
 def _naive_walking(crowd, bodies):
+    from crowdstudy.body.rotations import quat_about_z, quat_blend, quat_multiply, quaternion_to_axis_angle
     from crowdstudy.motion.baseline import body_scales, gait_blend
     from crowdstudy.motion.library import walk_clips
-    from crowdstudy.body.rotations import quat_about_z, quat_blend, quat_multiply, quaternion_to_axis_angle
 
     walks = walk_clips()
     speeds = np.array([c.speed for c in walks])
@@ -119,8 +122,11 @@ def _naive_walking(crowd, bodies):
             q[0] = quat_multiply(quat_about_z(np.array(heading)), q[0])
             rot[f, i] = quaternion_to_axis_angle(q)
             c, s = np.cos(heading), np.sin(heading)
-            root[f, i] = [pos[f, i, 0] + scale[i] * (c * r[0] - s * r[1]),
-                          pos[f, i, 1] + scale[i] * (s * r[0] + c * r[1]), scale[i] * r[2]]
+            root[f, i] = [
+                pos[f, i, 0] + scale[i] * (c * r[0] - s * r[1]),
+                pos[f, i, 1] + scale[i] * (s * r[0] + c * r[1]),
+                scale[i] * r[2],
+            ]
     return rot, root
 
 
@@ -147,10 +153,16 @@ def main(argv: list[str]) -> int:
     walking = _walking_crowd(n, dur, fps, args.seed)
     rows = []
     cases = [
-        ("stationary", lambda: animate_stationary(stationary, duration=dur, fps=fps, seed=args.seed, bodies=bodies),
-         lambda: _naive_stationary(stationary, dur, fps, args.seed, bodies)),
-        ("walking", lambda: animate_walking(walking, fps=fps, seed=args.seed, bodies=bodies),
-         lambda: _naive_walking(walking, bodies)),
+        (
+            "stationary",
+            lambda: animate_stationary(stationary, duration=dur, fps=fps, seed=args.seed, bodies=bodies),
+            lambda: _naive_stationary(stationary, dur, fps, args.seed, bodies),
+        ),
+        (
+            "walking",
+            lambda: animate_walking(walking, fps=fps, seed=args.seed, bodies=bodies),
+            lambda: _naive_walking(walking, bodies),
+        ),
     ]
     for scene, ours, peer in cases:
         t_ours = measure(ours, repeat=args.repeat, warmup=1)["median"]

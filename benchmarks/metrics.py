@@ -49,9 +49,12 @@ def _scene(n: int, seed: int = 0):
 
     rng = np.random.default_rng(seed)
     side = int(np.ceil(np.sqrt(n)))
-    grid = np.stack(np.meshgrid(np.arange(side), np.arange(side)), -1).reshape(-1, 2)[:n] * (3.0 / side) - 1.5 + 1.5 / side
-    records = [{"model": "open", "sex": ("female", "male")[i % 2], "height": float(rng.uniform(1.55, 1.9))}
-               for i in range(n)]
+    grid = (
+        np.stack(np.meshgrid(np.arange(side), np.arange(side)), -1).reshape(-1, 2)[:n] * (3.0 / side) - 1.5 + 1.5 / side
+    )
+    records = [
+        {"model": "open", "sex": ("female", "male")[i % 2], "height": float(rng.uniform(1.55, 1.9))} for i in range(n)
+    ]
     t = 30
     roots = np.zeros((t, n, 3))
     roots[:, :, :2] = grid + rng.normal(0, 0.03, grid.shape)
@@ -73,9 +76,14 @@ def _warp_peer(anim, frame: int, h: float) -> tuple[float, np.ndarray]:
     wp = get_warp()
 
     @wp.kernel
-    def inside_others(meshes: wp.array(dtype=wp.uint64), points: wp.array(dtype=wp.vec3),
-                      owner: wp.array(dtype=wp.int32), first: wp.array(dtype=wp.int32),
-                      partners: wp.array(dtype=wp.int32), out: wp.array(dtype=wp.float32)):
+    def inside_others(
+        meshes: wp.array(dtype=wp.uint64),
+        points: wp.array(dtype=wp.vec3),
+        owner: wp.array(dtype=wp.int32),
+        first: wp.array(dtype=wp.int32),
+        partners: wp.array(dtype=wp.int32),
+        out: wp.array(dtype=wp.float32),
+    ):
         t = wp.tid()
         p = points[t]
         i = owner[t]
@@ -90,12 +98,19 @@ def _warp_peer(anim, frame: int, h: float) -> tuple[float, np.ndarray]:
         out[t] = hit
 
     bodies = resolve_bodies(anim)
-    verts = [np.asarray(b.pose(anim.joint_rotations[frame, i], anim.root_translation[frame, i])[0])
-             for i, b in enumerate(bodies)]
+    verts = [
+        np.asarray(b.pose(anim.joint_rotations[frame, i], anim.root_translation[frame, i])[0])
+        for i, b in enumerate(bodies)
+    ]
     t0 = time.perf_counter()
-    meshes = [wp.Mesh(points=wp.array(v, dtype=wp.vec3), indices=wp.array(np.asarray(b.faces, np.int32).ravel(),
-                                                                          dtype=wp.int32),
-                      support_winding_number=True) for v, b in zip(verts, bodies)]
+    meshes = [
+        wp.Mesh(
+            points=wp.array(v, dtype=wp.vec3),
+            indices=wp.array(np.asarray(b.faces, np.int32).ravel(), dtype=wp.int32),
+            support_winding_number=True,
+        )
+        for v, b in zip(verts, bodies)
+    ]
     lo = np.array([v.min(0) for v in verts])
     hi = np.array([v.max(0) for v in verts])
     meet = np.all((lo[:, None] <= hi[None]) & (lo[None] <= hi[:, None]), axis=2)
@@ -115,14 +130,20 @@ def _warp_peer(anim, frame: int, h: float) -> tuple[float, np.ndarray]:
         owner.append(np.full(len(grid), i, np.int32))
     pts = np.concatenate(points)
     out = wp.zeros(len(pts), dtype=wp.float32)
-    wp.launch(inside_others, dim=len(pts), inputs=[wp.array([m.id for m in meshes], dtype=wp.uint64),
-                                                   wp.array(pts, dtype=wp.vec3),
-                                                   wp.array(np.concatenate(owner), dtype=wp.int32),
-                                                   wp.array(np.array(first, np.int32), dtype=wp.int32),
-                                                   wp.array(np.array(partners or [0], np.int32), dtype=wp.int32),
-                                                   out])
+    wp.launch(
+        inside_others,
+        dim=len(pts),
+        inputs=[
+            wp.array([m.id for m in meshes], dtype=wp.uint64),
+            wp.array(pts, dtype=wp.vec3),
+            wp.array(np.concatenate(owner), dtype=wp.int32),
+            wp.array(np.array(first, np.int32), dtype=wp.int32),
+            wp.array(np.array(partners or [0], np.int32), dtype=wp.int32),
+            out,
+        ],
+    )
     wp.synchronize()
-    vol = np.bincount(np.concatenate(owner), weights=out.numpy(), minlength=len(verts)) * h ** 3
+    vol = np.bincount(np.concatenate(owner), weights=out.numpy(), minlength=len(verts)) * h**3
     return time.perf_counter() - t0, vol
 
 
@@ -131,8 +152,12 @@ def main(argv: list[str]) -> int:
     parser.add_argument("--characters", type=int, default=60)
     parser.add_argument("--resolution", type=float, default=0.02)
     parser.add_argument("--repeat", type=int, default=8, help="frames timed for the column method (>= 2)")
-    parser.add_argument("--peer-resolution", type=float, default=0.04,
-                        help="grid spacing for the side-by-side with the Warp peer (0.04)")
+    parser.add_argument(
+        "--peer-resolution",
+        type=float,
+        default=0.04,
+        help="grid spacing for the side-by-side with the Warp peer (0.04)",
+    )
     parser.add_argument("--no-peer", action="store_true", help="skip the (slow) Warp point-sampling peer")
     args = parser.parse_args(argv)
     from crowdstudy.metrics import overlap_volume
@@ -156,12 +181,20 @@ def main(argv: list[str]) -> int:
             per_frame.append(((t2 - t1) - (t1 - t0)) / (len(frames) - 1))
             setup.append((t1 - t0) - per_frame[-1])
         times = per_frame
-        name = f"columns/{geometry}" + ("" if geometry == "capsule" else
-                                        " (numpy)" if device == "numpy" else " (warp kernel)")
+        name = f"columns/{geometry}" + (
+            "" if geometry == "capsule" else " (numpy)" if device == "numpy" else " (warp kernel)"
+        )
         results[name] = float(np.median(times))
-        rows.append({"method": name, "characters": anim.n_characters, "frames": len(frames),
-                     "ms_per_frame": 1000 * results[name], "setup_ms": 1000 * float(np.median(setup)),
-                     "overlap_litres": res.mean_litres})
+        rows.append(
+            {
+                "method": name,
+                "characters": anim.n_characters,
+                "frames": len(frames),
+                "ms_per_frame": 1000 * results[name],
+                "setup_ms": 1000 * float(np.median(setup)),
+                "overlap_litres": res.mean_litres,
+            }
+        )
     rows[1]["speedup_vs_peer"] = results[rows[1]["method"]] / results[rows[0]["method"]]
     rows[1]["note"] = "speedup = numpy / warp kernel"
     if not args.no_peer:
@@ -174,15 +207,42 @@ def main(argv: list[str]) -> int:
         t0 = time.perf_counter()
         ours = overlap_volume(anim, resolution=hp, geometry="mesh", frames=frames).per_character[0]
         ours_s = (time.perf_counter() - t0) / len(frames)
-        rows.append({"method": f"columns/mesh @ {100 * hp:g} cm", "characters": anim.n_characters,
-                     "frames": len(frames),
-                     "ms_per_frame": 1000 * ours_s, "overlap_litres": 1000 * float(ours.mean()),
-                     "speedup_vs_peer": peer_s / ours_s,
-                     "volume_vs_peer": float(ours.sum() / max(peer_vol.sum(), 1e-12))})
-        rows.append({"method": f"warp-winding/mesh @ {100 * hp:g} cm (peer)", "characters": anim.n_characters,
-                     "frames": 1, "ms_per_frame": 1000 * peer_s, "overlap_litres": 1000 * float(peer_vol.mean())})
-    print(format_table(rows, ["method", "characters", "frames", "ms_per_frame", "setup_ms", "overlap_litres",
-                              "speedup_vs_peer", "volume_vs_peer", "note"]))
+        rows.append(
+            {
+                "method": f"columns/mesh @ {100 * hp:g} cm",
+                "characters": anim.n_characters,
+                "frames": len(frames),
+                "ms_per_frame": 1000 * ours_s,
+                "overlap_litres": 1000 * float(ours.mean()),
+                "speedup_vs_peer": peer_s / ours_s,
+                "volume_vs_peer": float(ours.sum() / max(peer_vol.sum(), 1e-12)),
+            }
+        )
+        rows.append(
+            {
+                "method": f"warp-winding/mesh @ {100 * hp:g} cm (peer)",
+                "characters": anim.n_characters,
+                "frames": 1,
+                "ms_per_frame": 1000 * peer_s,
+                "overlap_litres": 1000 * float(peer_vol.mean()),
+            }
+        )
+    print(
+        format_table(
+            rows,
+            [
+                "method",
+                "characters",
+                "frames",
+                "ms_per_frame",
+                "setup_ms",
+                "overlap_litres",
+                "speedup_vs_peer",
+                "volume_vs_peer",
+                "note",
+            ],
+        )
+    )
     path = write_report("metrics", rows, scene=label, resolution=args.resolution)
     print(f"wrote {path}")
     return 0

@@ -73,8 +73,7 @@ def device_rows(cpu_only: bool = False) -> list[dict]:
 
     wp = get_warp()
     cpu = wp.get_device("cpu")
-    rows = [{"device": "cpu", "present": True, "name": getattr(cpu, "name", "cpu"),
-             "host_threads": host_threads()}]
+    rows = [{"device": "cpu", "present": True, "name": getattr(cpu, "name", "cpu"), "host_threads": host_threads()}]
     if cpu_only:
         rows.append({"device": "cuda", "present": False, "name": "skipped (--cpu-only)"})
     elif wp.is_cuda_available():
@@ -104,14 +103,22 @@ def cost_curve(sizes, steps: int, device: str = "cpu", base=None, config=None) -
         rss0 = rss_mib()
         r = time_steps(anim, steps, device=device, config=config)
         grown = rss_mib() - rss0
-        row = {"characters": n, "device": device, "steps": steps, "load": os.getloadavg()[0],
-               "cpu_ms_per_60th": r["total_cpu_ms"], "wall_ms_per_60th": r["total_wall_ms"],
-               "wall_min_ms": r["total_wall_min_ms"],
-               **{k: r[k] for k in r if k.endswith("_cpu_ms") and k != "total_cpu_ms"},
-               "cg_iterations": r["cg_iterations"], "contacts": r["contacts"],
-               "warp_mib": r["warp_mib"], "warp_kib_per_character": 1024.0 * r["warp_mib"] / n,
-               "rss_growth_mib": grown,
-               "peak_rss_mib": rss_mib("VmHWM")}
+        row = {
+            "characters": n,
+            "device": device,
+            "steps": steps,
+            "load": os.getloadavg()[0],
+            "cpu_ms_per_60th": r["total_cpu_ms"],
+            "wall_ms_per_60th": r["total_wall_ms"],
+            "wall_min_ms": r["total_wall_min_ms"],
+            **{k: r[k] for k in r if k.endswith("_cpu_ms") and k != "total_cpu_ms"},
+            "cg_iterations": r["cg_iterations"],
+            "contacts": r["contacts"],
+            "warp_mib": r["warp_mib"],
+            "warp_kib_per_character": 1024.0 * r["warp_mib"] / n,
+            "rss_growth_mib": grown,
+            "peak_rss_mib": rss_mib("VmHWM"),
+        }
         rows.append(row)
         print(format_table([row]), flush=True)
         del anim
@@ -153,7 +160,7 @@ def runtime_figure(rows: list[dict], path=None):
 def compare_cg(anim, repeat: int = 10) -> list[dict]:
     """The CG implementations on the same assembled CPU system (after 10 steps)."""
     corr = timed_corrector(anim, device="cpu")
-    for s in range(10):     # get into a contact-rich state
+    for s in range(10):  # get into a contact-rich state
         f = 1 + s // 2
         corr.control.advance(f - 1, f, (s % 2 + 1) / 2)
         corr.pipeline.collide(corr.states[0], corr.contacts, corr.control)
@@ -162,21 +169,30 @@ def compare_cg(anim, repeat: int = 10) -> list[dict]:
     corr.pipeline.collide(corr.states[0], corr.contacts, corr.control)
     corr.solver.assemble(corr.states[0], corr.control, corr.contacts, corr.dt)
     rows = []
-    for name, solver, precond in (("fused PCG, tree precond", "fused", "character"),
-                                  ("fused PCG, 6x6 block Jacobi", "fused", "body"),
-                                  ("scipy CG on BSR, 6x6 block Jacobi", "scipy", "body"),
-                                  ("warp.optim.linear.cg on BSR, tree precond", "warp", "character"),
-                                  ("warp.optim.linear.cg on BSR, 6x6 block Jacobi", "warp", "body")):
+    for name, solver, precond in (
+        ("fused PCG, tree precond", "fused", "character"),
+        ("fused PCG, 6x6 block Jacobi", "fused", "body"),
+        ("scipy CG on BSR, 6x6 block Jacobi", "scipy", "body"),
+        ("warp.optim.linear.cg on BSR, tree precond", "warp", "character"),
+        ("warp.optim.linear.cg on BSR, 6x6 block Jacobi", "warp", "body"),
+    ):
         corr.solver.linear_solver, corr.solver.preconditioner = solver, precond
-        corr.solver.solve(corr.contacts)     # warm-up (compiles)
+        corr.solver.solve(corr.contacts)  # warm-up (compiles)
         times, cpu = [], []
         for _ in range(repeat):
             t0, c0 = time.perf_counter(), time.thread_time()
             corr.solver.solve(corr.contacts)
             times.append(1000 * (time.perf_counter() - t0))
             cpu.append(1000 * (time.thread_time() - c0))
-        rows.append({"cg": name, "cpu_ms": statistics.median(cpu), "wall_ms": statistics.median(times),
-                     "iterations": corr.solver.last_cg[0], "rel_residual": corr.solver.last_cg[1]})
+        rows.append(
+            {
+                "cg": name,
+                "cpu_ms": statistics.median(cpu),
+                "wall_ms": statistics.median(times),
+                "iterations": corr.solver.last_cg[0],
+                "rel_residual": corr.solver.last_cg[1],
+            }
+        )
     best = rows[0]["cpu_ms"]
     for r in rows:
         r["x_fused_tree"] = r["cpu_ms"] / best
@@ -193,8 +209,10 @@ def parse_cells(text: str, levels) -> list[tuple[str, str]] | None:
     for item in text.split(","):
         scene, _, level = item.strip().partition(":")
         if scene not in stages or level not in levels:
-            raise SystemExit(f"--cells: expected SCENE:LEVEL with SCENE in concert, corridor and LEVEL in "
-                             f"{', '.join(levels)}, got {item.strip()!r}")
+            raise SystemExit(
+                f"--cells: expected SCENE:LEVEL with SCENE in concert, corridor and LEVEL in "
+                f"{', '.join(levels)}, got {item.strip()!r}"
+            )
         cells.append((stages[scene], level))
     return cells
 
@@ -219,10 +237,24 @@ def parse_seeds(text: str) -> list[int | None]:
     return seeds
 
 
-SPREAD_COLUMNS = ["stage", "level", "seeds", "mesh_ratio_study", "mesh_ratio_mean", "mesh_ratio_sd",
-                  "mesh_ratio_min", "mesh_ratio_max", "baseline_cm3_mean", "ours_cm3_mean", "ours_cm3_max",
-                  "overlap_met", "tracking_cm_mean", "tracking_cm_max",
-                  "tracking_met", "all_bars_met"]
+SPREAD_COLUMNS = [
+    "stage",
+    "level",
+    "seeds",
+    "mesh_ratio_study",
+    "mesh_ratio_mean",
+    "mesh_ratio_sd",
+    "mesh_ratio_min",
+    "mesh_ratio_max",
+    "baseline_cm3_mean",
+    "ours_cm3_mean",
+    "ours_cm3_max",
+    "overlap_met",
+    "tracking_cm_mean",
+    "tracking_cm_max",
+    "tracking_met",
+    "all_bars_met",
+]
 
 
 def seed_spread(rows: list[dict]) -> list[dict]:
@@ -243,19 +275,30 @@ def seed_spread(rows: list[dict]) -> list[dict]:
         failed = [set(filter(None, r["bars_failed"].replace("-", "").split(","))) for r in rs]
         study = [r["mesh_ratio"] for r in rs if r.get("study_seed")]
         n = len(rs)
-        out.append({"stage": stage, "level": level, "seeds": n,
-                    "mesh_ratio_study": float(study[0]) if study else float("nan"),
-                    "mesh_ratio_mean": float(ratio.mean()),
-                    "mesh_ratio_sd": float(ratio.std(ddof=1)) if n > 1 else 0.0,
-                    "mesh_ratio_min": float(ratio.min()), "mesh_ratio_max": float(ratio.max()),
-                    "baseline_cm3_mean": 1e6 * float(np.mean([r["mesh_baseline_m3"] for r in rs])),
-                    "ours_cm3_mean": 1e6 * float(np.mean([r["mesh_ours_m3"] for r in rs])),
-                    "ours_cm3_max": 1e6 * float(np.max([r["mesh_ours_m3"] for r in rs])),
-                    "overlap_met": f"{sum('overlap' not in f for f in failed)}/{n}",
-                    "tracking_cm_mean": float(track.mean()), "tracking_cm_max": float(track.max()),
-                    "tracking_met": (f"{sum('tracking' not in f for f in failed)}/{n}"
-                                     if rs[0].get("tracking_bar_cm") is not None else ""),
-                    "all_bars_met": f"{sum(not f for f in failed)}/{n}"})
+        out.append(
+            {
+                "stage": stage,
+                "level": level,
+                "seeds": n,
+                "mesh_ratio_study": float(study[0]) if study else float("nan"),
+                "mesh_ratio_mean": float(ratio.mean()),
+                "mesh_ratio_sd": float(ratio.std(ddof=1)) if n > 1 else 0.0,
+                "mesh_ratio_min": float(ratio.min()),
+                "mesh_ratio_max": float(ratio.max()),
+                "baseline_cm3_mean": 1e6 * float(np.mean([r["mesh_baseline_m3"] for r in rs])),
+                "ours_cm3_mean": 1e6 * float(np.mean([r["mesh_ours_m3"] for r in rs])),
+                "ours_cm3_max": 1e6 * float(np.max([r["mesh_ours_m3"] for r in rs])),
+                "overlap_met": f"{sum('overlap' not in f for f in failed)}/{n}",
+                "tracking_cm_mean": float(track.mean()),
+                "tracking_cm_max": float(track.max()),
+                "tracking_met": (
+                    f"{sum('tracking' not in f for f in failed)}/{n}"
+                    if rs[0].get("tracking_bar_cm") is not None
+                    else ""
+                ),
+                "all_bars_met": f"{sum(not f for f in failed)}/{n}",
+            }
+        )
     return out
 
 
@@ -272,8 +315,10 @@ def seed_figure(rows: list[dict], path=None, tolerances: BarTolerances | None = 
     cells = list(dict.fromkeys((r["stage"], r["level"]) for r in rows))
     names = [f"{'concert' if st == 'stationary' else 'corridor'}\n{lv}" for st, lv in cells]
     fig, axes = plt.subplots(2, 1, figsize=(max(6.0, 0.8 * len(cells) + 2), 6.4), dpi=120, sharex=True)
-    for ax, key, scale, label in ((axes[0], "mesh_ratio", 100.0, "mesh overlap, % of the Baseline's"),
-                                  (axes[1], "tracking_cm", 1.0, "tracking error, cm")):
+    for ax, key, scale, label in (
+        (axes[0], "mesh_ratio", 100.0, "mesh overlap, % of the Baseline's"),
+        (axes[1], "tracking_cm", 1.0, "tracking error, cm"),
+    ):
         for i, cell in enumerate(cells):
             sel = [r for r in rows if (r["stage"], r["level"]) == cell]
             ys = np.array([r[key] * scale for r in sel])
@@ -307,8 +352,13 @@ def _run_mujoco(args) -> list[dict]:
     unknown = set(args.mujoco_settings.split(",")) - set(MUJOCO_SETTINGS)
     if unknown:
         raise SystemExit(f"--mujoco-settings: unknown {sorted(unknown)}; expected some of {list(MUJOCO_SETTINGS)}")
-    rows = compare_mujoco(args.mujoco_duration, scenes=tuple(args.mujoco_scenes.split(",")),
-                          settings=args.mujoco_settings.split(","), steps=args.steps, report=_print_row)
+    rows = compare_mujoco(
+        args.mujoco_duration,
+        scenes=tuple(args.mujoco_scenes.split(",")),
+        settings=args.mujoco_settings.split(","),
+        steps=args.steps,
+        report=_print_row,
+    )
     print(format_table(rows, MUJOCO_COLUMNS), flush=True)
     return rows
 
@@ -319,33 +369,74 @@ def _parser() -> argparse.ArgumentParser:
     parser.add_argument("--sizes", default="20,60,200")
     parser.add_argument("--no-peer", action="store_true")
     parser.add_argument("--cpu-only", action="store_true", help="skip the CUDA rows even when a GPU is present")
-    parser.add_argument("--mujoco", action="store_true",
-                        help="only the side-by-side comparison with MuJoCo (concert D5 and corridor D5)")
-    parser.add_argument("--mujoco-duration", type=float, default=4.0, metavar="SECONDS",
-                        help="seconds of each scene simulated for the MuJoCo comparison (20 = the full clips)")
-    parser.add_argument("--mujoco-settings", default=",".join(MUJOCO_SETTINGS),
-                        help=f"MuJoCo tunings to run, comma-separated among {', '.join(MUJOCO_SETTINGS)}")
+    parser.add_argument(
+        "--mujoco",
+        action="store_true",
+        help="only the side-by-side comparison with MuJoCo (concert D5 and corridor D5)",
+    )
+    parser.add_argument(
+        "--mujoco-duration",
+        type=float,
+        default=4.0,
+        metavar="SECONDS",
+        help="seconds of each scene simulated for the MuJoCo comparison (20 = the full clips)",
+    )
+    parser.add_argument(
+        "--mujoco-settings",
+        default=",".join(MUJOCO_SETTINGS),
+        help=f"MuJoCo tunings to run, comma-separated among {', '.join(MUJOCO_SETTINGS)}",
+    )
     parser.add_argument("--mujoco-scenes", default="concert,corridor", help="D5 scenes: concert, corridor")
-    parser.add_argument("--bars", type=float, default=0.0, metavar="SECONDS",
-                        help="also measure overlap/tracking on every study cell for SECONDS (20 = the full clips)")
+    parser.add_argument(
+        "--bars",
+        type=float,
+        default=0.0,
+        metavar="SECONDS",
+        help="also measure overlap/tracking on every study cell for SECONDS (20 = the full clips)",
+    )
     parser.add_argument("--bars-only", action="store_true", help="only the --bars measurement")
-    parser.add_argument("--cells", default="", metavar="SCENE:LEVEL,...",
-                        help="--bars on these cells only (e.g. concert:D1,corridor:D5; default all ten)")
-    parser.add_argument("--seeds", default="study", metavar="SEED,...",
-                        help="--bars-only on these seeds of each cell ('study': the stimulus's own crowd; "
-                             "e.g. study,1,2,3): with more than one, the spread per cell and its figure")
-    add_config_option(parser, "the physics of the timed steps, --bars and --stadium (e.g. cg_tolerance=1e-4); "
-                              "the report (physics_*_trial) records them")
-    parser.add_argument("--curve-only", action="store_true",
-                        help="only the cost curve over --sizes (and its figure), no CG comparison or peers")
-    parser.add_argument("--stadium", default="", metavar="N,N",
-                        help="only correct() on stadium crowds of these sizes (e.g. 1000,5000): time, memory, bars")
+    parser.add_argument(
+        "--cells",
+        default="",
+        metavar="SCENE:LEVEL,...",
+        help="--bars on these cells only (e.g. concert:D1,corridor:D5; default all ten)",
+    )
+    parser.add_argument(
+        "--seeds",
+        default="study",
+        metavar="SEED,...",
+        help="--bars-only on these seeds of each cell ('study': the stimulus's own crowd; "
+        "e.g. study,1,2,3): with more than one, the spread per cell and its figure",
+    )
+    add_config_option(
+        parser,
+        "the physics of the timed steps, --bars and --stadium (e.g. cg_tolerance=1e-4); "
+        "the report (physics_*_trial) records them",
+    )
+    parser.add_argument(
+        "--curve-only",
+        action="store_true",
+        help="only the cost curve over --sizes (and its figure), no CG comparison or peers",
+    )
+    parser.add_argument(
+        "--stadium",
+        default="",
+        metavar="N,N",
+        help="only correct() on stadium crowds of these sizes (e.g. 1000,5000): time, memory, bars",
+    )
     parser.add_argument("--stadium-level", default="D3", help="density level of the stadium crowds (default D3)")
-    parser.add_argument("--stadium-seconds", default="20", metavar="S[,S]",
-                        help="seconds simulated per stadium size (one value, or one per size)")
-    parser.add_argument("--light-bodies", action="store_true",
-                        help="stadium runs hand correct() body proxies without the meshes (needed at 5,000 "
-                             "MakeHuman characters in 24 GiB)")
+    parser.add_argument(
+        "--stadium-seconds",
+        default="20",
+        metavar="S[,S]",
+        help="seconds simulated per stadium size (one value, or one per size)",
+    )
+    parser.add_argument(
+        "--light-bodies",
+        action="store_true",
+        help="stadium runs hand correct() body proxies without the meshes (needed at 5,000 "
+        "MakeHuman characters in 24 GiB)",
+    )
     return parser
 
 
@@ -359,13 +450,23 @@ def _main_stadium(args, config, trial: str) -> int:
         secs = secs * len(counts)
     if len(secs) != len(counts) or min(counts) < 1 or min(secs) <= 0:
         raise SystemExit("--stadium-seconds: one positive value, or one per --stadium size")
-    devices = device_rows()      # the stadium runs are CPU runs; the rows say what else is there
-    rows = [stadium_run(n, args.stadium_level, s, light_bodies=args.light_bodies, config=config,
-                        tolerances=TOLERANCES, report=_print_row)
-            for n, s in zip(counts, secs)]
+    devices = device_rows()  # the stadium runs are CPU runs; the rows say what else is there
+    rows = [
+        stadium_run(
+            n,
+            args.stadium_level,
+            s,
+            light_bodies=args.light_bodies,
+            config=config,
+            tolerances=TOLERANCES,
+            report=_print_row,
+        )
+        for n, s in zip(counts, secs)
+    ]
     print("bars: " + "; ".join(BAR_TEXT.values()), flush=True)
-    path = write_report("physics_stadium" + trial, rows, seed=None, devices=devices, bar_text=BAR_TEXT,
-                        config_changes=list(args.config))
+    path = write_report(
+        "physics_stadium" + trial, rows, seed=None, devices=devices, bar_text=BAR_TEXT, config_changes=list(args.config)
+    )
     print(f"wrote {path}", file=sys.stderr)
     return 0
 
@@ -375,21 +476,30 @@ def _main_bars(args, config, trial: str) -> int:
 
     cells = parse_cells(args.cells, list(load_design().densities))
     seeds = parse_seeds(args.seeds)
-    bars = measure_bars(args.bars or 20.0, config=config, cells=cells, seeds=seeds, tolerances=TOLERANCES,
-                        report=_print_row)
+    bars = measure_bars(
+        args.bars or 20.0, config=config, cells=cells, seeds=seeds, tolerances=TOLERANCES, report=_print_row
+    )
     print("bars: " + "; ".join(BAR_TEXT.values()), flush=True)
     extra: dict = {}
     if len(seeds) > 1:
         extra["spread"] = seed_spread(bars)
         print(format_table(extra["spread"], SPREAD_COLUMNS), flush=True)
-        extra["figure"] = str(seed_figure(bars, path=report_path(f"physics_bars_seeds{trial}").with_suffix(".png"),
-                                          tolerances=TOLERANCES))
+        extra["figure"] = str(
+            seed_figure(bars, path=report_path(f"physics_bars_seeds{trial}").with_suffix(".png"), tolerances=TOLERANCES)
+        )
         print(f"figure: {extra['figure']}", flush=True)
         name = f"physics_bars_seeds{trial}"
     else:
         name = "physics_bars_trial" if trial or cells is not None or seeds != [None] else "physics_bars"
-    path = write_report(name, bars, seed=None, bar_text=BAR_TEXT, config_changes=list(args.config),
-                        seeds=["study" if v is None else v for v in seeds], **extra)
+    path = write_report(
+        name,
+        bars,
+        seed=None,
+        bar_text=BAR_TEXT,
+        config_changes=list(args.config),
+        seeds=["study" if v is None else v for v in seeds],
+        **extra,
+    )
     print(f"wrote {path}", file=sys.stderr)
     return 0
 
@@ -401,8 +511,9 @@ def _main_curve(args, config, trial: str, sizes: list[int], devices: list[dict],
         rows += cost_curve(sizes, args.steps, device="cuda:0", base=d5, config=config)
     figure = runtime_figure(rows, path=report_path(f"physics_runtime{trial}").with_suffix(".png"))
     print(f"figure: {figure}", flush=True)
-    path = write_report(f"physics_curve{trial}", rows, seed=None, devices=devices, figure=str(figure),
-                        config_changes=list(args.config))
+    path = write_report(
+        f"physics_curve{trial}", rows, seed=None, devices=devices, figure=str(figure), config_changes=list(args.config)
+    )
     print(f"wrote {path}", file=sys.stderr)
     return 0
 
@@ -421,17 +532,25 @@ def _main_steps(args, config, trial: str, sizes: list[int], devices: list[dict],
     print(format_table(cg_rows), flush=True)
     peer_rows = [] if args.no_peer else _run_mujoco(args)
     bars = measure_bars(args.bars, config=config, tolerances=TOLERANCES, report=_print_row) if args.bars > 0 else []
-    path = write_report(f"physics{trial}", rows, seed=None, cg=cg_rows, peer=peer_rows,
-                        bars=bars, bar_text=BAR_TEXT, config_changes=list(args.config),
-                        devices=devices)
+    path = write_report(
+        f"physics{trial}",
+        rows,
+        seed=None,
+        cg=cg_rows,
+        peer=peer_rows,
+        bars=bars,
+        bar_text=BAR_TEXT,
+        config_changes=list(args.config),
+        devices=devices,
+    )
     print(f"wrote {path}", file=sys.stderr)
     return 0
 
 
 def main(argv: list[str]) -> int:
     args = _parser().parse_args(argv)
-    config = config_from_cli(args.config)                  # the defaults without --config
-    trial = "_trial" if args.config else ""                 # reports of changed settings keep their own names
+    config = config_from_cli(args.config)  # the defaults without --config
+    trial = "_trial" if args.config else ""  # reports of changed settings keep their own names
     try:
         sizes = [int(v) for v in args.sizes.split(",") if v.strip()]
     except ValueError:

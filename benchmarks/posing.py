@@ -67,8 +67,16 @@ def _round_robin(fns: dict, repeat: int, warmup: int = 3) -> dict:
             t0 = time.perf_counter()
             fn()
             times[name].append(time.perf_counter() - t0)
-    return {name: {"median": statistics.median(ts), "min": min(ts), "p90": float(np.percentile(ts, 90)),
-                   "mean": statistics.fmean(ts), "n": len(ts)} for name, ts in times.items()}
+    return {
+        name: {
+            "median": statistics.median(ts),
+            "min": min(ts),
+            "p90": float(np.percentile(ts, 90)),
+            "mean": statistics.fmean(ts),
+            "n": len(ts),
+        }
+        for name, ts in times.items()
+    }
 
 
 def _load() -> float:
@@ -101,10 +109,12 @@ def main(argv: list[str]) -> int:
         for threads in (1, 2):
             if threads != default.threads:
                 skinners[f"CrowdSkinner ({default.device}, {threads} thread(s))"] = CrowdSkinner(
-                    bodies, device=args.device, threads=threads)
+                    bodies, device=args.device, threads=threads
+                )
     other = "segments" if default.schedule == "vertices" else "vertices"
     skinners[f"CrowdSkinner ({default.device}, schedule={other})"] = CrowdSkinner(
-        bodies, device=args.device, schedule=other)
+        bodies, device=args.device, schedule=other
+    )
     n_vertices = default.n_vertices
 
     # the fast paths agree with Body.pose before anything is timed
@@ -113,38 +123,69 @@ def main(argv: list[str]) -> int:
         verts = s.pose(rot, root, copy=True)[0]
         for i in (0, n - 1):
             ref = bodies[i].pose(rot[i], root[i])[0]
-            worst = max(worst, float(np.abs(verts[s.offsets[i]:s.offsets[i + 1]] - ref).max()))
+            worst = max(worst, float(np.abs(verts[s.offsets[i] : s.offsets[i + 1]] - ref).max()))
 
     load_before = _load()
     fns = {name: (lambda s=s: s.pose(rot, root)) for name, s in skinners.items()}
     fns["CrowdSkinner default, copy=True"] = lambda: default.pose(rot, root, copy=True)
     stats = _round_robin(fns, args.repeat)
-    stats["pose_bodies (numpy, batched)"] = measure(lambda: pose_bodies(bodies, rot, root),
-                                                    repeat=max(3, args.repeat // 40))
+    stats["pose_bodies (numpy, batched)"] = measure(
+        lambda: pose_bodies(bodies, rot, root), repeat=max(3, args.repeat // 40)
+    )
     stats["peer: Body.pose loop (numpy)"] = measure(
-        lambda: [b.pose(rot[i], root[i]) for i, b in enumerate(bodies)], repeat=3, warmup=1)
+        lambda: [b.pose(rot[i], root[i]) for i, b in enumerate(bodies)], repeat=3, warmup=1
+    )
     load_after = _load()
 
-    rows = [{"method": name, "median_ms": 1e3 * st["median"], "min_ms": 1e3 * st["min"],
-             "p90_ms": 1e3 * st["p90"] if "p90" in st else float("nan"), "repeats": st["n"], "note": ""}
-            for name, st in stats.items()]
+    rows = [
+        {
+            "method": name,
+            "median_ms": 1e3 * st["median"],
+            "min_ms": 1e3 * st["min"],
+            "p90_ms": 1e3 * st["p90"] if "p90" in st else float("nan"),
+            "repeats": st["n"],
+            "note": "",
+        }
+        for name, st in stats.items()
+    ]
     if not args.no_naive:
         t0 = time.perf_counter()
         _naive_pose(bodies[0], rot[0], root[0])
         one = time.perf_counter() - t0
-        rows.append({"method": "peer: naive per-vertex loop", "median_ms": 1e3 * one * n, "min_ms": 1e3 * one * n,
-                     "p90_ms": float("nan"), "repeats": 1, "note": f"extrapolated from 1 body x {n}"})
+        rows.append(
+            {
+                "method": "peer: naive per-vertex loop",
+                "median_ms": 1e3 * one * n,
+                "min_ms": 1e3 * one * n,
+                "p90_ms": float("nan"),
+                "repeats": 1,
+                "note": f"extrapolated from 1 body x {n}",
+            }
+        )
     base = rows[0]["median_ms"]
     for r in rows:
         r["ratio_vs_default"] = r["median_ms"] / base
-    print(f"{n} bodies, {n_vertices} vertices, {default.n_segments} skinning segments, one frame; "
-          f"max |CrowdSkinner - Body.pose| = {worst:.2e} m")
+    print(
+        f"{n} bodies, {n_vertices} vertices, {default.n_segments} skinning segments, one frame; "
+        f"max |CrowdSkinner - Body.pose| = {worst:.2e} m"
+    )
     print(format_table(rows, ["method", "median_ms", "min_ms", "p90_ms", "repeats", "ratio_vs_default", "note"]))
     verdict = "meets" if base < BAR_MS else "misses"
-    print(f"bar: < {BAR_MS:g} ms per frame for {n} bodies -> {verdict} (median {base:.2f} ms, "
-          f"min {rows[0]['min_ms']:.2f} ms; load average {load_before:.2f} before, {load_after:.2f} after)")
-    path = write_report("posing", rows, seed=SEED, characters=n, vertices=n_vertices, max_error_m=worst,
-                        load_average_before=load_before, load_average_after=load_after, bar_ms=BAR_MS,
-                        meets_bar=bool(base < BAR_MS))
+    print(
+        f"bar: < {BAR_MS:g} ms per frame for {n} bodies -> {verdict} (median {base:.2f} ms, "
+        f"min {rows[0]['min_ms']:.2f} ms; load average {load_before:.2f} before, {load_after:.2f} after)"
+    )
+    path = write_report(
+        "posing",
+        rows,
+        seed=SEED,
+        characters=n,
+        vertices=n_vertices,
+        max_error_m=worst,
+        load_average_before=load_before,
+        load_average_after=load_after,
+        bar_ms=BAR_MS,
+        meets_bar=bool(base < BAR_MS),
+    )
     print(f"wrote {path}")
     return 0

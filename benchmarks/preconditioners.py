@@ -64,10 +64,19 @@ def sample_systems(n_characters: int, warmup: int, samples: tuple[int, ...]):
             vals = vals.astype(np.float64)
             a = bsr_from_triplets(rows, cols, vals, nb).tocsr()
             # the first 3B triplets: each body's diagonal block and its joint's couplings
-            tree = bsr_from_triplets(rows[:3 * nb], cols[:3 * nb], vals[:3 * nb], nb).tocsr()
-            out.append({"step": s, "A": a, "tree": tree, "b": rhs.astype(np.float64).ravel(),
-                        "x": corr.states[0].x.numpy().astype(np.float64), "fused_iterations": corr.solver.last_cg[0],
-                        "tolerance": float(corr.config.solver.cg_tolerance), "contacts": int(corr.contacts.n_active())})
+            tree = bsr_from_triplets(rows[: 3 * nb], cols[: 3 * nb], vals[: 3 * nb], nb).tocsr()
+            out.append(
+                {
+                    "step": s,
+                    "A": a,
+                    "tree": tree,
+                    "b": rhs.astype(np.float64).ravel(),
+                    "x": corr.states[0].x.numpy().astype(np.float64),
+                    "fused_iterations": corr.solver.last_cg[0],
+                    "tolerance": float(corr.config.solver.cg_tolerance),
+                    "contacts": int(corr.contacts.n_active()),
+                }
+            )
         corr.solver.update(corr.states[0], corr.states[1], corr.dt)
         corr.states.reverse()
     return out, nb, nj
@@ -80,7 +89,7 @@ def _pcg(a, b, apply_m, tol: float, max_iter: int) -> int:
     p, rz, limit = z.copy(), float(r @ z), tol * np.linalg.norm(b)
     for k in range(1, max_iter + 1):
         q = a @ p
-        r -= (rz / float(p @ q)) * q           # the iterate itself is not needed, only its residual
+        r -= (rz / float(p @ q)) * q  # the iterate itself is not needed, only its residual
         if np.linalg.norm(r) <= limit:
             return k
         z = apply_m(r)
@@ -105,7 +114,7 @@ def _rigid_basis(x: np.ndarray, nj: int, rotations: bool):
     if rotations:
         centre = x.reshape(-1, nj, 3).mean(axis=1)[char]
         d = x - centre
-        rows.append(6 * body[:, None] + 3 + np.arange(3))         # dw = w
+        rows.append(6 * body[:, None] + 3 + np.arange(3))  # dw = w
         cols.append(6 * char[:, None] + 3 + np.arange(3))
         vals.append(np.ones((nb, 3)))
         # dx += w x d = -[d]x w
@@ -116,9 +125,13 @@ def _rigid_basis(x: np.ndarray, nj: int, rotations: bool):
         cols.append(np.tile(6 * char[:, None] + 3 + np.arange(3), 3))
         vals.append(skew.reshape(nb, 9))
     shape = (6 * nb, k * (nb // nj))
-    return sp.csr_matrix((np.concatenate([v.ravel() for v in vals]),
-                          (np.concatenate([r.ravel() for r in rows]), np.concatenate([c.ravel() for c in cols]))),
-                         shape=shape)
+    return sp.csr_matrix(
+        (
+            np.concatenate([v.ravel() for v in vals]),
+            (np.concatenate([r.ravel() for r in rows]), np.concatenate([c.ravel() for c in cols])),
+        ),
+        shape=shape,
+    )
 
 
 def compare(system: dict, nb: int, nj: int, tol: float | None = None, max_iter: int = 400) -> list[dict]:
@@ -136,7 +149,7 @@ def compare(system: dict, nb: int, nj: int, tol: float | None = None, max_iter: 
     coupling_share = float(between.sum()) / a.nnz
     # the solver's blocks: bodies and joints only (the first 3B triplets), exactly inverted;
     # everything else (contacts between bodies, within a character or between two) is coupling
-    blocks = [system["tree"][c * size:(c + 1) * size, c * size:(c + 1) * size].toarray() for c in range(nc)]
+    blocks = [system["tree"][c * size : (c + 1) * size, c * size : (c + 1) * size].toarray() for c in range(nc)]
     tri = sp.block_diag(blocks, format="csr")
     inv = [np.linalg.inv(blk) for blk in blocks]
     inv_all = sp.block_diag(inv, format="csr")
@@ -159,12 +172,14 @@ def compare(system: dict, nb: int, nj: int, tol: float | None = None, max_iter: 
         return y + rigid(r - a @ y)
 
     off = (a - tri).tocoo()
-    lower = sp.csr_matrix((off.data[off.row > off.col], (off.row[off.row > off.col], off.col[off.row > off.col])),
-                          shape=a.shape)
-    upper = sp.csr_matrix((off.data[off.row < off.col], (off.row[off.row < off.col], off.col[off.row < off.col])),
-                          shape=a.shape)
-    lower_rows = [lower[c * size:(c + 1) * size] for c in range(nc)]
-    upper_rows = [upper[c * size:(c + 1) * size] for c in range(nc)]
+    lower = sp.csr_matrix(
+        (off.data[off.row > off.col], (off.row[off.row > off.col], off.col[off.row > off.col])), shape=a.shape
+    )
+    upper = sp.csr_matrix(
+        (off.data[off.row < off.col], (off.row[off.row < off.col], off.col[off.row < off.col])), shape=a.shape
+    )
+    lower_rows = [lower[c * size : (c + 1) * size] for c in range(nc)]
+    upper_rows = [upper[c * size : (c + 1) * size] for c in range(nc)]
 
     def sgs(r):
         """(B + U)^-1 B (B + L)^-1 r, B the character blocks, L / U the couplings below / above."""
@@ -181,17 +196,31 @@ def compare(system: dict, nb: int, nj: int, tol: float | None = None, max_iter: 
         count["coupling"] += coupling_share
         return w
 
-    cases = {"character": blocks_solve, "+translation": lambda r: blocks_solve(r) + trans(r),
-             "+rigid": lambda r: blocks_solve(r) + rigid(r), "rigid two-level": two_level, "block SGS": sgs}
+    cases = {
+        "character": blocks_solve,
+        "+translation": lambda r: blocks_solve(r) + trans(r),
+        "+rigid": lambda r: blocks_solve(r) + rigid(r),
+        "rigid two-level": two_level,
+        "block SGS": sgs,
+    }
     rows = []
     for name, apply_m in cases.items():
         count.update(matvec=0, block=0, coupling=0.0)
         it = _pcg(a, b, apply_m, tol, max_iter)
         matvecs = count["matvec"] + it
-        rows.append({"step": system["step"], "contacts": system["contacts"], "preconditioner": name,
-                     "iterations": it, "fused_iterations": system["fused_iterations"], "matvec": matvecs,
-                     "block": count["block"], "coupling": round(count["coupling"], 1),
-                     "cost": round(matvecs + count["block"] + count["coupling"], 1)})
+        rows.append(
+            {
+                "step": system["step"],
+                "contacts": system["contacts"],
+                "preconditioner": name,
+                "iterations": it,
+                "fused_iterations": system["fused_iterations"],
+                "matvec": matvecs,
+                "block": count["block"],
+                "coupling": round(count["coupling"], 1),
+                "cost": round(matvecs + count["block"] + count["coupling"], 1),
+            }
+        )
     base = rows[0]["cost"]
     for r in rows:
         r["cost_ratio"] = round(r["cost"] / base, 2)

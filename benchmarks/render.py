@@ -90,6 +90,7 @@ def _bind_frame_target(renderer, vp: np.ndarray):
 def _draw_characters(renderer, prog, vp: np.ndarray) -> None:
     """The characters' part of the colour pass: back faces culled, ``prog`` (or its per-kind variants)."""
     from crowdstudy.render.passes import cull_back_faces
+
     cull_back_faces(renderer.ctx, True)
     renderer.characters.draw(prog, vp)
     cull_back_faces(renderer.ctx, False)
@@ -99,6 +100,7 @@ def _passes(renderer, frame: int) -> dict:
     """Wall seconds of each pass of one frame (the GPU/llvmpipe finished after each), as
     ``CrowdRenderer`` runs them; the static layer is drawn beforehand."""
     from crowdstudy.render.passes import ENV_PARTS
+
     ctx = renderer.ctx
     out = {}
 
@@ -109,7 +111,7 @@ def _passes(renderer, frame: int) -> dict:
         ctx.finish()
         out[name] = out.get(name, 0.0) + time.perf_counter() - t0
 
-    renderer.render_raw(frame)   # the frame's static layer drawn, its programs compiled
+    renderer.render_raw(frame)  # the frame's static layer drawn, its programs compiled
     timed("bones upload", lambda: renderer.load_frame(frame))
     timed("shadow pass", lambda: renderer.shadow_pass.run(renderer.character_positions(frame), renderer.camera))
     vp = None
@@ -155,8 +157,9 @@ def _character_parts(renderer, frame: int, reps: int = 4) -> dict:
     from crowdstudy.render.gpu import group_vertex_array, shader_source
 
     ctx = renderer.ctx
-    flat = ctx.program(vertex_shader="#version 330 core\n" + shader_source("character.vert"),
-                       fragment_shader=_FLAT_FRAGMENT)
+    flat = ctx.program(
+        vertex_shader="#version 330 core\n" + shader_source("character.vert"), fragment_shader=_FLAT_FRAGMENT
+    )
     added = []
     for gl in renderer.character_resources.groups:
         gl.vaos[flat] = vao = group_vertex_array(ctx, flat, gl.vbo, gl.inst, gl.ibo)
@@ -188,8 +191,13 @@ def _character_parts(renderer, frame: int, reps: int = 4) -> dict:
             del gl.vaos[flat]
             vao.release()
         flat.release()
-    return {"full": full, "vertex+setup": vertex, "constant-colour fragments": constant,
-            "fragments": full - vertex, "shading": full - constant}
+    return {
+        "full": full,
+        "vertex+setup": vertex,
+        "constant-colour fragments": constant,
+        "fragments": full - vertex,
+        "shading": full - constant,
+    }
 
 
 def _psnr(path: str, reference: str) -> float:
@@ -198,8 +206,13 @@ def _psnr(path: str, reference: str) -> float:
     import subprocess
 
     from crowdstudy.render.video import find_ffmpeg
-    res = subprocess.run([find_ffmpeg(), "-hide_banner", "-i", path, "-i", reference, "-lavfi", "psnr", "-f", "null",
-                          "-"], capture_output=True, text=True, check=True)
+
+    res = subprocess.run(
+        [find_ffmpeg(), "-hide_banner", "-i", path, "-i", reference, "-lavfi", "psnr", "-f", "null", "-"],
+        capture_output=True,
+        text=True,
+        check=True,
+    )
     match = re.findall(r"PSNR y:[\d.inf]+ u:[\d.inf]+ v:[\d.inf]+ average:([\d.inf]+)", res.stderr)
     if not match:
         raise RuntimeError(f"ffmpeg's psnr filter printed no result: {res.stderr[-400:]}")
@@ -210,6 +223,7 @@ def _encoders(raw: list, width: int, height: int, presets, crf: int) -> list[dic
     """Per x264 preset at ``crf``: ffmpeg's CPU and wall seconds per frame, size, and PSNR
     against the lossless encode (x264 qp 0, the same 4:2:0 frames) of the same frames."""
     from crowdstudy.render.video import VideoWriter
+
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
         ref = os.path.join(tmp, "lossless.mp4")
@@ -226,10 +240,16 @@ def _encoders(raw: list, width: int, height: int, presets, crf: int) -> list[dic
                 writer.write(frame)
             writer.close()
             after = resource.getrusage(resource.RUSAGE_CHILDREN)
-            rows.append({"x264 preset": preset, "crf": crf, "wall_s": (time.perf_counter() - t0) / len(raw),
-                         "ffmpeg_cpu_s": (after.ru_utime + after.ru_stime - before.ru_utime - before.ru_stime)
-                         / len(raw), "kB_per_frame": os.path.getsize(path) / 1024 / len(raw),
-                         "psnr_db": _psnr(path, ref)})
+            rows.append(
+                {
+                    "x264 preset": preset,
+                    "crf": crf,
+                    "wall_s": (time.perf_counter() - t0) / len(raw),
+                    "ffmpeg_cpu_s": (after.ru_utime + after.ru_stime - before.ru_utime - before.ru_stime) / len(raw),
+                    "kB_per_frame": os.path.getsize(path) / 1024 / len(raw),
+                    "psnr_db": _psnr(path, ref),
+                }
+            )
     return rows
 
 
@@ -259,9 +279,12 @@ def _set_main(args) -> int:
     workers = default_workers() if args.workers is None else args.workers
     n_video = int(round(full["duration"] * full["fps"]))
     info = context_info()
-    print(f"renderer: {info['renderer']} | {_cpus()} CPUs | load {os.getloadavg()[0]:.2f} | {len(stimuli)} videos "
-          f"of {n_video} frames, {full['width']}x{full['height']}, {full['msaa']}x MSAA, x264 "
-          f"{full['x264_preset']} crf {full['crf']} | {workers} worker process(es)", flush=True)
+    print(
+        f"renderer: {info['renderer']} | {_cpus()} CPUs | load {os.getloadavg()[0]:.2f} | {len(stimuli)} videos "
+        f"of {n_video} frames, {full['width']}x{full['height']}, {full['msaa']}x MSAA, x264 "
+        f"{full['x264_preset']} crf {full['crf']} | {workers} worker process(es)",
+        flush=True,
+    )
 
     # where the time of a frame goes, per view (one D5 renderer), and the encoder's quality
     d5 = build_baseline(design, "stationary", "D5", duration=1.0)
@@ -269,7 +292,7 @@ def _set_main(args) -> int:
     with CrowdRenderer(d5, design=design, width=full["width"], height=full["height"], msaa=full["msaa"]) as r:
         for view in sorted({s.viewpoint for s in stimuli}):
             r.set_view(view)
-            for f in range(r.layers.phases()):   # every static layer of the view drawn
+            for f in range(r.layers.phases()):  # every static layer of the view drawn
                 r.render_raw(f)
             per_view[view] = _passes(r, 20)
             per_view[view]["frame (all passes)"] = _time_frames(r, [18, 21, 24, 27])["wall_s"]
@@ -296,16 +319,25 @@ def _set_main(args) -> int:
             frames = args.frames
             if frames < 2:
                 raise SystemExit("--frames: expected at least 2 frames per video")
-            pick = stimuli if args.videos is None else \
-                [stimuli[i] for i in np.unique(np.linspace(0, len(stimuli) - 1, args.videos).round().astype(int))]
+            pick = (
+                stimuli
+                if args.videos is None
+                else [stimuli[i] for i in np.unique(np.linspace(0, len(stimuli) - 1, args.videos).round().astype(int))]
+            )
             settings = {**full, "duration": frames / full["fps"], "red_frames": min(full["red_frames"], frames)}
             anims, dissolve = {}, {}
             for s in pick:  # the cells' Baselines, `frames` long (the Ours videos render them too)
                 cell = f"S{s.stage}-{s.density_level}"
                 if cell not in anims:
                     path = os.path.join(tmp, f"{cell}.npz")
-                    anim = build_baseline(design, s.stage_key, s.density_level, duration=settings["duration"],
-                                          fps=full["fps"], seed=s.seed)
+                    anim = build_baseline(
+                        design,
+                        s.stage_key,
+                        s.density_level,
+                        duration=settings["duration"],
+                        fps=full["fps"],
+                        seed=s.seed,
+                    )
                     # a loop's cross-dissolve (the corridor: its last 0.5 s rendered twice and
                     # blended) would be most of a short sample: left out, and counted below
                     # as that many more frames of the video
@@ -318,20 +350,36 @@ def _set_main(args) -> int:
                     anim.save(path)
                     anims[cell] = (path, baseline_color_positions(path).tolist())
             t_anim = time.perf_counter() - t0
-            jobs = [{"stimulus_id": s.stimulus_id, "viewpoint": s.viewpoint, "design": design, "settings": settings,
-                     "animation": anims[f"S{s.stage}-{s.density_level}"][0],
-                     "color_positions": anims[f"S{s.stage}-{s.density_level}"][1],
-                     "out": os.path.join(tmp, f"{s.stimulus_id}.mp4"), "cell": f"S{s.stage}-{s.density_level}"}
-                    for s in pick]
+            jobs = [
+                {
+                    "stimulus_id": s.stimulus_id,
+                    "viewpoint": s.viewpoint,
+                    "design": design,
+                    "settings": settings,
+                    "animation": anims[f"S{s.stage}-{s.density_level}"][0],
+                    "color_positions": anims[f"S{s.stage}-{s.density_level}"][1],
+                    "out": os.path.join(tmp, f"{s.stimulus_id}.mp4"),
+                    "cell": f"S{s.stage}-{s.density_level}",
+                }
+                for s in pick
+            ]
             t1, c1, k1 = time.perf_counter(), time.process_time(), _children_cpu()
             runner = _Runner(None, workers)
             videos = []
             try:
                 for job, res in runner.run(video_job, jobs):
-                    videos.append({"stimulus_id": job["stimulus_id"], "frames": res["frames"],
-                                   "dissolve_frames": dissolve[job["cell"]], **res["timings"]})
-                    print(f"  {job['stimulus_id']}: " + ", ".join(f"{k} {v:.1f}" for k, v in res["timings"].items()),
-                          flush=True)
+                    videos.append(
+                        {
+                            "stimulus_id": job["stimulus_id"],
+                            "frames": res["frames"],
+                            "dissolve_frames": dissolve[job["cell"]],
+                            **res["timings"],
+                        }
+                    )
+                    print(
+                        f"  {job['stimulus_id']}: " + ", ".join(f"{k} {v:.1f}" for k, v in res["timings"].items()),
+                        flush=True,
+                    )
             finally:
                 runner.close()
             wall = time.perf_counter() - t1
@@ -343,29 +391,59 @@ def _set_main(args) -> int:
             scale = len(stimuli) / len(pick)
             proj = {}
             for kind in ("wall", "cpu"):
-                per = [v[f"setup_{kind}_s"] + v.get(f"first_frame_{kind}_s", 0.0) + v[f"frames_{kind}_s"]
-                       * _rest(v, n_video) + v[f"red_{kind}_s"] * red_scale for v in videos]
+                per = [
+                    v[f"setup_{kind}_s"]
+                    + v.get(f"first_frame_{kind}_s", 0.0)
+                    + v[f"frames_{kind}_s"] * _rest(v, n_video)
+                    + v[f"red_{kind}_s"] * red_scale
+                    for v in videos
+                ]
                 proj[f"{kind}_h"] = sum(per) * scale / (max(1, workers) if kind == "wall" else 1) / 3600
             keys = sorted({k for v in videos for k in v if k.endswith("_s")})
             stage_totals = {k: sum(v.get(k, 0.0) for v in videos) for k in keys}
-            proj["parts_h_cpu"] = {st: sum(v.get(f"{st}_cpu_s", 0.0) * (_rest(v, n_video) if st == "frames" else
-                                                                       red_scale if st == "red" else 1.0)
-                                         for v in videos) * scale / 3600
-                                   for st in ("setup", "first_frame", "frames", "red")}
-            proj["measured"] = {"videos": len(pick), "frames_per_video": frames, "wall_s": wall, "cpu_s": cpu,
-                                "animations_wall_s": t_anim, "stage_totals": stage_totals}
+            proj["parts_h_cpu"] = {
+                st: sum(
+                    v.get(f"{st}_cpu_s", 0.0)
+                    * (_rest(v, n_video) if st == "frames" else red_scale if st == "red" else 1.0)
+                    for v in videos
+                )
+                * scale
+                / 3600
+                for st in ("setup", "first_frame", "frames", "red")
+            }
+            proj["measured"] = {
+                "videos": len(pick),
+                "frames_per_video": frames,
+                "wall_s": wall,
+                "cpu_s": cpu,
+                "animations_wall_s": t_anim,
+                "stage_totals": stage_totals,
+            }
     proj["cpu_h_over_cores"] = proj["cpu_h"] / _cpus()
     label = "full set, built" if args.full else f"sample of {proj['measured']['videos']} videos x {frames} frames"
-    print(f"whole set ({len(stimuli)} videos x {n_video} frames), {label}: "
-          f"{proj['wall_h']:.2f} h wall, {proj['cpu_h']:.2f} CPU-h ({proj['cpu_h_over_cores']:.2f} h over "
-          f"{_cpus()} cores); x264 {full['x264_preset']} crf {full['crf']}: PSNR {used['psnr_db']:.2f} dB "
-          f"against the lossless encode (target: 1 h)")
+    print(
+        f"whole set ({len(stimuli)} videos x {n_video} frames), {label}: "
+        f"{proj['wall_h']:.2f} h wall, {proj['cpu_h']:.2f} CPU-h ({proj['cpu_h_over_cores']:.2f} h over "
+        f"{_cpus()} cores); x264 {full['x264_preset']} crf {full['crf']}: PSNR {used['psnr_db']:.2f} dB "
+        f"against the lossless encode (target: 1 h)"
+    )
     if "parts_h_cpu" in proj:
         print("  CPU-h by stage: " + ", ".join(f"{k} {v:.2f}" for k, v in proj["parts_h_cpu"].items()))
-    path = write_report("render_set", videos, projection=proj, per_view_passes=per_view, encoders=encoders,
-                        encoder={"x264_preset": full["x264_preset"], "crf": full["crf"], "psnr_db": used["psnr_db"]},
-                        workers=workers, lp_num_threads=os.environ.get("LP_NUM_THREADS"), cpus=_cpus(), gl=info,
-                        load=os.getloadavg()[0], full=bool(args.full), frames_per_video=frames)
+    path = write_report(
+        "render_set",
+        videos,
+        projection=proj,
+        per_view_passes=per_view,
+        encoders=encoders,
+        encoder={"x264_preset": full["x264_preset"], "crf": full["crf"], "psnr_db": used["psnr_db"]},
+        workers=workers,
+        lp_num_threads=os.environ.get("LP_NUM_THREADS"),
+        cpus=_cpus(),
+        gl=info,
+        load=os.getloadavg()[0],
+        full=bool(args.full),
+        frames_per_video=frames,
+    )
     print(f"report: {path}")
     print(json.dumps({k: v for k, v in proj.items() if k != "measured"}, default=float))
     return 0
@@ -378,8 +456,18 @@ def _rest(video: dict, n_video: int) -> float:
     return (n_video + video.get("dissolve_frames", 0) - first) / max(1, video["frames"] - first)
 
 
-_X264_ORDER = ["placebo", "veryslow", "slower", "slow", "medium", "fast", "faster", "veryfast", "superfast",
-               "ultrafast"]
+_X264_ORDER = [
+    "placebo",
+    "veryslow",
+    "slower",
+    "slow",
+    "medium",
+    "fast",
+    "faster",
+    "veryfast",
+    "superfast",
+    "ultrafast",
+]
 
 
 def main(argv: list[str]) -> int:
@@ -388,9 +476,12 @@ def main(argv: list[str]) -> int:
     parser.add_argument("--width", type=int, default=1920)
     parser.add_argument("--height", type=int, default=1080)
     parser.add_argument("--view", default="V3")
-    parser.add_argument("--set", action="store_true",
-                        help="the whole stimulus set: every video of the design rendered --frames frames long "
-                             "through the stimulus path (worker pool, encoder), projected to its full length")
+    parser.add_argument(
+        "--set",
+        action="store_true",
+        help="the whole stimulus set: every video of the design rendered --frames frames long "
+        "through the stimulus path (worker pool, encoder), projected to its full length",
+    )
     parser.add_argument("--videos", type=int, default=None, help="--set: an evenly spaced sample of this many videos")
     parser.add_argument("--workers", type=int, default=None, help="--set: worker processes (default: stimuli's)")
     parser.add_argument("--full", action="store_true", help="--set: build the whole set for real (hours)")
@@ -410,20 +501,32 @@ def main(argv: list[str]) -> int:
     frames = [int(f) for f in np.linspace(1, anim.n_frames - 1, args.frames).round()]
     info = context_info()
     gl = f"{info['vendor']} {info['renderer']}".lower()
-    devices = [{"device": "egl", "present": True, "name": f"{info['vendor']} / {info['renderer']}"},
-               {"device": "nvidia egl", "present": "nvidia" in gl,
-                "name": info["renderer"] if "nvidia" in gl else "nvidia egl: not present"}]
+    devices = [
+        {"device": "egl", "present": True, "name": f"{info['vendor']} / {info['renderer']}"},
+        {
+            "device": "nvidia egl",
+            "present": "nvidia" in gl,
+            "name": info["renderer"] if "nvidia" in gl else "nvidia egl: not present",
+        },
+    ]
     for d in devices:
         print(f"device {d['device']}: {d['name']}", flush=True)
-    print(f"renderer: {info['renderer']} | OpenGL {info['version']} | {os.cpu_count()} CPUs | "
-          f"load {os.getloadavg()[0]:.2f} | {anim.n_characters} characters, {args.width}x{args.height}", flush=True)
+    print(
+        f"renderer: {info['renderer']} | OpenGL {info['version']} | {os.cpu_count()} CPUs | "
+        f"load {os.getloadavg()[0]:.2f} | {anim.n_characters} characters, {args.width}x{args.height}",
+        flush=True,
+    )
     import dataclasses
 
-    mannequins = dataclasses.replace(anim, bodies=tuple({"model": "open", "sex": b["sex"], "height": b["height"]}
-                                                        for b in anim.bodies))
-    configs = [("ours", dict(msaa=4, shadows=True)), ("plain (no MSAA, no shadows)", dict(msaa=0, shadows=False)),
-               ("full-mesh (4x MSAA, shadows)", dict(msaa=4, shadows=True, max_faces=None)),
-               ("mannequin (open model, 4x MSAA, shadows)", dict(msaa=4, shadows=True))]
+    mannequins = dataclasses.replace(
+        anim, bodies=tuple({"model": "open", "sex": b["sex"], "height": b["height"]} for b in anim.bodies)
+    )
+    configs = [
+        ("ours", dict(msaa=4, shadows=True)),
+        ("plain (no MSAA, no shadows)", dict(msaa=0, shadows=False)),
+        ("full-mesh (4x MSAA, shadows)", dict(msaa=4, shadows=True, max_faces=None)),
+        ("mannequin (open model, 4x MSAA, shadows)", dict(msaa=4, shadows=True)),
+    ]
     rows, breakdown, encoders, parts = [], {}, [], {}
     for name, kw in configs:
         scene = mannequins if name.startswith("mannequin") else anim
@@ -431,27 +534,34 @@ def main(argv: list[str]) -> int:
         with CrowdRenderer(scene, design=design, width=args.width, height=args.height, **kw) as r:
             init_s = time.perf_counter() - t_init
             r.set_view(args.view)
-            r.draw_layers()   # a video's set-up draws them (render_video); not a per-frame cost
+            r.draw_layers()  # a video's set-up draws them (render_video); not a per-frame cost
             res = _time_frames(r, frames)
             if name in ("ours", "plain (no MSAA, no shadows)"):
                 parts[name] = _character_parts(r, frames[-1])
             if name == "ours":
                 breakdown = _passes(r, frames[-1])
                 with tempfile.TemporaryDirectory() as tmp:
-                    writer = VideoWriter(os.path.join(tmp, "b.mp4"), args.width, args.height, 30.0, preset=x264,
-                                         crf=crf)
+                    writer = VideoWriter(
+                        os.path.join(tmp, "b.mp4"), args.width, args.height, 30.0, preset=x264, crf=crf
+                    )
                     t0, c0 = time.perf_counter(), time.process_time()
                     for f in frames:
                         writer.write(r.render_raw(f))
                     writer.close()
-                    enc = {"wall_s": (time.perf_counter() - t0) / len(frames),
-                           "cpu_s": (time.process_time() - c0) / len(frames)}
+                    enc = {
+                        "wall_s": (time.perf_counter() - t0) / len(frames),
+                        "cpu_s": (time.process_time() - c0) / len(frames),
+                    }
                     # the encoder alone (ffmpeg's own CPU time and PSNR), per x264 preset
                     raw = [r.render_raw(f) for f in frames[:4]]
                     raw = [raw[k % len(raw)] for k in range(len(frames))]
-                    encoders = _encoders(raw, args.width, args.height,
-                                         sorted({"medium", x264, "faster", "veryfast", "superfast"},
-                                                key=_X264_ORDER.index), crf)
+                    encoders = _encoders(
+                        raw,
+                        args.width,
+                        args.height,
+                        sorted({"medium", x264, "faster", "veryfast", "superfast"}, key=_X264_ORDER.index),
+                        crf,
+                    )
         rows.append({"config": name, **res, "init_s": init_s})
         if name == "ours":
             rows.append({"config": f"ours+encode (x264 {x264})", **enc, "init_s": init_s})
@@ -468,8 +578,10 @@ def main(argv: list[str]) -> int:
     cpu_per_frame = rows[0]["cpu_s"] + enc_cpu
     projected_cpu_h = cpu_per_frame / cpus * n_set / 3600.0
     print(format_table(rows, ["config", "wall_s", "cpu_s", "init_s", "fps", "vs_ours"]))
-    print(f"MakeHuman characters vs the mannequins, same run: {vs_mannequin['wall']:.2f}x wall, "
-          f"{vs_mannequin['cpu']:.2f}x CPU per frame (bar 1.5x)")
+    print(
+        f"MakeHuman characters vs the mannequins, same run: {vs_mannequin['wall']:.2f}x wall, "
+        f"{vs_mannequin['cpu']:.2f}x CPU per frame (bar 1.5x)"
+    )
     print("where the time goes (one 'ours' frame, seconds):")
     for k, v in breakdown.items():
         print(f"  {k:14s} {v:.4f}")
@@ -477,17 +589,33 @@ def main(argv: list[str]) -> int:
     print(format_table([{"part": k, **{cfg: parts[cfg][k] for cfg in parts}} for k in next(iter(parts.values()))]))
     if len(parts) == 2:
         ours_p, plain_p = parts["ours"], parts["plain (no MSAA, no shadows)"]
-        print(f"  4x MSAA: fragments {ours_p['fragments'] / max(plain_p['fragments'], 1e-9):.2f}x, shading "
-              f"{ours_p['shading'] / max(plain_p['shading'], 1e-9):.2f}x the plain pass's")
+        print(
+            f"  4x MSAA: fragments {ours_p['fragments'] / max(plain_p['fragments'], 1e-9):.2f}x, shading "
+            f"{ours_p['shading'] / max(plain_p['shading'], 1e-9):.2f}x the plain pass's"
+        )
     print("encoder alone (per 1080p frame; ffmpeg's CPU time, not in cpu_s above):")
     print(format_table(encoders))
-    print(f"projected whole set ({n_set} frames, render+encode): {projected_h:.2f} h at the measured wall time; "
-          f"{projected_cpu_h:.2f} h from CPU time ({cpu_per_frame:.3f} CPU-s per frame over {cpus} idle CPUs) "
-          f"(target 0.15 s/frame -> {0.15 * n_set / 3600:.2f} h)")
-    path = write_report("render", rows, vs_mannequin=vs_mannequin, breakdown=breakdown, character_pass=parts,
-                        encoders=encoders, projected_set_hours=projected_h,
-                        projected_set_hours_cpu=projected_cpu_h, cpu_s_per_frame_render_encode=cpu_per_frame, gl=info,
-                        load=os.getloadavg()[0], frames=args.frames, width=args.width, height=args.height,
-                        devices=devices)
+    print(
+        f"projected whole set ({n_set} frames, render+encode): {projected_h:.2f} h at the measured wall time; "
+        f"{projected_cpu_h:.2f} h from CPU time ({cpu_per_frame:.3f} CPU-s per frame over {cpus} idle CPUs) "
+        f"(target 0.15 s/frame -> {0.15 * n_set / 3600:.2f} h)"
+    )
+    path = write_report(
+        "render",
+        rows,
+        vs_mannequin=vs_mannequin,
+        breakdown=breakdown,
+        character_pass=parts,
+        encoders=encoders,
+        projected_set_hours=projected_h,
+        projected_set_hours_cpu=projected_cpu_h,
+        cpu_s_per_frame_render_encode=cpu_per_frame,
+        gl=info,
+        load=os.getloadavg()[0],
+        frames=args.frames,
+        width=args.width,
+        height=args.height,
+        devices=devices,
+    )
     print(f"report: {path}")
     return 0

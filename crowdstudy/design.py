@@ -23,9 +23,19 @@ from crowdstudy.errors import InvalidInputError
 from crowdstudy.package_data import resource_path
 
 __all__ = [
-    "StudyDesign", "Stage", "Viewpoint", "Scenario", "Item", "Stimulus",
-    "load_design", "default_design_path", "read_toml", "parse_design",
-    "ScenarioName", "MotionSource", "CorridorDirection",
+    "StudyDesign",
+    "Stage",
+    "Viewpoint",
+    "Scenario",
+    "Item",
+    "Stimulus",
+    "load_design",
+    "default_design_path",
+    "read_toml",
+    "parse_design",
+    "ScenarioName",
+    "MotionSource",
+    "CorridorDirection",
 ]
 
 #: The scenarios a stage can show: a stationary concert crowd, people walking a corridor.
@@ -48,6 +58,7 @@ class Viewpoint:
     +y; ``elevation`` (deg) above the horizon; ``fov`` (deg) vertical field of view. The
     distance is chosen by the renderer so the whole area is framed.
     """
+
     id: str
     label: str
     azimuth: float
@@ -57,8 +68,8 @@ class Viewpoint:
 
 @dataclasses.dataclass(frozen=True)
 class Stage:
-    key: str            # "stationary" | "walking"
-    number: int         # 1, 2 ...
+    key: str  # "stationary" | "walking"
+    number: int  # 1, 2 ...
     scenario: ScenarioName
     description: str
     viewpoints: tuple[str, ...]
@@ -70,6 +81,7 @@ class Scenario:
     scenario (a concert's ``stage_distance``, ``margin``, ``tempo``; a corridor's ``width``,
     ``length``, ``direction`` (:data:`CorridorDirection`), ``preferred_speed``,
     ``preferred_speed_sd``) and ``motion`` (:data:`MotionSource`)."""
+
     name: ScenarioName
     params: dict
 
@@ -90,7 +102,8 @@ class Item:
 @dataclasses.dataclass(frozen=True)
 class Stimulus:
     """One video of the study."""
-    stimulus_id: str     # e.g. "S1-D3-V2-Ours"
+
+    stimulus_id: str  # e.g. "S1-D3-V2-Ours"
     stage: int
     stage_key: str
     scenario: str
@@ -99,7 +112,7 @@ class Stimulus:
     n_characters: int
     viewpoint: str
     method: str
-    seed: int            # seed of the (stage, density) cell: shared by all its viewpoints and methods
+    seed: int  # seed of the (stage, density) cell: shared by all its viewpoints and methods
 
     def as_dict(self) -> dict:
         return dataclasses.asdict(self)
@@ -156,11 +169,20 @@ class StudyDesign:
             for level, value in self.densities.items():
                 for vp in st.viewpoints:
                     for method in self.methods:
-                        out.append(Stimulus(
-                            stimulus_id=f"S{st.number}-{level}-{vp}-{method}", stage=st.number, stage_key=st.key,
-                            scenario=st.scenario, density_level=level, density=value,
-                            n_characters=self.n_characters(level), viewpoint=vp, method=method,
-                            seed=self.cell_seed(st, level)))
+                        out.append(
+                            Stimulus(
+                                stimulus_id=f"S{st.number}-{level}-{vp}-{method}",
+                                stage=st.number,
+                                stage_key=st.key,
+                                scenario=st.scenario,
+                                density_level=level,
+                                density=value,
+                                n_characters=self.n_characters(level),
+                                viewpoint=vp,
+                                method=method,
+                                seed=self.cell_seed(st, level),
+                            )
+                        )
         return out
 
 
@@ -197,11 +219,21 @@ class _Reader:
             self.fail(key, f"must be {names}, got {type(value).__name__} {value!r}")
         return value
 
-    def number(self, key: str, *, lo: float | None = None, hi: float | None = None, lo_open: bool = False,
-               default: Any = dataclasses.MISSING) -> float:
+    def number(
+        self,
+        key: str,
+        *,
+        lo: float | None = None,
+        hi: float | None = None,
+        lo_open: bool = False,
+        default: Any = dataclasses.MISSING,
+    ) -> float:
         value = self.get(key, float, default)
-        if not math.isfinite(value) or (lo is not None and (value <= lo if lo_open else value < lo)) or \
-                (hi is not None and value > hi):
+        if (
+            not math.isfinite(value)
+            or (lo is not None and (value <= lo if lo_open else value < lo))
+            or (hi is not None and value > hi)
+        ):
             lo_txt = "" if lo is None else (f"> {lo}" if lo_open else f">= {lo}")
             hi_txt = "" if hi is None else f"<= {hi}"
             self.fail(key, f"must be a finite number {' and '.join(t for t in (lo_txt, hi_txt) if t)}, got {value!r}")
@@ -213,7 +245,7 @@ class _Reader:
             self.fail(key, f"must be an integer >= {lo}, got {value!r}")
         return value
 
-    def table_(self, key: str) -> "_Reader":
+    def table_(self, key: str) -> _Reader:
         return _Reader(self.get(key, dict), self._key(key), self.source)
 
     def strings(self, key: str) -> list[str]:
@@ -268,13 +300,29 @@ def parse_design(raw: dict, source: str = "<memory>") -> StudyDesign:
     scenarios = _read_scenarios(top, stages, width, depth)
     points, labels, items = _read_questionnaire(top)
     composites = _read_composites(top, items)
-    top.close(allowed_extra=("online",))   # the online study's controls: crowdstudy.study.quality
+    top.close(allowed_extra=("online",))  # the online study's controls: crowdstudy.study.quality
 
-    return StudyDesign(name=name, seed=seed, floor_width=width, floor_depth=depth, densities=densities,
-                       viewpoints=viewpoints, methods=methods, video_width=video.width, video_height=video.height,
-                       duration=video.duration, fps=video.fps, stages=stages, scenarios=scenarios,
-                       likert_points=points, likert_labels=labels, items=items, composites=composites,
-                       source=source, online=raw.get("online"))
+    return StudyDesign(
+        name=name,
+        seed=seed,
+        floor_width=width,
+        floor_depth=depth,
+        densities=densities,
+        viewpoints=viewpoints,
+        methods=methods,
+        video_width=video.width,
+        video_height=video.height,
+        duration=video.duration,
+        fps=video.fps,
+        stages=stages,
+        scenarios=scenarios,
+        likert_points=points,
+        likert_labels=labels,
+        items=items,
+        composites=composites,
+        source=source,
+        online=raw.get("online"),
+    )
 
 
 def _read_floor(top: _Reader) -> tuple[float, float]:
@@ -306,9 +354,13 @@ def _read_viewpoints(top: _Reader) -> dict[str, Viewpoint]:
     viewpoints = {}
     for vid in vps.table:
         vt = vps.table_(vid)
-        viewpoints[vid] = Viewpoint(id=vid, label=vt.get("label", str, vid), azimuth=vt.number("azimuth"),
-                                    elevation=vt.number("elevation", lo=-89.0, hi=90.0),
-                                    fov=vt.number("fov", lo=1.0, hi=170.0))
+        viewpoints[vid] = Viewpoint(
+            id=vid,
+            label=vt.get("label", str, vid),
+            azimuth=vt.number("azimuth"),
+            elevation=vt.number("elevation", lo=-89.0, hi=90.0),
+            fov=vt.number("fov", lo=1.0, hi=170.0),
+        )
         vt.close()
     if not viewpoints:
         top.fail("viewpoints", "must define at least one viewpoint")
@@ -357,8 +409,15 @@ def _read_stages(top: _Reader, viewpoints: dict[str, Viewpoint]) -> tuple[Stage,
         for v in vlist:
             if v not in viewpoints:
                 s.fail("viewpoints", f"names unknown viewpoint {v!r}; defined: {', '.join(viewpoints)}")
-        stages.append(Stage(key=key, number=s.integer("number", lo=1), scenario=scenario,
-                            description=s.get("description", str, ""), viewpoints=tuple(vlist)))
+        stages.append(
+            Stage(
+                key=key,
+                number=s.integer("number", lo=1),
+                scenario=scenario,
+                description=s.get("description", str, ""),
+                viewpoints=tuple(vlist),
+            )
+        )
         s.close()
     if not stages:
         top.fail("stages", "must define at least one stage")
@@ -392,8 +451,11 @@ def _read_scenarios(top: _Reader, stages: tuple[Stage, ...], width: float, depth
 
 def _concert_params(r: _Reader, width: float, depth: float) -> dict[str, Any]:
     """``[scenarios.concert]``: distance to the stage, margin inside the floor, music tempo (bpm)."""
-    params = {"stage_distance": r.number("stage_distance", lo=0), "margin": r.number("margin", lo=0),
-              "tempo": r.number("tempo", lo=40.0, hi=240.0, default=120.0)}
+    params = {
+        "stage_distance": r.number("stage_distance", lo=0),
+        "margin": r.number("margin", lo=0),
+        "tempo": r.number("tempo", lo=40.0, hi=240.0, default=120.0),
+    }
     if 2 * params["margin"] >= min(width, depth):
         r.fail("margin", "leaves no room inside the floor area")
     return params
@@ -401,8 +463,11 @@ def _concert_params(r: _Reader, width: float, depth: float) -> dict[str, Any]:
 
 def _corridor_params(r: _Reader, width: float, depth: float) -> dict[str, Any]:
     """``[scenarios.corridor]``: size (m), walking direction(s) and preferred speed (m/s, mean and SD)."""
-    params = {"width": r.number("width", lo=0, lo_open=True), "length": r.number("length", lo=0, lo_open=True),
-              "direction": r.get("direction", str)}
+    params = {
+        "width": r.number("width", lo=0, lo_open=True),
+        "length": r.number("length", lo=0, lo_open=True),
+        "direction": r.get("direction", str),
+    }
     if params["direction"] not in _CORRIDOR_DIRECTIONS:
         r.fail("direction", f"must be {' or '.join(map(repr, _CORRIDOR_DIRECTIONS))}, got {params['direction']!r}")
     params["preferred_speed"] = r.number("preferred_speed", lo=0, lo_open=True, hi=5.0)
@@ -412,7 +477,9 @@ def _corridor_params(r: _Reader, width: float, depth: float) -> dict[str, Any]:
 
 #: Each scenario's parameter reader: (its table, floor width, floor depth) -> parameters.
 _SCENARIO_PARAMS: dict[str, Callable[[_Reader, float, float], dict[str, Any]]] = {
-    "concert": _concert_params, "corridor": _corridor_params}
+    "concert": _concert_params,
+    "corridor": _corridor_params,
+}
 
 
 def _read_questionnaire(top: _Reader) -> tuple[int, tuple[str, ...], tuple[Item, ...]]:

@@ -25,8 +25,10 @@ def resource_path(package: str, *parts: str) -> Path:
     ref = resources.files(package).joinpath(*parts)
     if isinstance(ref, Path):
         return ref
-    raise RuntimeError(f"crowdstudy resource {'/'.join(parts)!r} of {package} is not on the file system "
-                       f"({ref!r}); install crowdstudy unzipped (pip install crowdstudy)")
+    raise RuntimeError(
+        f"crowdstudy resource {'/'.join(parts)!r} of {package} is not on the file system "
+        f"({ref!r}); install crowdstudy unzipped (pip install crowdstudy)"
+    )
 
 
 def read_resource(package: str, *parts: str) -> str:

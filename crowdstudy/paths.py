@@ -50,11 +50,13 @@ def _writable_folder(folder: Path, what: str) -> None:
     try:
         folder.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
-        raise InvalidInputError(f"{what}: cannot create the output folder {str(folder)!r} ({exc.strerror}); "
-                                "choose a writable location") from None
+        raise InvalidInputError(
+            f"{what}: cannot create the output folder {str(folder)!r} ({exc.strerror}); choose a writable location"
+        ) from None
     if not os.access(folder, os.W_OK | os.X_OK):
-        raise InvalidInputError(f"{what}: the output folder {str(folder)!r} is not writable; "
-                                "fix its permissions or choose another location")
+        raise InvalidInputError(
+            f"{what}: the output folder {str(folder)!r} is not writable; fix its permissions or choose another location"
+        )
 
 
 def check_output_path(path: str | Path, what: str = "out") -> Path:
@@ -82,5 +84,8 @@ def timings_path(output: str | Path) -> Path:
     """The timings sidecar of an output file: ``NAME.timings.json`` beside ``NAME.npz``
     (the suffix replaced, like the stimulus set's ``NAME.metrics.json``)."""
     output = Path(output)
-    return output.with_name(output.stem + ".timings.json") if output.suffix else \
-        output.with_name(output.name + ".timings.json")
+    return (
+        output.with_name(output.stem + ".timings.json")
+        if output.suffix
+        else output.with_name(output.name + ".timings.json")
+    )

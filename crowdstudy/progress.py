@@ -37,8 +37,10 @@ def progress_mode() -> ProgressMode:
     """The mode :data:`PROGRESS_ENV` sets (``"auto"`` when it is unset or empty)."""
     value = os.environ.get(PROGRESS_ENV, "").strip()
     if value not in _VALUES:
-        raise InvalidInputError(f"environment variable {PROGRESS_ENV}: expected 1 (bars on), 0 (bars off) or "
-                                f"unset (bars on a terminal only), got {value!r}")
+        raise InvalidInputError(
+            f"environment variable {PROGRESS_ENV}: expected 1 (bars on), 0 (bars off) or "
+            f"unset (bars on a terminal only), got {value!r}"
+        )
     return _VALUES[value]
 
 
@@ -61,7 +63,7 @@ def progress_enabled(stream: IO[str] | None = None) -> bool:
     stream = sys.stderr if stream is None else stream
     try:
         return bool(stream is not None and stream.isatty())
-    except (AttributeError, ValueError):       # no isatty, or a closed stream
+    except (AttributeError, ValueError):  # no isatty, or a closed stream
         return False
 
 

@@ -32,10 +32,16 @@ def git_sha() -> str:
     if not (root / "pyproject.toml").is_file():
         return "unknown"
     try:
-        sha = subprocess.run(["git", "rev-parse", "HEAD"], cwd=root, capture_output=True,
-                             text=True, timeout=5, check=True).stdout.strip()
-        dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"], cwd=root,
-                               capture_output=True, text=True, timeout=5).stdout.strip()
+        sha = subprocess.run(
+            ["git", "rev-parse", "HEAD"], cwd=root, capture_output=True, text=True, timeout=5, check=True
+        ).stdout.strip()
+        dirty = subprocess.run(
+            ["git", "status", "--porcelain", "--untracked-files=no"],
+            cwd=root,
+            capture_output=True,
+            text=True,
+            timeout=5,
+        ).stdout.strip()
     except (OSError, subprocess.SubprocessError):
         return "unknown"
     return f"{sha}-dirty" if dirty else sha
@@ -55,7 +61,6 @@ def package_versions() -> dict[str, str]:
 
 def provenance(seed: int | None = None, **extra) -> dict:
     """A JSON-serialisable record: ``{"seed", "git_sha", "versions", **extra}``."""
-    record = {"seed": None if seed is None else int(seed), "git_sha": git_sha(),
-              "versions": dict(package_versions())}
+    record = {"seed": None if seed is None else int(seed), "git_sha": git_sha(), "versions": dict(package_versions())}
     record.update(extra)
     return record

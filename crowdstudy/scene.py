@@ -69,7 +69,7 @@ def _save_npz(path: Path, arrays: dict[str, np.ndarray], meta: dict) -> Path:
         tmp.replace(path)
     except BaseException:
         try:
-            tmp.unlink(missing_ok=True)      # never leave a partial .tmp behind
+            tmp.unlink(missing_ok=True)  # never leave a partial .tmp behind
         except OSError:
             pass
         raise
@@ -106,7 +106,8 @@ def _load_npz(path, cls: str) -> tuple[dict[str, np.ndarray], dict]:
     version = meta.get("schema_version")
     if version != SCHEMA_VERSION:
         raise InvalidInputError(
-            f"{cls} file {str(path)!r}: field 'schema_version' is {version!r}, this crowdstudy reads {SCHEMA_VERSION}")
+            f"{cls} file {str(path)!r}: field 'schema_version' is {version!r}, this crowdstudy reads {SCHEMA_VERSION}"
+        )
     return arrays, meta
 
 
@@ -157,11 +158,14 @@ class CrowdAnimation:
             raise InvalidInputError(f"{cls}.root_translation: expected shape (T, N, 3), got {root.shape}")
         t, n = root.shape[:2]
         if t < 1 or n < 1:
-            raise InvalidInputError(f"{cls}.root_translation: needs at least one frame and one character, got {root.shape}")
+            raise InvalidInputError(
+                f"{cls}.root_translation: needs at least one frame and one character, got {root.shape}"
+            )
         rot = _as_array(self.joint_rotations, "joint_rotations", np.float64, 4, cls)
         if rot.shape != (t, n, n_j, 3):
             raise InvalidInputError(
-                f"{cls}.joint_rotations: expected shape (T, N, J, 3) = ({t}, {n}, {n_j}, 3), got {rot.shape}")
+                f"{cls}.joint_rotations: expected shape (T, N, J, 3) = ({t}, {n}, {n_j}, 3), got {rot.shape}"
+            )
         _check_finite(root, "root_translation", cls)
         _check_finite(rot, "joint_rotations", cls)
         try:
@@ -214,13 +218,13 @@ class CrowdAnimation:
         return periodic_length(self.meta)
 
     # -- derived copies ----------------------------------------------------------------
-    def replace(self, **changes) -> "CrowdAnimation":
+    def replace(self, **changes) -> CrowdAnimation:
         """A validated copy with some fields replaced (``meta`` is merged, not replaced)."""
         if "meta" in changes:
             changes["meta"] = {**self.meta, **changes["meta"]}
         return dataclasses.replace(self, **changes)
 
-    def frames(self, start: int = 0, stop: int | None = None) -> "CrowdAnimation":
+    def frames(self, start: int = 0, stop: int | None = None) -> CrowdAnimation:
         """The frames [start, stop) as a new animation."""
         sl = slice(start, stop)
         if len(range(*sl.indices(self.n_frames))) == 0:
@@ -233,13 +237,27 @@ class CrowdAnimation:
         ``meta`` is checked again (:func:`~crowdstudy.scene_meta.check_meta`): it is a dict
         its owner may have changed since the animation was made."""
         check_meta(self.meta, f"CrowdAnimation.save({str(path)!r})")
-        meta = {"type": "CrowdAnimation", "schema_version": SCHEMA_VERSION, "joint_names": list(self.joint_names),
-                "fps": self.fps, "bodies": list(self.bodies), "clips": list(self.clips), "meta": self.meta}
-        return _save_npz(Path(path), {"parents": self.parents, "root_translation": self.root_translation,
-                                      "joint_rotations": self.joint_rotations}, meta)
+        meta = {
+            "type": "CrowdAnimation",
+            "schema_version": SCHEMA_VERSION,
+            "joint_names": list(self.joint_names),
+            "fps": self.fps,
+            "bodies": list(self.bodies),
+            "clips": list(self.clips),
+            "meta": self.meta,
+        }
+        return _save_npz(
+            Path(path),
+            {
+                "parents": self.parents,
+                "root_translation": self.root_translation,
+                "joint_rotations": self.joint_rotations,
+            },
+            meta,
+        )
 
     @classmethod
-    def load(cls, path: str | Path) -> "CrowdAnimation":
+    def load(cls, path: str | Path) -> CrowdAnimation:
         """Read and validate a file written by :meth:`save`."""
         arrays, meta = _load_npz(path, "CrowdAnimation")
         for key in ("parents", "root_translation", "joint_rotations"):
@@ -249,9 +267,16 @@ class CrowdAnimation:
             if key not in meta:
                 raise InvalidInputError(f"CrowdAnimation file {str(path)!r}: field {key!r} is missing")
         try:
-            return cls(joint_names=tuple(meta["joint_names"]), parents=arrays["parents"],
-                       root_translation=arrays["root_translation"], joint_rotations=arrays["joint_rotations"],
-                       fps=meta["fps"], bodies=tuple(meta["bodies"]), clips=tuple(meta["clips"]), meta=meta["meta"])
+            return cls(
+                joint_names=tuple(meta["joint_names"]),
+                parents=arrays["parents"],
+                root_translation=arrays["root_translation"],
+                joint_rotations=arrays["joint_rotations"],
+                fps=meta["fps"],
+                bodies=tuple(meta["bodies"]),
+                clips=tuple(meta["clips"]),
+                meta=meta["meta"],
+            )
         except InvalidInputError as exc:
             raise InvalidInputError(f"CrowdAnimation file {str(path)!r}: {exc}") from None
 
@@ -288,7 +313,9 @@ class Crowd:
         if pos.ndim == 2:
             pos = pos[None]
         if pos.ndim != 3 or pos.shape[2] != 2 or pos.shape[0] < 1 or pos.shape[1] < 1:
-            raise InvalidInputError(f"{cls}.positions: expected shape (T, N, 2) or (N, 2), got {np.shape(self.positions)}")
+            raise InvalidInputError(
+                f"{cls}.positions: expected shape (T, N, 2) or (N, 2), got {np.shape(self.positions)}"
+            )
         _check_finite(pos, "positions", cls)
         t, n = pos.shape[:2]
         radius = _as_array(self.radius, "radius", np.float64, None, cls)
@@ -307,17 +334,29 @@ class Crowd:
             if head.shape != (t, n):
                 raise InvalidInputError(f"{cls}.headings: expected shape ({t}, {n}), got {head.shape}")
             _check_finite(head, "headings", cls)
-        obst = _as_array(self.obstacles, "obstacles", np.float64, None, cls).reshape(-1, 2, 2) \
-            if np.size(self.obstacles) else np.zeros((0, 2, 2))
-        region = _as_array(self.region, "region", np.float64, None, cls).reshape(-1, 2) \
-            if np.size(self.region) else np.zeros((0, 2))
+        obst = (
+            _as_array(self.obstacles, "obstacles", np.float64, None, cls).reshape(-1, 2, 2)
+            if np.size(self.obstacles)
+            else np.zeros((0, 2, 2))
+        )
+        region = (
+            _as_array(self.region, "region", np.float64, None, cls).reshape(-1, 2)
+            if np.size(self.region)
+            else np.zeros((0, 2))
+        )
         fps = float(self.fps)
         if not np.isfinite(fps) or fps <= 0:
             raise InvalidInputError(f"{cls}.fps: expected a positive rate, got {self.fps!r}")
         if not isinstance(self.meta, dict):
             raise InvalidInputError(f"{cls}.meta: expected a dict")
-        for name, arr in (("positions", pos), ("radius", radius), ("velocities", vel), ("headings", head),
-                          ("obstacles", obst), ("region", region)):
+        for name, arr in (
+            ("positions", pos),
+            ("radius", radius),
+            ("velocities", vel),
+            ("headings", head),
+            ("obstacles", obst),
+            ("region", region),
+        ):
             if arr is not None:
                 arr.flags.writeable = False
             object.__setattr__(self, name, arr)
@@ -336,14 +375,18 @@ class Crowd:
         """Period along x in metres for periodic scenes (corridor), else None."""
         return periodic_length(self.meta)
 
-    def replace(self, **changes) -> "Crowd":
+    def replace(self, **changes) -> Crowd:
         if "meta" in changes:
             changes["meta"] = {**self.meta, **changes["meta"]}
         return dataclasses.replace(self, **changes)
 
     def save(self, path: str | Path) -> Path:
-        arrays = {"positions": self.positions, "radius": self.radius, "obstacles": self.obstacles,
-                  "region": self.region}
+        arrays = {
+            "positions": self.positions,
+            "radius": self.radius,
+            "obstacles": self.obstacles,
+            "region": self.region,
+        }
         if self.velocities is not None:
             arrays["velocities"] = self.velocities
         if self.headings is not None:
@@ -352,15 +395,21 @@ class Crowd:
         return _save_npz(Path(path), arrays, meta)
 
     @classmethod
-    def load(cls, path: str | Path) -> "Crowd":
+    def load(cls, path: str | Path) -> Crowd:
         arrays, meta = _load_npz(path, "Crowd")
         for key in ("positions", "radius"):
             if key not in arrays:
                 raise InvalidInputError(f"Crowd file {str(path)!r}: field {key!r} is missing")
         try:
-            return cls(positions=arrays["positions"], radius=arrays["radius"], fps=meta.get("fps", 30.0),
-                       velocities=arrays.get("velocities"), headings=arrays.get("headings"),
-                       obstacles=arrays.get("obstacles", np.zeros((0, 2, 2))),
-                       region=arrays.get("region", np.zeros((0, 2))), meta=meta.get("meta", {}))
+            return cls(
+                positions=arrays["positions"],
+                radius=arrays["radius"],
+                fps=meta.get("fps", 30.0),
+                velocities=arrays.get("velocities"),
+                headings=arrays.get("headings"),
+                obstacles=arrays.get("obstacles", np.zeros((0, 2, 2))),
+                region=arrays.get("region", np.zeros((0, 2))),
+                meta=meta.get("meta", {}),
+            )
         except InvalidInputError as exc:
             raise InvalidInputError(f"Crowd file {str(path)!r}: {exc}") from None

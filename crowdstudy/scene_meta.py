@@ -88,8 +88,21 @@ import numpy as np
 
 from crowdstudy.errors import InvalidInputError
 
-__all__ = ["LoopMode", "LOOP_MODES", "Floor", "Periodic", "Loop", "PhysicsLoop", "PhysicsMeta", "SceneMeta",
-           "check_meta", "loop_mode", "periodic_length", "static_walls_from_meta", "wall_segments"]
+__all__ = [
+    "LoopMode",
+    "LOOP_MODES",
+    "Floor",
+    "Periodic",
+    "Loop",
+    "PhysicsLoop",
+    "PhysicsMeta",
+    "SceneMeta",
+    "check_meta",
+    "loop_mode",
+    "periodic_length",
+    "static_walls_from_meta",
+    "wall_segments",
+]
 
 #: How an animation's video loops (``meta["loop"]["mode"]``).
 LoopMode = Literal["periodic", "dissolve", "none"]
@@ -236,7 +249,7 @@ def _floor(value: object, path: str) -> None:
 
 
 def _periodic(value: object, path: str) -> None:
-    if not value:                                   # None or {}: not periodic
+    if not value:  # None or {}: not periodic
         return
     _mapping(value, path)
     if "length" not in value:
@@ -271,8 +284,15 @@ def _physics(value: object, path: str) -> None:
             _number(value[key], f"{path}.{key}", lo=0.0)
     if value.get("profile_weight") is not None:
         _number(value["profile_weight"], f"{path}.profile_weight", lo=0.0)
-    for key in ("steps", "substeps_per_frame", "cg_iterations_max", "static_walls", "contacts_max",
-                "contacts_dropped_steps", "pairs_dropped"):
+    for key in (
+        "steps",
+        "substeps_per_frame",
+        "cg_iterations_max",
+        "static_walls",
+        "contacts_max",
+        "contacts_dropped_steps",
+        "pairs_dropped",
+    ):
         if key in value:
             _integer(value[key], f"{path}.{key}")
     for key in ("device", "linear_solver"):
@@ -283,16 +303,28 @@ def _physics(value: object, path: str) -> None:
 
 
 _CHECKS: dict[str, Callable[[object, str], None]] = {
-    "scenario": _text, "stage": _text, "density_level": _text, "method": _text, "source": _text,
+    "scenario": _text,
+    "stage": _text,
+    "density_level": _text,
+    "method": _text,
+    "source": _text,
     "baseline_method": _optional(_text),
-    "stage_number": _integer, "n_characters": _integer, "seed": _optional(_integer),
-    "density": lambda v, p: _number(v, p, lo=0.0), "tempo": _optional(lambda v, p: _number(v, p, positive=True)),
-    "stage_distance": _number, "stage_front": _number,
+    "stage_number": _integer,
+    "n_characters": _integer,
+    "seed": _optional(_integer),
+    "density": lambda v, p: _number(v, p, lo=0.0),
+    "tempo": _optional(lambda v, p: _number(v, p, positive=True)),
+    "stage_distance": _number,
+    "stage_front": _number,
     "corridor_width": lambda v, p: _number(v, p, positive=True),
     "corridor_length": lambda v, p: _number(v, p, positive=True),
-    "floor": _floor, "obstacles": lambda v, p: _obstacles(v, p), "periodic": _periodic,
-    "loop": _loop, "physics": _physics,
-    "provenance": _optional(_mapping), "baseline_provenance": _optional(_mapping),
+    "floor": _floor,
+    "obstacles": lambda v, p: _obstacles(v, p),
+    "periodic": _periodic,
+    "loop": _loop,
+    "physics": _physics,
+    "provenance": _optional(_mapping),
+    "baseline_provenance": _optional(_mapping),
 }
 
 
@@ -343,7 +375,8 @@ def static_walls_from_meta(meta: Mapping[str, Any]) -> np.ndarray:
                 f"meta['obstacles']: missing from this {scenario} animation, so its walls are unknown "
                 "(written by an older crowdstudy?); regenerate it (crowdstudy layout/navigate, then "
                 "crowdstudy animate, or crowdstudy.motion.build_baseline), or set meta['obstacles'] to "
-                "its wall segments [[[x0, y0], [x1, y1]], ...] in metres ([] for none)")
+                "its wall segments [[[x0, y0], [x1, y1]], ...] in metres ([] for none)"
+            )
         return np.zeros((0, 2, 2))
     return wall_segments(meta["obstacles"], "meta['obstacles']")
 
@@ -354,8 +387,9 @@ def wall_segments(value: object, name: str) -> np.ndarray:
     try:
         walls = np.asarray(value, np.float64)
     except (TypeError, ValueError):
-        raise InvalidInputError(f"{name}: expected (M, 2, 2) wall segments "
-                                "[[[x0, y0], [x1, y1]], ...] in metres") from None
+        raise InvalidInputError(
+            f"{name}: expected (M, 2, 2) wall segments [[[x0, y0], [x1, y1]], ...] in metres"
+        ) from None
     if walls.size == 0:
         return np.zeros((0, 2, 2))
     if walls.ndim != 3 or walls.shape[1:] != (2, 2):

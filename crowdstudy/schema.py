@@ -37,8 +37,28 @@ __all__ = ["RESPONSE_COLUMNS", "DEMOGRAPHIC_COLUMNS", "ITEM_COLUMNS", "RESPONSE_
 
 #: The questionnaire items' columns in the responses file.
 ITEM_COLUMNS = ("Q1", "Q2", "Q3", "Q4", "Q5", "Q6")
-RESPONSE_COLUMNS = ("participant_id", "stage", "scenario", "trial_index", "stimulus_id", "density_level", "density",
-                    "viewpoint", "method", *ITEM_COLUMNS, "rt_ms", "shown_at", "answered_at")
-RESPONSE_QUALITY_COLUMNS = ("video_plays", "first_play_ms", "hidden_count", "hidden_ms", "fullscreen_exits",
-                            "check_answer", "check_value")
+RESPONSE_COLUMNS = (
+    "participant_id",
+    "stage",
+    "scenario",
+    "trial_index",
+    "stimulus_id",
+    "density_level",
+    "density",
+    "viewpoint",
+    "method",
+    *ITEM_COLUMNS,
+    "rt_ms",
+    "shown_at",
+    "answered_at",
+)
+RESPONSE_QUALITY_COLUMNS = (
+    "video_plays",
+    "first_play_ms",
+    "hidden_count",
+    "hidden_ms",
+    "fullscreen_exits",
+    "check_answer",
+    "check_value",
+)
 DEMOGRAPHIC_COLUMNS = ("participant_id", "age", "gender", "started_at", "completed_at", "completion_code")

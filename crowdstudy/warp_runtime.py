@@ -130,7 +130,7 @@ class _Worker:
         return value
 
 
-_local = threading.local()     # one helper thread per calling thread
+_local = threading.local()  # one helper thread per calling thread
 
 
 class _Policy:
@@ -182,7 +182,7 @@ def _pays_off() -> bool:
     policy = getattr(_local, "policy", None)
     if policy is None:
         policy = _local.policy = _Policy()
-    forced = bool(os.environ.get("CROWDSTUDY_THREADS"))      # set: no second-guessing (benchmarks)
+    forced = bool(os.environ.get("CROWDSTUDY_THREADS"))  # set: no second-guessing (benchmarks)
     return host_threads() >= 2 and (forced or policy.parallel())
 
 

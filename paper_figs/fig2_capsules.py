@@ -32,9 +32,9 @@ def poses() -> dict[str, np.ndarray]:
 
     rest = np.zeros((24, 3))
     walk = np.zeros((24, 3))
-    walk[J["left_hip"]] = (0.45, 0, 0)        # left leg forward
-    walk[J["right_hip"]] = (-0.3, 0, 0)       # right leg back ...
-    walk[J["right_knee"]] = (-0.55, 0, 0)     # ... knee bent
+    walk[J["left_hip"]] = (0.45, 0, 0)  # left leg forward
+    walk[J["right_hip"]] = (-0.3, 0, 0)  # right leg back ...
+    walk[J["right_knee"]] = (-0.55, 0, 0)  # ... knee bent
     walk[J["left_knee"]] = (-0.1, 0, 0)
     walk[J["left_shoulder"]] = (0.0, -1.25, -0.25)  # arms down and swinging
     walk[J["right_shoulder"]] = (0.0, 1.25, -0.25)
@@ -79,7 +79,7 @@ def _draw(ax, parts, azimuth_deg: float = -25.0):
 
     az = np.radians(azimuth_deg)
     to_viewer = np.array([np.sin(az), np.cos(az), 0.0])  # the camera stands in front (+y)
-    right = np.cross(-to_viewer, [0.0, 0.0, 1.0])          # screen right (the body's left)
+    right = np.cross(-to_viewer, [0.0, 0.0, 1.0])  # screen right (the body's left)
     light = np.array([0.3, 0.8, 0.6])
     light /= np.linalg.norm(light)
     polys, colours, depth = [], [], []
@@ -112,8 +112,10 @@ def main(argv=None) -> int:
     from crowdstudy.body.capsules import capsule_mesh_iou, posed_capsules
 
     resolution = 0.015 if args.quick else 0.008
-    records = [{"model": "open", "sex": "female", "height": 1.63, "shape": [0.4, 0.0]},
-               {"model": "open", "sex": "male", "height": 1.76, "shape": [0.8, 0.5]}]
+    records = [
+        {"model": "open", "sex": "female", "height": 1.63, "shape": [0.4, 0.0]},
+        {"model": "open", "sex": "male", "height": 1.76, "shape": [0.8, 0.5]},
+    ]
     bodies = [cb.load_body(r) for r in records]
     ious = [capsule_mesh_iou(b, resolution=resolution)["iou"] for b in bodies]
     sample = cb.sample_bodies(4 if args.quick else 12, seed=SEED)
@@ -137,14 +139,34 @@ def main(argv=None) -> int:
         _draw(axes[1, col], capsule_parts)
         axes[0, col].set_title(name)
     for row, label in enumerate(("body meshes", "capsule proxies (24 per body)")):
-        axes[row, 0].text(-0.08, 0.5, label, transform=axes[row, 0].transAxes, fontsize=10, weight="bold",
-                          rotation=90, va="center", ha="right")
-    fig.suptitle(f"Capsule fit, volume IoU: female {ious[0]:.2f}, male {ious[1]:.2f}; "
-                 f"{len(sample_iou)} sampled bodies {min(sample_iou):.2f}-{max(sample_iou):.2f} "
-                 f"(mean {np.mean(sample_iou):.2f})", fontsize=10)
+        axes[row, 0].text(
+            -0.08,
+            0.5,
+            label,
+            transform=axes[row, 0].transAxes,
+            fontsize=10,
+            weight="bold",
+            rotation=90,
+            va="center",
+            ha="right",
+        )
+    fig.suptitle(
+        f"Capsule fit, volume IoU: female {ious[0]:.2f}, male {ious[1]:.2f}; "
+        f"{len(sample_iou)} sampled bodies {min(sample_iou):.2f}-{max(sample_iou):.2f} "
+        f"(mean {np.mean(sample_iou):.2f})",
+        fontsize=10,
+    )
     path = out_path("fig2_capsules", args)
-    save_figure(fig, path, seed=SEED, records=records, iou=ious, sample_records=sample, sample_iou=sample_iou,
-                voxel_resolution=resolution)
+    save_figure(
+        fig,
+        path,
+        seed=SEED,
+        records=records,
+        iou=ious,
+        sample_records=sample,
+        sample_iou=sample_iou,
+        voxel_resolution=resolution,
+    )
     return 0
 
 

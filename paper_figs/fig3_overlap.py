@@ -26,9 +26,25 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 from figstyle import METHOD_COLOURS, apply_style, cache_path, figure_args, out_path, save_figure  # noqa: E402
 
 STAGES = ("stationary", "walking")
-COLUMNS = ["stage", "scenario", "density_level", "density", "characters", "method", "duration", "frames_measured",
-           "resolution", "overlap_mesh_litres", "overlap_mesh_sd_litres", "overlap_capsule_litres",
-           "overlap_capsule_sd_litres", "tracking_error_cm", "seconds_correct", "seconds_metrics", "seed"]
+COLUMNS = [
+    "stage",
+    "scenario",
+    "density_level",
+    "density",
+    "characters",
+    "method",
+    "duration",
+    "frames_measured",
+    "resolution",
+    "overlap_mesh_litres",
+    "overlap_mesh_sd_litres",
+    "overlap_capsule_litres",
+    "overlap_capsule_sd_litres",
+    "tracking_error_cm",
+    "seconds_correct",
+    "seconds_metrics",
+    "seed",
+]
 
 
 def configuration(quick: bool) -> dict:
@@ -50,21 +66,32 @@ def measure_cell(design, stage: str, level: str, config: dict) -> list[dict]:
     rows = []
     for method, anim in (("Baseline", baseline), ("Ours", ours)):
         t0 = time.perf_counter()
-        mesh = overlap_volume(anim, resolution=config["resolution"], geometry="mesh", frames=config["frames"],
-                              progress=True)
+        mesh = overlap_volume(
+            anim, resolution=config["resolution"], geometry="mesh", frames=config["frames"], progress=True
+        )
         caps = overlap_volume(anim, resolution=config["resolution"], geometry="capsule", frames=config["frames"])
         t_metrics = time.perf_counter() - t0
-        rows.append({
-            "stage": stage, "scenario": anim.meta.get("scenario", ""), "density_level": level,
-            "density": float(design.densities[level]), "characters": anim.n_characters, "method": method,
-            "duration": anim.duration, "frames_measured": len(mesh.frames), "resolution": config["resolution"],
-            "overlap_mesh_litres": mesh.mean_litres, "overlap_mesh_sd_litres": 1000 * float(mesh.per_frame.std()),
-            "overlap_capsule_litres": caps.mean_litres,
-            "overlap_capsule_sd_litres": 1000 * float(caps.per_frame.std()),
-            "tracking_error_cm": tracking_error(anim, baseline) if method == "Ours" else 0.0,
-            "seconds_correct": t_correct if method == "Ours" else 0.0, "seconds_metrics": t_metrics,
-            "seed": baseline.meta.get("seed", ""),
-        })
+        rows.append(
+            {
+                "stage": stage,
+                "scenario": anim.meta.get("scenario", ""),
+                "density_level": level,
+                "density": float(design.densities[level]),
+                "characters": anim.n_characters,
+                "method": method,
+                "duration": anim.duration,
+                "frames_measured": len(mesh.frames),
+                "resolution": config["resolution"],
+                "overlap_mesh_litres": mesh.mean_litres,
+                "overlap_mesh_sd_litres": 1000 * float(mesh.per_frame.std()),
+                "overlap_capsule_litres": caps.mean_litres,
+                "overlap_capsule_sd_litres": 1000 * float(caps.per_frame.std()),
+                "tracking_error_cm": tracking_error(anim, baseline) if method == "Ours" else 0.0,
+                "seconds_correct": t_correct if method == "Ours" else 0.0,
+                "seconds_metrics": t_metrics,
+                "seed": baseline.meta.get("seed", ""),
+            }
+        )
     return rows
 
 
@@ -83,8 +110,9 @@ def save_rows(path: Path, rows: list[dict], config: dict) -> None:
         writer.writeheader()
         for row in rows:
             writer.writerow({k: row.get(k, "") for k in COLUMNS})
-    path.with_suffix(".json").write_text(json.dumps({"csv": path.name, "configuration": config,
-                                                     "provenance": provenance(None)}, indent=2, default=str))
+    path.with_suffix(".json").write_text(
+        json.dumps({"csv": path.name, "configuration": config, "provenance": provenance(None)}, indent=2, default=str)
+    )
 
 
 def collect(design, config: dict, csv_path: Path, refresh: bool) -> list[dict]:
@@ -111,8 +139,9 @@ def plot(rows: list[dict], path: Path, config: dict) -> None:
     series = []  # the plotted numbers, for the JSON sidecar
     for ax, stage in zip(axes, STAGES):
         for method in ("Baseline", "Ours"):
-            sel = sorted((r for r in rows if r["stage"] == stage and r["method"] == method),
-                         key=lambda r: float(r["density"]))
+            sel = sorted(
+                (r for r in rows if r["stage"] == stage and r["method"] == method), key=lambda r: float(r["density"])
+            )
             if not sel:
                 continue
             x = [float(r["density"]) for r in sel]
@@ -122,18 +151,31 @@ def plot(rows: list[dict], path: Path, config: dict) -> None:
             ax.errorbar(x, y, yerr=sd, color=colour, marker="o", ms=4, capsize=2, label=f"{method} (mesh)")
             yc = [float(r["overlap_capsule_litres"]) for r in sel]
             ax.plot(x, yc, color=colour, ls="--", lw=1.0, alpha=0.7, label=f"{method} (capsules)")
-            series.append({"stage": stage, "method": method, "density_level": [r["density_level"] for r in sel],
-                           "density": x, "characters": [int(r["characters"]) for r in sel],
-                           "overlap_mesh_litres": y, "overlap_mesh_sd_litres": sd, "overlap_capsule_litres": yc,
-                           "tracking_error_cm": [float(r["tracking_error_cm"]) for r in sel]})
+            series.append(
+                {
+                    "stage": stage,
+                    "method": method,
+                    "density_level": [r["density_level"] for r in sel],
+                    "density": x,
+                    "characters": [int(r["characters"]) for r in sel],
+                    "overlap_mesh_litres": y,
+                    "overlap_mesh_sd_litres": sd,
+                    "overlap_capsule_litres": yc,
+                    "tracking_error_cm": [float(r["tracking_error_cm"]) for r in sel],
+                }
+            )
         ax.set_title(titles[stage])
         ax.set_xlabel("density (characters / m$^2$)")
         ax.set_ylim(bottom=0)
     axes[0].set_ylabel("mean overlap per character (L)")
     axes[0].legend(loc="upper left", fontsize=7)
     res_cm = 100 * config["resolution"]
-    fig.suptitle(f"Per-character body volume inside other characters (mesh grid {res_cm:g} cm, "
-                 f"frames {config['frames']}; bars: SD over frames)", fontsize=9, y=1.04)
+    fig.suptitle(
+        f"Per-character body volume inside other characters (mesh grid {res_cm:g} cm, "
+        f"frames {config['frames']}; bars: SD over frames)",
+        fontsize=9,
+        y=1.04,
+    )
     save_figure(fig, path, configuration=config, rows=len(rows), series=series)
     plt.close(fig)
 

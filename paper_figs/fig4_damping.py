@@ -12,7 +12,6 @@ import json
 import sys
 
 import numpy as np
-
 from figstyle import apply_style, cache_path, figure_args, out_path, save_figure
 
 
@@ -20,15 +19,20 @@ def _compute(dampings: tuple[float, ...], duration: float) -> dict:
     from crowdstudy.physics.damping import damping_study
 
     data = damping_study(dampings=dampings, duration=duration)
-    return {"time": np.asarray(data["time"]).tolist(), "target": np.asarray(data["target"]).tolist(),
-            "release_time": float(data["release_time"]), "push": float(data["push"]),
-            "position": {repr(float(d)): np.asarray(p).tolist() for d, p in data["position"].items()},
-            "metrics": {repr(float(d)): {k: float(v) for k, v in m.items()} for d, m in data["metrics"].items()}}
+    return {
+        "time": np.asarray(data["time"]).tolist(),
+        "target": np.asarray(data["target"]).tolist(),
+        "release_time": float(data["release_time"]),
+        "push": float(data["push"]),
+        "position": {repr(float(d)): np.asarray(p).tolist() for d, p in data["position"].items()},
+        "metrics": {repr(float(d)): {k: float(v) for k, v in m.items()} for d, m in data["metrics"].items()},
+    }
 
 
 def main(argv=None) -> int:
-    args = figure_args(__doc__.splitlines()[0], argv,
-                       dampings=dict(default="0,0.006,0.06", help="comma-separated damping values d"))
+    args = figure_args(
+        __doc__.splitlines()[0], argv, dampings=dict(default="0,0.006,0.06", help="comma-separated damping values d")
+    )
     dampings = tuple(float(v) for v in args.dampings.split(","))
     duration = 5.0 if args.quick else 6.0
     cache = cache_path(f"fig4_damping_{'_'.join(f'{d:g}' for d in dampings)}_{duration:g}s.json")
@@ -48,18 +52,37 @@ def main(argv=None) -> int:
     for colour, (d, pos) in zip(colours, data["position"].items()):
         m = data["metrics"][d]
         ret = "never" if not np.isfinite(m["return_time"]) else f"{m['return_time']:.2f} s"
-        ax.plot(t, pos, color=colour, label=f"d = {float(d):g}  (back within 2 cm: {ret}, "
-                                            f"overshoot {100 * m['overshoot']:.1f} cm)")
+        ax.plot(
+            t,
+            pos,
+            color=colour,
+            label=f"d = {float(d):g}  (back within 2 cm: {ret}, overshoot {100 * m['overshoot']:.1f} cm)",
+        )
     ax.axvline(data["release_time"], color="#888888", lw=0.8)
-    ax.annotate("released", (data["release_time"], ax.get_ylim()[1]), xytext=(4, -12),
-                textcoords="offset points", fontsize=8, color="#555555")
+    ax.annotate(
+        "released",
+        (data["release_time"], ax.get_ylim()[1]),
+        xytext=(4, -12),
+        textcoords="offset points",
+        fontsize=8,
+        color="#555555",
+    )
     ax.set_xlabel("time (s)")
     ax.set_ylabel("pelvis position along y (m)")
     ax.set_title("Damping of the PD control: recovery after a collision")
     ax.legend(loc="upper left", fontsize=7.5)
-    save_figure(fig, out_path("fig4_damping", args), metrics=data["metrics"], dampings=dampings,
-                series={"time": data["time"], "target": target.tolist(), "release_time": data["release_time"],
-                        "position": data["position"]})
+    save_figure(
+        fig,
+        out_path("fig4_damping", args),
+        metrics=data["metrics"],
+        dampings=dampings,
+        series={
+            "time": data["time"],
+            "target": target.tolist(),
+            "release_time": data["release_time"],
+            "position": data["position"],
+        },
+    )
     return 0
 
 

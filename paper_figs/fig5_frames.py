@@ -44,10 +44,10 @@ def cell_animations(design, level: str, duration: float, refresh: bool):
 
 def main(argv=None) -> int:
     args = figure_args(__doc__.splitlines()[0], argv, view={"default": "V2", "help": "viewpoint"})
+    import matplotlib.pyplot as plt
+
     from crowdstudy.design import load_design
     from crowdstudy.render.renderer import CrowdRenderer
-
-    import matplotlib.pyplot as plt
 
     apply_style()
     design = load_design()
@@ -73,16 +73,29 @@ def main(argv=None) -> int:
                 spine.set_visible(True)
                 spine.set_color(METHOD_COLOURS[method])
                 spine.set_linewidth(1.5)
-            ax.set_title(f"{level} ({anim.n_characters} characters), {method}: "
-                         f"{100 * res.crowd_fraction:.1f}% of crowd pixels overlap", fontsize=8)
-            info["panels"].append({"level": level, "method": method, "frame": frame, "characters": anim.n_characters,
-                                   "red_fraction": res.red_fraction, "crowd_fraction": res.crowd_fraction})
+            ax.set_title(
+                f"{level} ({anim.n_characters} characters), {method}: "
+                f"{100 * res.crowd_fraction:.1f}% of crowd pixels overlap",
+                fontsize=8,
+            )
+            info["panels"].append(
+                {
+                    "level": level,
+                    "method": method,
+                    "frame": frame,
+                    "characters": anim.n_characters,
+                    "red_fraction": res.red_fraction,
+                    "crowd_fraction": res.crowd_fraction,
+                }
+            )
     fig.suptitle("Overlapping body volumes (red), Baseline vs Ours, per density", fontsize=10)
     fig.tight_layout()
     save_figure(fig, out_path("fig5_frames", args), seed=design.seed, **info)
     for p in info["panels"]:
-        print(f"  {p['level']} {p['method']:8s} red {100 * p['red_fraction']:.2f}% of image, "
-              f"{100 * p['crowd_fraction']:.2f}% of crowd")
+        print(
+            f"  {p['level']} {p['method']:8s} red {100 * p['red_fraction']:.2f}% of image, "
+            f"{100 * p['crowd_fraction']:.2f}% of crowd"
+        )
     return 0
 
 

@@ -21,12 +21,20 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
 CHROMIUM = "/usr/bin/chromium"
-CHROMIUM_ARGS = ["--no-sandbox", "--headless", "--disable-gpu", "--disable-background-networking",
-                 "--disable-component-update", "--disable-sync", "--no-first-run"]
+CHROMIUM_ARGS = [
+    "--no-sandbox",
+    "--headless",
+    "--disable-gpu",
+    "--disable-background-networking",
+    "--disable-component-update",
+    "--disable-sync",
+    "--no-first-run",
+]
 
 
 def screenshot(url: str, out: Path, *, width: int, height: int, video_timeout_ms: float) -> dict:
     from playwright.sync_api import sync_playwright
+
     with sync_playwright() as pw:
         browser = pw.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS)
         try:
@@ -47,7 +55,9 @@ def screenshot(url: str, out: Path, *, width: int, height: int, video_timeout_ms
             page.wait_for_selector(".cs-trial .cs-next")
             for q, v in (("Q1", 5), ("Q2", 2), ("Q3", 4), ("Q4", 3)):
                 page.check(f'input[name="{q}"][value="{v}"]')
-            page.wait_for_function("() => document.querySelector('.cs-video').currentTime > 0.3", timeout=video_timeout_ms)
+            page.wait_for_function(
+                "() => document.querySelector('.cs-video').currentTime > 0.3", timeout=video_timeout_ms
+            )
             out.parent.mkdir(parents=True, exist_ok=True)
             page.screenshot(path=str(out), full_page=False)
             return page.evaluate(PAGE_STATE)
@@ -87,8 +97,15 @@ def _render_crowd_clips(stim: Path, size: tuple[int, int]) -> None:
 
     design = load_design()
     clip = stim / "crowd.mp4"
-    render_video(build_baseline(design, "stationary", "D3", duration=2.0), "V2", clip, width=size[0],
-                 height=size[1], design=design, progress=False)
+    render_video(
+        build_baseline(design, "stationary", "D3", duration=2.0),
+        "V2",
+        clip,
+        width=size[0],
+        height=size[1],
+        design=design,
+        progress=False,
+    )
     digest = sha256_file(clip)
     manifest = json.loads((stim / "manifest.json").read_text())
     for row in manifest["stimuli"]:
@@ -129,8 +146,9 @@ def main(argv: list[str] | None = None) -> int:
 
     from crowdstudy.provenance import provenance
 
-    args.out.with_suffix(".json").write_text(json.dumps({"figure": args.out.name, "page": state,
-                                                         "provenance": provenance(None)}, indent=1, default=str))
+    args.out.with_suffix(".json").write_text(
+        json.dumps({"figure": args.out.name, "page": state, "provenance": provenance(None)}, indent=1, default=str)
+    )
     print(f"fig7: wrote {args.out}")
     return 0
 

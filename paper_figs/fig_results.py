@@ -20,10 +20,13 @@ from figstyle import apply_style, cache_path, figure_args, out_path
 
 
 def main(argv=None) -> int:
-    args = figure_args(__doc__.splitlines()[0], argv,  # writes one figure per stage; --out is not used
-                       responses=dict(type=Path, default=None, help="responses.csv from crowdstudy export"),
-                       participants=dict(type=int, default=30, help="simulated participants (default 30)"),
-                       seed=dict(type=int, default=2024, help="seed of the simulated participants"))
+    args = figure_args(
+        __doc__.splitlines()[0],
+        argv,  # writes one figure per stage; --out is not used
+        responses=dict(type=Path, default=None, help="responses.csv from crowdstudy export"),
+        participants=dict(type=int, default=30, help="simulated participants (default 30)"),
+        seed=dict(type=int, default=2024, help="seed of the simulated participants"),
+    )
     apply_style()
     from crowdstudy.design import load_design
     from crowdstudy.provenance import provenance
@@ -52,15 +55,38 @@ def main(argv=None) -> int:
         shutil.copyfile(produced[0], target)
         # sidecar: the plotted numbers (method_figure's .json), the ANOVA behind the stars, provenance
         plotted = json.loads(produced[0].with_suffix(".json").read_text())
-        anova = {comp: {row.Source: {"F": row.F, "ddof1": row.ddof1, "ddof2": row.ddof2, "p_unc": row.p_unc,
-                                     "p": row.p, "np2": row.np2}
-                        for row in result.results[(stage.number, comp)].anova.itertuples()}
-                 for comp in design.composites if (stage.number, comp) in result.results}
-        target.with_suffix(".json").write_text(json.dumps(
-            {**plotted, "figure": target.name, "stage": stage.number, "scenario": stage.scenario,
-             "responses": "simulated" if args.responses is None else str(args.responses), "participants": n,
-             "seed": args.seed if args.responses is None else None, "provenance": provenance(args.seed),
-             "anova": anova}, indent=1, default=float))
+        anova = {
+            comp: {
+                row.Source: {
+                    "F": row.F,
+                    "ddof1": row.ddof1,
+                    "ddof2": row.ddof2,
+                    "p_unc": row.p_unc,
+                    "p": row.p,
+                    "np2": row.np2,
+                }
+                for row in result.results[(stage.number, comp)].anova.itertuples()
+            }
+            for comp in design.composites
+            if (stage.number, comp) in result.results
+        }
+        target.with_suffix(".json").write_text(
+            json.dumps(
+                {
+                    **plotted,
+                    "figure": target.name,
+                    "stage": stage.number,
+                    "scenario": stage.scenario,
+                    "responses": "simulated" if args.responses is None else str(args.responses),
+                    "participants": n,
+                    "seed": args.seed if args.responses is None else None,
+                    "provenance": provenance(args.seed),
+                    "anova": anova,
+                },
+                indent=1,
+                default=float,
+            )
+        )
         written.append(target)
         print(f"wrote {target}")
     summary = work / "summary.md"

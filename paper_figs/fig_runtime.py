@@ -34,8 +34,15 @@ def _measure(sizes: list[int], steps: int) -> list[dict]:
         anim = d1 if n == d1.n_characters else d5 if n == d5.n_characters else tile_crowd(d5, n)
         for device in devices:
             r = time_steps(anim, steps, device=device)
-            rows.append({"characters": n, "device": device, "cpu_ms": r["total_cpu_ms"],
-                         "wall_ms": r["total_wall_ms"], "contacts": r["contacts"]})
+            rows.append(
+                {
+                    "characters": n,
+                    "device": device,
+                    "cpu_ms": r["total_cpu_ms"],
+                    "wall_ms": r["total_wall_ms"],
+                    "contacts": r["contacts"],
+                }
+            )
             print(f"{n:4d} characters on {device}: {r['total_cpu_ms']:.2f} ms/step (CPU time)", flush=True)
     return rows
 
@@ -59,12 +66,24 @@ def main(argv=None) -> int:
             continue
         label = "crowdstudy, this CPU (2 cores)" if device == "cpu" else "crowdstudy, CUDA"
         ax.plot([r["characters"] for r in pts], [r["cpu_ms"] for r in pts], "o-", color=colour, label=label)
-        ax.plot([r["characters"] for r in pts], [r["wall_ms"] for r in pts], ":", color=colour, lw=1,
-                label=f"{label}, wall clock")
+        ax.plot(
+            [r["characters"] for r in pts],
+            [r["wall_ms"] for r in pts],
+            ":",
+            color=colour,
+            lw=1,
+            label=f"{label}, wall clock",
+        )
     ax.plot(list(PAPER), list(PAPER.values()), "s--", color="#d1495b", label="paper (GTX 1080 Ti)")
     ax.axhline(1000 / 60, color="#888888", lw=0.8)
-    ax.annotate("real time at 1/60 s steps", (max(r["characters"] for r in rows), 1000 / 60), ha="right",
-                va="bottom", fontsize=7, color="#666666")
+    ax.annotate(
+        "real time at 1/60 s steps",
+        (max(r["characters"] for r in rows), 1000 / 60),
+        ha="right",
+        va="bottom",
+        fontsize=7,
+        color="#666666",
+    )
     ax.set_xlabel("characters (24 bones each)")
     ax.set_ylabel("ms per physics step")
     ax.set_title("Cost of one correction step")

@@ -27,21 +27,41 @@ METHOD_COLOURS = {"Baseline": "#d1495b", "Ours": "#00798c"}
 #: Sequential colours for density levels D1..D5.
 DENSITY_COLOURS = ["#c6dbef", "#9ecae1", "#6baed6", "#3182bd", "#08519c"]
 
-__all__ = ["apply_style", "figure_args", "out_path", "cache_path", "save_figure", "METHOD_COLOURS",
-           "DENSITY_COLOURS", "OUT_DIR", "CACHE_DIR"]
+__all__ = [
+    "apply_style",
+    "figure_args",
+    "out_path",
+    "cache_path",
+    "save_figure",
+    "METHOD_COLOURS",
+    "DENSITY_COLOURS",
+    "OUT_DIR",
+    "CACHE_DIR",
+]
 
 
 def apply_style() -> None:
     """Apply the shared look: sans-serif, light grid, no top/right spines, 150 dpi."""
     import matplotlib as mpl
 
-    mpl.rcParams.update({
-        "figure.dpi": 110, "savefig.dpi": 150, "savefig.bbox": "tight",
-        "font.family": "DejaVu Sans", "font.size": 9, "axes.titlesize": 10, "axes.labelsize": 9,
-        "axes.spines.top": False, "axes.spines.right": False, "axes.grid": True,
-        "grid.color": "#e5e5e5", "grid.linewidth": 0.6, "legend.frameon": False,
-        "lines.linewidth": 1.6,
-    })
+    mpl.rcParams.update(
+        {
+            "figure.dpi": 110,
+            "savefig.dpi": 150,
+            "savefig.bbox": "tight",
+            "font.family": "DejaVu Sans",
+            "font.size": 9,
+            "axes.titlesize": 10,
+            "axes.labelsize": 9,
+            "axes.spines.top": False,
+            "axes.spines.right": False,
+            "axes.grid": True,
+            "grid.color": "#e5e5e5",
+            "grid.linewidth": 0.6,
+            "legend.frameon": False,
+            "lines.linewidth": 1.6,
+        }
+    )
 
 
 def figure_args(description: str, argv=None, **extra) -> argparse.Namespace:
@@ -77,7 +97,6 @@ def save_figure(fig, path: Path, *, seed=None, **info) -> Path:
     path = Path(path)
     fig.savefig(path)
     sidecar = path.with_suffix(".json")
-    sidecar.write_text(json.dumps({"figure": path.name, "provenance": provenance(seed), **info},
-                                  indent=2, default=str))
+    sidecar.write_text(json.dumps({"figure": path.name, "provenance": provenance(seed), **info}, indent=2, default=str))
     print(f"wrote {path}")
     return path

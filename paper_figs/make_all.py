@@ -1,8 +1,8 @@
 """Regenerate every figure of the paper: runs each ``paper_figs/fig*.py`` in turn.
 
-    .venv/bin/python paper_figs/make_all.py            # full configuration (``make figures``)
-    .venv/bin/python paper_figs/make_all.py --quick    # small configuration
-    .venv/bin/python paper_figs/make_all.py fig4_damping fig_runtime   # a selection
+.venv/bin/python paper_figs/make_all.py            # full configuration (``make figures``)
+.venv/bin/python paper_figs/make_all.py --quick    # small configuration
+.venv/bin/python paper_figs/make_all.py fig4_damping fig_runtime   # a selection
 """
 
 from __future__ import annotations

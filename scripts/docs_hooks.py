@@ -50,6 +50,7 @@ RESULTS_INDEX = "results/index.md"
 
 # ------------------------------------------------------------------ command line
 
+
 @contextlib.contextmanager
 def _columns(width: int):
     old = os.environ.get("COLUMNS")
@@ -105,12 +106,17 @@ def benchmark_helps() -> list[tuple[str, str]]:
 def cli_page() -> str:
     from crowdstudy.cli import COMMANDS
 
-    lines = ["# Command line", "",
-             "Generated at build time from the parsers of the `crowdstudy` commands: each section "
-             "is what `crowdstudy COMMAND --help` prints. Every command reads and writes files, "
-             "so the stages can run one at a time; the [getting started](../getting-started.md) "
-             "page walks through them in order.", "",
-             "| command | what it does |", "| --- | --- |"]
+    lines = [
+        "# Command line",
+        "",
+        "Generated at build time from the parsers of the `crowdstudy` commands: each section "
+        "is what `crowdstudy COMMAND --help` prints. Every command reads and writes files, "
+        "so the stages can run one at a time; the [getting started](../getting-started.md) "
+        "page walks through them in order.",
+        "",
+        "| command | what it does |",
+        "| --- | --- |",
+    ]
     lines += [f"| [`{name}`](#{name}) | {text} |" for name, _, text in COMMANDS]
     for name, text, subs in command_helps():
         lines += ["", f"## {name}", "", "```text", text.rstrip(), "```"]
@@ -118,16 +124,21 @@ def cli_page() -> str:
             lines += ["", f"### {name} {sub}", "", "```text", sub_text.rstrip(), "```"]
     benches = benchmark_helps()
     if benches:
-        lines += ["", "## Benchmarks (`crowdstudy bench NAME`)", "",
-                  "Each script in `benchmarks/` (a checkout only) takes its own options after its name. "
-                  "Reports go to `build/bench/NAME.json`; [results](../results/index.md) says how "
-                  "they become pages."]
+        lines += [
+            "",
+            "## Benchmarks (`crowdstudy bench NAME`)",
+            "",
+            "Each script in `benchmarks/` (a checkout only) takes its own options after its name. "
+            "Reports go to `build/bench/NAME.json`; [results](../results/index.md) says how "
+            "they become pages.",
+        ]
         for name, text in benches:
             lines += ["", f"### bench {name}", "", "```text", text.rstrip(), "```"]
     return "\n".join(lines) + "\n"
 
 
 # ------------------------------------------------------------------ API reference
+
 
 def _docstring_summary(path: Path) -> str:
     doc = ast.get_docstring(ast.parse(path.read_text(encoding="utf-8"))) or ""
@@ -144,30 +155,51 @@ def api_pages() -> dict[str, str]:
     """{page path: Markdown} of the API reference: an index, one page per subpackage and
     one for the top-level modules."""
     pages: dict[str, str] = {}
-    index = ["# API reference", "",
-             "Generated from the docstrings by mkdocstrings; griffe reads the sources without "
-             "importing them. One page per subpackage, each with the package's public names "
-             "first and then every module.", "",
-             "| page | what it holds |", "| --- | --- |",
-             f"| [crowdstudy](crowdstudy.md) | {_docstring_summary(PACKAGE / '__init__.py')} "
-             "The top-level modules: scene containers, study design, file columns, errors, provenance. |"]
+    index = [
+        "# API reference",
+        "",
+        "Generated from the docstrings by mkdocstrings; griffe reads the sources without "
+        "importing them. One page per subpackage, each with the package's public names "
+        "first and then every module.",
+        "",
+        "| page | what it holds |",
+        "| --- | --- |",
+        f"| [crowdstudy](crowdstudy.md) | {_docstring_summary(PACKAGE / '__init__.py')} "
+        "The top-level modules: scene containers, study design, file columns, errors, provenance. |",
+    ]
     for name in subpackages():
         summary = _docstring_summary(PACKAGE / name / "__init__.py")
         index.append(f"| [crowdstudy.{name}]({name}.md) | {summary} |")
-        pages[f"reference/api/{name}.md"] = "\n".join([
-            f"# crowdstudy.{name}", "",
-            f"::: crowdstudy.{name}",
+        pages[f"reference/api/{name}.md"] = "\n".join(
+            [
+                f"# crowdstudy.{name}",
+                "",
+                f"::: crowdstudy.{name}",
+                "    options:",
+                "      show_submodules: true",
+                "      heading_level: 2",
+                "",
+            ]
+        )
+    top = sorted(p.stem for p in PACKAGE.glob("*.py") if not p.stem.startswith("_"))
+    body = [
+        "# crowdstudy",
+        "",
+        "::: crowdstudy",
+        "    options:",
+        "      show_submodules: false",
+        "      heading_level: 2",
+        "",
+    ]
+    for mod in top:
+        body += [
+            f"::: crowdstudy.{mod}",
             "    options:",
-            "      show_submodules: true",
+            "      show_root_heading: true",
+            "      show_root_full_path: true",
             "      heading_level: 2",
             "",
-        ])
-    top = sorted(p.stem for p in PACKAGE.glob("*.py") if not p.stem.startswith("_"))
-    body = ["# crowdstudy", "", "::: crowdstudy", "    options:", "      show_submodules: false",
-            "      heading_level: 2", ""]
-    for mod in top:
-        body += [f"::: crowdstudy.{mod}", "    options:", "      show_root_heading: true",
-                 "      show_root_full_path: true", "      heading_level: 2", ""]
+        ]
     pages["reference/api/crowdstudy.md"] = "\n".join(body)
     pages[API_INDEX] = "\n".join(index) + "\n"
     return pages
@@ -191,8 +223,9 @@ def column_table(dotted: str, described: str, where: str = "") -> tuple[str, lis
     columns = list(_constant(dotted))
     meanings = {m.group(1): " ".join(m.group(2).split()) for m in _ITEM_RE.finditer(described)}
     problems = [f"{where}: column {c!r} of {dotted} has no meaning in the page" for c in columns if c not in meanings]
-    problems += [f"{where}: the page describes {c!r}, which {dotted} does not have" for c in meanings
-                 if c not in columns]
+    problems += [
+        f"{where}: the page describes {c!r}, which {dotted} does not have" for c in meanings if c not in columns
+    ]
     lines = [f"Columns, in order (`{dotted}`):", "", "| # | column | meaning |", "| --- | --- | --- |"]
     lines += [f"| {i} | `{c}` | {meanings.get(c, '')} |" for i, c in enumerate(columns, 1)]
     return "\n".join(lines) + "\n", problems
@@ -209,12 +242,12 @@ def expand_markers(markdown: str, where: str = "") -> tuple[str, list[str]]:
 
     markdown = _COLUMNS_RE.sub(columns, markdown)
     if "<!-- results: index -->" in markdown:
-        markdown = markdown.replace("<!-- results: index -->",
-                                    results_pages.index_table(results_pages.load_reports()))
+        markdown = markdown.replace("<!-- results: index -->", results_pages.index_table(results_pages.load_reports()))
     return markdown, problems
 
 
 # ------------------------------------------------------------------ MkDocs events
+
 
 def generated_pages() -> dict[str, str]:
     pages = {"reference/cli.md": cli_page()}

@@ -98,7 +98,7 @@ def heading_line(report: dict) -> str:
 def _table(rows: list[dict]) -> list[str]:
     columns: list[str] = []
     for row in rows:
-        for key in (row if isinstance(row, dict) else {}):
+        for key in row if isinstance(row, dict) else {}:
             if key not in columns:
                 columns.append(key)
     if not columns:
@@ -129,8 +129,14 @@ def render_report(stem: str, report: dict) -> str:
     summary = _benchmark_summary(name)
     if summary:
         out += [summary, ""]
-    out += ["Generated from `docs/results/data/" + stem + ".json`; "
-            "[how these pages are made](index.md).", "", "## Rows", "", head, ""]
+    out += [
+        "Generated from `docs/results/data/" + stem + ".json`; [how these pages are made](index.md).",
+        "",
+        "## Rows",
+        "",
+        head,
+        "",
+    ]
     out += _table(report["rows"])
     settings = []
     for key, value in report.items():
@@ -165,8 +171,10 @@ def index_table(reports: dict[str, dict]) -> str:
     lines = ["| report | command | machine | date |", "| --- | --- | --- | --- |"]
     for stem, rep in reports.items():
         command = rep.get("command") or "not recorded"
-        lines.append(f"| [{stem}]({stem}.md) | `{_cell(command)}` | {_cell(_machine_text(rep.get('machine')))} | "
-                     f"{str(rep.get('date') or 'not recorded')[:10]} |")
+        lines.append(
+            f"| [{stem}]({stem}.md) | `{_cell(command)}` | {_cell(_machine_text(rep.get('machine')))} | "
+            f"{str(rep.get('date') or 'not recorded')[:10]} |"
+        )
     return "\n".join(lines) + "\n"
 
 

@@ -15,13 +15,21 @@ SHARED = ROOT.parent / "shared"
 #: loadfile --no-loadscope-reorder` (the Makefile's) the end-to-end demo starts at once on one
 #: worker and the rest of the suite fills the other around it (xdist's default order, most
 #: tests first, started the demo last and left one worker idle at the end)
-SLOWEST_FIRST = ("test_demo.py", "test_paper_figs.py", "test_study_browser_quality.py", "test_study_browser.py",
-                 "test_study_load.py", "test_stimuli.py", "test_physics_meta.py", "test_physics_solver.py")
+SLOWEST_FIRST = (
+    "test_demo.py",
+    "test_paper_figs.py",
+    "test_study_browser_quality.py",
+    "test_study_browser.py",
+    "test_study_load.py",
+    "test_stimuli.py",
+    "test_physics_meta.py",
+    "test_physics_solver.py",
+)
 
 
 def pytest_collection_modifyitems(session, config, items):
     rank = {name: i for i, name in enumerate(SLOWEST_FIRST)}
-    items.sort(key=lambda item: rank.get(item.path.name, len(rank)))      # stable: the rest keep their order
+    items.sort(key=lambda item: rank.get(item.path.name, len(rank)))  # stable: the rest keep their order
 
 
 @pytest.fixture
@@ -48,4 +56,3 @@ def saved_figures(monkeypatch):
 
     monkeypatch.setattr(Figure, "savefig", savefig)
     return figures
-

@@ -29,15 +29,21 @@ EXTRA = {
     "mixamorig:HeadTop_End": ("mixamorig:Head", "head", (0.0, 0.0, 0.2)),
 }
 #: our joint that each extra bone's weights must end on after import
-EXTRA_TARGET = {"mixamorig:LeftHandIndex1": "left_wrist", "mixamorig:LeftHandMiddle2": "left_hand",
-                "mixamorig:LeftForeArmTwist": "left_elbow", "mixamorig:HeadTop_End": "head"}
+EXTRA_TARGET = {
+    "mixamorig:LeftHandIndex1": "left_wrist",
+    "mixamorig:LeftHandMiddle2": "left_hand",
+    "mixamorig:LeftForeArmTwist": "left_elbow",
+    "mixamorig:HeadTop_End": "head",
+}
 A_POSE = math.radians(40.0)
 YAW = math.radians(90.0)
 
 
 def _trs(m: np.ndarray) -> dict:
-    return {"translation": [float(x) for x in m[:3, 3]],
-            "rotation": [float(x) for x in matrix_to_quaternion(m[:3, :3])]}
+    return {
+        "translation": [float(x) for x in m[:3, 3]],
+        "rotation": [float(x) for x in matrix_to_quaternion(m[:3, :3])],
+    }
 
 
 def mixamo_weights(body) -> tuple[list[str], np.ndarray]:
@@ -96,8 +102,15 @@ def _rename(names: list[str], weights: np.ndarray, convention: str, omit: tuple[
     return new, w, keep
 
 
-def write_mixamo_character(path, body, *, texture: bool = True, convention: str = "mixamo",
-                           omit: tuple[str, ...] = (), vrm_extension: bool = False) -> dict:
+def write_mixamo_character(
+    path,
+    body,
+    *,
+    texture: bool = True,
+    convention: str = "mixamo",
+    omit: tuple[str, ...] = (),
+    vrm_extension: bool = False,
+) -> dict:
     """Write ``body`` as a Mixamo-style skinned .glb; returns what a test compares against:
     ``{"names", "weights" (V, K), "uv" (V, 2) bottom-left origin, "texture" (H, W, 3)}``.
 
@@ -106,8 +119,11 @@ def write_mixamo_character(path, body, *, texture: bool = True, convention: str 
     ``omit`` drops joints (weights to the parent, children re-parented)."""
     names, weights = mixamo_weights(body)
     mix_names = list(names)
-    names, weights, keep = _rename(names, weights, convention, omit) if (convention != "mixamo" or omit) \
+    names, weights, keep = (
+        _rename(names, weights, convention, omit)
+        if (convention != "mixamo" or omit)
         else (names, weights, list(range(len(names))))
+    )
     rot = a_pose_rotations()
     local = axis_angle_to_matrix(rot)
     glob, pos = forward_kinematics(body.rest_joints, local, np.zeros(3), rotations_are_matrices=True)
@@ -129,8 +145,9 @@ def write_mixamo_character(path, body, *, texture: bool = True, convention: str 
         m[:3, :3] = turn @ glob[j] @ roll
         m[:3, 3] = cm * (turn @ (pos[j] + glob[j] @ np.asarray(offset)))
         frames[name] = m
-    parents = {MIXAMO[n]: (MIXAMO[JOINT_NAMES[PARENTS[j]]] if PARENTS[j] >= 0 else None)
-               for j, n in enumerate(JOINT_NAMES)}
+    parents = {
+        MIXAMO[n]: (MIXAMO[JOINT_NAMES[PARENTS[j]]] if PARENTS[j] >= 0 else None) for j, n in enumerate(JOINT_NAMES)
+    }
     parents.update({n: p for n, (p, _, _) in EXTRA.items()})
 
     # re-key by the file's names, re-parent children of omitted joints
@@ -146,13 +163,21 @@ def write_mixamo_character(path, body, *, texture: bool = True, convention: str 
         return par
 
     frames = {rename[k]: v for k, v in frames.items()}
-    parents = {rename[k]: (None if kept_parent(k) is None else rename[kept_parent(k)])
-               for k in mix_names if k not in omitted}
+    parents = {
+        rename[k]: (None if kept_parent(k) is None else rename[kept_parent(k)]) for k in mix_names if k not in omitted
+    }
     weights = weights[:, keep]
     names = [names[k] for k in keep]
     b = GltfBuilder(generator="crowdstudy test fixture (Mixamo-style)")
-    armature = b.add("nodes", {"name": "Armature", "rotation": [-math.sqrt(0.5), 0.0, 0.0, math.sqrt(0.5)],
-                               "scale": [0.01, 0.01, 0.01], "children": []})
+    armature = b.add(
+        "nodes",
+        {
+            "name": "Armature",
+            "rotation": [-math.sqrt(0.5), 0.0, 0.0, math.sqrt(0.5)],
+            "scale": [0.01, 0.01, 0.01],
+            "children": [],
+        },
+    )
     index = {}
     for name in names:  # parents come first (24 joints in tree order, then the extras)
         par = parents[name]
@@ -174,9 +199,18 @@ def write_mixamo_character(path, body, *, texture: bool = True, convention: str 
         yy, xx = np.mgrid[0:16, 0:16]
         tex = np.stack([xx * 16, yy * 16, ((xx // 4 + yy // 4) % 2) * 255], axis=-1).astype(np.uint8)
     mesh_node = add_skinned_mesh(
-        b, name="Body", vertices=bind_verts, faces=body.faces, joints=order[:, :4], weights=vals[:, :4],
-        joint_nodes=[index[n] for n in names], inverse_bind=ibm, skeleton=index[names[0]],
-        uv=None if uv is None else np.stack([uv[:, 0], 1.0 - uv[:, 1]], 1), texture=tex)
+        b,
+        name="Body",
+        vertices=bind_verts,
+        faces=body.faces,
+        joints=order[:, :4],
+        weights=vals[:, :4],
+        joint_nodes=[index[n] for n in names],
+        inverse_bind=ibm,
+        skeleton=index[names[0]],
+        uv=None if uv is None else np.stack([uv[:, 0], 1.0 - uv[:, 1]], 1),
+        texture=tex,
+    )
     # the other four influences as JOINTS_1 / WEIGHTS_1
     prim = b.doc["meshes"][b.doc["nodes"][mesh_node]["mesh"]]["primitives"][0]
     j1 = np.where(vals[:, 4:] > 0, order[:, 4:], 0).astype(np.uint8)
@@ -184,8 +218,11 @@ def write_mixamo_character(path, body, *, texture: bool = True, convention: str 
     prim["attributes"]["WEIGHTS_1"] = b.accessor(vals[:, 4:].copy(), target=34962)
     if vrm_extension:
         b.doc["extensionsUsed"] = ["VRMC_vrm"]
-        bones = {vrm: {"node": index[rename[mix_names[JOINT_INDEX[ours]]]]}
-                 for vrm, ours in NAME_MAPS["vrm"].items() if ours not in omit}
+        bones = {
+            vrm: {"node": index[rename[mix_names[JOINT_INDEX[ours]]]]}
+            for vrm, ours in NAME_MAPS["vrm"].items()
+            if ours not in omit
+        }
         b.doc["extensions"] = {"VRMC_vrm": {"specVersion": "1.0", "humanoid": {"humanBones": bones}}}
     b.doc["scenes"] = [{"nodes": [armature, mesh_node]}]
     b.doc["scene"] = 0

@@ -11,21 +11,37 @@ import dataclasses
 
 import numpy as np
 
-from crowdstudy.body.skeleton import DEFAULT_PELVIS_HEIGHT, DEFAULT_REST_JOINTS, JOINT_NAMES, PARENTS, forward_kinematics
+from crowdstudy.body.skeleton import (
+    DEFAULT_PELVIS_HEIGHT,
+    DEFAULT_REST_JOINTS,
+    JOINT_NAMES,
+    PARENTS,
+    forward_kinematics,
+)
 from crowdstudy.scene import CrowdAnimation
 
 # (joint, start offset from the joint or None, end: child joint name or offset, radius)
 _BONES = [
     ("pelvis", (-0.09, 0, -0.02), (0.09, 0, -0.02), 0.11),
-    ("spine1", None, "spine2", 0.12), ("spine2", None, "spine3", 0.13), ("spine3", (-0.06, 0, 0.03), (0.06, 0, 0.03), 0.13),
-    ("neck", None, "head", 0.05), ("head", (0, 0.01, 0.08), (0, 0.01, 0.12), 0.1),
-    ("left_hip", None, "left_knee", 0.075), ("right_hip", None, "right_knee", 0.075),
-    ("left_knee", None, "left_ankle", 0.055), ("right_knee", None, "right_ankle", 0.055),
-    ("left_ankle", None, "left_foot", 0.045), ("right_ankle", None, "right_foot", 0.045),
-    ("left_collar", None, "left_shoulder", 0.05), ("right_collar", None, "right_shoulder", 0.05),
-    ("left_shoulder", None, "left_elbow", 0.05), ("right_shoulder", None, "right_elbow", 0.05),
-    ("left_elbow", None, "left_wrist", 0.042), ("right_elbow", None, "right_wrist", 0.042),
-    ("left_wrist", None, "left_hand", 0.038), ("right_wrist", None, "right_hand", 0.038),
+    ("spine1", None, "spine2", 0.12),
+    ("spine2", None, "spine3", 0.13),
+    ("spine3", (-0.06, 0, 0.03), (0.06, 0, 0.03), 0.13),
+    ("neck", None, "head", 0.05),
+    ("head", (0, 0.01, 0.08), (0, 0.01, 0.12), 0.1),
+    ("left_hip", None, "left_knee", 0.075),
+    ("right_hip", None, "right_knee", 0.075),
+    ("left_knee", None, "left_ankle", 0.055),
+    ("right_knee", None, "right_ankle", 0.055),
+    ("left_ankle", None, "left_foot", 0.045),
+    ("right_ankle", None, "right_foot", 0.045),
+    ("left_collar", None, "left_shoulder", 0.05),
+    ("right_collar", None, "right_shoulder", 0.05),
+    ("left_shoulder", None, "left_elbow", 0.05),
+    ("right_shoulder", None, "right_elbow", 0.05),
+    ("left_elbow", None, "left_wrist", 0.042),
+    ("right_elbow", None, "right_wrist", 0.042),
+    ("left_wrist", None, "left_hand", 0.038),
+    ("right_wrist", None, "right_hand", 0.038),
 ]
 
 
@@ -141,8 +157,17 @@ def mannequin_renderer(anim, design, **kw):
     return CrowdRenderer(anim, design=design, body_loader=mannequin_loader, **kw)
 
 
-def crowd_animation(positions, *, n_frames: int = 4, fps: float = 30.0, scenario: str = "concert",
-                    period: float | None = None, velocity=(0.0, 0.0), seed: int = 7, heights=None) -> CrowdAnimation:
+def crowd_animation(
+    positions,
+    *,
+    n_frames: int = 4,
+    fps: float = 30.0,
+    scenario: str = "concert",
+    period: float | None = None,
+    velocity=(0.0, 0.0),
+    seed: int = 7,
+    heights=None,
+) -> CrowdAnimation:
     """Mannequins standing at ``positions`` (N, 2), facing +y, arms down, swaying a little."""
     pos = np.asarray(positions, float)
     n = len(pos)
@@ -162,11 +187,19 @@ def crowd_animation(positions, *, n_frames: int = 4, fps: float = 30.0, scenario
     meta = {"scenario": scenario, "seed": seed}
     if period:
         meta["periodic"] = {"axis": 0, "length": float(period)}
-    bodies = tuple({"model": "mannequin", "sex": "female" if i % 2 else "male", "height": float(h)}
-                   for i, h in enumerate(heights))
-    return CrowdAnimation(joint_names=JOINT_NAMES, parents=PARENTS, root_translation=root, joint_rotations=rot,
-                          fps=fps, bodies=bodies, clips=tuple({"name": "sway", "phase": float(p)} for p in phase),
-                          meta=meta)
+    bodies = tuple(
+        {"model": "mannequin", "sex": "female" if i % 2 else "male", "height": float(h)} for i, h in enumerate(heights)
+    )
+    return CrowdAnimation(
+        joint_names=JOINT_NAMES,
+        parents=PARENTS,
+        root_translation=root,
+        joint_rotations=rot,
+        fps=fps,
+        bodies=bodies,
+        clips=tuple({"name": "sway", "phase": float(p)} for p in phase),
+        meta=meta,
+    )
 
 
 def grid_positions(n: int, extent=(3.0, 3.0), margin: float = 0.35, seed: int = 0) -> np.ndarray:

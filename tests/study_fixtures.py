@@ -10,8 +10,15 @@ from pathlib import Path
 import pytest
 
 CHROMIUM = "/usr/bin/chromium"
-CHROMIUM_ARGS = ["--no-sandbox", "--headless", "--disable-gpu", "--disable-background-networking",
-                 "--disable-component-update", "--disable-sync", "--no-first-run"]
+CHROMIUM_ARGS = [
+    "--no-sandbox",
+    "--headless",
+    "--disable-gpu",
+    "--disable-background-networking",
+    "--disable-component-update",
+    "--disable-sync",
+    "--no-first-run",
+]
 
 
 def require_study_browser() -> None:
@@ -20,8 +27,10 @@ def require_study_browser() -> None:
     if not Path(CHROMIUM).exists():
         pytest.skip("Debian chromium is not installed")
     from crowdstudy.study.server import default_ui_dir
+
     if not (default_ui_dir() / "node_modules" / "jspsych").is_dir():
         pytest.skip("ui/node_modules missing (run make setup)")
+
 
 TOKEN = "test-admin-token-0123456789abcdef"
 ADMIN = {"Authorization": f"Bearer {TOKEN}"}
@@ -31,8 +40,10 @@ ANS = {f"Q{i}": 3 for i in range(1, 7)}
 def make_client(stim_dir, db_url, **kwargs):
     """(TestClient, StudyConfig) of a study server on ``db_url`` (a new "process": its own state)."""
     from starlette.testclient import TestClient
+
     from crowdstudy.study.app import create_app
     from crowdstudy.study.server import build_config
+
     cfg = build_config(stim_dir, db=db_url, admin_token=TOKEN, **kwargs)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
@@ -51,10 +62,14 @@ def register(api, pid, *, ready=True, **body):
     h = {"X-Participant-Secret": r.json()["secret"]}
     if ready:
         assert api.post(f"/api/participants/{pid}/consent", json={"consent": True}, headers=h).status_code == 200
-        assert api.post(f"/api/participants/{pid}/demographics", json={"age": 30, "gender": "male"},
-                        headers=h).status_code == 200
-        assert api.post(f"/api/participants/{pid}/practice", json={"answers": ANS, "rt_ms": 10},
-                        headers=h).status_code == 201
+        assert (
+            api.post(f"/api/participants/{pid}/demographics", json={"age": 30, "gender": "male"}, headers=h).status_code
+            == 200
+        )
+        assert (
+            api.post(f"/api/participants/{pid}/practice", json={"answers": ANS, "rt_ms": 10}, headers=h).status_code
+            == 201
+        )
     return h, r.json()["state"]
 
 

@@ -14,8 +14,10 @@ from crowdstudy.render.palette import MIN_SKIN_DELTA_E, SHIRTS, SHOES, SKIN_TONE
 
 pytestmark = pytest.mark.filterwarnings("ignore::DeprecationWarning")
 
-RECORDS = [{"model": "makehuman", "sex": "female", "height": 1.64, "age": 31, "race": [0.05, 0.05, 0.9]},
-           {"model": "makehuman", "sex": "male", "height": 1.80, "age": 35, "race": [0.9, 0.05, 0.05]}]
+RECORDS = [
+    {"model": "makehuman", "sex": "female", "height": 1.64, "age": 31, "race": [0.05, 0.05, 0.9]},
+    {"model": "makehuman", "sex": "male", "height": 1.80, "age": 35, "race": [0.9, 0.05, 0.05]},
+]
 
 
 def test_no_clothing_colour_is_close_to_any_skin_tone():
@@ -33,7 +35,7 @@ def test_skin_tone_follows_the_ancestry_blend():
     light = lum({"model": "makehuman", "race": [0, 0, 1]})
     mixed = lum({"model": "makehuman", "race": [1, 0, 1]})
     assert dark < mixed < light and light > 4 * dark
-    assert skin_tone({"model": "open"}, rng, 3).shape == (3,)   # other bodies: the palette
+    assert skin_tone({"model": "open"}, rng, 3).shape == (3,)  # other bodies: the palette
 
 
 def test_nearest_fill_gives_every_empty_texel_its_nearest_painted_colour():
@@ -54,10 +56,16 @@ def renderer():
 
     bodies = [load_body(r) for r in RECORDS]
     root = np.array([[[-0.5, 0.0, bodies[0].pelvis_height], [0.5, 0.0, bodies[1].pelvis_height]]] * 2)
-    anim = CrowdAnimation(joint_names=JOINT_NAMES, parents=PARENTS, root_translation=root,
-                          joint_rotations=np.zeros((2, 2, 24, 3)), fps=30.0, bodies=tuple(RECORDS),
-                          clips=({"kind": "dance", "clips": ["x"]},) * 2,
-                          meta={"scenario": "concert", "method": "Baseline", "seed": 4})
+    anim = CrowdAnimation(
+        joint_names=JOINT_NAMES,
+        parents=PARENTS,
+        root_translation=root,
+        joint_rotations=np.zeros((2, 2, 24, 3)),
+        fps=30.0,
+        bodies=tuple(RECORDS),
+        clips=({"kind": "dance", "clips": ["x"]},) * 2,
+        meta={"scenario": "concert", "method": "Baseline", "seed": 4},
+    )
     with CrowdRenderer(anim, width=320, height=240, msaa=0) as r:
         yield r
 
@@ -85,15 +93,15 @@ def _codes(renderer, body):
 
 def test_dressing_lifts_the_clothes_and_keeps_the_eyes(renderer):
     body, look = renderer.bodies[0], renderer.looks[0]
-    assert renderer.drawn_bodies[0] is body   # a 240 px tall image: dressing would be sub-pixel, skipped
+    assert renderer.drawn_bodies[0] is body  # a 240 px tall image: dressing would be sub-pixel, skipped
     drawn = dress_body(body, _codes(renderer, body), look.hair_volume)
     codes = np.array(vertex_codes(drawn, _codes(renderer, body)))
     moved = np.linalg.norm(drawn.rest_vertices - body.rest_vertices, axis=1)
-    np.testing.assert_array_equal(moved[13380:], 0.0)                 # eyes untouched
-    assert np.median(moved[codes == "shirt"]) > 0.5 * CLOTH_LIFT       # fabric stands off the skin
-    assert np.median(moved[codes == "skin"]) < 0.2 * CLOTH_LIFT        # bare skin stays
+    np.testing.assert_array_equal(moved[13380:], 0.0)  # eyes untouched
+    assert np.median(moved[codes == "shirt"]) > 0.5 * CLOTH_LIFT  # fabric stands off the skin
+    assert np.median(moved[codes == "skin"]) < 0.2 * CLOTH_LIFT  # bare skin stays
     assert drawn.mesh().volume > body.mesh().volume
-    assert drawn.rest_joints is body.rest_joints                        # the skeleton is the body's
+    assert drawn.rest_joints is body.rest_joints  # the skeleton is the body's
 
 
 def test_rendered_characters_show_their_shirt_colours(renderer):
@@ -106,15 +114,17 @@ def test_rendered_characters_show_their_shirt_colours(renderer):
         chest = np.array([x, 0.1, body.pelvis_height + body.rest_joints[J["spine3"], 2] - 0.05, 1.0])
         clip = vp @ chest
         col, row = (clip[:2] / clip[3] * 0.5 + 0.5) * (320, 240)
-        patch = img[240 - int(row) - 3:240 - int(row) + 3, int(col) - 3:int(col) + 3].reshape(-1, 3)
+        patch = img[240 - int(row) - 3 : 240 - int(row) + 3, int(col) - 3 : int(col) + 3].reshape(-1, 3)
         seen = patch.mean(axis=0) / max(patch.mean(axis=0).max(), 1e-6)
-        hue = np.sqrt(np.asarray(look.shirt) / max(max(look.shirt), 1e-6))   # display ~ sqrt of linear
+        hue = np.sqrt(np.asarray(look.shirt) / max(max(look.shirt), 1e-6))  # display ~ sqrt of linear
         assert np.abs(seen - hue).max() < 0.3, (seen, hue)
 
 
 def test_appearance_is_seeded_and_varied():
-    recs = [{"model": "makehuman", "sex": s, "age": a, "race": [0.3, 0.3, 0.4]}
-            for s, a in zip(["female", "male"] * 20, np.linspace(18, 70, 40))]
+    recs = [
+        {"model": "makehuman", "sex": s, "age": a, "race": [0.3, 0.3, 0.4]}
+        for s, a in zip(["female", "male"] * 20, np.linspace(18, 70, 40))
+    ]
     pos = np.stack([np.arange(40) % 8, np.arange(40) // 8], axis=1) * 0.6
     looks = assign_appearance(recs, assign_colors(pos, 3)[1], 3)
     assert looks == assign_appearance(recs, assign_colors(pos, 3)[1], 3)
@@ -135,21 +145,28 @@ def test_periodic_copies_wear_other_characters_clothes():
     bodies = [load_body(r) for r in recs]
     # character 0 at x = -0.6, character 1 at x = +0.6 (outside the view); period 4 m
     root = np.array([[[-0.6, 0.0, bodies[0].pelvis_height], [0.6, 0.0, bodies[1].pelvis_height]]] * 2)
-    anim = CrowdAnimation(joint_names=JOINT_NAMES, parents=PARENTS, root_translation=root,
-                          joint_rotations=np.zeros((2, 2, 24, 3)), fps=30.0, bodies=tuple(recs),
-                          clips=({"kind": "walk", "clips": ["x"]},) * 2,
-                          meta={"scenario": "corridor", "method": "Baseline", "seed": 4,
-                                "periodic": {"axis": 0, "length": 4.0}})
+    anim = CrowdAnimation(
+        joint_names=JOINT_NAMES,
+        parents=PARENTS,
+        root_translation=root,
+        joint_rotations=np.zeros((2, 2, 24, 3)),
+        fps=30.0,
+        bodies=tuple(recs),
+        clips=({"kind": "walk", "clips": ["x"]},) * 2,
+        meta={"scenario": "corridor", "method": "Baseline", "seed": 4, "periodic": {"axis": 0, "length": 4.0}},
+    )
     with CrowdRenderer(anim, width=320, height=240, msaa=0) as r:
         looks = r.looks
         seen = []
-        for x in (-0.6, 3.4):   # character 0 and its copy k = 1 (dressed as character 1)
+        for x in (-0.6, 3.4):  # character 0 and its copy k = 1 (dressed as character 1)
             cam = r.set_view(Camera(eye=(x, 2.5, 1.2), target=(x, 0.0, 1.1), fov=30.0))
             img = r.render(0).astype(np.float64)
             chest = np.array([x, 0.1, bodies[0].pelvis_height + bodies[0].rest_joints[J["spine3"], 2] - 0.05, 1.0])
             clip = cam.view_projection(320 / 240) @ chest
             col, row = (clip[:2] / clip[3] * 0.5 + 0.5) * (320, 240)
-            patch = img[240 - int(row) - 3:240 - int(row) + 3, int(col) - 3:int(col) + 3].reshape(-1, 3).mean(axis=0)
+            patch = (
+                img[240 - int(row) - 3 : 240 - int(row) + 3, int(col) - 3 : int(col) + 3].reshape(-1, 3).mean(axis=0)
+            )
             seen.append(patch / max(patch.max(), 1e-6))
     for k, look in enumerate(looks):
         hue = np.sqrt(np.asarray(look.shirt) / max(max(look.shirt), 1e-6))
@@ -169,8 +186,8 @@ def test_the_texture_array_keeps_within_what_the_driver_holds():
     for n in (1, 60, 299, 300, 400, 1000, 2000, 5000, 20000):
         size = texture_size(1080, n)
         assert _array_bytes(size, n) <= TEXTURE_ARRAY_BUDGET or size == 64
-        assert size == 1024 or _array_bytes(2 * size, n) > TEXTURE_ARRAY_BUDGET     # no smaller than needed
-    assert _array_bytes(1024, 500) >= 2 ** 31 > TEXTURE_ARRAY_BUDGET
+        assert size == 1024 or _array_bytes(2 * size, n) > TEXTURE_ARRAY_BUDGET  # no smaller than needed
+    assert _array_bytes(1024, 500) >= 2**31 > TEXTURE_ARRAY_BUDGET
 
 
 def test_a_texture_array_the_driver_refuses_is_an_error_not_black_characters():

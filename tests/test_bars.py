@@ -16,13 +16,21 @@ BARS = BarTolerances()
 
 def _passing_row(t: BarTolerances = BARS) -> dict:
     """A row a hair inside every bar of ``t`` (a looped concert at the densest level)."""
-    return {"jerk_ratio": t.jerk_ratio - 0.01, "hf_share_baseline": 0.02, "hf_share_ours": 0.02 * t.hf_share_ratio - 1e-4,
-            "max_joint_speed_baseline": 5.0, "max_joint_speed_ours": 5.0 + t.joint_speed_increase_m_s - 0.01,
-            "pelvis_p99_baseline": 3.0,
-            "pelvis_p99_ours": t.pelvis_accel_ratio * 3.0 + t.pelvis_accel_increase_m_s2 - 0.01,
-            "foot_slide_p99_ours": t.foot_slide_p99_m_s - 0.001, "mesh_ratio": t.overlap_ratio - 0.001,
-            "tracking_cm": t.tracking_densest_cm - 0.1, "seam_ratio_baseline": 1.0,
-            "seam_ratio_ours": t.seam_ratio - 0.01, "loop": "periodic"}
+    return {
+        "jerk_ratio": t.jerk_ratio - 0.01,
+        "hf_share_baseline": 0.02,
+        "hf_share_ours": 0.02 * t.hf_share_ratio - 1e-4,
+        "max_joint_speed_baseline": 5.0,
+        "max_joint_speed_ours": 5.0 + t.joint_speed_increase_m_s - 0.01,
+        "pelvis_p99_baseline": 3.0,
+        "pelvis_p99_ours": t.pelvis_accel_ratio * 3.0 + t.pelvis_accel_increase_m_s2 - 0.01,
+        "foot_slide_p99_ours": t.foot_slide_p99_m_s - 0.001,
+        "mesh_ratio": t.overlap_ratio - 0.001,
+        "tracking_cm": t.tracking_densest_cm - 0.1,
+        "seam_ratio_baseline": 1.0,
+        "seam_ratio_ours": t.seam_ratio - 0.01,
+        "loop": "periodic",
+    }
 
 
 def test_a_row_inside_every_bar_meets_them_all():
@@ -32,14 +40,16 @@ def test_a_row_inside_every_bar_meets_them_all():
 
 
 # each bar's measurement moved just past its tolerance
-PAST = {"jerk": {"jerk_ratio": BARS.jerk_ratio + 0.01},
-        "hf": {"hf_share_ours": 0.02 * BARS.hf_share_ratio + 1e-4},
-        "speed": {"max_joint_speed_ours": 5.0 + BARS.joint_speed_increase_m_s + 0.01},
-        "pelvis": {"pelvis_p99_ours": BARS.pelvis_accel_ratio * 3.0 + BARS.pelvis_accel_increase_m_s2 + 0.01},
-        "slide": {"foot_slide_p99_ours": BARS.foot_slide_p99_m_s + 0.001},
-        "overlap": {"mesh_ratio": BARS.overlap_ratio + 0.001},
-        "tracking": {"tracking_cm": BARS.tracking_densest_cm + 0.1},
-        "seam": {"seam_ratio_ours": BARS.seam_ratio + 0.01}}
+PAST = {
+    "jerk": {"jerk_ratio": BARS.jerk_ratio + 0.01},
+    "hf": {"hf_share_ours": 0.02 * BARS.hf_share_ratio + 1e-4},
+    "speed": {"max_joint_speed_ours": 5.0 + BARS.joint_speed_increase_m_s + 0.01},
+    "pelvis": {"pelvis_p99_ours": BARS.pelvis_accel_ratio * 3.0 + BARS.pelvis_accel_increase_m_s2 + 0.01},
+    "slide": {"foot_slide_p99_ours": BARS.foot_slide_p99_m_s + 0.001},
+    "overlap": {"mesh_ratio": BARS.overlap_ratio + 0.001},
+    "tracking": {"tracking_cm": BARS.tracking_densest_cm + 0.1},
+    "seam": {"seam_ratio_ours": BARS.seam_ratio + 0.01},
+}
 
 
 @pytest.mark.parametrize("bar", BAR_NAMES)
@@ -62,8 +72,13 @@ def test_the_tolerances_decide():
 
 
 def test_the_tracking_bar_holds_at_the_sparsest_and_densest_levels_only():
-    assert [BARS.tracking_cm(i, 5) for i in range(5)] == [BARS.tracking_sparsest_cm, None, None, None,
-                                                         BARS.tracking_densest_cm]
+    assert [BARS.tracking_cm(i, 5) for i in range(5)] == [
+        BARS.tracking_sparsest_cm,
+        None,
+        None,
+        None,
+        BARS.tracking_densest_cm,
+    ]
     row = {**_passing_row(), "tracking_cm": BARS.tracking_sparsest_cm + 0.1}
     assert "tracking" not in check_bars(row, BARS, 2, 5)
     assert check_bars(row, BARS, 0, 5)["tracking"] is False and check_bars(row, BARS, 4, 5)["tracking"] is True
@@ -109,10 +124,18 @@ def test_the_text_follows_the_tolerances():
 def test_tile_ratios_are_the_overlap_of_each_neighbourhood():
     """Characters binned into floor tiles: each tile's summed Ours over summed Baseline; a
     tile with too few characters, or no Baseline overlap, is left out."""
-    xy = np.array([[0.5, 0.5], [1.0, 2.0], [2.9, 0.1],          # tile (0, 0)
-                   [3.5, 0.5], [5.0, 2.5],                      # tile (1, 0)
-                   [0.5, 3.5],                                  # tile (0, 1): one character
-                   [4.0, 4.0], [5.5, 3.1]])                     # tile (1, 1): no Baseline overlap
+    xy = np.array(
+        [
+            [0.5, 0.5],
+            [1.0, 2.0],
+            [2.9, 0.1],  # tile (0, 0)
+            [3.5, 0.5],
+            [5.0, 2.5],  # tile (1, 0)
+            [0.5, 3.5],  # tile (0, 1): one character
+            [4.0, 4.0],
+            [5.5, 3.1],
+        ]
+    )  # tile (1, 1): no Baseline overlap
     base = np.array([1.0, 2.0, 1.0, 4.0, 4.0, 9.0, 0.0, 0.0])
     ours = np.array([0.1, 0.0, 0.1, 0.2, 0.6, 9.0, 0.5, 0.5])
     ratios = tile_ratios(xy, base, ours, (3.0, 3.0), min_characters=2)

@@ -90,8 +90,14 @@ def _trajectories(n=8, seconds=8.0, fps=30.0, seed=3):
     heading = 0.25 * np.sin(t[:, None] * rng.uniform(0.2, 0.4, n))
     vel = np.stack([speed * np.cos(heading), speed * np.sin(heading)], axis=-1)
     pos = np.cumsum(vel / fps, axis=0) + np.stack([np.zeros(n), np.linspace(-0.8, 0.8, n)], -1)
-    return Crowd(positions=pos, radius=0.2, fps=fps, velocities=vel, headings=heading,
-                 meta={"scenario": "corridor", "periodic": {"axis": 0, "length": 4.5}})
+    return Crowd(
+        positions=pos,
+        radius=0.2,
+        fps=fps,
+        velocities=vel,
+        headings=heading,
+        meta={"scenario": "corridor", "periodic": {"axis": 0, "length": 4.5}},
+    )
 
 
 @pytest.fixture(scope="module")
@@ -129,7 +135,7 @@ def test_walking_feet_do_not_skate(walkers):
     lead = pos[:, :, J["left_ankle"], 0] - pos[:, :, J["right_ankle"], 0]
     steps = np.count_nonzero(np.diff(np.sign(lead), axis=0), axis=0)
     dist = np.linalg.norm(np.diff(crowd.positions, axis=0), axis=-1).sum(0)
-    assert np.all(steps / dist > 1.0) and np.all(steps / dist < 2.6)     # strides of 0.8..2 m
+    assert np.all(steps / dist > 1.0) and np.all(steps / dist < 2.6)  # strides of 0.8..2 m
 
 
 def test_skate_measure_catches_sliding_feet(walkers):
@@ -151,7 +157,7 @@ def test_build_baseline_cells():
     walk = build_baseline(design, 2, "D3", duration=4.0)
     assert walk.meta["stage"] == "walking" and walk.meta["periodic"]["length"] == pytest.approx(4.5)
     assert walk.n_characters == design.n_characters("D3")
-    assert foot_skate(walk).max() < 0.045   # measured 4.1 cm with the MakeHuman bodies (1.9 cm mannequins)
+    assert foot_skate(walk).max() < 0.045  # measured 4.1 cm with the MakeHuman bodies (1.9 cm mannequins)
     with pytest.raises(InvalidInputError, match="level"):
         build_baseline(design, "stationary", "D9")
 
@@ -184,6 +190,7 @@ def test_bad_inputs_name_the_argument():
 def test_facing_from_motion_matches_the_headings(walkers):
     crowd, anim = walkers
     by_motion = animate_walking(crowd, seed=5, facing="motion")
+
     def yaw(a):
         forward = axis_angle_to_matrix(a.joint_rotations[:, :, 0])[..., :, 1]
         return np.arctan2(forward[..., 1], forward[..., 0])

@@ -24,11 +24,15 @@ def bench():
 def test_cells_name_scenes_and_levels(bench):
     assert bench.parse_cells("", LEVELS) is None
     assert bench.parse_cells("concert:D1, corridor:D5,walking:D2", LEVELS) == [
-        ("stationary", "D1"), ("walking", "D5"), ("walking", "D2")]
+        ("stationary", "D1"),
+        ("walking", "D5"),
+        ("walking", "D2"),
+    ]
 
 
-@pytest.mark.parametrize("text, bad", [("concert:D9", "concert:D9"), ("stadium:D1", "stadium:D1"),
-                                       ("concert", "concert")])
+@pytest.mark.parametrize(
+    "text, bad", [("concert:D9", "concert:D9"), ("stadium:D1", "stadium:D1"), ("concert", "concert")]
+)
 def test_a_bad_cell_is_named(bench, text, bad):
     with pytest.raises(SystemExit, match=f"--cells: .*{bad!r}"):
         bench.parse_cells(text, LEVELS)
@@ -76,11 +80,13 @@ def test_stadium_runs_take_the_asked_config(bench, monkeypatch):
         raise Stop
 
     monkeypatch.setattr(corrector, "correct", fake_correct)
-    monkeypatch.setattr(stadium, "stadium_crowd",
-                        lambda n, level, duration: build_baseline(load_design(), "stationary", "D1", duration=0.2))
+    monkeypatch.setattr(
+        stadium,
+        "stadium_crowd",
+        lambda n, level, duration: build_baseline(load_design(), "stationary", "D1", duration=0.2),
+    )
     with pytest.raises(Stop):
-        bench.main(["--stadium", "20", "--stadium-seconds", "0.2", "--config", "skin.max=0.04",
-                    "output.hold=0.8"])
+        bench.main(["--stadium", "20", "--stadium-seconds", "0.2", "--config", "skin.max=0.04", "output.hold=0.8"])
     assert len(seen) == 1
     assert seen[0][1].skin.max == 0.04 and seen[0][1].output.hold == 0.8
 
@@ -143,24 +149,35 @@ def test_a_seed_builds_another_crowd_of_the_cell(monkeypatch, seed, study):
         acceptance.measure_cell(design, "stationary", 1, "D2", seed, 0.2, 10, None)
     expected = design.cell_seed(design.stage("stationary"), "D2") if study else seed
     assert seen[0][0] == expected
-    if not study:      # another crowd: the characters stand elsewhere
+    if not study:  # another crowd: the characters stand elsewhere
         with pytest.raises(Stop):
             acceptance.measure_cell(design, "stationary", 1, "D2", None, 0.2, 10, None)
         assert seen[1][0] != seed and not np.allclose(seen[0][1], seen[1][1])
 
 
 def _row(stage, level, seed, ratio, tracking, failed, study=False, bar=None):
-    return {"stage": stage, "level": level, "seed": seed, "study_seed": study, "mesh_ratio": ratio,
-            "mesh_baseline_m3": 1e-4, "mesh_ours_m3": ratio * 1e-4, "tracking_cm": tracking,
-            "bars_failed": failed, "tracking_bar_cm": bar}
+    return {
+        "stage": stage,
+        "level": level,
+        "seed": seed,
+        "study_seed": study,
+        "mesh_ratio": ratio,
+        "mesh_baseline_m3": 1e-4,
+        "mesh_ours_m3": ratio * 1e-4,
+        "tracking_cm": tracking,
+        "bars_failed": failed,
+        "tracking_bar_cm": bar,
+    }
 
 
 def test_the_spread_counts_the_crowds_that_meet_each_bar(bench):
-    rows = [_row("stationary", "D3", 11, 0.044, 2.0, "-", study=True),
-            _row("stationary", "D3", 1, 0.056, 2.2, "overlap"),
-            _row("stationary", "D3", 2, 0.032, 2.4, "-"),
-            _row("walking", "D5", 1, 0.03, 5.5, "tracking,hf", bar=5.0),
-            _row("walking", "D5", 2, 0.06, 4.5, "overlap", bar=5.0)]
+    rows = [
+        _row("stationary", "D3", 11, 0.044, 2.0, "-", study=True),
+        _row("stationary", "D3", 1, 0.056, 2.2, "overlap"),
+        _row("stationary", "D3", 2, 0.032, 2.4, "-"),
+        _row("walking", "D5", 1, 0.03, 5.5, "tracking,hf", bar=5.0),
+        _row("walking", "D5", 2, 0.06, 4.5, "overlap", bar=5.0),
+    ]
     spread = {(r["stage"], r["level"]): r for r in bench.seed_spread(rows)}
     d3 = spread[("stationary", "D3")]
     assert d3["seeds"] == 3 and d3["mesh_ratio_study"] == 0.044
@@ -178,13 +195,14 @@ def test_the_spread_counts_the_crowds_that_meet_each_bar(bench):
 def test_the_seed_figure_draws_each_crowd_and_the_bars(bench, tmp_path):
     import matplotlib.image as mpimg
 
-    rows = [_row("stationary", "D1", s, r, t, "-", study=s == 0, bar=1.5)
-            for s, r, t in ((0, 0.02, 1.0), (1, 0.03, 1.2))]
+    rows = [
+        _row("stationary", "D1", s, r, t, "-", study=s == 0, bar=1.5) for s, r, t in ((0, 0.02, 1.0), (1, 0.03, 1.2))
+    ]
     rows += [_row("walking", "D5", s, r, t, "-", bar=5.0) for s, r, t in ((0, 0.04, 4.0), (1, 0.02, 4.5))]
     path = bench.seed_figure(rows, path=tmp_path / "seeds.png")
     img = mpimg.imread(path)[..., :3]
-    red = (img[..., 0] > 0.9) & (img[..., 1] < 0.2) & (img[..., 2] < 0.2)       # the bars' dashed lines
-    blue = (np.abs(img[..., 0] - 0.12) < 0.08) & (np.abs(img[..., 2] - 0.71) < 0.08)   # the dots
+    red = (img[..., 0] > 0.9) & (img[..., 1] < 0.2) & (img[..., 2] < 0.2)  # the bars' dashed lines
+    blue = (np.abs(img[..., 0] - 0.12) < 0.08) & (np.abs(img[..., 2] - 0.71) < 0.08)  # the dots
     assert red.sum() > 100 and blue.sum() > 100
-    top, bottom = red[: img.shape[0] // 2], red[img.shape[0] // 2:]
-    assert top.any() and bottom.any()          # the overlap bar above, the tracking bars below
+    top, bottom = red[: img.shape[0] // 2], red[img.shape[0] // 2 :]
+    assert top.any() and bottom.any()  # the overlap bar above, the tracking bars below

@@ -23,7 +23,7 @@ def test_the_reference_reproduces_the_solver_and_the_alternatives_converge(study
     # float64 here, float32 in the fused kernel: the same count within one iteration
     assert abs(ref["iterations"] - ref["fused_iterations"]) <= 1, ref
     for name, r in rows.items():
-        assert 0 < r["iterations"] < 400, (name, r)          # converged under the cap
+        assert 0 < r["iterations"] < 400, (name, r)  # converged under the cap
         assert r["cost_ratio"] == pytest.approx(r["cost"] / ref["cost"], abs=0.01)
     # the two-level rigid coarse space and the block sweeps take fewer iterations, the additive
     # rigid coarse space no more (measured at step 7, to the default 1e-3, with the skins of

@@ -7,8 +7,9 @@ from crowdstudy import bench
 
 
 def test_write_report_records_command_machine_and_date(tmp_path):
-    path = bench.write_report("demo", [{"case": "a", "median_s": 0.5}], out=tmp_path / "demo.json", seed=3,
-                              participants=4)
+    path = bench.write_report(
+        "demo", [{"case": "a", "median_s": 0.5}], out=tmp_path / "demo.json", seed=3, participants=4
+    )
     report = json.loads(path.read_text())
     assert report["benchmark"] == "demo" and report["rows"] == [{"case": "a", "median_s": 0.5}]
     assert report["participants"] == 4 and report["provenance"]["seed"] == 3
@@ -33,7 +34,7 @@ def test_the_command_is_the_bench_command_line(tmp_path, monkeypatch):
     assert bench.run_benchmarks("fake", ["--agents", "60,1000", "--note", "two words"]) == 0
     report = json.loads(seen["path"].read_text())
     assert report["command"] == "crowdstudy bench fake --agents 60,1000 --note 'two words'"
-    assert bench.command_line() != report["command"]       # reset once the benchmark returns
+    assert bench.command_line() != report["command"]  # reset once the benchmark returns
 
 
 def test_a_benchmark_may_name_its_own_command(tmp_path):

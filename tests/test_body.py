@@ -10,8 +10,7 @@ import crowdstudy.body as cb
 from crowdstudy.body.model import Body, pose_bodies
 from crowdstudy.body.rotations import axis_angle_to_matrix
 from crowdstudy.body.shapes import HEIGHT_STATS
-from crowdstudy.body.skeleton import (BVH_NAME_MAPS, DEFAULT_REST_JOINTS, JOINT_NAMES, bvh_name_map,
-                                      joint_index)
+from crowdstudy.body.skeleton import BVH_NAME_MAPS, DEFAULT_REST_JOINTS, JOINT_NAMES, bvh_name_map, joint_index
 from crowdstudy.errors import InvalidInputError
 
 MALE = {"model": "open", "sex": "male", "height": 1.80, "shape": [0.5, -0.3]}
@@ -19,6 +18,7 @@ FEMALE = {"model": "open", "sex": "female", "height": 1.58, "shape": [-1.0, 1.0]
 
 
 # ---------------------------------------------------------------- the open model
+
 
 @pytest.mark.parametrize("record", [MALE, FEMALE])
 def test_open_body_is_a_watertight_human_sized_mesh(record):
@@ -93,21 +93,35 @@ def test_sample_bodies_is_balanced_seeded_and_matches_height_statistics():
 
 # ---------------------------------------------------------------- skinning
 
+
 def _two_bone_body() -> Body:
     """Vertices along the left arm, hand-checkable: v0 on the upper arm (all left_shoulder),
     v1 on the forearm (all left_elbow), v2 half-half at the elbow."""
     joints = np.array(DEFAULT_REST_JOINTS)
     sh, el = joint_index("left_shoulder"), joint_index("left_elbow")
-    verts = np.array([joints[sh] + (-0.10, 0.0, 0.03), joints[el] + (-0.10, 0.0, 0.0),
-                      joints[el] + (0.0, 0.0, 0.04), (0.0, 0.0, 0.0)])
+    verts = np.array(
+        [
+            joints[sh] + (-0.10, 0.0, 0.03),
+            joints[el] + (-0.10, 0.0, 0.0),
+            joints[el] + (0.0, 0.0, 0.04),
+            (0.0, 0.0, 0.0),
+        ]
+    )
     w = np.zeros((4, 24), dtype=np.float32)
     w[0, sh] = 1.0
     w[1, el] = 1.0
     w[2, sh] = w[2, el] = 0.5
     w[3, 0] = 1.0
     faces = np.array([[0, 1, 2], [0, 2, 3], [0, 3, 1], [1, 3, 2]], dtype=np.int32)
-    return Body(record={}, rest_joints=joints, rest_vertices=verts, faces=faces, weights=w,
-                pelvis_height=1.0, template_key="test")
+    return Body(
+        record={},
+        rest_joints=joints,
+        rest_vertices=verts,
+        faces=faces,
+        weights=w,
+        pelvis_height=1.0,
+        template_key="test",
+    )
 
 
 def test_skinning_against_hand_computed_rotation():
@@ -131,7 +145,9 @@ def test_skinning_against_hand_computed_rotation():
     verts, _ = body.pose(rot, np.zeros(3))
     r = axis_angle_to_matrix(np.array([0.0, np.pi / 2, 0.0]))
     np.testing.assert_allclose(verts[0], j[sh] + r @ np.array([-0.10, 0.0, 0.03]), atol=1e-12)
-    expected_mid = 0.5 * (j[sh] + r @ (j[el] + (0, 0, 0.04) - j[sh])) + 0.5 * (j[sh] + r @ (j[el] - j[sh]) + r @ (0, 0, 0.04))
+    expected_mid = 0.5 * (j[sh] + r @ (j[el] + (0, 0, 0.04) - j[sh])) + 0.5 * (
+        j[sh] + r @ (j[el] - j[sh]) + r @ (0, 0, 0.04)
+    )
     np.testing.assert_allclose(verts[2], expected_mid, atol=1e-12)
 
 
@@ -166,7 +182,7 @@ def test_pose_bodies_and_warp_skinner_match_body_pose():
     for i, body in enumerate(bodies):
         ref, ref_j = body.pose(rot[i], root[i])
         np.testing.assert_allclose(batched[i], ref, atol=2e-5)
-        np.testing.assert_allclose(verts[skinner.offsets[i]:skinner.offsets[i + 1]], ref, atol=2e-5)
+        np.testing.assert_allclose(verts[skinner.offsets[i] : skinner.offsets[i + 1]], ref, atol=2e-5)
         np.testing.assert_allclose(joints[i], ref_j, atol=2e-5)
     # every body's faces index its own block of vertices (a MakeHuman body's eyeballs, its
     # last vertices, are drawn but not part of the closed surface)
@@ -184,21 +200,31 @@ def _synthetic_body(rng, n_vertices, key, rest_joints=DEFAULT_REST_JOINTS):
     for v in range(n_vertices):
         weights[v, rng.choice(24, nk[v], replace=False)] = rng.dirichlet(np.ones(nk[v]))
     weights /= weights.sum(axis=1, keepdims=True)
-    return Body(record={}, rest_joints=np.array(rest_joints, dtype=np.float64),
-                rest_vertices=rng.normal(0.0, 0.4, (n_vertices, 3)), faces=np.zeros((1, 3), np.int32),
-                weights=weights, pelvis_height=1.0, template_key=key)
+    return Body(
+        record={},
+        rest_joints=np.array(rest_joints, dtype=np.float64),
+        rest_vertices=rng.normal(0.0, 0.4, (n_vertices, 3)),
+        faces=np.zeros((1, 3), np.int32),
+        weights=weights,
+        pelvis_height=1.0,
+        template_key=key,
+    )
 
 
-@pytest.mark.parametrize("options", [{"threads": 1}, {"threads": 2}, {"threads": 3, "schedule": "segments"},
-                                     {"schedule": "vertices"}])
+@pytest.mark.parametrize(
+    "options", [{"threads": 1}, {"threads": 2}, {"threads": 3, "schedule": "segments"}, {"schedule": "vertices"}]
+)
 def test_crowd_skinner_schedules_equal_body_pose_on_random_poses(options):
     from crowdstudy.body.skinning import CrowdSkinner
 
     rng = np.random.default_rng(7)
     open_bodies = [cb.load_body(r) for r in cb.sample_bodies(3, seed=11)]
     # two synthetic bodies share a template_key but not their weights: they must not share data
-    synthetic = [_synthetic_body(rng, 700, "synthetic"), _synthetic_body(rng, 500, "synthetic"),
-                 _synthetic_body(rng, 300, "other", DEFAULT_REST_JOINTS * 1.1)]
+    synthetic = [
+        _synthetic_body(rng, 700, "synthetic"),
+        _synthetic_body(rng, 500, "synthetic"),
+        _synthetic_body(rng, 300, "other", DEFAULT_REST_JOINTS * 1.1),
+    ]
     bodies = [open_bodies[0], synthetic[0], open_bodies[1], synthetic[1], open_bodies[2], synthetic[2]]
     skinner = CrowdSkinner(bodies, device="cpu", **options)
     assert skinner.n_segments > 200  # the synthetic bodies have many joint sets
@@ -210,8 +236,9 @@ def test_crowd_skinner_schedules_equal_body_pose_on_random_poses(options):
         assert verts.dtype == np.float32 and verts.shape == (skinner.n_vertices, 3)
         for i, body in enumerate(bodies):
             ref, ref_j = body.pose(rot[i], root[i])
-            np.testing.assert_allclose(verts[skinner.offsets[i]:skinner.offsets[i + 1]], ref, atol=1e-5,
-                                       err_msg=f"body {i}, trial {trial}")
+            np.testing.assert_allclose(
+                verts[skinner.offsets[i] : skinner.offsets[i + 1]], ref, atol=1e-5, err_msg=f"body {i}, trial {trial}"
+            )
             np.testing.assert_allclose(joints[i], ref_j, atol=1e-5)
 
 
@@ -244,6 +271,7 @@ def test_crowd_skinner_buffers_and_copies():
 
 # ---------------------------------------------------------------- BVH names
 
+
 def test_bvh_name_maps_cover_the_skeleton(shared_dir):
     text = (shared_dir / "data" / "cmu_12_01_walk.bvh").read_text()
     names = re.findall(r"(?:ROOT|JOINT)\s+(\S+)", text)
@@ -261,17 +289,21 @@ def test_mixamo_names_with_any_namespace():
 
 # ---------------------------------------------------------------- bad input
 
-@pytest.mark.parametrize("record, field", [
-    ({"model": "nope", "sex": "male"}, "model"),
-    ({"model": "open", "sex": "robot"}, "sex"),
-    ({"model": "open", "sex": "male", "height": "tall"}, "height"),
-    ({"model": "open", "sex": "male", "height": 3.5}, "height"),
-    ({"model": "open", "sex": "male", "shape": [0, 0, 0]}, "shape"),
-    ({"model": "open", "sex": "male", "shape": [float("nan")]}, "shape"),
-    ({"model": "open", "sex": "male", "weight_kg": 80}, "weight_kg"),
-    ({"model": "smpl", "path": "x.pkl", "gender": "f"}, "gender"),
-    ({"model": "smpl", "path": "/nonexistent/SMPL.pkl"}, "path"),
-])
+
+@pytest.mark.parametrize(
+    "record, field",
+    [
+        ({"model": "nope", "sex": "male"}, "model"),
+        ({"model": "open", "sex": "robot"}, "sex"),
+        ({"model": "open", "sex": "male", "height": "tall"}, "height"),
+        ({"model": "open", "sex": "male", "height": 3.5}, "height"),
+        ({"model": "open", "sex": "male", "shape": [0, 0, 0]}, "shape"),
+        ({"model": "open", "sex": "male", "shape": [float("nan")]}, "shape"),
+        ({"model": "open", "sex": "male", "weight_kg": 80}, "weight_kg"),
+        ({"model": "smpl", "path": "x.pkl", "gender": "f"}, "gender"),
+        ({"model": "smpl", "path": "/nonexistent/SMPL.pkl"}, "path"),
+    ],
+)
 def test_bad_records_name_the_field(record, field):
     with pytest.raises(InvalidInputError, match=field):
         cb.load_body(record)
@@ -294,9 +326,15 @@ def test_bad_arguments_are_named():
     with pytest.raises(InvalidInputError, match="body record"):
         cb.load_body("male")
     with pytest.raises(InvalidInputError, match="Body.weights"):
-        Body(record={}, rest_joints=np.zeros((24, 3)), rest_vertices=np.zeros((5, 3)),
-             faces=np.zeros((1, 3), np.int32), weights=np.zeros((4, 24), np.float32),
-             pelvis_height=1.0, template_key="x")
+        Body(
+            record={},
+            rest_joints=np.zeros((24, 3)),
+            rest_vertices=np.zeros((5, 3)),
+            faces=np.zeros((1, 3), np.int32),
+            weights=np.zeros((4, 24), np.float32),
+            pelvis_height=1.0,
+            template_key="x",
+        )
 
 
 def test_open_model_generation_is_deterministic_and_a_bad_cache_is_regenerated(tmp_path, monkeypatch):
@@ -324,7 +362,7 @@ def test_axis_angle_to_matrix_is_rodrigues():
     from crowdstudy.body.rotations import axis_angle_to_matrix
 
     rng = np.random.default_rng(11)
-    v = rng.normal(size=(400, 24, 3)) * rng.uniform(0, 3.1, size=(400, 24, 1))     # more than one block
+    v = rng.normal(size=(400, 24, 3)) * rng.uniform(0, 3.1, size=(400, 24, 1))  # more than one block
     v[0, :6] = [[0, 0, 0], [1e-9, 0, 0], [0, 3e-7, -2e-7], [np.pi, 0, 0], [0, 0, -np.pi + 1e-9], [1, 2, 2]]
     got = axis_angle_to_matrix(v)
     assert got.shape == (400, 24, 3, 3)
@@ -343,7 +381,7 @@ def test_axis_angle_to_quaternion_is_scipys():
     v[0, :3] = [[0, 0, 0], [1e-10, 0, 0], [0, 3e-9, -2e-9]]
     got = axis_angle_to_quaternion(v)
     want = Rotation.from_rotvec(v.reshape(-1, 3)).as_quat().reshape(got.shape)
-    want *= np.sign(want[..., 3:]) * np.sign(got[..., 3:])         # scipy picks w >= 0
+    want *= np.sign(want[..., 3:]) * np.sign(got[..., 3:])  # scipy picks w >= 0
     np.testing.assert_allclose(got, want, rtol=0, atol=1e-15)
     with pytest.raises(InvalidInputError, match="rotvec"):
         axis_angle_to_quaternion(np.zeros((4, 2)))
@@ -356,7 +394,7 @@ def _chain_fk(rest, rot, root, parents):
     glob = np.empty(rot.shape[:-1] + (3, 3))
     pos = np.empty(rot.shape)
     for idx in np.ndindex(rot.shape[:-2]):
-        r = rest[idx[-rest.ndim + 2:]] if rest.ndim > 2 else rest
+        r = rest[idx[-rest.ndim + 2 :]] if rest.ndim > 2 else rest
         local = Rotation.from_rotvec(rot[idx]).as_matrix()
         for j, p in enumerate(parents):
             if p < 0:
@@ -375,7 +413,7 @@ def test_forward_kinematics_in_blocks_is_the_chain_rule():
 
     rng = np.random.default_rng(13)
     rest = DEFAULT_REST_JOINTS[None] + rng.normal(0, 0.02, size=(3, 24, 3))
-    rot = rng.normal(0, 0.6, size=(1500, 3, 24, 3))                  # 4,500 poses: two blocks
+    rot = rng.normal(0, 0.6, size=(1500, 3, 24, 3))  # 4,500 poses: two blocks
     rot[0, 0, 5] = [1e-9, 0, 0]
     root = rng.normal(size=(1500, 3, 3))
     glob, pos = forward_kinematics(rest[None], rot, root)
@@ -386,9 +424,8 @@ def test_forward_kinematics_in_blocks_is_the_chain_rule():
     np.testing.assert_allclose(pos[pick], want_p, rtol=0, atol=1e-13)
     one_g, one_p = forward_kinematics(rest[2], rot[1100, 2], root[1100, 2])
     assert np.array_equal(one_g, glob[1100, 2]) and np.array_equal(one_p, pos[1100, 2])
-    few_g, few_p = forward_kinematics(rest[1], rot[:5, 1], np.zeros(3))     # a few poses, the root broadcast
-    np.testing.assert_allclose(few_p, _chain_fk(rest[1], rot[:5, 1], np.zeros((5, 3)), PARENTS)[1], rtol=0,
-                               atol=1e-13)
+    few_g, few_p = forward_kinematics(rest[1], rot[:5, 1], np.zeros(3))  # a few poses, the root broadcast
+    np.testing.assert_allclose(few_p, _chain_fk(rest[1], rot[:5, 1], np.zeros((5, 3)), PARENTS)[1], rtol=0, atol=1e-13)
     mats = axis_angle_to_matrix(rot[:40])
     mat_g, mat_p = forward_kinematics(rest[None], mats, root[:40], rotations_are_matrices=True)
     assert np.array_equal(mat_g, glob[:40]) and np.array_equal(mat_p, pos[:40])

@@ -27,16 +27,16 @@ def test_cmu_walk_retargets_to_a_plausible_walk(shared_dir):
     clip = load_bvh(path)
     assert clip.n_frames == 524 and clip.fps == pytest.approx(120.0, rel=1e-4)
     assert clip.meta["skeleton"] == "cmu" and clip.kind == "mocap" and not clip.loop
-    assert clip.meta["unit_scale"] == pytest.approx(0.0564, rel=0.05)      # CMU's inch-ish units
+    assert clip.meta["unit_scale"] == pytest.approx(0.0564, rel=0.05)  # CMU's inch-ish units
     root = clip.root_translation
-    walk = slice(60, None)                                                  # frame 0 is a calibration pose
+    walk = slice(60, None)  # frame 0 is a calibration pose
     travel = root[-1, :2] - root[60, :2]
     speed = np.linalg.norm(travel) / ((clip.n_frames - 61) / clip.fps)
     assert 0.7 < speed < 1.6
     heading = travel / np.linalg.norm(travel)
     forward = axis_angle_to_matrix(clip.joint_rotations[walk, 0])[:, :2, 1]
     forward /= np.linalg.norm(forward, axis=1, keepdims=True)
-    assert (forward @ heading).mean() > 0.9                                  # faces where it walks
+    assert (forward @ heading).mean() > 0.9  # faces where it walks
     pos = clip.joint_positions()
     # bone lengths of the retargeted skeleton are those of the target skeleton, every frame
     bones = np.linalg.norm(pos[:, 1:] - pos[:, PARENTS[1:]], axis=-1)
@@ -57,7 +57,7 @@ def test_cmu_walk_retargets_to_a_plausible_walk(shared_dir):
     # resampling the 120 fps capture to 30 fps keeps every 4th pose
     slow = clip.resample(30.0)
     assert slow.n_frames == 131 and slow.fps == 30.0
-    assert np.abs(slow.joint_positions() - pos[::4]).max() < 1e-3     # frame time 0.0083333, not 1/120
+    assert np.abs(slow.joint_positions() - pos[::4]).max() < 1e-3  # frame time 0.0083333, not 1/120
 
 
 @pytest.mark.parametrize("naming,order", [("mixamo", "ZXY"), ("cmu", "XYZ")])
@@ -70,7 +70,7 @@ def test_save_then_load_round_trip(tmp_path, naming, order):
     a, b = clip.joint_positions(), back.joint_positions()
     assert np.abs((a - a[:, :1]) - (b - b[:, :1])).max() < 1e-4
     assert np.abs(a[:, 0, :2] - b[:, 0, :2]).max() < 1e-4
-    assert np.ptp(a[:, 0, 2] - b[:, 0, 2]) < 1e-5          # only a constant grounding shift
+    assert np.ptp(a[:, 0, 2] - b[:, 0, 2]) < 1e-5  # only a constant grounding shift
 
 
 def test_a_pose_rest_is_aligned_to_our_t_pose(tmp_path):
@@ -183,7 +183,7 @@ Frame Time: 0.04
     assert np.allclose(bvh.end_sites[1], [0, 5, 0])
     glob, pos = bvh.global_transforms()
     assert np.allclose(pos[0, 0], [1, 2, 3])
-    assert np.allclose(pos[0, 1], [1, 12, 3])            # yaw about Y leaves the +Y bone in place
+    assert np.allclose(pos[0, 1], [1, 12, 3])  # yaw about Y leaves the +Y bone in place
     # frame 1: 90 degrees about Z rolls the +Y bone to -X
     assert np.allclose(pos[1, 1], [-10, 0, 0], atol=1e-9)
 
@@ -197,13 +197,13 @@ def _write_amass(path, poses, trans, rate=60.0, **extra):
 def test_amass_frames_and_axes(tmp_path):
     n = 30
     poses = np.zeros((n, 72))
-    poses[:, J["left_knee"] * 3] = np.radians(60)           # SMPL: +x flexes the knee
+    poses[:, J["left_knee"] * 3] = np.radians(60)  # SMPL: +x flexes the knee
     trans = np.zeros((n, 3))
-    trans[:, 2] = np.linspace(0, 1.2, n)                      # walking along SMPL's +z (forward)
+    trans[:, 2] = np.linspace(0, 1.2, n)  # walking along SMPL's +z (forward)
     clip = load_amass(_write_amass(tmp_path / "a.npz", poses, trans, rate=60.0))
     assert clip.fps == 60.0 and clip.n_frames == n and clip.kind == "mocap"
     assert np.allclose(clip.joint_rotations[:, J["left_knee"]], [-np.radians(60), 0, 0], atol=1e-9)
-    assert np.allclose(clip.joint_rotations[:, 0], 0, atol=1e-9)          # facing +y
+    assert np.allclose(clip.joint_rotations[:, 0], 0, atol=1e-9)  # facing +y
     assert np.allclose(np.diff(clip.root_translation[:, 1]), 1.2 / (n - 1))  # forward is +y
     pos = clip.joint_positions()
     assert (pos[:, J["left_ankle"], 1] < pos[:, J["left_knee"], 1]).all()  # shin bends backwards
@@ -217,7 +217,7 @@ def test_amass_frames_and_axes(tmp_path):
     assert np.allclose(clip_h.joint_rotations[:, 22:], 0)
     # a Z-up archive: the root orientation carries SMPL's Y-up frame into the world
     poses_z = poses.copy()
-    poses_z[:, :3] = [np.pi / 2, 0, 0]                       # Y up -> Z up, facing -y
+    poses_z[:, :3] = [np.pi / 2, 0, 0]  # Y up -> Z up, facing -y
     clip_z = load_amass(_write_amass(tmp_path / "z.npz", poses_z, trans[:, [0, 2, 1]] * [1, -1, 1]), up="z")
     up_axis = axis_angle_to_matrix(clip_z.joint_rotations[:, 0])[:, :, 2]
     assert np.allclose(up_axis, [0, 0, 1], atol=1e-9)

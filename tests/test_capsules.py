@@ -6,8 +6,17 @@ import pytest
 import trimesh
 
 import crowdstudy.body as cb
-from crowdstudy.body.capsules import (Capsules, cached_fit_capsules, capsule_mesh_iou, capsule_occupancy,
-                                      fit_capsules, fit_digest, mesh_occupancy, posed_capsules, segment_distance)
+from crowdstudy.body.capsules import (
+    Capsules,
+    cached_fit_capsules,
+    capsule_mesh_iou,
+    capsule_occupancy,
+    fit_capsules,
+    fit_digest,
+    mesh_occupancy,
+    posed_capsules,
+    segment_distance,
+)
 from crowdstudy.body.skeleton import PARENTS, forward_kinematics
 from crowdstudy.errors import InvalidInputError
 
@@ -59,20 +68,22 @@ def test_cached_fit_is_the_fit_read_back_and_follows_the_body(tmp_path, monkeypa
     verts = np.array(body.rest_vertices, dtype=np.float64)
     verts[0, 2] += 1e-3
     moved = SimpleNamespace(rest_vertices=verts, rest_joints=body.rest_joints, faces=body.faces, weights=body.weights)
-    same = SimpleNamespace(rest_vertices=body.rest_vertices, rest_joints=body.rest_joints, faces=body.faces,
-                           weights=body.weights)
+    same = SimpleNamespace(
+        rest_vertices=body.rest_vertices, rest_joints=body.rest_joints, faces=body.faces, weights=body.weights
+    )
     assert fit_digest(same) == fit_digest(body) != fit_digest(moved)
     assert fit_digest(body, 0.03) != fit_digest(body, 0.02)
     # the shared weights' digest is kept for read-only arrays only: a writeable copy with
     # the same values has the same key, and changing it in place changes the key
     weights = np.array(body.weights)
-    copied = SimpleNamespace(rest_vertices=body.rest_vertices, rest_joints=body.rest_joints, faces=body.faces,
-                             weights=weights)
+    copied = SimpleNamespace(
+        rest_vertices=body.rest_vertices, rest_joints=body.rest_joints, faces=body.faces, weights=weights
+    )
     assert fit_digest(copied) == fit_digest(body)
     weights[5] = weights[5][::-1]
     assert fit_digest(copied) != fit_digest(body)
     with pytest.raises(ValueError):
-        body.weights[0, 0] = 1.0          # the shared template cannot change under its digest
+        body.weights[0, 0] = 1.0  # the shared template cannot change under its digest
 
 
 def test_skins_of_the_grouped_vertices_are_the_per_bone_percentiles():
@@ -90,7 +101,7 @@ def test_skins_of_the_grouped_vertices_are_the_per_bone_percentiles():
         v = np.asarray(body.rest_vertices, np.float64)[dominant == j]
         if len(v):
             d = caps.end[j] - caps.start[j]
-            t = np.clip((v - caps.start[j]) @ d / max(d @ d, 1e-12), 0.0, 1.0)     # a sphere: d = 0
+            t = np.clip((v - caps.start[j]) @ d / max(d @ d, 1e-12), 0.0, 1.0)  # a sphere: d = 0
             out = np.linalg.norm(v - (caps.start[j] + t[:, None] * d), axis=1) - caps.radius[j]
             want[j] = np.clip(np.percentile(out, 90.0), 0.0, 0.02)
     got = capsule_skin(body, 90.0, max_skin=0.02, hand_scale=1.0)
@@ -154,8 +165,7 @@ def test_posed_capsules_follow_the_bones():
     j = 18
     np.testing.assert_allclose(end[1, j], glob[1, j] @ (caps.end[j] - body.rest_joints[j]) + pos[1, j])
     # capsule lengths are preserved by the rigid motion
-    np.testing.assert_allclose(np.linalg.norm(end - start, axis=-1), np.broadcast_to(caps.length, (2, 24)),
-                               atol=1e-12)
+    np.testing.assert_allclose(np.linalg.norm(end - start, axis=-1), np.broadcast_to(caps.length, (2, 24)), atol=1e-12)
 
 
 def test_bad_capsule_input():
@@ -170,8 +180,9 @@ class _SkinBody:
     """24 vertical capsules (radius 5 cm) with ten vertices each at known distances outside."""
 
     def __init__(self, excess_cm):
-        self.capsules = Capsules(start=np.zeros((24, 3)), end=np.tile([0.0, 0.0, 0.1], (24, 1)),
-                                 radius=np.full(24, 0.05))
+        self.capsules = Capsules(
+            start=np.zeros((24, 3)), end=np.tile([0.0, 0.0, 0.1], (24, 1)), radius=np.full(24, 0.05)
+        )
         angle = np.linspace(0.0, 2.0 * np.pi, 10, endpoint=False)
         verts, owner = [], []
         for j in range(24):
@@ -188,13 +199,14 @@ def test_capsule_skin_is_the_percentile_capped_and_halved_on_the_hands():
     from crowdstudy.physics.config import PhysicsConfig
 
     rng = np.random.default_rng(3)
-    excess = rng.uniform(0.0, 4.0, size=(24, 10))        # cm beyond each capsule
-    excess[5] = -1.0                                       # bone 5's mesh lies inside its capsule
+    excess = rng.uniform(0.0, 4.0, size=(24, 10))  # cm beyond each capsule
+    excess[5] = -1.0  # bone 5's mesh lies inside its capsule
     body = _SkinBody(excess)
     expected = np.clip(np.percentile(excess / 100.0, 90, axis=1), 0.0, None)
-    np.testing.assert_allclose(capsule_skin(body, 90.0, max_skin=0.04, hand_scale=1.0), np.minimum(expected, 0.04),
-                               atol=1e-12)
-    skin = capsule_skin(body)                              # defaults: the physics' 1.5 cm cap, hands halved
+    np.testing.assert_allclose(
+        capsule_skin(body, 90.0, max_skin=0.04, hand_scale=1.0), np.minimum(expected, 0.04), atol=1e-12
+    )
+    skin = capsule_skin(body)  # defaults: the physics' 1.5 cm cap, hands halved
     capped = np.minimum(expected, 0.015)
     assert sorted(JOINT_NAMES[j] for j in HAND_BONES) == ["left_hand", "left_wrist", "right_hand", "right_wrist"]
     others = [j for j in range(24) if j not in HAND_BONES]
@@ -207,8 +219,10 @@ def test_capsule_skin_is_the_percentile_capped_and_halved_on_the_hands():
     assert np.all(PhysicsConfig().with_values({"skin.percentile": 0.0}).mesh_skin(body) == 0.0)
     # left to the density profile, the skin is its dense end's (what a CrowdCorrector uses)
     dense = PhysicsConfig().profile.dense
-    np.testing.assert_allclose(PhysicsConfig().mesh_skin(body),
-                               capsule_skin(body, 90.0, max_skin=dense.skin_max, hand_scale=dense.skin_hand_scale))
+    np.testing.assert_allclose(
+        PhysicsConfig().mesh_skin(body),
+        capsule_skin(body, 90.0, max_skin=dense.skin_max, hand_scale=dense.skin_hand_scale),
+    )
     with pytest.raises(InvalidInputError, match="hand_scale"):
         capsule_skin(body, hand_scale=-1.0)
     with pytest.raises(InvalidInputError, match="skin.max"):

@@ -38,8 +38,18 @@ def test_output_folder_instead_of_file_fails_at_once(tmp_path, capsys):
         (["import-gltf", missing, "--out", str(tmp_path / "dir.json")], "--out"),
         (["power", "--out", str(d), "--sims", "1"], "--out"),
         (["export", "--db", "sqlite:///" + str(tmp_path / "no.db"), "--out", str(d)], "--out"),
-        (["export", "--db", "sqlite:///" + str(tmp_path / "no.db"), "--out", str(tmp_path / "r.csv"),
-          "--demographics", str(d)], "--demographics"),
+        (
+            [
+                "export",
+                "--db",
+                "sqlite:///" + str(tmp_path / "no.db"),
+                "--out",
+                str(tmp_path / "r.csv"),
+                "--demographics",
+                str(d),
+            ],
+            "--demographics",
+        ),
         (["simulate-participants", "--url", "http://127.0.0.1:9", "--json", str(d)], "--json"),
         (["animate", missing, "--out", str(d)], "--out"),
         (["motion", "report", "--json", str(d)], "--json"),
@@ -56,9 +66,13 @@ def test_output_file_instead_of_folder_fails_at_once(tmp_path, capsys):
     f = tmp_path / "a_file"
     f.write_text("x")
     (tmp_path / "responses.csv").write_text("participant\n")
-    for argv in (["stimuli", "--out", str(f)], ["demo", "--out", str(f)], ["animate", "--stage", "all", "--out", str(f)],
-                 ["motion", "build-library", "--source", str(tmp_path), "--out", str(f)],
-                 ["analyze", str(tmp_path / "responses.csv"), "--out", str(f)]):
+    for argv in (
+        ["stimuli", "--out", str(f)],
+        ["demo", "--out", str(f)],
+        ["animate", "--stage", "all", "--out", str(f)],
+        ["motion", "build-library", "--source", str(tmp_path), "--out", str(f)],
+        ["analyze", str(tmp_path / "responses.csv"), "--out", str(f)],
+    ):
         _one_line_error(capsys, argv, "--out", f, kind="file")
 
 
@@ -75,13 +89,16 @@ def test_a_bug_keeps_its_traceback(monkeypatch):
 
 
 def test_a_bug_prints_a_traceback_and_exits_1(tmp_path):
-    code = ("import sys, crowdstudy.layout.cli_layout as m\n"
-            "def broken(args):\n    raise ValueError('operands could not be broadcast together')\n"
-            "m.run = broken\n"
-            "from crowdstudy.cli import main\nsys.exit(main(['layout']))\n")
+    code = (
+        "import sys, crowdstudy.layout.cli_layout as m\n"
+        "def broken(args):\n    raise ValueError('operands could not be broadcast together')\n"
+        "m.run = broken\n"
+        "from crowdstudy.cli import main\nsys.exit(main(['layout']))\n"
+    )
     env = {**os.environ, "PYTHONPATH": str(ROOT)}
-    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=tmp_path, env=env,
-                          timeout=120)
+    proc = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, cwd=tmp_path, env=env, timeout=120
+    )
     assert proc.returncode == 1, proc.stderr
     assert "Traceback" in proc.stderr and "ValueError: operands could not be broadcast" in proc.stderr
 
@@ -104,6 +121,7 @@ def test_bench_checks_its_report_path_before_running(tmp_path, monkeypatch, caps
             @staticmethod
             def main(argv):
                 raise AssertionError("the benchmark ran although its report cannot be written")
+
         return Module
 
     monkeypatch.setattr(bench, "load_benchmark", refuse)

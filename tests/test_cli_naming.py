@@ -29,7 +29,7 @@ def test_the_module_is_named_after_its_command(name, module):
     command = name.replace("-", "_")
     assert re.fullmatch(rf"crowdstudy(\.[a-z_]+)?\.cli_{command}", module), (name, module)
     if module.count(".") == 2:
-        assert (PACKAGE / module.split(".")[1]).is_dir(), module          # a stage's subpackage
+        assert (PACKAGE / module.split(".")[1]).is_dir(), module  # a stage's subpackage
     path = _path(module)
     assert path.is_file(), path
     assert {"configure", "run"} <= _functions(path), path
@@ -43,4 +43,4 @@ def test_every_cli_module_is_a_command():
 
 def test_the_check_sees_a_misnamed_module():
     assert not re.fullmatch(r"crowdstudy(\.[a-z_]+)?\.cli_sheet", "crowdstudy.render.sheet_cli")
-    assert "run" not in _functions(PACKAGE / "bench.py")       # the command line lives in cli_bench.py
+    assert "run" not in _functions(PACKAGE / "bench.py")  # the command line lives in cli_bench.py

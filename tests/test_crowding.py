@@ -20,13 +20,13 @@ def test_local_density_of_a_square_lattice():
     a = 0.5
     xy = _lattice(7, a)
     dens = local_density(xy[None], k=4)
-    inner = (np.abs(xy - 1.5).max(1) < 1.0)
-    assert np.allclose(dens[inner], 4 / (np.pi * a ** 2))
+    inner = np.abs(xy - 1.5).max(1) < 1.0
+    assert np.allclose(dens[inner], 4 / (np.pi * a**2))
     corner = np.flatnonzero((xy == 0).all(1))[0]
     assert dens[corner] == pytest.approx(4 / (np.pi * (2 * a) ** 2))
     # the median over frames: a frame where the crowd spreads out twice as far counts once in three
     frames = np.stack([xy, xy, 2 * xy])
-    assert np.allclose(local_density(frames, k=4)[inner], 4 / (np.pi * a ** 2))
+    assert np.allclose(local_density(frames, k=4)[inner], 4 / (np.pi * a**2))
 
 
 def test_a_periodic_row_has_no_ends():
@@ -35,8 +35,8 @@ def test_a_periodic_row_has_no_ends():
     xy = np.column_stack([x, np.zeros(10)])[None]
     open_row = local_density(xy, k=2)
     ring = local_density(xy, k=2, period=4.0)
-    assert np.allclose(ring, 2 / (np.pi * 0.4 ** 2))
-    assert open_row[0] == pytest.approx(2 / (np.pi * 0.8 ** 2)) and open_row[5] == pytest.approx(ring[5])
+    assert np.allclose(ring, 2 / (np.pi * 0.4**2))
+    assert open_row[0] == pytest.approx(2 / (np.pi * 0.8**2)) and open_row[5] == pytest.approx(ring[5])
     # positions given outside the first period are the same crowd
     assert np.allclose(local_density(xy + [[8.0, 0.0]], k=2, period=4.0), ring)
     # a root a hair below 0 (its x mod the period rounds to the period itself) still counts
@@ -45,8 +45,8 @@ def test_a_periodic_row_has_no_ends():
 
 
 def test_local_density_edge_cases_and_errors():
-    assert np.array_equal(local_density(np.zeros((3, 1, 2))), np.zeros(1))        # alone: no neighbour
-    two = local_density(np.array([[[0.0, 0.0], [1.0, 0.0]]]))                         # k falls to 1
+    assert np.array_equal(local_density(np.zeros((3, 1, 2))), np.zeros(1))  # alone: no neighbour
+    two = local_density(np.array([[[0.0, 0.0], [1.0, 0.0]]]))  # k falls to 1
     assert np.allclose(two, 1 / np.pi)
     with pytest.raises(InvalidInputError, match="root_xy"):
         local_density(np.zeros((4, 2)))
@@ -68,10 +68,16 @@ def test_profile_weight_and_for_density():
     assert cfg.profile_weight(mid) == pytest.approx(0.5)
 
     sparse, dense, half = cfg.for_density(1.0), cfg.for_density(9.0), cfg.for_density(mid)
-    assert (sparse.skin.max, sparse.skin.hand_scale, sparse.output.hold) == (sp.skin_max, sp.skin_hand_scale,
-                                                                            sp.output_hold)
-    assert (dense.skin.max, dense.skin.hand_scale, dense.output.hold) == (dp.skin_max, dp.skin_hand_scale,
-                                                                         dp.output_hold)
+    assert (sparse.skin.max, sparse.skin.hand_scale, sparse.output.hold) == (
+        sp.skin_max,
+        sp.skin_hand_scale,
+        sp.output_hold,
+    )
+    assert (dense.skin.max, dense.skin.hand_scale, dense.output.hold) == (
+        dp.skin_max,
+        dp.skin_hand_scale,
+        dp.output_hold,
+    )
     assert half.skin.max == pytest.approx(0.5 * (sp.skin_max + dp.skin_max))
     assert half.output.hold == pytest.approx(0.5 * (sp.output_hold + dp.output_hold))
     assert cfg.profile.at(mid).skin_max == half.skin.max and cfg.for_dense_crowd() == dense
@@ -94,8 +100,9 @@ def test_fixing_the_three_values_replaces_the_old_switch():
     did): fix the three fields; the former switch is an error that says so."""
     cfg = PhysicsConfig()
     dp = cfg.profile.dense
-    fixed = cfg.with_values({"skin.max": dp.skin_max, "skin.hand_scale": dp.skin_hand_scale,
-                             "output.hold": dp.output_hold})
+    fixed = cfg.with_values(
+        {"skin.max": dp.skin_max, "skin.hand_scale": dp.skin_hand_scale, "output.hold": dp.output_hold}
+    )
     assert not fixed.follows_profile and fixed.for_density(1.0) is fixed and fixed == cfg.for_dense_crowd()
     with pytest.raises(InvalidInputError, match="crowd_adaptive.*skin.max=0.015 skin.hand_scale=0.5 output.hold=0.6"):
         cfg.with_values(crowd_adaptive=False)
@@ -120,8 +127,14 @@ def test_correct_sizes_the_skins_by_the_crowd():
     assert phys["config"]["skin"]["max"] == sp.skin_max and phys["config"]["output"]["hold"] == sp.output_hold
     assert PhysicsConfig.from_dict(phys["config"]) == cfg.for_density(density)
 
-    by_hand = correct(clip, cfg.with_values({"skin.max": sp.skin_max, "skin.hand_scale": sp.skin_hand_scale,
-                                             "output.hold": sp.output_hold}), progress=False, device="cpu")
+    by_hand = correct(
+        clip,
+        cfg.with_values(
+            {"skin.max": sp.skin_max, "skin.hand_scale": sp.skin_hand_scale, "output.hold": sp.output_hold}
+        ),
+        progress=False,
+        device="cpu",
+    )
     dense = correct(clip, cfg.for_dense_crowd(), progress=False, device="cpu")
     assert np.array_equal(ours.joint_rotations, by_hand.joint_rotations)
     assert np.array_equal(ours.root_translation, by_hand.root_translation)

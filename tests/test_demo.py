@@ -24,8 +24,25 @@ def test_demo_runs_end_to_end_on_a_small_design(tmp_path):
     design_path = write_small_design(tmp_path / "small.toml", levels=("D1", "D5"))
     design = load_design(design_path)
     out = tmp_path / "demo"
-    proc = subprocess.run([sys.executable, "-m", "crowdstudy", "demo", "--out", str(out), "--design", str(design_path),
-                           "--duration", "1", "--participants", "4"], capture_output=True, text=True, timeout=900)
+    proc = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "crowdstudy",
+            "demo",
+            "--out",
+            str(out),
+            "--design",
+            str(design_path),
+            "--duration",
+            "1",
+            "--participants",
+            "4",
+        ],
+        capture_output=True,
+        text=True,
+        timeout=900,
+    )
     assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
     for name in ("layouts_and_trajectories.png", "bodies_capsules.png", "demographics.csv", "analysis/summary.md"):
         assert (out / name).is_file(), name
@@ -38,16 +55,16 @@ def test_demo_runs_end_to_end_on_a_small_design(tmp_path):
     rows = {(r["scene"], r["method"]): r for r in json.loads((out / "metrics.json").read_text())["rows"]}
     for scene in ("stationary", "walking"):
         base, ours = rows[(scene, "Baseline")], rows[(scene, "Ours")]
-        assert base["overlap_mesh_L"] > 0.3, base                     # a dense crowd's Baseline overlaps
+        assert base["overlap_mesh_L"] > 0.3, base  # a dense crowd's Baseline overlaps
         assert ours["overlap_mesh_L"] <= base["overlap_mesh_L"] / 5, (base, ours)
         assert ours["overlap_capsule_L"] <= base["overlap_capsule_L"] / 5, (base, ours)
         assert base["tracking_cm"] == 0.0 and 0.0 < ours["tracking_cm"] < 25.0
         assert f"{scene}" in proc.stdout
     # step 5: the four videos are 640x360, one frame per 1/30 s of the clip
     videos = sorted((out / "videos").glob("*.mp4"))
-    assert [v.name for v in videos] == sorted(f"{st}_D5_{vp}_{m}.mp4" for st, vp in (("stationary", "V3"),
-                                                                                   ("walking", "V3"))
-                                              for m in ("Baseline", "Ours"))
+    assert [v.name for v in videos] == sorted(
+        f"{st}_D5_{vp}_{m}.mp4" for st, vp in (("stationary", "V3"), ("walking", "V3")) for m in ("Baseline", "Ours")
+    )
     for v in videos:
         info = probe_video(v)
         assert (info["width"], info["height"]) == (640, 360) and info["frames"] == 30, (v.name, info)
@@ -68,7 +85,7 @@ def test_demo_runs_end_to_end_on_a_small_design(tmp_path):
     assert all(probe_video(out / "stimuli" / f)["frames"] == 30 for f in manifest["file"])
     responses = pd.read_csv(out / "responses.csv")
     assert responses["participant_id"].nunique() == 4
-    assert len(responses) == 4 * 8          # 2 densities x 1 viewpoint x 2 methods x 2 stages
+    assert len(responses) == 4 * 8  # 2 densities x 1 viewpoint x 2 methods x 2 stages
     cells = ["stage", "density_level", "viewpoint", "method"]
     assert not responses.duplicated(["participant_id", *cells]).any()
     assert set(responses.groupby(cells).size()) == {4}
@@ -77,11 +94,16 @@ def test_demo_runs_end_to_end_on_a_small_design(tmp_path):
     assert responses[items].isin(range(1, design.likert_points + 1)).all().all()
     analysis = json.loads((out / "analysis" / "analysis.json").read_text())
     assert analysis["participants"] == 4
-    assert {(r["stage"], r["composite"]) for r in analysis["results"]} == {(s, c) for s in (1, 2)
-                                                                          for c in design.composites}
+    assert {(r["stage"], r["composite"]) for r in analysis["results"]} == {
+        (s, c) for s in (1, 2) for c in design.composites
+    }
 
 
 def test_demo_rejects_bad_arguments(tmp_path):
-    proc = subprocess.run([sys.executable, "-m", "crowdstudy", "demo", "--out", str(tmp_path), "--density", "D9"],
-                          capture_output=True, text=True, timeout=120)
+    proc = subprocess.run(
+        [sys.executable, "-m", "crowdstudy", "demo", "--out", str(tmp_path), "--density", "D9"],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
     assert proc.returncode == 2 and "--density" in proc.stderr

@@ -56,8 +56,8 @@ def _markdown_files() -> list[Path]:
 
 
 def _without_code(text: str) -> str:
-    text = re.sub(r"^(\s*)(```|~~~).*?^\1\2", "", text, flags=re.M | re.S)   # fenced blocks
-    return re.sub(r"`[^`\n]*`", "", text)                                     # inline code
+    text = re.sub(r"^(\s*)(```|~~~).*?^\1\2", "", text, flags=re.M | re.S)  # fenced blocks
+    return re.sub(r"`[^`\n]*`", "", text)  # inline code
 
 
 _LINK_RE = re.compile(r"!?\[[^\]]*\]\(([^)\s]+)(?:\s+\"[^\"]*\")?\)")
@@ -67,7 +67,7 @@ def _relative_links(path: Path) -> list[str]:
     links = []
     for target in _LINK_RE.findall(_without_code(path.read_text(encoding="utf-8"))):
         if re.match(r"^[a-z][a-z0-9+.-]*:", target, re.I) or target.startswith("#"):
-            continue                                   # URLs, mailto:, anchors in the page
+            continue  # URLs, mailto:, anchors in the page
         links.append(target.split("#", 1)[0])
     return links
 
@@ -113,9 +113,9 @@ def _docstrings_and_comments(path: Path) -> list[tuple[int, str]]:
             doc = ast.get_docstring(node, clean=False)
             if doc:
                 out.append((getattr(node, "lineno", 1), doc))
-    for number, line in enumerate(text.splitlines(), 1):      # comments (and the odd '#' in a string)
+    for number, line in enumerate(text.splitlines(), 1):  # comments (and the odd '#' in a string)
         if "#" in line:
-            out.append((number, line[line.index("#"):]))
+            out.append((number, line[line.index("#") :]))
     return out
 
 
@@ -126,17 +126,20 @@ def _forbidden(text: str) -> list[str]:
 def test_the_pointer_check_sees_docstrings_and_comments(tmp_path):
     design, folder = "DESIGN" + ".md", "../" + "shared"
     source = tmp_path / "mod.py"
-    source.write_text(f'"""See {design}."""\n\n\ndef f():\n    """In the shared  folder."""\n'
-                      f'    return "{folder} in a plain string is code"  # {folder}/notes\n'
-                      f'# the raw takes: {folder}/data/mocap\n')
+    source.write_text(
+        f'"""See {design}."""\n\n\ndef f():\n    """In the shared  folder."""\n'
+        f'    return "{folder} in a plain string is code"  # {folder}/notes\n'
+        f"# the raw takes: {folder}/data/mocap\n"
+    )
     hits = [hit for _, text in _docstrings_and_comments(source) for hit in _forbidden(text)]
     assert hits == [design, "shared  folder", folder]
 
 
 def test_no_pointers_outside_the_repository():
     found = []
-    texts: list[tuple[str, str]] = [(str(p.relative_to(ROOT)), p.read_text(encoding="utf-8"))
-                                    for p in _markdown_files()]
+    texts: list[tuple[str, str]] = [
+        (str(p.relative_to(ROOT)), p.read_text(encoding="utf-8")) for p in _markdown_files()
+    ]
     for folder in SOURCE_DIRS:
         for path in _source_files(ROOT / folder, (".py",)):
             if path == Path(__file__).resolve():
@@ -161,8 +164,9 @@ def test_every_column_has_a_meaning(hooks):
 
 
 def test_a_column_table_reports_drift(hooks):
-    table, problems = hooks.column_table("crowdstudy.schema.DEMOGRAPHIC_COLUMNS",
-                                         "- `age`: years\n- `shoe_size`: EU\n", "x.md")
+    table, problems = hooks.column_table(
+        "crowdstudy.schema.DEMOGRAPHIC_COLUMNS", "- `age`: years\n- `shoe_size`: EU\n", "x.md"
+    )
     assert "| 2 | `age` | years |" in table
     assert any("'participant_id'" in p and "no meaning" in p for p in problems)
     assert any("'shoe_size'" in p for p in problems)
@@ -185,25 +189,34 @@ def test_api_pages_cover_every_subpackage(hooks):
 
 
 def test_nav_pages_exist(hooks, results):
-    nav_files = re.findall(r":\s*([\w./-]+\.md)\s*$|^\s*-\s*([\w./-]+\.md)\s*$",
-                           (ROOT / "mkdocs.yml").read_text(encoding="utf-8"), flags=re.M)
+    nav_files = re.findall(
+        r":\s*([\w./-]+\.md)\s*$|^\s*-\s*([\w./-]+\.md)\s*$",
+        (ROOT / "mkdocs.yml").read_text(encoding="utf-8"),
+        flags=re.M,
+    )
     generated = set(hooks.api_pages()) | {"reference/cli.md"} | set(results.render_all())
     missing = [p for pair in nav_files for p in pair if p and not (DOCS / p).is_file() and p not in generated]
     assert nav_files and not missing, f"mkdocs.yml names missing pages: {missing}"
 
 
 def test_results_tables_are_headed_by_command_machine_and_date(results, tmp_path):
-    report = {"benchmark": "toy", "rows": [{"case": "a", "median_s": 0.0123, "ok": True}],
-              "command": "crowdstudy bench toy --n 3", "date": "2026-12-07T10:00:00+00:00",
-              "machine": {"cpu": "Some CPU", "cores": 2, "gpus": [], "load_average": [1.25, 1.0, 0.5]}, "provenance": {"git_sha": "abc", "seed": 1},
-              "extra_rows": [{"x": 1}], "repeat": 5}
+    report = {
+        "benchmark": "toy",
+        "rows": [{"case": "a", "median_s": 0.0123, "ok": True}],
+        "command": "crowdstudy bench toy --n 3",
+        "date": "2026-12-07T10:00:00+00:00",
+        "machine": {"cpu": "Some CPU", "cores": 2, "gpus": [], "load_average": [1.25, 1.0, 0.5]},
+        "provenance": {"git_sha": "abc", "seed": 1},
+        "extra_rows": [{"x": 1}],
+        "repeat": 5,
+    }
     (tmp_path / "toy.json").write_text(json.dumps(report))
     (tmp_path / "old.json").write_text(json.dumps({"benchmark": "old", "rows": [{"x": 1.5}]}))
     pages = results.render_all(tmp_path)
     toy = pages["results/toy.md"].splitlines()
     head = "`crowdstudy bench toy --n 3` · Some CPU, 2 cores, no GPU, load 1.2 · 2026-12-07"
     tables = [i for i, line in enumerate(toy) if line.startswith("| ") and toy[i - 1] == ""]
-    assert len(tables) == 3                                  # rows, extra_rows, settings
+    assert len(tables) == 3  # rows, extra_rows, settings
     assert all(toy[i - 2] == head for i in tables)
     assert "| a | 0.0123 | yes |" in toy
     assert "arguments not recorded" in pages["results/old.md"] and "machine not recorded" in pages["results/old.md"]

@@ -16,12 +16,20 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from gltf_fixtures import EXTRA_TARGET, write_mixamo_character
 
 from crowdstudy.body import load_body
 from crowdstudy.body.gltf_container import Z_UP_TO_Y_UP, read_gltf
-from crowdstudy.body.gltf_model import (ARM_ELEVATION_LIMIT, map_skin_joints, node_local_matrix, node_parents,
-                                        node_world_matrices, read_character, read_skin_binds,
-                                        read_skinned_mesh)
+from crowdstudy.body.gltf_model import (
+    ARM_ELEVATION_LIMIT,
+    map_skin_joints,
+    node_local_matrix,
+    node_parents,
+    node_world_matrices,
+    read_character,
+    read_skin_binds,
+    read_skinned_mesh,
+)
 from crowdstudy.body.rotations import axis_angle_to_matrix, quaternion_to_matrix
 from crowdstudy.body.shapes import sample_bodies
 from crowdstudy.body.skeleton import JOINT_INDEX, JOINT_NAMES, PARENTS, forward_kinematics
@@ -29,13 +37,20 @@ from crowdstudy.cli import main
 from crowdstudy.errors import InvalidInputError
 from crowdstudy.gltf.export import build_gltf, character_prefix, export_gltf
 from crowdstudy.scene import CrowdAnimation
-from gltf_fixtures import EXTRA_TARGET, write_mixamo_character
 
 ROOT = Path(__file__).resolve().parent.parent
 JS = ROOT / "tests" / "js"
 CHROMIUM = "/usr/bin/chromium"
-CHROMIUM_ARGS = ["--no-sandbox", "--headless", "--disable-background-networking", "--disable-component-update",
-                 "--disable-sync", "--no-first-run", "--use-angle=swiftshader", "--enable-unsafe-swiftshader"]
+CHROMIUM_ARGS = [
+    "--no-sandbox",
+    "--headless",
+    "--disable-background-networking",
+    "--disable-component-update",
+    "--disable-sync",
+    "--no-first-run",
+    "--use-angle=swiftshader",
+    "--enable-unsafe-swiftshader",
+]
 N, T, FPS = 3, 12, 30.0
 
 
@@ -45,9 +60,16 @@ def small_animation(seed: int = 3) -> CrowdAnimation:
     roots = np.array([[0.0, 0.0, 0.95], [1.2, 0.4, 0.93], [-0.8, 1.1, 0.97]])[None] + t * [[0.5, 0.2, 0.0]]
     rot = rng.normal(0.0, 0.35, (T, N, 24, 3))
     rot[:, :, 0] += np.array([0.0, 0.0, 1.0])  # turned about z
-    return CrowdAnimation(joint_names=JOINT_NAMES, parents=PARENTS, root_translation=roots, joint_rotations=rot,
-                          fps=FPS, bodies=tuple(sample_bodies(N, seed)), clips=tuple({} for _ in range(N)),
-                          meta={"seed": seed, "scenario": "test"})
+    return CrowdAnimation(
+        joint_names=JOINT_NAMES,
+        parents=PARENTS,
+        root_translation=roots,
+        joint_rotations=rot,
+        fps=FPS,
+        bodies=tuple(sample_bodies(N, seed)),
+        clips=tuple({} for _ in range(N)),
+        meta={"seed": seed, "scenario": "test"},
+    )
 
 
 @pytest.fixture(scope="module")
@@ -91,6 +113,7 @@ def _world_at_frame(gltf, frame: int) -> np.ndarray:
 
 # ---------------------------------------------------------------------- export
 
+
 def test_export_structure(exported):
     anim, path = exported
     gltf = read_gltf(path)
@@ -123,12 +146,14 @@ def test_export_animation_reads_back_as_input(exported):
         pre = character_prefix(i, N)
         for j, jname in enumerate(JOINT_NAMES):
             q = _sample(gltf, "rotation", names[pre + jname])
-            np.testing.assert_allclose(quaternion_to_matrix(q), axis_angle_to_matrix(anim.joint_rotations[:, i, j]),
-                                       atol=2e-6)
+            np.testing.assert_allclose(
+                quaternion_to_matrix(q), axis_angle_to_matrix(anim.joint_rotations[:, i, j]), atol=2e-6
+            )
             # consecutive keys on the same hemisphere (LINEAR interpolation takes the short way)
             assert np.all(np.sum(q[1:] * q[:-1], axis=1) >= 0)
-        np.testing.assert_allclose(_sample(gltf, "translation", names[pre + "pelvis"]), anim.root_translation[:, i],
-                                   atol=1e-6)
+        np.testing.assert_allclose(
+            _sample(gltf, "translation", names[pre + "pelvis"]), anim.root_translation[:, i], atol=1e-6
+        )
 
 
 def test_export_world_is_y_up_and_matches_forward_kinematics(exported):
@@ -160,8 +185,9 @@ def _textured(body, seed: int):
     """The body with ``uv`` and ``texture`` (the interface i12-body adds to Body)."""
     rng = np.random.default_rng(seed)
     v = body.rest_vertices
-    body.uv = np.stack([(v[:, 0] - v[:, 0].min()) / np.ptp(v[:, 0]),
-                        (v[:, 2] - v[:, 2].min()) / np.ptp(v[:, 2])], axis=1).astype(np.float32)
+    body.uv = np.stack(
+        [(v[:, 0] - v[:, 0].min()) / np.ptp(v[:, 0]), (v[:, 2] - v[:, 2].min()) / np.ptp(v[:, 2])], axis=1
+    ).astype(np.float32)
     body.texture = rng.integers(0, 256, (32, 16, 3), dtype=np.uint8)
     return body
 
@@ -174,9 +200,20 @@ def textured(exported, tmp_path_factory):
     bodies = []
     for i, rec in enumerate(anim.bodies):  # fresh objects: load_body's are cached and shared
         b = load_body(rec)
-        bodies.append(_textured(Body(record=dict(rec), rest_joints=b.rest_joints, rest_vertices=b.rest_vertices,
-                                     faces=b.faces, weights=b.weights, pelvis_height=b.pelvis_height,
-                                     template_key=b.template_key), i))
+        bodies.append(
+            _textured(
+                Body(
+                    record=dict(rec),
+                    rest_joints=b.rest_joints,
+                    rest_vertices=b.rest_vertices,
+                    faces=b.faces,
+                    weights=b.weights,
+                    pelvis_height=b.pelvis_height,
+                    template_key=b.template_key,
+                ),
+                i,
+            )
+        )
     return bodies, export_gltf(anim, tmp_path_factory.mktemp("textured") / "textured.glb", bodies=bodies)
 
 
@@ -205,14 +242,17 @@ def test_export_rejects_bad_arguments(exported, tmp_path):
         build_gltf(anim, bodies=[load_body(anim.bodies[0])])
 
 
-@pytest.mark.skipif(shutil.which("node") is None or not (JS / "node_modules" / "gltf-validator").is_dir(),
-                    reason="node or tests/js/node_modules missing (make setup)")
+@pytest.mark.skipif(
+    shutil.which("node") is None or not (JS / "node_modules" / "gltf-validator").is_dir(),
+    reason="node or tests/js/node_modules missing (make setup)",
+)
 def test_export_passes_khronos_validator(exported, tmp_path):
     _, path = exported
     fixture = tmp_path / "mixamo.glb"
     write_mixamo_character(fixture, load_body({"model": "open", "sex": "female", "height": 1.62}))
-    res = subprocess.run(["node", str(JS / "validate.mjs"), str(path), str(fixture)], capture_output=True,
-                         text=True, timeout=120)
+    res = subprocess.run(
+        ["node", str(JS / "validate.mjs"), str(path), str(fixture)], capture_output=True, text=True, timeout=120
+    )
     reports = [json.loads(line) for line in res.stdout.splitlines()]
     assert len(reports) == 2, res.stderr
     for rep in reports:
@@ -226,13 +266,14 @@ def test_export_passes_khronos_validator(exported, tmp_path):
     view = gltf.doc["bufferViews"][acc["bufferView"]]
     json_len = int.from_bytes(data[12:16], "little")
     start = 12 + 8 + json_len + 8 + view["byteOffset"]
-    data[start:start + 4] = np.float32(3.0).tobytes()
+    data[start : start + 4] = np.float32(3.0).tobytes()
     doc_path.write_bytes(bytes(data))
     res = subprocess.run(["node", str(JS / "validate.mjs"), str(doc_path)], capture_output=True, text=True, timeout=60)
     assert json.loads(res.stdout)["numErrors"] > 0
 
 
 # ---------------------------------------------------------------------- import
+
 
 def test_round_trip_export_import(exported):
     anim, path = exported
@@ -272,8 +313,9 @@ def test_import_mixamo_rig_in_another_rest_pose(mixamo):
     arm = [JOINT_INDEX[f"{s}_{j}"] for s in ("left", "right") for j in ("elbow", "wrist", "hand")]
     still = [j for j in range(24) if j not in arm]
     np.testing.assert_allclose(ch.joints[still], body.rest_joints[still], atol=1e-6)
-    arm_weight = body.weights[:, [JOINT_INDEX[f"{s}_{j}"] for s in ("left", "right")
-                                  for j in ("shoulder", "elbow", "wrist", "hand")]].sum(axis=1)
+    arm_weight = body.weights[
+        :, [JOINT_INDEX[f"{s}_{j}"] for s in ("left", "right") for j in ("shoulder", "elbow", "wrist", "hand")]
+    ].sum(axis=1)
     np.testing.assert_allclose(ch.vertices[arm_weight == 0], body.rest_vertices[arm_weight == 0], atol=1e-5)
     assert ch.height == pytest.approx(body.height, abs=1e-6)
     # the A-pose is lifted to the rest convention: arms within the limit of horizontal, in
@@ -349,21 +391,25 @@ def test_import_texture_and_record(mixamo):
     assert verts[:, 2].min() == pytest.approx(0.0, abs=1e-9)
 
 
-@pytest.mark.parametrize("convention, omit, vrm, expect", [
-    ("mixamo", (), False, "mixamo"),   # Ready Player Me: Mixamo names without the prefix (below)
-    ("vrm", ("spine3", "left_foot", "right_foot"), False, "vrm"),  # upperChest and toes are optional in VRM
-    ("vroid", (), False, "vroid"),
-    ("rigify", ("left_hand", "right_hand"), False, "rigify"),
-    ("generic", ("spine3",), True, "vrm-extension"),  # bone_NN names, VRM 1.0 humanoid table
-    ("cmu", (), False, "cmu"),
-])
+@pytest.mark.parametrize(
+    "convention, omit, vrm, expect",
+    [
+        ("mixamo", (), False, "mixamo"),  # Ready Player Me: Mixamo names without the prefix (below)
+        ("vrm", ("spine3", "left_foot", "right_foot"), False, "vrm"),  # upperChest and toes are optional in VRM
+        ("vroid", (), False, "vroid"),
+        ("rigify", ("left_hand", "right_hand"), False, "rigify"),
+        ("generic", ("spine3",), True, "vrm-extension"),  # bone_NN names, VRM 1.0 humanoid table
+        ("cmu", (), False, "cmu"),
+    ],
+)
 def test_import_other_rigs(tmp_path, convention, omit, vrm, expect):
     body = load_body({"model": "open", "sex": "female", "height": 1.6})
     path = tmp_path / f"{convention}.glb"
     write_mixamo_character(path, body, convention=convention, omit=omit, vrm_extension=vrm, texture=False)
     if convention == "mixamo":  # strip the namespace: Ready Player Me's names (JSON padded with spaces)
-        path.write_bytes(re.sub(rb'"mixamorig:(\w+)"', lambda m: b'"' + m.group(1) + b'"' + b" " * 10,
-                                path.read_bytes()))
+        path.write_bytes(
+            re.sub(rb'"mixamorig:(\w+)"', lambda m: b'"' + m.group(1) + b'"' + b" " * 10, path.read_bytes())
+        )
     ch = read_character(path)
     assert ch.convention == expect and sorted(ch.synthesized) == sorted(omit)
     kept = [j for j in JOINT_NAMES if j not in omit]
@@ -426,6 +472,7 @@ def test_cli_export_and_import(exported, tmp_path, capsys):
 
 # ---------------------------------------------------------------------- three.js
 
+
 class _Quiet(http.server.SimpleHTTPRequestHandler):
     def log_message(self, *args):
         pass
@@ -478,9 +525,15 @@ def test_threejs_loads_export_and_poses_it_like_the_toolkit(exported, browser_pa
         idx, val = body.top_weights(4)
         top = np.zeros_like(body.weights)
         np.put_along_axis(top, idx.astype(np.int64), val, axis=1)
-        posed = type(body)(record=body.record, rest_joints=body.rest_joints, rest_vertices=body.rest_vertices,
-                           faces=body.faces, weights=top, pelvis_height=body.pelvis_height,
-                           template_key="top4")
+        posed = type(body)(
+            record=body.record,
+            rest_joints=body.rest_joints,
+            rest_vertices=body.rest_vertices,
+            faces=body.faces,
+            weights=top,
+            pelvis_height=body.pelvis_height,
+            template_key="top4",
+        )
         v_world, _ = posed.pose(anim.joint_rotations[frame, i], anim.root_translation[frame, i])
         np.testing.assert_allclose(vertices[i], v_world[[0, 1234, 4321]] @ Z_UP_TO_Y_UP.T, atol=1e-4)
 
@@ -502,8 +555,20 @@ needs_blender = pytest.mark.skipif(BLENDER is None, reason="Blender not installe
 
 
 def _blender(script: str, *args) -> subprocess.CompletedProcess:
-    res = subprocess.run([BLENDER, "-b", "--factory-startup", "--python", str(ROOT / "tests" / "blender" / script),
-                          "--", *map(str, args)], capture_output=True, text=True, timeout=300)
+    res = subprocess.run(
+        [
+            BLENDER,
+            "-b",
+            "--factory-startup",
+            "--python",
+            str(ROOT / "tests" / "blender" / script),
+            "--",
+            *map(str, args),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
     assert res.returncode == 0, res.stdout[-3000:] + res.stderr[-3000:]
     return res
 
@@ -525,9 +590,15 @@ def test_blender_imports_export_and_poses_it_like_the_toolkit(exported, tmp_path
         idx, val = body.top_weights(4)
         top = np.zeros_like(body.weights)
         np.put_along_axis(top, idx.astype(np.int64), val, axis=1)
-        v, _ = type(body)(record=body.record, rest_joints=body.rest_joints, rest_vertices=body.rest_vertices,
-                          faces=body.faces, weights=top, pelvis_height=body.pelvis_height,
-                          template_key="top4").pose(anim.joint_rotations[frame, i], anim.root_translation[frame, i])
+        v, _ = type(body)(
+            record=body.record,
+            rest_joints=body.rest_joints,
+            rest_vertices=body.rest_vertices,
+            faces=body.faces,
+            weights=top,
+            pelvis_height=body.pelvis_height,
+            template_key="top4",
+        ).pose(anim.joint_rotations[frame, i], anim.root_translation[frame, i])
         exp["vertices"][pre + "body"] = {str(k): v[k].tolist() for k in (0, 3000, 6000)}
         want_vertices[pre + "body"] = v
     (tmp_path / "expected.json").write_text(json.dumps(exp))

@@ -86,8 +86,7 @@ def test_physics_on_cuda_matches_the_cpu(cuda_device, d1_concert, cpu_corrected,
     from crowdstudy.metrics import tracking_error
     from crowdstudy.physics.corrector import correct
 
-    gpu = correct(d1_concert, device=device, progress=False, linear_solver=linear_solver,
-                  config=_tight())
+    gpu = correct(d1_concert, device=device, progress=False, linear_solver=linear_solver, config=_tight())
     assert gpu.meta["physics"]["device"] == device
     assert np.all(np.isfinite(gpu.root_translation)) and np.all(np.isfinite(gpu.joint_rotations))
     mean, largest = _joint_distance_cm(gpu, cpu_corrected)
@@ -104,7 +103,7 @@ def test_mesh_overlap_on_cuda_matches_the_cpu(cuda_device, d1_concert, cpu_corre
         frames = [0, anim.n_frames // 2, anim.n_frames - 1]
         on_cpu = overlap_volume(anim, geometry="mesh", frames=frames, device="cpu")
         on_gpu = overlap_volume(anim, geometry="mesh", frames=frames, device=device)
-        assert on_cpu.per_character.sum() > 0.0         # the D1 Baseline has contacts to measure
+        assert on_cpu.per_character.sum() > 0.0  # the D1 Baseline has contacts to measure
         np.testing.assert_allclose(on_gpu.per_character, on_cpu.per_character, rtol=1e-6, atol=1e-12)
 
 
@@ -136,8 +135,13 @@ def _vendor_file(name: str) -> Path | None:
 
 def _render_with(vendor_json: Path, out: Path) -> dict:
     env = dict(os.environ, __EGL_VENDOR_LIBRARY_FILENAMES=str(vendor_json), PYTHONPATH=str(ROOT))
-    proc = subprocess.run([sys.executable, "-c", _RENDER_SCRIPT, str(HERE), str(out)], env=env,
-                          capture_output=True, text=True, timeout=600)
+    proc = subprocess.run(
+        [sys.executable, "-c", _RENDER_SCRIPT, str(HERE), str(out)],
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
     if proc.returncode != 0:
         return {"error": proc.stderr.strip().splitlines()[-1] if proc.stderr.strip() else f"exit {proc.returncode}"}
     return json.loads(proc.stdout.strip().splitlines()[-1])
@@ -146,8 +150,9 @@ def _render_with(vendor_json: Path, out: Path) -> dict:
 def test_renderer_on_nvidia_egl_matches_llvmpipe(tmp_path):
     nvidia = _vendor_file("nvidia")
     if nvidia is None:
-        pytest.skip("no NVIDIA EGL vendor library (no glvnd egl_vendor.d/*nvidia*.json): the GPU renderer "
-                    "is not tested here")
+        pytest.skip(
+            "no NVIDIA EGL vendor library (no glvnd egl_vendor.d/*nvidia*.json): the GPU renderer is not tested here"
+        )
     mesa = _vendor_file("mesa")
     if mesa is None:
         pytest.skip("no Mesa EGL vendor library (egl_vendor.d/*mesa*.json) to compare against")
@@ -161,6 +166,6 @@ def test_renderer_on_nvidia_egl_matches_llvmpipe(tmp_path):
     b = np.load(tmp_path / "mesa.npy").astype(np.float64)
     assert a.shape == b.shape == (180, 320, 3)
     mse = float(np.mean((a - b) ** 2))
-    psnr = float("inf") if mse == 0 else 10.0 * np.log10(255.0 ** 2 / mse)
+    psnr = float("inf") if mse == 0 else 10.0 * np.log10(255.0**2 / mse)
     assert psnr >= 30.0, (psnr, info_gpu, info_cpu)
-    assert a.std() > 5.0                         # a real picture (characters on a lit floor), not a blank
+    assert a.std() > 5.0  # a real picture (characters on a lit floor), not a blank

@@ -31,7 +31,7 @@ ROOT = Path(__file__).resolve().parent.parent
 UI_MODULES = ROOT / "ui" / "node_modules"
 
 # Runs inside the temporary environment, in a folder outside the source tree.
-DRIVER = textwrap.dedent(r'''
+DRIVER = textwrap.dedent(r"""
     import json, sys, warnings
     from pathlib import Path
 
@@ -81,7 +81,7 @@ DRIVER = textwrap.dedent(r'''
     responses = simulate_responses(design, 4, seed=0)
     out["responses"] = len(responses)
     print("DRIVER-RESULT " + json.dumps(out))
-''')
+""")
 
 
 def _tree(folder: Path) -> dict:
@@ -105,18 +105,20 @@ def test_front_end_is_one_folder_linked_into_the_package():
     """The questionnaire lives in the top-level ui/; the package's study/ui is a link to it
     (so git holds one copy of each file, and the package finds it)."""
     from crowdstudy.study.server import default_ui_dir
+
     link = ROOT / "crowdstudy" / "study" / "ui"
     assert link.is_symlink() and link.resolve() == (ROOT / "ui").resolve()
     assert default_ui_dir().resolve() == (ROOT / "ui").resolve()
     for name in ("package.json", "package-lock.json", "index.html", "README.md"):
         assert (ROOT / "ui" / name).is_file(), name
-    tracked = subprocess.run(["git", "ls-files", "-s", "crowdstudy/study/ui", "ui"], cwd=ROOT, capture_output=True,
-                             text=True)
+    tracked = subprocess.run(
+        ["git", "ls-files", "-s", "crowdstudy/study/ui", "ui"], cwd=ROOT, capture_output=True, text=True
+    )
     if tracked.returncode != 0:
         pytest.skip("not a git checkout")
     entries = [line.split(None, 3) for line in tracked.stdout.splitlines()]
     in_package = [(mode, path) for mode, _, _, path in entries if path.startswith("crowdstudy/")]
-    assert in_package == [("120000", "crowdstudy/study/ui")], tracked.stdout   # the link alone, no copies
+    assert in_package == [("120000", "crowdstudy/study/ui")], tracked.stdout  # the link alone, no copies
     assert any(path == "ui/package.json" for *_, path in entries), tracked.stdout
 
 
@@ -137,11 +139,23 @@ def test_wheel_installs_and_runs_outside_the_tree(tmp_path):
     src.mkdir()
     for name in ("pyproject.toml", "README.md", "LICENSE"):
         shutil.copy2(ROOT / name, src / name)
-    shutil.copytree(ROOT / "crowdstudy", src / "crowdstudy",
-                    ignore=shutil.ignore_patterns("__pycache__", "*.pyc"))
+    shutil.copytree(ROOT / "crowdstudy", src / "crowdstudy", ignore=shutil.ignore_patterns("__pycache__", "*.pyc"))
     dist = tmp_path / "dist"
-    _run([sys.executable, "-m", "pip", "wheel", "-q", "--no-deps", "--no-build-isolation", "--no-index",
-          "-w", str(dist), str(src)])
+    _run(
+        [
+            sys.executable,
+            "-m",
+            "pip",
+            "wheel",
+            "-q",
+            "--no-deps",
+            "--no-build-isolation",
+            "--no-index",
+            "-w",
+            str(dist),
+            str(src),
+        ]
+    )
     wheels = list(dist.glob("crowdstudy-*.whl"))
     assert len(wheels) == 1, wheels
 
@@ -149,19 +163,35 @@ def test_wheel_installs_and_runs_outside_the_tree(tmp_path):
     venv = tmp_path / "venv"
     _run([sys.executable, "-m", "venv", "--without-pip", str(venv)])
     python = venv / "bin" / "python"
-    _run([sys.executable, "-m", "pip", "--python", str(python), "install", "-q", "--no-deps", "--no-index",
-          str(wheels[0])])
+    _run(
+        [
+            sys.executable,
+            "-m",
+            "pip",
+            "--python",
+            str(python),
+            "install",
+            "-q",
+            "--no-deps",
+            "--no-index",
+            str(wheels[0]),
+        ]
+    )
     site = Path(_run([str(python), "-c", "import sysconfig; print(sysconfig.get_paths()['purelib'])"]).stdout.strip())
     deps = {sysconfig.get_paths()["purelib"], sysconfig.get_paths()["platlib"]}
     (site / "zz_crowdstudy_test_deps.pth").write_text("".join(f"{d}\n" for d in sorted(deps)))
     installed = site / "crowdstudy"
     assert (installed / "study" / "ui" / "node_modules" / "jspsych" / "dist" / "index.browser.min.js").is_file()
-    assert not (installed / "study" / "ui" / "node_modules" / "jspsych" / "src").exists(), \
+    assert not (installed / "study" / "ui" / "node_modules" / "jspsych" / "src").exists(), (
         "only the files the page loads should ship from node_modules"
+    )
     # Every data file of the source package ships (shaders, Markdown, TOML, the motion
     # library's .npz/.json ...): a new kind of file needs a package-data pattern.
-    data = [p.relative_to(src / "crowdstudy") for p in (src / "crowdstudy").rglob("*")
-            if p.is_file() and p.suffix not in (".py", ".pyc") and "node_modules" not in p.parts]
+    data = [
+        p.relative_to(src / "crowdstudy")
+        for p in (src / "crowdstudy").rglob("*")
+        if p.is_file() and p.suffix not in (".py", ".pyc") and "node_modules" not in p.parts
+    ]
     assert any(p.name == "study.toml" for p in data)
     missing = [str(p) for p in data if not (installed / p).is_file()]
     assert not missing, f"data files missing from the wheel (add them to package-data in pyproject.toml): {missing}"
@@ -171,10 +201,18 @@ def test_wheel_installs_and_runs_outside_the_tree(tmp_path):
     work, home, cache = tmp_path / "work", tmp_path / "home", tmp_path / "cache"
     for d in (work, home):
         d.mkdir()
-    env = {k: v for k, v in os.environ.items()
-           if k not in ("PYTHONPATH", "CROWDSTUDY_CACHE", "XDG_CACHE_HOME", "VIRTUAL_ENV", "PYTHONHOME")}
-    env.update(HOME=str(home), CROWDSTUDY_CACHE=str(cache), MPLBACKEND="Agg", PYTHONNOUSERSITE="1",
-               PATH=f"{venv / 'bin'}{os.pathsep}{env.get('PATH', '')}")
+    env = {
+        k: v
+        for k, v in os.environ.items()
+        if k not in ("PYTHONPATH", "CROWDSTUDY_CACHE", "XDG_CACHE_HOME", "VIRTUAL_ENV", "PYTHONHOME")
+    }
+    env.update(
+        HOME=str(home),
+        CROWDSTUDY_CACHE=str(cache),
+        MPLBACKEND="Agg",
+        PYTHONNOUSERSITE="1",
+        PATH=f"{venv / 'bin'}{os.pathsep}{env.get('PATH', '')}",
+    )
     # Warp's compiled kernels are keyed by their source: reuse the test session's cache.
     env["WARP_CACHE_PATH"] = os.environ.get("WARP_CACHE_PATH", str(cache / "warp-cache"))
 
@@ -240,6 +278,7 @@ def _third_party_imports() -> dict[str, tuple[set[str], set[str]]]:
 
 def test_dependencies_match_the_imports():
     from importlib.metadata import packages_distributions
+
     from packaging.requirements import Requirement
 
     project = tomllib.loads((ROOT / "pyproject.toml").read_text(encoding="utf-8"))["project"]
@@ -248,7 +287,7 @@ def test_dependencies_match_the_imports():
     for reqs in project["optional-dependencies"].values():
         for r in map(Requirement, reqs):
             declared.add(_canonical(r.name))
-            declared.update(_canonical(e) for e in r.extras)      # dask[distributed] -> distributed
+            declared.update(_canonical(e) for e in r.extras)  # dask[distributed] -> distributed
     assert not core & {"pingouin", "statsmodels", "httpx", "pytest", "playwright"}, core
 
     dists = packages_distributions()
@@ -256,5 +295,7 @@ def test_dependencies_match_the_imports():
         names = {_canonical(d) for d in dists.get(module, [module])}
         assert names & declared, f"{module} (imported by {sorted(anywhere)[:3]}) is not declared in pyproject.toml"
         if module_level:
-            assert names & core, (f"{module} is imported at module level by {sorted(module_level)[:3]} but is "
-                                  f"not a core dependency (import it inside the function, or make it core)")
+            assert names & core, (
+                f"{module} is imported at module level by {sorted(module_level)[:3]} but is "
+                f"not a core dependency (import it inside the function, or make it core)"
+            )

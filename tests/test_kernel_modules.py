@@ -33,8 +33,9 @@ def _python(code: str, **env: str | None) -> str:
             environ.pop(key, None)
         else:
             environ[key] = value
-    proc = subprocess.run([sys.executable, "-c", textwrap.dedent(code)], capture_output=True, text=True,
-                          env=environ, timeout=300)
+    proc = subprocess.run(
+        [sys.executable, "-c", textwrap.dedent(code)], capture_output=True, text=True, env=environ, timeout=300
+    )
     assert proc.returncode == 0, proc.stderr
     return proc.stdout
 
@@ -43,8 +44,12 @@ def _is_warp_decorator(node: ast.expr) -> bool:
     """``@wp.kernel``, ``@wp.func`` (or called, ``@wp.kernel(...)``)."""
     if isinstance(node, ast.Call):
         node = node.func
-    return (isinstance(node, ast.Attribute) and node.attr in ("kernel", "func")
-            and isinstance(node.value, ast.Name) and node.value.id == "wp")
+    return (
+        isinstance(node, ast.Attribute)
+        and node.attr in ("kernel", "func")
+        and isinstance(node.value, ast.Name)
+        and node.value.id == "wp"
+    )
 
 
 def _module_name(path: Path) -> str:
@@ -65,8 +70,13 @@ def test_no_module_but_the_kernel_modules_imports_warp():
         print(json.dumps({{"imported": imported, "warp": "warp" in sys.modules}}))
     """)
     res = json.loads(out)
-    assert {"crowdstudy.physics", "crowdstudy.physics.solver", "crowdstudy.physics.collision",
-            "crowdstudy.navigation.orca", "crowdstudy.metrics.overlap"} <= set(res["imported"])
+    assert {
+        "crowdstudy.physics",
+        "crowdstudy.physics.solver",
+        "crowdstudy.physics.collision",
+        "crowdstudy.navigation.orca",
+        "crowdstudy.metrics.overlap",
+    } <= set(res["imported"])
     assert not res["warp"]
 
 
@@ -87,13 +97,17 @@ def test_kernels_and_funcs_are_defined_at_module_level():
 
 @pytest.mark.parametrize("module", sorted(name for name, factory in KERNEL_MODULES if factory is None))
 def test_importing_a_kernel_module_sets_the_project_kernel_cache(module, tmp_path):
-    out = _python(f"""
+    out = _python(
+        f"""
         import importlib
         import warp
         importlib.import_module({module!r})
         print(warp.config.kernel_cache_dir)
         print(warp.get_module({module!r}).options["enable_backward"])
-    """, CROWDSTUDY_CACHE=str(tmp_path), WARP_CACHE_PATH=None)
+    """,
+        CROWDSTUDY_CACHE=str(tmp_path),
+        WARP_CACHE_PATH=None,
+    )
     cache, backward = out.split()
     assert Path(cache).resolve().is_relative_to((tmp_path / "warp-cache").resolve())
     assert backward == "False"

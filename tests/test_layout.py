@@ -46,7 +46,7 @@ def test_rectangle_exact_n_inside_and_spaced(n):
 
 def test_polygon_with_margin_keeps_points_inside_and_away_from_edges():
     poly = np.array([[0.0, 0.0], [4.0, 0.0], [4.0, 1.0], [1.5, 1.2], [1.0, 3.0], [0.0, 2.5]])
-    layout = poisson_disk(poly[::-1], 45, seed=3, margin=0.15)          # clockwise input is accepted
+    layout = poisson_disk(poly[::-1], 45, seed=3, margin=0.15)  # clockwise input is accepted
     pts = layout.points
     from matplotlib.path import Path
 
@@ -81,27 +81,30 @@ def test_min_distance_option_and_too_many_points():
     layout = poisson_disk((3.0, 3.0), 30, seed=1, min_distance=0.45)
     assert pdist(layout.points).min() >= 0.45
     with pytest.raises(InvalidInputError, match=r"^n: "):
-        poisson_disk((3.0, 3.0), 60, seed=1, min_distance=0.5)        # beyond even hexagonal packing
+        poisson_disk((3.0, 3.0), 60, seed=1, min_distance=0.5)  # beyond even hexagonal packing
     with pytest.raises(InvalidInputError, match=r"^n: "):
-        poisson_disk((3.0, 3.0), 50, seed=1, min_distance=0.42)       # fits hexagonally, not at random
+        poisson_disk((3.0, 3.0), 50, seed=1, min_distance=0.42)  # fits hexagonally, not at random
 
 
-@pytest.mark.parametrize("kwargs, name", [
-    (dict(region=(3, 3), n=0), "n"),
-    (dict(region=(3, 3), n=-5), "n"),
-    (dict(region=(3, 3), n=float("nan")), "n"),
-    (dict(region=(3, 3), n=2.5), "n"),
-    (dict(region=(3, float("nan")), n=10), "region"),
-    (dict(region=(3, -1), n=10), "region"),
-    (dict(region=[[0, 0], [1, 1], [2, 2]], n=10), "region"),             # collinear
-    (dict(region=[[0, 0], [1, 0]], n=10), "region"),                     # two vertices
-    (dict(region=[[0, 0], [1, 1], [1, 0], [0, 1]], n=10), "region"),     # bow tie
-    (dict(region=[[0, 0], [1, 0], [np.nan, 1]], n=10), "region"),
-    (dict(region=(3, 3), n=10, margin=1.6), "margin"),
-    (dict(region=(3, 3), n=10, margin=-0.1), "margin"),
-    (dict(region=(3, 3), n=10, margin=float("nan")), "margin"),
-    (dict(region=(3, 3), n=10, min_distance=float("nan")), "min_distance"),
-])
+@pytest.mark.parametrize(
+    "kwargs, name",
+    [
+        (dict(region=(3, 3), n=0), "n"),
+        (dict(region=(3, 3), n=-5), "n"),
+        (dict(region=(3, 3), n=float("nan")), "n"),
+        (dict(region=(3, 3), n=2.5), "n"),
+        (dict(region=(3, float("nan")), n=10), "region"),
+        (dict(region=(3, -1), n=10), "region"),
+        (dict(region=[[0, 0], [1, 1], [2, 2]], n=10), "region"),  # collinear
+        (dict(region=[[0, 0], [1, 0]], n=10), "region"),  # two vertices
+        (dict(region=[[0, 0], [1, 1], [1, 0], [0, 1]], n=10), "region"),  # bow tie
+        (dict(region=[[0, 0], [1, 0], [np.nan, 1]], n=10), "region"),
+        (dict(region=(3, 3), n=10, margin=1.6), "margin"),
+        (dict(region=(3, 3), n=10, margin=-0.1), "margin"),
+        (dict(region=(3, 3), n=10, margin=float("nan")), "margin"),
+        (dict(region=(3, 3), n=10, min_distance=float("nan")), "min_distance"),
+    ],
+)
 def test_bad_inputs_name_the_argument(kwargs, name):
     with pytest.raises(InvalidInputError, match=rf"^{name}\b"):
         poisson_disk(seed=0, **kwargs)
@@ -127,7 +130,7 @@ def test_concert_layouts_for_the_study(design):
         assert pdist(pos).min() >= 0.75 * math.sqrt(area / n)
         assert crowd.meta["min_distance"] == pytest.approx(pdist(pos).min())
         assert crowd.radius[0] == pytest.approx(disc_radius(density))
-        np.testing.assert_allclose(crowd.headings, np.pi / 2)         # facing the stage at +y
+        np.testing.assert_allclose(crowd.headings, np.pi / 2)  # facing the stage at +y
         assert crowd.meta["density_level"] == level and crowd.meta["scenario"] == "concert"
     assert counts == [20, 30, 40, 50, 60]
     with pytest.raises(InvalidInputError, match=r"^level"):
@@ -137,7 +140,7 @@ def test_concert_layouts_for_the_study(design):
 def test_disc_radius_fits_the_densest_cell():
     r = disc_radius(6.66)
     assert 0.15 < r < 0.22
-    assert 6.66 * math.pi * r * r <= 0.6 + 1e-9          # packing fraction at most 0.6
+    assert 6.66 * math.pi * r * r <= 0.6 + 1e-9  # packing fraction at most 0.6
     assert disc_radius(2.22) == pytest.approx(0.22)
     with pytest.raises(InvalidInputError, match=r"^density"):
         disc_radius(0.0)
@@ -167,9 +170,9 @@ def test_layout_cli(tmp_path, capsys, saved_figures):
         x0, x1 = ax.get_xlim()
         y0, y1 = ax.get_ylim()
         assert x0 <= pos[:, 0].min() and pos[:, 0].max() <= x1 and y0 <= pos[:, 1].min() and pos[:, 1].max() <= y1
-    assert counts == sorted(counts) and counts[0] < counts[-1]              # more characters at higher density
+    assert counts == sorted(counts) and counts[0] < counts[-1]  # more characters at higher density
     radii = [plotted_discs(ax)[1][0] for ax in panels]
-    assert radii == sorted(radii, reverse=True)                              # smaller discs when denser
+    assert radii == sorted(radii, reverse=True)  # smaller discs when denser
     assert "D5" in capsys.readouterr().out
     assert cli_main(["layout", "--density", "D9", "--out", str(out)]) == 2
     assert "--density" in capsys.readouterr().err

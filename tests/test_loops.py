@@ -37,7 +37,7 @@ def concert(design):
 def _seam_steps(anim):
     """Per frame step (T-1,) and the seam step T-1 -> 0, mean joint displacement (m), and
     the same per character: (T-1, N) and (N,)."""
-    pos = joint_positions(anim)                                      # (T, N, J, 3)
+    pos = joint_positions(anim)  # (T, N, J, 3)
     steps = np.linalg.norm(np.diff(pos, axis=0), axis=-1).mean(axis=-1)
     seam = np.linalg.norm(pos[0] - pos[-1], axis=-1).mean(axis=-1)
     return steps.mean(axis=1), float(seam.mean()), steps, seam
@@ -62,7 +62,7 @@ def test_concert_baseline_is_periodic(design, concert):
     assert np.all(seam_c <= steps_c.max(axis=0) + 1e-9)
     for rec in concert.clips:
         cycles = n_frames / rec["loop_frames"]
-        assert abs(cycles - round(cycles)) < 1e-9 and round(cycles) >= 1      # the loop divides T
+        assert abs(cycles - round(cycles)) < 1e-9 and round(cycles) >= 1  # the loop divides T
         # motion capture: the take time-warped onto the beat, loops of whole bars (4 beats)
         assert abs(np.log(rec["tempo"])) <= np.log(MAX_TEMPO_RATIO) + 1e-9
         beat = design.fps * 60.0 / design.scenarios["concert"]["tempo"]
@@ -78,7 +78,7 @@ def test_every_clip_loop_divides_the_stimulus(design):
         natural = load_clip(name).duration * design.fps
         k = baseline_mod.loop_cycles(natural, n_frames)
         assert k >= 1, name
-        assert n_frames % k == 0, name                    # the 15 clips get whole-frame loops at 20 s
+        assert n_frames % k == 0, name  # the 15 clips get whole-frame loops at 20 s
         worst = max(worst, abs(natural * k / n_frames - 1.0))
     assert worst <= MAX_LOOP_TEMPO_CHANGE
 
@@ -131,14 +131,14 @@ def test_corridor_baseline_has_dissolve_frames(design):
     none = build_baseline(design, "walking", "D1", duration=4.0, dissolve=0)
     assert none.n_frames == n_video and none.meta["loop"] == {"mode": "none"}
     # the extra frames continue the same walk
-    np.testing.assert_allclose(none.root_translation[:n_video - 20], anim.root_translation[:n_video - 20], atol=1e-9)
+    np.testing.assert_allclose(none.root_translation[: n_video - 20], anim.root_translation[: n_video - 20], atol=1e-9)
 
 
 def test_dissolve_clips_have_no_joint_space_seam(design):
     from crowdstudy.metrics import smoothness
 
     anim = build_baseline(design, "walking", "D1", duration=4.0)
-    assert np.isnan(smoothness(anim).seam_ratio)          # measured in pixels instead
+    assert np.isnan(smoothness(anim).seam_ratio)  # measured in pixels instead
     assert smoothness(anim).as_dict()["seam_ratio"] is None
     # without the dissolve the joint-space seam is measured, and the crowd jumps
     none = build_baseline(design, "walking", "D1", duration=4.0, dissolve=0)
@@ -146,8 +146,14 @@ def test_dissolve_clips_have_no_joint_space_seam(design):
 
 
 def _walkers(n_frames: int, d: int, fps: float = 30.0):
-    anim = crowd_animation(grid_positions(6, extent=(4.5, 2.0), margin=0.5), n_frames=n_frames, fps=fps,
-                           scenario="corridor", period=4.5, velocity=(1.2, 0.0))
+    anim = crowd_animation(
+        grid_positions(6, extent=(4.5, 2.0), margin=0.5),
+        n_frames=n_frames,
+        fps=fps,
+        scenario="corridor",
+        period=4.5,
+        velocity=(1.2, 0.0),
+    )
     return anim.replace(meta={"loop": {"mode": "dissolve", "frames": d, "video_frames": n_frames - d}})
 
 
@@ -176,11 +182,11 @@ def test_blend_is_linear_light_on_constant_frames():
         w = (i + 1) / (d + 1)
         out = blend_frames(white, black, w)
         assert out.dtype == np.uint8 and out.shape == white.shape
-        assert np.all(out == int(np.floor(255 * np.sqrt(w) + 0.5)))          # display = sqrt(linear)
+        assert np.all(out == int(np.floor(255 * np.sqrt(w) + 0.5)))  # display = sqrt(linear)
     assert np.all(blend_frames(white, black, 0.25) == 128)
     grey = np.full((4, 6, 3), 100, np.uint8)
     assert np.all(blend_frames(grey, grey, 0.3) == 100)
-    raw = blend_frames(white.tobytes(), black.tobytes(), 0.25)               # raw bytes in, bytes out
+    raw = blend_frames(white.tobytes(), black.tobytes(), 0.25)  # raw bytes in, bytes out
     assert isinstance(raw, bytes) and set(raw) == {128}
 
 
@@ -191,11 +197,15 @@ def test_dissolve_video_blends_its_first_frames(tmp_path):
     anim = _walkers(t + d, d)
     design = load_design()
     out = tmp_path / "corridor.mp4"
-    res = render_video(anim, "V4", out, width=w, height=h, design=design, progress=False, body_loader=mannequin_loader,
-                       crf=12)
+    res = render_video(
+        anim, "V4", out, width=w, height=h, design=design, progress=False, body_loader=mannequin_loader, crf=12
+    )
     assert res["frames"] == t and res["dissolve_frames"] == d and probe_video(out)["frames"] == t
-    raw = subprocess.run([find_ffmpeg(), "-loglevel", "error", "-i", str(out), "-f", "rawvideo", "-pix_fmt", "rgb24",
-                          "pipe:1"], capture_output=True, check=True).stdout
+    raw = subprocess.run(
+        [find_ffmpeg(), "-loglevel", "error", "-i", str(out), "-f", "rawvideo", "-pix_fmt", "rgb24", "pipe:1"],
+        capture_output=True,
+        check=True,
+    ).stdout
     video = np.frombuffer(raw, np.uint8).reshape(-1, h, w, 3).astype(int)
     with mannequin_renderer(anim, design, width=w, height=h) as r:
         r.set_view("V4")
@@ -204,7 +214,7 @@ def test_dissolve_video_blends_its_first_frames(tmp_path):
         expected = blend_frames(frames[i], frames[t + i], (i + 1) / (d + 1)).astype(int)
         err = np.abs(video[i] - expected).mean()
         assert err < 3 and err < 0.5 * np.abs(video[i] - frames[i].astype(int)).mean()
-    assert np.abs(video[d] - frames[d].astype(int)).mean() < 3                 # the clip itself from frame D
+    assert np.abs(video[d] - frames[d].astype(int)).mean() < 3  # the clip itself from frame D
     assert np.abs(video[t - 1] - frames[t - 1].astype(int)).mean() < 3
 
 

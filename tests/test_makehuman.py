@@ -9,7 +9,8 @@ from crowdstudy.body import load_body, sample_bodies
 from crowdstudy.body.capsules import capsule_mesh_iou
 from crowdstudy.body.makehuman import FINGER_CURL_DEG, age_value, macro_weights
 from crowdstudy.body.makehuman_assets import BONE_TO_JOINT, JOINT_CUBES, makehuman_assets, target_names
-from crowdstudy.body.skeleton import JOINT_INDEX as J, JOINT_NAMES
+from crowdstudy.body.skeleton import JOINT_INDEX as J
+from crowdstudy.body.skeleton import JOINT_NAMES
 from crowdstudy.errors import InvalidInputError
 
 
@@ -53,8 +54,15 @@ def test_makehuman_macro_rules():
 
 
 def test_body_has_exact_stature_t_pose_and_skeleton_conventions():
-    rec = {"model": "makehuman", "sex": "male", "height": 1.83, "age": 44, "weight": 0.6, "muscle": 0.55,
-           "race": [0.2, 0.1, 0.7]}
+    rec = {
+        "model": "makehuman",
+        "sex": "male",
+        "height": 1.83,
+        "age": 44,
+        "weight": 0.6,
+        "muscle": 0.55,
+        "race": [0.2, 0.1, 0.7],
+    }
     body = load_body(rec)
     assert body.height == pytest.approx(1.83, abs=1e-9)
     j = body.rest_joints
@@ -62,12 +70,12 @@ def test_body_has_exact_stature_t_pose_and_skeleton_conventions():
     assert body.pelvis_height == pytest.approx(-body.rest_vertices[:13380, 2].min())
     for side, sign in (("left", -1), ("right", 1)):
         chain = j[[J[f"{side}_{n}"] for n in ("shoulder", "elbow", "wrist", "hand")]]
-        np.testing.assert_allclose(chain[:, 1:] - chain[0, 1:], 0.0, atol=1e-6)   # arm horizontal, straight
-        assert np.all(np.sign(np.diff(chain[:, 0])) == sign)                  # left arm towards -x
+        np.testing.assert_allclose(chain[:, 1:] - chain[0, 1:], 0.0, atol=1e-6)  # arm horizontal, straight
+        assert np.all(np.sign(np.diff(chain[:, 0])) == sign)  # left arm towards -x
         hip, ankle = j[J[f"{side}_hip"]], j[J[f"{side}_ankle"]]
-        assert abs(hip[0] - ankle[0]) < 1e-6                                   # legs vertical from the front
+        assert abs(hip[0] - ankle[0]) < 1e-6  # legs vertical from the front
     head = body.rest_vertices[body.weights[:, J["head"]] > 0.9]
-    assert head[:, 1].max() > j[J["head"], 1] + 0.08   # the face (nose) points +y
+    assert head[:, 1].max() > j[J["head"], 1] + 0.08  # the face (nose) points +y
     mesh = body.mesh()
     assert mesh.is_watertight and 0.06 < mesh.volume < 0.11
     np.testing.assert_allclose(body.weights.sum(axis=1), 1.0, atol=1e-5)
@@ -82,15 +90,17 @@ def test_shape_fields_change_the_body_and_the_same_record_gives_the_same_bytes()
     young = load_body({**base, "age": 22, "weight": 0.3})
     old = load_body({**base, "age": 68, "weight": 0.8})
     assert young.height == pytest.approx(old.height)
-    assert old.mesh().volume > young.mesh().volume * 1.08   # heavier
+    assert old.mesh().volume > young.mesh().volume * 1.08  # heavier
     again = load_body({**base, "age": 22, "weight": 0.3})
     assert young.rest_vertices.tobytes() == again.rest_vertices.tobytes()
     male = load_body({**base, "sex": "male"})
     assert not np.allclose(male.rest_vertices, load_body(base).rest_vertices, atol=0.01)
 
 
-@pytest.mark.parametrize("field,value", [("age", 120), ("weight", 1.5), ("race", [1, -1, 0]), ("race", [1, 2]),
-                                         ("sex", "x"), ("wingspan", 1)])
+@pytest.mark.parametrize(
+    "field,value",
+    [("age", 120), ("weight", 1.5), ("race", [1, -1, 0]), ("race", [1, 2]), ("sex", "x"), ("wingspan", 1)],
+)
 def test_bad_record_fields_are_named(field, value):
     with pytest.raises(InvalidInputError, match=field):
         load_body({"model": "makehuman", "sex": "female", field: value})
@@ -104,7 +114,7 @@ def test_sampled_population_and_capsule_fit():
     assert all(0.15 <= r["weight"] <= 0.85 and 0.15 <= r["muscle"] <= 0.85 for r in recs)
     np.testing.assert_allclose([sum(r["race"]) for r in recs], 1.0, atol=2e-3)
     dominant = np.argmax([r["race"] for r in recs], axis=1)
-    assert len(set(dominant.tolist())) == 3   # every ancestry appears
+    assert len(set(dominant.tolist())) == 3  # every ancestry appears
     assert sample_bodies(40, 11) == recs
     ious = [capsule_mesh_iou(load_body(r), resolution=0.012)["iou"] for r in recs[:4]]
     assert min(ious) >= 0.75, ious

@@ -83,7 +83,12 @@ def sphere_lens(r1, r2, d):
         return 0.0
     if d <= abs(r1 - r2):
         return 4.0 / 3.0 * np.pi * min(r1, r2) ** 3
-    return np.pi * (r1 + r2 - d) ** 2 * (d * d + 2 * d * r2 - 3 * r2 * r2 + 2 * d * r1 + 6 * r1 * r2 - 3 * r1 * r1) / (12 * d)
+    return (
+        np.pi
+        * (r1 + r2 - d) ** 2
+        * (d * d + 2 * d * r2 - 3 * r2 * r2 + 2 * d * r1 + 6 * r1 * r2 - 3 * r1 * r1)
+        / (12 * d)
+    )
 
 
 def circle_lens_area(r, d):
@@ -124,8 +129,9 @@ def test_parallel_capsules_match_analytic_volume():
     res = overlap_volume(anim, resolution=0.02, geometry="capsule", bodies=[body, body])
     assert res.mean == pytest.approx(exact, rel=0.01)
     fine = overlap_volume(anim, resolution=0.01, geometry="capsule", bodies=[body, body])
-    assert abs(fine.mean - exact) < abs(overlap_volume(anim, resolution=0.05, geometry="capsule",
-                                                       bodies=[body, body]).mean - exact)
+    assert abs(fine.mean - exact) < abs(
+        overlap_volume(anim, resolution=0.05, geometry="capsule", bodies=[body, body]).mean - exact
+    )
 
 
 @pytest.mark.parametrize("device", ["numpy", None])
@@ -169,7 +175,7 @@ def test_self_intersecting_mesh_counts_its_union_once():
     mesh = overlap_volume(anim, resolution=0.01, geometry="mesh", bodies=[both, probe])
     caps = overlap_volume(anim, resolution=0.01, geometry="capsule", bodies=[both, probe])
     # the probe lies entirely inside the union of the two spheres
-    assert caps.per_character[0, 1] == pytest.approx(4 / 3 * np.pi * 0.12 ** 3, rel=0.01)
+    assert caps.per_character[0, 1] == pytest.approx(4 / 3 * np.pi * 0.12**3, rel=0.01)
     assert mesh.per_character[0, 1] == pytest.approx(caps.per_character[0, 1], rel=0.02)
     assert mesh.per_character[0, 0] == pytest.approx(mesh.per_character[0, 1], rel=1e-9)
 
@@ -190,7 +196,9 @@ def test_point_inside_two_neighbours_counts_once_and_isolated_is_zero():
 
 def test_overlap_is_invariant_to_rotation_about_z():
     r = 0.2
-    body = RigidBody([trimesh.creation.capsule(height=0.4, radius=r)], [(np.array([0, 0, -0.2]), np.array([0, 0, 0.2]), r)])
+    body = RigidBody(
+        [trimesh.creation.capsule(height=0.4, radius=r)], [(np.array([0, 0, -0.2]), np.array([0, 0, 0.2]), r)]
+    )
     exact = circle_lens_area(r, 0.25) * 0.4 + sphere_lens(r, r, 0.25)
     # a 15 cm wide vertical lens prism is the worst case for the (x, y) midpoint rule:
     # within 3.5 % at 2 cm and 1.2 % at 1 cm, whatever the direction
@@ -235,9 +243,13 @@ def test_frames_selection_and_bad_arguments():
     assert res.frames.tolist() == [1, 3] and res.per_character.shape == (2, 2)
     assert res.per_character[0, 0] == pytest.approx(sphere_lens(0.2, 0.2, 0.2), rel=0.01)
     assert res.per_character[1, 0] == 0.0
-    for kwargs, word in (({"frames": "every:0"}, "frames"), ({"frames": [7]}, "frames"),
-                         ({"resolution": -1}, "resolution"), ({"geometry": "voxels"}, "geometry"),
-                         ({"bodies": [body]}, "bodies")):
+    for kwargs, word in (
+        ({"frames": "every:0"}, "frames"),
+        ({"frames": [7]}, "frames"),
+        ({"resolution": -1}, "resolution"),
+        ({"geometry": "voxels"}, "geometry"),
+        ({"bodies": [body]}, "bodies"),
+    ):
         args = {"geometry": "capsule", "bodies": [body, body], **kwargs}
         with pytest.raises(InvalidInputError, match=word):
             overlap_volume(anim, **args)
@@ -292,11 +304,12 @@ def test_tracking_parts_split_a_constant_shift_from_the_motion():
     offset[:, 0] = [0.03, 0.04, 0.0]
     offset[:, 1, 0] = 0.02 * np.where(np.arange(8) % 2 == 0, 1.0, -1.0)
     parts = tracking_parts(animation(roots + offset, rotations=rot), ref, bodies=[body, body])
-    assert parts.placement_cm == pytest.approx(2.5, rel=1e-9)          # (5 + 0) / 2
-    assert parts.motion_cm == pytest.approx(1.0, rel=1e-9)             # (0 + 2) / 2
+    assert parts.placement_cm == pytest.approx(2.5, rel=1e-9)  # (5 + 0) / 2
+    assert parts.motion_cm == pytest.approx(1.0, rel=1e-9)  # (0 + 2) / 2
     assert parts.total_cm == pytest.approx(3.5, rel=1e-9)
-    assert parts.total_cm == pytest.approx(tracking_error(animation(roots + offset, rotations=rot), ref,
-                                                          bodies=[body, body]), rel=1e-9)
+    assert parts.total_cm == pytest.approx(
+        tracking_error(animation(roots + offset, rotations=rot), ref, bodies=[body, body]), rel=1e-9
+    )
     np.testing.assert_allclose(parts.per_character_placement_cm, [5.0, 0.0], atol=1e-9)
     np.testing.assert_allclose(parts.per_character_cm, [5.0, 2.0], rtol=1e-9)
     # a vertical shift is motion, not placement (a dense crowd spreads out on the floor)
@@ -315,9 +328,9 @@ def test_tracking_parts_say_which_body_part_moved():
     body = articulated_body()
     rot = np.zeros((6, 2, 24, 3))
     elbow = JOINT_INDEX["right_elbow"]
-    rot[:, 0, elbow] = [0.0, 0.0, 0.5]                   # character 0: right forearm bent 0.5 rad
+    rot[:, 0, elbow] = [0.0, 0.0, 0.5]  # character 0: right forearm bent 0.5 rad
     shifted = roots.copy()
-    shifted[:, 1, 1] += 0.04                             # character 1: 4 cm to the side all along
+    shifted[:, 1, 1] += 0.04  # character 1: 4 cm to the side all along
     parts = tracking_parts(animation(shifted, rotations=rot), ref, bodies=[body, body])
     # what the bend moves, by forward kinematics of the rest skeleton
     rest = np.asarray(body.rest_joints)
@@ -329,8 +342,9 @@ def test_tracking_parts_say_which_body_part_moved():
     assert parts.per_character_part_cm["arms"][0] == pytest.approx(100 * moved[arms].mean(), rel=1e-9)
     for name, _ in BODY_PARTS:
         assert parts.per_character_part_cm[name][1] == pytest.approx(4.0, rel=1e-9)
-    assert parts.per_joint_cm[JOINT_INDEX["right_hand"]] == pytest.approx(50 * moved[JOINT_INDEX["right_hand"]]
-                                                                           + 2.0, rel=1e-9)
+    assert parts.per_joint_cm[JOINT_INDEX["right_hand"]] == pytest.approx(
+        50 * moved[JOINT_INDEX["right_hand"]] + 2.0, rel=1e-9
+    )
     out = parts.as_dict(per_character=True)
     assert out["tracking_legs_cm"] == pytest.approx(2.0) and out["tracking_arms_cm"] > 2.0
     per = out["tracking_per_character"]
@@ -343,7 +357,7 @@ def test_mean_jerk_of_cubic_motion():
     t = np.arange(12) / fps
     a = 0.7
     roots = np.zeros((12, 1, 3))
-    roots[:, 0, 2] = 1.0 + a * t ** 3
+    roots[:, 0, 2] = 1.0 + a * t**3
     anim = animation(roots, fps=fps)
     body = articulated_body()
     assert mean_jerk(anim, bodies=[body]) == pytest.approx(6 * a, rel=1e-6)
@@ -386,8 +400,8 @@ def test_intra_penetration_zero_at_rest_positive_when_forearm_enters_torso():
 
 # ------------------------------------------------------------------ summary and CLI
 def test_summarize_and_cli(tmp_path, monkeypatch, capsys):
-    from crowdstudy import cli
     import crowdstudy.metrics.summary as summary_module
+    from crowdstudy import cli
 
     body = sphere_body(0.2, subdivisions=3)
     roots = np.zeros((6, 2, 3))
@@ -409,8 +423,22 @@ def test_summarize_and_cli(tmp_path, monkeypatch, capsys):
     f_base = base.save(tmp_path / "base.npz")
     f_ours = ours.save(tmp_path / "ours.npz")
     js = tmp_path / "m.json"
-    assert cli.main(["metrics", str(f_ours), "--reference", str(f_base), "--json", str(js),
-                     "--frames", "every:2", "--no-progress"]) == 0
+    assert (
+        cli.main(
+            [
+                "metrics",
+                str(f_ours),
+                "--reference",
+                str(f_base),
+                "--json",
+                str(js),
+                "--frames",
+                "every:2",
+                "--no-progress",
+            ]
+        )
+        == 0
+    )
     text = capsys.readouterr()
     assert "tracking error" in text.out and "overlap mesh" in text.out
     assert "one frame in 2" in text.err
@@ -465,6 +493,7 @@ def _brute_mesh_intersection(tri_a, tri_b, lo, hi, h):
 
 def _brute_capsule_intersection(caps_a, caps_b, h):
     """Volume of (union of capsules A) n (union of capsules B) by point sampling on a 3-D grid."""
+
     def blocks(caps):
         s, e, r = caps
         return np.minimum(s, e) - r[:, None], np.maximum(s, e) + r[:, None]
@@ -477,14 +506,18 @@ def _brute_capsule_intersection(caps_a, caps_b, h):
     for s, e, r in (caps_a, caps_b):
         mask = np.zeros(shape, bool)
         for j in np.flatnonzero(r > 0):
-            sl = tuple(slice(np.searchsorted(ax, min(s[j, k], e[j, k]) - r[j]),
-                             np.searchsorted(ax, max(s[j, k], e[j, k]) + r[j])) for k, ax in enumerate(axes))
+            sl = tuple(
+                slice(
+                    np.searchsorted(ax, min(s[j, k], e[j, k]) - r[j]), np.searchsorted(ax, max(s[j, k], e[j, k]) + r[j])
+                )
+                for k, ax in enumerate(axes)
+            )
             p = np.stack(np.meshgrid(*(ax[q] for ax, q in zip(axes, sl)), indexing="ij"), -1)
             ab = e[j] - s[j]
             t = np.clip(((p - s[j]) @ ab) / max(ab @ ab, 1e-18), 0.0, 1.0)
             mask[sl] |= np.linalg.norm(p - (s[j] + t[..., None] * ab), axis=-1) < r[j]
         inside.append(mask)
-    return float((inside[0] & inside[1]).sum()) * h ** 3
+    return float((inside[0] & inside[1]).sum()) * h**3
 
 
 def test_real_bodies_mesh_and_capsule_overlap_match_a_brute_force_reference():
@@ -500,15 +533,17 @@ def test_real_bodies_mesh_and_capsule_overlap_match_a_brute_force_reference():
     mesh = overlap_volume(anim, geometry="mesh", frames=[0])
     caps = overlap_volume(anim, geometry="capsule", frames=[0])
     assert mesh.dropped_columns == 0
-    verts = [np.asarray(b.pose(anim.joint_rotations[0, i], anim.root_translation[0, i])[0], float)
-             for i, b in enumerate(bodies)]
+    verts = [
+        np.asarray(b.pose(anim.joint_rotations[0, i], anim.root_translation[0, i])[0], float)
+        for i, b in enumerate(bodies)
+    ]
     tris = [v[np.asarray(b.faces)] for v, b in zip(verts, bodies)]
     lo = np.maximum(verts[0].min(0), verts[1].min(0))
     hi = np.minimum(verts[0].max(0), verts[1].max(0))
     ref_mesh = _brute_mesh_intersection(tris[0], tris[1], lo, hi, 0.01)
     world = [capsules_world(b, anim.joint_rotations[:, i], anim.root_translation[:, i]) for i, b in enumerate(bodies)]
     ref_caps = _brute_capsule_intersection(*[(s[0], e[0], r) for s, e, r in world], 0.006)
-    assert ref_mesh > 0.004 and ref_caps > 0.002            # a real collision of two torsos
+    assert ref_mesh > 0.004 and ref_caps > 0.002  # a real collision of two torsos
     # A inside B and B inside A are the same intersection: both characters carry it
     np.testing.assert_allclose(mesh.per_character[0], ref_mesh, rtol=0.04)
     np.testing.assert_allclose(caps.per_character[0], ref_caps, rtol=0.04)
@@ -529,8 +564,22 @@ def test_cli_on_real_bodies(tmp_path, capsys):
     f_base = base.save(tmp_path / "base.npz")
     f_ours = ours.save(tmp_path / "ours.npz")
     out = tmp_path / "metrics.json"
-    assert cli.main(["metrics", str(f_ours), "--reference", str(f_base), "--resolution", "0.03",
-                     "--json", str(out), "--no-progress"]) == 0
+    assert (
+        cli.main(
+            [
+                "metrics",
+                str(f_ours),
+                "--reference",
+                str(f_base),
+                "--resolution",
+                "0.03",
+                "--json",
+                str(out),
+                "--no-progress",
+            ]
+        )
+        == 0
+    )
     record = json.loads(out.read_text())["metrics"]
     assert record["overlap_mesh_m3"] == 0.0 and record["reference_overlap_mesh_m3"] > 0.002
     assert record["overlap_mesh_ratio"] == 0.0

@@ -32,7 +32,7 @@ def test_library_ships_every_take_compactly_with_its_licence():
     assert size <= 10 * 2**20
     assert set(mocap_names()) == {t.name for t in TAKES}
     assert len(mocap_names("dance")) == 11 and len(mocap_names("idle")) == 3 and len(mocap_names("walk")) == 6
-    assert list_clips("dance") == mocap_names("dance")                 # motion capture is the default
+    assert list_clips("dance") == mocap_names("dance")  # motion capture is the default
     assert {"jump", "groove_knees", "happy_claps", "groove_steps"}.isdisjoint(list_clips("dance", default_only=True))
     for name in mocap_names():
         clip = load_clip(name)
@@ -61,15 +61,15 @@ def test_daz_bvh_retargets_with_derived_spine_and_toes(shared_dir):
     np.testing.assert_allclose(spine3, np.broadcast_to(spine3[0], spine3.shape), atol=1e-9)
     pos = clip.joint_positions()
     head, pelvis = pos[:, J["head"]], pos[:, J["pelvis"]]
-    assert np.all(head[:, 2] - pelvis[:, 2] > 0.5)                   # upright
+    assert np.all(head[:, 2] - pelvis[:, 2] > 0.5)  # upright
     toes = pos[:, J["left_foot"]] - pos[:, J["left_ankle"]]
-    assert np.all(toes[:, 2] < 0.0) and np.all(np.linalg.norm(toes[:, :2], axis=1) > 0.08)   # forward and down
+    assert np.all(toes[:, 2] < 0.0) and np.all(np.linalg.norm(toes[:, :2], axis=1) > 0.08)  # forward and down
     feet = pos[:, [J["left_ankle"], J["right_ankle"]], 2]
-    assert 0.04 < np.median(feet) < 0.15                             # grounded: ankles above the floor
+    assert 0.04 < np.median(feet) < 0.15  # grounded: ankles above the floor
     # left and right are not swapped: the left hip is on the left of the facing direction
     fwd = toes[:, :2] / np.linalg.norm(toes[:, :2], axis=1, keepdims=True)
     side = pos[:, J["left_hip"], :2] - pos[:, J["right_hip"], :2]
-    assert np.median(fwd[:, 0] * side[:, 1] - fwd[:, 1] * side[:, 0]) > 0   # left = +90 degrees from forward
+    assert np.median(fwd[:, 0] * side[:, 1] - fwd[:, 1] * side[:, 0]) > 0  # left = +90 degrees from forward
 
 
 def test_cleaned_take_faces_the_stage_on_its_spot_with_planted_feet(shared_dir):
@@ -85,7 +85,7 @@ def test_cleaned_take_faces_the_stage_on_its_spot_with_planted_feet(shared_dir):
         ankle = fwd[:, J[f"{side}_ankle"], :2]
         both = contacts[1:, k] & contacts[:-1, k]
         speed = np.linalg.norm(np.diff(ankle, axis=0), axis=1) * clip.fps
-        assert both.sum() > 10 and np.percentile(speed[both], 95) < 0.02      # planted: < 2 cm/s
+        assert both.sum() > 10 and np.percentile(speed[both], 95) < 0.02  # planted: < 2 cm/s
 
 
 # ----------------------------------------------------------------------------- loops
@@ -104,9 +104,9 @@ def _periodic_clip(period: int, n: int, noise: float = 0.0) -> MotionClip:
 def test_find_loop_recovers_the_period_of_a_periodic_take():
     clip = _periodic_clip(37, 300)
     choice = find_loop(in_place_positions(clip), [30, 37, 45, 74], window=5, min_start=10)
-    assert choice.length == 74 and choice.score < 1e-10              # the longest whole number of periods
+    assert choice.length == 74 and choice.score < 1e-10  # the longest whole number of periods
     choice = find_loop(in_place_positions(clip), [30, 45], window=5, min_start=10)
-    assert choice.score > 1e-4                                       # no exact match among wrong lengths
+    assert choice.score > 1e-4  # no exact match among wrong lengths
 
 
 def test_blended_seam_is_smooth_and_a_broken_loop_is_caught():
@@ -125,8 +125,8 @@ def test_blended_seam_is_smooth_and_a_broken_loop_is_caught():
 def test_every_default_dance_loops_seamlessly_on_whole_bars(name):
     loop = dance_loop(name, 120.0, 30.0, 20.0)
     assert loop.loop and loop.meta["beat_frames"] == 15
-    assert loop.n_frames % 60 == 0 and 600 % loop.n_frames == 0      # whole bars that divide 20 s
-    assert loop.meta["loop_source"]["start"] % 15 == 0              # cut on a beat
+    assert loop.n_frames % 60 == 0 and 600 % loop.n_frames == 0  # whole bars that divide 20 s
+    assert loop.meta["loop_source"]["start"] % 15 == 0  # cut on a beat
     assert 1 / MAX_TEMPO_RATIO <= loop.meta["tempo_ratio"] <= MAX_TEMPO_RATIO
     sd = seam_discontinuity(loop)
     assert sd["step_seam"] <= 1.5 * sd["step_max"] and sd["accel_seam"] <= 1.5 * sd["accel_max"]
@@ -149,13 +149,14 @@ def test_warp_to_tempo_lands_the_lows_on_the_grid():
     fps = 60.0
     t = np.arange(600) / fps
     root = np.zeros((600, 3))
-    root[:, 2] = 0.9 + 0.02 * np.cos(2 * np.pi * t / 0.55)             # about 109 bounces per minute
-    clip = MotionClip(name="b", kind="mocap", fps=fps, joint_rotations=np.zeros((600, 24, 3)),
-                      root_translation=root, loop=False)
+    root[:, 2] = 0.9 + 0.02 * np.cos(2 * np.pi * t / 0.55)  # about 109 bounces per minute
+    clip = MotionClip(
+        name="b", kind="mocap", fps=fps, joint_rotations=np.zeros((600, 24, 3)), root_translation=root, loop=False
+    )
     bc = beat_curve(root[:, 2], fps)
     warped = warp_to_tempo(clip, bc.bounces, 120.0, 30.0)
     lows = low_points(warped.root_translation[:, 2], 30.0)
-    beats = lows * 2.0                                                  # 120 bpm: 2 beats per second
+    beats = lows * 2.0  # 120 bpm: 2 beats per second
     np.testing.assert_allclose(beats, np.round(beats), atol=0.08)
     assert warped.meta["tempo_ratio"] == pytest.approx(120.0 / (60 / 0.55), rel=0.02)
 
@@ -165,8 +166,13 @@ def test_bounce_phase_tells_a_shared_beat_from_drifting_dancers():
     t = np.arange(600) / fps
     rng = np.random.default_rng(1)
     on_beat = np.stack([0.9 - 0.02 * np.cos(2 * np.pi * 2.0 * (t - k * 0.5)) for k in rng.integers(0, 8, 12)], 1)
-    drifting = np.stack([0.9 - 0.02 * np.cos(2 * np.pi * f * t + p) for f, p in
-                         zip(rng.uniform(1.4, 2.6, 12), rng.uniform(0, 6.3, 12))], 1)
+    drifting = np.stack(
+        [
+            0.9 - 0.02 * np.cos(2 * np.pi * f * t + p)
+            for f, p in zip(rng.uniform(1.4, 2.6, 12), rng.uniform(0, 6.3, 12))
+        ],
+        1,
+    )
     on, off = bounce_phase(on_beat, fps, bpm), bounce_phase(drifting, fps, bpm)
     assert on["resultant"] > 0.95 and on["circular_sd"] < 0.2
     assert off["resultant"] < 0.3
@@ -187,9 +193,9 @@ def test_concert_dancers_share_the_beat_and_differ(concert):
     assert on.meta["loop"]["mode"] == "periodic" and on.meta["tempo"] == 120.0
     r_on = bounce_phase(on.root_translation[:, :, 2], on.fps, 120.0)
     r_free = bounce_phase(free.root_translation[:, :, 2], free.fps, 120.0)
-    assert r_on["resultant"] > 0.5 > 0.25 > r_free["resultant"]      # measured: 0.64 vs 0.04 at D5, 20 s
+    assert r_on["resultant"] > 0.5 > 0.25 > r_free["resultant"]  # measured: 0.64 vs 0.04 at D5, 20 s
     recs = on.clips
-    assert len({r["clips"][0] for r in recs}) == 7                  # each dancer its own clip, all seven dealt
+    assert len({r["clips"][0] for r in recs}) == 7  # each dancer its own clip, all seven dealt
     assert 0 < sum(r["mirrored"] for r in recs) < len(recs)
     amps = np.array([r["amplitude"] for r in recs])
     assert 0.85 <= amps.min() < amps.max() <= 1.15
@@ -214,22 +220,22 @@ def test_mirror_pose_reflects_joint_positions():
 
 def test_a_tempo_the_take_cannot_reach_is_refused():
     with pytest.raises(InvalidInputError, match="bpm"):
-        dance_loop("chicken_claps", 200.0, 30.0, 20.0)             # 96 bpm, one bounce per beat
+        dance_loop("chicken_claps", 200.0, 30.0, 20.0)  # 96 bpm, one bounce per beat
     with pytest.raises(InvalidInputError, match="whole number of frames"):
         dance_loop("macarena", 128.0, 30.0, 20.0)
 
 
 # ----------------------------------------------------------------------- self-contact
 def test_hands_are_moved_out_of_a_wider_body():
-    take = load_mocap("cheer").resample(30.0)                       # fist pumps: hands to the belly
+    take = load_mocap("cheer").resample(30.0)  # fist pumps: hands to the belly
     bodies = [load_body(b) for b in sample_bodies(4, 0)]
     rot = np.repeat(take.joint_rotations[:, None], 4, axis=1)
     root = np.repeat(take.root_translation[:, None], 4, axis=1)
     before = max(hand_penetration(b, rot[:, i], root[:, i]).max() for i, b in enumerate(bodies))
     fixed = clear_hands(rot, root, bodies, take.fps)
     after = [hand_penetration(b, fixed[:, i], root[:, i]) for i, b in enumerate(bodies)]
-    assert before > 0.05                                            # measured 0.097 m beyond the 2 cm slack
-    assert max(np.percentile(a.max(axis=1), 95) for a in after) < 0.007   # measured 5.7 mm (MakeHuman bodies)
+    assert before > 0.05  # measured 0.097 m beyond the 2 cm slack
+    assert max(np.percentile(a.max(axis=1), 95) for a in after) < 0.007  # measured 5.7 mm (MakeHuman bodies)
     # the legs and the frames without contact are untouched
     legs = [J[f"{s}_{n}"] for s in ("left", "right") for n in ("hip", "knee", "ankle")]
     np.testing.assert_array_equal(fixed[:, :, legs], rot[:, :, legs])
@@ -242,14 +248,15 @@ def test_calibration_frames_at_the_ends_are_cut(shared_dir):
 
     raw = load_bvh(shared_dir / "data" / "mocap" / "cmu_113_21_idle_standing_still.bvh.gz")
     start, end = outlier_ends(raw)
-    assert start == pytest.approx(1 / raw.fps) and end == pytest.approx(raw.duration)   # the first frame jumps
+    assert start == pytest.approx(1 / raw.fps) and end == pytest.approx(raw.duration)  # the first frame jumps
     assert load_mocap("idle_still").meta["trim"][0] == pytest.approx(start)
     clean = _periodic_clip(37, 300)
     assert outlier_ends(clean) == (0.0, pytest.approx(clean.duration))
     rot = np.array(clean.joint_rotations)
-    rot[-1, J["right_shoulder"], 2] += 1.0                       # a glitch in the last frame
-    glitch = MotionClip(name="g", kind="mocap", fps=30.0, joint_rotations=rot, root_translation=clean.root_translation,
-                        loop=False)
+    rot[-1, J["right_shoulder"], 2] += 1.0  # a glitch in the last frame
+    glitch = MotionClip(
+        name="g", kind="mocap", fps=30.0, joint_rotations=rot, root_translation=clean.root_translation, loop=False
+    )
     assert outlier_ends(glitch)[1] == pytest.approx((clean.n_frames - 2) / 30.0)
 
 
@@ -258,16 +265,22 @@ def test_contact_sheet_shows_the_clip_in_every_tile(tmp_path):
 
     from crowdstudy.render.sheets import clip_sheet
 
-    out = clip_sheet([load_clip("jumping_jacks"), load_clip("gait_fast")], tmp_path / "sheet.png", span=1.0,
-                     frames=4, width=96, height=128)
+    out = clip_sheet(
+        [load_clip("jumping_jacks"), load_clip("gait_fast")],
+        tmp_path / "sheet.png",
+        span=1.0,
+        frames=4,
+        width=96,
+        height=128,
+    )
     img = np.asarray(Image.open(out).convert("RGB")).astype(int)
     assert img.shape == (2 * 128, 4 * 96, 3)
-    tiles = img.reshape(2, 128, 4, 96, 3).transpose(0, 2, 1, 3, 4)            # (row, col, H, W, 3)
-    background = np.median(img[:5].reshape(-1, 3), axis=0)                   # the sky above the heads
+    tiles = img.reshape(2, 128, 4, 96, 3).transpose(0, 2, 1, 3, 4)  # (row, col, H, W, 3)
+    background = np.median(img[:5].reshape(-1, 3), axis=0)  # the sky above the heads
     for row in tiles:
         middle = [np.mean(np.abs(t[20:110, 38:58] - background).sum(-1) > 60) for t in row]
         edges = [np.mean(np.abs(t[:10] - background).sum(-1) > 60) for t in row]
-        assert min(middle) > 0.2 and max(edges) < 0.05                      # a body in the middle of each tile
+        assert min(middle) > 0.2 and max(edges) < 0.05  # a body in the middle of each tile
     # the jumping jacks move: the tiles differ
     assert np.abs(tiles[0, 0] - tiles[0, 2]).mean() > 1.0
 
@@ -278,13 +291,13 @@ def test_baseline_beside_ours_sheet_puts_the_reference_above(tmp_path):
     from crowdstudy.render.sheets import animation_sheet, clips_animation
 
     base = clips_animation([load_clip("cheer"), load_clip("twist")], span=1.0)
-    moved = base.replace(root_translation=base.root_translation + np.array([0.0, 0.0, 0.15]))   # "Ours": lifted 15 cm
+    moved = base.replace(root_translation=base.root_translation + np.array([0.0, 0.0, 0.15]))  # "Ours": lifted 15 cm
     both = animation_sheet(moved, tmp_path / "both.png", [1], span=1.0, frames=3, width=80, height=112, reference=base)
     alone = animation_sheet(base, tmp_path / "base.png", [1], span=1.0, frames=3, width=80, height=112)
     b = np.asarray(Image.open(both).convert("RGB")).astype(int)
     a = np.asarray(Image.open(alone).convert("RGB")).astype(int)
     assert b.shape == (2 * 112, 3 * 80, 3)
-    np.testing.assert_array_equal(b[:112], a)                 # the reference row, same cameras and colours
-    assert np.abs(b[112:] - a).mean() > 1.0                  # the lifted character looks different
+    np.testing.assert_array_equal(b[:112], a)  # the reference row, same cameras and colours
+    assert np.abs(b[112:] - a).mean() > 1.0  # the lifted character looks different
     with pytest.raises(InvalidInputError, match="reference"):
         animation_sheet(moved, tmp_path / "x.png", [0], span=1.0, reference=clips_animation([load_clip("cheer")]))

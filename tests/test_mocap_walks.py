@@ -30,10 +30,18 @@ def loops():
 def _straight(speed: float, n: int = 3, seconds: float = 5.0, fps: float = 30.0) -> Crowd:
     """n walkers side by side going along +y at a constant ``speed`` (m/s)."""
     t = np.arange(int(seconds * fps)) / fps
-    pos = np.stack([np.broadcast_to(np.linspace(-1.0, 1.0, n), (len(t), n)),
-                    np.broadcast_to(speed * t[:, None], (len(t), n))], axis=-1)
-    return Crowd(positions=pos, radius=0.2, fps=fps, velocities=np.broadcast_to([0.0, speed], pos.shape).copy(),
-                 headings=np.full(pos.shape[:2], np.pi / 2), meta={"scenario": "corridor"})
+    pos = np.stack(
+        [np.broadcast_to(np.linspace(-1.0, 1.0, n), (len(t), n)), np.broadcast_to(speed * t[:, None], (len(t), n))],
+        axis=-1,
+    )
+    return Crowd(
+        positions=pos,
+        radius=0.2,
+        fps=fps,
+        velocities=np.broadcast_to([0.0, speed], pos.shape).copy(),
+        headings=np.full(pos.shape[:2], np.pi / 2),
+        meta={"scenario": "corridor"},
+    )
 
 
 def _left_strike_ok(clip) -> bool:
@@ -86,8 +94,11 @@ def test_phase_zero_is_a_left_heel_strike(loops):
     # mutation: a loop turned by a third of a cycle no longer starts at a left heel strike
     c = loops[2]
     shift = c.n_frames // (3 * c.meta["cycles"])
-    turned = dataclasses.replace(c, joint_rotations=np.roll(c.joint_rotations, -shift, axis=0),
-                                 root_translation=np.roll(c.root_translation, -shift, axis=0))
+    turned = dataclasses.replace(
+        c,
+        joint_rotations=np.roll(c.joint_rotations, -shift, axis=0),
+        root_translation=np.roll(c.root_translation, -shift, axis=0),
+    )
     assert not _left_strike_ok(turned)
 
 

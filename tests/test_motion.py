@@ -17,8 +17,22 @@ ALL = list_clips(source="procedural")
 
 # Largest rotation (degrees) of each joint relative to its parent: generous bounds of the
 # adult range of motion (the pelvis row is its tilt from upright, checked separately).
-LIMITS = {"hip": 120, "knee": 150, "ankle": 60, "foot": 70, "spine1": 30, "spine2": 30, "spine3": 30,
-          "neck": 45, "head": 45, "collar": 35, "shoulder": 150, "elbow": 150, "wrist": 80, "hand": 40}
+LIMITS = {
+    "hip": 120,
+    "knee": 150,
+    "ankle": 60,
+    "foot": 70,
+    "spine1": 30,
+    "spine2": 30,
+    "spine3": 30,
+    "neck": 45,
+    "head": 45,
+    "collar": 35,
+    "shoulder": 150,
+    "elbow": 150,
+    "wrist": 80,
+    "hand": 40,
+}
 
 
 def _limit(name: str) -> float:
@@ -53,9 +67,18 @@ def _descriptor(clip):
             return 0.0
         return 0.2 * np.corrcoef(za, zb)[0, 1]
 
-    return np.concatenate([rel.mean(0).ravel(), rel.std(0).ravel(), pos[:, 0].std(0),
-                           [coordination("left_wrist", "right_wrist"), coordination("left_ankle", "right_ankle"),
-                            clip.meta["bpm"] / 1000.0]])
+    return np.concatenate(
+        [
+            rel.mean(0).ravel(),
+            rel.std(0).ravel(),
+            pos[:, 0].std(0),
+            [
+                coordination("left_wrist", "right_wrist"),
+                coordination("left_ankle", "right_ankle"),
+                clip.meta["bpm"] / 1000.0,
+            ],
+        ]
+    )
 
 
 def test_dances_are_distinct_combinations():
@@ -69,11 +92,14 @@ def test_dances_are_distinct_combinations():
     assert {"bounce", "sway", "nod", "jump", "twist", "step"} <= moves
     desc = {d.name: _descriptor(load_clip(d.name)) for d in DANCES}
     dists = [np.linalg.norm(desc[a] - desc[b]) for a, b in itertools.combinations(desc, 2)]
-    assert min(dists) > 0.05          # metres summed over joints: no two dances alike
+    assert min(dists) > 0.05  # metres summed over joints: no two dances alike
     # A phase-shifted copy would have (nearly) the same descriptor: the measure can tell.
     clip = load_clip(DANCES[0].name)
-    shifted = dataclasses.replace(clip, joint_rotations=np.roll(clip.joint_rotations, 37, 0),
-                                  root_translation=np.roll(clip.root_translation, 37, 0))
+    shifted = dataclasses.replace(
+        clip,
+        joint_rotations=np.roll(clip.joint_rotations, 37, 0),
+        root_translation=np.roll(clip.root_translation, 37, 0),
+    )
     assert np.linalg.norm(_descriptor(shifted) - desc[clip.name]) < 1e-9
 
 
@@ -87,16 +113,17 @@ def test_loop_is_seamless(name):
     # rotations too: the angle between consecutive frames
     q = clip.quaternions
     dots = np.abs(np.sum(q * np.roll(q, -1, axis=0), axis=-1)).clip(max=1.0)
-    ang = 2 * np.arccos(dots)                      # (T, J), last row is the seam
+    ang = 2 * np.arccos(dots)  # (T, J), last row is the seam
     assert ang[-1].max() <= 1.02 * ang[:-1].max() + 1e-6
-    omega = np.diff(np.concatenate([ang, ang[:1]]), axis=0)   # change of angular step
+    omega = np.diff(np.concatenate([ang, ang[:1]]), axis=0)  # change of angular step
     assert np.abs(omega[-2:]).max() <= 1.02 * np.abs(omega[:-2]).max() + 1e-6
 
 
 def test_seam_check_detects_a_broken_loop():
     clip = load_clip("dance_fist_pump_right")
-    broken = dataclasses.replace(clip, joint_rotations=clip.joint_rotations[:-7],
-                                 root_translation=clip.root_translation[:-7])
+    broken = dataclasses.replace(
+        clip, joint_rotations=clip.joint_rotations[:-7], root_translation=clip.root_translation[:-7]
+    )
     rep = seam_discontinuity(broken)
     assert rep["accel_seam"] > 1.5 * rep["accel_max"]
 
@@ -108,7 +135,7 @@ def test_joint_limits_and_floor(name):
     for j, jn in enumerate(JOINT_NAMES[1:], start=1):
         assert angles[j] <= _limit(jn), f"{jn}: {angles[j]:.0f} deg"
     root = axis_angle_to_matrix(clip.joint_rotations[:, 0])
-    assert np.degrees(np.arccos(root[:, 2, 2].clip(-1, 1))).max() < 20      # trunk stays upright
+    assert np.degrees(np.arccos(root[:, 2, 2].clip(-1, 1))).max() < 20  # trunk stays upright
     # hinges bend the anatomical way: knees backwards (rotation about -x), elbows forwards
     knees = clip.joint_rotations[:, [JOINT_INDEX["left_knee"], JOINT_INDEX["right_knee"]], 0]
     assert np.degrees(knees).max() < 5
@@ -117,8 +144,8 @@ def test_joint_limits_and_floor(name):
     pos = clip.joint_positions()
     ankles = pos[:, [JOINT_INDEX["left_ankle"], JOINT_INDEX["right_ankle"]], 2]
     balls = pos[:, [JOINT_INDEX["left_foot"], JOINT_INDEX["right_foot"]], 2]
-    assert ankles.min() >= ANKLE_HEIGHT - 1e-3 and balls.min() >= FOOT_HEIGHT - 3e-3   # never below the floor
-    assert ankles.min() <= ANKLE_HEIGHT + 1e-3                                       # and standing on it
+    assert ankles.min() >= ANKLE_HEIGHT - 1e-3 and balls.min() >= FOOT_HEIGHT - 3e-3  # never below the floor
+    assert ankles.min() <= ANKLE_HEIGHT + 1e-3  # and standing on it
     # the wrists stay outside the torso's core (no arm through the body)
     torso = pos[:, JOINT_INDEX["spine3"], :2]
     for wrist in ("left_wrist", "right_wrist"):
@@ -154,7 +181,7 @@ def test_walk_feet_planted_and_alternating(name):
         speed = np.linalg.norm(np.diff(p[:, :2], axis=0), axis=-1) * clip.fps
         flat = (p[:-1, 2] < ANKLE_HEIGHT + 1e-4) & (p[1:, 2] < ANKLE_HEIGHT + 1e-4)
         assert 0.3 < flat.mean() < 0.6
-        assert speed[flat].max() < 0.01                     # no sliding on the ground
+        assert speed[flat].max() < 0.01  # no sliding on the ground
         stances.append(flat)
     # the feet alternate: each is flat while the other swings, half a cycle apart
     shift = np.argmax([np.sum(stances[0] == np.roll(stances[1], k)) for k in range(clip.n_frames)])
@@ -168,8 +195,8 @@ def test_walk_feet_planted_and_alternating(name):
 
     left = forward_kinematics(DEFAULT_REST_JOINTS, rot2, root2)[1][:, JOINT_INDEX["left_ankle"]]
     flat2 = np.concatenate([stances[0]] * 2)
-    first = left[:clip.n_frames - 1][flat2[:clip.n_frames - 1]][:, 1].mean()
-    second = left[clip.n_frames:2 * clip.n_frames - 1][flat2[clip.n_frames - 1:2 * clip.n_frames - 2]][:, 1].mean()
+    first = left[: clip.n_frames - 1][flat2[: clip.n_frames - 1]][:, 1].mean()
+    second = left[clip.n_frames : 2 * clip.n_frames - 1][flat2[clip.n_frames - 1 : 2 * clip.n_frames - 2]][:, 1].mean()
     assert second - first == pytest.approx(clip.meta["stride_length"], rel=0.01)
 
 

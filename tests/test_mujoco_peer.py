@@ -12,8 +12,13 @@ import numpy as np
 import pytest
 
 from crowdstudy.errors import InvalidInputError, MissingDependencyError
-from crowdstudy.physics.mujoco_peer import (MUJOCO_SETTINGS, MujocoScene, check_timeconsts, mujoco_peer,
-                                            rigid_to_animation)
+from crowdstudy.physics.mujoco_peer import (
+    MUJOCO_SETTINGS,
+    MujocoScene,
+    check_timeconsts,
+    mujoco_peer,
+    rigid_to_animation,
+)
 
 N_FRAMES = 10
 
@@ -29,14 +34,18 @@ def _tiny(kind: str, chars=(0, 1, 2), spread: float = 0.0):
 
     stage = "stationary" if kind == "concert" else "walking"
     design = load_design()
-    for sc in design.scenarios.values():          # the bars below were set on the procedural motion
+    for sc in design.scenarios.values():  # the bars below were set on the procedural motion
         sc.params["motion"] = "procedural"
     anim = build_baseline(design, stage, "D1", duration=N_FRAMES / 30.0)
     sel = list(chars)
     root = anim.root_translation[:N_FRAMES, sel].copy()
-    root[..., 0] += spread * np.arange(len(sel))      # spread > 0: characters far apart
-    return anim.replace(root_translation=root, joint_rotations=anim.joint_rotations[:N_FRAMES, sel],
-                        bodies=tuple(anim.bodies[i] for i in sel), clips=tuple(anim.clips[i] for i in sel))
+    root[..., 0] += spread * np.arange(len(sel))  # spread > 0: characters far apart
+    return anim.replace(
+        root_translation=root,
+        joint_rotations=anim.joint_rotations[:N_FRAMES, sel],
+        bodies=tuple(anim.bodies[i] for i in sel),
+        clips=tuple(anim.clips[i] for i in sel),
+    )
 
 
 def _ours(anim):
@@ -45,8 +54,7 @@ def _ours(anim):
     from crowdstudy.physics.crowding import crowd_config
 
     config = crowd_config(anim)[0]
-    corr = CrowdCorrector(load_bodies(anim.bodies), fps=anim.fps, n_frames=anim.n_frames, device="cpu",
-                          config=config)
+    corr = CrowdCorrector(load_bodies(anim.bodies), fps=anim.fps, n_frames=anim.n_frames, device="cpu", config=config)
     corr.control.set_frames(anim.joint_rotations, anim.root_translation)
     return corr
 
@@ -61,7 +69,7 @@ def test_same_geometry_and_self_pairs(mujoco, kind):
     # inter-body (hull) capsules: radius + mesh skin, plus the contact margin, body by body
     ours = (m.cap_radius + m.cap_skin + cfg.contacts.margin).reshape(n, nj)
     np.testing.assert_allclose(scene.inter_body_radius(), ours, atol=1e-7)
-    assert np.all(m.cap_skin.reshape(n, nj).max(1) > 0)          # the skin is really there
+    assert np.all(m.cap_skin.reshape(n, nj).max(1) > 0)  # the skin is really there
     np.testing.assert_allclose(scene.model.geom_margin[scene.hull_geom], cfg.contacts.margin)
     # ground and self contacts on the bare capsule, no margin; masses from the bare capsule
     np.testing.assert_allclose(scene.model.geom_size[scene.core_geom, 0], m.cap_radius.reshape(n, nj), atol=1e-7)
@@ -74,8 +82,11 @@ def test_same_geometry_and_self_pairs(mujoco, kind):
     assert len(intra) > 0
     np.testing.assert_array_equal(scene.self_pairs(), intra)
     # walls (concert stage front, corridor walls) are there; the corridor gets periodic images
-    walls = [i for i in range(scene.model.ngeom) if (mujoco.mj_id2name(scene.model, mujoco.mjtObj.mjOBJ_GEOM, i)
-                                                      or "").startswith("wall")]
+    walls = [
+        i
+        for i in range(scene.model.ngeom)
+        if (mujoco.mj_id2name(scene.model, mujoco.mjtObj.mjOBJ_GEOM, i) or "").startswith("wall")
+    ]
     assert len(walls) == (2 if kind == "corridor" else 1)
     assert len(scene.ghost_shift) == (2 if kind == "corridor" else 0)
     # each box's face is the wall and it lies behind it, away from the crowd (ours: one-sided
@@ -88,7 +99,7 @@ def test_same_geometry_and_self_pairs(mujoco, kind):
         half_depth = scene.model.geom_size[gid, 1]
         direction = np.array([x1 - x0, y1 - y0]) / np.hypot(x1 - x0, y1 - y0)
         normal = np.array([-direction[1], direction[0]])
-        offset = (centre - [x0, y0]) @ normal                     # box centre from the wall's line
+        offset = (centre - [x0, y0]) @ normal  # box centre from the wall's line
         assert abs(abs(offset) - half_depth) < 1e-4 and half_depth >= 0.2
         assert np.all(np.sign((roots - [x0, y0]) @ normal) == -np.sign(offset))
 
@@ -130,7 +141,7 @@ def test_conversion_back_same_as_ours_and_tracks(mujoco):
     x = corr.state.x.numpy().astype(np.float64)
     from crowdstudy.body.rotations import quaternion_to_matrix
 
-    pelvis = (x + np.einsum("bij,bj->bi", quaternion_to_matrix(q.reshape(-1, 4)), corr.model.anchor_child))
+    pelvis = x + np.einsum("bij,bj->bi", quaternion_to_matrix(q.reshape(-1, 4)), corr.model.anchor_child)
     r_np, root_np = rigid_to_animation(q, pelvis.reshape(anim.n_characters, anim.n_joints, 3)[:, 0])
     np.testing.assert_allclose(r_np.reshape(-1, 3), rot.numpy()[0], atol=2e-5)
     np.testing.assert_allclose(root_np, root.numpy()[0], atol=2e-6)
@@ -138,10 +149,18 @@ def test_conversion_back_same_as_ours_and_tracks(mujoco):
     scene = MujocoScene(anim)
     r0, root0 = scene.read()
     np.testing.assert_allclose(root0, anim.root_translation[0], atol=1e-9)
-    assert tracking_error(anim.replace(joint_rotations=np.repeat(r0[None], N_FRAMES, 0),
-                                       root_translation=np.repeat(root0[None], N_FRAMES, 0)),
-                          anim.replace(joint_rotations=np.repeat(anim.joint_rotations[:1], N_FRAMES, 0),
-                                       root_translation=np.repeat(anim.root_translation[:1], N_FRAMES, 0))) < 1e-6
+    assert (
+        tracking_error(
+            anim.replace(
+                joint_rotations=np.repeat(r0[None], N_FRAMES, 0), root_translation=np.repeat(root0[None], N_FRAMES, 0)
+            ),
+            anim.replace(
+                joint_rotations=np.repeat(anim.joint_rotations[:1], N_FRAMES, 0),
+                root_translation=np.repeat(anim.root_translation[:1], N_FRAMES, 0),
+            ),
+        )
+        < 1e-6
+    )
     mj, timing = mujoco_peer(anim)
     assert not timing["unstable"] and timing["steps_per_60th"] == 1.0
     assert mj.meta["method"] == "MuJoCo" and mj.n_frames == anim.n_frames
@@ -159,12 +178,12 @@ def test_every_tuning_is_one_mujoco_runs_as_written(mujoco):
     too_stiff = dataclasses.replace(MUJOCO_SETTINGS["weld0.05"], weld_solref=(0.02, 1.0))
     with pytest.raises(InvalidInputError, match="weld_solref"):
         MujocoScene(_tiny("concert", chars=(0,)), setting=too_stiff)
-    MujocoScene(_tiny("concert", chars=(0,)), setting=dataclasses.replace(too_stiff, substeps=4))   # 1/120 s: 2 steps
+    MujocoScene(_tiny("concert", chars=(0,)), setting=dataclasses.replace(too_stiff, substeps=4))  # 1/120 s: 2 steps
     with pytest.raises(InvalidInputError, match="setting"):
         MujocoScene(_tiny("concert", chars=(0,)), setting="weld0.07")
 
 
 def test_without_mujoco_the_peer_names_the_extra(monkeypatch):
-    monkeypatch.setitem(sys.modules, "mujoco", None)          # import mujoco raises ImportError
+    monkeypatch.setitem(sys.modules, "mujoco", None)  # import mujoco raises ImportError
     with pytest.raises(MissingDependencyError, match=r"pip install 'crowdstudy\[peers\]'"):
         MujocoScene(_tiny("concert", chars=(0,)))

@@ -41,7 +41,7 @@ def crowd():
         ref_root[:, c] = [1.2 * c, 0.0, rest[c, 0, 2] + 0.9]
     sim_rot = ref_rot + rng.normal(0.0, 0.01, ref_rot.shape)
     sim_root = ref_root + rng.normal(0.0, 0.005, ref_root.shape)
-    for c in (1, 4, 5):                                   # held off, then back within a frame
+    for c in (1, 4, 5):  # held off, then back within a frame
         hold = slice(10 + 5 * c, 30 + 5 * c)
         sim_rot[hold, c, JOINT_INDEX["right_shoulder"], 2] += 0.9
         sim_rot[hold, c, JOINT_INDEX["left_elbow"], 1] += 0.7
@@ -56,14 +56,24 @@ def _whole_crowd(sim_rot, sim_root, ref_rot, ref_root, rest, config):
     (a hold that follows the density profile taken at its dense end, as finish_crowd takes it)."""
     out = config.for_dense_crowd().output
     rot, root = close_loop(sim_rot, sim_root, N_FRAMES, WARMUP, BLEND)
-    rot, root = smooth_deviation(rot, root, ref_rot, ref_root, out.smoothing * FPS, periodic=True,
-                                 root_sigma_frames=out.smoothing_root * FPS, hold=out.hold)
-    locked = lock_planted_feet(rot, root, ref_rot, ref_root, rest, FPS, planted_speed=out.foot_lock_speed,
-                               periodic=True)
-    assert not np.array_equal(locked, rot)                 # the feet were held somewhere
-    rot, report = limit_joint_speed(locked, root, ref_rot, ref_root, rest, FPS, margin=out.speed_limit_margin,
-                                    periodic=True)
-    assert report.characters and report.fast_samples > 0    # the speed limit had work to do
+    rot, root = smooth_deviation(
+        rot,
+        root,
+        ref_rot,
+        ref_root,
+        out.smoothing * FPS,
+        periodic=True,
+        root_sigma_frames=out.smoothing_root * FPS,
+        hold=out.hold,
+    )
+    locked = lock_planted_feet(
+        rot, root, ref_rot, ref_root, rest, FPS, planted_speed=out.foot_lock_speed, periodic=True
+    )
+    assert not np.array_equal(locked, rot)  # the feet were held somewhere
+    rot, report = limit_joint_speed(
+        locked, root, ref_rot, ref_root, rest, FPS, margin=out.speed_limit_margin, periodic=True
+    )
+    assert report.characters and report.fast_samples > 0  # the speed limit had work to do
     return rot, root, report
 
 
@@ -71,13 +81,24 @@ def _whole_crowd(sim_rot, sim_root, ref_rot, ref_root, rest, config):
 def test_blocks_give_the_whole_crowds_animation_and_report(crowd, chunk, threads):
     config = PhysicsConfig()
     want_rot, want_root, want = _whole_crowd(*crowd, config)
-    rot, root, report = finish_crowd(*crowd, FPS, config, warmup=WARMUP, blend=BLEND, looped=True, chunk=chunk,
-                                     threads=threads)
+    rot, root, report = finish_crowd(
+        *crowd, FPS, config, warmup=WARMUP, blend=BLEND, looped=True, chunk=chunk, threads=threads
+    )
     assert np.array_equal(rot, want_rot) and np.array_equal(root, want_root)
     assert report == want
     # the simulation's float32 readback is taken as it comes
-    rot32, _, _ = finish_crowd(crowd[0].astype(np.float32), crowd[1].astype(np.float32), *crowd[2:], FPS, config,
-                               warmup=WARMUP, blend=BLEND, looped=True, chunk=chunk, threads=threads)
+    rot32, _, _ = finish_crowd(
+        crowd[0].astype(np.float32),
+        crowd[1].astype(np.float32),
+        *crowd[2:],
+        FPS,
+        config,
+        warmup=WARMUP,
+        blend=BLEND,
+        looped=True,
+        chunk=chunk,
+        threads=threads,
+    )
     assert rot32.dtype == np.float64 and np.abs(rot32 - rot).max() < 1e-3
 
 
@@ -96,14 +117,15 @@ def test_a_hold_that_follows_the_profile_is_taken_at_its_dense_end(crowd):
 def test_the_progress_bar_counts_the_blocks_and_changes_nothing(crowd, capsys, monkeypatch):
     from crowdstudy.progress import PROGRESS_ENV
 
-    monkeypatch.setenv(PROGRESS_ENV, "1")       # captured stderr is no terminal: draw the bar anyway
+    monkeypatch.setenv(PROGRESS_ENV, "1")  # captured stderr is no terminal: draw the bar anyway
     config = PhysicsConfig()
     quiet = finish_crowd(*crowd, FPS, config, warmup=WARMUP, blend=BLEND, looped=True, chunk=2, threads=2)
-    shown = finish_crowd(*crowd, FPS, config, warmup=WARMUP, blend=BLEND, looped=True, chunk=2, threads=2,
-                         progress=True)
+    shown = finish_crowd(
+        *crowd, FPS, config, warmup=WARMUP, blend=BLEND, looped=True, chunk=2, threads=2, progress=True
+    )
     assert np.array_equal(quiet[0], shown[0]) and quiet[2] == shown[2]
     err = capsys.readouterr().err
-    assert "output stage" in err and "0/4 [" in err               # 7 characters: 4 blocks of 2
+    assert "output stage" in err and "0/4 [" in err  # 7 characters: 4 blocks of 2
 
 
 def test_the_limit_is_the_whole_crowds(crowd):
@@ -117,10 +139,12 @@ def test_the_limit_is_the_whole_crowds(crowd):
 
 def test_the_stage_can_be_switched_off_step_by_step(crowd):
     sim_rot, sim_root, ref_rot, ref_root, rest = crowd
-    config = PhysicsConfig().with_values({"output.foot_lock": False, "output.speed_limit": False,
-                                          "output.smoothing": 0.0, "output.smoothing_root": 0.0})
-    rot, root, report = finish_crowd(sim_rot, sim_root, ref_rot, ref_root, rest, FPS, config, warmup=WARMUP,
-                                     blend=BLEND, looped=True, chunk=3)
+    config = PhysicsConfig().with_values(
+        {"output.foot_lock": False, "output.speed_limit": False, "output.smoothing": 0.0, "output.smoothing_root": 0.0}
+    )
+    rot, root, report = finish_crowd(
+        sim_rot, sim_root, ref_rot, ref_root, rest, FPS, config, warmup=WARMUP, blend=BLEND, looped=True, chunk=3
+    )
     want_rot, want_root = close_loop(sim_rot, sim_root, N_FRAMES, WARMUP, BLEND)
     assert report is None
     assert np.array_equal(rot, want_rot) and np.array_equal(root, want_root)
@@ -129,11 +153,42 @@ def test_the_stage_can_be_switched_off_step_by_step(crowd):
 def test_bad_shapes_are_named(crowd):
     sim_rot, sim_root, ref_rot, ref_root, rest = crowd
     with pytest.raises(InvalidInputError, match="sim_rot, sim_root"):
-        finish_crowd(sim_rot[1:], sim_root, ref_rot, ref_root, rest, FPS, PhysicsConfig(), warmup=WARMUP,
-                     blend=BLEND, looped=True)
+        finish_crowd(
+            sim_rot[1:],
+            sim_root,
+            ref_rot,
+            ref_root,
+            rest,
+            FPS,
+            PhysicsConfig(),
+            warmup=WARMUP,
+            blend=BLEND,
+            looped=True,
+        )
     with pytest.raises(InvalidInputError, match="rest_joints"):
-        finish_crowd(sim_rot, sim_root, ref_rot, ref_root, rest[1:], FPS, PhysicsConfig(), warmup=WARMUP,
-                     blend=BLEND, looped=True)
+        finish_crowd(
+            sim_rot,
+            sim_root,
+            ref_rot,
+            ref_root,
+            rest[1:],
+            FPS,
+            PhysicsConfig(),
+            warmup=WARMUP,
+            blend=BLEND,
+            looped=True,
+        )
     with pytest.raises(InvalidInputError, match="chunk"):
-        finish_crowd(sim_rot, sim_root, ref_rot, ref_root, rest, FPS, PhysicsConfig(), warmup=WARMUP,
-                     blend=BLEND, looped=True, chunk=0)
+        finish_crowd(
+            sim_rot,
+            sim_root,
+            ref_rot,
+            ref_root,
+            rest,
+            FPS,
+            PhysicsConfig(),
+            warmup=WARMUP,
+            blend=BLEND,
+            looped=True,
+            chunk=0,
+        )

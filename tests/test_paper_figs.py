@@ -14,8 +14,15 @@ import pytest
 
 ROOT = Path(__file__).resolve().parent.parent
 FIGS = ROOT / "paper_figs"
-EXPECTED = ["fig2_capsules", "fig3_overlap", "fig4_damping", "fig5_frames", "fig7_questionnaire", "fig_results",
-            "fig_runtime"]
+EXPECTED = [
+    "fig2_capsules",
+    "fig3_overlap",
+    "fig4_damping",
+    "fig5_frames",
+    "fig7_questionnaire",
+    "fig_results",
+    "fig_runtime",
+]
 
 
 def test_every_paper_figure_has_a_script():
@@ -24,8 +31,13 @@ def test_every_paper_figure_has_a_script():
 
 
 def _run(name: str, *args) -> None:
-    proc = subprocess.run([sys.executable, str(FIGS / f"{name}.py"), "--quick", *map(str, args)], cwd=FIGS,
-                          capture_output=True, text=True, timeout=400)
+    proc = subprocess.run(
+        [sys.executable, str(FIGS / f"{name}.py"), "--quick", *map(str, args)],
+        cwd=FIGS,
+        capture_output=True,
+        text=True,
+        timeout=400,
+    )
     assert proc.returncode == 0, proc.stdout[-2000:] + proc.stderr[-3000:]
 
 
@@ -50,7 +62,7 @@ def test_fig2_capsule_fit(tmp_path):
     # measured (1.5 cm voxels): female 0.78, male 0.80; the 4 sampled bodies 0.77-0.79
     assert len(data["iou"]) == 2 and len(data["sample_iou"]) == 4 == len(data["sample_records"])
     ious = np.array(data["iou"] + data["sample_iou"])
-    assert np.all((ious > 0.7) & (ious < 0.95)), ious       # capsules fit the body, never exactly
+    assert np.all((ious > 0.7) & (ious < 0.95)), ious  # capsules fit the body, never exactly
 
 
 @pytest.mark.slow
@@ -78,7 +90,7 @@ def test_fig3_overlap_falls_with_the_correction_and_grows_with_density(tmp_path,
         for key in ("overlap_mesh_litres", "overlap_capsule_litres"):
             o, bb = np.array(ours[key]), np.array(base[key])
             assert np.all(o <= bb / 5 + 5e-3), (stage, key, bb, o)
-        assert min(ours["tracking_error_cm"][1:]) > 0.0                # it did move the colliding characters
+        assert min(ours["tracking_error_cm"][1:]) > 0.0  # it did move the colliding characters
 
 
 @pytest.mark.slow
@@ -92,7 +104,7 @@ def test_fig4_damping_curves(tmp_path):
     curves = {float(d): np.asarray(p) - target for d, p in s["position"].items()}
     assert set(curves) == {0.0, 0.006, 0.06}
     one_s = np.searchsorted(t, release + 1.0)
-    for d, e in curves.items():                                       # measured 20 cm behind for every d
+    for d, e in curves.items():  # measured 20 cm behind for every d
         assert e[np.searchsorted(t, release - 0.1)] < -0.1, d
     e0, e1, e2 = curves[0.0], curves[0.006], curves[0.06]
     # d = 0 oscillates: measured overshoot 8.3 cm, 6 sign changes after the release
@@ -139,9 +151,9 @@ def test_fig7_questionnaire_page(tmp_path):
     vx, vy, vw, vh = data["video"]
     qx, qy, qw, qh = data["questions"]
     assert vx + vw <= qx + 1 and vw > 300 and qw > 300
-    assert vy < qy + qh and qy < vy + vh                              # side by side, not stacked
+    assert vy < qy + qh and qy < vy + vh  # side by side, not stacked
     # the screenshot shows the video frame there (a test pattern), the light page elsewhere
-    inner = img[int(vy) + 5:int(vy + vh) - 5, int(vx) + 5:int(vx + vw) - 5]
+    inner = img[int(vy) + 5 : int(vy + vh) - 5, int(vx) + 5 : int(vx + vw) - 5]
     page = img[5:20, 5:20].reshape(-1, 3).mean(axis=0)
     assert inner.std() > 20 and np.abs(inner.reshape(-1, 3).mean(axis=0) - page).max() > 30
 
@@ -155,7 +167,7 @@ def test_fig_results_plots_the_stats_module_numbers(design):
     from crowdstudy.stats.synthetic import simulate_responses
 
     _run("fig_results")
-    responses = simulate_responses(design, 8, seed=2024)         # what --quick plots
+    responses = simulate_responses(design, 8, seed=2024)  # what --quick plots
     points = design.likert_points
     reverse = {it.id for it in design.items if it.reverse}
     for stage in design.stages:
@@ -165,16 +177,22 @@ def test_fig_results_plots_the_stats_module_numbers(design):
         rows = responses[responses["stage"] == stage.number]
         for comp, items in design.composites.items():
             score = np.mean([points + 1 - rows[q] if q in reverse else rows[q] for q in items], axis=0)
-            cells = rows.assign(score=score).groupby(["participant_id", "density_level", "viewpoint", "method"],
-                                                     as_index=False)["score"].mean()
+            cells = (
+                rows.assign(score=score)
+                .groupby(["participant_id", "density_level", "viewpoint", "method"], as_index=False)["score"]
+                .mean()
+            )
             stats = cells.groupby(["density_level", "viewpoint", "method"])["score"].agg(["mean", "std"])
             plotted = data["series"][comp]
             assert len(plotted) == len(design.densities) * len(stage.viewpoints) * 2
             for p in plotted:
                 m, sd = stats.loc[(p["density"], p["viewpoint"], p["method"])]
                 assert p["mean"] == pytest.approx(m, abs=1e-9) and p["error"] == pytest.approx(sd, abs=1e-9)
-            table = AnovaRM(cells, "score", "participant_id", within=["density_level", "viewpoint", "method"]
-                            ).fit().anova_table
+            table = (
+                AnovaRM(cells, "score", "participant_id", within=["density_level", "viewpoint", "method"])
+                .fit()
+                .anova_table
+            )
             names = {"density_level": "Density", "viewpoint": "Viewpoint", "method": "Method"}
             for source, row in table.iterrows():
                 ours = data["anova"][comp][":".join(names[f] for f in source.split(":"))]

@@ -8,8 +8,16 @@ import pytest
 from crowdstudy.body.capsules import closest_points_on_segments
 from crowdstudy.body.skeleton import DEFAULT_PELVIS_HEIGHT, DEFAULT_REST_JOINTS, PARENTS, children
 from crowdstudy.errors import InvalidInputError
-from crowdstudy.physics.collision import (KIND_ENVIRONMENT, KIND_GROUND, KIND_INTER, KIND_INTRA, CollisionPipeline,
-                                          Contacts, sample_static_walls, sweep_pairs)
+from crowdstudy.physics.collision import (
+    KIND_ENVIRONMENT,
+    KIND_GROUND,
+    KIND_INTER,
+    KIND_INTRA,
+    CollisionPipeline,
+    Contacts,
+    sample_static_walls,
+    sweep_pairs,
+)
 from crowdstudy.physics.config import PhysicsConfig
 from crowdstudy.physics.model import ModelBuilder
 from crowdstudy.physics.state import Control, State
@@ -71,13 +79,18 @@ def test_inter_body_contacts_match_exact_capsule_distance():
     roots = np.array([[0, 0, 1.2], [0.15, 0.05, 1.2]])
     ja, jb = model.body_joint[a], model.body_joint[b]
     ra, rb = roots[model.body_char[a]], roots[model.body_char[b]]
-    _, _, dist = closest_points_on_segments(ra + caps.start[ja], ra + caps.end[ja],
-                                            rb + caps.start[jb], rb + caps.end[jb])
+    _, _, dist = closest_points_on_segments(
+        ra + caps.start[ja], ra + caps.end[ja], rb + caps.start[jb], rb + caps.end[jb]
+    )
     np.testing.assert_allclose(c["depth"][inter], caps.radius[ja] + caps.radius[jb] - dist, atol=1e-4)
     # every overlapping capsule pair was found
     all_a, all_b = np.meshgrid(np.arange(24), np.arange(24), indexing="ij")
-    _, _, d_all = closest_points_on_segments(roots[0] + caps.start[all_a], roots[0] + caps.end[all_a],
-                                             roots[1] + caps.start[all_b], roots[1] + caps.end[all_b])
+    _, _, d_all = closest_points_on_segments(
+        roots[0] + caps.start[all_a],
+        roots[0] + caps.end[all_a],
+        roots[1] + caps.start[all_b],
+        roots[1] + caps.end[all_b],
+    )
     assert inter.sum() == np.count_nonzero(caps.radius[all_a] + caps.radius[all_b] - d_all > 0)
     _, far, _ = detect([[0, 0, 1.2], [3.0, 0, 1.2]])
     assert not (far["kind"] == KIND_INTER).any()
@@ -94,19 +107,22 @@ def test_the_sweep_finds_the_broadphase_kernels_pairs_in_its_order():
     rng = np.random.default_rng(5)
     n = 700
     lo = np.column_stack([rng.uniform(0, 30, n), rng.uniform(0, 12, n), rng.uniform(0, 0.1, n)])
-    lo[::7, 0] = lo[3, 0]                                             # ties along x
+    lo[::7, 0] = lo[3, 0]  # ties along x
     hi = lo + np.column_stack([rng.uniform(0.3, 1.0, n), rng.uniform(0.3, 1.0, n), rng.uniform(1.5, 1.9, n)])
-    lo[10] = (hi[11, 0], lo[11, 1], lo[11, 2])                       # touching exactly along x
+    lo[10] = (hi[11, 0], lo[11, 1], lo[11, 2])  # touching exactly along x
     hi[10] = lo[10] + (0.5, 0.5, 1.7)
-    lo[12] = (lo[13, 0], hi[13, 1], lo[13, 2])                       # ... and along y
+    lo[12] = (lo[13, 0], hi[13, 1], lo[13, 2])  # ... and along y
     hi[12] = lo[12] + (0.5, 0.5, 1.7)
     lo, hi = lo.astype(np.float32), hi.astype(np.float32)
     cap = 20 * n
     count = wp.zeros(1, dtype=wp.int32)
     pi, pj = wp.zeros(cap, dtype=wp.int32), wp.zeros(cap, dtype=wp.int32)
     shift = wp.zeros(cap, dtype=wp.float32)
-    wp.launch(k.broadphase_kernel, n, [wp.array(lo, dtype=wp.vec3), wp.array(hi, dtype=wp.vec3), 0.0, count, cap,
-                                       pi, pj, shift])
+    wp.launch(
+        k.broadphase_kernel,
+        n,
+        [wp.array(lo, dtype=wp.vec3), wp.array(hi, dtype=wp.vec3), 0.0, count, cap, pi, pj, shift],
+    )
     m = int(count.numpy()[0])
     assert 1000 < m < cap
     i, j = sweep_pairs(lo, hi)
@@ -129,10 +145,11 @@ def test_intra_pairs_skip_rest_touching_and_parent_child():
     assert len(pairs) > 50
     assert not np.any(PARENTS[pairs[:, 1]] == pairs[:, 0])
     caps = fixture_body().capsules
-    _, _, d = closest_points_on_segments(caps.start[pairs[:, 0]], caps.end[pairs[:, 0]],
-                                         caps.start[pairs[:, 1]], caps.end[pairs[:, 1]])
+    _, _, d = closest_points_on_segments(
+        caps.start[pairs[:, 0]], caps.end[pairs[:, 0]], caps.start[pairs[:, 1]], caps.end[pairs[:, 1]]
+    )
     assert np.all(d > caps.radius[pairs[:, 0]] + caps.radius[pairs[:, 1]])
-    assert not ((c["kind"] == KIND_INTRA) & (c["depth"] > 0)).any()    # the T-pose is free
+    assert not ((c["kind"] == KIND_INTRA) & (c["depth"] > 0)).any()  # the T-pose is free
     # bend the right elbow so the forearm folds through the chest -> an intra contact
     rot = np.zeros((1, 24, 3))
     rot[0, 17] = [0, 0, 1.4]
@@ -148,7 +165,7 @@ def test_environment_points_push_away_from_walls():
     _, c, _ = detect([[0, 0, 1.2]], points=pts, cfg=PhysicsConfig().with_values(margin=0.0))
     env = (c["kind"] == KIND_ENVIRONMENT) & (c["depth"] > 0)
     assert env.any()
-    assert np.all(c["normal"][env][:, 1] < 0)          # pushed towards -y, away from the wall
+    assert np.all(c["normal"][env][:, 1] < 0)  # pushed towards -y, away from the wall
 
 
 def _wall_depths(pipe, wall_y, spec):
@@ -167,14 +184,14 @@ def test_walls_are_one_sided_planes_on_the_side_of_the_root():
     its centre beyond the plane, also the ends that have crossed the wall; no contact has a
     component along the wall."""
     rot = np.zeros((1, 24, 3))
-    rot[0, 0] = [0.0, 0.0, np.pi / 2]                   # the T-pose's arms along y
+    rot[0, 0] = [0.0, 0.0, np.pi / 2]  # the T-pose's arms along y
     walls = np.array([[[-2.0, 0.15], [2.0, 0.15]]])
     cfg = PhysicsConfig().with_values(margin=0.0)
     _, c, pipe = detect([[0, 0, 1.2]], rot=rot, cfg=cfg, walls=walls)
     env = c["kind"] == KIND_ENVIRONMENT
     assert pipe.n_static_walls == 1 and env.sum() > 4
     assert np.allclose(c["normal"][env], [0.0, -1.0, 0.0], atol=0.0)
-    assert c["depth"][env].max() > 0.5                  # a hand 0.6 m through is pushed back, not out
+    assert c["depth"][env].max() > 0.5  # a hand 0.6 m through is pushed back, not out
     assert np.allclose(np.sort(c["depth"][env]), _wall_depths(pipe, 0.15, cfg.contacts.speculative_distance), atol=1e-6)
     # the same wall seen from the other side: a root at y = 0.3 is on the +y side
     _, c2, _ = detect([[0, 0.3, 1.2]], rot=rot, cfg=cfg, walls=walls)
@@ -200,7 +217,7 @@ def test_walls_end_where_their_segment_ends_and_repeat_with_the_period():
     _, here, _ = detect([[0.4, 0, 1.2]], rot=rot, walls=short, period=4.5)
     d_here = np.sort(here["depth"][here["kind"] == KIND_ENVIRONMENT])
     assert len(d_here) > 4
-    for x in (4.9, 4.4 + 4.5 * 5, -4.1):          # images, also many periods on (a walker's unwrapped x)
+    for x in (4.9, 4.4 + 4.5 * 5, -4.1):  # images, also many periods on (a walker's unwrapped x)
         _, image, _ = detect([[x, 0, 1.2]], rot=rot, walls=short, period=4.5)
         d_image = np.sort(image["depth"][image["kind"] == KIND_ENVIRONMENT])
         assert np.allclose(d_here, d_image, atol=1e-4), x
@@ -210,8 +227,9 @@ def test_walls_end_where_their_segment_ends_and_repeat_with_the_period():
 
 def test_static_walls_from_meta():
     walls = [[[-1.0, -1.0], [5.5, -1.0]], [[-1.0, 1.0], [5.5, 1.0]]]
-    corridor = static_walls_from_meta({"scenario": "corridor", "periodic": {"axis": 0, "length": 4.5},
-                                       "obstacles": walls})
+    corridor = static_walls_from_meta(
+        {"scenario": "corridor", "periodic": {"axis": 0, "length": 4.5}, "obstacles": walls}
+    )
     assert corridor.shape == (2, 2, 2) and np.array_equal(corridor, walls)
     assert static_walls_from_meta({}).shape == (0, 2, 2)
     assert static_walls_from_meta({"scenario": "concert", "obstacles": []}).shape == (0, 2, 2)
@@ -233,7 +251,7 @@ def test_a_dense_crowd_finds_every_touching_capsule_pair_of_different_characters
     from crowdstudy.physics.corrector import CrowdCorrector, load_bodies
 
     anim = build_baseline(load_design(), "stationary", "D5", duration=0.2, body_model="open")
-    reps = 4                                              # 240 characters: four floors side by side
+    reps = 4  # 240 characters: four floors side by side
     shift = np.array([8.0, 0.0, 0.0])
     root = np.concatenate([anim.root_translation + r * shift for r in range(reps)], 1)
     rot = np.concatenate([anim.joint_rotations] * reps, 1)
@@ -251,7 +269,7 @@ def test_a_dense_crowd_finds_every_touching_capsule_pair_of_different_characters
     reach = corr.model.wp["cap_radius"].numpy() + corr.model.wp["cap_skin"].numpy()
     limit = float(corr.config.contacts.margin) + pipe.speculative
     nj, n = corr.model.n_joints, corr.model.n_characters
-    ci, cj = np.triu_indices(n, 1)                        # character pairs less than 3 m apart
+    ci, cj = np.triu_indices(n, 1)  # character pairs less than 3 m apart
     pelvis = p0[::nj]
     close = np.linalg.norm(pelvis[ci] - pelvis[cj], axis=1) < 3.0
     ci, cj = ci[close], cj[close]
@@ -259,7 +277,7 @@ def test_a_dense_crowd_finds_every_touching_capsule_pair_of_different_characters
     ia = (ci[:, None] * nj + ja.ravel()).ravel()
     ib = (cj[:, None] * nj + jb.ravel()).ravel()
     _, _, dist = closest_points_on_segments(p0[ia], p1[ia], p0[ib], p1[ib])
-    touching = reach[ia] + reach[ib] + limit - dist > 1e-4       # clear of float32 rounding
+    touching = reach[ia] + reach[ib] + limit - dist > 1e-4  # clear of float32 rounding
     want = set(zip(ia[touching].tolist(), ib[touching].tolist()))
     assert len(want) > 2000
     assert want <= found

@@ -34,18 +34,20 @@ def test_the_paper_controller_keeps_its_values():
     assert changed.control.root_translation_stiffness == 1.0e4
 
 
-@pytest.mark.parametrize("overrides", [
-    {"control.damping": 0.06}, {"damping": 0.06}, {"control": {"damping": 0.06}}, {"damping": 6}])
+@pytest.mark.parametrize(
+    "overrides", [{"control.damping": 0.06}, {"damping": 0.06}, {"control": {"damping": 0.06}}, {"damping": 6}]
+)
 def test_a_field_is_named_by_path_leaf_or_table(overrides):
     cfg = PhysicsConfig.from_overrides(overrides)
     assert cfg.control.damping == pytest.approx(0.06 if overrides != {"damping": 6} else 6.0)
-    assert isinstance(cfg.control.damping, float)              # an int given for a float is stored as a float
+    assert isinstance(cfg.control.damping, float)  # an int given for a float is stored as a float
     assert cfg.replace(control=PhysicsConfig().control) == PhysicsConfig()
 
 
 def test_former_flat_names_keep_working():
-    cfg = PhysicsConfig().with_values(contact_stiffness=3e4, foot_anchor_stiffness=0.0, sparse_output_hold=1.0,
-                                      max_contacts_per_character=64)
+    cfg = PhysicsConfig().with_values(
+        contact_stiffness=3e4, foot_anchor_stiffness=0.0, sparse_output_hold=1.0, max_contacts_per_character=64
+    )
     assert cfg.contacts.stiffness == 3e4 and cfg.feet.anchor_stiffness == 0.0
     assert cfg.profile.sparse.output_hold == 1.0 and cfg.contacts.max_per_character == 64
     for name in RETIRED_NAMES:
@@ -53,23 +55,29 @@ def test_former_flat_names_keep_working():
             PhysicsConfig.from_overrides({name: 0.02 if name != "crowd_adaptive" else False})
 
 
-@pytest.mark.parametrize("overrides, message", [
-    ({"dampng": 0.06}, r"study\.toml: unknown PhysicsConfig field 'dampng' \(did you mean damping\?\)"),
-    ({"control.dampng": 0.06}, r"unknown PhysicsConfig field 'control\.dampng' \(did you mean control\.damping\?\)"),
-    ({"stiffness": 1e5}, r"'stiffness' is ambiguous; name one of control\.stiffness, contacts\.stiffness"),
-    ({"release_distance": 0.1}, r"ambiguous; name one of feet\.release_distance, contacts\.release_distance"),
-    ({"contacts.stiffness": -1}, r"PhysicsConfig\.contacts\.stiffness: expected a finite value >= 0, got -1"),
-    ({"solver.dt": 0.0}, r"PhysicsConfig\.solver\.dt: expected a positive value"),
-    ({"damping": True}, r"PhysicsConfig\.control\.damping: expected a number, got True"),
-    ({"damping": "0.06"}, r"PhysicsConfig\.control\.damping: expected a number, got '0\.06'"),
-    ({"intra_body": 1}, r"PhysicsConfig\.contacts\.intra_body: expected true or false, got 1"),
-    ({"cg_max_iterations": 60.0}, r"PhysicsConfig\.solver\.cg_max_iterations: expected an integer, got 60\.0"),
-    ({"damping": float("nan")}, r"control\.damping: expected a finite value >= 0"),
-    ({"contacts": 1}, r"'contacts' is a section of PhysicsConfig, not a field"),
-    ({"sparse": {"skin_max": 0.05}}, r"\[sparse\] is not a section of PhysicsConfig"),
-    ({"damping": 0.01, "control": {"damping": 0.02}}, r"control\.damping is given twice"),
-    ({"profile.sparse.crowd_density": 7.0}, r"profile\.dense\.crowd_density: expected more than"),
-])
+@pytest.mark.parametrize(
+    "overrides, message",
+    [
+        ({"dampng": 0.06}, r"study\.toml: unknown PhysicsConfig field 'dampng' \(did you mean damping\?\)"),
+        (
+            {"control.dampng": 0.06},
+            r"unknown PhysicsConfig field 'control\.dampng' \(did you mean control\.damping\?\)",
+        ),
+        ({"stiffness": 1e5}, r"'stiffness' is ambiguous; name one of control\.stiffness, contacts\.stiffness"),
+        ({"release_distance": 0.1}, r"ambiguous; name one of feet\.release_distance, contacts\.release_distance"),
+        ({"contacts.stiffness": -1}, r"PhysicsConfig\.contacts\.stiffness: expected a finite value >= 0, got -1"),
+        ({"solver.dt": 0.0}, r"PhysicsConfig\.solver\.dt: expected a positive value"),
+        ({"damping": True}, r"PhysicsConfig\.control\.damping: expected a number, got True"),
+        ({"damping": "0.06"}, r"PhysicsConfig\.control\.damping: expected a number, got '0\.06'"),
+        ({"intra_body": 1}, r"PhysicsConfig\.contacts\.intra_body: expected true or false, got 1"),
+        ({"cg_max_iterations": 60.0}, r"PhysicsConfig\.solver\.cg_max_iterations: expected an integer, got 60\.0"),
+        ({"damping": float("nan")}, r"control\.damping: expected a finite value >= 0"),
+        ({"contacts": 1}, r"'contacts' is a section of PhysicsConfig, not a field"),
+        ({"sparse": {"skin_max": 0.05}}, r"\[sparse\] is not a section of PhysicsConfig"),
+        ({"damping": 0.01, "control": {"damping": 0.02}}, r"control\.damping is given twice"),
+        ({"profile.sparse.crowd_density": 7.0}, r"profile\.dense\.crowd_density: expected more than"),
+    ],
+)
 def test_bad_overrides_name_where_and_the_key(overrides, message):
     with pytest.raises(InvalidInputError, match=message) as err:
         PhysicsConfig.from_overrides(overrides, where="study.toml")
@@ -77,8 +85,10 @@ def test_bad_overrides_name_where_and_the_key(overrides, message):
 
 
 def test_strings_are_parsed_for_the_command_line():
-    cfg = PhysicsConfig.from_overrides({"damping": "0.01", "intra_body": "no", "cg_max_iterations": "80",
-                                        "skin.max": "0.02", "output.hold": "none"}, strings=True)
+    cfg = PhysicsConfig.from_overrides(
+        {"damping": "0.01", "intra_body": "no", "cg_max_iterations": "80", "skin.max": "0.02", "output.hold": "none"},
+        strings=True,
+    )
     assert cfg.control.damping == 0.01 and cfg.contacts.intra_body is False and cfg.solver.cg_max_iterations == 80
     assert cfg.skin.max == 0.02 and cfg.output.hold is None
     with pytest.raises(InvalidInputError, match="solver.cg_max_iterations expects an integer, got '8.5'"):
@@ -103,8 +113,14 @@ def test_sections_check_their_fields_when_made():
         PhysicsConfig().control.damping = 0.01
 
 
-@pytest.mark.parametrize("cfg", [PhysicsConfig(), PhysicsConfig().for_density(5.0),
-                                 PhysicsConfig.paper_controller(intra_body=False, cg_max_iterations=7)])
+@pytest.mark.parametrize(
+    "cfg",
+    [
+        PhysicsConfig(),
+        PhysicsConfig().for_density(5.0),
+        PhysicsConfig.paper_controller(intra_body=False, cg_max_iterations=7),
+    ],
+)
 def test_the_nested_dict_round_trips(cfg):
     d = cfg.as_dict()
     assert d["control"]["damping"] == cfg.control.damping and d["profile"]["dense"]["crowd_density"] == 6.0
@@ -120,36 +136,52 @@ def test_the_profile_interpolates_bit_for_bit():
     sp, dp = profile.sparse, profile.dense
     for density, want in ((0.0, sp), (sp.crowd_density, sp), (dp.crowd_density, dp), (12.0, dp)):
         got = profile.at(density)
-        assert (got.skin_max, got.skin_hand_scale, got.output_hold) == (want.skin_max, want.skin_hand_scale,
-                                                                        want.output_hold)
+        assert (got.skin_max, got.skin_hand_scale, got.output_hold) == (
+            want.skin_max,
+            want.skin_hand_scale,
+            want.output_hold,
+        )
     w = profile.weight(5.0)
     assert profile.at(5.0).skin_max == float((1.0 - w) * sp.skin_max + w * dp.skin_max)
 
 
 def test_a_toml_file_and_items_on_top(tmp_path):
     path = tmp_path / "physics.toml"
-    path.write_text("[control]\ndamping = 0.01\n[contacts]\nstiffness = 30000\n[profile.sparse]\nskin_max = 0.05\n"
-                    "[solver]\ncg_tolerance = 1e-3\n")
+    path.write_text(
+        "[control]\ndamping = 0.01\n[contacts]\nstiffness = 30000\n[profile.sparse]\nskin_max = 0.05\n"
+        "[solver]\ncg_tolerance = 1e-3\n"
+    )
     cfg = load_config_file(path)
-    assert (cfg.control.damping, cfg.contacts.stiffness, cfg.profile.sparse.skin_max,
-            cfg.solver.cg_tolerance) == (0.01, 3e4, 0.05, 1e-3)
+    assert (cfg.control.damping, cfg.contacts.stiffness, cfg.profile.sparse.skin_max, cfg.solver.cg_tolerance) == (
+        0.01,
+        3e4,
+        0.05,
+        1e-3,
+    )
     both = config_from_cli(["control.damping=0.02", str(path), "intra_body=false"])
     assert both.control.damping == 0.02 and both.contacts.stiffness == 3e4 and both.contacts.intra_body is False
     assert config_from_cli([]) == PhysicsConfig()
 
 
-@pytest.mark.parametrize("text, items, message", [
-    (None, ["missing.toml"], r"--config '.*missing\.toml': no such file"),
-    ("[control\ndamping = 0.01\n", None, r"--config '.*physics\.toml': not valid TOML"),
-    ("[control]\ndampng = 0.01\n", None, r"physics\.toml': unknown PhysicsConfig field 'control\.dampng' "
-                                         r"\(did you mean control\.damping\?\)"),
-    ("damping = \"0.01\"\n", None, r"physics\.toml': PhysicsConfig\.control\.damping: expected a number"),
-    ("", ["damping"], r"--config 'damping': no such file"),
-    ("", ["a.toml", "b.toml"], r"--config: expected at most one TOML file"),
-    ("", ["damping=0.1", "damping=0.2"], r"--config: damping is given twice"),
-    ("", ["=0.1"], r"--config: expected KEY=VALUE"),
-    ("", ["dampng=0.1"], r"--config: unknown PhysicsConfig field 'dampng' \(did you mean damping\?\)"),
-])
+@pytest.mark.parametrize(
+    "text, items, message",
+    [
+        (None, ["missing.toml"], r"--config '.*missing\.toml': no such file"),
+        ("[control\ndamping = 0.01\n", None, r"--config '.*physics\.toml': not valid TOML"),
+        (
+            "[control]\ndampng = 0.01\n",
+            None,
+            r"physics\.toml': unknown PhysicsConfig field 'control\.dampng' "
+            r"\(did you mean control\.damping\?\)",
+        ),
+        ('damping = "0.01"\n', None, r"physics\.toml': PhysicsConfig\.control\.damping: expected a number"),
+        ("", ["damping"], r"--config 'damping': no such file"),
+        ("", ["a.toml", "b.toml"], r"--config: expected at most one TOML file"),
+        ("", ["damping=0.1", "damping=0.2"], r"--config: damping is given twice"),
+        ("", ["=0.1"], r"--config: expected KEY=VALUE"),
+        ("", ["dampng=0.1"], r"--config: unknown PhysicsConfig field 'dampng' \(did you mean damping\?\)"),
+    ],
+)
 def test_bad_config_options_name_file_and_key(tmp_path, monkeypatch, text, items, message):
     monkeypatch.chdir(tmp_path)
     if text is not None:
@@ -158,11 +190,14 @@ def test_bad_config_options_name_file_and_key(tmp_path, monkeypatch, text, items
         config_from_cli(items if items is not None else ["physics.toml"])
 
 
-@pytest.mark.parametrize("config_args, message", [
-    (["dampng=0.01"], "unknown PhysicsConfig field 'dampng' (did you mean damping?)"),
-    (["nothere.toml"], "no such file"),
-    (["stiffness=1"], "ambiguous"),
-])
+@pytest.mark.parametrize(
+    "config_args, message",
+    [
+        (["dampng=0.01"], "unknown PhysicsConfig field 'dampng' (did you mean damping?)"),
+        (["nothere.toml"], "no such file"),
+        (["stiffness=1"], "ambiguous"),
+    ],
+)
 def test_correct_cli_refuses_a_bad_config_before_writing(tmp_path, capsys, config_args, message):
     """One line on stderr naming the key, exit 2, nothing written (the input is not even read)."""
     from crowdstudy.cli import main
@@ -208,6 +243,6 @@ def test_the_paper_preset_switches_off_every_addition():
     assert not paper.follows_profile and paper.skin.max == 0 and paper.skin.percentile == 0
     o = paper.output
     assert o.smoothing == o.smoothing_root == o.hold == 0 and not o.speed_limit and not o.foot_lock
-    assert paper.for_density(6.5) == paper                     # no density profile to follow
+    assert paper.for_density(6.5) == paper  # no density profile to follow
     assert PhysicsConfig.paper(damping=0.06).control.damping == 0.06
-    assert default.output.speed_limit and default.follows_profile   # the defaults are untouched
+    assert default.output.speed_limit and default.follows_profile  # the defaults are untouched

@@ -145,8 +145,16 @@ def test_contact_gradient_and_gauss_newton_hessian():
     # Gauss-Newton Hessian k (1 + 2 d / d0) u u^T
     es, gs, Hs, _ = E.contact_energy(xa, Ra, seg_a, 0.08, xb, Rb, seg_b, 0.07, 2e4, 0.01)
     assert es == pytest.approx(2e4 * (depth**2 / 2 + depth**3 / 0.03))
-    fs = lambda d: E.contact_energy(*perturb(xa, Ra, d[:6]), seg_a, 0.08, *perturb(xb, Rb, d[6:]), seg_b,  # noqa: E731
-                                    0.07, 2e4, 0.01)[0]
+    fs = lambda d: E.contact_energy(
+        *perturb(xa, Ra, d[:6]),
+        seg_a,
+        0.08,
+        *perturb(xb, Rb, d[6:]),
+        seg_b,  # noqa: E731
+        0.07,
+        2e4,
+        0.01,
+    )[0]
     np.testing.assert_allclose(gs, fd_grad(fs, 12), rtol=1e-4, atol=1e-3)
     np.testing.assert_allclose(Hs, 2e4 * (1 + 2 * depth / 0.01) * np.outer(u, u), rtol=1e-4, atol=1e-2)
 
@@ -233,8 +241,9 @@ def test_warp_assembly_matches_numpy_reference(small_system):
             g[b, 3:] += gc[3:]
             D[b, 3:, 3:] += Hc[3:, 3:]
         else:
-            _, gj, Hj = E.ball_joint_energy(xp[p], Rp[p], model.anchor_parent[b], xp[b], Rp[b], model.anchor_child[b],
-                                            cfg.body.joint_stiffness)
+            _, gj, Hj = E.ball_joint_energy(
+                xp[p], Rp[p], model.anchor_parent[b], xp[b], Rp[b], model.anchor_child[b], cfg.body.joint_stiffness
+            )
             g[p] += gj[:6]
             g[b] += gj[6:]
             D[p] += Hj[:6, :6]
@@ -256,13 +265,12 @@ def test_warp_assembly_matches_numpy_reference(small_system):
 def test_fused_pcg_solves_the_assembled_system(small_system):
     import scipy.sparse.linalg as spl
 
+    from crowdstudy.physics import Solver
     from crowdstudy.physics.collision import CollisionPipeline, Contacts
     from crowdstudy.physics.linear import bsr_from_triplets
 
-    from crowdstudy.physics import Solver
-
     model, cfg, control, state, _ = small_system
-    cfg = cfg.with_values(cg_tolerance=1e-5, cg_max_iterations=400)   # solved to the exact solution's 5e-3
+    cfg = cfg.with_values(cg_tolerance=1e-5, cg_max_iterations=400)  # solved to the exact solution's 5e-3
     solver = Solver(model, cfg)
     pipe = CollisionPipeline(model, cfg)
     contacts = Contacts.allocate(pipe.default_capacity(), "cpu")
@@ -294,7 +302,7 @@ def test_tree_preconditioner_is_the_inverse_of_each_characters_block(small_syste
     solver.assemble(state, control, contacts, cfg.solver.dt)
     solver._factor_tree()
     nb, nj = model.n_bodies, model.n_joints
-    rows, cols, vals, _ = solver.triplets(Contacts.allocate(0, "cpu"))     # bodies and joints only
+    rows, cols, vals, _ = solver.triplets(Contacts.allocate(0, "cpu"))  # bodies and joints only
     tree = bsr_from_triplets(rows.numpy(), cols.numpy(), vals.numpy().astype(float), nb).toarray()
     wp = solver.wp
     rng = np.random.default_rng(7)
@@ -303,14 +311,31 @@ def test_tree_preconditioner_is_the_inverse_of_each_characters_block(small_syste
     xw, yw = wp.array(x, dtype=wp.spatial_vector), wp.array(y, dtype=wp.spatial_vector)
     z = wp.zeros(nb, dtype=wp.spatial_vector)
     work = wp.zeros(nb, dtype=wp.spatial_vector)
-    wp.launch(tree_precond_kernel, model.n_characters,
-              [nj, model.wp["body_parent"], solver.tree_dinv, solver.tree_l, solver.lever_p, solver.lever_c,
-               solver.ctrl_c, float(cfg.body.joint_stiffness), xw, yw, z, 0.5, 2.0, work])
+    wp.launch(
+        tree_precond_kernel,
+        model.n_characters,
+        [
+            nj,
+            model.wp["body_parent"],
+            solver.tree_dinv,
+            solver.tree_l,
+            solver.lever_p,
+            solver.lever_c,
+            solver.ctrl_c,
+            float(cfg.body.joint_stiffness),
+            xw,
+            yw,
+            z,
+            0.5,
+            2.0,
+            work,
+        ],
+    )
     m = 6 * nj
     for c in range(model.n_characters):
         sl = slice(c * m, (c + 1) * m)
         block = tree[sl, sl]
-        assert np.abs(tree[sl, :c * m]).max(initial=0) == 0 and np.abs(tree[sl, (c + 1) * m:]).max(initial=0) == 0
+        assert np.abs(tree[sl, : c * m]).max(initial=0) == 0 and np.abs(tree[sl, (c + 1) * m :]).max(initial=0) == 0
         want = 0.5 * np.linalg.solve(block, x.ravel()[sl].astype(float)) + 2.0 * y.ravel()[sl]
         got = z.numpy().ravel()[sl]
         assert np.linalg.norm(got - want) <= 1e-4 * np.linalg.norm(want)
@@ -332,8 +357,9 @@ def test_warp_off_diagonal_joint_blocks_match_numpy_reference(small_system):
         p = model.body_parent[b]
         if p < 0:
             continue
-        _, _, Hj = E.ball_joint_energy(xp[p], Rp[p], model.anchor_parent[b], xp[b], Rp[b], model.anchor_child[b],
-                                       cfg.body.joint_stiffness)
+        _, _, Hj = E.ball_joint_energy(
+            xp[p], Rp[p], model.anchor_parent[b], xp[b], Rp[b], model.anchor_child[b], cfg.body.joint_stiffness
+        )
         _, _, Hc = E.control_energy(Rp[p], Rp[b], np.eye(3), np.eye(3), kb[b], db[b] / h**2)
         expected = Hj[:6, 6:].copy()
         expected[3:, 3:] += Hc[:3, 3:]
@@ -353,7 +379,7 @@ def test_warp_contact_assembly_matches_numpy_reference(small_system):
     # the plain penalty (k/2) depth^2: the activation band is tested on its own below
     cfg = cfg.with_values({"contacts.activation": 0.0})
     solver = Solver(model, cfg)
-    still = State(model)                      # same pose, zero velocity: prediction == state
+    still = State(model)  # same pose, zero velocity: prediction == state
     still.x.assign(state.x)
     still.q.assign(state.q)
     pipe = CollisionPipeline(model, cfg)
@@ -374,15 +400,19 @@ def test_warp_contact_assembly_matches_numpy_reference(small_system):
             depth = c["depth"][i]
             if depth > 0:
                 lever = c["lever_a"][i]
-                expected[a] += cfg.contacts.ground_stiffness * depth * np.concatenate([-np.array([0, 0, 1.0]),
-                                                                              -np.cross(lever, [0, 0, 1.0])])
+                expected[a] += (
+                    cfg.contacts.ground_stiffness
+                    * depth
+                    * np.concatenate([-np.array([0, 0, 1.0]), -np.cross(lever, [0, 0, 1.0])])
+                )
                 kinds.add(kind)
             continue
         margin = cfg.contacts.margin if kind == KIND_INTER else 0.0
         k = cfg.contacts.stiffness if kind == KIND_INTER else cfg.contacts.intra_stiffness
         stiffening = cfg.contacts.stiffening_depth if kind == KIND_INTER else 0.0
-        _, g, _, depth = E.contact_energy(x[a], R[a], seg[a], model.cap_radius[a] + margin, x[b], R[b], seg[b],
-                                          model.cap_radius[b], k, stiffening)
+        _, g, _, depth = E.contact_energy(
+            x[a], R[a], seg[a], model.cap_radius[a] + margin, x[b], R[b], seg[b], model.cap_radius[b], k, stiffening
+        )
         expected[a] += g[:6]
         expected[b] += g[6:]
         if depth > 0:
@@ -452,7 +482,7 @@ def test_foot_anchor_energy_gradient_and_hessian_match_finite_differences():
         fd_H[:, i] = (gp - gm) / (2 * EPS)
     np.testing.assert_allclose(g, fd_g, rtol=1e-5, atol=1e-6 * np.abs(g).max())
     np.testing.assert_allclose(H, fd_H, rtol=1e-5, atol=1e-6 * np.abs(H).max())
-    assert g[2] == 0 and H[2, 2] == 0                        # horizontal only
+    assert g[2] == 0 and H[2, 2] == 0  # horizontal only
 
 
 def test_stance_foot_anchor_assembly_matches_reference():
@@ -498,15 +528,26 @@ def test_stance_foot_anchor_assembly_matches_reference():
         w = E.foot_planted_weight(tx[b], tx[b], h, cfg.feet.planted_speed)
         assert w == 1.0
         off = E.foot_anchor_update(x_old[b], tx[b], np.zeros(3), w, slip)
-        if j == 3:                                           # pushed 30 cm: it steps, no anchor
+        if j == 3:  # pushed 30 cm: it steps, no anchor
             assert on.foot_stepping.numpy()[b] == 1
             continue
         np.testing.assert_allclose(offsets[b], off, atol=1e-6)
-        _, g, H = E.foot_anchor_energy(x_pred[b], x_old[b], tx[b], tx[b], off, w, cfg.feet.anchor_stiffness,
-                                       cfg.feet.anchor_damping, h, kt[b], dh2[b])
+        _, g, H = E.foot_anchor_energy(
+            x_pred[b],
+            x_old[b],
+            tx[b],
+            tx[b],
+            off,
+            w,
+            cfg.feet.anchor_stiffness,
+            cfg.feet.anchor_damping,
+            h,
+            kt[b],
+            dh2[b],
+        )
         exp_g[b], exp_A[b] = g, H
     assert np.linalg.norm(offsets[8, :2] - shift[8, :2]) == pytest.approx(slip, rel=1e-3)  # dragged
-    np.testing.assert_allclose(offsets[7], 0.0, atol=1e-7)                               # held
+    np.testing.assert_allclose(offsets[7], 0.0, atol=1e-7)  # held
     np.testing.assert_allclose(g1 - g0, exp_g, atol=1e-4 * np.abs(exp_g).max())
     np.testing.assert_allclose(A1 - A0, exp_A, atol=1e-4 * np.abs(exp_A).max())
     # the animation's foot moves at 1 m/s: free, and the anchor follows the body
@@ -526,21 +567,34 @@ def test_arm_and_trunk_scales_set_the_pd_gains_of_exactly_their_joints(small_sys
 
     model, cfg, *_ = small_system
     joint = model.body_joint
-    arms = [JOINT_INDEX[n] for n in ("left_collar", "right_collar", "left_shoulder", "right_shoulder", "left_elbow",
-                                     "right_elbow", "left_wrist", "right_wrist", "left_hand", "right_hand")]
+    arms = [
+        JOINT_INDEX[n]
+        for n in (
+            "left_collar",
+            "right_collar",
+            "left_shoulder",
+            "right_shoulder",
+            "left_elbow",
+            "right_elbow",
+            "left_wrist",
+            "right_wrist",
+            "left_hand",
+            "right_hand",
+        )
+    ]
     trunk = [JOINT_INDEX[n] for n in ("spine2", "spine3", "neck", "head")]
     pelvis = [JOINT_INDEX[n] for n in ("pelvis", "left_hip", "right_hip", "spine1")]
     feet = [JOINT_INDEX[n] for n in ("left_ankle", "right_ankle", "left_foot", "right_foot")]
     expect = np.ones(len(joint))
     for idx, scale in ((arms, 0.5), (trunk, 4.0), (pelvis, cfg.control.pelvis_scale), (feet, cfg.control.feet_scale)):
         expect[np.isin(joint, idx)] = scale
-    assert np.isin(joint, [JOINT_INDEX["left_knee"], JOINT_INDEX["right_knee"]]).sum() == 4   # two characters
+    assert np.isin(joint, [JOINT_INDEX["left_knee"], JOINT_INDEX["right_knee"]]).sum() == 4  # two characters
     solver = Solver(model, cfg.with_values(arm_scale=0.5, trunk_scale=4.0))
     np.testing.assert_allclose(solver.body_k.numpy(), cfg.control.stiffness * expect, rtol=1e-6)
     np.testing.assert_allclose(solver.body_d.numpy(), cfg.control.damping * expect, rtol=1e-6)
     default = Solver(model, cfg)
-    expect[np.isin(joint, arms)] = 0.25               # the defaults: soft arms (held by the pose springs)
-    expect[np.isin(joint, trunk)] = 1.0               # and the paper's single body k for the trunk
+    expect[np.isin(joint, arms)] = 0.25  # the defaults: soft arms (held by the pose springs)
+    expect[np.isin(joint, trunk)] = 1.0  # and the paper's single body k for the trunk
     np.testing.assert_allclose(default.body_k.numpy(), cfg.control.stiffness * expect, rtol=1e-6)
 
 
@@ -562,7 +616,7 @@ def test_set_frames_gathers_the_asked_frames_in_blocks(monkeypatch):
     schedule = np.array([5, 6, 0, 1, 2, 3, 4, 5, 6, 0])
     gathered = Control(model, n_frames=len(schedule))
     gathered.set_frames(rot[schedule], root[schedule])
-    monkeypatch.setattr(state_mod, "_UPLOAD_ROTATIONS", 3 * model.n_bodies)        # blocks of 3 frames
+    monkeypatch.setattr(state_mod, "_UPLOAD_ROTATIONS", 3 * model.n_bodies)  # blocks of 3 frames
     indexed = Control(model, n_frames=len(schedule) + 1)
     indexed.set_frames(rot, root, start=1, frames=schedule)
     assert np.array_equal(indexed.anim_q.numpy()[1:], gathered.anim_q.numpy())

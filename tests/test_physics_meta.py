@@ -30,8 +30,9 @@ def _custom_design(folder: Path, name: str, pattern: str, replacement: str):
 def wide_floor(tmp_path_factory):
     """A 5.5 m x 5.5 m concert floor: the stage front at 5.5 / 2 + 1.0 = 3.75 m."""
     folder = tmp_path_factory.mktemp("wide_floor")
-    design = _custom_design(folder, "floor.toml", r"^\[floor\]\nwidth = 3\.0(.*)\ndepth = 3\.0",
-                            r"[floor]\nwidth = 5.5\1\ndepth = 5.5")
+    design = _custom_design(
+        folder, "floor.toml", r"^\[floor\]\nwidth = 3\.0(.*)\ndepth = 3\.0", r"[floor]\nwidth = 5.5\1\ndepth = 5.5"
+    )
     assert (design.floor_width, design.floor_depth) == (5.5, 5.5)
     from crowdstudy.motion.baseline import build_baseline
 
@@ -62,8 +63,14 @@ def _environment_contacts(anim, walls, frames) -> list[int]:
     from crowdstudy.physics.corrector import CrowdCorrector, load_bodies
 
     cfg = PhysicsConfig()
-    corr = CrowdCorrector(load_bodies(anim.bodies), config=cfg, device="cpu", fps=anim.fps,
-                          periodic_length=anim.periodic_length, static_walls=walls)
+    corr = CrowdCorrector(
+        load_bodies(anim.bodies),
+        config=cfg,
+        device="cpu",
+        fps=anim.fps,
+        periodic_length=anim.periodic_length,
+        static_walls=walls,
+    )
     counts = []
     for f in frames:
         corr.reset(anim.joint_rotations[f], anim.root_translation[f])
@@ -130,7 +137,7 @@ def test_the_physics_uses_the_scene_walls(scene, request):
     walls = static_walls_from_meta(clip.meta)
     cfg = PhysicsConfig()
     ours = correct(clip, cfg, progress=False, device="cpu")
-    assert ours.meta["physics"]["static_walls"] == len(walls) > 0     # the physics used these walls
+    assert ours.meta["physics"]["static_walls"] == len(walls) > 0  # the physics used these walls
     frames = range(clip.n_frames)
     before = _environment_contacts(clip, walls, frames)
     after = _environment_contacts(ours, walls, frames)
@@ -140,16 +147,16 @@ def test_the_physics_uses_the_scene_walls(scene, request):
         y0 = clip.root_translation[0, :, 1]
         row = y0 > y0.max() - 0.5
         dy = ours.root_translation[:, row, 1] - clip.root_translation[:, row, 1]
-        assert dy.min() > -0.03          # the stage wall inside the front row pushed it 2-16 cm
+        assert dy.min() > -0.03  # the stage wall inside the front row pushed it 2-16 cm
 
 
 def test_geometry_missing_from_an_old_file_is_an_error(default_d1):
-    from crowdstudy.physics.corrector import correct
-
     import dataclasses
 
+    from crowdstudy.physics.corrector import correct
+
     old_meta = {k: v for k, v in default_d1.meta.items() if k not in ("obstacles", "floor", "stage_front")}
-    old = dataclasses.replace(default_d1.frames(0, 2), meta=old_meta)     # as an older version wrote it
+    old = dataclasses.replace(default_d1.frames(0, 2), meta=old_meta)  # as an older version wrote it
     with pytest.raises(InvalidInputError, match=r"meta\['obstacles'\].*regenerate"):
         correct(old, progress=False, device="cpu")
     # a hand-made scene states its walls explicitly (an empty list: none)

@@ -38,7 +38,7 @@ def test_standing_character_tracks_its_animation_and_keeps_feet_on_ground(bodies
     corr = CrowdCorrector(bodies[:1], device="cpu")
     root = standing_root(bodies[:1], [(0.0, 0.0)])
     rot = np.zeros((1, 24, 3))
-    rot[0, 16] = [0, 0, -1.2]     # arms down
+    rot[0, 16] = [0, 0, -1.2]  # arms down
     rot[0, 17] = [0, 0, 1.2]
     corr.reset(rot, root)
     for _ in range(45):
@@ -49,7 +49,7 @@ def test_standing_character_tracks_its_animation_and_keeps_feet_on_ground(bodies
     _, joints = forward_kinematics(bodies[0].rest_joints, out_rot[0], out_root[0])
     _, target = forward_kinematics(bodies[0].rest_joints, rot[0], root[0])
     assert np.linalg.norm(joints - target, axis=1).mean() < 0.02
-    assert abs(joints[[7, 8], 2] - target[[7, 8], 2]).max() < 0.01   # ankles stay where the animation puts them
+    assert abs(joints[[7, 8], 2] - target[[7, 8], 2]).max() < 0.01  # ankles stay where the animation puts them
     assert corr.solver.last_cg[1] < 1e-3
 
 
@@ -81,8 +81,12 @@ def test_reset_with_settle_starts_resolved(bodies):
 def test_linear_solvers_agree(bodies):
     results = {}
     for name in ("fused", "scipy", "warp"):
-        corr = CrowdCorrector(bodies[:2], device="cpu", linear_solver=name,
-                              config=PhysicsConfig().with_values(cg_tolerance=1e-6, cg_max_iterations=400))
+        corr = CrowdCorrector(
+            bodies[:2],
+            device="cpu",
+            linear_solver=name,
+            config=PhysicsConfig().with_values(cg_tolerance=1e-6, cg_max_iterations=400),
+        )
         root = standing_root(bodies[:2], [(0.0, 0.0), (0.25, 0.0)])
         corr.reset(np.zeros((2, 24, 3)), root)
         _, r = corr.step(np.zeros((2, 24, 3)), root + [0.0, 0.02, 0.0])
@@ -104,7 +108,7 @@ def test_damping_paper_value_recovers_smoothly(damping):
     assert m["return_time"] < 1.0
     assert m["overshoot"] < 0.05
     held = damping["position"][0.006][np.searchsorted(damping["time"], 3.4)]
-    assert held < -0.1                        # it really was held back before the release
+    assert held < -0.1  # it really was held back before the release
 
 
 def test_damping_zero_oscillates(damping):
@@ -131,9 +135,16 @@ def _tiny_anim(records, bodies, n_frames=8):
     rot = np.zeros((n_frames, n, 24, 3))
     rot[:, :, 16, 2] = -1.1
     rot[:, :, 17, 2] = 1.1
-    return CrowdAnimation(joint_names=JOINT_NAMES, parents=PARENTS, root_translation=root, joint_rotations=rot,
-                          fps=30.0, bodies=tuple(records[:n]), clips=tuple({"name": "test"} for _ in range(n)),
-                          meta={"method": "Baseline", "seed": 1})
+    return CrowdAnimation(
+        joint_names=JOINT_NAMES,
+        parents=PARENTS,
+        root_translation=root,
+        joint_rotations=rot,
+        fps=30.0,
+        bodies=tuple(records[:n]),
+        clips=tuple({"name": "test"} for _ in range(n)),
+        meta={"method": "Baseline", "seed": 1},
+    )
 
 
 def test_correct_removes_the_overlap_of_the_same_scene_and_keeps_the_layout(records, bodies):
@@ -157,12 +168,12 @@ def test_correct_removes_the_overlap_of_the_same_scene_and_keeps_the_layout(reco
     for geometry in ("capsule", "mesh"):
         base = overlap_volume(anim, geometry=geometry).per_frame
         ours = overlap_volume(out, geometry=geometry).per_frame
-        assert base.min() > 1e-3, (geometry, base)                 # > 1 L per character: a real collision
-        assert np.all(ours <= base / 20), (geometry, base, ours)    # every frame, not just on average
+        assert base.min() > 1e-3, (geometry, base)  # > 1 L per character: a real collision
+        assert np.all(ours <= base / 20), (geometry, base, ours)  # every frame, not just on average
     # the correction pushes the characters apart, it does not teleport them
     drift = np.abs(out.root_translation - anim.root_translation)
     assert drift.max() < 0.10
-    assert drift[..., 2].max() < 0.03                               # horizontal separation, not lifting
+    assert drift[..., 2].max() < 0.03  # horizontal separation, not lifting
     assert tracking_error(out, anim) < 8.0
     pelvis = lambda a: np.linalg.norm(a.root_translation[:, :, None, :2] - a.root_translation[:, None, :, :2], axis=-1)
     iu = np.triu_indices(anim.n_characters, 1)
@@ -174,8 +185,9 @@ def test_cli_correct_round_trip(tmp_path, records, bodies):
     from crowdstudy.scene import CrowdAnimation
 
     src = _tiny_anim(records, bodies, n_frames=4).save(tmp_path / "in.npz")
-    rc = main(["correct", str(src), str(tmp_path / "out.npz"), "--no-progress", "--device", "cpu",
-               "--config", "damping=0.01"])
+    rc = main(
+        ["correct", str(src), str(tmp_path / "out.npz"), "--no-progress", "--device", "cpu", "--config", "damping=0.01"]
+    )
     assert rc == 0
     out = CrowdAnimation.load(tmp_path / "out.npz")
     assert out.meta["method"] == "Ours" and out.meta["physics"]["config"]["control"]["damping"] == 0.01
@@ -229,7 +241,7 @@ def test_real_scene_d1_meets_the_overlap_and_tracking_bars():
     oo = overlap_volume(ours, geometry="mesh", frames=frames).mean
     assert ob > 0
     assert oo <= 0.15 * ob
-    assert tracking_error(ours, base) < BarTolerances().tracking_sparsest_cm      # the D1 bar
+    assert tracking_error(ours, base) < BarTolerances().tracking_sparsest_cm  # the D1 bar
     from crowdstudy.body.skeleton import forward_kinematics
     from crowdstudy.physics.corrector import load_bodies
 
@@ -237,7 +249,7 @@ def test_real_scene_d1_meets_the_overlap_and_tracking_bars():
     _, p_ours = forward_kinematics(rest[None], ours.joint_rotations, ours.root_translation)
     _, p_base = forward_kinematics(rest[None], base.joint_rotations, base.root_translation)
     feet = [7, 8, 10, 11]
-    assert np.abs(p_ours[:, :, feet, 2] - p_base[:, :, feet, 2]).mean() < 0.02     # feet stay on the ground
+    assert np.abs(p_ours[:, :, feet, 2] - p_base[:, :, feet, 2]).mean() < 0.02  # feet stay on the ground
 
 
 @pytest.mark.slow
@@ -258,7 +270,7 @@ def test_the_default_cg_tolerance_tracks_as_a_tight_solve_does():
     default = tracking_error(correct(base, progress=False), base)
     tight_cfg = PhysicsConfig().with_values(cg_tolerance=1e-5, cg_max_iterations=400)
     tight = tracking_error(correct(base, tight_cfg, progress=False), base)
-    assert tight > 2.0                          # a dense cell: the contacts move the crowd
+    assert tight > 2.0  # a dense cell: the contacts move the crowd
     assert abs(default - tight) <= 0.06, (default, tight)
 
 
@@ -282,7 +294,7 @@ def test_a_dense_crowd_held_in_place_tracks_closer():
     held = tracking_parts(correct(base, progress=False), base)
     soft = PhysicsConfig().with_values(root_translation_far_stiffness=1e4)
     spread = tracking_parts(correct(base, soft, progress=False), base)
-    assert spread.placement_cm > 2.5                               # the soft root lets the crowd spread
+    assert spread.placement_cm > 2.5  # the soft root lets the crowd spread
     assert held.total_cm <= spread.total_cm - 0.35, (held, spread)
     assert held.placement_cm <= spread.placement_cm - 0.45, (held, spread)
 
@@ -349,6 +361,6 @@ def test_a_character_gliding_along_a_wall_is_not_held_back(bodies):
             lag.append(root[0, 0] - out_root[0, 0])
             reach.append(forward_kinematics(body.rest_joints, out_rot[0], out_root[0])[1][:, 1].max())
         result[name] = (np.abs(lag[30:]).max(), max(reach[30:]))
-    assert result["plane"][0] < 0.002                      # m behind the animation
-    assert result["plane"][1] < wall_y                     # every joint on the body's side
+    assert result["plane"][0] < 0.002  # m behind the animation
+    assert result["plane"][1] < wall_y  # every joint on the body's side
     assert result["points"][0] > 0.03 and result["points"][1] > wall_y

@@ -32,7 +32,7 @@ def test_precompile_loads_every_module_into_the_cache():
     cache = Path(wp.config.kernel_cache_dir)
     for name, _ in KERNEL_MODULES:
         module = wp.get_module(name)
-        assert module.execs, name                                   # loaded on the CPU
+        assert module.execs, name  # loaded on the CPU
         assert not module.options.get("enable_backward", True) or name == "crowdstudy.body.skinning", name
         # the binary lies in the cache under the module's name and the hash a launch asks for
         digest = module.get_module_hash(1).hex()[:7]
@@ -40,8 +40,9 @@ def test_precompile_loads_every_module_into_the_cache():
 
 
 def test_precompile_cli_and_bad_arguments():
-    proc = subprocess.run([sys.executable, "-m", "crowdstudy", "precompile"], capture_output=True, text=True,
-                          timeout=300)
+    proc = subprocess.run(
+        [sys.executable, "-m", "crowdstudy", "precompile"], capture_output=True, text=True, timeout=300
+    )
     assert proc.returncode == 0, proc.stderr
     assert f"{len(KERNEL_MODULES)} Warp modules ready on cpu" in proc.stdout
     with pytest.raises(InvalidInputError, match="workers"):

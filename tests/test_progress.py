@@ -21,7 +21,7 @@ class _Terminal(io.StringIO):
 
 @pytest.fixture
 def auto(monkeypatch):
-    monkeypatch.delenv(PROGRESS_ENV, raising=False)      # restored after the test
+    monkeypatch.delenv(PROGRESS_ENV, raising=False)  # restored after the test
 
 
 def _drawn(stream, **kw) -> str:
@@ -35,8 +35,8 @@ def _drawn(stream, **kw) -> str:
 def test_a_bar_draws_on_a_terminal_only(auto):
     assert "\r" in _drawn(_Terminal())
     assert _drawn(io.StringIO()) == ""
-    assert _drawn(_Terminal(), enabled=False) == ""           # the caller's own switch still holds
-    assert list(progress_bar(range(3), file=io.StringIO())) == [0, 1, 2]      # a silent bar still iterates
+    assert _drawn(_Terminal(), enabled=False) == ""  # the caller's own switch still holds
+    assert list(progress_bar(range(3), file=io.StringIO())) == [0, 1, 2]  # a silent bar still iterates
 
 
 def test_the_environment_forces_bars_on_or_off(auto):
@@ -61,9 +61,16 @@ def test_a_bad_setting_is_named(auto, monkeypatch):
 
 def test_the_setting_reaches_the_processes_a_command_starts(auto):
     set_progress_mode("on")
-    child = subprocess.run([sys.executable, "-c", "from crowdstudy.progress import progress_enabled; "
-                            "import io; print(progress_enabled(io.StringIO()))"],
-                           capture_output=True, text=True, timeout=120)
+    child = subprocess.run(
+        [
+            sys.executable,
+            "-c",
+            "from crowdstudy.progress import progress_enabled; import io; print(progress_enabled(io.StringIO()))",
+        ],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
     assert child.stdout.strip() == "True", child.stderr
 
 
@@ -71,8 +78,12 @@ def test_the_setting_reaches_the_processes_a_command_starts(auto):
 def test_a_command_writes_bars_to_a_pipe_only_when_asked(flags, drawn):
     """``crowdstudy power`` has a bar over its simulated studies; its stderr here is a pipe."""
     env = {k: v for k, v in os.environ.items() if k != PROGRESS_ENV}
-    proc = subprocess.run([sys.executable, "-m", "crowdstudy", *flags, "power", "--sims", "3", "-n", "6",
-                           "--dz", "0.5"], capture_output=True, env=env, timeout=300)   # bytes: \r kept
+    proc = subprocess.run(
+        [sys.executable, "-m", "crowdstudy", *flags, "power", "--sims", "3", "-n", "6", "--dz", "0.5"],
+        capture_output=True,
+        env=env,
+        timeout=300,
+    )  # bytes: \r kept
     err = proc.stderr.decode("utf-8", "replace")
     assert proc.returncode == 0, err[-2000:]
     assert b"Method" in proc.stdout

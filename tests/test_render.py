@@ -11,12 +11,11 @@ import numpy as np
 import pytest
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from render_fixtures import W, H, crowd_animation, grid_positions, mannequin_loader, mannequin_renderer  # noqa: E402
+from render_fixtures import H, W, crowd_animation, grid_positions, mannequin_loader, mannequin_renderer  # noqa: E402
 
 from crowdstudy.body.skeleton import JOINT_NAMES  # noqa: E402
 from crowdstudy.design import load_design  # noqa: E402
 from crowdstudy.errors import InvalidInputError, MissingDependencyError  # noqa: E402
-
 
 
 @pytest.fixture(scope="module")
@@ -100,7 +99,7 @@ def test_known_scene_silhouettes_sit_where_the_bodies_project(design):
     w, h = 192, 108
     anim = crowd_animation([[0.7, 0.0], [-0.6, 0.4]], n_frames=1, heights=[1.85, 1.6])
     rot = np.array(anim.joint_rotations)
-    rot[0, 0, JOINT_NAMES.index("left_shoulder")] = [0.0, 0.0, 1.3]      # arm out towards -x
+    rot[0, 0, JOINT_NAMES.index("left_shoulder")] = [0.0, 0.0, 1.3]  # arm out towards -x
     anim = anim.replace(joint_rotations=rot)
     eye, target, fov = (0.3, -4.5, 1.5), (0.0, 0.0, 0.9), 40.0
     images = []
@@ -109,7 +108,7 @@ def test_known_scene_silhouettes_sit_where_the_bodies_project(design):
             r.set_view(Camera(eye=eye, target=target, fov=fov))
             images.append(r.render(0).astype(int))
     img, empty = images
-    silhouette = np.abs(img - empty).sum(axis=2) > 12     # some clothes are nearly the stage's colour
+    silhouette = np.abs(img - empty).sum(axis=2) > 12  # some clothes are nearly the stage's colour
     caps = _posed_capsules(anim, 0)
     # 1. every character covers the pixels of its projected bone axes
     for who in (0, 1):
@@ -151,17 +150,18 @@ def test_known_scene_silhouettes_sit_where_the_bodies_project(design):
     floor[:2] = floor[-2:] = False
     assert floor.mean() > 0.15
     pixels = img[floor]
-    assert np.abs(pixels - empty[floor]).max() <= 3                  # untouched by the characters
+    assert np.abs(pixels - empty[floor]).max() <= 3  # untouched by the characters
     grey = np.median(pixels, axis=0)
-    assert np.ptp(grey) < 20 and 100 < grey.mean() < 230               # a neutral, lit grey ...
-    assert np.mean(np.abs(pixels - grey).max(axis=1) < 25) > 0.95     # ... over the whole floor ...
-    top = np.median(empty[:h // 8].reshape(-1, 3), axis=0)            # ... below the dark stage (upright)
+    assert np.ptp(grey) < 20 and 100 < grey.mean() < 230  # a neutral, lit grey ...
+    assert np.mean(np.abs(pixels - grey).max(axis=1) < 25) > 0.95  # ... over the whole floor ...
+    top = np.median(empty[: h // 8].reshape(-1, 3), axis=0)  # ... below the dark stage (upright)
     assert grey.mean() > top.mean() + 60
     # 4. left/right: the tall character (x > 0) is right of the short one, its hand left of its head
-    cols = lambda who: np.concatenate([_pinhole(np.array([a, b]), eye, target, fov, w, h)[0][:, 0]
-                                       for i, a, b, _ in caps if i == who])
+    cols = lambda who: np.concatenate(
+        [_pinhole(np.array([a, b]), eye, target, fov, w, h)[0][:, 0] for i, a, b, _ in caps if i == who]
+    )
     assert cols(0).mean() > w / 2 > cols(1).mean()
-    assert silhouette[:, int(cols(0).mean()):].sum() > silhouette[:, :int(cols(1).mean())].sum()
+    assert silhouette[:, int(cols(0).mean()) :].sum() > silhouette[:, : int(cols(1).mean())].sum()
 
 
 def test_animation_moves_and_is_deterministic(concert, design):
@@ -174,13 +174,14 @@ def test_animation_moves_and_is_deterministic(concert, design):
 
 def test_neighbours_have_different_clothes():
     from crowdstudy.render.palette import assign_colors
+
     pos = grid_positions(60, margin=0.2)
     colors, choice = assign_colors(pos, seed=3)
     d = np.linalg.norm(pos[:, None] - pos[None], axis=2)
     np.fill_diagonal(d, np.inf)
     nearest = np.argmin(d, axis=1)
-    assert np.all(choice[:, 2] != choice[nearest, 2])          # shirts differ from the nearest neighbour
-    assert len(np.unique(choice[:, 0])) >= 6                   # a diverse range of skin tones
+    assert np.all(choice[:, 2] != choice[nearest, 2])  # shirts differ from the nearest neighbour
+    assert len(np.unique(choice[:, 0])) >= 6  # a diverse range of skin tones
     assert colors.shape == (60, 6, 3) and np.all((colors >= 0) & (colors <= 1))
     close = d < 0.9
     assert not np.any(close & (choice[:, None, 2] == choice[None, :, 2]))
@@ -190,7 +191,7 @@ def test_neighbours_have_different_clothes():
 def test_overlap_view_marks_forced_overlap(design):
     pos = grid_positions(6, margin=0.6)
     forced = pos.copy()
-    forced[1] = forced[0] + [0.12, 0.04]                      # two bodies sharing the same space
+    forced[1] = forced[0] + [0.12, 0.04]  # two bodies sharing the same space
     with mannequin_renderer(crowd_animation(forced, n_frames=2), design, width=240, height=136) as r:
         r.set_view("V1")
         hit = r.overlap(0)
@@ -204,23 +205,35 @@ def test_overlap_view_marks_forced_overlap(design):
 
 
 def test_corridor_draws_periodic_copies(design):
-    anim = crowd_animation(np.array([[2.1, 0.0], [-0.5, 0.3]]), n_frames=3, scenario="corridor", period=4.5,
-                           velocity=(1.2, 0.0))
+    anim = crowd_animation(
+        np.array([[2.1, 0.0], [-0.5, 0.3]]), n_frames=3, scenario="corridor", period=4.5, velocity=(1.2, 0.0)
+    )
     with mannequin_renderer(anim, design) as r:
         r.set_view("V4")
         img = r.render(2)
         shifts = {round(float(s), 2) for gl in r.character_resources.groups for s in r.characters.instances(gl)["s"]}
         wrapped = r.character_positions(2)
-    assert {-4.5, 0.0} <= shifts                               # the copy across the seam is drawn
-    assert np.all(np.abs(wrapped[:, 0]) <= 2.25)               # unwrapped positions are wrapped for drawing
+    assert {-4.5, 0.0} <= shifts  # the copy across the seam is drawn
+    assert np.all(np.abs(wrapped[:, 0]) <= 2.25)  # unwrapped positions are wrapped for drawing
     assert img.std() > 10
 
 
 def test_video_decodes_with_right_frames_and_size(concert, design, tmp_path):
     from crowdstudy.render.video import probe_video, render_video
+
     out = tmp_path / "clip.mp4"
-    res = render_video(concert, "V2", out, width=W, height=H, fps=30, design=design, progress=False,
-                       body_loader=mannequin_loader, red_sample_frames=2)
+    res = render_video(
+        concert,
+        "V2",
+        out,
+        width=W,
+        height=H,
+        fps=30,
+        design=design,
+        progress=False,
+        body_loader=mannequin_loader,
+        red_sample_frames=2,
+    )
     info = probe_video(out)
     assert (info["codec"], info["pix_fmt"], info["width"], info["height"]) == ("h264", "yuv420p", W, H)
     assert info["frames"] == res["frames"] == concert.n_frames
@@ -230,8 +243,12 @@ def test_video_decodes_with_right_frames_and_size(concert, design, tmp_path):
     assert not list(tmp_path.glob("*.part.mp4"))
     # the decoded frames are the rendered ones, upright and in order
     from crowdstudy.render.video import find_ffmpeg
-    raw = subprocess.run([find_ffmpeg(), "-loglevel", "error", "-i", str(out), "-f", "rawvideo", "-pix_fmt", "rgb24",
-                          "pipe:1"], capture_output=True, check=True).stdout
+
+    raw = subprocess.run(
+        [find_ffmpeg(), "-loglevel", "error", "-i", str(out), "-f", "rawvideo", "-pix_fmt", "rgb24", "pipe:1"],
+        capture_output=True,
+        check=True,
+    ).stdout
     decoded = np.frombuffer(raw, np.uint8).reshape(-1, H, W, 3).astype(int)
     with mannequin_renderer(concert, design) as r:
         r.set_view("V2")
@@ -242,28 +259,65 @@ def test_video_decodes_with_right_frames_and_size(concert, design, tmp_path):
 
 def test_overlap_video_and_resampling(concert, design, tmp_path):
     from crowdstudy.render.video import probe_video, render_video
-    res = render_video(concert, "V1", tmp_path / "o.mp4", width=W, height=H, fps=15, overlap_view=True,
-                       design=design, progress=False, body_loader=mannequin_loader)
+
+    res = render_video(
+        concert,
+        "V1",
+        tmp_path / "o.mp4",
+        width=W,
+        height=H,
+        fps=15,
+        overlap_view=True,
+        design=design,
+        progress=False,
+        body_loader=mannequin_loader,
+    )
     assert res["frames"] == 3 and len(res["red_fraction"]) == 3
     assert probe_video(tmp_path / "o.mp4")["frames"] == 3
     with pytest.raises(InvalidInputError, match="duration"):
-        render_video(concert, "V1", tmp_path / "x.mp4", width=W, height=H, duration=5.0, design=design,
-                     progress=False, body_loader=mannequin_loader)
+        render_video(
+            concert,
+            "V1",
+            tmp_path / "x.mp4",
+            width=W,
+            height=H,
+            duration=5.0,
+            design=design,
+            progress=False,
+            body_loader=mannequin_loader,
+        )
 
 
 def test_bad_inputs(concert, design, tmp_path):
     from crowdstudy.render.video import render_video
+
     with pytest.raises(InvalidInputError, match="viewpoint.*V9"):
         with mannequin_renderer(concert, design) as r:
             r.set_view("V9")
     blocker = tmp_path / "file"
     blocker.write_text("x")
     with pytest.raises(InvalidInputError, match="output folder"):
-        render_video(concert, "V1", blocker / "sub" / "clip.mp4", width=W, height=H, design=design,
-                     progress=False, body_loader=mannequin_loader)
+        render_video(
+            concert,
+            "V1",
+            blocker / "sub" / "clip.mp4",
+            width=W,
+            height=H,
+            design=design,
+            progress=False,
+            body_loader=mannequin_loader,
+        )
     with pytest.raises(InvalidInputError, match="even"):
-        render_video(concert, "V1", tmp_path / "odd.mp4", width=W + 1, height=H, design=design, progress=False,
-                     body_loader=mannequin_loader)
+        render_video(
+            concert,
+            "V1",
+            tmp_path / "odd.mp4",
+            width=W + 1,
+            height=H,
+            design=design,
+            progress=False,
+            body_loader=mannequin_loader,
+        )
 
 
 def test_missing_egl_names_packages(monkeypatch):
@@ -290,27 +344,46 @@ def test_missing_egl_names_packages(monkeypatch):
 
 
 def _cli(*args):
-    return subprocess.run([sys.executable, "-m", "crowdstudy", "render", *map(str, args)], capture_output=True,
-                          text=True, timeout=120)
+    return subprocess.run(
+        [sys.executable, "-m", "crowdstudy", "render", *map(str, args)], capture_output=True, text=True, timeout=120
+    )
 
 
 def test_cli_png_with_real_bodies_and_errors(tmp_path):
     pytest.importorskip("crowdstudy.body.model")
     anim = crowd_animation(grid_positions(4, margin=0.6), n_frames=3)
-    bodies = tuple({"model": "open", "sex": b["sex"], "height": b["height"], "shape": [0.0, 0.0]}
-                   for b in anim.bodies)
+    bodies = tuple({"model": "open", "sex": b["sex"], "height": b["height"], "shape": [0.0, 0.0]} for b in anim.bodies)
     path = anim.replace(bodies=bodies).save(tmp_path / "a.npz")
     out = tmp_path / "f.png"
     proc = _cli(path, "--view", "V3", "--frame", 1, "--png", "--out", out, "--width", 160, "--height", 90)
     assert proc.returncode == 0, proc.stderr
     from PIL import Image
+
     img = np.asarray(Image.open(out))
     assert img.shape == (90, 160, 3) and img.std() > 10
     clip = tmp_path / "free.mp4"
-    proc = _cli(path, "--eye", "5,4,3", "--target", "0,0,1", "--out", clip, "--width", 96, "--height", 54,
-                "--duration", 0.1, "--quiet", "--no-shadows", "--msaa", 0)
+    proc = _cli(
+        path,
+        "--eye",
+        "5,4,3",
+        "--target",
+        "0,0,1",
+        "--out",
+        clip,
+        "--width",
+        96,
+        "--height",
+        54,
+        "--duration",
+        0.1,
+        "--quiet",
+        "--no-shadows",
+        "--msaa",
+        0,
+    )
     assert proc.returncode == 0, proc.stderr
     from crowdstudy.render.video import probe_video
+
     assert probe_video(clip)["frames"] == 3
     bad = tmp_path / "bad.npz"
     bad.write_bytes(b"not a zip")
@@ -326,15 +399,20 @@ def test_corrected_crowd_keeps_the_baseline_colours(design):
     base = crowd_animation(grid_positions(20, margin=0.3), n_frames=2)
     shift = np.random.default_rng(0).normal(0, 0.08, base.root_translation.shape) * [1, 1, 0]
     moved = base.replace(root_translation=base.root_translation + shift)
-    with mannequin_renderer(base, design) as a, mannequin_renderer(moved, design,
-                                                 color_positions=base.root_translation[0, :, :2]) as b:
+    with (
+        mannequin_renderer(base, design) as a,
+        mannequin_renderer(moved, design, color_positions=base.root_translation[0, :, :2]) as b,
+    ):
         assert np.array_equal(a.colors, b.colors)
     with pytest.raises(InvalidInputError, match="color_positions"):
         mannequin_renderer(base, design, color_positions=np.zeros((3, 2)))
 
 
 def test_level_of_detail_and_culling_keep_the_picture(concert, design):
-    with mannequin_renderer(concert, design, max_faces=None) as full, mannequin_renderer(concert, design, width=W, height=H) as lod:
+    with (
+        mannequin_renderer(concert, design, max_faces=None) as full,
+        mannequin_renderer(concert, design, width=W, height=H) as lod,
+    ):
         full.set_view("V3")
         lod.set_view("V3")
         a, b = full.render(1).astype(int), lod.render(1).astype(int)

@@ -10,10 +10,9 @@ import numpy as np
 import pytest
 
 sys.path.insert(0, str(Path(__file__).parent))
-from render_fixtures import W, H, crowd_animation, grid_positions, mannequin_loader, mannequin_renderer  # noqa: E402
+from render_fixtures import H, W, crowd_animation, grid_positions, mannequin_loader, mannequin_renderer  # noqa: E402
 
 from crowdstudy.design import load_design  # noqa: E402
-
 
 
 @pytest.fixture(scope="module")
@@ -23,7 +22,8 @@ def design():
 
 def test_lod_level_by_screen_size_is_monotone_and_deterministic():
     from crowdstudy.render.assets import lod_levels
-    pixels = np.linspace(2000.0, 1.0, 500)               # characters ever smaller on screen
+
+    pixels = np.linspace(2000.0, 1.0, 500)  # characters ever smaller on screen
     levels = lod_levels(pixels)
     assert np.all(np.diff(levels) >= 0), "a smaller character got a finer mesh"
     assert levels[0] == 0 and levels[-1] == 2 and set(levels.tolist()) == {0, 1, 2}
@@ -36,6 +36,7 @@ def test_renderer_draws_each_character_at_its_screen_size_level(design):
     """A crowd seen from V1: the near characters use finer meshes than the far ones, and
     every visible character is drawn exactly once."""
     from crowdstudy.render.assets import lod_levels
+
     anim = crowd_animation(grid_positions(12, margin=0.45), n_frames=1)
     with mannequin_renderer(anim, design, width=1920, height=1080, msaa=0, shadows=False, max_faces=1200) as r:
         r.set_view("V1")
@@ -58,7 +59,10 @@ def test_static_layers_give_the_per_frame_picture(design, view):
     frames drawn from scratch, over more than one beat; a handful of pixels may differ where
     two surfaces meet at the same depth (drawn in another order)."""
     anim = crowd_animation(grid_positions(10, margin=0.45), n_frames=20)
-    with mannequin_renderer(anim, design, msaa=4) as layered, mannequin_renderer(anim, design, msaa=4, static_layer=False) as plain:
+    with (
+        mannequin_renderer(anim, design, msaa=4) as layered,
+        mannequin_renderer(anim, design, msaa=4, static_layer=False) as plain,
+    ):
         for r in (layered, plain):
             r.set_view(view)
         assert layered.layers.phases() == 15 and "cut_figures" in layered.layers.parts
@@ -68,14 +72,19 @@ def test_static_layers_give_the_per_frame_picture(design, view):
             diff = np.abs(a - b).max(axis=2)
             assert np.mean(diff > 0) < 2e-3, f"frame {f}: {np.mean(diff > 0):.4f} of the pixels differ"
             assert np.mean(diff > 2) < 1e-3
-        assert len(layered.layers.layers) == len({f % 15 for f in (0, 7, 15, 19)})   # drawn on first use
+        assert len(layered.layers.layers) == len({f % 15 for f in (0, 7, 15, 19)})  # drawn on first use
 
 
 def test_static_layers_follow_the_camera_and_the_corridor_walls(design):
     """set_view redraws the layers; in the corridor the walls, which the characters'
     shadows reach, stay in the per-frame pass."""
-    anim = crowd_animation(grid_positions(6, extent=(4.0, 3.0), margin=0.45), n_frames=3, scenario="corridor",
-                           period=4.0, velocity=(1.0, 0.0))
+    anim = crowd_animation(
+        grid_positions(6, extent=(4.0, 3.0), margin=0.45),
+        n_frames=3,
+        scenario="corridor",
+        period=4.0,
+        velocity=(1.0, 0.0),
+    )
     with mannequin_renderer(anim, design) as layered, mannequin_renderer(anim, design, static_layer=False) as plain:
         assert "walls" not in layered.layers.parts
         for view in ("V3", "V4"):
@@ -95,10 +104,10 @@ def test_draw_layers_draws_each_beat_phase_once(design):
         assert r.draw_layers() == 15
         assert len(r.layers.layers) == 15 and len(r.layers.drawn) == 15
         before = r.render(1)
-        r.set_view("V2")                       # the same camera again: layers drawn anew
+        r.set_view("V2")  # the same camera again: layers drawn anew
         assert not r.layers.drawn
         assert np.array_equal(r.render(1), before)
-        assert len(r.layers.layers) == 15            # ... into the same framebuffers
+        assert len(r.layers.layers) == 15  # ... into the same framebuffers
 
 
 def test_shader_variants_equal_the_branching_program(design):
@@ -114,12 +123,12 @@ def test_shader_variants_equal_the_branching_program(design):
 
 
 def test_overlap_mask_without_the_picture_is_the_same(design):
-    pos = np.array([[0.0, 0.0], [0.25, 0.0], [1.0, 1.0]])    # two interpenetrating characters
+    pos = np.array([[0.0, 0.0], [0.25, 0.0], [1.0, 1.0]])  # two interpenetrating characters
     anim = crowd_animation(pos, n_frames=2)
     with mannequin_renderer(anim, design) as r:
         r.set_view("V3")
         full = r.overlap(1)
-        r.render(0)                            # another frame's state in between
+        r.render(0)  # another frame's state in between
         quick = r.overlap(1, image=False)
     assert quick.image is None and full.image is not None
     assert full.red_fraction > 0
@@ -131,9 +140,19 @@ def test_pipelined_encode_gives_the_serial_bytes(design, tmp_path):
     """render_video (two pixel-pack buffers, a writer thread, ffmpeg in its own process)
     writes the same file as rendering each frame and writing it in turn."""
     from crowdstudy.render.video import VideoWriter, render_video, sha256_file
+
     anim = crowd_animation(grid_positions(6, margin=0.45), n_frames=8)
-    res = render_video(anim, "V3", tmp_path / "pipelined.mp4", width=W, height=H, design=design, progress=False,
-                       body_loader=mannequin_loader, preset="superfast")
+    res = render_video(
+        anim,
+        "V3",
+        tmp_path / "pipelined.mp4",
+        width=W,
+        height=H,
+        design=design,
+        progress=False,
+        body_loader=mannequin_loader,
+        preset="superfast",
+    )
     with mannequin_renderer(anim, design) as r:
         r.set_view("V3")
         writer = VideoWriter(tmp_path / "serial.mp4", W, H, 30.0, preset="superfast", crf=18)
@@ -151,6 +170,7 @@ def test_overlap_bisection_marks_the_pixels_of_the_full_scan(design, monkeypatch
     """overlap.frag bisects a hidden fragment's sorted candidates to the visible character's
     capsules; compiled to scan them all (OVERLAP_SCAN_ALL), it marks the same pixels."""
     import crowdstudy.render.gpu as gpu_module
+
     anim = crowd_animation(grid_positions(16, extent=(1.6, 1.6), margin=0.2, seed=3), n_frames=2)
     masks = []
     for scan_all in (False, True):
@@ -161,6 +181,7 @@ def test_overlap_bisection_marks_the_pixels_of_the_full_scan(design, monkeypatch
                 if frag == "overlap.frag":
                     kw["defines"] = (*kw.get("defines", ()), "OVERLAP_SCAN_ALL")
                 return compile_program(ctx, vert, frag, **kw)
+
             monkeypatch.setattr(gpu_module, "compile_program", with_define)
         with mannequin_renderer(anim, design, width=384, height=216) as r:
             r.set_view("V3")

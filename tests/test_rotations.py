@@ -3,10 +3,22 @@ the matrix conversions (scalar-last quaternions, matrices acting on column vecto
 
 import numpy as np
 
-from crowdstudy.body.rotations import (axis_angle_to_matrix, axis_angle_to_quaternion, quat_about_z,
-                                       quat_align_signs, quat_blend, quat_conjugate, quat_multiply,
-                                       quat_nearest_sign, quat_rotate, quaternion_to_matrix, rot_x, rot_y, rot_z,
-                                       yaw_roll_pitch)
+from crowdstudy.body.rotations import (
+    axis_angle_to_matrix,
+    axis_angle_to_quaternion,
+    quat_about_z,
+    quat_align_signs,
+    quat_blend,
+    quat_conjugate,
+    quat_multiply,
+    quat_nearest_sign,
+    quat_rotate,
+    quaternion_to_matrix,
+    rot_x,
+    rot_y,
+    rot_z,
+    yaw_roll_pitch,
+)
 
 
 def _random_quats(rng, n):

@@ -23,27 +23,35 @@ def concert():
     return build_baseline(load_design(), "stationary", "D5", duration=0.3, body_model="open")
 
 
-def _run(anim, monkeypatch, threads: str, steps: int = 8, capacity: int | None = None, split: float | None = None,
-         split_pcg: bool = True, config=None):
+def _run(
+    anim,
+    monkeypatch,
+    threads: str,
+    steps: int = 8,
+    capacity: int | None = None,
+    split: float | None = None,
+    split_pcg: bool = True,
+    config=None,
+):
     import crowdstudy.physics.collision as collision
     import crowdstudy.physics.solver as solver
     import crowdstudy.physics.state as state
-    from crowdstudy.physics.corrector import CrowdCorrector, load_bodies
     from crowdstudy.physics.collision import Contacts
+    from crowdstudy.physics.corrector import CrowdCorrector, load_bodies
 
     monkeypatch.setenv("CROWDSTUDY_THREADS", threads)
-    monkeypatch.setattr(collision, "_MIN_SPLIT_THREADS", 0)       # split even this small scene
+    monkeypatch.setattr(collision, "_MIN_SPLIT_THREADS", 0)  # split even this small scene
     monkeypatch.setattr(solver, "_MIN_CHARACTERS_PER_THREAD", 1)
-    monkeypatch.setattr(solver, "_MIN_CHARACTERS_SPLIT_PCG", 1 if split_pcg else 10 ** 9)   # the split PCG too
-    monkeypatch.setattr(solver, "_MIN_CHARACTERS_SPLIT_ASSEMBLY", 1)   # the contacts' terms by halves
-    monkeypatch.setattr(collision, "_MIN_CHARACTERS_PARALLEL", 1)      # the three capsule poses at once
-    monkeypatch.setattr(state, "_MIN_CHARACTERS_PARALLEL", 1)          # the two targets at once
+    monkeypatch.setattr(solver, "_MIN_CHARACTERS_SPLIT_PCG", 1 if split_pcg else 10**9)  # the split PCG too
+    monkeypatch.setattr(solver, "_MIN_CHARACTERS_SPLIT_ASSEMBLY", 1)  # the contacts' terms by halves
+    monkeypatch.setattr(collision, "_MIN_CHARACTERS_PARALLEL", 1)  # the three capsule poses at once
+    monkeypatch.setattr(state, "_MIN_CHARACTERS_PARALLEL", 1)  # the two targets at once
     corr = CrowdCorrector(load_bodies(anim.bodies), fps=anim.fps, n_frames=anim.n_frames, device="cpu", config=config)
     if capacity is not None:
         corr.contacts = Contacts.allocate(capacity, "cpu")
     if split is not None:
         corr.pipeline._split = split
-        corr.pipeline._balance = lambda *a: None                 # keep this split
+        corr.pipeline._balance = lambda *a: None  # keep this split
     corr.control.set_frames(anim.joint_rotations, anim.root_translation)
     corr.reset_to_frame(0)
     contacts = []
@@ -71,7 +79,7 @@ def _same(a, b):
 def test_two_host_threads_give_the_same_bits(concert, monkeypatch, split):
     one = _run(concert, monkeypatch, "1")
     two = _run(concert, monkeypatch, "2", split=split)
-    assert max(n for n, _ in one[1]) > 100           # the scene has contacts (inter-body among them)
+    assert max(n for n, _ in one[1]) > 100  # the scene has contacts (inter-body among them)
     assert any((c["kind"] == 2).any() for _, c in one[1])
     _same(one, two)
 
@@ -86,9 +94,9 @@ def test_the_split_pcg_solves_what_the_fused_one_solves(concert, monkeypatch):
     fused = _run(concert, monkeypatch, "1", split_pcg=False, config=tight)
     split = _run(concert, monkeypatch, "2", split_pcg=True, config=tight)
     assert any((c["kind"] == 2).any() for _, c in fused[1])
-    assert not np.array_equal(split[0]["x"], fused[0]["x"])     # not the same code path ...
-    np.testing.assert_allclose(split[0]["x"], fused[0]["x"], rtol=0, atol=5e-5)   # ... the same solution (m; float32 CG)
-    np.testing.assert_allclose(split[0]["v"], fused[0]["v"], rtol=0, atol=5e-3)   # m/s
+    assert not np.array_equal(split[0]["x"], fused[0]["x"])  # not the same code path ...
+    np.testing.assert_allclose(split[0]["x"], fused[0]["x"], rtol=0, atol=5e-5)  # ... the same solution (m; float32 CG)
+    np.testing.assert_allclose(split[0]["v"], fused[0]["v"], rtol=0, atol=5e-3)  # m/s
 
 
 def test_overflowing_contacts_drop_the_same_surplus(concert, monkeypatch):
@@ -110,7 +118,7 @@ def test_host_threads_setting(monkeypatch):
     out = []
     t0, t1 = run_parallel(lambda: out.append("a"), lambda: out.append("b"))
     assert sorted(out) == ["a", "b"] and t0 >= 0 and t1 >= 0
-    with pytest.raises(ZeroDivisionError):                # an error on the helper thread reaches the caller
+    with pytest.raises(ZeroDivisionError):  # an error on the helper thread reaches the caller
         run_parallel(lambda: None, lambda: 1 / 0)
     monkeypatch.setenv("CROWDSTUDY_THREADS", "two")
     with pytest.raises(InvalidInputError, match="CROWDSTUDY_THREADS"):
@@ -138,7 +146,7 @@ def test_run_together_meets_at_a_barrier_or_declines(monkeypatch):
             barrier.wait()
 
     assert run_together(lambda: side("a"), lambda: side("b")) is True
-    assert [s for s, _ in seen] == [0, 0, 1, 1, 2, 2]          # in step with each other
+    assert [s for s, _ in seen] == [0, 0, 1, 1, 2, 2]  # in step with each other
 
     broken = threading.Barrier(2, timeout=10)
 

@@ -12,20 +12,36 @@ import pytest
 import crowdstudy.scene_meta as scene_meta
 from crowdstudy.errors import InvalidInputError
 from crowdstudy.scene import CrowdAnimation
-from crowdstudy.scene_meta import (LOOP_MODES, LoopMode, PhysicsMeta, SceneMeta, check_meta, loop_mode,
-                                   periodic_length)
+from crowdstudy.scene_meta import LOOP_MODES, LoopMode, PhysicsMeta, SceneMeta, check_meta, loop_mode, periodic_length
 
 
 def _anim(meta: dict) -> CrowdAnimation:
-    return CrowdAnimation(joint_names=("root", "child"), parents=np.array([-1, 0]),
-                          root_translation=np.zeros((2, 1, 3)), joint_rotations=np.zeros((2, 1, 2, 3)), fps=30.0,
-                          bodies=({},), clips=({},), meta=meta)
+    return CrowdAnimation(
+        joint_names=("root", "child"),
+        parents=np.array([-1, 0]),
+        root_translation=np.zeros((2, 1, 3)),
+        joint_rotations=np.zeros((2, 1, 2, 3)),
+        fps=30.0,
+        bodies=({},),
+        clips=({},),
+        meta=meta,
+    )
 
 
-GOOD = {"scenario": "corridor", "periodic": {"axis": 0, "length": 4.5}, "floor": {"width": 4.5, "depth": 2.0},
-        "obstacles": [[[-6.0, -1.0], [6.0, -1.0]]], "corridor_width": 2.0, "seed": 3, "density": 2.22,
-        "loop": {"mode": "dissolve", "frames": 15, "video_frames": 30}, "method": "Baseline", "tempo": None,
-        "provenance": {"seed": 3}, "my_own_key": {"anything": [1, "two"]}}
+GOOD = {
+    "scenario": "corridor",
+    "periodic": {"axis": 0, "length": 4.5},
+    "floor": {"width": 4.5, "depth": 2.0},
+    "obstacles": [[[-6.0, -1.0], [6.0, -1.0]]],
+    "corridor_width": 2.0,
+    "seed": 3,
+    "density": 2.22,
+    "loop": {"mode": "dissolve", "frames": 15, "video_frames": 30},
+    "method": "Baseline",
+    "tempo": None,
+    "provenance": {"seed": 3},
+    "my_own_key": {"anything": [1, "two"]},
+}
 
 
 def test_a_good_meta_and_the_users_own_keys_pass():
@@ -37,26 +53,29 @@ def test_a_good_meta_and_the_users_own_keys_pass():
     assert typing.get_args(LoopMode) == LOOP_MODES
 
 
-@pytest.mark.parametrize("change, message", [
-    ({"periodic": {"axis": 0, "length": 0.0}}, r"meta\.periodic\.length: expected a positive number, got 0\.0"),
-    ({"periodic": {"axis": 0}}, r"meta\.periodic\.length: missing"),
-    ({"periodic": {"axis": -1, "length": 4.5}}, r"meta\.periodic\.axis: expected an integer >= 0"),
-    ({"loop": {"mode": "forever"}}, r"meta\.loop\.mode: expected one of 'periodic', 'dissolve', 'none'"),
-    ({"loop": {"mode": "dissolve", "frames": 15}}, r"meta\.loop\.video_frames: missing"),
-    ({"loop": {"mode": "periodic", "frames": 2.5}}, r"meta\.loop\.frames: expected an integer"),
-    ({"floor": {"width": 3.0}}, r"meta\.floor\.depth: missing"),
-    ({"floor": {"width": -3.0, "depth": 3.0}}, r"meta\.floor\.width: expected a positive number"),
-    ({"obstacles": [[0.0, 1.0]]}, r"meta\.obstacles: expected \(M, 2, 2\) wall segments"),
-    ({"seed": "three"}, r"meta\.seed: expected an integer"),
-    ({"seed": True}, r"meta\.seed: expected an integer"),
-    ({"density": float("nan")}, r"meta\.density: expected a number >= 0"),
-    ({"scenario": 1}, r"meta\.scenario: expected a string"),
-    ({"tempo": 0.0}, r"meta\.tempo: expected a positive number"),
-    ({"physics": {"profile_weight": -0.5}}, r"meta\.physics\.profile_weight: expected a number >= 0"),
-    ({"physics": {"config": [1, 2]}}, r"meta\.physics\.config: expected a dict"),
-    ({"physics": {"steps": 1.5}}, r"meta\.physics\.steps: expected an integer"),
-    ({"provenance": "git"}, r"meta\.provenance: expected a dict"),
-])
+@pytest.mark.parametrize(
+    "change, message",
+    [
+        ({"periodic": {"axis": 0, "length": 0.0}}, r"meta\.periodic\.length: expected a positive number, got 0\.0"),
+        ({"periodic": {"axis": 0}}, r"meta\.periodic\.length: missing"),
+        ({"periodic": {"axis": -1, "length": 4.5}}, r"meta\.periodic\.axis: expected an integer >= 0"),
+        ({"loop": {"mode": "forever"}}, r"meta\.loop\.mode: expected one of 'periodic', 'dissolve', 'none'"),
+        ({"loop": {"mode": "dissolve", "frames": 15}}, r"meta\.loop\.video_frames: missing"),
+        ({"loop": {"mode": "periodic", "frames": 2.5}}, r"meta\.loop\.frames: expected an integer"),
+        ({"floor": {"width": 3.0}}, r"meta\.floor\.depth: missing"),
+        ({"floor": {"width": -3.0, "depth": 3.0}}, r"meta\.floor\.width: expected a positive number"),
+        ({"obstacles": [[0.0, 1.0]]}, r"meta\.obstacles: expected \(M, 2, 2\) wall segments"),
+        ({"seed": "three"}, r"meta\.seed: expected an integer"),
+        ({"seed": True}, r"meta\.seed: expected an integer"),
+        ({"density": float("nan")}, r"meta\.density: expected a number >= 0"),
+        ({"scenario": 1}, r"meta\.scenario: expected a string"),
+        ({"tempo": 0.0}, r"meta\.tempo: expected a positive number"),
+        ({"physics": {"profile_weight": -0.5}}, r"meta\.physics\.profile_weight: expected a number >= 0"),
+        ({"physics": {"config": [1, 2]}}, r"meta\.physics\.config: expected a dict"),
+        ({"physics": {"steps": 1.5}}, r"meta\.physics\.steps: expected an integer"),
+        ({"provenance": "git"}, r"meta\.provenance: expected a dict"),
+    ],
+)
 def test_a_bad_key_is_named_by_its_path(change, message):
     with pytest.raises(InvalidInputError, match=r"CrowdAnimation: " + message):
         _anim({**GOOD, **change})

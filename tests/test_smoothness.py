@@ -58,7 +58,7 @@ def test_jerk_of_a_sine_matches_the_analytic_mean():
     omega = 2 * np.pi * freq
     pos = sine_positions(freq, amp, 300)  # 10 s: whole periods of 20 frames
     overall, per = joint_jerk(pos, FPS)
-    analytic = (2 / np.pi) * amp * omega ** 3
+    analytic = (2 / np.pi) * amp * omega**3
     # the third difference of sin(omega t) scales omega^3 by sinc(omega dt / 2)^3, about
     # 1 - (omega dt)^2 / 8 (1.2 % at 1.5 Hz and 30 fps); sampling |cos| on 20 points per
     # period adds well under 1 %: the measurement sits below the analytic value
@@ -76,7 +76,7 @@ def test_jerk_of_a_sine_matches_the_analytic_mean():
     # the third difference of a cubic is exact: x = a t^3 has jerk 6a
     t = np.arange(10) / FPS
     cubic = np.zeros((10, 1, 1, 3))
-    cubic[:, 0, 0, 2] = 0.7 * t ** 3
+    cubic[:, 0, 0, 2] = 0.7 * t**3
     assert joint_jerk(cubic, FPS)[0] == pytest.approx(6 * 0.7, rel=1e-6)
     with pytest.raises(InvalidInputError, match="pos"):
         joint_jerk(pos[:3], FPS)
@@ -187,9 +187,9 @@ def test_seam_ratio_of_seamless_and_broken_loops():
 def test_pelvis_acceleration_of_parabolas():
     t = np.arange(60) / FPS
     root = np.zeros((60, 2, 3))
-    root[:, 0, 0] = 0.5 * 1.5 * t ** 2
-    root[:, 0, 1] = 0.5 * 0.6 * t ** 2 + 0.2 * t
-    root[:, 1, 1] = 0.5 * 3.0 * t ** 2
+    root[:, 0, 0] = 0.5 * 1.5 * t**2
+    root[:, 0, 1] = 0.5 * 0.6 * t**2 + 0.2 * t
+    root[:, 1, 1] = 0.5 * 3.0 * t**2
     root[:, :, 2] = 0.9 + 0.05 * np.sin(2 * np.pi * 2 * t)[:, None]  # vertical bounce: not horizontal
     overall, per = pelvis_acceleration_p99(root, FPS)
     np.testing.assert_allclose(per, [np.hypot(1.5, 0.6), 3.0], rtol=1e-6)
@@ -305,8 +305,13 @@ def test_smoothness_of_a_rigidly_swaying_animation():
     assert res2.max_joint_speed_character == 0 and res2.max_joint_speed_frame in (39, 40)
     assert res2.max_joint_speed_m_s > 0.06 * FPS
     ratios = smoothness_ratios(res2, res)
-    assert set(ratios) == {"jerk_ratio", "hf_share_ratio", "pelvis_accel_p99_ratio", "max_joint_speed_diff_m_s",
-                           "foot_slide_p99_diff_m_s"}
+    assert set(ratios) == {
+        "jerk_ratio",
+        "hf_share_ratio",
+        "pelvis_accel_p99_ratio",
+        "max_joint_speed_diff_m_s",
+        "foot_slide_p99_diff_m_s",
+    }
     assert ratios["jerk_ratio"] > 2 and ratios["pelvis_accel_p99_ratio"] > 2 and ratios["hf_share_ratio"] > 2
     assert ratios["max_joint_speed_diff_m_s"] == pytest.approx(res2.max_joint_speed_m_s - res.max_joint_speed_m_s)
     same = smoothness_ratios(res, res)
@@ -362,11 +367,36 @@ def test_cli_reports_smoothness_against_the_reference(d1_baseline, tmp_path, cap
     f_base = base.save(tmp_path / "base.npz")
     f_ours = spiked(base).save(tmp_path / "ours.npz")
     out = tmp_path / "m.json"
-    assert cli.main(["metrics", str(f_ours), "--reference", str(f_base), "--geometry", "capsule",
-                     "--frames", "0,30", "--json", str(out), "--per-character", "--no-progress"]) == 0
+    assert (
+        cli.main(
+            [
+                "metrics",
+                str(f_ours),
+                "--reference",
+                str(f_base),
+                "--geometry",
+                "capsule",
+                "--frames",
+                "0,30",
+                "--json",
+                str(out),
+                "--per-character",
+                "--no-progress",
+            ]
+        )
+        == 0
+    )
     text = capsys.readouterr().out
-    for row in ("mean jerk", "HF share > 6 Hz", "max joint speed", "pelvis accel p99", "foot slide p99",
-                "loop seam jump", "ratio", "jerk ratio"):
+    for row in (
+        "mean jerk",
+        "HF share > 6 Hz",
+        "max joint speed",
+        "pelvis accel p99",
+        "foot slide p99",
+        "loop seam jump",
+        "ratio",
+        "jerk ratio",
+    ):
         assert row in text
     m = json.loads(out.read_text())["metrics"]
     for key in SmoothnessResult.KEYS:

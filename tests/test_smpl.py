@@ -42,8 +42,15 @@ def _model_arrays(seed: int = 0) -> dict:
     j_reg[np.arange(24), np.arange(24)] = 1.0
     kintree = np.stack([np.where(PARENTS < 0, 4294967295, PARENTS), np.arange(24)]).astype(np.uint32)
     faces = np.array([[i, i + 1, i + 2] for i in range(N_V - 2)], dtype=np.uint32)
-    return {"v_template": v, "shapedirs": shapedirs, "posedirs": posedirs, "J_regressor": j_reg,
-            "weights": weights, "kintree_table": kintree, "f": faces}
+    return {
+        "v_template": v,
+        "shapedirs": shapedirs,
+        "posedirs": posedirs,
+        "J_regressor": j_reg,
+        "weights": weights,
+        "kintree_table": kintree,
+        "f": faces,
+    }
 
 
 @pytest.fixture
@@ -148,10 +155,12 @@ def test_bad_smpl_files_name_the_file_and_field(tmp_path, smpl_npz):
     trunc.write_bytes(data[: len(data) // 2])
     with pytest.raises(InvalidInputError, match="trunc.npz.*cannot be read"):
         read_smpl_file(trunc)
-    for key, bad, field in [("posedirs", np.zeros((N_V, 3, 10)), "posedirs"),
-                            ("J_regressor", np.zeros((23, N_V)), "J_regressor"),
-                            ("kintree_table", np.zeros((2, 24), np.uint32), "kintree_table"),
-                            ("f", np.array([[0, 1, 99]]), "'f'")]:
+    for key, bad, field in [
+        ("posedirs", np.zeros((N_V, 3, 10)), "posedirs"),
+        ("J_regressor", np.zeros((23, N_V)), "J_regressor"),
+        ("kintree_table", np.zeros((2, 24), np.uint32), "kintree_table"),
+        ("f", np.array([[0, 1, 99]]), "'f'"),
+    ]:
         arrays = _model_arrays()
         arrays[key] = bad
         path = tmp_path / f"bad_{key}.npz"

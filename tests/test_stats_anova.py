@@ -33,13 +33,27 @@ def _close(ours, theirs, rtol, atol=1e-12):
 def test_matches_afex_and_car(name):
     data, ref = _load(name)
     table = rm_anova(data, "y", W, "subject", correction=True).set_index("Source")
-    assert list(table.index) == list(ref.index)       # R's effect order and names
+    assert list(table.index) == list(ref.index)  # R's effect order and names
     src = table.index
-    for ours, theirs in [("SS", "SS"), ("ddof1", "num_df"), ("ddof2", "den_df"), ("SS_error", "SS_error"),
-                         ("F", "F"), ("p_unc", "p_unc"), ("eps_GG", "eps_GG"), ("eps_HF", "eps_HF"),
-                         ("p_GG_corr", "p_GG"), ("p_HF_corr", "p_HF"), ("W_spher", "W"), ("p_spher", "p_W"),
-                         ("ddof1_used", "afex_GG_num_df"), ("ddof2_used", "afex_GG_den_df"), ("p", "afex_GG_p"),
-                         ("ng2", "ges"), ("np2", "pes")]:
+    for ours, theirs in [
+        ("SS", "SS"),
+        ("ddof1", "num_df"),
+        ("ddof2", "den_df"),
+        ("SS_error", "SS_error"),
+        ("F", "F"),
+        ("p_unc", "p_unc"),
+        ("eps_GG", "eps_GG"),
+        ("eps_HF", "eps_HF"),
+        ("p_GG_corr", "p_GG"),
+        ("p_HF_corr", "p_HF"),
+        ("W_spher", "W"),
+        ("p_spher", "p_W"),
+        ("ddof1_used", "afex_GG_num_df"),
+        ("ddof2_used", "afex_GG_den_df"),
+        ("p", "afex_GG_p"),
+        ("ng2", "ges"),
+        ("np2", "pes"),
+    ]:
         _close(table[ours], ref.loc[src, theirs], rtol=1e-6, atol=1e-10)
     none = rm_anova(data, "y", W, "subject", correction=False).set_index("Source")
     _close(none["p"], ref.loc[src, "afex_none_p"], rtol=1e-6, atol=1e-12)
@@ -53,7 +67,7 @@ def test_violated_dataset_triggers_the_papers_rule():
     data, ref = _load("violated_5x4x2")
     auto = rm_anova(data, "y", W, "subject", correction="auto").set_index("Source")
     violated = ref["p_W"] < 0.05
-    assert violated.sum() >= 3                            # the dataset violates sphericity clearly
+    assert violated.sum() >= 3  # the dataset violates sphericity clearly
     for src in ref.index:
         assert auto.at[src, "correction_applied"] == bool(violated[src])
         expected = ref.at[src, "p_GG"] if violated[src] else ref.at[src, "p_unc"]
@@ -90,8 +104,10 @@ def test_four_factors_match_statsmodels():
     from statsmodels.stats.anova import AnovaRM
 
     rng = np.random.default_rng(5)
-    idx = pd.MultiIndex.from_product([range(9), ["a1", "a2"], ["b1", "b2", "b3"], ["c1", "c2"], ["d1", "d2", "d3"]],
-                                     names=["s", "F1", "F2", "F3", "F4"]).to_frame(index=False)
+    idx = pd.MultiIndex.from_product(
+        [range(9), ["a1", "a2"], ["b1", "b2", "b3"], ["c1", "c2"], ["d1", "d2", "d3"]],
+        names=["s", "F1", "F2", "F3", "F4"],
+    ).to_frame(index=False)
     idx["y"] = rng.normal(size=len(idx)) + (idx["F1"] == "a2") * 0.5 + idx["s"] * 0.2
     ours = rm_anova(idx, "y", ["F1", "F2", "F3", "F4"], "s").set_index("Source")
     assert len(ours) == 15
@@ -143,17 +159,20 @@ def test_missing_cells_raise_or_drop():
         rm_anova(nan_dv, "y", W, "subject")
 
 
-@pytest.mark.parametrize("mutate, kwargs, pattern", [
-    (None, dict(dv="score"), "dv column 'score'"),
-    (None, dict(subject="participant"), "subject column 'participant'"),
-    (None, dict(within=["Density", "Angle"]), "within column 'Angle'"),
-    (lambda d: d.assign(y=d.y.astype(object).where(d.index != 7, "high")), {}, "dv column 'y'.*'high'"),
-    (lambda d: d[d.Method == "Ours"], {}, "within factor 'Method' has a single level 'Ours'"),
-    (None, dict(correction="sometimes"), "correction"),
-    (None, dict(effsize="d"), "effsize"),
-    (None, dict(alpha=1.5), "alpha"),
-    (None, dict(missing="ignore"), "missing"),
-])
+@pytest.mark.parametrize(
+    "mutate, kwargs, pattern",
+    [
+        (None, dict(dv="score"), "dv column 'score'"),
+        (None, dict(subject="participant"), "subject column 'participant'"),
+        (None, dict(within=["Density", "Angle"]), "within column 'Angle'"),
+        (lambda d: d.assign(y=d.y.astype(object).where(d.index != 7, "high")), {}, "dv column 'y'.*'high'"),
+        (lambda d: d[d.Method == "Ours"], {}, "within factor 'Method' has a single level 'Ours'"),
+        (None, dict(correction="sometimes"), "correction"),
+        (None, dict(effsize="d"), "effsize"),
+        (None, dict(alpha=1.5), "alpha"),
+        (None, dict(missing="ignore"), "missing"),
+    ],
+)
 def test_bad_input_names_the_culprit(mutate, kwargs, pattern):
     data, _ = _load("likert_5x2x2")
     if mutate is not None:
@@ -168,7 +187,7 @@ def test_type_one_error_under_the_null():
     # 300 null studies with non-spherical errors: GG-corrected tests keep the nominal rate
     rng = np.random.default_rng(3)
     n, k = 12, 4
-    scale = np.array([0.3, 0.6, 1.2, 2.4])        # unequal variances: sphericity violated
+    scale = np.array([0.3, 0.6, 1.2, 2.4])  # unequal variances: sphericity violated
     subjects = np.repeat(np.arange(n), k)
     levels = np.tile([f"L{i}" for i in range(k)], n)
     rej_gg = rej_unc = 0
@@ -207,6 +226,7 @@ def test_degenerate_data_gives_undefined_f_not_significance():
     assert t["F"].isna().all() and t["p"].isna().all() and t["np2"].isna().all()
     assert t.attrs["undefined"] == list(t["Source"]) and "F undefined" in t.attrs["note"]
     from crowdstudy.stats.report import apa_summary
+
     assert apa_summary(t) == []
     # an effect with a real SS but an exactly zero error (every subject shifts the same) stays F = inf
     shifted = data.assign(y=3.0 + (data.Method == "Ours") * 1.0)

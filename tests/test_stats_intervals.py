@@ -78,7 +78,7 @@ def test_simple_effects_match_joint_tests(name):
     np.testing.assert_array_equal(m["df2"], m["df2_r"].astype(float))
     np.testing.assert_allclose(m["p"], m["p_r"].astype(float), rtol=1e-6, atol=1e-14)
     np.testing.assert_allclose(m["F"], m["F_from_p"].astype(float), rtol=1e-6)
-    np.testing.assert_allclose(m["F"], m["F_rounded"].astype(float), atol=5.1e-4)    # joint_tests prints 3 decimals
+    np.testing.assert_allclose(m["F"], m["F_rounded"].astype(float), atol=5.1e-4)  # joint_tests prints 3 decimals
     # a 1-df simple effect is the paired comparison's t squared
     one = m[(m.by == "Density,Viewpoint")]
     pw = pairwise_from_cells(cm, "Method", ["Density", "Viewpoint"]).set_index("by_level")
@@ -89,8 +89,9 @@ def test_simple_effects_match_joint_tests(name):
 def test_polynomial_contrasts_match_emmeans(name):
     ref = _ref(name, "poly")
     cm = _cm(name)
-    ours = pd.concat([polynomial_contrasts(cm, "Density"), polynomial_contrasts(cm, "Density", "Method")],
-                     ignore_index=True)
+    ours = pd.concat(
+        [polynomial_contrasts(cm, "Density"), polynomial_contrasts(cm, "Density", "Method")], ignore_index=True
+    )
     m = ours.merge(ref, on=["by", "by_level", "contrast"], suffixes=("", "_r"), validate="one_to_one")
     assert len(m) == len(ref) == len(ours)
     assert (m["coefficients"] == m["coefficients_r"]).all()
@@ -100,10 +101,10 @@ def test_polynomial_contrasts_match_emmeans(name):
 
 def test_qtukey_and_critical_values_follow_r():
     # R 4.2.2: qtukey(0.95, 5, 19), qtukey(0.95, 2, 15), qtukey(0.95, 10, 7)
-    for (k, df), r in {(5, 19): 4.2528308219230677, (2, 15): 3.0143247949591689,
-                       (10, 7): 6.1579437044766028}.items():
+    for (k, df), r in {(5, 19): 4.2528308219230677, (2, 15): 3.0143247949591689, (10, 7): 6.1579437044766028}.items():
         assert studentized_range_ppf(0.95, k, df) == pytest.approx(r, rel=1e-12)
     from scipy import stats
+
     assert critical_value("none", level=0.95, df=15, n_means=2, n_contrasts=1) == pytest.approx(stats.t.ppf(0.975, 15))
     bonf = critical_value("bonferroni", level=0.95, df=15, n_means=5, n_contrasts=10)
     assert bonf == pytest.approx(stats.t.ppf(1 - 0.05 / 20, 15))

@@ -26,8 +26,10 @@ _DATA: dict = {}
 
 def _data(name):
     if name not in _DATA:
-        _DATA[name] = (pd.read_csv(REF / f"{name}.csv"),
-                       pd.read_csv(REF / f"ref_{name}_posthoc.csv", keep_default_na=False))
+        _DATA[name] = (
+            pd.read_csv(REF / f"{name}.csv"),
+            pd.read_csv(REF / f"ref_{name}_posthoc.csv", keep_default_na=False),
+        )
     return _DATA[name]
 
 
@@ -47,9 +49,16 @@ def test_matches_emmeans(name, factor, by, adjust):
     np.testing.assert_allclose(m["p_adj"], m["p_value"].astype(float), rtol=1e-6, atol=1e-12)
 
 
-@pytest.mark.parametrize("q, k, df, r_value", [     # R 4.2.2: ptukey(q, k, df, lower.tail = FALSE)
-    (3, 5, 19, 0.25181210312867008), (4.5, 3, 10, 0.024255808749401697), (2, 10, 1000, 0.92288628676658913),
-    (5, 4, 150, 0.0030130617092911649), (3.2, 6, 30000, 0.209488675920116)])
+@pytest.mark.parametrize(
+    "q, k, df, r_value",
+    [  # R 4.2.2: ptukey(q, k, df, lower.tail = FALSE)
+        (3, 5, 19, 0.25181210312867008),
+        (4.5, 3, 10, 0.024255808749401697),
+        (2, 10, 1000, 0.92288628676658913),
+        (5, 4, 150, 0.0030130617092911649),
+        (3.2, 6, 30000, 0.209488675920116),
+    ],
+)
 def test_studentized_range_matches_r_and_scipy(q, k, df, r_value):
     from crowdstudy.stats._tukey import studentized_range_sf
 
@@ -64,7 +73,7 @@ def test_tukey_two_means_is_the_t_test_and_monotone():
     np.testing.assert_allclose(tukey_p(t, 2, 19), 2 * stats.t.sf(np.abs(t), 19), rtol=1e-12)
     p3 = tukey_p(t, 3, 19)
     p5 = tukey_p(t, 5, 19)
-    assert np.all(np.diff(p5) < 0) and np.all(p5[1:] > p3[1:])       # more means, larger p
+    assert np.all(np.diff(p5) < 0) and np.all(p5[1:] > p3[1:])  # more means, larger p
     assert p3[0] == 1.0
 
 
@@ -92,13 +101,16 @@ def test_layout_and_default_factor():
     np.testing.assert_allclose(a["p_adj"], b["p_adj"], rtol=1e-12)
 
 
-@pytest.mark.parametrize("kwargs, pattern", [
-    (dict(factor="Angle"), "factor 'Angle'"),
-    (dict(factor="Density", by="Density"), "by factor 'Density' is the compared factor"),
-    (dict(factor="Density", by="Light"), "by factor 'Light'"),
-    (dict(), "factor is ambiguous"),
-    (dict(factor="Method", adjust="scheffe"), "adjust"),
-])
+@pytest.mark.parametrize(
+    "kwargs, pattern",
+    [
+        (dict(factor="Angle"), "factor 'Angle'"),
+        (dict(factor="Density", by="Density"), "by factor 'Density' is the compared factor"),
+        (dict(factor="Density", by="Light"), "by factor 'Light'"),
+        (dict(), "factor is ambiguous"),
+        (dict(factor="Method", adjust="scheffe"), "adjust"),
+    ],
+)
 def test_bad_arguments(kwargs, pattern):
     data, _ = _data("likert_5x2x2")
     with pytest.raises(InvalidInputError, match=pattern):

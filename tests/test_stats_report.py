@@ -13,8 +13,15 @@ from crowdstudy.stats._data import cell_matrix
 from crowdstudy.stats.options import AnalysisOptions
 from crowdstudy.stats.pipeline import analyze
 from crowdstudy.stats.power import power_analysis
-from crowdstudy.stats.report import (apa_effect, apa_summary, descriptives_from_cells, format_p, stars, to_latex,
-                                     to_markdown)
+from crowdstudy.stats.report import (
+    apa_effect,
+    apa_summary,
+    descriptives_from_cells,
+    format_p,
+    stars,
+    to_latex,
+    to_markdown,
+)
 from crowdstudy.stats.synthetic import ResponseModel, simulate_responses
 
 
@@ -34,16 +41,39 @@ def test_stars_and_p_format():
 
 
 def test_apa_text():
-    row = {"Source": "Density:Method", "ddof1_used": 2.4513, "ddof2_used": 71.087, "F": 12.3049, "p": 0.00002,
-           "np2": 0.2977, "ng2": 0.05, "correction_applied": True, "eps_GG": 0.6128}
-    assert apa_effect(row) == ("F(2.45, 71.09) = 12.30, p < .001, eta_p^2 = .30 "
-                               "(Greenhouse-Geisser corrected, eps = 0.61)")
-    table = pd.DataFrame([row, {**row, "Source": "Viewpoint", "p": 0.2, "ddof1_used": 3.0, "ddof2_used": 87.0,
-                                "correction_applied": False}])
+    row = {
+        "Source": "Density:Method",
+        "ddof1_used": 2.4513,
+        "ddof2_used": 71.087,
+        "F": 12.3049,
+        "p": 0.00002,
+        "np2": 0.2977,
+        "ng2": 0.05,
+        "correction_applied": True,
+        "eps_GG": 0.6128,
+    }
+    assert apa_effect(row) == (
+        "F(2.45, 71.09) = 12.30, p < .001, eta_p^2 = .30 (Greenhouse-Geisser corrected, eps = 0.61)"
+    )
+    table = pd.DataFrame(
+        [
+            row,
+            {
+                **row,
+                "Source": "Viewpoint",
+                "p": 0.2,
+                "ddof1_used": 3.0,
+                "ddof2_used": 87.0,
+                "correction_applied": False,
+            },
+        ]
+    )
     table.attrs.update(alpha=0.05, effsize="np2")
     lines = apa_summary(table, label="Stage 1, QCR")
-    assert lines == ["Stage 1, QCR: a significant Density x Method interaction, F(2.45, 71.09) = 12.30, "
-                     "p < .001, eta_p^2 = .30 (Greenhouse-Geisser corrected, eps = 0.61)."]
+    assert lines == [
+        "Stage 1, QCR: a significant Density x Method interaction, F(2.45, 71.09) = 12.30, "
+        "p < .001, eta_p^2 = .30 (Greenhouse-Geisser corrected, eps = 0.61)."
+    ]
 
 
 def test_tables_render():
@@ -71,18 +101,29 @@ def test_analyze_writes_the_report(design, responses, tmp_path):
     res = analyze(responses, design, tmp_path, AnalysisOptions(stages=(2,), composites=("QCR",)))
     r = res.results[(2, "QCR")]
     assert list(r.anova["Source"])[:3] == ["Density", "Viewpoint", "Method"]
-    assert r.anova.set_index("Source").at["Method", "p"] < 0.05        # the simulated effect is found
+    assert r.anova.set_index("Source").at["Method", "p"] < 0.05  # the simulated effect is found
     method_rows = r.posthoc[r.posthoc["effect"] == "Method"]
-    assert len(method_rows) == 1 and method_rows["estimate"].iloc[0] < 0     # Baseline - Ours < 0
+    assert len(method_rows) == 1 and method_rows["estimate"].iloc[0] < 0  # Baseline - Ours < 0
     assert len(r.method_by_cell) == 10
     d = tmp_path / "stage2_corridor"
-    for name in ("QCR_anova.csv", "QCR_anova.md", "QCR_anova.tex", "QCR_posthoc.csv", "QCR_descriptives.tex",
-                 "QCR_shapiro.csv", "QCR_qq.png", "QCR_by_density.png", "scores_by_density.png"):
+    for name in (
+        "QCR_anova.csv",
+        "QCR_anova.md",
+        "QCR_anova.tex",
+        "QCR_posthoc.csv",
+        "QCR_descriptives.tex",
+        "QCR_shapiro.csv",
+        "QCR_qq.png",
+        "QCR_by_density.png",
+        "scores_by_density.png",
+    ):
         assert (d / name).stat().st_size > 0, name
     summary = (tmp_path / "summary.md").read_text()
     assert "a significant main effect of Method, F(1, 7) = " in summary and "Item-pair reliability" in summary
     record = json.loads((tmp_path / "analysis.json").read_text())
-    assert record["results"][0]["effects"]["Method"]["p"] == pytest.approx(r.anova.set_index("Source").at["Method", "p"])
+    assert record["results"][0]["effects"]["Method"]["p"] == pytest.approx(
+        r.anova.set_index("Source").at["Method", "p"]
+    )
     assert "git_sha" in record["provenance"]
     back = pd.read_csv(d / "QCR_anova.csv")
     np.testing.assert_allclose(back["F"], r.anova["F"], rtol=1e-9)
@@ -110,18 +151,51 @@ def test_cli_analyze(design, responses, tmp_path, capsys):
 
 
 def test_power(design, tmp_path, capsys):
-    res = power_analysis(design, 6, model=ResponseModel.for_design(design, method_effect=2.0), sims=4, seed=3,
-                         stage=2, composites=["QCR"])
+    res = power_analysis(
+        design,
+        6,
+        model=ResponseModel.for_design(design, method_effect=2.0),
+        sims=4,
+        seed=3,
+        stage=2,
+        composites=["QCR"],
+    )
     table = res.table.set_index("effect")
     assert table.at["Method", "power"] == 1.0 and table.at["Method", "mc_se"] == 0.0
     assert res.p_values.shape == (4, 2)
-    null = power_analysis(design, 6, model=ResponseModel.for_design(design, method_effect=0.0,
-                                                                    participant_method_sd=0.0),
-                          sims=4, seed=3, stage=2, composites=["QCR"])
+    null = power_analysis(
+        design,
+        6,
+        model=ResponseModel.for_design(design, method_effect=0.0, participant_method_sd=0.0),
+        sims=4,
+        seed=3,
+        stage=2,
+        composites=["QCR"],
+    )
     assert null.p_values["QCR/Method"].median() > res.p_values["QCR/Method"].median()
     out = tmp_path / "power.json"
-    assert cli_main(["power", "-n", "5", "--method-effect", "0.5", "--sims", "2", "--seed", "1", "--stage", "2",
-                     "--composite", "QCR", "--out", str(out)]) == 0
+    assert (
+        cli_main(
+            [
+                "power",
+                "-n",
+                "5",
+                "--method-effect",
+                "0.5",
+                "--sims",
+                "2",
+                "--seed",
+                "1",
+                "--stage",
+                "2",
+                "--composite",
+                "QCR",
+                "--out",
+                str(out),
+            ]
+        )
+        == 0
+    )
     data = json.loads(out.read_text())
     assert {r["effect"] for r in data["table"]} == {"Method", "Density:Method"}
     assert "power" in capsys.readouterr().out
@@ -138,10 +212,12 @@ def test_single_viewpoint_design_and_determinism(tmp_path):
     raw["stages"]["walking"]["viewpoints"] = ["V4"]
     one_view = parse_design(raw)
     df = simulate_responses(one_view, 6, seed=2, stages=[2])
-    runs = [analyze(df, one_view, tmp_path / f"run{i}", AnalysisOptions(composites=("QCA",), figures=False))
-            for i in range(2)]
+    runs = [
+        analyze(df, one_view, tmp_path / f"run{i}", AnalysisOptions(composites=("QCA",), figures=False))
+        for i in range(2)
+    ]
     table = runs[0].results[(2, "QCA")].anova
-    assert list(table["Source"]) == ["Density", "Method", "Density:Method"]   # Viewpoint left out
+    assert list(table["Source"]) == ["Density", "Method", "Density:Method"]  # Viewpoint left out
     assert len(runs[0].results[(2, "QCA")].method_by_cell) == 5
     for name in ("QCA_anova.csv", "QCA_anova.tex", "QCA_posthoc.csv", "QCA_descriptives.md"):
         a = (tmp_path / "run0" / "stage2_corridor" / name).read_bytes()
@@ -168,14 +244,14 @@ def test_shapiro_per_cell_and_qq_figure(tmp_path, saved_figures):
     from PIL import Image
 
     v1 = data[data.Viewpoint == "V1"]
-    with matplotlib.rc_context({"savefig.bbox": "tight"}):    # as the paper figures' style sets it
+    with matplotlib.rc_context({"savefig.bbox": "tight"}):  # as the paper figures' style sets it
         out = qq_figure(v1, "y", ["Density", "Method"], "subject", tmp_path / "qq.png")
     fig = saved_figures[-1]
     # the laid-out figure is saved whole (110 dpi), not re-cropped by the caller's rcParams
     size, whole = Image.open(out).size, fig.get_size_inches() * 110
     assert abs(size[0] - whole[0]) <= 1 and abs(size[1] - whole[1]) <= 1, (size, whole)
     panels = [ax for ax in fig.axes if ax.lines]
-    assert len(panels) == 10                                       # 5 densities x 2 methods
+    assert len(panels) == 10  # 5 densities x 2 methods
     shp_v1 = shapiro_by_cell(v1, "y", ["Density", "Method"], "subject")
     for ax, (_, r) in zip(panels, shp_v1.iterrows()):
         assert ax.get_title() == f"{r['cell']}\np={r['p']:.3f}"

@@ -11,11 +11,18 @@ import pytest
 from crowdstudy.errors import InvalidInputError
 from crowdstudy.stats._data import cell_matrix
 from crowdstudy.stats.anova import rm_anova
-from crowdstudy.stats.robust import (_design_matrix, _sum_coding, mixed_model, ordinal_method_check, sign_test,
-                                     signed_rank_test)
+from crowdstudy.stats.robust import (
+    _design_matrix,
+    _sum_coding,
+    mixed_model,
+    ordinal_method_check,
+    sign_test,
+    signed_rank_test,
+)
 
 REF = Path(__file__).resolve().parent.parent / "analysis" / "reference_r"
 W = ["Density", "Viewpoint", "Method"]
+
 
 @pytest.fixture(scope="module")
 def fitted():
@@ -49,7 +56,8 @@ def test_mixed_model_matches_statsmodels_mixedlm(fitted):
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         fit = sm.MixedLM(data["y"].to_numpy(float), x, data["subject"].to_numpy(), exog_re=z).fit(
-            reml=True, method=["bfgs"], gtol=1e-10)
+            reml=True, method=["bfgs"], gtol=1e-10
+        )
     np.testing.assert_allclose(res.fixed["estimate"], np.asarray(fit.fe_params), rtol=1e-6, atol=1e-8)
     assert res.loglik == pytest.approx(float(fit.llf), rel=1e-10)
     assert res.variances["residual"] == pytest.approx(float(fit.scale), rel=1e-5)
@@ -60,7 +68,7 @@ def test_mixed_model_keeps_the_incomplete_participants(fitted):
     data, res = fitted
     assert res.n_participants == 16 and res.n_incomplete == 13
     anova = rm_anova(data, "y", W, "subject", missing="drop")
-    assert anova["n_subjects"].iloc[0] == 3                              # listwise deletion keeps 3
+    assert anova["n_subjects"].iloc[0] == 3  # listwise deletion keeps 3
     # two methods: the Method contrast is twice the sum-coded coefficient, Wald interval around it
     m1 = res.fixed.set_index("term").loc["Method1"]
     assert res.method["contrast"] == "Baseline - Ours"
@@ -104,7 +112,7 @@ def test_analyze_reports_the_robustness_checks(tmp_path):
 
     design = load_design()
     df = simulate_responses(design, 6, seed=5, stages=[2])
-    holes = df.drop(df.index[(df.participant_id == "sim-004")][:3])            # sim-004 lacks 3 cells
+    holes = df.drop(df.index[(df.participant_id == "sim-004")][:3])  # sim-004 lacks 3 cells
     res = analyze(holes, design, tmp_path, AnalysisOptions(composites=("QCR",), missing="drop", figures=False))
     assert res.results[(2, "QCR")].anova["n_subjects"].iloc[0] == 5
     record = json.loads((tmp_path / "analysis.json").read_text())["results"][0]["robustness"]
@@ -113,6 +121,6 @@ def test_analyze_reports_the_robustness_checks(tmp_path):
     assert "6 participants (1 incomplete, kept)" in res.summary
     assert "Wilcoxon signed-rank on each participant's mean difference" in res.summary
     ordinal = pd.read_csv(tmp_path / "stage2_corridor" / "QCR_ordinal.csv", keep_default_na=False)
-    assert len(ordinal) == 10 + 1 and ordinal["n"].iloc[0] == 5                # the ANOVA's participants
+    assert len(ordinal) == 10 + 1 and ordinal["n"].iloc[0] == 5  # the ANOVA's participants
     fixed = pd.read_csv(tmp_path / "stage2_corridor" / "QCR_mixed_model.csv")
     assert fixed["term"].iloc[0] == "(Intercept)" and len(fixed) == 20

@@ -6,8 +6,7 @@ import pytest
 
 from crowdstudy.design import load_design
 from crowdstudy.errors import InvalidInputError
-from crowdstudy.stats.scoring import (cell_means, composite_scores, item_reliability, reverse_items,
-                                      validate_responses)
+from crowdstudy.stats.scoring import cell_means, composite_scores, item_reliability, reverse_items, validate_responses
 from crowdstudy.stats.synthetic import ResponseModel, simulate_responses
 from crowdstudy.study.export import RESPONSE_COLUMNS
 
@@ -31,10 +30,10 @@ def test_schema_and_determinism(design, sim):
     assert sim[["Q1", "Q2", "Q3", "Q4", "Q5", "Q6"]].isin(range(1, 7)).all().all()
     for pid, g in sim.groupby("participant_id"):
         assert list(g["trial_index"]) == list(range(60))
-        assert list(g["stage"]) == [1] * 40 + [2] * 20          # stage 1 then stage 2
+        assert list(g["stage"]) == [1] * 40 + [2] * 20  # stage 1 then stage 2
         assert g["stimulus_id"].is_unique
     orders = sim[sim.stage == 1].groupby("participant_id")["stimulus_id"].apply(tuple)
-    assert orders.nunique() == 6                                 # each participant has their own order
+    assert orders.nunique() == 6  # each participant has their own order
     assert (pd.to_datetime(sim["answered_at"]) > pd.to_datetime(sim["shown_at"])).all()
     only2 = simulate_responses(design, 2, seed=1, stages=[2])
     assert set(only2.stage) == {2} and len(only2) == 40
@@ -48,7 +47,7 @@ def test_negative_items_move_the_other_way(design):
         assert means.at["Ours", neg] < means.at["Baseline", neg] - 0.3
     scored = composite_scores(df, design)
     eff = scored.groupby("method")[["QCR", "QCA", "QOR"]].mean().diff().iloc[1]
-    assert eff["QCR"] > eff["QOR"] > eff["QCA"] > 0             # per-composite multipliers 1.0, 0.8, 0.6
+    assert eff["QCR"] > eff["QOR"] > eff["QCA"] > 0  # per-composite multipliers 1.0, 0.8, 0.6
 
 
 def test_answer_model_details(design):
@@ -84,10 +83,22 @@ def test_reversal_and_composites(design, sim):
 
 
 def test_reliability_by_hand(design):
-    df = pd.DataFrame({"participant_id": ["a", "a", "b", "b", "c", "c"], "stage": 1, "scenario": "concert",
-                       "density_level": "D1", "viewpoint": "V1", "method": ["Baseline", "Ours"] * 3,
-                       "Q1": [1, 2, 4, 5, 6, 3], "Q2": [6, 4, 3, 2, 2, 4], "Q3": [1, 2, 3, 4, 5, 6],
-                       "Q4": [6, 5, 4, 3, 2, 1], "Q5": [2, 2, 3, 3, 5, 6], "Q6": [5, 4, 4, 3, 1, 2]})
+    df = pd.DataFrame(
+        {
+            "participant_id": ["a", "a", "b", "b", "c", "c"],
+            "stage": 1,
+            "scenario": "concert",
+            "density_level": "D1",
+            "viewpoint": "V1",
+            "method": ["Baseline", "Ours"] * 3,
+            "Q1": [1, 2, 4, 5, 6, 3],
+            "Q2": [6, 4, 3, 2, 2, 4],
+            "Q3": [1, 2, 3, 4, 5, 6],
+            "Q4": [6, 5, 4, 3, 2, 1],
+            "Q5": [2, 2, 3, 3, 5, 6],
+            "Q6": [5, 4, 4, 3, 1, 2],
+        }
+    )
     rel = item_reliability(df, design).set_index("composite")
     q1, q2r = df["Q1"].to_numpy(float), 7 - df["Q2"].to_numpy(float)
     r = np.corrcoef(q1, q2r)[0, 1]
@@ -95,7 +106,7 @@ def test_reliability_by_hand(design):
     assert rel.at["QCR", "spearman_brown"] == pytest.approx(2 * r / (1 + r))
     alpha = 2 * (1 - (q1.var(ddof=1) + q2r.var(ddof=1)) / (q1 + q2r).var(ddof=1))
     assert rel.at["QCR", "cronbach_alpha"] == pytest.approx(alpha)
-    assert rel.at["QCA", "pearson_r"] == pytest.approx(1.0)     # Q4 = 7 - Q3 exactly
+    assert rel.at["QCA", "pearson_r"] == pytest.approx(1.0)  # Q4 = 7 - Q3 exactly
     assert rel.at["QCA", "cronbach_alpha"] == pytest.approx(1.0)
 
 
@@ -107,20 +118,33 @@ def test_cell_means_average_repeated_trials(design, sim):
     assert len(cells) == 6 * 20
     assert list(cells["Viewpoint"].cat.categories) == ["V3", "V4"]
     one = scored[(scored.participant_id == "sim-002") & (scored.stimulus_id == "S2-D4-V3-Ours")]["QCR"].mean()
-    row = cells[(cells.participant_id == "sim-002") & (cells.Density == "D4") & (cells.Viewpoint == "V3")
-                & (cells.Method == "Ours")]
+    row = cells[
+        (cells.participant_id == "sim-002")
+        & (cells.Density == "D4")
+        & (cells.Viewpoint == "V3")
+        & (cells.Method == "Ours")
+    ]
     assert row["QCR"].iloc[0] == pytest.approx(one)
 
 
-@pytest.mark.parametrize("mutate, pattern", [
-    (lambda d: d.drop(columns=["Q4"]), "missing column.*'Q4'"),
-    (lambda d: d.drop(columns=["viewpoint"]), "missing column.*'viewpoint'"),
-    (lambda d: d.assign(Q3=d.Q3.astype(object).where(d.index != 3, "agree")), r"'Q3' row 4 \(participant 'sim-001'\) holds 'agree'"),
-    (lambda d: d.assign(Q5=d.Q5.where(d.index != 10, 7)), r"'Q5' row 11 .* holds 7; expected an integer 1..6"),
-    (lambda d: d.assign(Q1=d.Q1.astype(float).where(d.index != 2, 2.5)), r"'Q1' row 3 .* holds 2.5;"),
-    (lambda d: d.assign(method=d.method.where(d.index != 0, "Physics")), "'method' row 1 .*unknown level 'Physics'"),
-    (lambda d: d.iloc[:0], "no rows"),
-])
+@pytest.mark.parametrize(
+    "mutate, pattern",
+    [
+        (lambda d: d.drop(columns=["Q4"]), "missing column.*'Q4'"),
+        (lambda d: d.drop(columns=["viewpoint"]), "missing column.*'viewpoint'"),
+        (
+            lambda d: d.assign(Q3=d.Q3.astype(object).where(d.index != 3, "agree")),
+            r"'Q3' row 4 \(participant 'sim-001'\) holds 'agree'",
+        ),
+        (lambda d: d.assign(Q5=d.Q5.where(d.index != 10, 7)), r"'Q5' row 11 .* holds 7; expected an integer 1..6"),
+        (lambda d: d.assign(Q1=d.Q1.astype(float).where(d.index != 2, 2.5)), r"'Q1' row 3 .* holds 2.5;"),
+        (
+            lambda d: d.assign(method=d.method.where(d.index != 0, "Physics")),
+            "'method' row 1 .*unknown level 'Physics'",
+        ),
+        (lambda d: d.iloc[:0], "no rows"),
+    ],
+)
 def test_bad_responses(design, sim, mutate, pattern):
     with pytest.raises(InvalidInputError, match=pattern):
         validate_responses(mutate(sim.copy()), design)

@@ -19,8 +19,14 @@ from render_fixtures import crowd_animation, grid_positions, mannequin_loader  #
 from crowdstudy.design import default_design_path, load_design  # noqa: E402
 from crowdstudy.errors import InvalidInputError  # noqa: E402
 from crowdstudy.render import stimuli as stimuli_module  # noqa: E402
-from crowdstudy.render.stimuli import (MANIFEST_COLUMNS, animation_digest, animation_record, build_stimuli,  # noqa: E402
-                                       preset_settings, video_digest)
+from crowdstudy.render.stimuli import (
+    MANIFEST_COLUMNS,
+    animation_digest,
+    animation_record,
+    build_stimuli,  # noqa: E402
+    preset_settings,
+    video_digest,
+)
 
 
 @pytest.fixture(scope="module")
@@ -74,8 +80,7 @@ def _seed_animations(design, out: Path, physics=None) -> None:
 def test_build_manifest_and_resume(tiny_design, tmp_path):
     out = tmp_path / "set"
     _seed_animations(tiny_design, out)
-    manifest = build_stimuli(tiny_design, out, preset="quick", workers=0, progress=False,
-                             body_loader=mannequin_loader)
+    manifest = build_stimuli(tiny_design, out, preset="quick", workers=0, progress=False, body_loader=mannequin_loader)
     rows = manifest["stimuli"]
     assert [r["stimulus_id"] for r in rows] == [s.stimulus_id for s in tiny_design.stimuli()]
     assert len(rows) == 6 and manifest["preset"] == "quick" and "git_sha" in manifest["provenance"]
@@ -129,8 +134,9 @@ def test_resume_remakes_exactly_what_a_change_affects(tiny_design, tmp_path, mon
         res = {"files": {}, "metrics": {}, "timings": {}}
         for method in job["methods"]:
             anim, vol = _mannequin_cell(tiny_design, st, method, shift=0.3)
-            res["files"][f"{job['cell']}-{method}.npz"] = str(anim.save(Path(job["out_dir"]) /
-                                                                       f"{job['cell']}-{method}.npz"))
+            res["files"][f"{job['cell']}-{method}.npz"] = str(
+                anim.save(Path(job["out_dir"]) / f"{job['cell']}-{method}.npz")
+            )
             res["metrics"][method] = {"overlap_mesh": vol, "overlap_capsule": 2 * vol}
         return res
 
@@ -152,8 +158,10 @@ def test_resume_remakes_exactly_what_a_change_affects(tiny_design, tmp_path, mon
     assert jobs == [] and stamps() == before and {r["stimulus_id"]: r for r in third} == second
 
     # one viewpoint moved: its videos only, no animation
-    moved = dataclasses.replace(tiny_design, viewpoints={
-        **tiny_design.viewpoints, "V1": dataclasses.replace(tiny_design.viewpoints["V1"], elevation=20.0)})
+    moved = dataclasses.replace(
+        tiny_design,
+        viewpoints={**tiny_design.viewpoints, "V1": dataclasses.replace(tiny_design.viewpoints["V1"], elevation=20.0)},
+    )
     build_stimuli(moved, out, physics=physics, **kw)
     assert jobs == []
     remade = {sid for sid, t in stamps().items() if t != before[sid]}
@@ -173,9 +181,17 @@ def test_dask_cluster_gives_the_same_videos(tiny_design, tmp_path):
     for d in (local, remote):
         _seed_animations(tiny_design, d)
     ref = build_stimuli(tiny_design, local, preset="quick", workers=0, progress=False, body_loader=mannequin_loader)
-    with distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=False, dashboard_address=None) as cluster:
-        got = build_stimuli(tiny_design, remote, preset="quick", scheduler=cluster.scheduler_address,
-                            progress=False, body_loader=mannequin_loader)
+    with distributed.LocalCluster(
+        n_workers=1, threads_per_worker=1, processes=False, dashboard_address=None
+    ) as cluster:
+        got = build_stimuli(
+            tiny_design,
+            remote,
+            preset="quick",
+            scheduler=cluster.scheduler_address,
+            progress=False,
+            body_loader=mannequin_loader,
+        )
     assert [r["sha256"] for r in got["stimuli"]] == [r["sha256"] for r in ref["stimuli"]]
     assert all((remote / r["file"]).is_file() for r in got["stimuli"])
 
@@ -206,4 +222,5 @@ def test_a_shorter_pilot_set_is_its_own_set(tiny_design):
     stim = tiny_design.stimuli()[0]
     assert animation_digest(tiny_design, stim, short) != animation_digest(tiny_design, stim, quick)
     assert video_digest(tiny_design, stim, short, body_loader=mannequin_loader) != video_digest(
-        tiny_design, stim, quick, body_loader=mannequin_loader)
+        tiny_design, stim, quick, body_loader=mannequin_loader
+    )

@@ -4,11 +4,11 @@ import json
 import os
 
 import pytest
+from study_fixtures import ADMIN, make_client, register
 
 from crowdstudy.study.fake_stimuli import write_fake_stimuli
 from crowdstudy.study.media import MEDIA_NAME_PATTERN, PUBLISHED_MTIME
 from crowdstudy.study.schedule import make_schedule
-from study_fixtures import ADMIN, make_client, register
 
 pytestmark = [pytest.mark.filterwarnings("ignore:Using `httpx` with `starlette.testclient`")]
 
@@ -39,12 +39,16 @@ def test_schedule_cannot_be_recomputed_from_the_public_seed(api):
     by_stage = api.app.state.study.by_stage
     for pid in ("P_a1", "P_a2", "P_a3"):
         _, state = register(api, pid, ready=False)
-        served = [t["stimulus_id"] for t in api.get(f"/admin/participants/{pid}/schedule", headers=ADMIN).json()["trials"]]
+        served = [
+            t["stimulus_id"] for t in api.get(f"/admin/participants/{pid}/schedule", headers=ADMIN).json()["trials"]
+        ]
         public = [t.stimulus_id for t in make_schedule(by_stage, pid, design.seed)]
         assert sorted(served) == sorted(public) and served != public
         # the order is keyed with the secret kept in the database (nothing the browser has)
-        keyed = [t.stimulus_id for t in make_schedule(by_stage, pid, design.seed,
-                                                      secret=api.app.state.config.store.blinding_secret())]
+        keyed = [
+            t.stimulus_id
+            for t in make_schedule(by_stage, pid, design.seed, secret=api.app.state.config.store.blinding_secret())
+        ]
         assert served == keyed
         assert api.app.state.config.store.blinding_secret() not in json.dumps(state)
 
@@ -60,8 +64,16 @@ def test_videos_carry_no_order_revealing_header(api):
             assert r.status_code in (200, 206)
             names = {k.lower() for k in r.headers}
             assert "last-modified" not in names and "etag" not in names, dict(r.headers)
-            seen.append((r.status_code, {k: v for k, v in r.headers.items()
-                                         if k.lower() not in ("content-length", "content-range", "date")}))
+            seen.append(
+                (
+                    r.status_code,
+                    {
+                        k: v
+                        for k, v in r.headers.items()
+                        if k.lower() not in ("content-length", "content-range", "date")
+                    },
+                )
+            )
     by_status = {}
     for status, headers in seen:
         by_status.setdefault(status, []).append(headers)
@@ -96,8 +108,8 @@ def test_published_media_are_opaque_and_all_dated_alike(stim_dir, tmp_path):
     for t in sched[:3]:
         src = cfg_a.stimuli.files[t["stimulus_id"]].read_bytes()
         pub = (out / t["video_url"].rsplit("/", 1)[1]).read_bytes()
-        assert pub[:len(src)] == src
-        box = pub[len(src):]
+        assert pub[: len(src)] == src
+        box = pub[len(src) :]
         assert int.from_bytes(box[:4], "big") == len(box) >= 8 and box[4:8] == b"free" and not any(box[8:])
     # and the server's own /media route (a proxy may forward to it) answers with those copies
     lengths = {a.get("/media/" + t["video_url"].rsplit("/", 1)[1]).headers["content-length"] for t in sched}
@@ -114,8 +126,12 @@ def test_browser_receives_no_scoring_metadata(api):
     """(c) which items are reversed and how they pair into composites stays on the server."""
     design = api.app.state.config.design
     h, state = register(api, "P_c")
-    texts = [api.get("/api/study").text, json.dumps(state),
-             api.get("/api/participants/P_c", headers=h).text, api.get("/").text]
+    texts = [
+        api.get("/api/study").text,
+        json.dumps(state),
+        api.get("/api/participants/P_c", headers=h).text,
+        api.get("/").text,
+    ]
     for text in texts:
         assert "reverse" not in text.lower() and "composite" not in text.lower()
         for name in design.composites:

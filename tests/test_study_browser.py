@@ -11,10 +11,10 @@ import sqlite3
 from pathlib import Path
 
 import pytest
+from study_fixtures import CHROMIUM, CHROMIUM_ARGS, require_study_browser
 
 from crowdstudy.study.fake_stimuli import write_fake_stimuli
 from crowdstudy.study.local_server import LocalServer, write_small_design
-from study_fixtures import CHROMIUM, CHROMIUM_ARGS, require_study_browser
 
 pytestmark = [pytest.mark.browser, pytest.mark.slow]
 
@@ -56,12 +56,15 @@ def _wait_gone(page, progress: str, timeout: float = 30000) -> None:
     """Wait until the trial showing ``progress`` has been replaced (its answer is stored)."""
     page.wait_for_function(
         "p => !document.querySelector('.cs-progress') || document.querySelector('.cs-progress').innerText !== p",
-        arg=progress, timeout=timeout)
+        arg=progress,
+        timeout=timeout,
+    )
 
 
 def _hidden_words(design_path: Path) -> list[str]:
     """Every stimulus id, method name and density level of the design: the participant must see none."""
     from crowdstudy.design import load_design
+
     design = load_design(design_path)
     words = {s.stimulus_id for s in design.stimuli()} | set(design.methods) | set(design.densities)
     return sorted(words, key=len, reverse=True)
@@ -82,12 +85,13 @@ def test_full_session_reload_and_server_crash(small_study):
 
     tmp, design = small_study
     db = tmp / "e2e.db"
-    server = LocalServer(["--stimuli", str(tmp / "stim"), "--design", str(design), "--db", f"sqlite:///{db}",
-                          "--completion-code", CODE])
+    server = LocalServer(
+        ["--stimuli", str(tmp / "stim"), "--design", str(design), "--db", f"sqlite:///{db}", "--completion-code", CODE]
+    )
     given = {}  # trial_index -> answers
     words = _hidden_words(design)
     assert {"Ours", "Baseline", "D1", "D2", "S1-D1-V1-Ours"} <= set(words)
-    requests = []   # (url, body) of every request any page made
+    requests = []  # (url, body) of every request any page made
     snapshots = []  # (where, page HTML) of every study trial shown
 
     def watch(context):
@@ -160,16 +164,19 @@ def test_full_session_reload_and_server_crash(small_study):
             page.wait_for_selector("text=Thank you!")
             assert CODE in page.inner_text(".cs-debrief")
             # stage-2 trials after the first came from the in-memory copy preloaded during the previous trial
-            preloaded = page.evaluate("crowdstudy.jsPsych.data.get().filter({trial_type: 'video-likert-loop'})"
-                                      ".select('preloaded').values")
+            preloaded = page.evaluate(
+                "crowdstudy.jsPsych.data.get().filter({trial_type: 'video-likert-loop'}).select('preloaded').values"
+            )
             assert preloaded[-3:] == [True, True, True], preloaded
             secret = page.evaluate(f"localStorage.getItem('crowdstudy:secret:{PID}')")
             # blinding: what the browser holds (jsPsych data, the session state, local storage,
             # the final page) names no stimulus id, method or density level
-            held = {"jspsych data": page.evaluate("crowdstudy.jsPsych.data.get().json()"),
-                    "session": page.evaluate("JSON.stringify(crowdstudy.session)"),
-                    "localStorage": page.evaluate("JSON.stringify(Object.assign({}, localStorage))"),
-                    "debrief page": page.content()}
+            held = {
+                "jspsych data": page.evaluate("crowdstudy.jsPsych.data.get().json()"),
+                "session": page.evaluate("JSON.stringify(crowdstudy.session)"),
+                "localStorage": page.evaluate("JSON.stringify(Object.assign({}, localStorage))"),
+                "debrief page": page.content(),
+            }
             assert '"token"' in held["session"] and "/media/" in held["jspsych data"]
             for where, text in [*held.items(), *snapshots]:
                 assert not _leaks(text, words), (where, _leaks(text, words))
@@ -186,8 +193,10 @@ def test_full_session_reload_and_server_crash(small_study):
             other.wait_for_selector("text=Informed consent")
 
             # an admin-issued resume link continues the session in another browser (here: at the debriefing)
-            link = httpx.post(f"{server.url}/admin/participants/{PID}/resume-link",
-                              headers={"Authorization": f"Bearer {server.admin_token}"}).json()["url"]
+            link = httpx.post(
+                f"{server.url}/admin/participants/{PID}/resume-link",
+                headers={"Authorization": f"Bearer {server.admin_token}"},
+            ).json()["url"]
             third = watch(browser.new_context()).new_page()
             third.goto(server.url + link)
             third.wait_for_selector("text=Thank you!")
@@ -199,8 +208,9 @@ def test_full_session_reload_and_server_crash(small_study):
         # the participant's schedule (the same order throughout) and the stored answers
         state = httpx.get(f"{server.url}/api/participants/{PID}", headers={"X-Participant-Secret": secret}).json()
         assert state["completed"] and state["n_answered"] == 8
-        admin = httpx.get(f"{server.url}/admin/participants/{PID}/schedule",
-                          headers={"Authorization": f"Bearer {server.admin_token}"}).json()["trials"]
+        admin = httpx.get(
+            f"{server.url}/admin/participants/{PID}/schedule", headers={"Authorization": f"Bearer {server.admin_token}"}
+        ).json()["trials"]
         assert [t["token"] for t in admin] == [t["token"] for t in state["trials"]]
         schedule = {t["trial_index"]: t["stimulus_id"] for t in admin}
 
@@ -213,8 +223,9 @@ def test_full_session_reload_and_server_crash(small_study):
     assert all(re.fullmatch(r"[0-9a-f]{32}\.mp4", v) for v in videos), videos
     posted = [json.loads(b) for u, b in requests if u.endswith("/responses") and b]
     quality = {"video_plays", "first_play_ms", "hidden_count", "hidden_ms", "fullscreen_exits"}
-    assert posted and all(set(b) - {"check"} == {"trial_index", "token", "answers", "rt_ms", "shown_at"} | quality
-                          for b in posted)
+    assert posted and all(
+        set(b) - {"check"} == {"trial_index", "token", "answers", "rt_ms", "shown_at"} | quality for b in posted
+    )
     assert all(b["video_plays"] >= 1 and b["first_play_ms"] > 500 for b in posted)
     assert {b["token"] for b in posted} == {t["token"] for t in admin}
 
@@ -222,8 +233,23 @@ def test_full_session_reload_and_server_crash(small_study):
     demo = tmp / "demographics.csv"
     import subprocess
     import sys
-    subprocess.run([sys.executable, "-m", "crowdstudy", "export", "--db", f"sqlite:///{db}", "--out", str(out),
-                    "--demographics", str(demo)], check=True, cwd=ROOT)
+
+    subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "crowdstudy",
+            "export",
+            "--db",
+            f"sqlite:///{db}",
+            "--out",
+            str(out),
+            "--demographics",
+            str(demo),
+        ],
+        check=True,
+        cwd=ROOT,
+    )
     rows = list(csv.DictReader(out.open()))
     assert len(rows) == 8
     assert [int(r["trial_index"]) for r in rows] == list(range(8))

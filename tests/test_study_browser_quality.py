@@ -6,10 +6,10 @@ import re
 import sqlite3
 
 import pytest
+from study_fixtures import CHROMIUM, CHROMIUM_ARGS, require_study_browser
 
 from crowdstudy.study.fake_stimuli import write_fake_stimuli
 from crowdstudy.study.local_server import LocalServer, write_small_design
-from study_fixtures import CHROMIUM, CHROMIUM_ARGS, require_study_browser
 
 pytestmark = [pytest.mark.browser, pytest.mark.slow]
 
@@ -22,12 +22,26 @@ def server(tmp_path_factory):
     tmp = tmp_path_factory.mktemp("study_quality")
     design = write_small_design(tmp / "small.toml")
     write_fake_stimuli(tmp / "stim", design, n_files=2, seconds=1.0)
-    (tmp / "online.toml").write_text('[online]\nmin_width = 1200\nmin_height = 700\nfullscreen = true\n'
-                                     'attention_checks = 0\n[online.codes]\nscreened_out = "SCREEN-7"\n'
-                                     'withdrawn = "WD-9"\n')
+    (tmp / "online.toml").write_text(
+        "[online]\nmin_width = 1200\nmin_height = 700\nfullscreen = true\n"
+        'attention_checks = 0\n[online.codes]\nscreened_out = "SCREEN-7"\n'
+        'withdrawn = "WD-9"\n'
+    )
     db = tmp / "q.db"
-    with LocalServer(["--stimuli", str(tmp / "stim"), "--design", str(design), "--db", f"sqlite:///{db}",
-                      "--online", str(tmp / "online.toml"), "--media-dir", str(tmp / "media")]) as srv:
+    with LocalServer(
+        [
+            "--stimuli",
+            str(tmp / "stim"),
+            "--design",
+            str(design),
+            "--db",
+            f"sqlite:///{db}",
+            "--online",
+            str(tmp / "online.toml"),
+            "--media-dir",
+            str(tmp / "media"),
+        ]
+    ) as srv:
         yield srv, db
 
 
@@ -79,8 +93,11 @@ def test_quality_controls_in_the_browser(server):
             assert "1000 x 600" in small.inner_text("#cs-target")
             small.click("button:has-text('I cannot')")
             small.wait_for_selector("text=SCREEN-7")
-            assert _one(db, "SELECT screened_out_at IS NOT NULL, consented_at, prolific_study_id, prolific_session_id "
-                            "FROM participants WHERE participant_id = 'Q_small'") == (1, None, "st1", "se1")
+            assert _one(
+                db,
+                "SELECT screened_out_at IS NOT NULL, consented_at, prolific_study_id, prolific_session_id "
+                "FROM participants WHERE participant_id = 'Q_small'",
+            ) == (1, None, "st1", "se1")
 
             # 2. two tabs of one participant; a tab switch during a trial is recorded with its answer
             ctx = browser.new_context(viewport={"width": 1280, "height": 800})
@@ -97,16 +114,23 @@ def test_quality_controls_in_the_browser(server):
             }""")
             _fill(a)
             a.click(".cs-next")
-            a.wait_for_function("() => document.querySelector('.cs-progress') && "
-                                "document.querySelector('.cs-progress').innerText.includes('video 2 of')")
-            assert _one(db, "SELECT hidden_count, video_plays >= 1 FROM responses WHERE participant_id = 'Q_tabs' "
-                            "AND trial_index = 0") == (1, 1)
+            a.wait_for_function(
+                "() => document.querySelector('.cs-progress') && "
+                "document.querySelector('.cs-progress').innerText.includes('video 2 of')"
+            )
+            assert _one(
+                db,
+                "SELECT hidden_count, video_plays >= 1 FROM responses WHERE participant_id = 'Q_tabs' "
+                "AND trial_index = 0",
+            ) == (1, 1)
             _fill(b, {**ANS, "Q1": 1})  # tab b still shows trial 0; a different answer
             b.click(".cs-next")
             b.wait_for_selector("#cs-warning:not([hidden])")
             assert "already been answered in another tab" in b.inner_text("#cs-warning")
-            b.wait_for_function("() => document.querySelector('.cs-progress') && "
-                                "document.querySelector('.cs-progress').innerText.includes('video 2 of')")
+            b.wait_for_function(
+                "() => document.querySelector('.cs-progress') && "
+                "document.querySelector('.cs-progress').innerText.includes('video 2 of')"
+            )
             assert _one(db, "SELECT COUNT(*), MIN(Q1) FROM answer_conflicts WHERE participant_id = 'Q_tabs'") == (1, 1)
             assert _one(db, "SELECT Q1 FROM responses WHERE participant_id = 'Q_tabs' AND trial_index = 0") == (4,)
 
@@ -128,16 +152,19 @@ def test_quality_controls_in_the_browser(server):
             _to_trials(w, f"{srv.url}/?participant=Q_leave")
             _fill(w)
             w.click(".cs-next")
-            w.wait_for_function("() => document.querySelector('.cs-progress') && "
-                                "document.querySelector('.cs-progress').innerText.includes('video 2 of')")
+            w.wait_for_function(
+                "() => document.querySelector('.cs-progress') && "
+                "document.querySelector('.cs-progress').innerText.includes('video 2 of')"
+            )
             assert _one(db, "SELECT COUNT(*) FROM responses WHERE participant_id = 'Q_leave'") == (2,)  # + practice
             w.click("#cs-withdraw")
             w.click("#cs-withdraw-yes")
             w.wait_for_selector("text=You have withdrawn")
             assert "WD-9" in w.inner_text("body")
             assert _one(db, "SELECT COUNT(*) FROM responses WHERE participant_id = 'Q_leave'") == (0,)
-            assert _one(db, "SELECT age, withdrawn_at IS NOT NULL FROM participants WHERE participant_id = 'Q_leave'"
-                        ) == (None, 1)
+            assert _one(
+                db, "SELECT age, withdrawn_at IS NOT NULL FROM participants WHERE participant_id = 'Q_leave'"
+            ) == (None, 1)
             w.reload()
             w.wait_for_selector("text=You have withdrawn from this study")
         finally:

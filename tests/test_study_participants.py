@@ -8,12 +8,12 @@ from pathlib import Path
 
 import pytest
 import sqlalchemy as sa
+from study_fixtures import ADMIN, ANS, answer, check_answer, make_client, register
 
 from crowdstudy.errors import InvalidInputError
 from crowdstudy.study.export import export_study
 from crowdstudy.study.fake_stimuli import write_fake_stimuli
 from crowdstudy.study.quality import load_online_config
-from study_fixtures import ADMIN, ANS, answer, check_answer, make_client, register
 
 pytestmark = [pytest.mark.filterwarnings("ignore:Using `httpx` with `starlette.testclient`")]
 ROOT = Path(__file__).resolve().parent.parent
@@ -54,6 +54,7 @@ def served(stim_dir, tmp_path):
 def _cli(capsys, *args):
     """`crowdstudy participants ARGS` in this process: (return code, stdout, stderr)."""
     from crowdstudy.cli import main
+
     capsys.readouterr()
     rc = main(["participants", *args])
     out = capsys.readouterr()
@@ -67,7 +68,10 @@ def test_prolific_ids_stored_and_completion_codes(served):
     people = {p["participant"]: p for p in api.get("/admin/participants.json", headers=ADMIN).json()["participants"]}
     me = people["5f0c1a2b3c4d5e6f7a8b9c0d"]
     assert (me["prolific_pid"], me["prolific_study_id"], me["prolific_session_id"]) == (
-        "5f0c1a2b3c4d5e6f7a8b9c0d", "study01", "sess_42")
+        "5f0c1a2b3c4d5e6f7a8b9c0d",
+        "study01",
+        "sess_42",
+    )
     for bad in ({"STUDY_ID": "a b"}, {"OTHER": "x"}, "nope", {"SESSION_ID": 5}):
         r = api.post("/api/participants", json={"participant_id": "P_badplat", "platform": bad})
         assert r.status_code == 400 and "platform" in r.json()["error"]
@@ -98,8 +102,9 @@ def test_participant_withdraws_everything_deleted_audit_kept(served, tmp_path):
     store = cfg.store
     with store.engine.connect() as conn:
         for table in (store.responses, store.conflicts, store.schedule_t):
-            n = conn.execute(sa.select(sa.func.count()).select_from(table).where(
-                table.c.participant_id == "P_out")).scalar_one()
+            n = conn.execute(
+                sa.select(sa.func.count()).select_from(table).where(table.c.participant_id == "P_out")
+            ).scalar_one()
             assert n == 0, table.name
     row = store.participant("P_out")
     assert row["age"] is None and row["gender"] is None and row["user_agent"] is None and row["withdrawn_at"]
@@ -108,7 +113,11 @@ def test_participant_withdraws_everything_deleted_audit_kept(served, tmp_path):
     audit = store.audit
     with store.engine.connect() as conn:
         lines = [dict(x._mapping) for x in conn.execute(sa.select(audit))]
-    assert len(lines) == 1 and lines[0]["participant_id"] == "P_out" and "deleted 4 answers, 1 practice answer(s), 1 refused" in lines[0]["detail"]
+    assert (
+        len(lines) == 1
+        and lines[0]["participant_id"] == "P_out"
+        and "deleted 4 answers, 1 practice answer(s), 1 refused" in lines[0]["detail"]
+    )
     assert "by participant" in lines[0]["detail"] and "Q1" not in lines[0]["detail"]
     # the export lists them as withdrawn, with no answers
     out = tmp_path / "out" / "responses.csv"
@@ -144,8 +153,13 @@ def test_participants_cli_list_and_withdraw(served, capsys):
     rc, _, err = _cli(capsys, "list", "--db", "sqlite:////nonexistent/x.db")
     assert rc == 2 and "does not exist" in err
     # the command itself, once as a subprocess
-    p = subprocess.run([sys.executable, "-m", "crowdstudy", "participants", "list", "--db", url], capture_output=True,
-                       text=True, cwd=ROOT, timeout=120)
+    p = subprocess.run(
+        [sys.executable, "-m", "crowdstudy", "participants", "list", "--db", url],
+        capture_output=True,
+        text=True,
+        cwd=ROOT,
+        timeout=120,
+    )
     assert p.returncode == 0 and "withdrawn" in p.stdout
 
 
@@ -160,15 +174,28 @@ def test_quality_record_attention_checks_and_exclusions(served, tmp_path):
     assert len({tuple(c[2]) for c in checks.values()}) > 1
     h, state, idx = checks["P_good"]
     t = state["trials"][idx[0]]
-    assert api.post("/api/participants/P_good/responses", headers=h, json={
-        "trial_index": 0, "token": state["trials"][0]["token"], "answers": ANS, "rt_ms": 5,
-        "check": 2} if idx[0] != 0 else {"trial_index": 0, "token": t["token"], "answers": ANS,
-                                         "rt_ms": 5}).status_code == 422  # check missing, or not expected
+    assert (
+        api.post(
+            "/api/participants/P_good/responses",
+            headers=h,
+            json={"trial_index": 0, "token": state["trials"][0]["token"], "answers": ANS, "rt_ms": 5, "check": 2}
+            if idx[0] != 0
+            else {"trial_index": 0, "token": t["token"], "answers": ANS, "rt_ms": 5},
+        ).status_code
+        == 422
+    )  # check missing, or not expected
     varied = [{f"Q{i}": (k + i) % 6 + 1 for i in range(1, 7)} for k in range(60)]
     for pid, (h, state, idx) in checks.items():
         for k, t in enumerate(state["trials"]):
-            kw = {"answers": varied[k], "rt": 5000.0, "video_plays": 1, "first_play_ms": 1000.0 + k,
-                  "hidden_count": 0, "hidden_ms": 0.0, "fullscreen_exits": 0}
+            kw = {
+                "answers": varied[k],
+                "rt": 5000.0,
+                "video_plays": 1,
+                "first_play_ms": 1000.0 + k,
+                "hidden_count": 0,
+                "hidden_ms": 0.0,
+                "fullscreen_exits": 0,
+            }
             if pid == "P_fast":
                 kw["rt"] = 300.0
             if pid == "P_flat":
@@ -187,13 +214,20 @@ def test_quality_record_attention_checks_and_exclusions(served, tmp_path):
     good = [r for r in rows if r["participant_id"] == "P_good"]
     assert good[3]["video_plays"] == "1" and float(good[3]["first_play_ms"]) == 1003.0
     assert sum(1 for r in good if r["check_value"]) == 3 and all(
-        r["check_answer"] == r["check_value"] for r in good if r["check_value"])
+        r["check_answer"] == r["check_value"] for r in good if r["check_value"]
+    )
     tabs = [r for r in rows if r["participant_id"] == "P_tabs"]
-    assert tabs[0]["hidden_count"] == "2" and float(tabs[0]["hidden_ms"]) == 15000.0 and tabs[0]["fullscreen_exits"] == "1"
+    assert (
+        tabs[0]["hidden_count"] == "2" and float(tabs[0]["hidden_ms"]) == 15000.0 and tabs[0]["fullscreen_exits"] == "1"
+    )
     people = {p["participant"]: p for p in csv.DictReader((tmp_path / "participants.csv").open())}
     assert {k: (v["excluded"], v["exclusion_reason"]) for k, v in people.items()} == {
-        "P_good": ("0", ""), "P_fast": ("1", "too_fast"), "P_flat": ("1", "straight_lining"),
-        "P_careless": ("1", "failed_attention_check"), "P_tabs": ("1", "tab_switching")}
+        "P_good": ("0", ""),
+        "P_fast": ("1", "too_fast"),
+        "P_flat": ("1", "straight_lining"),
+        "P_careless": ("1", "failed_attention_check"),
+        "P_tabs": ("1", "tab_switching"),
+    }
     assert summary["excluded"] == 4
     # the same database with rules off: nobody flagged
     relaxed = tmp_path / "relaxed.toml"
@@ -206,9 +240,13 @@ def test_online_config_validation(tmp_path):
     cfg = load_online_config()
     assert cfg.min_width == 1280 and cfg.min_height == 720 and cfg.attention_checks == 2
     bad = tmp_path / "bad.toml"
-    for text, fragment in (("[online]\nmin_width = -1\n", "min_width"), ("[online]\nspeed = 1\n", "unknown key"),
-                           ("[online.exclude]\nmax_straightline_fraction = 2\n", "max_straightline_fraction"),
-                           ("[online.codes]\nfinished = 'x'\n", "codes"), ("x = 1\n", "[online]")):
+    for text, fragment in (
+        ("[online]\nmin_width = -1\n", "min_width"),
+        ("[online]\nspeed = 1\n", "unknown key"),
+        ("[online.exclude]\nmax_straightline_fraction = 2\n", "max_straightline_fraction"),
+        ("[online.codes]\nfinished = 'x'\n", "codes"),
+        ("x = 1\n", "[online]"),
+    ):
         bad.write_text(text)
         with pytest.raises(InvalidInputError, match=fragment.replace("[", r"\[").replace("]", r"\]")):
             load_online_config(bad)

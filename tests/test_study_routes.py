@@ -16,8 +16,11 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from study_fixtures import ADMIN, answer, make_client, register  # noqa: E402
 
 pytestmark = [pytest.mark.filterwarnings("ignore:Using `httpx` with `starlette.testclient`")]
-TABLES = {routes_participant: routes_participant.ROUTES, routes_static: routes_static.ROUTES,
-          routes_admin: routes_admin.ROUTES}
+TABLES = {
+    routes_participant: routes_participant.ROUTES,
+    routes_static: routes_static.ROUTES,
+    routes_admin: routes_admin.ROUTES,
+}
 
 
 @pytest.fixture(scope="module")
@@ -34,13 +37,15 @@ def api(stim_dir, tmp_path):
 
 def test_the_app_serves_exactly_the_route_tables(api):
     from starlette.routing import Mount, Route
+
     listed = [(spec.path, method) for table in TABLES.values() for spec in table for method in spec.methods]
     assert len(listed) == len(set(listed)), "a (path, method) is listed twice"
     served = {(r.path, m) for r in api.app.routes if isinstance(r, Route) for m in r.methods if m != "HEAD"}
     assert served == set(listed)
     mounts = {r.path for r in api.app.routes if isinstance(r, Mount)}
-    assert mounts == {"/js", "/css", "/lib/jspsych/dist", "/lib/jspsych/css"} | \
-        {f"/lib/{p}" for p in routes_static.UI_PLUGINS}
+    assert mounts == {"/js", "/css", "/lib/jspsych/dist", "/lib/jspsych/css"} | {
+        f"/lib/{p}" for p in routes_static.UI_PLUGINS
+    }
 
 
 def test_handlers_are_module_level_coroutines_without_closures():
@@ -56,12 +61,12 @@ def test_metrics_count_every_answer_post_of_this_app(api, stim_dir, tmp_path):
     h, state = register(api, "P_lat")
     for t in state["trials"][:3]:
         assert answer(api, "P_lat", h, t).status_code == 201
-    assert answer(api, "P_lat", h, state["trials"][5]).status_code == 409     # timed too: a POST answered
-    assert api.get("/api/participants/P_lat/responses", headers=h).status_code == 200    # not an answer
+    assert answer(api, "P_lat", h, state["trials"][5]).status_code == 409  # timed too: a POST answered
+    assert api.get("/api/participants/P_lat/responses", headers=h).status_code == 200  # not an answer
     summary = api.get("/admin/metrics.json", headers=ADMIN).json()["server_answer_latency"]
     assert summary["answers_timed"] == 4 and summary["latency_ms_max"] >= summary["latency_ms_p50"] >= 0
     assert api.app.state.answer_latency.summary() == summary
-    other, cfg = make_client(stim_dir, f"sqlite:///{tmp_path / 'other.db'}")   # another process: its own log
+    other, cfg = make_client(stim_dir, f"sqlite:///{tmp_path / 'other.db'}")  # another process: its own log
     assert other.get("/admin/metrics.json", headers=ADMIN).json()["server_answer_latency"] == {"answers_timed": 0}
     cfg.store.close()
 
@@ -86,6 +91,7 @@ def test_withdrawals_drop_the_cached_schedule(api):
 def test_errors_raised_in_handlers_become_json(api, monkeypatch):
     def broken():
         raise InvalidInputError("design study.toml: items must be listed")
+
     monkeypatch.setattr(api.app.state.study, "scoring", broken)
     r = api.get("/admin/study.json", headers=ADMIN)
     assert r.status_code == 422 and r.json() == {"error": "design study.toml: items must be listed"}
@@ -109,11 +115,20 @@ def test_parse_registration_and_platform():
 def test_parse_timing_normalises_and_names_the_field():
     t = bodies.parse_timing({"rt_ms": 1500, "shown_at": "2026-01-08T10:00:00+01:00", "video_plays": 2})
     assert t.rt_ms == 1500.0 and t.shown_at == "2026-01-08T09:00:00.000+00:00"
-    assert t.quality == {"video_plays": 2, "hidden_count": None, "fullscreen_exits": None,
-                         "first_play_ms": None, "hidden_ms": None}
+    assert t.quality == {
+        "video_plays": 2,
+        "hidden_count": None,
+        "fullscreen_exits": None,
+        "first_play_ms": None,
+        "hidden_ms": None,
+    }
     assert bodies.parse_timing({"rt_ms": 1, "shown_at": "2026-01-08T09:00:00"}).shown_at.endswith("+00:00")
-    for body, field in [({"rt_ms": True}, "rt_ms"), ({"rt_ms": 1, "hidden_ms": -1}, "hidden_ms"),
-                        ({"rt_ms": 1, "video_plays": 1.5}, "video_plays"), ({"rt_ms": 1, "shown_at": 7}, "shown_at")]:
+    for body, field in [
+        ({"rt_ms": True}, "rt_ms"),
+        ({"rt_ms": 1, "hidden_ms": -1}, "hidden_ms"),
+        ({"rt_ms": 1, "video_plays": 1.5}, "video_plays"),
+        ({"rt_ms": 1, "shown_at": 7}, "shown_at"),
+    ]:
         with pytest.raises(ApiError) as e:
             bodies.parse_timing(body)
         assert e.value.status == 422 and e.value.message.startswith(field), body

@@ -27,8 +27,10 @@ ROOT = Path(__file__).resolve().parent.parent
 TOKEN = "test-admin-token-0123456789abcdef"
 ANS = {f"Q{i}": 3 for i in range(1, 7)}
 
-pytestmark = [pytest.mark.filterwarnings("ignore:Using `httpx` with `starlette.testclient`"),
-              pytest.mark.filterwarnings("ignore:Setting per-request cookies")]
+pytestmark = [
+    pytest.mark.filterwarnings("ignore:Using `httpx` with `starlette.testclient`"),
+    pytest.mark.filterwarnings("ignore:Setting per-request cookies"),
+]
 
 
 @pytest.fixture(scope="module")
@@ -38,8 +40,10 @@ def stim_dir(tmp_path_factory):
 
 def _client(stim_dir, db_url, **kwargs):
     from starlette.testclient import TestClient
+
     from crowdstudy.study.app import create_app
     from crowdstudy.study.server import build_config
+
     cfg = build_config(stim_dir, db=db_url, admin_token=TOKEN, **kwargs)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
@@ -61,6 +65,7 @@ def _register(api, pid="P001", *, ready=True):
 def check_answer(trial):
     """The point an attention-check trial's extra statement asks for (parsed from its text)."""
     import re
+
     return int(re.search(r"choose \((\d+)\)", trial["check"]["text"]).group(1))
 
 
@@ -150,6 +155,7 @@ def test_concurrent_resends_store_exactly_one_row(api):
 
     def send():
         codes.append(_answer(api, "P_conc", h, t0).status_code)
+
     threads = [threading.Thread(target=send) for _ in range(8)]
     for th in threads:
         th.start()
@@ -160,17 +166,20 @@ def test_concurrent_resends_store_exactly_one_row(api):
 
 
 # -- rejected input -----------------------------------------------------------------------
-@pytest.mark.parametrize("answers, fragment", [
-    ({**ANS, "Q1": 0}, "answers.Q1 must be an integer 1..6"),
-    ({**ANS, "Q2": 7}, "answers.Q2 must be an integer 1..6"),
-    ({**ANS, "Q3": 3.5}, "answers.Q3 must be an integer"),
-    ({**ANS, "Q4": "3"}, "answers.Q4 must be an integer"),
-    ({**ANS, "Q5": True}, "answers.Q5 must be an integer"),
-    ({**ANS, "Q6": None}, "answers.Q6 must be an integer"),
-    ({k: v for k, v in ANS.items() if k != "Q3"}, "answers.Q3 is missing"),
-    ({**ANS, "Q7": 2}, "unknown item 'Q7'"),
-    ([3, 3, 3, 3, 3, 3], "answers must be an object"),
-])
+@pytest.mark.parametrize(
+    "answers, fragment",
+    [
+        ({**ANS, "Q1": 0}, "answers.Q1 must be an integer 1..6"),
+        ({**ANS, "Q2": 7}, "answers.Q2 must be an integer 1..6"),
+        ({**ANS, "Q3": 3.5}, "answers.Q3 must be an integer"),
+        ({**ANS, "Q4": "3"}, "answers.Q4 must be an integer"),
+        ({**ANS, "Q5": True}, "answers.Q5 must be an integer"),
+        ({**ANS, "Q6": None}, "answers.Q6 must be an integer"),
+        ({k: v for k, v in ANS.items() if k != "Q3"}, "answers.Q3 is missing"),
+        ({**ANS, "Q7": 2}, "unknown item 'Q7'"),
+        ([3, 3, 3, 3, 3, 3], "answers must be an object"),
+    ],
+)
 def test_rejects_bad_answers(api, answers, fragment):
     h, state = _register(api, "P_bad")
     r = _answer(api, "P_bad", h, state["trials"][0], answers=answers)
@@ -178,22 +187,25 @@ def test_rejects_bad_answers(api, answers, fragment):
     assert api.get("/api/participants/P_bad/responses", headers=h).json()["responses"] == []
 
 
-@pytest.mark.parametrize("patch, fragment", [
-    ({"trial_index": -1}, "trial_index must be an integer 0..59"),
-    ({"trial_index": 60}, "trial_index must be an integer 0..59"),
-    ({"trial_index": "0"}, "trial_index must be an integer"),
-    ({"trial_index": 0.0}, "trial_index must be an integer"),
-    ({"token": "0123456789abcdef0123"}, "not in this participant's schedule"),
-    ({"token": "../../manifest.json"}, "token must be"),
-    ({"token": "x' OR '1'='1"}, "token must be"),
-    ({"token": "0123456789ABCDEF0123"}, "token must be"),
-    ({"token": None}, "token must be"),
-    ({"token": 12}, "token must be"),
-    ({"stimulus_id": "S1-D1-V1-Ours"}, "not a stimulus_id"),
-    ({"rt_ms": -5}, "rt_ms must be"),
-    ({"rt_ms": "fast"}, "rt_ms must be"),
-    ({"shown_at": "yesterday"}, "shown_at must be an ISO 8601"),
-])
+@pytest.mark.parametrize(
+    "patch, fragment",
+    [
+        ({"trial_index": -1}, "trial_index must be an integer 0..59"),
+        ({"trial_index": 60}, "trial_index must be an integer 0..59"),
+        ({"trial_index": "0"}, "trial_index must be an integer"),
+        ({"trial_index": 0.0}, "trial_index must be an integer"),
+        ({"token": "0123456789abcdef0123"}, "not in this participant's schedule"),
+        ({"token": "../../manifest.json"}, "token must be"),
+        ({"token": "x' OR '1'='1"}, "token must be"),
+        ({"token": "0123456789ABCDEF0123"}, "token must be"),
+        ({"token": None}, "token must be"),
+        ({"token": 12}, "token must be"),
+        ({"stimulus_id": "S1-D1-V1-Ours"}, "not a stimulus_id"),
+        ({"rt_ms": -5}, "rt_ms must be"),
+        ({"rt_ms": "fast"}, "rt_ms must be"),
+        ({"shown_at": "yesterday"}, "shown_at must be an ISO 8601"),
+    ],
+)
 def test_rejects_bad_trial_fields(api, patch, fragment):
     h, state = _register(api, "P_fields")
     t = state["trials"][0]
@@ -248,17 +260,21 @@ def test_flow_order_and_demographics_validation(api):
     r = api.post(f"/api/participants/{pid}/consent", json={"consent": "yes"}, headers=h)
     assert r.status_code == 422 and "consent must be true" in r.json()["error"]
     assert api.post(f"/api/participants/{pid}/consent", json={"consent": True}, headers=h).status_code == 200
-    for body, fragment in [({"age": 17, "gender": "male"}, "age must be an integer 18..120"),
-                           ({"age": 121, "gender": "male"}, "age must be"),
-                           ({"age": 30.5, "gender": "male"}, "age must be"),
-                           ({"age": "abc", "gender": "male"}, "age must be"),
-                           ({"age": True, "gender": "male"}, "age must be"),
-                           ({"age": 30, "gender": "robot"}, "gender must be one of"),
-                           ({"age": 30}, "gender must be one of")]:
+    for body, fragment in [
+        ({"age": 17, "gender": "male"}, "age must be an integer 18..120"),
+        ({"age": 121, "gender": "male"}, "age must be"),
+        ({"age": 30.5, "gender": "male"}, "age must be"),
+        ({"age": "abc", "gender": "male"}, "age must be"),
+        ({"age": True, "gender": "male"}, "age must be"),
+        ({"age": 30, "gender": "robot"}, "gender must be one of"),
+        ({"age": 30}, "gender must be one of"),
+    ]:
         r = api.post(f"/api/participants/{pid}/demographics", json=body, headers=h)
         assert r.status_code == 422 and fragment in r.json()["error"], body
-    assert api.post(f"/api/participants/{pid}/demographics", json={"age": "44", "gender": "female"},
-                    headers=h).status_code == 200
+    assert (
+        api.post(f"/api/participants/{pid}/demographics", json={"age": "44", "gender": "female"}, headers=h).status_code
+        == 200
+    )
     r = _answer(api, pid, h, state["trials"][0])
     assert r.status_code == 409 and "practice" in r.json()["error"]
 
@@ -272,6 +288,7 @@ def _condition_words(design):
 
 def _leaks(text: str, words) -> list[str]:
     import re
+
     return [w for w in words if re.search(rf"(?<![A-Za-z0-9]){re.escape(w)}(?![A-Za-z0-9])", text)]
 
 
@@ -301,17 +318,34 @@ def test_participant_facing_responses_never_reveal_the_condition(api):
         body["check"] = check_answer(trials[0])
     assert call("POST", f"/api/participants/{pid}/responses", json=body, headers=h).status_code == 201
     assert call("POST", f"/api/participants/{pid}/responses", json=body, headers=h).status_code == 200
-    assert call("POST", f"/api/participants/{pid}/responses", json={**body, "answers": {**ANS, "Q1": 1}},
-                headers=h).status_code == 409
-    for patch in ({"trial_index": 1}, {"trial_index": 2, "token": trials[2]["token"]},
-                  {"trial_index": 1, "token": trials[3]["token"]}, {"token": "0" * 20}, {"token": "bad"}):
+    assert (
+        call(
+            "POST", f"/api/participants/{pid}/responses", json={**body, "answers": {**ANS, "Q1": 1}}, headers=h
+        ).status_code
+        == 409
+    )
+    for patch in (
+        {"trial_index": 1},
+        {"trial_index": 2, "token": trials[2]["token"]},
+        {"trial_index": 1, "token": trials[3]["token"]},
+        {"token": "0" * 20},
+        {"token": "bad"},
+    ):
         assert call("POST", f"/api/participants/{pid}/responses", json={**body, **patch}, headers=h).status_code in (
-            409, 422)
+            409,
+            422,
+        )
     for t in trials[1:]:
         extra = {"check": check_answer(t)} if "check" in t else {}
-        assert call("POST", f"/api/participants/{pid}/responses", headers=h,
-                    json={"trial_index": t["trial_index"], "token": t["token"], "answers": ANS,
-                          "rt_ms": 100, **extra}).status_code == 201
+        assert (
+            call(
+                "POST",
+                f"/api/participants/{pid}/responses",
+                headers=h,
+                json={"trial_index": t["trial_index"], "token": t["token"], "answers": ANS, "rt_ms": 100, **extra},
+            ).status_code
+            == 201
+        )
     own = call("GET", f"/api/participants/{pid}/responses", headers=h).json()["responses"]
     assert [r["token"] for r in own] == [t["token"] for t in trials]
     call("GET", f"/api/participants/{pid}", headers=h)
@@ -342,8 +376,11 @@ def test_token_of_participant_a_is_rejected_for_b(api):
     # B sends A's token of B's own first stimulus, then A's token of A's first trial: both refused
     sid_b0 = b[0]["stimulus_id"]
     for token in (tok_a[sid_b0], sa_["trials"][0]["token"]):
-        r = api.post("/api/participants/P_tokB/responses", headers=hb,
-                     json={"trial_index": 0, "token": token, "answers": ANS, "rt_ms": 100})
+        r = api.post(
+            "/api/participants/P_tokB/responses",
+            headers=hb,
+            json={"trial_index": 0, "token": token, "answers": ANS, "rt_ms": 100},
+        )
         assert r.status_code == 422 and "not in this participant's schedule" in r.json()["error"]
     assert api.get("/api/participants/P_tokB/responses", headers=hb).json()["responses"] == []
     # a trial token is no video name
@@ -367,18 +404,33 @@ def test_admin_schedule_endpoint(api):
     for t in trials:
         s = by_id[t["stimulus_id"]]
         assert (t["stage"], t["scenario"], t["density_level"], t["viewpoint"], t["method"]) == (
-            s.stage, s.scenario, s.density_level, s.viewpoint, s.method)
+            s.stage,
+            s.scenario,
+            s.density_level,
+            s.viewpoint,
+            s.method,
+        )
         assert t["density"] == pytest.approx(s.density)
 
 
 def test_blinding_tokens():
     from crowdstudy.study.blinding import TOKEN_LENGTH, TOKEN_PATTERN, stimulus_token, token_table
+
     key = "k" * 64
     t = stimulus_token(key, "P1", "S1-D3-V2-Ours")
     assert TOKEN_PATTERN.fullmatch(t) and len(t) == TOKEN_LENGTH
     assert t == stimulus_token(key.encode(), "P1", "S1-D3-V2-Ours")
-    assert len({t, stimulus_token(key, "P2", "S1-D3-V2-Ours"), stimulus_token(key, "P1", "S1-D3-V2-Baseline"),
-                stimulus_token("j" * 64, "P1", "S1-D3-V2-Ours")}) == 4
+    assert (
+        len(
+            {
+                t,
+                stimulus_token(key, "P2", "S1-D3-V2-Ours"),
+                stimulus_token(key, "P1", "S1-D3-V2-Baseline"),
+                stimulus_token("j" * 64, "P1", "S1-D3-V2-Ours"),
+            }
+        )
+        == 4
+    )
     table = token_table(key, "P1", [s.stimulus_id for s in load_design().stimuli()])
     assert len(set(table.values())) == 60
     with pytest.raises(InvalidInputError, match="secret"):
@@ -407,8 +459,10 @@ def test_admin_resume_link_moves_the_session(api):
     h, state = _register(api, "P_move")
     _answer(api, "P_move", h, state["trials"][0])
     assert api.post("/admin/participants/P_move/resume-link").status_code == 401
-    assert api.post("/admin/participants/P_nobody/resume-link", headers={"Authorization": f"Bearer {TOKEN}"}
-                    ).status_code == 404
+    assert (
+        api.post("/admin/participants/P_nobody/resume-link", headers={"Authorization": f"Bearer {TOKEN}"}).status_code
+        == 404
+    )
     r = api.post("/admin/participants/P_move/resume-link", headers={"Authorization": f"Bearer {TOKEN}"})
     assert r.status_code == 200 and r.json()["url"].startswith("/?participant=P_move&resume=")
     new_secret = r.json()["url"].split("resume=")[1]
@@ -417,9 +471,19 @@ def test_admin_resume_link_moves_the_session(api):
     assert reg.status_code == 200 and reg.json()["state"]["next_trial_index"] == 1
 
 
-@pytest.mark.parametrize("path", ["/admin", "/admin/progress.json", "/admin/metrics.json", "/admin/study.json",
-                                  "/admin/participants.json", "/admin/export/responses.csv",
-                                  "/admin/export/demographics.csv", "/admin/export/participants.csv"])
+@pytest.mark.parametrize(
+    "path",
+    [
+        "/admin",
+        "/admin/progress.json",
+        "/admin/metrics.json",
+        "/admin/study.json",
+        "/admin/participants.json",
+        "/admin/export/responses.csv",
+        "/admin/export/demographics.csv",
+        "/admin/export/participants.csv",
+    ],
+)
 def test_admin_endpoints_need_the_token(api, path):
     assert api.get(path).status_code == 401
     assert api.get(path, headers={"Authorization": "Bearer wrong-token"}).status_code == 403
@@ -457,7 +521,7 @@ def test_admin_export_and_dashboard(api):
         _answer(api, "P_exp", h, t)
     text = api.get("/admin/export/responses.csv", headers=ADMIN).text
     rows = list(csv.DictReader(text.splitlines()))
-    assert list(rows[0])[:len(RESPONSE_COLUMNS)] == list(RESPONSE_COLUMNS) and len(rows) == 3
+    assert list(rows[0])[: len(RESPONSE_COLUMNS)] == list(RESPONSE_COLUMNS) and len(rows) == 3
     page = api.get("/admin", headers=ADMIN).text
     assert "P_exp" in page and "3 / 60" in page and "token=" not in page
     prog = api.get("/admin/progress.json", headers={"Authorization": f"Bearer {TOKEN}"}).json()
@@ -481,9 +545,18 @@ def test_videos_support_range_requests_and_never_paths(api, stim_dir):
     assert api.get(t["video_url"]).content == (stim_dir / rel).read_bytes()
     full = api.get(state["practice"]["video_url"])
     assert full.status_code == 200 and full.content[4:8] == b"ftyp"
-    for bad in ["/media/manifest.json", "/media/..%2Fmanifest.json", "/media/S1-D3-V2-Ours", f"/media/{sid}",
-                f"/media/{sid}.mp4", "/media/" + "0" * 32 + ".mp4", t["video_url"] + "x", "/media/practice",
-                "/videos/practice", f"/videos/P_video/{t['token']}"]:
+    for bad in [
+        "/media/manifest.json",
+        "/media/..%2Fmanifest.json",
+        "/media/S1-D3-V2-Ours",
+        f"/media/{sid}",
+        f"/media/{sid}.mp4",
+        "/media/" + "0" * 32 + ".mp4",
+        t["video_url"] + "x",
+        "/media/practice",
+        "/videos/practice",
+        f"/videos/P_video/{t['token']}",
+    ]:
         assert api.get(bad).status_code == 404, bad
     assert api.get("/lib/jspsych/dist/index.browser.min.js").status_code == 200
     assert api.get("/lib/jspsych/package.json").status_code == 404
@@ -534,13 +607,27 @@ def test_export_cli_and_errors(api, tmp_path):
     assert json.loads((tmp_path / "r.csv.provenance.json").read_text())["responses"] == 2
     demo = list(csv.DictReader((tmp_path / "d.csv").open()))
     assert demo[0]["participant_id"] == "P_cli" and demo[0]["age"] == "30"
-    p = subprocess.run([sys.executable, "-m", "crowdstudy", "export", "--db", f"sqlite:///{tmp_path}/none.db",
-                        "--out", str(tmp_path / "x.csv")], capture_output=True, text=True, cwd=ROOT)
+    p = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "crowdstudy",
+            "export",
+            "--db",
+            f"sqlite:///{tmp_path}/none.db",
+            "--out",
+            str(tmp_path / "x.csv"),
+        ],
+        capture_output=True,
+        text=True,
+        cwd=ROOT,
+    )
     assert p.returncode == 2 and "does not exist" in p.stderr
 
 
 def test_serve_config_errors(stim_dir, tmp_path):
     from crowdstudy.study.server import build_config
+
     with pytest.raises(InvalidInputError, match="--redirect-url"):
         build_config(stim_dir, db=f"sqlite:///{tmp_path}/a.db", redirect_url="javascript:alert(1)")
     with pytest.raises(InvalidInputError, match="--admin-token"):

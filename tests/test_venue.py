@@ -12,10 +12,9 @@ import numpy as np
 import pytest
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from render_fixtures import W, H, crowd_animation, grid_positions, mannequin_renderer  # noqa: E402
+from render_fixtures import H, W, crowd_animation, grid_positions, mannequin_renderer  # noqa: E402
 
 from crowdstudy.design import load_design  # noqa: E402
-
 
 
 @pytest.fixture(scope="module")
@@ -26,11 +25,13 @@ def design():
 @pytest.fixture(scope="module")
 def venue(design):
     from crowdstudy.render.scene import build_environment
+
     return build_environment("concert", design)
 
 
 def _figures(env):
     from crowdstudy.render.venue import PATTERN_FIGURE
+
     cut = env.cutaway
     first_rows = cut.indices[cut.first]
     return np.flatnonzero(cut.vertices[first_rows, 9] >= PATTERN_FIGURE)
@@ -39,13 +40,14 @@ def _figures(env):
 def test_audience_surrounds_the_area_and_keeps_out_of_it(design, venue):
     from crowdstudy.render.scene import build_environment
     from crowdstudy.render.venue import KEEP_OUT
+
     cut = venue.cutaway
     figs = _figures(venue)
     assert len(figs) > 200
     limit = np.array(venue.extent) / 2 + KEEP_OUT
     # no vertex of any figure, at any bob height, inside the area grown by KEEP_OUT
     for e in figs:
-        xy = cut.vertices[cut.indices[cut.first[e]:cut.first[e] + cut.count[e]], :2]
+        xy = cut.vertices[cut.indices[cut.first[e] : cut.first[e] + cut.count[e]], :2]
         assert not np.any(np.all(np.abs(xy) < limit, axis=1)), e
     centre = 0.5 * (cut.lo[figs] + cut.hi[figs])
     behind = centre[:, 1] < -limit[1]
@@ -55,8 +57,9 @@ def test_audience_surrounds_the_area_and_keeps_out_of_it(design, venue):
     again = build_environment("concert", design)
     assert again.cutaway.vertices.tobytes() == cut.vertices.tobytes()
     other = build_environment("concert", dataclasses.replace(design, seed=design.seed + 1))
-    assert other.cutaway.vertices.shape != cut.vertices.shape or \
-        other.cutaway.vertices.tobytes() != cut.vertices.tobytes()
+    assert (
+        other.cutaway.vertices.shape != cut.vertices.shape or other.cutaway.vertices.tobytes() != cut.vertices.tobytes()
+    )
 
 
 @pytest.mark.parametrize("view", ["V1", "V2", "V3", "V4"])
@@ -65,6 +68,7 @@ def test_cutaway_leaves_every_sight_line_to_the_crowd_free(design, venue, view):
     box (points the cutaway's own grid does not sample), yet most of the venue stays."""
     from crowdstudy.render.renderer import resolve_camera
     from crowdstudy.render.venue import occluding
+
     cam = resolve_camera(view, design, venue.extent, W / H)
     cut = venue.cutaway
     keep = ~occluding(cut, cam.eye, venue.extent)
@@ -75,7 +79,7 @@ def test_cutaway_leaves_every_sight_line_to_the_crowd_free(design, venue, view):
     eye = np.asarray(cam.eye)
     lo, hi = cut.lo[keep], cut.hi[keep]
     for s in np.linspace(0.0, 1.0, 200)[1:-1]:
-        p = eye + s * (pts - eye)                                     # (400, 3) points on the sight lines
+        p = eye + s * (pts - eye)  # (400, 3) points on the sight lines
         inside = np.all((p[:, None] >= lo[None]) & (p[:, None] <= hi[None]), axis=2)
         assert not inside.any(), f"{view}: a kept element stands between the camera and the crowd"
 
@@ -92,7 +96,7 @@ def test_venue_hides_no_character_and_fills_the_background(design, view):
                 if bare:  # the same scene without the venue's cut-away elements
                     r.set_cutaway([])
                 images[name, bare] = r.render(1).astype(int)
-    mask = np.abs(images["crowd", True] - images["empty", True]).sum(axis=2) > 30   # the characters' pixels
+    mask = np.abs(images["crowd", True] - images["empty", True]).sum(axis=2) > 30  # the characters' pixels
     for axis in (0, 1):  # ... less their anti-aliased edges, which blend with the background
         mask &= np.roll(mask, 1, axis) & np.roll(mask, -1, axis)
     assert mask.mean() > 0.02
@@ -104,20 +108,21 @@ def test_venue_hides_no_character_and_fills_the_background(design, view):
 
 
 def test_audience_bobs_on_the_beat(design):
-    anim = crowd_animation(grid_positions(4, margin=0.45), n_frames=16)   # 30 fps; 120 bpm: a beat is 15 frames
+    anim = crowd_animation(grid_positions(4, margin=0.45), n_frames=16)  # 30 fps; 120 bpm: a beat is 15 frames
     anim = anim.replace(root_translation=anim.root_translation + [0, 0, -50.0])
     with mannequin_renderer(anim, design, width=320, height=180) as r:
         r.set_view("V1")
         a, half, beat = (r.render(f).astype(int) for f in (0, 7, 15))
-    moved = np.abs(a - half).max(axis=2) > 8       # half a beat later the figures stand higher ...
+    moved = np.abs(a - half).max(axis=2) > 8  # half a beat later the figures stand higher ...
     assert moved.mean() > 0.01
-    assert np.abs(a - beat).max() <= 2             # ... and a whole beat later where they stood
+    assert np.abs(a - beat).max() <= 2  # ... and a whole beat later where they stood
 
 
 def _floor_view(design, width, height):
     """The bare hall floor (no crowd, no venue elements) from low above the stage, looking
     over the floor to the back wall 21 m away: the tiles shrink below a pixel there."""
     from crowdstudy.render.camera import free_camera
+
     anim = crowd_animation(np.array([[0.0, 0.0]]), n_frames=1)
     anim = anim.replace(root_translation=anim.root_translation + [0, 0, -50.0])
     with mannequin_renderer(anim, design, width=width, height=height, msaa=0, shadows=False) as r:
@@ -139,6 +144,7 @@ def test_floor_pattern_is_filtered_at_the_horizon(design):
 
 def test_video_is_bt709_and_tagged(tmp_path):
     from crowdstudy.render.video import VideoWriter, find_ffmpeg, probe_video
+
     w, h, rgb = 64, 48, (200, 39, 44)
     writer = VideoWriter(tmp_path / "red.mp4", w, h, 30, bottom_up=False)
     for _ in range(3):
@@ -147,11 +153,27 @@ def test_video_is_bt709_and_tagged(tmp_path):
     info = probe_video(tmp_path / "red.mp4")
     assert (info["color_space"], info["color_primaries"], info["color_transfer"]) == ("bt709",) * 3
     assert info["color_range"] == "tv"
-    raw = subprocess.run([find_ffmpeg(), "-loglevel", "error", "-i", str(tmp_path / "red.mp4"), "-frames:v", "1",
-                          "-f", "rawvideo", "-pix_fmt", "yuv420p", "pipe:1"], capture_output=True, check=True).stdout
-    y = np.frombuffer(raw[:w * h], np.uint8).mean()
-    u = np.frombuffer(raw[w * h:w * h * 5 // 4], np.uint8).mean()
-    v = np.frombuffer(raw[w * h * 5 // 4:], np.uint8).mean()
+    raw = subprocess.run(
+        [
+            find_ffmpeg(),
+            "-loglevel",
+            "error",
+            "-i",
+            str(tmp_path / "red.mp4"),
+            "-frames:v",
+            "1",
+            "-f",
+            "rawvideo",
+            "-pix_fmt",
+            "yuv420p",
+            "pipe:1",
+        ],
+        capture_output=True,
+        check=True,
+    ).stdout
+    y = np.frombuffer(raw[: w * h], np.uint8).mean()
+    u = np.frombuffer(raw[w * h : w * h * 5 // 4], np.uint8).mean()
+    v = np.frombuffer(raw[w * h * 5 // 4 :], np.uint8).mean()
     # a BT.709 limited-range decode (what a browser applies to HD video)
     kr, kb = 0.2126, 0.0722
     luma, cb, cr = (y - 16) / 219, (u - 128) / 224, (v - 128) / 224
@@ -163,6 +185,7 @@ def test_video_is_bt709_and_tagged(tmp_path):
 def test_frustum_culling_of_the_venue_keeps_the_picture(design):
     """The elements outside the camera's view are not submitted; the image is the same."""
     from crowdstudy.render.venue import visible_indices
+
     anim = crowd_animation(grid_positions(4, margin=0.45), n_frames=1)
     with mannequin_renderer(anim, design) as r:
         r.set_view("V4")

@@ -4,17 +4,19 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from test_metrics import animation, sphere_body
 
 from crowdstudy.errors import InvalidInputError
 from crowdstudy.metrics import summarize, wall_penetration
 
-from test_metrics import animation, sphere_body
-
 trimesh = pytest.importorskip("trimesh")
 
 R = 0.3
-CORRIDOR = {"scenario": "corridor", "periodic": {"axis": 0, "length": 4.5},
-            "obstacles": [[[-1.0, -1.0], [5.5, -1.0]], [[-1.0, 1.0], [5.5, 1.0]]]}
+CORRIDOR = {
+    "scenario": "corridor",
+    "periodic": {"axis": 0, "length": 4.5},
+    "obstacles": [[[-1.0, -1.0], [5.5, -1.0]], [[-1.0, 1.0], [5.5, 1.0]]],
+}
 
 
 @pytest.fixture(scope="module")
@@ -49,8 +51,9 @@ def test_a_wall_is_seen_from_the_side_the_root_stands_on(ball):
     body, _, bottom = ball
     # outside the corridor, beyond the y = 1 wall: clear of it at y = 1.5, 0.1 m through at 1.2
     anim = animation([[[0.5, 1.5, 1.0]], [[0.5, 1.2, 1.0]]], meta=CORRIDOR)
-    np.testing.assert_allclose(wall_penetration(anim, bodies=[body]).per_character[:, 0], [0.0, bottom - 0.2],
-                               atol=1e-9)
+    np.testing.assert_allclose(
+        wall_penetration(anim, bodies=[body]).per_character[:, 0], [0.0, bottom - 0.2], atol=1e-9
+    )
 
 
 def test_no_walls_and_bad_input(ball):

@@ -26,15 +26,22 @@ HERE = Path(__file__).resolve().parent
 
 
 def _grid(n, levels):
-    idx = pd.MultiIndex.from_product([[f"s{i + 1:02d}" for i in range(n)], *levels.values()],
-                                     names=["subject", *levels])
+    idx = pd.MultiIndex.from_product(
+        [[f"s{i + 1:02d}" for i in range(n)], *levels.values()], names=["subject", *levels]
+    )
     return idx.to_frame(index=False)
 
 
 def spherical(seed=11, n=20):
     rng = np.random.default_rng(seed)
-    df = _grid(n, {"Density": [f"D{i}" for i in range(1, 6)], "Viewpoint": [f"V{i}" for i in range(1, 5)],
-                   "Method": ["Baseline", "Ours"]})
+    df = _grid(
+        n,
+        {
+            "Density": [f"D{i}" for i in range(1, 6)],
+            "Viewpoint": [f"V{i}" for i in range(1, 5)],
+            "Method": ["Baseline", "Ours"],
+        },
+    )
     subj = dict(zip(df.subject.unique(), rng.normal(0, 1.0, n)))
     d = df.Density.str[1].astype(int).to_numpy()
     v = df.Viewpoint.str[1].astype(int).to_numpy()
@@ -46,8 +53,14 @@ def spherical(seed=11, n=20):
 
 def violated(seed=12, n=20):
     rng = np.random.default_rng(seed)
-    df = _grid(n, {"Density": [f"D{i}" for i in range(1, 6)], "Viewpoint": [f"V{i}" for i in range(1, 5)],
-                   "Method": ["Baseline", "Ours"]})
+    df = _grid(
+        n,
+        {
+            "Density": [f"D{i}" for i in range(1, 6)],
+            "Viewpoint": [f"V{i}" for i in range(1, 5)],
+            "Method": ["Baseline", "Ours"],
+        },
+    )
     subjects = df.subject.unique()
     slope = dict(zip(subjects, rng.normal(0, 0.8, n)))
     vslope = dict(zip(subjects, rng.normal(0, 0.6, n)))
@@ -55,9 +68,15 @@ def violated(seed=12, n=20):
     d = df.Density.str[1].astype(int).to_numpy()
     v = df.Viewpoint.str[1].astype(int).to_numpy()
     m = (df.Method == "Ours").to_numpy()
-    sd = 0.2 * d ** 1.5 * (1 + 0.5 * (v == 4))
-    y = (3.0 + df.subject.map(inter).to_numpy() + df.subject.map(slope).to_numpy() * d ** 2 / 5
-         + df.subject.map(vslope).to_numpy() * (v == 4) * d - 1.0 * d + m * (0.4 * d))
+    sd = 0.2 * d**1.5 * (1 + 0.5 * (v == 4))
+    y = (
+        3.0
+        + df.subject.map(inter).to_numpy()
+        + df.subject.map(slope).to_numpy() * d**2 / 5
+        + df.subject.map(vslope).to_numpy() * (v == 4) * d
+        - 1.0 * d
+        + m * (0.4 * d)
+    )
     df["y"] = y + rng.normal(0, 1, len(df)) * sd
     return df
 
@@ -68,8 +87,15 @@ def likert(seed=13, n=16):
 
     raw = simulate_responses(load_design(), n, seed=seed)
     raw = raw[raw.stage == 2]
-    out = pd.DataFrame({"subject": raw.participant_id, "Density": raw.density_level, "Viewpoint": raw.viewpoint,
-                        "Method": raw.method, "y": (raw.Q1 + 7 - raw.Q2) / 2.0})
+    out = pd.DataFrame(
+        {
+            "subject": raw.participant_id,
+            "Density": raw.density_level,
+            "Viewpoint": raw.viewpoint,
+            "Method": raw.method,
+            "y": (raw.Q1 + 7 - raw.Q2) / 2.0,
+        }
+    )
     return out.sort_values(["subject", "Density", "Viewpoint", "Method"]).reset_index(drop=True)
 
 
@@ -81,8 +107,12 @@ def incomplete(full: pd.DataFrame, seed=21, n_drop=32):
 
 def main():
     lik = likert()
-    for name, df in [("spherical_5x4x2", spherical()), ("violated_5x4x2", violated()), ("likert_5x2x2", lik),
-                     ("likert_incomplete_5x2x2", incomplete(lik))]:
+    for name, df in [
+        ("spherical_5x4x2", spherical()),
+        ("violated_5x4x2", violated()),
+        ("likert_5x2x2", lik),
+        ("likert_incomplete_5x2x2", incomplete(lik)),
+    ]:
         df.to_csv(HERE / f"{name}.csv", index=False, float_format="%.17g")
         print(name, df.shape)
 

@@ -7,7 +7,6 @@ from crowdstudy.body.capsules import Capsules, capsule_mesh_iou, posed_capsules
 from crowdstudy.body.loading import load_body
 from crowdstudy.body.model import Body, pose_bodies
 from crowdstudy.body.shapes import sample_bodies
-from crowdstudy.body.skinning import CrowdSkinner
 from crowdstudy.body.skeleton import (
     BVH_NAME_MAPS,
     DEFAULT_PELVIS_HEIGHT,
@@ -19,6 +18,7 @@ from crowdstudy.body.skeleton import (
     forward_kinematics,
     joint_index,
 )
+from crowdstudy.body.skinning import CrowdSkinner
 
 __all__ = [
     "BVH_NAME_MAPS",

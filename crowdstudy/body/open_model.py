@@ -50,9 +50,9 @@ OPEN_SHAPE_NAMES = ("build", "proportion")
 TEMPLATE_HEIGHTS = {"male": 1.710, "female": 1.595}
 
 _GRID_STEP = 0.016  # marching-cubes cell, metres at the template's scale
-_SMOOTH_K = 0.011    # exponential smooth-union radius, metres
+_SMOOTH_K = 0.011  # exponential smooth-union radius, metres
 _WEIGHT_TAU = 0.012  # skinning-weight falloff, metres
-_WEIGHT_MIN = 0.02   # smallest skinning weight kept
+_WEIGHT_MIN = 0.02  # smallest skinning weight kept
 _TEMPLATE_BUILD = {"male": 0.8, "female": 1.6}  # build of the template in primitive units
 
 
@@ -95,6 +95,7 @@ class OpenModel:
 
 # --------------------------------------------------------------------------- the skeleton
 
+
 def _template_joints(sex: str) -> np.ndarray:
     """Template joints (24, 3), m, at the reference scale (scaled to the stature later)."""
     j = np.array(DEFAULT_REST_JOINTS, dtype=np.float64)
@@ -114,8 +115,7 @@ def _mirror(prims):
     for kind, bone, params in prims:
         out.append((kind, bone, params))
         name = _NAMES[bone]
-        off_centre = any(np.asarray(params[k], dtype=np.float64)[0] < -1e-9 for k in ("a", "b", "c")
-                         if k in params)
+        off_centre = any(np.asarray(params[k], dtype=np.float64)[0] < -1e-9 for k in ("a", "b", "c") if k in params)
         if name.startswith("left_") or off_centre:
             other = JOINT_INDEX["right_" + name[5:]] if name.startswith("left_") else bone
             flipped = {}
@@ -146,35 +146,59 @@ def _primitives(sex: str, j: np.ndarray):
         ("ellipsoid", 6, dict(c=(0, 0.002, 0.25), r=(0.142 if f else 0.16, 0.102, 0.16))),
         ("ellipsoid", 9, dict(c=(0, -0.005, 0.37), r=(0.155 if f else 0.175, 0.108, 0.15))),
         # neck and head
-        ("cone", 12, dict(a=J["neck"] + (0, 0, -0.03), b=J["head"] + (0, -0.01, 0.0),
-                          ra=0.052 * limb, rb=0.047 * limb)),
+        (
+            "cone",
+            12,
+            dict(a=J["neck"] + (0, 0, -0.03), b=J["head"] + (0, -0.01, 0.0), ra=0.052 * limb, rb=0.047 * limb),
+        ),
         ("ellipsoid", 15, dict(c=J["head"] + (0, 0.012, 0.08), r=(0.073, 0.093, 0.107))),
         ("ellipsoid", 15, dict(c=J["head"] + (0, 0.04, 0.02), r=(0.055, 0.062, 0.05))),
         ("ellipsoid", 15, dict(c=J["head"] + (0, 0.108, 0.065), r=(0.012, 0.018, 0.026))),
         # shoulder girdle, arms, hands
-        ("cone", 13, dict(a=J["left_collar"] + (0.02, 0, -0.005), b=J["left_shoulder"],
-                          ra=0.062 * limb, rb=0.055 * limb)),
-        ("ellipsoid", 16, dict(c=J["left_shoulder"] + (-0.025, 0.0, -0.005),
-                               r=(0.07, 0.055 * limb, 0.055 * limb))),
+        (
+            "cone",
+            13,
+            dict(a=J["left_collar"] + (0.02, 0, -0.005), b=J["left_shoulder"], ra=0.062 * limb, rb=0.055 * limb),
+        ),
+        ("ellipsoid", 16, dict(c=J["left_shoulder"] + (-0.025, 0.0, -0.005), r=(0.07, 0.055 * limb, 0.055 * limb))),
         ("cone", 16, dict(a=J["left_shoulder"], b=J["left_elbow"], ra=0.05 * limb, rb=0.039 * limb)),
         ("cone", 18, dict(a=J["left_elbow"], b=J["left_wrist"], ra=0.04 * limb, rb=0.027 * limb)),
-        ("ellipsoid", 20, dict(c=(J["left_wrist"] + J["left_hand"]) / 2 + (-0.005, 0, -0.002),
-                               r=(0.06, 0.043 * limb, 0.02))),
+        (
+            "ellipsoid",
+            20,
+            dict(c=(J["left_wrist"] + J["left_hand"]) / 2 + (-0.005, 0, -0.002), r=(0.06, 0.043 * limb, 0.02)),
+        ),
         ("ellipsoid", 22, dict(c=J["left_hand"] + (-0.05, 0.0, -0.006), r=(0.06, 0.04 * limb, 0.0145))),
-        ("ellipsoid", 20, dict(c=J["left_wrist"] + (-0.04, 0.045 * limb, -0.006),
-                               r=(0.045, 0.015, 0.014))),
+        ("ellipsoid", 20, dict(c=J["left_wrist"] + (-0.04, 0.045 * limb, -0.006), r=(0.045, 0.015, 0.014))),
         # legs and feet
-        ("cone", 1, dict(a=J["left_hip"] + (0, 0, 0.0), b=J["left_knee"],
-                         ra=0.088 * (1.04 if f else 1.0), rb=0.055 * limb)),
+        (
+            "cone",
+            1,
+            dict(a=J["left_hip"] + (0, 0, 0.0), b=J["left_knee"], ra=0.088 * (1.04 if f else 1.0), rb=0.055 * limb),
+        ),
         ("cone", 4, dict(a=J["left_knee"], b=J["left_ankle"], ra=0.053 * limb, rb=0.034 * limb)),
-        ("ellipsoid", 4, dict(c=J["left_knee"] + 0.33 * (J["left_ankle"] - J["left_knee"]) + (0, -0.018, 0),
-                              r=(0.05 * limb, 0.055 * limb, 0.12))),
-        ("ellipsoid", 7, dict(c=(J["left_ankle"][0] * 0.95 + J["left_foot"][0] * 0.05,
-                                 J["left_ankle"][1] + 0.035, sole + 0.036),
-                              r=(0.042 * limb, 0.105 * limb, 0.037))),
+        (
+            "ellipsoid",
+            4,
+            dict(
+                c=J["left_knee"] + 0.33 * (J["left_ankle"] - J["left_knee"]) + (0, -0.018, 0),
+                r=(0.05 * limb, 0.055 * limb, 0.12),
+            ),
+        ),
+        (
+            "ellipsoid",
+            7,
+            dict(
+                c=(J["left_ankle"][0] * 0.95 + J["left_foot"][0] * 0.05, J["left_ankle"][1] + 0.035, sole + 0.036),
+                r=(0.042 * limb, 0.105 * limb, 0.037),
+            ),
+        ),
         ("ellipsoid", 7, dict(c=J["left_ankle"] + (0, -0.012, -0.01), r=(0.036 * limb, 0.042, 0.05))),
-        ("ellipsoid", 10, dict(c=(J["left_foot"][0], J["left_foot"][1] + 0.035, sole + 0.021),
-                               r=(0.044 * limb, 0.055 * limb, 0.022))),
+        (
+            "ellipsoid",
+            10,
+            dict(c=(J["left_foot"][0], J["left_foot"][1] + 0.035, sole + 0.021), r=(0.044 * limb, 0.055 * limb, 0.022)),
+        ),
     ]
     if f:
         prims.append(("ellipsoid", 9, dict(c=(-0.058, 0.07, 0.355), r=(0.058, 0.05, 0.055))))
@@ -182,6 +206,7 @@ def _primitives(sex: str, j: np.ndarray):
 
 
 # --------------------------------------------------------------------------- the field
+
 
 def _prim_distance(kind: str, params: dict, p: np.ndarray) -> np.ndarray:
     """Approximate signed distance (m) of points p (P, 3) to one primitive (exact zero set)."""
@@ -216,23 +241,32 @@ def body_field(prims, p: np.ndarray, k: float = _SMOOTH_K) -> np.ndarray:
 
 # --------------------------------------------------------------------------- generation
 
+
 def _mesh(prims, step: float):
     try:
         from skimage.measure import marching_cubes
     except ImportError:  # pragma: no cover - scikit-image is a core dependency
         raise MissingDependencyError(
-            "generating the open body model needs scikit-image: pip install scikit-image") from None
+            "generating the open body model needs scikit-image: pip install scikit-image"
+        ) from None
     import trimesh
 
     half = np.ceil(0.95 / step) + 0.5  # x samples mirror about x = 0: a symmetric mesh
     lo = np.array([-half * step, -0.25, -1.05])
     hi = np.array([half * step, 0.30, 0.85])
-    axes = [np.linspace(lo[0], hi[0], int(round(2 * half)) + 1)] + \
-        [np.arange(lo[i], hi[i] + step, step) for i in (1, 2)]
+    axes = [np.linspace(lo[0], hi[0], int(round(2 * half)) + 1)] + [
+        np.arange(lo[i], hi[i] + step, step) for i in (1, 2)
+    ]
     grid = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
     field = body_field(prims, grid).reshape(len(axes[0]), len(axes[1]), len(axes[2]))
-    if field[0].min() <= 0 or field[-1].min() <= 0 or field[:, 0].min() <= 0 or field[:, -1].min() <= 0 \
-            or field[:, :, 0].min() <= 0 or field[:, :, -1].min() <= 0:
+    if (
+        field[0].min() <= 0
+        or field[-1].min() <= 0
+        or field[:, 0].min() <= 0
+        or field[:, -1].min() <= 0
+        or field[:, :, 0].min() <= 0
+        or field[:, :, -1].min() <= 0
+    ):
         raise RuntimeError("open body model: the implicit body reaches the meshing box")
     verts, faces, _n, _v = marching_cubes(field, level=0.0, spacing=(step, step, step))
     verts += lo
@@ -302,8 +336,16 @@ def _shape_directions(sex: str, verts, joints, weights):
     gain = np.full(NUM_JOINTS, 0.07)
     gain[list(_TORSO)] = 0.10
     gain[[JOINT_INDEX["head"], JOINT_INDEX["neck"]]] = 0.04
-    for name in ("left_hand", "right_hand", "left_wrist", "right_wrist", "left_foot", "right_foot",
-                 "left_ankle", "right_ankle"):
+    for name in (
+        "left_hand",
+        "right_hand",
+        "left_wrist",
+        "right_wrist",
+        "left_foot",
+        "right_foot",
+        "left_ankle",
+        "right_ankle",
+    ):
         gain[JOINT_INDEX[name]] = 0.02
     build = np.einsum("vb,vbi->vi", w * gain, off)
     front = np.clip(verts[:, 1], 0.0, None)[:, None] * np.array([0.0, 1.0, 0.0])
@@ -356,9 +398,16 @@ def generate_open_model(sex: str, step: float = _GRID_STEP) -> OpenModel:
     joints = joints + _TEMPLATE_BUILD[sex] * jdirs[:, :, 0]
     height = float(verts[:, 2].max() - verts[:, 2].min())
     scale = TEMPLATE_HEIGHTS[sex] / height
-    return OpenModel(sex=sex, v_template=verts * scale, shapedirs=shapedirs * scale,
-                     j_template=joints * scale, joint_shapedirs=jdirs * scale, faces=faces,
-                     weights=weights, template_height=TEMPLATE_HEIGHTS[sex])
+    return OpenModel(
+        sex=sex,
+        v_template=verts * scale,
+        shapedirs=shapedirs * scale,
+        j_template=joints * scale,
+        joint_shapedirs=jdirs * scale,
+        faces=faces,
+        weights=weights,
+        template_height=TEMPLATE_HEIGHTS[sex],
+    )
 
 
 _FIELDS = ("v_template", "shapedirs", "j_template", "joint_shapedirs", "faces", "weights")
@@ -375,17 +424,21 @@ def open_model(sex: str) -> OpenModel:
             with np.load(path) as data:
                 arrays = {k: data[k] for k in _FIELDS}
                 height = float(data["template_height"])
-            return OpenModel(sex=sex, template_height=height,
-                             **{k: (v.astype(np.float64) if v.dtype == np.float32 and k != "weights"
-                                    else v) for k, v in arrays.items()})
+            return OpenModel(
+                sex=sex,
+                template_height=height,
+                **{
+                    k: (v.astype(np.float64) if v.dtype == np.float32 and k != "weights" else v)
+                    for k, v in arrays.items()
+                },
+            )
         except (OSError, KeyError, ValueError):
             pass  # a damaged cache file is regenerated
     model = generate_open_model(sex)
     try:  # an unwritable cache only costs the regeneration next time
         path.parent.mkdir(parents=True, exist_ok=True)
         tmp = path.with_suffix(f".{os.getpid()}.tmp.npz")
-        np.savez_compressed(tmp, template_height=model.template_height,
-                            **{k: getattr(model, k) for k in _FIELDS})
+        np.savez_compressed(tmp, template_height=model.template_height, **{k: getattr(model, k) for k in _FIELDS})
         os.replace(tmp, path)
     except OSError:
         pass

@@ -65,10 +65,10 @@ def axis_angle_to_matrix(rotvec: np.ndarray) -> np.ndarray:
     flat = v.reshape(-1, 3)
     out = np.empty((flat.shape[0], 3, 3))
     for s in range(0, flat.shape[0], _BLOCK):
-        block = np.ascontiguousarray(flat[s:s + _BLOCK].T)
+        block = np.ascontiguousarray(flat[s : s + _BLOCK].T)
         rows = np.empty((3, 3, block.shape[1]))
         rodrigues_rows(block[0], block[1], block[2], rows)
-        out[s:s + _BLOCK] = rows.transpose(2, 0, 1)
+        out[s : s + _BLOCK] = rows.transpose(2, 0, 1)
     return out.reshape(v.shape[:-1] + (3, 3))
 
 
@@ -122,20 +122,28 @@ def matrix_to_quaternion(matrix: np.ndarray) -> np.ndarray:
         r = m[sel]
         if case == 0:
             s = np.sqrt(1.0 + tr[sel]) * 2.0
-            q[sel] = np.stack([(r[:, 2, 1] - r[:, 1, 2]) / s, (r[:, 0, 2] - r[:, 2, 0]) / s,
-                               (r[:, 1, 0] - r[:, 0, 1]) / s, 0.25 * s], axis=1)
+            q[sel] = np.stack(
+                [(r[:, 2, 1] - r[:, 1, 2]) / s, (r[:, 0, 2] - r[:, 2, 0]) / s, (r[:, 1, 0] - r[:, 0, 1]) / s, 0.25 * s],
+                axis=1,
+            )
         elif case == 1:
             s = np.sqrt(1.0 + r[:, 0, 0] - r[:, 1, 1] - r[:, 2, 2]) * 2.0
-            q[sel] = np.stack([0.25 * s, (r[:, 0, 1] + r[:, 1, 0]) / s,
-                               (r[:, 0, 2] + r[:, 2, 0]) / s, (r[:, 2, 1] - r[:, 1, 2]) / s], axis=1)
+            q[sel] = np.stack(
+                [0.25 * s, (r[:, 0, 1] + r[:, 1, 0]) / s, (r[:, 0, 2] + r[:, 2, 0]) / s, (r[:, 2, 1] - r[:, 1, 2]) / s],
+                axis=1,
+            )
         elif case == 2:
             s = np.sqrt(1.0 + r[:, 1, 1] - r[:, 0, 0] - r[:, 2, 2]) * 2.0
-            q[sel] = np.stack([(r[:, 0, 1] + r[:, 1, 0]) / s, 0.25 * s,
-                               (r[:, 1, 2] + r[:, 2, 1]) / s, (r[:, 0, 2] - r[:, 2, 0]) / s], axis=1)
+            q[sel] = np.stack(
+                [(r[:, 0, 1] + r[:, 1, 0]) / s, 0.25 * s, (r[:, 1, 2] + r[:, 2, 1]) / s, (r[:, 0, 2] - r[:, 2, 0]) / s],
+                axis=1,
+            )
         else:
             s = np.sqrt(1.0 + r[:, 2, 2] - r[:, 0, 0] - r[:, 1, 1]) * 2.0
-            q[sel] = np.stack([(r[:, 0, 2] + r[:, 2, 0]) / s, (r[:, 1, 2] + r[:, 2, 1]) / s,
-                               0.25 * s, (r[:, 1, 0] - r[:, 0, 1]) / s], axis=1)
+            q[sel] = np.stack(
+                [(r[:, 0, 2] + r[:, 2, 0]) / s, (r[:, 1, 2] + r[:, 2, 1]) / s, 0.25 * s, (r[:, 1, 0] - r[:, 0, 1]) / s],
+                axis=1,
+            )
     q /= np.linalg.norm(q, axis=1, keepdims=True)
     q[q[:, 3] < 0] *= -1.0
     return q.reshape(batch + (4,))
@@ -169,7 +177,7 @@ def axis_angle_to_quaternion(rotvec: np.ndarray) -> np.ndarray:
     flat = v.reshape(-1, 3)
     out = np.empty((flat.shape[0], 4))
     for s in range(0, flat.shape[0], _BLOCK):
-        x, y, z = np.ascontiguousarray(flat[s:s + _BLOCK].T)
+        x, y, z = np.ascontiguousarray(flat[s : s + _BLOCK].T)
         angle = np.sqrt(x * x + y * y + z * z)
         half = 0.5 * angle
         # sin(half)/angle with its Taylor expansion near zero
@@ -183,7 +191,7 @@ def axis_angle_to_quaternion(rotvec: np.ndarray) -> np.ndarray:
         np.multiply(y, scale, out=rows[1])
         np.multiply(z, scale, out=rows[2])
         np.cos(half, out=rows[3])
-        out[s:s + _BLOCK] = rows.T
+        out[s : s + _BLOCK] = rows.T
     return out.reshape(v.shape[:-1] + (4,))
 
 
@@ -194,7 +202,7 @@ def quaternion_to_axis_angle(quat: np.ndarray) -> np.ndarray:
     vec = np.where(q[..., 3:4] < 0.0, -q[..., :3], q[..., :3])
     w = np.abs(q[..., 3:4])
     sin_half = np.sqrt(np.einsum("...c,...c->...", vec, vec))[..., None]
-    angle = 2.0 * np.arctan2(sin_half, w)     # scale-free: no normalisation needed
+    angle = 2.0 * np.arctan2(sin_half, w)  # scale-free: no normalisation needed
     small = sin_half < 1e-12
     scale = np.where(small, 2.0 / np.maximum(w, 1e-12), angle / np.where(small, 1.0, sin_half))
     return vec * scale
@@ -221,6 +229,7 @@ def rotation_between(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 
 # -- elementary rotations -------------------------------------------------------------
+
 
 def _rot(axis: int, angle: np.ndarray) -> np.ndarray:
     """(...,) radians -> (..., 3, 3) rotation about coordinate axis ``axis`` (0 x, 1 y, 2 z)."""
@@ -261,14 +270,20 @@ def yaw_roll_pitch(yaw: np.ndarray, roll: np.ndarray, pitch: np.ndarray) -> np.n
 
 # -- quaternion algebra ---------------------------------------------------------------
 
+
 def quat_multiply(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Hamilton product ``a * b`` of (..., 4) quaternions (rotation b first, then a)."""
     ax, ay, az, aw = np.moveaxis(np.asarray(a, dtype=np.float64), -1, 0)
     bx, by, bz, bw = np.moveaxis(np.asarray(b, dtype=np.float64), -1, 0)
-    return np.stack([aw * bx + ax * bw + ay * bz - az * by,
-                     aw * by - ax * bz + ay * bw + az * bx,
-                     aw * bz + ax * by - ay * bx + az * bw,
-                     aw * bw - ax * bx - ay * by - az * bz], axis=-1)
+    return np.stack(
+        [
+            aw * bx + ax * bw + ay * bz - az * by,
+            aw * by - ax * bz + ay * bw + az * bx,
+            aw * bz + ax * by - ay * bx + az * bw,
+            aw * bw - ax * bx - ay * by - az * bz,
+        ],
+        axis=-1,
+    )
 
 
 def quat_conjugate(q: np.ndarray) -> np.ndarray:

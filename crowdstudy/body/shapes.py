@@ -34,8 +34,9 @@ MODELS = ("makehuman", "open", "smpl")
 AGE_RANGE = (18.0, 70.0)
 
 
-def sample_bodies(n: int, seed, *, model: str = "makehuman", height_stats: dict | None = None,
-                  smpl_path: str | dict | None = None) -> list[dict]:
+def sample_bodies(
+    n: int, seed, *, model: str = "makehuman", height_stats: dict | None = None, smpl_path: str | dict | None = None
+) -> list[dict]:
     """N body records, half female and half male (the odd one out is female), in a
     seeded random order.
 
@@ -64,7 +65,8 @@ def sample_bodies(n: int, seed, *, model: str = "makehuman", height_stats: dict 
         for sex, val in height_stats.items():
             if sex not in stats or len(val) != 2 or not (0.5 < float(val[0]) < 2.5 and 0 <= float(val[1]) < 0.5):
                 raise InvalidInputError(
-                    f"height_stats[{sex!r}]: expected (mean, sd) in metres for 'male'/'female', got {val!r}")
+                    f"height_stats[{sex!r}]: expected (mean, sd) in metres for 'male'/'female', got {val!r}"
+                )
             stats[sex] = (float(val[0]), float(val[1]))
     rng = seed if isinstance(seed, np.random.Generator) else np.random.default_rng(seed)
     sexes = np.array(["female"] * ((n + 1) // 2) + ["male"] * (n // 2))
@@ -81,15 +83,19 @@ def sample_bodies(n: int, seed, *, model: str = "makehuman", height_stats: dict 
         sex = str(sexes[i])
         mean, sd = stats[sex]
         height = round(float(mean + sd * z[i]), 4)
-        rec = {"model": model, "sex": sex, "height": height,
-               "shape": [round(float(s), 4) for s in shape[i]]}
+        rec = {"model": model, "sex": sex, "height": height, "shape": [round(float(s), 4) for s in shape[i]]}
         if model == "makehuman":
             weight = 0.5 + 0.13 * shape[i][0] + 0.08 * extra[i, 0] + 0.05 * max(0.0, (age[i] - 30.0) / 10.0)
-            rec = {"model": "makehuman", "sex": sex, "height": height, "age": round(float(age[i]), 1),
-                   "weight": round(float(np.clip(weight, 0.15, 0.85)), 4),
-                   "muscle": round(float(np.clip(0.5 + 0.08 * shape[i][0] + 0.12 * extra[i, 1], 0.15, 0.85)), 4),
-                   "proportions": round(float(np.clip(0.5 + 0.1 * extra[i, 2], 0.2, 0.8)), 4),
-                   "race": [round(float(r), 4) for r in race[i]]}
+            rec = {
+                "model": "makehuman",
+                "sex": sex,
+                "height": height,
+                "age": round(float(age[i]), 1),
+                "weight": round(float(np.clip(weight, 0.15, 0.85)), 4),
+                "muscle": round(float(np.clip(0.5 + 0.08 * shape[i][0] + 0.12 * extra[i, 1], 0.15, 0.85)), 4),
+                "proportions": round(float(np.clip(0.5 + 0.1 * extra[i, 2], 0.2, 0.8)), 4),
+                "race": [round(float(r), 4) for r in race[i]],
+            }
         if model == "smpl":
             from crowdstudy.body.smpl import betas_for_height, smpl_model
 

@@ -39,38 +39,89 @@ __all__ = [
 ]
 
 JOINT_NAMES: tuple[str, ...] = (
-    "pelvis", "left_hip", "right_hip", "spine1", "left_knee", "right_knee", "spine2",
-    "left_ankle", "right_ankle", "spine3", "left_foot", "right_foot", "neck",
-    "left_collar", "right_collar", "head", "left_shoulder", "right_shoulder",
-    "left_elbow", "right_elbow", "left_wrist", "right_wrist", "left_hand", "right_hand",
+    "pelvis",
+    "left_hip",
+    "right_hip",
+    "spine1",
+    "left_knee",
+    "right_knee",
+    "spine2",
+    "left_ankle",
+    "right_ankle",
+    "spine3",
+    "left_foot",
+    "right_foot",
+    "neck",
+    "left_collar",
+    "right_collar",
+    "head",
+    "left_shoulder",
+    "right_shoulder",
+    "left_elbow",
+    "right_elbow",
+    "left_wrist",
+    "right_wrist",
+    "left_hand",
+    "right_hand",
 )
 PARENTS: np.ndarray = np.array(
-    [-1, 0, 0, 0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 9, 9, 12, 13, 14, 16, 17, 18, 19, 20, 21],
-    dtype=np.int64)
+    [-1, 0, 0, 0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 9, 9, 12, 13, 14, 16, 17, 18, 19, 20, 21], dtype=np.int64
+)
 NUM_JOINTS = len(JOINT_NAMES)
 JOINT_INDEX: dict[str, int] = {name: i for i, name in enumerate(JOINT_NAMES)}
-ARM_JOINTS: tuple[str, ...] = ("left_collar", "right_collar", "left_shoulder", "right_shoulder", "left_elbow",
-                               "right_elbow", "left_wrist", "right_wrist", "left_hand", "right_hand")
-LEG_JOINTS: tuple[str, ...] = ("left_hip", "right_hip", "left_knee", "right_knee", "left_ankle", "right_ankle",
-                               "left_foot", "right_foot")
+ARM_JOINTS: tuple[str, ...] = (
+    "left_collar",
+    "right_collar",
+    "left_shoulder",
+    "right_shoulder",
+    "left_elbow",
+    "right_elbow",
+    "left_wrist",
+    "right_wrist",
+    "left_hand",
+    "right_hand",
+)
+LEG_JOINTS: tuple[str, ...] = (
+    "left_hip",
+    "right_hip",
+    "left_knee",
+    "right_knee",
+    "left_ankle",
+    "right_ankle",
+    "left_foot",
+    "right_foot",
+)
 TRUNK_JOINTS: tuple[str, ...] = ("pelvis", "spine1", "spine2", "spine3", "neck", "head")
 #: the tree split into three parts (each joint in exactly one), for reports of where a
 #: correction moves a character: ``(name, joint names)``
-BODY_PARTS: tuple[tuple[str, tuple[str, ...]], ...] = (("legs", LEG_JOINTS), ("trunk", TRUNK_JOINTS),
-                                                       ("arms", ARM_JOINTS))
+BODY_PARTS: tuple[tuple[str, tuple[str, ...]], ...] = (
+    ("legs", LEG_JOINTS),
+    ("trunk", TRUNK_JOINTS),
+    ("arms", ARM_JOINTS),
+)
 
 # An average adult (about 1.70 m) in the T-pose, metres, relative to the pelvis. Only a
 # default for shape-independent work (clip authoring, tests): body models provide the rest
 # joints of each shape.
 _HALF = {  # left-side joints; the right side mirrors x
-    "left_hip": (-0.060, -0.010, -0.090), "left_knee": (-0.105, -0.005, -0.475),
-    "left_ankle": (-0.088, -0.040, -0.880), "left_foot": (-0.115, 0.080, -0.935),
-    "left_collar": (-0.075, -0.020, 0.440), "left_shoulder": (-0.165, -0.025, 0.485),
-    "left_elbow": (-0.420, -0.045, 0.475), "left_wrist": (-0.675, -0.050, 0.475),
+    "left_hip": (-0.060, -0.010, -0.090),
+    "left_knee": (-0.105, -0.005, -0.475),
+    "left_ankle": (-0.088, -0.040, -0.880),
+    "left_foot": (-0.115, 0.080, -0.935),
+    "left_collar": (-0.075, -0.020, 0.440),
+    "left_shoulder": (-0.165, -0.025, 0.485),
+    "left_elbow": (-0.420, -0.045, 0.475),
+    "left_wrist": (-0.675, -0.050, 0.475),
     "left_hand": (-0.760, -0.055, 0.470),
 }
-_MID = {"pelvis": (0.0, 0.0, 0.0), "spine1": (0.0, -0.020, 0.115), "spine2": (0.0, -0.005, 0.255),
-        "spine3": (0.0, 0.000, 0.315), "neck": (0.0, -0.020, 0.525), "head": (0.0, 0.020, 0.615)}
+_MID = {
+    "pelvis": (0.0, 0.0, 0.0),
+    "spine1": (0.0, -0.020, 0.115),
+    "spine2": (0.0, -0.005, 0.255),
+    "spine3": (0.0, 0.000, 0.315),
+    "neck": (0.0, -0.020, 0.525),
+    "head": (0.0, 0.020, 0.615),
+}
 
 
 def _default_rest() -> np.ndarray:
@@ -94,8 +145,7 @@ def joint_index(name: str) -> int:
     try:
         return JOINT_INDEX[name]
     except KeyError:
-        raise InvalidInputError(
-            f"unknown joint name {name!r}; expected one of {', '.join(JOINT_NAMES)}") from None
+        raise InvalidInputError(f"unknown joint name {name!r}; expected one of {', '.join(JOINT_NAMES)}") from None
 
 
 def children(parents: np.ndarray = PARENTS) -> list[list[int]]:
@@ -108,8 +158,9 @@ def children(parents: np.ndarray = PARENTS) -> list[list[int]]:
 
 
 #: Joint index -> its mirror image (left <-> right), for :func:`mirror_pose`.
-MIRROR_JOINTS: np.ndarray = np.array([JOINT_INDEX[n.replace("left_", "#").replace("right_", "left_").replace("#", "right_")]
-                                      for n in JOINT_NAMES])
+MIRROR_JOINTS: np.ndarray = np.array(
+    [JOINT_INDEX[n.replace("left_", "#").replace("right_", "left_").replace("#", "right_")] for n in JOINT_NAMES]
+)
 
 
 def mirror_pose(quat: np.ndarray, root: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -124,9 +175,14 @@ def mirror_pose(quat: np.ndarray, root: np.ndarray) -> tuple[np.ndarray, np.ndar
     return q, r
 
 
-def forward_kinematics(rest_joints: np.ndarray, joint_rotations: np.ndarray,
-                       root_translation: np.ndarray, parents: np.ndarray = PARENTS,
-                       *, rotations_are_matrices: bool = False) -> tuple[np.ndarray, np.ndarray]:
+def forward_kinematics(
+    rest_joints: np.ndarray,
+    joint_rotations: np.ndarray,
+    root_translation: np.ndarray,
+    parents: np.ndarray = PARENTS,
+    *,
+    rotations_are_matrices: bool = False,
+) -> tuple[np.ndarray, np.ndarray]:
     """Global joint rotations and positions.
 
     Args:
@@ -165,7 +221,7 @@ def forward_kinematics(rest_joints: np.ndarray, joint_rotations: np.ndarray,
     lead = batch[0] if batch else 1
     per_row = int(np.prod(batch[1:], dtype=np.int64)) if len(batch) > 1 else 1
     rows = max(1, _FK_BLOCK // max(per_row, 1))
-    full_rot = np.broadcast_to(rot, batch + rot.shape[len(rot_batch):])
+    full_rot = np.broadcast_to(rot, batch + rot.shape[len(rot_batch) :])
     full_off = np.broadcast_to(offsets, batch + (n_j, 3))
     full_root = np.broadcast_to(root, batch + (3,))
     flat_glob = glob.reshape(-1, n_j, 3, 3)
@@ -173,12 +229,13 @@ def forward_kinematics(rest_joints: np.ndarray, joint_rotations: np.ndarray,
     for r0 in range(0, lead, rows):
         r1 = min(lead, r0 + rows)
         pick = (slice(r0, r1),) if batch else ()
-        block_rot = full_rot[pick].reshape((-1,) + rot.shape[len(rot_batch):])
+        block_rot = full_rot[pick].reshape((-1,) + rot.shape[len(rot_batch) :])
         m0, m1 = r0 * per_row, r1 * per_row if batch else 1
         block_off, block_root = full_off[pick].reshape(-1, n_j, 3), full_root[pick].reshape(-1, 3)
         if m1 - m0 <= _FK_FEW:
-            _fk_few(block_rot, block_off, block_root, parents, rotations_are_matrices, flat_glob[m0:m1],
-                    flat_pos[m0:m1])
+            _fk_few(
+                block_rot, block_off, block_root, parents, rotations_are_matrices, flat_glob[m0:m1], flat_pos[m0:m1]
+            )
             continue
         g, p = _fk_block(block_rot, block_off, block_root, parents, rotations_are_matrices)
         flat_glob[m0:m1] = g.transpose(3, 0, 1, 2)
@@ -195,8 +252,15 @@ _FK_BLOCK = 4096
 _FK_FEW = 16
 
 
-def _fk_few(rot: np.ndarray, offsets: np.ndarray, root: np.ndarray, parents: np.ndarray, matrices: bool,
-            glob: np.ndarray, pos: np.ndarray) -> None:
+def _fk_few(
+    rot: np.ndarray,
+    offsets: np.ndarray,
+    root: np.ndarray,
+    parents: np.ndarray,
+    matrices: bool,
+    glob: np.ndarray,
+    pos: np.ndarray,
+) -> None:
     """Forward kinematics of a few poses into ``glob`` (M, J, 3, 3) and ``pos`` (M, J, 3)
     (arguments as :func:`_fk_block`)."""
     if matrices:
@@ -214,8 +278,9 @@ def _fk_few(rot: np.ndarray, offsets: np.ndarray, root: np.ndarray, parents: np.
         pos[:, j] = (gp * offsets[:, j, None, :]).sum(axis=2) + pos[:, p]
 
 
-def _fk_block(rot: np.ndarray, offsets: np.ndarray, root: np.ndarray, parents: np.ndarray,
-              matrices: bool) -> tuple[np.ndarray, np.ndarray]:
+def _fk_block(
+    rot: np.ndarray, offsets: np.ndarray, root: np.ndarray, parents: np.ndarray, matrices: bool
+) -> tuple[np.ndarray, np.ndarray]:
     """Forward kinematics of M poses, component-major: rot (M, J, 3) axis-angle or (M, J, 3, 3),
     offsets (M, J, 3) from each joint's parent at rest, root (M, 3) -> ``(glob (J, 3, 3, M),
     pos (J, 3, M))``."""
@@ -224,9 +289,9 @@ def _fk_block(rot: np.ndarray, offsets: np.ndarray, root: np.ndarray, parents: n
     if matrices:
         local = np.ascontiguousarray(rot.transpose(1, 2, 3, 0))
     else:
-        comp = np.ascontiguousarray(rot.transpose(2, 1, 0))                 # (3, J, M)
+        comp = np.ascontiguousarray(rot.transpose(2, 1, 0))  # (3, J, M)
         local = rodrigues_rows(comp[0], comp[1], comp[2], np.empty((3, 3, n_j, m))).transpose(2, 0, 1, 3)
-    off = np.ascontiguousarray(offsets.transpose(1, 2, 0))                    # (J, 3, M)
+    off = np.ascontiguousarray(offsets.transpose(1, 2, 0))  # (J, 3, M)
     glob = np.empty((n_j, 3, 3, m))
     pos = np.empty((n_j, 3, m))
     glob[0] = local[0]
@@ -256,12 +321,28 @@ def _fk_block(rot: np.ndarray, offsets: np.ndarray, root: np.ndarray, parents: n
 # map (CMU's LHipJoint/RHipJoint/Neck1/finger and thumb joints, Mixamo's *_End and finger
 # joints) have no counterpart: a retargeter folds their rotation into the nearest mapped
 # joint (the parent for a fixed offset, the mapped child for an intermediate one).
-_CMU_SIDE = {"UpLeg": "hip", "Leg": "knee", "Foot": "ankle", "ToeBase": "foot",
-             "Shoulder": "collar", "Arm": "shoulder", "ForeArm": "elbow", "Hand": "wrist",
-             "FingerBase": "hand"}
-_MIXAMO_SIDE = {"UpLeg": "hip", "Leg": "knee", "Foot": "ankle", "ToeBase": "foot",
-                "Shoulder": "collar", "Arm": "shoulder", "ForeArm": "elbow", "Hand": "wrist",
-                "HandMiddle1": "hand"}
+_CMU_SIDE = {
+    "UpLeg": "hip",
+    "Leg": "knee",
+    "Foot": "ankle",
+    "ToeBase": "foot",
+    "Shoulder": "collar",
+    "Arm": "shoulder",
+    "ForeArm": "elbow",
+    "Hand": "wrist",
+    "FingerBase": "hand",
+}
+_MIXAMO_SIDE = {
+    "UpLeg": "hip",
+    "Leg": "knee",
+    "Foot": "ankle",
+    "ToeBase": "foot",
+    "Shoulder": "collar",
+    "Arm": "shoulder",
+    "ForeArm": "elbow",
+    "Hand": "wrist",
+    "HandMiddle1": "hand",
+}
 
 
 def _side_map(table: dict[str, str], prefix: str = "") -> dict[str, str]:
@@ -277,16 +358,45 @@ def _side_map(table: dict[str, str], prefix: str = "") -> dict[str, str]:
 #: Left/Right chains. Mixamo: the same names with the ``mixamorig:`` prefix (Spine, Spine1,
 #: Spine2 for our spine1..3; the middle finger's first joint stands for ``*_hand``).
 BVH_NAME_MAPS: dict[str, dict[str, str]] = {
-    "cmu": {"Hips": "pelvis", "LowerBack": "spine1", "Spine": "spine2", "Spine1": "spine3",
-            "Neck": "neck", "Head": "head", **_side_map(_CMU_SIDE)},
-    "daz": {"hip": "pelvis", "abdomen": "spine1", "chest": "spine2", "neck": "neck", "head": "head",
-            **{f"{c}{bvh}": f"{side}_{ours}" for c, side in (("l", "left"), ("r", "right"))
-               for bvh, ours in {"Thigh": "hip", "Shin": "knee", "Foot": "ankle", "Collar": "collar",
-                                 "Shldr": "shoulder", "ForeArm": "elbow", "Hand": "wrist", "Mid1": "hand"}.items()}},
-    "mixamo": {"mixamorig:Hips": "pelvis", "mixamorig:Spine": "spine1",
-               "mixamorig:Spine1": "spine2", "mixamorig:Spine2": "spine3",
-               "mixamorig:Neck": "neck", "mixamorig:Head": "head",
-               **_side_map(_MIXAMO_SIDE, "mixamorig:")},
+    "cmu": {
+        "Hips": "pelvis",
+        "LowerBack": "spine1",
+        "Spine": "spine2",
+        "Spine1": "spine3",
+        "Neck": "neck",
+        "Head": "head",
+        **_side_map(_CMU_SIDE),
+    },
+    "daz": {
+        "hip": "pelvis",
+        "abdomen": "spine1",
+        "chest": "spine2",
+        "neck": "neck",
+        "head": "head",
+        **{
+            f"{c}{bvh}": f"{side}_{ours}"
+            for c, side in (("l", "left"), ("r", "right"))
+            for bvh, ours in {
+                "Thigh": "hip",
+                "Shin": "knee",
+                "Foot": "ankle",
+                "Collar": "collar",
+                "Shldr": "shoulder",
+                "ForeArm": "elbow",
+                "Hand": "wrist",
+                "Mid1": "hand",
+            }.items()
+        },
+    },
+    "mixamo": {
+        "mixamorig:Hips": "pelvis",
+        "mixamorig:Spine": "spine1",
+        "mixamorig:Spine1": "spine2",
+        "mixamorig:Spine2": "spine3",
+        "mixamorig:Neck": "neck",
+        "mixamorig:Head": "head",
+        **_side_map(_MIXAMO_SIDE, "mixamorig:"),
+    },
 }
 #: Joints a naming lacks, derived from the ones it has: ``{convention: {joint: (anchor BVH
 #: joint, end BVH joint or None for the anchor's end site, fraction)}}``. A derived joint
@@ -296,8 +406,7 @@ BVH_NAME_MAPS: dict[str, dict[str, str]] = {
 #: lShldr, lForeArm, lHand`` and fingers) has two spine joints and no toes: ``spine3`` sits
 #: halfway up the chest, the toe joint at the foot's end site.
 BVH_DERIVED_JOINTS: dict[str, dict[str, tuple[str, str | None, float]]] = {
-    "daz": {"spine3": ("chest", "neck", 0.5), "left_foot": ("lFoot", None, 1.0),
-            "right_foot": ("rFoot", None, 1.0)},
+    "daz": {"spine3": ("chest", "neck", 0.5), "left_foot": ("lFoot", None, 1.0), "right_foot": ("rFoot", None, 1.0)},
 }
 __all__ += ["BVH_NAME_MAPS", "BVH_DERIVED_JOINTS", "bvh_name_map", "bvh_convention"]
 
@@ -332,7 +441,8 @@ def bvh_name_map(bvh_joint_names, convention: str | None = None) -> dict[str, st
     names = list(bvh_joint_names)
     if convention is not None and convention not in BVH_NAME_MAPS:
         raise InvalidInputError(
-            f"convention: unknown BVH naming {convention!r}; expected one of {sorted(BVH_NAME_MAPS)}")
+            f"convention: unknown BVH naming {convention!r}; expected one of {sorted(BVH_NAME_MAPS)}"
+        )
 
     def strip(name: str) -> str:
         return "mixamorig:" + name.split(":", 1)[1] if ":" in name else name
@@ -351,11 +461,14 @@ def bvh_name_map(bvh_joint_names, convention: str | None = None) -> dict[str, st
     convs = [convention] if convention else list(BVH_NAME_MAPS)
     conv = max(convs, key=lambda c: len(candidates(c)))
     best = candidates(conv)
-    derived = {j for j, (anchor, end, _) in BVH_DERIVED_JOINTS.get(conv, {}).items()
-               if anchor in names and (end is None or end in names)}
+    derived = {
+        j
+        for j, (anchor, end, _) in BVH_DERIVED_JOINTS.get(conv, {}).items()
+        if anchor in names and (end is None or end in names)
+    }
     missing = sorted(set(JOINT_NAMES) - set(best.values()) - derived)
     if missing:
         raise InvalidInputError(
-            f"BVH joint names: no counterpart for joints {', '.join(missing)} "
-            f"(conventions tried: {', '.join(convs)})")
+            f"BVH joint names: no counterpart for joints {', '.join(missing)} (conventions tried: {', '.join(convs)})"
+        )
     return best

@@ -56,10 +56,15 @@ def warp_kernels():
     wp = get_warp()
 
     @wp.kernel(enable_backward=False)
-    def forward_kinematics_kernel(rotvec: wp.array2d(dtype=wp.vec3), root: wp.array(dtype=wp.vec3),
-                                  rest: wp.array2d(dtype=wp.vec3), parents: wp.array(dtype=wp.int32),
-                                  glob: wp.array2d(dtype=wp.mat33), pos: wp.array2d(dtype=wp.vec3),
-                                  skin_trans: wp.array2d(dtype=wp.vec3)):
+    def forward_kinematics_kernel(
+        rotvec: wp.array2d(dtype=wp.vec3),
+        root: wp.array(dtype=wp.vec3),
+        rest: wp.array2d(dtype=wp.vec3),
+        parents: wp.array(dtype=wp.int32),
+        glob: wp.array2d(dtype=wp.mat33),
+        pos: wp.array2d(dtype=wp.vec3),
+        skin_trans: wp.array2d(dtype=wp.vec3),
+    ):
         n = wp.tid()
         for j in range(parents.shape[0]):
             rv = rotvec[n, j]
@@ -78,10 +83,15 @@ def warp_kernels():
             skin_trans[n, j] = x - g * rest[n, j]
 
     @wp.kernel(enable_backward=False)
-    def skin_segments_kernel(seg: wp.array2d(dtype=wp.int32), rest: wp.array(dtype=wp.vec3),
-                             weights: wp.array2d(dtype=wp.float32), perm: wp.array(dtype=wp.int32),
-                             rot: wp.array2d(dtype=wp.mat33), trans: wp.array2d(dtype=wp.vec3),
-                             out: wp.array(dtype=wp.vec3)):
+    def skin_segments_kernel(
+        seg: wp.array2d(dtype=wp.int32),
+        rest: wp.array(dtype=wp.vec3),
+        weights: wp.array2d(dtype=wp.float32),
+        perm: wp.array(dtype=wp.int32),
+        rot: wp.array2d(dtype=wp.mat33),
+        trans: wp.array2d(dtype=wp.vec3),
+        out: wp.array(dtype=wp.vec3),
+    ):
         # one thread per segment: a run of one body's vertices sharing one set of joints
         s = wp.tid()
         b = seg[s, 0]
@@ -110,8 +120,9 @@ def warp_kernels():
             for i in range(count):
                 p = rest[v0 + i]
                 q = w0 + i
-                out[base + perm[q]] = (weights[q, 0] * (r0 * p + t0) + weights[q, 1] * (r1 * p + t1)
-                                       + weights[q, 2] * (r2 * p + t2))
+                out[base + perm[q]] = (
+                    weights[q, 0] * (r0 * p + t0) + weights[q, 1] * (r1 * p + t1) + weights[q, 2] * (r2 * p + t2)
+                )
         else:
             r1 = rot[b, seg[s, 7]]
             t1 = trans[b, seg[s, 7]]
@@ -122,14 +133,24 @@ def warp_kernels():
             for i in range(count):
                 p = rest[v0 + i]
                 q = w0 + i
-                out[base + perm[q]] = (weights[q, 0] * (r0 * p + t0) + weights[q, 1] * (r1 * p + t1)
-                                       + weights[q, 2] * (r2 * p + t2) + weights[q, 3] * (r3 * p + t3))
+                out[base + perm[q]] = (
+                    weights[q, 0] * (r0 * p + t0)
+                    + weights[q, 1] * (r1 * p + t1)
+                    + weights[q, 2] * (r2 * p + t2)
+                    + weights[q, 3] * (r3 * p + t3)
+                )
 
     @wp.kernel(enable_backward=False)
-    def skin_vertices_kernel(seg: wp.array2d(dtype=wp.int32), seg_of: wp.array(dtype=wp.int32),
-                             rest: wp.array(dtype=wp.vec3), weights: wp.array2d(dtype=wp.float32),
-                             perm: wp.array(dtype=wp.int32), rot: wp.array2d(dtype=wp.mat33),
-                             trans: wp.array2d(dtype=wp.vec3), out: wp.array(dtype=wp.vec3)):
+    def skin_vertices_kernel(
+        seg: wp.array2d(dtype=wp.int32),
+        seg_of: wp.array(dtype=wp.int32),
+        rest: wp.array(dtype=wp.vec3),
+        weights: wp.array2d(dtype=wp.float32),
+        perm: wp.array(dtype=wp.int32),
+        rot: wp.array2d(dtype=wp.mat33),
+        trans: wp.array2d(dtype=wp.vec3),
+        out: wp.array(dtype=wp.vec3),
+    ):
         # one thread per (sorted) vertex, for GPUs
         v = wp.tid()
         s = seg_of[v]
@@ -192,8 +213,10 @@ def _sorted_template(body) -> tuple[np.ndarray, np.ndarray, list[tuple[int, int,
     change = np.r_[True, np.any(joints[1:] != joints[:-1], axis=1)]
     starts = np.flatnonzero(change)
     ends = np.r_[starts[1:], len(perm)]
-    runs = [(int(s), int(e - s), int(nk[s]), tuple(int(j) if j < NUM_JOINTS else 0 for j in joints[s]))
-            for s, e in zip(starts, ends)]
+    runs = [
+        (int(s), int(e - s), int(nk[s]), tuple(int(j) if j < NUM_JOINTS else 0 for j in joints[s]))
+        for s, e in zip(starts, ends)
+    ]
     return perm.astype(np.int32), np.ascontiguousarray(weights), runs
 
 
@@ -214,8 +237,7 @@ class CrowdSkinner:
         faces: (F_total, 3) int32 faces indexing the concatenated vertex buffer.
     """
 
-    def __init__(self, bodies, device: str | None = None, *, threads: int = 1,
-                 schedule: str | None = None):
+    def __init__(self, bodies, device: str | None = None, *, threads: int = 1, schedule: str | None = None):
         from crowdstudy.warp_runtime import resolve_device
 
         if len(bodies) == 0:
@@ -234,8 +256,9 @@ class CrowdSkinner:
         self.n = len(bodies)
         counts = np.array([b.n_vertices for b in bodies], dtype=np.int64)
         self.offsets = np.r_[0, np.cumsum(counts)]
-        self.faces = np.concatenate([np.asarray(b.faces, dtype=np.int64) + o
-                                     for b, o in zip(bodies, self.offsets[:-1])]).astype(np.int32)
+        self.faces = np.concatenate(
+            [np.asarray(b.faces, dtype=np.int64) + o for b, o in zip(bodies, self.offsets[:-1])]
+        ).astype(np.int32)
 
         # per template: sorted order, weights, runs; per body: segments over its rest copy
         template_of, reps = _template_groups(bodies)
@@ -249,7 +272,7 @@ class CrowdSkinner:
             t = template_of[i]
             t_perm, _, runs = sorted_templates[t]
             base = int(self.offsets[i])
-            rest_sorted[base:base + len(t_perm)] = b.rest_vertices[t_perm]
+            rest_sorted[base : base + len(t_perm)] = b.rest_vertices[t_perm]
             for start, count, nk, joints in runs:
                 rows.append((i, base + start, int(weight_start[t]) + start, count, nk, base, *joints))
         seg = np.array(rows, dtype=np.int32).reshape(-1, _SEG_COLUMNS)
@@ -260,8 +283,7 @@ class CrowdSkinner:
         self._rest = wp.array(rest_sorted, dtype=wp.vec3, device=dev)
         self._weights = wp.array(weights, dtype=wp.float32, device=dev)
         self._perm = wp.array(perm, dtype=wp.int32, device=dev)
-        self._rest_j = wp.array(np.stack([b.rest_joints for b in bodies]).astype(np.float32), dtype=wp.vec3,
-                                device=dev)
+        self._rest_j = wp.array(np.stack([b.rest_joints for b in bodies]).astype(np.float32), dtype=wp.vec3, device=dev)
         self._parents = wp.array(PARENTS.astype(np.int32), dtype=wp.int32, device=dev)
         shape = (self.n, NUM_JOINTS)
         self._glob = wp.zeros(shape, dtype=wp.mat33, device=dev)
@@ -272,21 +294,34 @@ class CrowdSkinner:
         self._root = wp.zeros(self.n, dtype=wp.vec3, device=dev)
 
         # recorded launches (no per-frame argument packing)
-        self._fk_cmd = wp.launch(self._fk, dim=self.n, device=dev, record_cmd=True,
-                                 inputs=[self._rotvec, self._root, self._rest_j, self._parents,
-                                         self._glob, self._pos, self._skin_trans])
+        self._fk_cmd = wp.launch(
+            self._fk,
+            dim=self.n,
+            device=dev,
+            record_cmd=True,
+            inputs=[self._rotvec, self._root, self._rest_j, self._parents, self._glob, self._pos, self._skin_trans],
+        )
         skin_args = [self._rest, self._weights, self._perm, self._glob, self._skin_trans, self._out]
         if schedule == "vertices":
             seg_of = np.repeat(np.arange(len(seg), dtype=np.int32), seg[:, _SEG_COUNT])
             self._seg_of = wp.array(seg_of, dtype=wp.int32, device=dev)
-            self._skin_cmds = [wp.launch(self._skin_vertices, dim=self.n_vertices, device=dev, record_cmd=True,
-                                         inputs=[self._seg, self._seg_of, *skin_args])]
+            self._skin_cmds = [
+                wp.launch(
+                    self._skin_vertices,
+                    dim=self.n_vertices,
+                    device=dev,
+                    record_cmd=True,
+                    inputs=[self._seg, self._seg_of, *skin_args],
+                )
+            ]
         else:
             n_parts = 1 if is_cuda or threads == 1 else _CHUNKS_PER_THREAD * int(threads)
             parts = self._split(seg[:, _SEG_COUNT], n_parts)
             self._seg_parts = [self._seg[lo:hi] for lo, hi in parts]
-            self._skin_cmds = [wp.launch(self._skin_segments, dim=len(part), device=dev, record_cmd=True,
-                                         inputs=[part, *skin_args]) for part in self._seg_parts]
+            self._skin_cmds = [
+                wp.launch(self._skin_segments, dim=len(part), device=dev, record_cmd=True, inputs=[part, *skin_args])
+                for part in self._seg_parts
+            ]
         self.threads = 1 if len(self._skin_cmds) == 1 else int(threads)
         self._pool = ThreadPoolExecutor(self.threads - 1) if self.threads > 1 else None
 
@@ -310,7 +345,8 @@ class CrowdSkinner:
         root = np.asarray(root_translation, dtype=np.float32)
         if rot.shape != (self.n, NUM_JOINTS, 3):
             raise InvalidInputError(
-                f"joint_rotations: expected shape ({self.n}, {NUM_JOINTS}, 3) axis-angle, got {rot.shape}")
+                f"joint_rotations: expected shape ({self.n}, {NUM_JOINTS}, 3) axis-angle, got {rot.shape}"
+            )
         if root.shape != (self.n, 3):
             raise InvalidInputError(f"root_translation: expected shape ({self.n}, 3), got {root.shape}")
         self._rotvec.assign(rot)

@@ -151,10 +151,19 @@ def read_smpl_file(path) -> dict[str, np.ndarray]:
         else:
             with open(path, "rb") as fh:
                 raw = _RestrictedUnpickler(io.BytesIO(fh.read()), encoding="latin1").load()
-    except (pickle.UnpicklingError, EOFError, zipfile.BadZipFile, OSError, ValueError,
-            AttributeError, IndexError, TypeError) as exc:
-        raise InvalidInputError(f"SMPL model file {path}: cannot be read ({type(exc).__name__}: {exc}); "
-                                "expected SMPL's .pkl or .npz") from None
+    except (
+        pickle.UnpicklingError,
+        EOFError,
+        zipfile.BadZipFile,
+        OSError,
+        ValueError,
+        AttributeError,
+        IndexError,
+        TypeError,
+    ) as exc:
+        raise InvalidInputError(
+            f"SMPL model file {path}: cannot be read ({type(exc).__name__}: {exc}); expected SMPL's .pkl or .npz"
+        ) from None
     if not isinstance(raw, dict):
         raise InvalidInputError(f"SMPL model file {path}: expected a dict of arrays, got {type(raw).__name__}")
     missing = [k for k in _REQUIRED if k not in raw]
@@ -167,8 +176,7 @@ def read_smpl_file(path) -> dict[str, np.ndarray]:
 
 def _check_layout(a: dict[str, np.ndarray], path: Path) -> None:
     def bad(key: str, expected: str):
-        raise InvalidInputError(
-            f"SMPL model file {path}: field {key!r} has shape {a[key].shape}, expected {expected}")
+        raise InvalidInputError(f"SMPL model file {path}: field {key!r} has shape {a[key].shape}, expected {expected}")
 
     v = a["v_template"]
     if v.ndim != 2 or v.shape[1] != 3 or len(v) < 4:
@@ -192,8 +200,9 @@ def _check_layout(a: dict[str, np.ndarray], path: Path) -> None:
     parents = a["kintree_table"][0].astype(np.int64)
     parents = np.where((parents < 0) | (parents >= NUM_JOINTS), -1, parents)
     if not np.array_equal(parents, PARENTS):
-        raise InvalidInputError(f"SMPL model file {path}: field 'kintree_table' is not SMPL's 24-joint "
-                                f"tree (parents {parents.tolist()})")
+        raise InvalidInputError(
+            f"SMPL model file {path}: field 'kintree_table' is not SMPL's 24-joint tree (parents {parents.tolist()})"
+        )
     for key in ("v_template", "shapedirs", "posedirs", "J_regressor", "weights"):
         if not np.all(np.isfinite(a[key])):
             raise InvalidInputError(f"SMPL model file {path}: field {key!r} has non-finite values")
@@ -238,7 +247,7 @@ class SmplModel:
     def shaped(self, betas) -> tuple[np.ndarray, np.ndarray]:
         """Rest vertices (V, 3) and joints (24, 3) in our frame, relative to the pelvis."""
         b = np.asarray(betas, dtype=np.float64)
-        v = self.v_template + self.shapedirs[:, :, :len(b)] @ b
+        v = self.v_template + self.shapedirs[:, :, : len(b)] @ b
         j = self.J_regressor @ v
         v = (v - j[0]) @ SMPL_TO_OURS.T
         j = (j - j[0]) @ SMPL_TO_OURS.T
@@ -300,13 +309,21 @@ def load_smpl_body(record: dict):
         raise InvalidInputError(f"body record field {field!r}: expected a list of numbers, got {raw!r}") from None
     if len(betas) > model.n_betas:
         raise InvalidInputError(
-            f"body record field {field!r}: {len(betas)} values but {p} has {model.n_betas} shape components")
+            f"body record field {field!r}: {len(betas)} values but {p} has {model.n_betas} shape components"
+        )
     if not np.all(np.isfinite(betas)):
         raise InvalidInputError(f"body record field {field!r}: values must be finite")
     sex = record.get("sex")
     if sex is not None and sex not in ("female", "male", "neutral"):
         raise InvalidInputError(f"body record field 'sex': expected 'female', 'male' or 'neutral', got {sex!r}")
     verts, joints = model.shaped(betas)
-    return Body(record=dict(record), rest_joints=joints, rest_vertices=verts, faces=model.faces,
-                weights=model.weights, pelvis_height=float(-verts[:, 2].min()),
-                template_key=f"smpl-{model.key}", posedirs=model.posedirs_ours)
+    return Body(
+        record=dict(record),
+        rest_joints=joints,
+        rest_vertices=verts,
+        faces=model.faces,
+        weights=model.weights,
+        pelvis_height=float(-verts[:, 2].min()),
+        template_key=f"smpl-{model.key}",
+        posedirs=model.posedirs_ours,
+    )

@@ -13,8 +13,9 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("output", help="output .glb")
     parser.add_argument("--start", type=int, default=0, help="first frame to export (default 0)")
     parser.add_argument("--stop", type=int, help="frame after the last one to export (default: all)")
-    parser.add_argument("--no-colors", action="store_true",
-                        help="no COLOR_0 clothing colours for bodies without a texture (plain grey)")
+    parser.add_argument(
+        "--no-colors", action="store_true", help="no COLOR_0 clothing colours for bodies without a texture (plain grey)"
+    )
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
 
 

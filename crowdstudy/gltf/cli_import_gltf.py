@@ -36,8 +36,10 @@ def run(args: argparse.Namespace) -> int:
     ch = read_character(record["path"], skin=args.skin, height=args.height)
     body = load_body(record)
     out.write_text(json.dumps(record, indent=2, sort_keys=True) + "\n")
-    print(f"{args.input}: naming convention {ch.convention}, {body.n_vertices} vertices, "
-          f"{len(body.faces)} faces, stature {body.height:.3f} m, texture: {'yes' if ch.texture is not None else 'no'}")
+    print(
+        f"{args.input}: naming convention {ch.convention}, {body.n_vertices} vertices, "
+        f"{len(body.faces)} faces, stature {body.height:.3f} m, texture: {'yes' if ch.texture is not None else 'no'}"
+    )
     for name, joint in ch.joint_map.items():
         print(f"  {name:32s} -> {joint}")
     if ch.synthesized:

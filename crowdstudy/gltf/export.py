@@ -39,14 +39,13 @@ from pathlib import Path
 
 import numpy as np
 
-from crowdstudy.body.gltf_container import ARRAY_BUFFER, ELEMENT_ARRAY_BUFFER, Z_UP_TO_Y_UP, GltfBuilder
+from crowdstudy.body.gltf_container import ARRAY_BUFFER, ELEMENT_ARRAY_BUFFER, GltfBuilder
 from crowdstudy.body.rotations import axis_angle_to_quaternion, quat_align_signs
 from crowdstudy.body.skeleton import JOINT_NAMES, NUM_JOINTS, PARENTS
 from crowdstudy.errors import InvalidInputError
 from crowdstudy.render.bodies import region_scores, vertex_normals
 
-__all__ = ["export_gltf", "build_gltf", "WORLD_ROTATION", "character_prefix",
-           "add_skinned_mesh", "encode_png"]
+__all__ = ["export_gltf", "build_gltf", "WORLD_ROTATION", "character_prefix", "add_skinned_mesh", "encode_png"]
 
 #: ``Z_UP_TO_Y_UP`` (:mod:`crowdstudy.body.gltf_container`) as the quaternion ``(x, y, z, w)`` of the
 #: ``crowdstudy_world`` node.
@@ -79,11 +78,23 @@ def _normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
     return n.astype(np.float32)
 
 
-def add_skinned_mesh(builder: GltfBuilder, *, name: str, vertices: np.ndarray, faces: np.ndarray,
-                     joints: np.ndarray, weights: np.ndarray, joint_nodes: list[int],
-                     inverse_bind: np.ndarray, skeleton: int | None = None, uv: np.ndarray | None = None,
-                     texture: np.ndarray | None = None, colors: np.ndarray | None = None,
-                     normals: np.ndarray | None = None, indices: int | None = None) -> int:
+def add_skinned_mesh(
+    builder: GltfBuilder,
+    *,
+    name: str,
+    vertices: np.ndarray,
+    faces: np.ndarray,
+    joints: np.ndarray,
+    weights: np.ndarray,
+    joint_nodes: list[int],
+    inverse_bind: np.ndarray,
+    skeleton: int | None = None,
+    uv: np.ndarray | None = None,
+    texture: np.ndarray | None = None,
+    colors: np.ndarray | None = None,
+    normals: np.ndarray | None = None,
+    indices: int | None = None,
+) -> int:
     """Add a skinned mesh, its skin and material, and the (transform-free) node that binds
     them; returns that node's index (the caller puts it in a scene).
 
@@ -101,15 +112,16 @@ def add_skinned_mesh(builder: GltfBuilder, *, name: str, vertices: np.ndarray, f
     if f.size and (f.min() < 0 or f.max() >= len(verts)):
         raise InvalidInputError(f"{name}: face indices outside 0..{len(verts) - 1}")
     norm = _normals(verts, f) if normals is None else np.asarray(normals, dtype=np.float32)
-    attrs = {"POSITION": builder.accessor(verts, target=ARRAY_BUFFER, bounds=True),
-             "NORMAL": builder.accessor(norm, target=ARRAY_BUFFER)}
+    attrs = {
+        "POSITION": builder.accessor(verts, target=ARRAY_BUFFER, bounds=True),
+        "NORMAL": builder.accessor(norm, target=ARRAY_BUFFER),
+    }
     jdtype = np.uint8 if len(joint_nodes) <= 256 else np.uint16
     w = np.asarray(weights, dtype=np.float32)
     j = np.where(w > 0, np.asarray(joints), 0).astype(jdtype)
     attrs["JOINTS_0"] = builder.accessor(j, target=ARRAY_BUFFER)
     attrs["WEIGHTS_0"] = builder.accessor(w, target=ARRAY_BUFFER)
-    material = {"name": f"{name}_material",
-                "pbrMetallicRoughness": {"metallicFactor": 0.0, "roughnessFactor": 0.85}}
+    material = {"name": f"{name}_material", "pbrMetallicRoughness": {"metallicFactor": 0.0, "roughnessFactor": 0.85}}
     if uv is not None and texture is not None:
         attrs["TEXCOORD_0"] = builder.accessor(np.asarray(uv, dtype=np.float32), target=ARRAY_BUFFER)
         if "samplers" not in builder.doc:
@@ -118,18 +130,21 @@ def add_skinned_mesh(builder: GltfBuilder, *, name: str, vertices: np.ndarray, f
         tex = builder.add("textures", {"sampler": 0, "source": image})
         material["pbrMetallicRoughness"]["baseColorTexture"] = {"index": tex, "texCoord": 0}
     elif colors is not None:
-        attrs["COLOR_0"] = builder.accessor(np.clip(np.asarray(colors, dtype=np.float32), 0.0, 1.0),
-                                            target=ARRAY_BUFFER)
+        attrs["COLOR_0"] = builder.accessor(
+            np.clip(np.asarray(colors, dtype=np.float32), 0.0, 1.0), target=ARRAY_BUFFER
+        )
     else:
         material["pbrMetallicRoughness"]["baseColorFactor"] = [0.7, 0.7, 0.7, 1.0]
     idx_dtype = np.uint16 if len(verts) < 65535 else np.uint32
     if indices is None:
         indices = builder.accessor(f.reshape(-1).astype(idx_dtype), target=ELEMENT_ARRAY_BUFFER)
-    prim = {"attributes": attrs, "indices": indices,
-            "material": builder.add("materials", material), "mode": 4}
+    prim = {"attributes": attrs, "indices": indices, "material": builder.add("materials", material), "mode": 4}
     mesh = builder.add("meshes", {"name": name, "primitives": [prim]})
-    skin = {"joints": list(joint_nodes), "inverseBindMatrices": builder.accessor(
-        np.asarray(inverse_bind, dtype=np.float32), kind="MAT4"), "name": f"{name}_skin"}
+    skin = {
+        "joints": list(joint_nodes),
+        "inverseBindMatrices": builder.accessor(np.asarray(inverse_bind, dtype=np.float32), kind="MAT4"),
+        "name": f"{name}_skin",
+    }
     if skeleton is not None:
         skin["skeleton"] = skeleton
     return builder.add("nodes", {"name": name, "mesh": mesh, "skin": builder.add("skins", skin)})
@@ -177,9 +192,16 @@ def build_gltf(anim, *, bodies=None, colors: bool = True, progress: bool = False
         raise InvalidInputError(f"bodies: expected {n} bodies (one per character), got {len(bodies)}")
     vcolors = _vertex_colors(anim, bodies) if colors else [None] * n
     b = GltfBuilder()
-    b.doc["asset"]["extras"] = {"crowdstudy": provenance(
-        seed=anim.meta.get("seed"), source="CrowdAnimation", n_characters=n, n_frames=t, fps=anim.fps,
-        up_axis_conversion="glTF (x, y, z) = (-x_toolkit, z_toolkit, y_toolkit)")}
+    b.doc["asset"]["extras"] = {
+        "crowdstudy": provenance(
+            seed=anim.meta.get("seed"),
+            source="CrowdAnimation",
+            n_characters=n,
+            n_frames=t,
+            fps=anim.fps,
+            up_axis_conversion="glTF (x, y, z) = (-x_toolkit, z_toolkit, y_toolkit)",
+        )
+    }
     world = b.add("nodes", {"name": WORLD_NODE, "rotation": list(WORLD_ROTATION), "children": []})
     # signs continuous in time: glTF's LINEAR interpolation takes the short arc
     quats = quat_align_signs(axis_angle_to_quaternion(anim.joint_rotations), axis=0)  # (T, N, J, 4)
@@ -215,10 +237,23 @@ def build_gltf(anim, *, bodies=None, colors: bool = True, progress: bool = False
         if uv is not None:
             uv = np.asarray(uv, dtype=np.float64)
             uv = np.stack([uv[:, 0], 1.0 - uv[:, 1]], axis=1)
-        mesh_nodes.append(add_skinned_mesh(
-            b, name=prefix + "body", vertices=body.rest_vertices, faces=body.faces, joints=idx,
-            weights=val, joint_nodes=nodes, inverse_bind=ibm, skeleton=nodes[0], uv=uv, texture=tex,
-            colors=vcolors[i], indices=index_accessors.get(body.template_key)))
+        mesh_nodes.append(
+            add_skinned_mesh(
+                b,
+                name=prefix + "body",
+                vertices=body.rest_vertices,
+                faces=body.faces,
+                joints=idx,
+                weights=val,
+                joint_nodes=nodes,
+                inverse_bind=ibm,
+                skeleton=nodes[0],
+                uv=uv,
+                texture=tex,
+                colors=vcolors[i],
+                indices=index_accessors.get(body.template_key),
+            )
+        )
         prim = b.doc["meshes"][b.doc["nodes"][mesh_nodes[-1]]["mesh"]]["primitives"][0]
         index_accessors.setdefault(body.template_key, prim["indices"])
         for jj in range(NUM_JOINTS):
@@ -227,8 +262,12 @@ def build_gltf(anim, *, bodies=None, colors: bool = True, progress: bool = False
         s = _add_sampler(anim_doc, time_acc, b.accessor(roots[:, i].astype(np.float32)))
         anim_doc["channels"].append({"sampler": s, "target": {"node": nodes[0], "path": "translation"}})
     b.add("animations", anim_doc)
-    b.doc["scenes"] = [{"name": anim.meta.get("scenario", "crowd") if isinstance(anim.meta.get("scenario"), str)
-                        else "crowd", "nodes": [world, *mesh_nodes]}]
+    b.doc["scenes"] = [
+        {
+            "name": anim.meta.get("scenario", "crowd") if isinstance(anim.meta.get("scenario"), str) else "crowd",
+            "nodes": [world, *mesh_nodes],
+        }
+    ]
     b.doc["scene"] = 0
     return b
 

@@ -10,5 +10,11 @@ from crowdstudy.layout.concert import concert_layout
 from crowdstudy.layout.discs import MAX_PACKING_FRACTION, SHOULDER_HALF_WIDTH, disc_radius
 from crowdstudy.layout.poisson import PoissonLayout, poisson_disk
 
-__all__ = ["poisson_disk", "PoissonLayout", "concert_layout", "disc_radius", "SHOULDER_HALF_WIDTH",
-           "MAX_PACKING_FRACTION"]
+__all__ = [
+    "poisson_disk",
+    "PoissonLayout",
+    "concert_layout",
+    "disc_radius",
+    "SHOULDER_HALF_WIDTH",
+    "MAX_PACKING_FRACTION",
+]

@@ -20,8 +20,9 @@ def scaled_floor(design, level: str, n_characters: int) -> tuple[float, float]:
     ``level``: the design's floor scaled by the same factor on both sides (its aspect ratio
     kept) so that ``n_characters / (width * depth)`` is the level's characters per m^2."""
     if level not in design.densities:
-        raise InvalidInputError(f"level: unknown density level {level!r}; "
-                                f"expected one of {', '.join(design.densities)}")
+        raise InvalidInputError(
+            f"level: unknown density level {level!r}; expected one of {', '.join(design.densities)}"
+        )
     if isinstance(n_characters, bool) or not isinstance(n_characters, (int, np.integer)) or n_characters < 1:
         raise InvalidInputError(f"n_characters: expected a positive integer, got {n_characters!r}")
     density = float(design.densities[level])
@@ -53,8 +54,9 @@ def concert_layout(design, level: str, seed, n_characters: int | None = None) ->
         the stage front as one wall segment from x = -floor_width to +floor_width.
     """
     if level not in design.densities:
-        raise InvalidInputError(f"level: unknown density level {level!r}; "
-                                f"expected one of {', '.join(design.densities)}")
+        raise InvalidInputError(
+            f"level: unknown density level {level!r}; expected one of {', '.join(design.densities)}"
+        )
     if n_characters is None:
         n = design.n_characters(level)
         width, depth = float(design.floor_width), float(design.floor_depth)
@@ -68,11 +70,25 @@ def concert_layout(design, level: str, seed, n_characters: int | None = None) ->
     stage_distance = float(design.scenarios["concert"]["stage_distance"])
     stage_front = depth / 2 + stage_distance
     return Crowd(
-        positions=layout.points[None], radius=np.full(n, disc_radius(density)), fps=float(design.fps),
-        headings=np.full((1, n), np.pi / 2), region=layout.region,
-        meta={"scenario": "concert", "density_level": level, "density": density, "n_characters": n,
-              "seed": seed_value, "margin": margin, "min_distance": layout.min_distance,
-              "target_distance": layout.target_distance, "area": layout.area,
-              "floor": {"width": width, "depth": depth}, "stage_distance": stage_distance,
-              "stage_front": stage_front, "obstacles": [[[-width, stage_front], [width, stage_front]]],
-              "provenance": provenance(seed_value, stage="layout")})
+        positions=layout.points[None],
+        radius=np.full(n, disc_radius(density)),
+        fps=float(design.fps),
+        headings=np.full((1, n), np.pi / 2),
+        region=layout.region,
+        meta={
+            "scenario": "concert",
+            "density_level": level,
+            "density": density,
+            "n_characters": n,
+            "seed": seed_value,
+            "margin": margin,
+            "min_distance": layout.min_distance,
+            "target_distance": layout.target_distance,
+            "area": layout.area,
+            "floor": {"width": width, "depth": depth},
+            "stage_distance": stage_distance,
+            "stage_front": stage_front,
+            "obstacles": [[[-width, stage_front], [width, stage_front]]],
+            "provenance": provenance(seed_value, stage="layout"),
+        },
+    )

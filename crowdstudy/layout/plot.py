@@ -45,8 +45,17 @@ def draw_layout(ax, crowd: Crowd, frame: int = 0, title: str | None = None) -> N
     ax.add_collection(PatchCollection(discs, facecolor="tab:blue", edgecolor="navy", alpha=0.55, lw=0.6))
     if crowd.headings is not None:
         h = crowd.headings[frame]
-        ax.quiver(pos[:, 0], pos[:, 1], np.cos(h) * crowd.radius, np.sin(h) * crowd.radius, angles="xy",
-                  scale_units="xy", scale=1, width=0.004, color="navy")
+        ax.quiver(
+            pos[:, 0],
+            pos[:, 1],
+            np.cos(h) * crowd.radius,
+            np.sin(h) * crowd.radius,
+            angles="xy",
+            scale_units="xy",
+            scale=1,
+            width=0.004,
+            color="navy",
+        )
     for seg in crowd.obstacles:
         ax.plot(seg[:, 0], seg[:, 1], color="k", lw=2.5)
     ax.set_aspect("equal")

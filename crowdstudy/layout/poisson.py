@@ -35,9 +35,9 @@ __all__ = ["PoissonLayout", "poisson_disk", "region_polygon", "SPACING_FACTOR"]
 
 #: The guaranteed spacing is at least ``SPACING_FACTOR * sqrt(area / n)``.
 SPACING_FACTOR = 0.75
-_HEX_FRACTION = math.pi / (2.0 * math.sqrt(3.0))   # densest packing of equal discs
-_SHRINK = 0.96                                      # radius factor between levels
-_MAX_FINAL_ROUNDS = 80                              # rounds at d_min before giving up
+_HEX_FRACTION = math.pi / (2.0 * math.sqrt(3.0))  # densest packing of equal discs
+_SHRINK = 0.96  # radius factor between levels
+_MAX_FINAL_ROUNDS = 80  # rounds at d_min before giving up
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -144,8 +144,9 @@ class _Region:
         self.poly, self.is_rect, self.margin = poly, is_rect, margin
         lo, hi = poly.min(axis=0) + margin, poly.max(axis=0) - margin
         if np.any(hi <= lo):
-            raise InvalidInputError(f"margin: {margin} m leaves no room inside the region "
-                                    f"(extent {np.ptp(poly, axis=0).tolist()} m)")
+            raise InvalidInputError(
+                f"margin: {margin} m leaves no room inside the region (extent {np.ptp(poly, axis=0).tolist()} m)"
+            )
         self.lo, self.hi = lo, hi
         if is_rect:
             self.area = float(np.prod(hi - lo))
@@ -170,7 +171,7 @@ class _Region:
             ex, ey = bx - ax, by - ay
             t = np.clip(((x - ax) * ex + (y - ay) * ey) / (ex * ex + ey * ey), 0.0, 1.0)
             d2 = (x - ax - t * ex) ** 2 + (y - ay - t * ey) ** 2
-            inside &= np.min(d2, axis=1) >= self.margin ** 2
+            inside &= np.min(d2, axis=1) >= self.margin**2
         return inside
 
     def _estimate_area(self, resolution: int = 256) -> float:
@@ -239,15 +240,27 @@ def poisson_disk(region, n: int, *, seed, margin: float = 0.0, min_distance: flo
             raise InvalidInputError(f"min_distance: expected >= 0 metres, got {md}")
         d_min = max(d_min, md)
     # Necessary condition: discs of radius d/2 are disjoint and lie in the region grown by d/2.
-    perimeter = 2.0 * float(np.sum(shape.hi - shape.lo)) if is_rect else \
-        float(np.sum(np.linalg.norm(np.roll(poly, -1, axis=0) - poly, axis=1)))
-    capacity = _HEX_FRACTION * (area + perimeter * d_min / 2 + math.pi * d_min ** 2 / 4) / (math.pi * d_min ** 2 / 4)
+    perimeter = (
+        2.0 * float(np.sum(shape.hi - shape.lo))
+        if is_rect
+        else float(np.sum(np.linalg.norm(np.roll(poly, -1, axis=0) - poly, axis=1)))
+    )
+    capacity = _HEX_FRACTION * (area + perimeter * d_min / 2 + math.pi * d_min**2 / 4) / (math.pi * d_min**2 / 4)
     if n > capacity:
-        raise InvalidInputError(f"n: {n} points do not fit {d_min:.4g} m apart in a region of {area:.4g} m^2 "
-                                f"(at most about {int(capacity)} even in a hexagonal packing)")
+        raise InvalidInputError(
+            f"n: {n} points do not fit {d_min:.4g} m apart in a region of {area:.4g} m^2 "
+            f"(at most about {int(capacity)} even in a hexagonal packing)"
+        )
     points = _dart_throw(shape, n, d_min, rng)
-    return PoissonLayout(points=points, min_distance=_min_pair_distance(points), target_distance=d_min,
-                         area=area, region=poly, margin=margin, seed=seed_value)
+    return PoissonLayout(
+        points=points,
+        min_distance=_min_pair_distance(points),
+        target_distance=d_min,
+        area=area,
+        region=poly,
+        margin=margin,
+        seed=seed_value,
+    )
 
 
 def _min_pair_distance(points: np.ndarray) -> float:
@@ -266,7 +279,7 @@ def _dart_throw(shape: _Region, n: int, d_min: float, rng: np.random.Generator) 
     ny = max(1, int(math.ceil((shape.hi[1] - lo[1]) / cell)))
     # Start near the spacing of a saturated random packing of n points (density ~0.7 / r^2).
     r = max(d_min, math.sqrt(0.75 * shape.area / n))
-    pad = int(math.ceil(r / cell - 1e-12))           # the largest neighbourhood reach in cells
+    pad = int(math.ceil(r / cell - 1e-12))  # the largest neighbourhood reach in cells
     width = nx + 2 * pad
     # owner[cell] = index of the point in that cell, n = empty (a sentinel point far away)
     owner = np.full((ny + 2 * pad) * width, n, dtype=np.int64)
@@ -281,8 +294,11 @@ def _dart_throw(shape: _Region, n: int, d_min: float, rng: np.random.Generator) 
         k = int(math.ceil(r / cell - 1e-12))
         if k != k_prev:
             period = k + 1
-            phase_cells = [np.flatnonzero((cy_all % period == py) & (cx_all % period == px))
-                           for py in range(period) for px in range(period)]
+            phase_cells = [
+                np.flatnonzero((cy_all % period == py) & (cx_all % period == px))
+                for py in range(period)
+                for px in range(period)
+            ]
             oy, ox = np.meshgrid(np.arange(-k, k + 1), np.arange(-k, k + 1), indexing="ij")
             keep = (np.maximum(np.abs(oy) - 1, 0) ** 2 + np.maximum(np.abs(ox) - 1, 0) ** 2) * cell * cell < r * r
             offsets = (oy * width + ox)[keep]
@@ -307,7 +323,7 @@ def _dart_throw(shape: _Region, n: int, d_min: float, rng: np.random.Generator) 
                 continue
             if count + new.size > n:
                 new = np.sort(rng.choice(new, size=n - count, replace=False))
-            pts[count:count + new.size] = cand[new]
+            pts[count : count + new.size] = cand[new]
             owner[flat_all[cells[new]]] = np.arange(count, count + new.size)
             count += new.size
             accepted += new.size
@@ -321,6 +337,8 @@ def _dart_throw(shape: _Region, n: int, d_min: float, rng: np.random.Generator) 
         else:
             final_rounds += 1
             if final_rounds >= _MAX_FINAL_ROUNDS:
-                raise InvalidInputError(f"n: could place only {count} of {n} points {d_min:.4g} m apart in a region "
-                                        f"of {shape.area:.4g} m^2; lower n or min_distance")
+                raise InvalidInputError(
+                    f"n: could place only {count} of {n} points {d_min:.4g} m apart in a region "
+                    f"of {shape.area:.4g} m^2; lower n or min_distance"
+                )
     return pts[:n]

@@ -64,16 +64,16 @@ class BarTolerances:
     def __post_init__(self) -> None:
         for field in dataclasses.fields(self):
             value = getattr(self, field.name)
-            if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) \
-                    or value <= 0:
+            if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) or value <= 0:
                 raise InvalidInputError(f"BarTolerances.{field.name}: expected a positive number, got {value!r}")
 
     def tracking_cm(self, level_index: int, n_levels: int) -> float | None:
         """The tracking bar of density level ``level_index`` of ``n_levels``, cm: the sparsest
         and the densest level have one, the levels between none (None)."""
         if not 0 <= level_index < n_levels:
-            raise InvalidInputError(f"level_index: expected 0 <= level_index < n_levels = {n_levels}, "
-                                    f"got {level_index!r}")
+            raise InvalidInputError(
+                f"level_index: expected 0 <= level_index < n_levels = {n_levels}, got {level_index!r}"
+            )
         if level_index == 0:
             return self.tracking_sparsest_cm
         return self.tracking_densest_cm if level_index == n_levels - 1 else None
@@ -81,19 +81,22 @@ class BarTolerances:
     def text(self, sparsest: str = "D1", densest: str = "D5") -> dict[BarName, str]:
         """Each bar in words, for reports (``sparsest``/``densest``: the names of the density
         levels the tracking bars apply to)."""
-        return {"jerk": f"mean jerk <= {self.jerk_ratio:g}x", "hf": f"HF share <= {self.hf_share_ratio:g}x",
-                "speed": f"max joint speed <= +{self.joint_speed_increase_m_s:g} m/s",
-                "pelvis": f"pelvis accel p99 <= {self.pelvis_accel_ratio:g}x + {self.pelvis_accel_increase_m_s2:g} "
-                          "m/s^2",
-                "slide": f"planted-foot slide p99 <= {100 * self.foot_slide_p99_m_s:g} cm/s",
-                "overlap": f"mesh overlap <= {100 * self.overlap_ratio:g} %",
-                "tracking": f"tracking <= {self.tracking_sparsest_cm:g} cm at {sparsest}, "
-                            f"<= {self.tracking_densest_cm:g} cm at {densest}",
-                "seam": f"seam <= {self.seam_ratio:g}x median step (a looped concert)"}
+        return {
+            "jerk": f"mean jerk <= {self.jerk_ratio:g}x",
+            "hf": f"HF share <= {self.hf_share_ratio:g}x",
+            "speed": f"max joint speed <= +{self.joint_speed_increase_m_s:g} m/s",
+            "pelvis": f"pelvis accel p99 <= {self.pelvis_accel_ratio:g}x + {self.pelvis_accel_increase_m_s2:g} m/s^2",
+            "slide": f"planted-foot slide p99 <= {100 * self.foot_slide_p99_m_s:g} cm/s",
+            "overlap": f"mesh overlap <= {100 * self.overlap_ratio:g} %",
+            "tracking": f"tracking <= {self.tracking_sparsest_cm:g} cm at {sparsest}, "
+            f"<= {self.tracking_densest_cm:g} cm at {densest}",
+            "seam": f"seam <= {self.seam_ratio:g}x median step (a looped concert)",
+        }
 
 
-def check_bars(row: Mapping[str, object], tolerances: BarTolerances, level_index: int,
-               n_levels: int) -> dict[BarName, bool]:
+def check_bars(
+    row: Mapping[str, object], tolerances: BarTolerances, level_index: int, n_levels: int
+) -> dict[BarName, bool]:
     """Which bars one measured crowd meets: ``{bar: passed}``.
 
     ``row`` holds the measurements of Ours against its Baseline: the columns of
@@ -104,9 +107,22 @@ def check_bars(row: Mapping[str, object], tolerances: BarTolerances, level_index
     (:meth:`BarTolerances.tracking_cm`), the seam on a periodic (looped concert) clip only: a
     clip too short to loop has no seam a viewer sees, the corridor dissolves instead.
     """
-    missing = [k for k in ("jerk_ratio", "hf_share_ours", "hf_share_baseline", "max_joint_speed_ours",
-                           "max_joint_speed_baseline", "pelvis_p99_ours", "pelvis_p99_baseline",
-                           "foot_slide_p99_ours", "mesh_ratio", "loop") if k not in row]
+    missing = [
+        k
+        for k in (
+            "jerk_ratio",
+            "hf_share_ours",
+            "hf_share_baseline",
+            "max_joint_speed_ours",
+            "max_joint_speed_baseline",
+            "pelvis_p99_ours",
+            "pelvis_p99_baseline",
+            "foot_slide_p99_ours",
+            "mesh_ratio",
+            "loop",
+        )
+        if k not in row
+    ]
     if missing:
         raise InvalidInputError(f"row: missing the measurements {missing}")
     t = tolerances
@@ -115,10 +131,12 @@ def check_bars(row: Mapping[str, object], tolerances: BarTolerances, level_index
         "jerk": r["jerk_ratio"] <= t.jerk_ratio,
         "hf": r["hf_share_ours"] <= t.hf_share_ratio * r["hf_share_baseline"],
         "speed": r["max_joint_speed_ours"] <= r["max_joint_speed_baseline"] + t.joint_speed_increase_m_s,
-        "pelvis": (r["pelvis_p99_ours"]
-                   <= t.pelvis_accel_ratio * r["pelvis_p99_baseline"] + t.pelvis_accel_increase_m_s2),
+        "pelvis": (
+            r["pelvis_p99_ours"] <= t.pelvis_accel_ratio * r["pelvis_p99_baseline"] + t.pelvis_accel_increase_m_s2
+        ),
         "slide": r["foot_slide_p99_ours"] <= t.foot_slide_p99_m_s,
-        "overlap": r["mesh_ratio"] <= t.overlap_ratio}
+        "overlap": r["mesh_ratio"] <= t.overlap_ratio,
+    }
     bar = t.tracking_cm(level_index, n_levels)
     if bar is not None:
         checks["tracking"] = r["tracking_cm"] <= bar
@@ -148,9 +166,14 @@ def smoothness_columns(base, ours, bodies: Sequence | None = None) -> dict[str, 
 
     sb, so = smoothness(base, base, bodies=bodies).as_dict(), smoothness(ours, base, bodies=bodies).as_dict()
     cols = {}
-    for key, name in (("jerk_m_s3", "jerk"), ("hf_share", "hf_share"), ("max_joint_speed_m_s", "max_joint_speed"),
-                      ("pelvis_accel_p99_m_s2", "pelvis_p99"), ("foot_slide_p99_m_s", "foot_slide_p99"),
-                      ("seam_ratio", "seam_ratio")):
+    for key, name in (
+        ("jerk_m_s3", "jerk"),
+        ("hf_share", "hf_share"),
+        ("max_joint_speed_m_s", "max_joint_speed"),
+        ("pelvis_accel_p99_m_s2", "pelvis_p99"),
+        ("foot_slide_p99_m_s", "foot_slide_p99"),
+        ("seam_ratio", "seam_ratio"),
+    ):
         cols[f"{name}_baseline"], cols[f"{name}_ours"] = sb[key], so[key]
     cols["jerk_ratio"] = so["jerk_m_s3"] / sb["jerk_m_s3"]
     cols["foot_slide_over_5cm_s_ours"] = so["foot_slide_fraction_over_5cm_s"]

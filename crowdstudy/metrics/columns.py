@@ -48,7 +48,7 @@ class Crossings:
         self.solid, self.ix, self.iy, self.z, self.sign = solid, ix, iy, z, sign
 
     @classmethod
-    def concatenate(cls, parts: list["Crossings"]) -> "Crossings":
+    def concatenate(cls, parts: list[Crossings]) -> Crossings:
         if not parts:
             empty_i = np.zeros(0, np.int64)
             return cls(empty_i, empty_i, empty_i, np.zeros(0), empty_i)
@@ -111,8 +111,9 @@ def mesh_crossings(vertices: np.ndarray, faces: np.ndarray, solid: np.ndarray, h
     y_lo = np.minimum(np.minimum(fy[:, 0], fy[:, 1]), fy[:, 2])
     y_hi = np.maximum(np.maximum(fy[:, 0], fy[:, 1]), fy[:, 2])
     keep = area != 0.0
-    owner, ix, iy = _enumerate_columns(np.where(keep, x_lo, 1.0), np.where(keep, x_hi, 0.0),
-                                       np.where(keep, y_lo, 1.0), np.where(keep, y_hi, 0.0), h)
+    owner, ix, iy = _enumerate_columns(
+        np.where(keep, x_lo, 1.0), np.where(keep, x_hi, 0.0), np.where(keep, y_lo, 1.0), np.where(keep, y_hi, 0.0), h
+    )
     if len(owner) == 0:
         return Crossings.concatenate([])
     px = (ix + 0.5) * h
@@ -153,8 +154,7 @@ def mesh_crossings(vertices: np.ndarray, faces: np.ndarray, solid: np.ndarray, h
     return Crossings(solid[tri].astype(np.int64), ix[sel], iy[sel], z, sign)
 
 
-def capsule_crossings(start: np.ndarray, end: np.ndarray, radius: np.ndarray, solid: np.ndarray,
-                      h: float) -> Crossings:
+def capsule_crossings(start: np.ndarray, end: np.ndarray, radius: np.ndarray, solid: np.ndarray, h: float) -> Crossings:
     """Each column's interval through each capsule, as a +1 / -1 crossing pair.
 
     Args:
@@ -223,9 +223,13 @@ def capsule_crossings(start: np.ndarray, end: np.ndarray, radius: np.ndarray, so
     hit = z_lo < z_hi
     n = int(hit.sum())
     sid = np.repeat(solid[owner[hit]].astype(np.int64), 2)
-    return Crossings(sid, np.repeat(ix[hit], 2), np.repeat(iy[hit], 2),
-                     np.stack([z_lo[hit], z_hi[hit]], axis=1).ravel(),
-                     np.tile(np.array([1, -1], np.int64), n))
+    return Crossings(
+        sid,
+        np.repeat(ix[hit], 2),
+        np.repeat(iy[hit], 2),
+        np.stack([z_lo[hit], z_hi[hit]], axis=1).ravel(),
+        np.tile(np.array([1, -1], np.int64), n),
+    )
 
 
 def _column_keys(ix: np.ndarray, iy: np.ndarray) -> tuple[np.ndarray, int]:
@@ -288,8 +292,7 @@ def solid_intervals(cr: Crossings) -> tuple[np.ndarray, np.ndarray, np.ndarray, 
     return solid_of, col_of, z[starts], z[ends], int(bad_group.sum())
 
 
-def overlap_lengths(solid: np.ndarray, column: np.ndarray, z0: np.ndarray, z1: np.ndarray,
-                    n_solids: int) -> np.ndarray:
+def overlap_lengths(solid: np.ndarray, column: np.ndarray, z0: np.ndarray, z1: np.ndarray, n_solids: int) -> np.ndarray:
     """Per solid, the summed length of its intervals where at least one other solid is inside.
 
     Args:

@@ -18,12 +18,18 @@ displacement, and rotating a bone can move one end less than translating it woul
 from __future__ import annotations
 
 import dataclasses
-from typing import Any, Sequence
+from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 
-from crowdstudy.body.capsules import (SKIN_HAND_SCALE, SKIN_MAX, SKIN_PERCENTILE, capsule_skin,
-                                      closest_points_on_segments)
+from crowdstudy.body.capsules import (
+    SKIN_HAND_SCALE,
+    SKIN_MAX,
+    SKIN_PERCENTILE,
+    capsule_skin,
+    closest_points_on_segments,
+)
 from crowdstudy.body.skeleton import ARM_JOINTS, JOINT_INDEX
 from crowdstudy.errors import InvalidInputError
 from crowdstudy.metrics.overlap import capsules_world, frame_indices, resolve_bodies
@@ -33,7 +39,7 @@ from crowdstudy.scene_meta import static_walls_from_meta
 __all__ = ["SeparationFloor", "separation_floor"]
 
 _ARMS = [JOINT_INDEX[name] for name in ARM_JOINTS]
-_CULL = 0.3             # m: capsule pairs farther apart than this beyond touching are left out until re-checked
+_CULL = 0.3  # m: capsule pairs farther apart than this beyond touching are left out until re-checked
 
 
 @dataclasses.dataclass(frozen=True)
@@ -84,8 +90,12 @@ class SeparationFloor:
         depth = self.contact_depth
         n = self.per_joint.shape[1]
         if depth is None or not len(depth):
-            return {"contact_fraction": np.zeros(n), "partner": np.full(n, -1), "partner_fraction": np.zeros(n),
-                    "deepest_cm": np.zeros(n)}
+            return {
+                "contact_fraction": np.zeros(n),
+                "partner": np.full(n, -1),
+                "partner_fraction": np.zeros(n),
+                "deepest_cm": np.zeros(n),
+            }
         touching = depth > 0
         partner = np.full(n, -1)
         share = np.zeros(n)
@@ -93,18 +103,25 @@ class SeparationFloor:
             found = self.partner[touching[:, c], c]
             if found.size:
                 ids, counts = np.unique(found, return_counts=True)
-                partner[c] = int(ids[counts.argmax()])           # ties: the lowest index
+                partner[c] = int(ids[counts.argmax()])  # ties: the lowest index
                 share[c] = counts.max() / len(depth)
-        return {"contact_fraction": touching.mean(axis=0), "partner": partner, "partner_fraction": share,
-                "deepest_cm": 100.0 * depth.max(axis=0)}
+        return {
+            "contact_fraction": touching.mean(axis=0),
+            "partner": partner,
+            "partner_fraction": share,
+            "deepest_cm": 100.0 * depth.max(axis=0),
+        }
 
     def as_dict(self, per_character: bool = False) -> dict:
         """The estimate and its arms' share; ``per_character``: also
         ``separation_floor_per_character`` (lists: ``floor_cm`` and
         :meth:`contacts_per_character`)."""
-        out = {"separation_floor_cm": self.mean_cm, "separation_floor_arms_cm": self.arms_cm,
-               "separation_floor_frames": int(len(self.frames)),
-               "separation_floor_residual_mm": 1000.0 * float(self.residual.max(initial=0.0))}
+        out = {
+            "separation_floor_cm": self.mean_cm,
+            "separation_floor_arms_cm": self.arms_cm,
+            "separation_floor_frames": int(len(self.frames)),
+            "separation_floor_residual_mm": 1000.0 * float(self.residual.max(initial=0.0)),
+        }
         if per_character:
             per = {"floor_cm": self.per_character_cm.tolist()}
             per.update({k: v.tolist() for k, v in self.contacts_per_character().items()})
@@ -125,11 +142,19 @@ def _pairs(root: np.ndarray, period: float | None, reach: float):
     return i[near], j[near], shift[near]
 
 
-def separation_floor(anim, *, frames: Any = "every:30", bodies: Sequence | None = None,
-                     skin_percentile: float = SKIN_PERCENTILE, skin_max: float = SKIN_MAX,
-                     hand_skin_scale: float = SKIN_HAND_SCALE,
-                     margin: float = 0.005, walls: bool = True,
-                     tolerance: float = 1e-4, max_iterations: int = 400) -> SeparationFloor:
+def separation_floor(
+    anim,
+    *,
+    frames: Any = "every:30",
+    bodies: Sequence | None = None,
+    skin_percentile: float = SKIN_PERCENTILE,
+    skin_max: float = SKIN_MAX,
+    hand_skin_scale: float = SKIN_HAND_SCALE,
+    margin: float = 0.005,
+    walls: bool = True,
+    tolerance: float = 1e-4,
+    max_iterations: int = 400,
+) -> SeparationFloor:
     """Estimate, frame by frame, the least joint displacement that removes every overlap.
 
     Args:
@@ -155,8 +180,10 @@ def separation_floor(anim, *, frames: Any = "every:30", bodies: Sequence | None 
     if not hasattr(anim, "joint_rotations"):
         raise TypeError(f"anim: expected a CrowdAnimation, got {type(anim).__name__}")
     if margin < 0 or tolerance <= 0 or int(max_iterations) < 1:
-        raise InvalidInputError(f"separation_floor: expected margin >= 0, tolerance > 0 and max_iterations >= 1, "
-                                f"got {margin!r}, {tolerance!r}, {max_iterations!r}")
+        raise InvalidInputError(
+            f"separation_floor: expected margin >= 0, tolerance > 0 and max_iterations >= 1, "
+            f"got {margin!r}, {tolerance!r}, {max_iterations!r}"
+        )
     idx = frame_indices(frames, anim.n_frames)
     body_objs = resolve_bodies(anim, bodies)
     n, n_j = anim.n_characters, anim.n_joints
@@ -176,12 +203,14 @@ def separation_floor(anim, *, frames: Any = "every:30", bodies: Sequence | None 
         # pose); every pair is checked again, and the set renewed, before it stops
         near, _, depth0 = _near_pairs(all_pairs, start, end, np.zeros((n, n_j, 3)))
         contact[k], partner[k] = _deepest_partner(all_pairs[0], all_pairs[1], depth0, n)
-        move, deepest, rounds[k] = _project(near, all_pairs, start, end, r, root, segs, period, tolerance,
-                                            int(max_iterations))
+        move, deepest, rounds[k] = _project(
+            near, all_pairs, start, end, r, root, segs, period, tolerance, int(max_iterations)
+        )
         out[k] = np.linalg.norm(move, axis=-1)
         residual[k] = max(deepest, 0.0)
-    return SeparationFloor(per_joint=out, frames=idx, residual=residual, iterations=rounds,
-                           contact_depth=contact, partner=partner)
+    return SeparationFloor(
+        per_joint=out, frames=idx, residual=residual, iterations=rounds, contact_depth=contact, partner=partner
+    )
 
 
 #: Capsule pairs between characters, parallel (P,) arrays: ``(char_a, char_b, joint_a,
@@ -190,15 +219,17 @@ def separation_floor(anim, *, frames: Any = "every:30", bodies: Sequence | None 
 _Pairs = tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]
 
 
-def _inflated_radii(body_objs: Sequence, skin_percentile: float, skin_max: float, hand_skin_scale: float,
-                    margin: float) -> tuple[np.ndarray, np.ndarray]:
+def _inflated_radii(
+    body_objs: Sequence, skin_percentile: float, skin_max: float, hand_skin_scale: float, margin: float
+) -> tuple[np.ndarray, np.ndarray]:
     """(N, J) which capsules take part (radius above 1 mm) and their radii (m) inflated by
     the mesh skin (:func:`~crowdstudy.body.capsules.capsule_skin`) and ``margin``, 0 for
     those left out."""
     radius = np.stack([np.asarray(b.capsules.radius, np.float64) for b in body_objs])
-    skin = np.stack([capsule_skin(b, skin_percentile, max_skin=skin_max, hand_scale=hand_skin_scale)
-                     for b in body_objs])
-    real = radius > 1e-3                                # zero-radius capsules take no part
+    skin = np.stack(
+        [capsule_skin(b, skin_percentile, max_skin=skin_max, hand_scale=hand_skin_scale) for b in body_objs]
+    )
+    real = radius > 1e-3  # zero-radius capsules take no part
     return real, np.where(real, radius + skin + margin, 0.0)
 
 
@@ -208,7 +239,7 @@ def _frame_capsules(anim, body_objs: Sequence, f: int) -> tuple[np.ndarray, np.n
     start = np.empty((n, n_j, 3))
     end = np.empty((n, n_j, 3))
     for c, body in enumerate(body_objs):
-        s, e, _ = capsules_world(body, anim.joint_rotations[f:f + 1, c], anim.root_translation[f:f + 1, c])
+        s, e, _ = capsules_world(body, anim.joint_rotations[f : f + 1, c], anim.root_translation[f : f + 1, c])
         start[c], end[c] = s[0], e[0]
     return start, end
 
@@ -227,9 +258,18 @@ def _capsule_pairs(root: np.ndarray, period: float | None, real: np.ndarray, r: 
     return pa_c, pb_c, pa_j, pb_j, off, r[pa_c, pa_j] + r[pb_c, pb_j]
 
 
-def _project(near: _Pairs, all_pairs: _Pairs, start: np.ndarray, end: np.ndarray, r: np.ndarray,
-             root: np.ndarray, segs: np.ndarray, period: float | None, tolerance: float,
-             max_iterations: int) -> tuple[np.ndarray, float, int]:
+def _project(
+    near: _Pairs,
+    all_pairs: _Pairs,
+    start: np.ndarray,
+    end: np.ndarray,
+    r: np.ndarray,
+    root: np.ndarray,
+    segs: np.ndarray,
+    period: float | None,
+    tolerance: float,
+    max_iterations: int,
+) -> tuple[np.ndarray, float, int]:
     """Jacobi projection of one frame: every round, each overlapping pair of ``near`` is
     pushed apart half each and each capsule beyond a wall back, the pushes on a capsule
     averaged; when nothing overlaps, ``all_pairs`` are checked again (the near set renewed)
@@ -243,19 +283,25 @@ def _project(near: _Pairs, all_pairs: _Pairs, start: np.ndarray, end: np.ndarray
         acc = np.zeros((n, n_j, 3))
         cnt = np.zeros((n, n_j))
         hit, deepest = _push_pairs(near, start, end, move, tolerance, acc, cnt)
-        wall_hit, deepest = _push_walls(segs, start + move, end + move, r, root, period, tolerance, acc, cnt,
-                                        deepest)
+        wall_hit, deepest = _push_walls(segs, start + move, end + move, r, root, period, tolerance, acc, cnt, deepest)
         if not hit and not wall_hit:
             near, worst, _ = _near_pairs(all_pairs, start, end, move)
             if worst <= tolerance:
                 break
-            continue                                  # a culled pair met: go on with the renewed set
+            continue  # a culled pair met: go on with the renewed set
         move += acc / np.maximum(cnt, 1.0)[..., None]
     return move, deepest, it + 1
 
 
-def _push_pairs(pairs: _Pairs, start: np.ndarray, end: np.ndarray, move: np.ndarray, tolerance: float,
-                acc: np.ndarray, cnt: np.ndarray) -> tuple[bool, float]:
+def _push_pairs(
+    pairs: _Pairs,
+    start: np.ndarray,
+    end: np.ndarray,
+    move: np.ndarray,
+    tolerance: float,
+    acc: np.ndarray,
+    cnt: np.ndarray,
+) -> tuple[bool, float]:
     """Add to ``acc`` (N, J, 3) the half-depth pushes (m) apart of the ``pairs`` overlapping
     by more than ``tolerance`` m with the capsules moved by ``move``, and count them in
     ``cnt`` (N, J); returns whether any did and the deepest overlap (m, 0 when none)."""
@@ -277,9 +323,18 @@ def _push_pairs(pairs: _Pairs, start: np.ndarray, end: np.ndarray, move: np.ndar
     return bool(hit.any()), float(depth.max(initial=0.0))
 
 
-def _push_walls(segs: np.ndarray, start: np.ndarray, end: np.ndarray, r: np.ndarray, root: np.ndarray,
-                period: float | None, tolerance: float, acc: np.ndarray, cnt: np.ndarray,
-                deepest: float) -> tuple[bool, float]:
+def _push_walls(
+    segs: np.ndarray,
+    start: np.ndarray,
+    end: np.ndarray,
+    r: np.ndarray,
+    root: np.ndarray,
+    period: float | None,
+    tolerance: float,
+    acc: np.ndarray,
+    cnt: np.ndarray,
+    deepest: float,
+) -> tuple[bool, float]:
     """Add to ``acc`` (N, J, 3) the pushes (m) back behind each wall of ``segs`` (W, 2, 2)
     of the capsules (N, J, 3) from ``start`` to ``end`` reaching beyond it by more than
     ``tolerance`` m, towards their root's side, and count them in ``cnt`` (N, J); returns
@@ -292,7 +347,7 @@ def _push_walls(segs: np.ndarray, start: np.ndarray, end: np.ndarray, r: np.ndar
             wall_hit = True
             deepest = max(deepest, float(depth_w.max()))
             push = np.zeros((len(root), 1, 3))
-            push[:, 0, :2] = normal                      # towards the root's side
+            push[:, 0, :2] = normal  # towards the root's side
             acc += np.where(over, depth_w, 0.0)[..., None] * push
             cnt += over
     return wall_hit, deepest
@@ -303,8 +358,12 @@ def _near_pairs(pairs, start, end, move):
     the deepest overlap (m) over all ``pairs`` (char_a, char_b, joint_a, joint_b, x offset
     of b, reach), and every pair's depth (m, negative: apart)."""
     ac, bc, aj, bj, off, reach = pairs
-    _, _, dist = closest_points_on_segments(start[ac, aj] + move[ac, aj], end[ac, aj] + move[ac, aj],
-                                            start[bc, bj] + move[bc, bj] + off, end[bc, bj] + move[bc, bj] + off)
+    _, _, dist = closest_points_on_segments(
+        start[ac, aj] + move[ac, aj],
+        end[ac, aj] + move[ac, aj],
+        start[bc, bj] + move[bc, bj] + off,
+        end[bc, bj] + move[bc, bj] + off,
+    )
     depth = reach - dist
     near = depth > -_CULL
     return tuple(a[near] for a in pairs), float(depth.max(initial=0.0)), depth
@@ -320,7 +379,7 @@ def _deepest_partner(char_a: np.ndarray, char_b: np.ndarray, depth: np.ndarray, 
     both = np.concatenate([depth, depth])
     touch = both > 0
     mine, other, both = mine[touch], other[touch], both[touch]
-    order = np.lexsort((both, mine))                     # by character, then depth
+    order = np.lexsort((both, mine))  # by character, then depth
     mine, other, both = mine[order], other[order], both[order]
     last = np.flatnonzero(np.r_[mine[1:] != mine[:-1], True]) if len(mine) else np.zeros(0, np.int64)
     deepest[mine[last]] = both[last]
@@ -331,7 +390,7 @@ def _deepest_partner(char_a: np.ndarray, char_b: np.ndarray, depth: np.ndarray, 
 def _unit(v: np.ndarray) -> np.ndarray:
     norm = np.linalg.norm(v, axis=-1, keepdims=True)
     fallback = np.zeros_like(v)
-    fallback[..., 2] = 1.0                  # coincident axes: part them vertically
+    fallback[..., 2] = 1.0  # coincident axes: part them vertically
     return np.where(norm > 1e-9, v / np.maximum(norm, 1e-12), fallback)
 
 

@@ -22,8 +22,8 @@ from crowdstudy.warp_runtime import get_warp
 
 __all__ = ["face_crossings", "skin_vertices", "mesh_crossings_warp", "WarpSkinner"]
 
-get_warp()      # the project's kernel cache and log level, set before this module can compile
-wp.set_module_options({"enable_backward": False})     # forward only: no adjoints to compile
+get_warp()  # the project's kernel cache and log level, set before this module can compile
+wp.set_module_options({"enable_backward": False})  # forward only: no adjoints to compile
 
 
 @wp.func
@@ -61,13 +61,22 @@ def edge_covers(verts: wp.array(dtype=wp.vec3d), vi: int, vj: int, w: wp.float64
 
 
 @wp.kernel
-def face_crossings(verts: wp.array(dtype=wp.vec3d), faces: wp.array2d(dtype=wp.int32),
-                   face_solid: wp.array(dtype=wp.int32), rect_first: wp.array(dtype=wp.int32),
-                   rects: wp.array2d(dtype=wp.int32), h: wp.float64, write: int,
-                   offsets: wp.array(dtype=wp.int32), counts: wp.array(dtype=wp.int32),
-                   out_solid: wp.array(dtype=wp.int32), out_ix: wp.array(dtype=wp.int32),
-                   out_iy: wp.array(dtype=wp.int32), out_z: wp.array(dtype=wp.float64),
-                   out_sign: wp.array(dtype=wp.int32)):
+def face_crossings(
+    verts: wp.array(dtype=wp.vec3d),
+    faces: wp.array2d(dtype=wp.int32),
+    face_solid: wp.array(dtype=wp.int32),
+    rect_first: wp.array(dtype=wp.int32),
+    rects: wp.array2d(dtype=wp.int32),
+    h: wp.float64,
+    write: int,
+    offsets: wp.array(dtype=wp.int32),
+    counts: wp.array(dtype=wp.int32),
+    out_solid: wp.array(dtype=wp.int32),
+    out_ix: wp.array(dtype=wp.int32),
+    out_iy: wp.array(dtype=wp.int32),
+    out_z: wp.array(dtype=wp.float64),
+    out_sign: wp.array(dtype=wp.int32),
+):
     """The column crossings of face f (thread): columns at ((ix + 1/2) h, (iy + 1/2) h)
     (h m) inside the face's projection and inside one of its solid's partner rectangles
     (``rects`` rows ``rect_first[s]`` to ``rect_first[s + 1]``, column index ranges).
@@ -117,8 +126,12 @@ def face_crossings(verts: wp.array(dtype=wp.vec3d), faces: wp.array2d(dtype=wp.i
                         wb = edge_value(verts, c, a, px, py)
                         wc = edge_value(verts, a, b, px, py)
                         denom = wa + wb + wc
-                        if (edge_covers(verts, b, c, wa) and edge_covers(verts, c, a, wb)
-                                and edge_covers(verts, a, b, wc) and denom > wp.float64(0.0)):
+                        if (
+                            edge_covers(verts, b, c, wa)
+                            and edge_covers(verts, c, a, wb)
+                            and edge_covers(verts, a, b, wc)
+                            and denom > wp.float64(0.0)
+                        ):
                             if write == 1:
                                 k = offsets[f] + n
                                 out_solid[k] = s
@@ -132,9 +145,14 @@ def face_crossings(verts: wp.array(dtype=wp.vec3d), faces: wp.array2d(dtype=wp.i
 
 
 @wp.kernel
-def skin_vertices(rest: wp.array(dtype=wp.vec3d), joint: wp.array2d(dtype=wp.int32),
-                  weight: wp.array2d(dtype=wp.float64), rot: wp.array(dtype=wp.mat33d),
-                  trans: wp.array(dtype=wp.vec3d), out: wp.array(dtype=wp.vec3d)):
+def skin_vertices(
+    rest: wp.array(dtype=wp.vec3d),
+    joint: wp.array2d(dtype=wp.int32),
+    weight: wp.array2d(dtype=wp.float64),
+    rot: wp.array(dtype=wp.mat33d),
+    trans: wp.array(dtype=wp.vec3d),
+    out: wp.array(dtype=wp.vec3d),
+):
     """Vertex v (thread) posed by linear blend skinning: sum over its 4 joints of weight
     times (R_joint p_rest + t_joint), R (N J,) mat33d and t (N J,) vec3d (m) each joint's
     world transform relative to the rest pose."""
@@ -147,8 +165,9 @@ def skin_vertices(rest: wp.array(dtype=wp.vec3d), joint: wp.array2d(dtype=wp.int
     out[v] = acc
 
 
-def mesh_crossings_warp(vertices: np.ndarray, faces: np.ndarray, face_solid: np.ndarray, rects: list[np.ndarray],
-                        h: float, device: str):
+def mesh_crossings_warp(
+    vertices: np.ndarray, faces: np.ndarray, face_solid: np.ndarray, rects: list[np.ndarray], h: float, device: str
+):
     """Column crossings of all faces, on ``device`` (``"cpu"`` or ``"cuda:N"``).
 
     Args:
@@ -180,8 +199,12 @@ def mesh_crossings_warp(vertices: np.ndarray, faces: np.ndarray, face_solid: np.
     counts = wp.zeros(n_faces, dtype=wp.int32, device=device)
     dummy_i = wp.zeros(1, dtype=wp.int32, device=device)
     dummy_f = wp.zeros(1, dtype=wp.float64, device=device)
-    wp.launch(face_crossings, dim=n_faces, device=device,
-              inputs=[v, f, fs, rf, rc, float(h), 0, dummy_i, counts, dummy_i, dummy_i, dummy_i, dummy_f, dummy_i])
+    wp.launch(
+        face_crossings,
+        dim=n_faces,
+        device=device,
+        inputs=[v, f, fs, rf, rc, float(h), 0, dummy_i, counts, dummy_i, dummy_i, dummy_i, dummy_f, dummy_i],
+    )
     cnt = counts.numpy().astype(np.int64)
     total = int(cnt.sum())
     if total == 0:
@@ -189,8 +212,12 @@ def mesh_crossings_warp(vertices: np.ndarray, faces: np.ndarray, face_solid: np.
     offsets = np.zeros(n_faces, np.int32)
     offsets[1:] = np.cumsum(cnt)[:-1]
     outs = [wp.zeros(total, dtype=dt, device=device) for dt in (wp.int32, wp.int32, wp.int32, wp.float64, wp.int32)]
-    wp.launch(face_crossings, dim=n_faces, device=device,
-              inputs=[v, f, fs, rf, rc, float(h), 1, wp.array(offsets, dtype=wp.int32, device=device), counts, *outs])
+    wp.launch(
+        face_crossings,
+        dim=n_faces,
+        device=device,
+        inputs=[v, f, fs, rf, rc, float(h), 1, wp.array(offsets, dtype=wp.int32, device=device), counts, *outs],
+    )
     solid, ix, iy, z, sign = (o.numpy() for o in outs)
     return Crossings(solid.astype(np.int64), ix.astype(np.int64), iy.astype(np.int64), z, sign.astype(np.int64))
 
@@ -241,7 +268,11 @@ class WarpSkinner:
         trans = pos - np.einsum("njab,njb->nja", glob, self.rest_joints)
         rot = wp.array(np.ascontiguousarray(glob.reshape(-1, 3, 3)), dtype=wp.mat33d, device=self.device)
         tr = wp.array(np.ascontiguousarray(trans.reshape(-1, 3)), dtype=wp.vec3d, device=self.device)
-        wp.launch(skin_vertices, dim=len(self._out), device=self.device,
-                  inputs=[self._rest, self._joint, self._weight, rot, tr, self._out])
+        wp.launch(
+            skin_vertices,
+            dim=len(self._out),
+            device=self.device,
+            inputs=[self._rest, self._joint, self._weight, rot, tr, self._out],
+        )
         flat = self._out.numpy()
         return np.split(flat, np.cumsum(self.sizes)[:-1])

@@ -14,8 +14,9 @@ from crowdstudy.errors import InvalidInputError
 __all__ = ["tile_ratios"]
 
 
-def tile_ratios(xy: np.ndarray, baseline: np.ndarray, ours: np.ndarray, tile: tuple[float, float],
-                min_characters: int) -> np.ndarray:
+def tile_ratios(
+    xy: np.ndarray, baseline: np.ndarray, ours: np.ndarray, tile: tuple[float, float], min_characters: int
+) -> np.ndarray:
     """The overlap ratio of each neighbourhood of a large crowd: the characters binned by
     their floor position ``xy`` (N, 2) m into ``tile`` = (width, depth) m rectangles (a study
     cell's floor), and per tile the sum of Ours' per-character overlap over the Baseline's
@@ -24,8 +25,9 @@ def tile_ratios(xy: np.ndarray, baseline: np.ndarray, ours: np.ndarray, tile: tu
     tile order (row-major from the smallest x and y)."""
     xy = np.asarray(xy, float)
     if xy.ndim != 2 or xy.shape[1] != 2 or len(xy) != len(baseline) or len(xy) != len(ours):
-        raise InvalidInputError(f"xy (N, 2), baseline (N,) and ours (N,): got {xy.shape}, {np.shape(baseline)}, "
-                                f"{np.shape(ours)}")
+        raise InvalidInputError(
+            f"xy (N, 2), baseline (N,) and ours (N,): got {xy.shape}, {np.shape(baseline)}, {np.shape(ours)}"
+        )
     if len(xy) == 0:
         return np.zeros(0)
     cell = np.floor((xy - xy.min(axis=0)) / np.asarray(tile, float)).astype(int)

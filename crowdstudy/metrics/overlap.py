@@ -24,7 +24,8 @@ from __future__ import annotations
 
 import dataclasses
 import time
-from typing import Any, Sequence
+from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 
@@ -37,8 +38,15 @@ from crowdstudy.metrics.columns import (
     solid_intervals,
 )
 
-__all__ = ["OverlapResult", "overlap_volume", "frame_indices", "resolve_bodies", "capsules_world",
-           "mesh_volume", "GEOMETRIES"]
+__all__ = [
+    "OverlapResult",
+    "overlap_volume",
+    "frame_indices",
+    "resolve_bodies",
+    "capsules_world",
+    "mesh_volume",
+    "GEOMETRIES",
+]
 
 GEOMETRIES = ("mesh", "capsule")
 _FRAME_CHUNK = 8
@@ -91,10 +99,17 @@ class OverlapResult:
         return self.mean / float(np.mean(self.body_volume))
 
     def to_dict(self) -> dict:
-        return {"geometry": self.geometry, "resolution_m": self.resolution, "mean_m3": self.mean,
-                "mean_litres": self.mean_litres, "frames_measured": int(len(self.frames)),
-                "fraction_of_body": self.fraction, "max_m3": float(self.per_character.max(initial=0.0)),
-                "dropped_columns": self.dropped_columns, "seconds": self.seconds}
+        return {
+            "geometry": self.geometry,
+            "resolution_m": self.resolution,
+            "mean_m3": self.mean,
+            "mean_litres": self.mean_litres,
+            "frames_measured": int(len(self.frames)),
+            "fraction_of_body": self.fraction,
+            "max_m3": float(self.per_character.max(initial=0.0)),
+            "dropped_columns": self.dropped_columns,
+            "seconds": self.seconds,
+        }
 
 
 def frame_indices(frames: Any, n_frames: int) -> np.ndarray:
@@ -152,13 +167,17 @@ def mesh_volume(vertices: np.ndarray, faces: np.ndarray) -> float:
     v = np.asarray(vertices, dtype=np.float64)
     f = np.asarray(faces)
     a, b, c = v[f[:, 0]], v[f[:, 1]], v[f[:, 2]]
-    triple = (a[:, 0] * (b[:, 1] * c[:, 2] - b[:, 2] * c[:, 1]) + a[:, 1] * (b[:, 2] * c[:, 0] - b[:, 0] * c[:, 2])
-              + a[:, 2] * (b[:, 0] * c[:, 1] - b[:, 1] * c[:, 0]))
+    triple = (
+        a[:, 0] * (b[:, 1] * c[:, 2] - b[:, 2] * c[:, 1])
+        + a[:, 1] * (b[:, 2] * c[:, 0] - b[:, 0] * c[:, 2])
+        + a[:, 2] * (b[:, 0] * c[:, 1] - b[:, 1] * c[:, 0])
+    )
     return float(abs(triple.sum()) / 6.0)
 
 
-def capsules_world(body, joint_rotations: np.ndarray, root_translation: np.ndarray
-                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def capsules_world(
+    body, joint_rotations: np.ndarray, root_translation: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """World-space capsules of one character at some frames.
 
     Args:
@@ -241,14 +260,17 @@ def _periodic_images(lo: np.ndarray, hi: np.ndarray, length: float | None) -> tu
     shift = -np.floor(centre / length) * length
     reach = float(np.max(hi[:, 0] - lo[:, 0]))
     if 2.0 * reach >= length:
-        raise InvalidInputError(
-            f"anim.meta['periodic']: length {length} m is too short for bodies {reach:.2f} m wide")
+        raise InvalidInputError(f"anim.meta['periodic']: length {length} m is too short for bodies {reach:.2f} m wide")
     x_lo = lo[:, 0] + shift
     x_hi = hi[:, 0] + shift
     near_start = np.flatnonzero(x_lo < reach)
     near_end = np.flatnonzero(x_hi > length - reach)
-    ghosts = np.concatenate([np.stack([near_start, np.full(len(near_start), length)], 1),
-                             np.stack([near_end, np.full(len(near_end), -length)], 1)])
+    ghosts = np.concatenate(
+        [
+            np.stack([near_start, np.full(len(near_start), length)], 1),
+            np.stack([near_end, np.full(len(near_end), -length)], 1),
+        ]
+    )
     return shift, ghosts
 
 
@@ -276,8 +298,15 @@ def _max3(a: np.ndarray) -> np.ndarray:
     return np.maximum(np.maximum(a[:, 0], a[:, 1]), a[:, 2])
 
 
-def _frame_overlap_mesh(verts: list[np.ndarray], faces: list[np.ndarray], lo: np.ndarray, hi: np.ndarray,
-                        n_real: int, h: float, backend: str = "numpy") -> tuple[np.ndarray, int]:
+def _frame_overlap_mesh(
+    verts: list[np.ndarray],
+    faces: list[np.ndarray],
+    lo: np.ndarray,
+    hi: np.ndarray,
+    n_real: int,
+    h: float,
+    backend: str = "numpy",
+) -> tuple[np.ndarray, int]:
     """Overlap volumes (n_real,) m^3 of one frame from posed meshes (real ones first, then
     ghosts, whose own overlap is not reported) with their AABBs ``lo``, ``hi`` (S, 3).
 
@@ -309,8 +338,12 @@ def _frame_overlap_mesh(verts: list[np.ndarray], faces: list[np.ndarray], lo: np
         y1 = np.floor(_max3(fw) / h - 0.5)
         hit = np.zeros(len(f), bool)
         for rx0, rx1, ry0, ry1 in rect:
-            hit |= ((x0 <= np.floor(rx1 / h - 0.5)) & (x1 >= np.ceil(rx0 / h - 0.5))
-                    & (y0 <= np.floor(ry1 / h - 0.5)) & (y1 >= np.ceil(ry0 / h - 0.5)))
+            hit |= (
+                (x0 <= np.floor(rx1 / h - 0.5))
+                & (x1 >= np.ceil(rx0 / h - 0.5))
+                & (y0 <= np.floor(ry1 / h - 0.5))
+                & (y1 >= np.ceil(ry0 / h - 0.5))
+            )
         hit &= (x0 <= x1) & (y0 <= y1)
         if not hit.any():
             continue
@@ -331,7 +364,7 @@ def _within_rects(cr: Crossings, rects: list[np.ndarray], h: float) -> Crossings
     k_max = max(len(r) for r in rects)
     table = np.full((len(rects), max(k_max, 1), 4), np.nan)
     for s, rect in enumerate(rects):
-        table[s, :len(rect)] = rect
+        table[s, : len(rect)] = rect
     t = table[cr.solid]  # (K, k_max, 4)
     px = ((cr.ix + 0.5) * h)[:, None]
     py = ((cr.iy + 0.5) * h)[:, None]
@@ -345,8 +378,9 @@ def _overlap_from_crossings(cr: Crossings, n_solids: int, n_real: int, h: float)
     return lengths[:n_real] * h * h, dropped
 
 
-def _frame_overlap_capsules(start: np.ndarray, end: np.ndarray, radius: np.ndarray, n_real: int,
-                            h: float) -> tuple[np.ndarray, int]:
+def _frame_overlap_capsules(
+    start: np.ndarray, end: np.ndarray, radius: np.ndarray, n_real: int, h: float
+) -> tuple[np.ndarray, int]:
     """Overlap volumes (n_real,) m^3 of one frame from capsules (S, J, 3) x2, radius (S, J)."""
     r = radius[:, :, None]
     lo = np.minimum(start, end) - r
@@ -366,8 +400,9 @@ def _frame_overlap_capsules(start: np.ndarray, end: np.ndarray, radius: np.ndarr
     return _overlap_from_crossings(cr, len(radius), n_real, h)
 
 
-def _mesh_frame(verts: list[np.ndarray], faces: list[np.ndarray], length: float | None, h: float,
-                backend: str) -> tuple[np.ndarray, int]:
+def _mesh_frame(
+    verts: list[np.ndarray], faces: list[np.ndarray], length: float | None, h: float, backend: str
+) -> tuple[np.ndarray, int]:
     """Overlap volumes (N,) m^3 of one frame of posed meshes ``verts[i]`` (V_i, 3), with
     periodic wrapping and ghost copies when ``length`` is set."""
     n = len(verts)
@@ -389,8 +424,9 @@ def _mesh_frame(verts: list[np.ndarray], faces: list[np.ndarray], length: float 
     return _frame_overlap_mesh(verts, all_faces, lo, hi, n, h, backend)
 
 
-def _capsule_frame(caps: list[tuple[np.ndarray, np.ndarray, np.ndarray]], length: float | None,
-                   h: float) -> tuple[np.ndarray, int]:
+def _capsule_frame(
+    caps: list[tuple[np.ndarray, np.ndarray, np.ndarray]], length: float | None, h: float
+) -> tuple[np.ndarray, int]:
     """Overlap volumes (N,) m^3 of one frame of capsules, ``caps[i] = (start (J, 3),
     end (J, 3), radius (J,))`` of character i, with periodic ghosts when ``length`` is set."""
     n = len(caps)
@@ -399,7 +435,7 @@ def _capsule_frame(caps: list[tuple[np.ndarray, np.ndarray, np.ndarray]], length
     end = np.zeros((n, n_j, 3))
     radius = np.zeros((n, n_j))
     for i, (s, e, r) in enumerate(caps):
-        start[i, :len(r)], end[i, :len(r)], radius[i, :len(r)] = s, e, r
+        start[i, : len(r)], end[i, : len(r)], radius[i, : len(r)] = s, e, r
     if length is not None:
         has = radius[:, :, None] > 0
         r3 = np.where(has, radius[:, :, None], 0.0)
@@ -419,9 +455,16 @@ def _capsule_frame(caps: list[tuple[np.ndarray, np.ndarray, np.ndarray]], length
     return _frame_overlap_capsules(start, end, radius, n, h)
 
 
-def overlap_volume(anim, *, resolution: float = 0.02, geometry: str = "mesh", frames: Any = None,
-                   device: str | None = None, progress: bool = False,
-                   bodies: Sequence | None = None) -> OverlapResult:
+def overlap_volume(
+    anim,
+    *,
+    resolution: float = 0.02,
+    geometry: str = "mesh",
+    frames: Any = None,
+    device: str | None = None,
+    progress: bool = False,
+    bodies: Sequence | None = None,
+) -> OverlapResult:
     """Mean per-character volumetric overlap between characters.
 
     Args:
@@ -452,8 +495,9 @@ def overlap_volume(anim, *, resolution: float = 0.02, geometry: str = "mesh", fr
     n = anim.n_characters
     length = anim.periodic_length
     if length is not None and int(anim.meta["periodic"].get("axis", 0)) != 0:
-        raise InvalidInputError("anim.meta['periodic']: only axis 0 (x) is supported, "
-                                f"got axis {anim.meta['periodic'].get('axis')!r}")
+        raise InvalidInputError(
+            f"anim.meta['periodic']: only axis 0 (x) is supported, got axis {anim.meta['periodic'].get('axis')!r}"
+        )
     out = np.zeros((len(idx), n))
     dropped = 0
     faces = body_volume = None
@@ -467,12 +511,15 @@ def overlap_volume(anim, *, resolution: float = 0.02, geometry: str = "mesh", fr
 
         bar = progress_bar(total=len(idx), desc=f"overlap ({geometry})", unit="frame", leave=False)
     for c0 in range(0, len(idx), _FRAME_CHUNK):
-        chunk = idx[c0:c0 + _FRAME_CHUNK]
+        chunk = idx[c0 : c0 + _FRAME_CHUNK]
         rot = anim.joint_rotations[chunk]  # (C, N, J, 3)
         root = anim.root_translation[chunk]  # (C, N, 3)
         if geometry == "mesh":
-            posed = None if batch_pose is not None else \
-                [np.asarray(b.pose(rot[:, i], root[:, i])[0], dtype=np.float64) for i, b in enumerate(body_objs)]
+            posed = (
+                None
+                if batch_pose is not None
+                else [np.asarray(b.pose(rot[:, i], root[:, i])[0], dtype=np.float64) for i, b in enumerate(body_objs)]
+            )
             for k in range(len(chunk)):
                 if batch_pose is not None:
                     verts = [np.asarray(v, dtype=np.float64) for v in batch_pose(body_objs, rot[k], root[k])]
@@ -491,6 +538,12 @@ def overlap_volume(anim, *, resolution: float = 0.02, geometry: str = "mesh", fr
                     bar.update(1)
     if bar is not None:
         bar.close()
-    return OverlapResult(per_character=out, frames=idx, resolution=h, geometry=geometry,
-                         body_volume=body_volume, dropped_columns=dropped,
-                         seconds=time.perf_counter() - t_start)
+    return OverlapResult(
+        per_character=out,
+        frames=idx,
+        resolution=h,
+        geometry=geometry,
+        body_volume=body_volume,
+        dropped_columns=dropped,
+        seconds=time.perf_counter() - t_start,
+    )

@@ -27,7 +27,8 @@ the minimum image, so a wrapped coordinate never reads as a jump.
 from __future__ import annotations
 
 import dataclasses
-from typing import Any, Sequence
+from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 
@@ -37,14 +38,31 @@ from crowdstudy.metrics.overlap import resolve_bodies
 from crowdstudy.metrics.tracking import check_reference, joint_positions
 from crowdstudy.scene_meta import loop_mode
 
-__all__ = ["FOOT_JOINTS", "SLIDE_THRESHOLD_M_S", "PeakSpeed", "FootSlide", "SeamJump", "SmoothnessResult",
-           "joint_jerk", "high_frequency_share", "joint_speeds", "peak_joint_speed", "pelvis_acceleration_p99", "foot_slide",
-           "seam_jump", "mean_jerk", "smoothness", "smoothness_from_positions", "smoothness_ratios"]
+__all__ = [
+    "FOOT_JOINTS",
+    "SLIDE_THRESHOLD_M_S",
+    "PeakSpeed",
+    "FootSlide",
+    "SeamJump",
+    "SmoothnessResult",
+    "joint_jerk",
+    "high_frequency_share",
+    "joint_speeds",
+    "peak_joint_speed",
+    "pelvis_acceleration_p99",
+    "foot_slide",
+    "seam_jump",
+    "mean_jerk",
+    "smoothness",
+    "smoothness_from_positions",
+    "smoothness_ratios",
+]
 
 #: Foot joints of the 24-joint SMPL-order skeleton: left/right ankle and left/right foot
 #: (toe), (7, 8, 10, 11).
-FOOT_JOINTS: tuple[int, ...] = tuple(JOINT_INDEX[name] for name in ("left_ankle", "right_ankle", "left_foot",
-                                                                     "right_foot"))
+FOOT_JOINTS: tuple[int, ...] = tuple(
+    JOINT_INDEX[name] for name in ("left_ankle", "right_ankle", "left_foot", "right_foot")
+)
 #: Planted-foot speed above which a sample counts as sliding, m/s (5 cm/s).
 SLIDE_THRESHOLD_M_S = 0.05
 
@@ -72,8 +90,9 @@ def _positive(value: Any, name: str, *, allow_zero: bool = False) -> float:
     except (TypeError, ValueError):
         raise InvalidInputError(f"{name}: expected a number, got {value!r}") from None
     if not np.isfinite(out) or out < 0 or (out == 0 and not allow_zero):
-        raise InvalidInputError(f"{name}: expected a {'non-negative' if allow_zero else 'positive'} "
-                                f"finite number, got {value!r}")
+        raise InvalidInputError(
+            f"{name}: expected a {'non-negative' if allow_zero else 'positive'} finite number, got {value!r}"
+        )
     return out
 
 
@@ -117,14 +136,15 @@ def joint_jerk(pos: Any, fps: float, *, periodic_length: float | None = None) ->
     """
     pos = _positions(pos, "pos", 4)
     fps = _positive(fps, "fps")
-    jerk = np.diff(_steps(pos, _length(periodic_length)), n=2, axis=0) * fps ** 3
+    jerk = np.diff(_steps(pos, _length(periodic_length)), n=2, axis=0) * fps**3
     norm = np.linalg.norm(jerk, axis=-1)  # (T-3, N, J)
     per = norm.mean(axis=(0, 2))
     return float(norm.mean()), per
 
 
-def high_frequency_share(pos: Any, fps: float, *, cutoff_hz: float = 6.0,
-                         periodic_length: float | None = None) -> tuple[float, np.ndarray]:
+def high_frequency_share(
+    pos: Any, fps: float, *, cutoff_hz: float = 6.0, periodic_length: float | None = None
+) -> tuple[float, np.ndarray]:
     """Share of joint-velocity energy above ``cutoff_hz`` (dimensionless, 0..1).
 
     Velocity = first difference times ``fps`` (m/s, T-1 samples). For every (character,
@@ -183,8 +203,9 @@ class PeakSpeed:
     per_character: np.ndarray
 
 
-def joint_speeds(pos: np.ndarray, fps: float, *, periodic_length: float | None = None,
-                 seam: bool = False) -> np.ndarray:
+def joint_speeds(
+    pos: np.ndarray, fps: float, *, periodic_length: float | None = None, seam: bool = False
+) -> np.ndarray:
     """Single-frame joint speeds, m/s: (T-1, ..., J) from positions (T, ..., J, 3) m, the
     steps taking the minimum image along x when ``periodic_length`` (m) is given; with
     ``seam`` the step from the last frame to the first (a loop) is appended (T steps)."""
@@ -206,12 +227,12 @@ def peak_joint_speed(pos: Any, fps: float, *, periodic_length: float | None = No
     fps = _positive(fps, "fps")
     speed = joint_speeds(pos, fps, periodic_length=_length(periodic_length))  # (T-1, N, J)
     t, i, j = np.unravel_index(int(np.argmax(speed)), speed.shape)
-    return PeakSpeed(value=float(speed[t, i, j]), frame=int(t), character=int(i), joint=int(j),
-                     per_character=speed.max(axis=(0, 2)))
+    return PeakSpeed(
+        value=float(speed[t, i, j]), frame=int(t), character=int(i), joint=int(j), per_character=speed.max(axis=(0, 2))
+    )
 
 
-def pelvis_acceleration_p99(root: Any, fps: float, *,
-                            periodic_length: float | None = None) -> tuple[float, np.ndarray]:
+def pelvis_acceleration_p99(root: Any, fps: float, *, periodic_length: float | None = None) -> tuple[float, np.ndarray]:
     """99th percentile of the pelvis horizontal acceleration, m/s^2.
 
     The second difference of the root's x, y times ``fps^2``, its norm, and the 99th
@@ -227,7 +248,7 @@ def pelvis_acceleration_p99(root: Any, fps: float, *,
     """
     root = _positions(root, "root", 3, ndim=3)
     fps = _positive(fps, "fps")
-    acc = np.diff(_steps(root, _length(periodic_length))[..., :2], axis=0) * fps ** 2
+    acc = np.diff(_steps(root, _length(periodic_length))[..., :2], axis=0) * fps**2
     norm = np.linalg.norm(acc, axis=-1)  # (T-2, N)
     return _percentile(norm, 99.0), np.percentile(norm, 99.0, axis=0)
 
@@ -267,9 +288,16 @@ def _horizontal_speed(pos: np.ndarray, fps: float, length: float | None) -> np.n
     return np.linalg.norm(_steps(pos, length)[..., :2], axis=-1) * fps
 
 
-def foot_slide(pos: Any, fps: float, *, reference: Any = None, foot_joints: Sequence[int] = FOOT_JOINTS,
-               planted_speed: float = 0.02, planted_height: float = 0.03,
-               periodic_length: float | None = None) -> FootSlide:
+def foot_slide(
+    pos: Any,
+    fps: float,
+    *,
+    reference: Any = None,
+    foot_joints: Sequence[int] = FOOT_JOINTS,
+    planted_speed: float = 0.02,
+    planted_height: float = 0.03,
+    periodic_length: float | None = None,
+) -> FootSlide:
     """Distribution of the horizontal speed (m/s) of planted feet (see :class:`FootSlide`).
 
     Args:
@@ -296,17 +324,24 @@ def foot_slide(pos: Any, fps: float, *, reference: Any = None, foot_joints: Sequ
     ref_feet = ref[:, :, feet]
     height = ref_feet[..., 2]  # (T, N, F)
     mid_height = 0.5 * (height[1:] + height[:-1])
-    planted = (_horizontal_speed(ref_feet, fps, length) < planted_speed) & \
-        (mid_height <= height.min(axis=0, keepdims=True) + planted_height)  # (T-1, N, F)
+    planted = (_horizontal_speed(ref_feet, fps, length) < planted_speed) & (
+        mid_height <= height.min(axis=0, keepdims=True) + planted_height
+    )  # (T-1, N, F)
     slide_all = _horizontal_speed(pos[:, :, feet], fps, length)
     slide = slide_all[planted]
     per_samples = planted.sum(axis=(0, 2)).astype(np.int64)
     per_p99 = np.array([_percentile(slide_all[:, i][planted[:, i]], 99.0) for i in range(pos.shape[1])])
     nan = float("nan")
-    return FootSlide(p50=_percentile(slide, 50.0), p90=_percentile(slide, 90.0), p99=_percentile(slide, 99.0),
-                     mean=float(slide.mean()) if slide.size else nan,
-                     fraction_over_threshold=float((slide > SLIDE_THRESHOLD_M_S).mean()) if slide.size else nan,
-                     samples=int(slide.size), per_character_p99=per_p99, per_character_samples=per_samples)
+    return FootSlide(
+        p50=_percentile(slide, 50.0),
+        p90=_percentile(slide, 90.0),
+        p99=_percentile(slide, 99.0),
+        mean=float(slide.mean()) if slide.size else nan,
+        fraction_over_threshold=float((slide > SLIDE_THRESHOLD_M_S).mean()) if slide.size else nan,
+        samples=int(slide.size),
+        per_character_p99=per_p99,
+        per_character_samples=per_samples,
+    )
 
 
 @dataclasses.dataclass(frozen=True)
@@ -351,8 +386,13 @@ def seam_jump(pos: Any, *, periodic_length: float | None = None) -> SeamJump:
     seam = float(seam_i.mean())
     frame_step = float(np.median(step.mean(axis=1)))
     per = _ratio(seam_i, np.median(step, axis=0))
-    return SeamJump(seam=seam, frame_step=frame_step, ratio=float(_ratio(seam, frame_step)),
-                    per_character=per, max_character=float(per.max()))
+    return SeamJump(
+        seam=seam,
+        frame_step=frame_step,
+        ratio=float(_ratio(seam, frame_step)),
+        per_character=per,
+        max_character=float(per.max()),
+    )
 
 
 # --------------------------------------------------------------------- on animations
@@ -459,35 +499,71 @@ class SmoothnessResult:
     seam_ratio_per_character: np.ndarray
 
     #: Keys of :meth:`as_dict` besides ``per_character`` (fixed, in this order).
-    KEYS = ("jerk_m_s3", "hf_share", "hf_cutoff_hz", "max_joint_speed_m_s", "max_joint_speed_frame",
-            "max_joint_speed_character", "max_joint_speed_joint", "pelvis_accel_p99_m_s2", "foot_slide_p50_m_s",
-            "foot_slide_p90_m_s", "foot_slide_p99_m_s", "foot_slide_mean_m_s", "foot_slide_fraction_over_5cm_s",
-            "foot_planted_samples", "foot_mask_from", "seam_jump_m", "seam_frame_step_m", "seam_ratio",
-            "seam_ratio_max_character")
+    KEYS = (
+        "jerk_m_s3",
+        "hf_share",
+        "hf_cutoff_hz",
+        "max_joint_speed_m_s",
+        "max_joint_speed_frame",
+        "max_joint_speed_character",
+        "max_joint_speed_joint",
+        "pelvis_accel_p99_m_s2",
+        "foot_slide_p50_m_s",
+        "foot_slide_p90_m_s",
+        "foot_slide_p99_m_s",
+        "foot_slide_mean_m_s",
+        "foot_slide_fraction_over_5cm_s",
+        "foot_planted_samples",
+        "foot_mask_from",
+        "seam_jump_m",
+        "seam_frame_step_m",
+        "seam_ratio",
+        "seam_ratio_max_character",
+    )
     #: Keys of ``as_dict()["per_character"]``: lists of N values.
-    PER_CHARACTER_KEYS = ("jerk_m_s3", "hf_share", "max_joint_speed_m_s", "pelvis_accel_p99_m_s2",
-                          "foot_slide_p99_m_s", "foot_planted_samples", "seam_ratio")
+    PER_CHARACTER_KEYS = (
+        "jerk_m_s3",
+        "hf_share",
+        "max_joint_speed_m_s",
+        "pelvis_accel_p99_m_s2",
+        "foot_slide_p99_m_s",
+        "foot_planted_samples",
+        "seam_ratio",
+    )
 
     def as_dict(self, *, per_character: bool = True) -> dict:
         """A JSON-serialisable dict with the keys :attr:`KEYS` (NaN and inf become None)
         and, when ``per_character``, ``per_character``: {key: list of N values} for
         :attr:`PER_CHARACTER_KEYS`."""
         out: dict = {
-            "jerk_m_s3": _num(self.jerk_m_s3), "hf_share": _num(self.hf_share), "hf_cutoff_hz": float(self.cutoff_hz),
+            "jerk_m_s3": _num(self.jerk_m_s3),
+            "hf_share": _num(self.hf_share),
+            "hf_cutoff_hz": float(self.cutoff_hz),
             "max_joint_speed_m_s": _num(self.max_joint_speed_m_s),
             "max_joint_speed_frame": int(self.max_joint_speed_frame),
             "max_joint_speed_character": int(self.max_joint_speed_character),
             "max_joint_speed_joint": int(self.max_joint_speed_joint),
             "pelvis_accel_p99_m_s2": _num(self.pelvis_accel_p99_m_s2),
-            "foot_slide_p50_m_s": _num(self.foot_slide_p50_m_s), "foot_slide_p90_m_s": _num(self.foot_slide_p90_m_s),
-            "foot_slide_p99_m_s": _num(self.foot_slide_p99_m_s), "foot_slide_mean_m_s": _num(self.foot_slide_mean_m_s),
+            "foot_slide_p50_m_s": _num(self.foot_slide_p50_m_s),
+            "foot_slide_p90_m_s": _num(self.foot_slide_p90_m_s),
+            "foot_slide_p99_m_s": _num(self.foot_slide_p99_m_s),
+            "foot_slide_mean_m_s": _num(self.foot_slide_mean_m_s),
             "foot_slide_fraction_over_5cm_s": _num(self.foot_slide_fraction_over_5cm_s),
-            "foot_planted_samples": int(self.foot_planted_samples), "foot_mask_from": self.foot_mask_from,
-            "seam_jump_m": _num(self.seam_jump_m), "seam_frame_step_m": _num(self.seam_frame_step_m),
-            "seam_ratio": _num(self.seam_ratio), "seam_ratio_max_character": _num(self.seam_ratio_max_character)}
+            "foot_planted_samples": int(self.foot_planted_samples),
+            "foot_mask_from": self.foot_mask_from,
+            "seam_jump_m": _num(self.seam_jump_m),
+            "seam_frame_step_m": _num(self.seam_frame_step_m),
+            "seam_ratio": _num(self.seam_ratio),
+            "seam_ratio_max_character": _num(self.seam_ratio_max_character),
+        }
         if per_character:
-            arrays = (self.jerk_per_character, self.hf_share_per_character, self.max_joint_speed_per_character,
-                      self.pelvis_accel_p99_per_character, self.foot_slide_p99_per_character)
+            arrays = (
+                self.jerk_per_character,
+                self.hf_share_per_character,
+                self.max_joint_speed_per_character,
+                self.pelvis_accel_p99_per_character,
+                self.foot_slide_p99_per_character,
+            )
             per = {key: [_num(v) for v in arr] for key, arr in zip(self.PER_CHARACTER_KEYS, arrays)}
             per["foot_planted_samples"] = [int(v) for v in self.foot_planted_samples_per_character]
             per["seam_ratio"] = [_num(v) for v in self.seam_ratio_per_character]
@@ -495,10 +571,18 @@ class SmoothnessResult:
         return out
 
 
-def smoothness_from_positions(pos: Any, root: Any, fps: float, *, reference_pos: Any = None,
-                              periodic_length: float | None = None, cutoff_hz: float = 6.0,
-                              planted_speed: float = 0.02, planted_height: float = 0.03,
-                              foot_joints: Sequence[int] = FOOT_JOINTS) -> SmoothnessResult:
+def smoothness_from_positions(
+    pos: Any,
+    root: Any,
+    fps: float,
+    *,
+    reference_pos: Any = None,
+    periodic_length: float | None = None,
+    cutoff_hz: float = 6.0,
+    planted_speed: float = 0.02,
+    planted_height: float = 0.03,
+    foot_joints: Sequence[int] = FOOT_JOINTS,
+) -> SmoothnessResult:
     """Every smoothness measure on plain arrays.
 
     Args:
@@ -519,26 +603,58 @@ def smoothness_from_positions(pos: Any, root: Any, fps: float, *, reference_pos:
     hf, hf_i = high_frequency_share(pos, fps, cutoff_hz=cutoff_hz, periodic_length=periodic_length)
     peak = peak_joint_speed(pos, fps, periodic_length=periodic_length)
     acc, acc_i = pelvis_acceleration_p99(root, fps, periodic_length=periodic_length)
-    feet = foot_slide(pos, fps, reference=reference_pos, foot_joints=foot_joints, planted_speed=planted_speed,
-                      planted_height=planted_height, periodic_length=periodic_length)
+    feet = foot_slide(
+        pos,
+        fps,
+        reference=reference_pos,
+        foot_joints=foot_joints,
+        planted_speed=planted_speed,
+        planted_height=planted_height,
+        periodic_length=periodic_length,
+    )
     seam = seam_jump(pos, periodic_length=periodic_length)
     return SmoothnessResult(
-        fps=float(fps), n_frames=int(pos.shape[0]), n_characters=int(pos.shape[1]), cutoff_hz=float(cutoff_hz),
-        jerk_m_s3=jerk, jerk_per_character=jerk_i, hf_share=hf, hf_share_per_character=hf_i,
-        max_joint_speed_m_s=peak.value, max_joint_speed_frame=peak.frame, max_joint_speed_character=peak.character,
-        max_joint_speed_joint=peak.joint, max_joint_speed_per_character=peak.per_character,
-        pelvis_accel_p99_m_s2=acc, pelvis_accel_p99_per_character=acc_i,
-        foot_slide_p50_m_s=feet.p50, foot_slide_p90_m_s=feet.p90, foot_slide_p99_m_s=feet.p99,
-        foot_slide_mean_m_s=feet.mean, foot_slide_fraction_over_5cm_s=feet.fraction_over_threshold,
-        foot_planted_samples=feet.samples, foot_slide_p99_per_character=feet.per_character_p99,
+        fps=float(fps),
+        n_frames=int(pos.shape[0]),
+        n_characters=int(pos.shape[1]),
+        cutoff_hz=float(cutoff_hz),
+        jerk_m_s3=jerk,
+        jerk_per_character=jerk_i,
+        hf_share=hf,
+        hf_share_per_character=hf_i,
+        max_joint_speed_m_s=peak.value,
+        max_joint_speed_frame=peak.frame,
+        max_joint_speed_character=peak.character,
+        max_joint_speed_joint=peak.joint,
+        max_joint_speed_per_character=peak.per_character,
+        pelvis_accel_p99_m_s2=acc,
+        pelvis_accel_p99_per_character=acc_i,
+        foot_slide_p50_m_s=feet.p50,
+        foot_slide_p90_m_s=feet.p90,
+        foot_slide_p99_m_s=feet.p99,
+        foot_slide_mean_m_s=feet.mean,
+        foot_slide_fraction_over_5cm_s=feet.fraction_over_threshold,
+        foot_planted_samples=feet.samples,
+        foot_slide_p99_per_character=feet.per_character_p99,
         foot_planted_samples_per_character=feet.per_character_samples,
         foot_mask_from="self" if reference_pos is None else "reference",
-        seam_jump_m=seam.seam, seam_frame_step_m=seam.frame_step, seam_ratio=seam.ratio,
-        seam_ratio_max_character=seam.max_character, seam_ratio_per_character=seam.per_character)
+        seam_jump_m=seam.seam,
+        seam_frame_step_m=seam.frame_step,
+        seam_ratio=seam.ratio,
+        seam_ratio_max_character=seam.max_character,
+        seam_ratio_per_character=seam.per_character,
+    )
 
 
-def smoothness(anim, reference=None, *, bodies: Sequence | None = None, cutoff_hz: float = 6.0,
-               planted_speed: float = 0.02, planted_height: float = 0.03) -> SmoothnessResult:
+def smoothness(
+    anim,
+    reference=None,
+    *,
+    bodies: Sequence | None = None,
+    cutoff_hz: float = 6.0,
+    planted_speed: float = 0.02,
+    planted_height: float = 0.03,
+) -> SmoothnessResult:
     """Smoothness of a :class:`~crowdstudy.scene.CrowdAnimation` (every frame).
 
     Joint positions come from forward kinematics with each character's rest joints; the
@@ -569,17 +685,29 @@ def smoothness(anim, reference=None, *, bodies: Sequence | None = None, cutoff_h
         check_reference(anim, reference)
         ref_pos = _joint_positions(reference, body_objs)
     pos = _joint_positions(anim, body_objs)
-    result = smoothness_from_positions(pos, anim.root_translation, anim.fps,
-                                       reference_pos=ref_pos, periodic_length=anim.periodic_length,
-                                       cutoff_hz=cutoff_hz, planted_speed=planted_speed, planted_height=planted_height)
+    result = smoothness_from_positions(
+        pos,
+        anim.root_translation,
+        anim.fps,
+        reference_pos=ref_pos,
+        periodic_length=anim.periodic_length,
+        cutoff_hz=cutoff_hz,
+        planted_speed=planted_speed,
+        planted_height=planted_height,
+    )
     if loop_mode(anim.meta) == "dissolve":
         # the video loops by a cross-dissolve of frames [T, T + D) into its first frames
         # (crowdstudy.render.video): a fading ghost, not a joint trajectory, so its seam is
         # measured in pixels (crowdstudy.render.seam), not here
         nan = float("nan")
-        result = dataclasses.replace(result, seam_jump_m=nan, seam_frame_step_m=nan, seam_ratio=nan,
-                                     seam_ratio_per_character=np.full(anim.n_characters, nan),
-                                     seam_ratio_max_character=nan)
+        result = dataclasses.replace(
+            result,
+            seam_jump_m=nan,
+            seam_frame_step_m=nan,
+            seam_ratio=nan,
+            seam_ratio_per_character=np.full(anim.n_characters, nan),
+            seam_ratio_max_character=nan,
+        )
     return result
 
 
@@ -602,8 +730,10 @@ def smoothness_ratios(result: SmoothnessResult, reference_result: SmoothnessResu
     def diff(a: float, b: float) -> float | None:
         return _num(a - b) if np.isfinite(a) and np.isfinite(b) else None
 
-    return {"jerk_ratio": ratio(result.jerk_m_s3, reference_result.jerk_m_s3),
-            "hf_share_ratio": ratio(result.hf_share, reference_result.hf_share),
-            "pelvis_accel_p99_ratio": ratio(result.pelvis_accel_p99_m_s2, reference_result.pelvis_accel_p99_m_s2),
-            "max_joint_speed_diff_m_s": diff(result.max_joint_speed_m_s, reference_result.max_joint_speed_m_s),
-            "foot_slide_p99_diff_m_s": diff(result.foot_slide_p99_m_s, reference_result.foot_slide_p99_m_s)}
+    return {
+        "jerk_ratio": ratio(result.jerk_m_s3, reference_result.jerk_m_s3),
+        "hf_share_ratio": ratio(result.hf_share, reference_result.hf_share),
+        "pelvis_accel_p99_ratio": ratio(result.pelvis_accel_p99_m_s2, reference_result.pelvis_accel_p99_m_s2),
+        "max_joint_speed_diff_m_s": diff(result.max_joint_speed_m_s, reference_result.max_joint_speed_m_s),
+        "foot_slide_p99_diff_m_s": diff(result.foot_slide_p99_m_s, reference_result.foot_slide_p99_m_s),
+    }

@@ -2,7 +2,8 @@
 
 from __future__ import annotations
 
-from typing import Any, Sequence
+from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 
@@ -14,9 +15,18 @@ from crowdstudy.metrics.walls import wall_penetration
 __all__ = ["summarize"]
 
 
-def summarize(anim, reference=None, *, resolution: float = 0.02, frames: Any = "auto",
-              geometries: Sequence[str] = GEOMETRIES, bodies: Sequence | None = None,
-              device: str | None = None, progress: bool = False, per_character: bool = False) -> dict:
+def summarize(
+    anim,
+    reference=None,
+    *,
+    resolution: float = 0.02,
+    frames: Any = "auto",
+    geometries: Sequence[str] = GEOMETRIES,
+    bodies: Sequence | None = None,
+    device: str | None = None,
+    progress: bool = False,
+    per_character: bool = False,
+) -> dict:
     """Overlap, smoothness, self-penetration and (with a reference) tracking of ``anim``.
 
     Args:
@@ -52,11 +62,23 @@ def summarize(anim, reference=None, *, resolution: float = 0.02, frames: Any = "
         :func:`~crowdstudy.metrics.smoothness.smoothness_ratios` (``jerk_ratio`` ...).
     """
     body_objs = resolve_bodies(anim, bodies)
-    out: dict = {"characters": anim.n_characters, "frames": anim.n_frames, "fps": anim.fps,
-                 "method": anim.meta.get("method"), "resolution_m": float(resolution)}
+    out: dict = {
+        "characters": anim.n_characters,
+        "frames": anim.n_frames,
+        "fps": anim.fps,
+        "method": anim.meta.get("method"),
+        "resolution_m": float(resolution),
+    }
     for geometry in geometries:
-        res = overlap_volume(anim, resolution=resolution, geometry=geometry, frames=frames, bodies=body_objs,
-                             device=device, progress=progress)
+        res = overlap_volume(
+            anim,
+            resolution=resolution,
+            geometry=geometry,
+            frames=frames,
+            bodies=body_objs,
+            device=device,
+            progress=progress,
+        )
         out["frames_measured"] = int(len(res.frames))
         steps = np.unique(np.diff(res.frames))
         # None when the measured frames are not evenly spaced (an explicit list)
@@ -67,23 +89,36 @@ def summarize(anim, reference=None, *, resolution: float = 0.02, frames: Any = "
         if res.fraction is not None:
             out[f"overlap_{geometry}_fraction"] = res.fraction
         if reference is not None:
-            ref = overlap_volume(reference, resolution=resolution, geometry=geometry, frames=frames,
-                                 bodies=body_objs, device=device, progress=progress)
+            ref = overlap_volume(
+                reference,
+                resolution=resolution,
+                geometry=geometry,
+                frames=frames,
+                bodies=body_objs,
+                device=device,
+                progress=progress,
+            )
             out[f"reference_overlap_{geometry}_m3"] = ref.mean
             out[f"reference_overlap_{geometry}_litres"] = ref.mean_litres
             out[f"overlap_{geometry}_ratio"] = res.mean / ref.mean if ref.mean > 0 else None
     if anim.n_frames >= 4:
         ref_pos = None if reference is None else _joint_positions(reference, body_objs)
-        smooth = smoothness_from_positions(_joint_positions(anim, body_objs), anim.root_translation, anim.fps,
-                                           reference_pos=ref_pos, periodic_length=anim.periodic_length)
+        smooth = smoothness_from_positions(
+            _joint_positions(anim, body_objs),
+            anim.root_translation,
+            anim.fps,
+            reference_pos=ref_pos,
+            periodic_length=anim.periodic_length,
+        )
         values = smooth.as_dict(per_character=per_character)
         if per_character:
             out["smoothness_per_character"] = values.pop("per_character")
         out.update(values)
         if reference is not None:
             # the Baseline's own feet decide where it is planted
-            ref_smooth = smoothness_from_positions(ref_pos, reference.root_translation, reference.fps,
-                                                   periodic_length=reference.periodic_length)
+            ref_smooth = smoothness_from_positions(
+                ref_pos, reference.root_translation, reference.fps, periodic_length=reference.periodic_length
+            )
             ref_values = ref_smooth.as_dict(per_character=per_character)
             if per_character:
                 out["reference_smoothness_per_character"] = ref_values.pop("per_character")

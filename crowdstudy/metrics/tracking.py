@@ -17,7 +17,8 @@ is measured in :mod:`crowdstudy.metrics.smoothness`.
 from __future__ import annotations
 
 import dataclasses
-from typing import Any, Sequence
+from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 
@@ -26,8 +27,16 @@ from crowdstudy.body.skeleton import BODY_PARTS
 from crowdstudy.errors import InvalidInputError
 from crowdstudy.metrics.overlap import capsules_world, frame_indices, resolve_bodies
 
-__all__ = ["joint_positions", "check_reference", "tracking_error", "tracking_parts", "TrackingParts",
-           "intra_penetration", "IntraPenetrationResult", "intra_pairs"]
+__all__ = [
+    "joint_positions",
+    "check_reference",
+    "tracking_error",
+    "tracking_parts",
+    "TrackingParts",
+    "intra_penetration",
+    "IntraPenetrationResult",
+    "intra_pairs",
+]
 
 _FRAME_CHUNK = 64
 
@@ -44,10 +53,8 @@ def joint_positions(anim, *, bodies: Sequence | None = None, frames: Any = None)
     body_objs = resolve_bodies(anim, bodies)
     rest = np.stack([np.asarray(b.rest_joints, dtype=np.float64) for b in body_objs])  # (N, J, 3)
     if rest.shape[1] != anim.n_joints:
-        raise InvalidInputError(
-            f"bodies: rest_joints have {rest.shape[1]} joints, the animation has {anim.n_joints}")
-    _, pos = forward_kinematics(rest[None], anim.joint_rotations[idx], anim.root_translation[idx],
-                                parents=anim.parents)
+        raise InvalidInputError(f"bodies: rest_joints have {rest.shape[1]} joints, the animation has {anim.n_joints}")
+    _, pos = forward_kinematics(rest[None], anim.joint_rotations[idx], anim.root_translation[idx], parents=anim.parents)
     return pos
 
 
@@ -57,7 +64,8 @@ def check_reference(anim, reference) -> None:
         raise InvalidInputError(
             f"reference: expected the same (frames, characters, joints) as anim "
             f"{anim.root_translation.shape[:2] + (anim.n_joints,)}, got "
-            f"{reference.root_translation.shape[:2] + (reference.n_joints,)}")
+            f"{reference.root_translation.shape[:2] + (reference.n_joints,)}"
+        )
 
 
 def tracking_error(anim, reference, *, bodies: Sequence | None = None) -> float:
@@ -94,8 +102,9 @@ def _deviations(anim, reference, body_objs):
     length = anim.periodic_length
     for c0 in range(0, anim.n_frames, _FRAME_CHUNK):
         chunk = np.arange(c0, min(c0 + _FRAME_CHUNK, anim.n_frames))
-        diff = joint_positions(anim, bodies=body_objs, frames=chunk) - \
-            joint_positions(reference, bodies=body_objs, frames=chunk)
+        diff = joint_positions(anim, bodies=body_objs, frames=chunk) - joint_positions(
+            reference, bodies=body_objs, frames=chunk
+        )
         if length is not None:
             diff[..., 0] -= length * np.round(diff[..., 0] / length)
         yield diff
@@ -130,13 +139,18 @@ class TrackingParts:
     def as_dict(self, per_character: bool = False) -> dict:
         """Totals as ``tracking_*_cm`` (the parts' ``tracking_legs_cm`` ... are means over
         characters); ``per_character``: also ``tracking_per_character`` (lists)."""
-        out = {"tracking_error_cm": self.total_cm, "tracking_placement_cm": self.placement_cm,
-               "tracking_motion_cm": self.motion_cm}
+        out = {
+            "tracking_error_cm": self.total_cm,
+            "tracking_placement_cm": self.placement_cm,
+            "tracking_motion_cm": self.motion_cm,
+        }
         for part, values in self.per_character_part_cm.items():
             out[f"tracking_{part}_cm"] = float(np.mean(values)) if np.all(np.isfinite(values)) else None
         if per_character:
-            per = {"tracking_cm": self.per_character_cm.tolist(),
-                   "placement_cm": self.per_character_placement_cm.tolist()}
+            per = {
+                "tracking_cm": self.per_character_cm.tolist(),
+                "placement_cm": self.per_character_placement_cm.tolist(),
+            }
             for part, values in self.per_character_part_cm.items():
                 per[f"{part}_cm"] = [float(v) if np.isfinite(v) else None for v in values]
             out["tracking_per_character"] = per
@@ -170,10 +184,15 @@ def tracking_parts(anim, reference, *, bodies: Sequence | None = None) -> Tracki
     for part, names in BODY_PARTS:
         cols = [index[name] for name in names if name in index]
         parts[part] = (100.0 * per_joint[:, cols].mean(axis=1) / anim.n_frames) if cols else np.full(n, np.nan)
-    return TrackingParts(total_cm=100.0 * float(dist.sum() / (count * n)), placement_cm=100.0 * float(place.mean()),
-                         motion_cm=100.0 * float(rest.sum() / (count * n)), per_character_placement_cm=100.0 * place,
-                         per_character_cm=100.0 * dist / count, per_character_part_cm=parts,
-                         per_joint_cm=100.0 * per_joint.sum(axis=0) / (anim.n_frames * n))
+    return TrackingParts(
+        total_cm=100.0 * float(dist.sum() / (count * n)),
+        placement_cm=100.0 * float(place.mean()),
+        motion_cm=100.0 * float(rest.sum() / (count * n)),
+        per_character_placement_cm=100.0 * place,
+        per_character_cm=100.0 * dist / count,
+        per_character_part_cm=parts,
+        per_joint_cm=100.0 * per_joint.sum(axis=0) / (anim.n_frames * n),
+    )
 
 
 def intra_pairs(body, *, parents: np.ndarray | None = None) -> np.ndarray:

@@ -12,7 +12,8 @@ character is wrapped into ``[0, L)`` along x by its root and its images at +-L a
 from __future__ import annotations
 
 import dataclasses
-from typing import Any, Sequence
+from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 
@@ -57,12 +58,17 @@ class WallPenetration:
         return float((self.per_character > 0.01).mean()) if self.per_character.size else 0.0
 
     def as_dict(self) -> dict:
-        return {"n_walls": self.n_walls, "frames_measured": int(len(self.frames)), "mean_cm": self.mean_cm,
-                "p99_cm": self.p99_cm, "max_cm": self.max_cm, "fraction_over_1cm": self.fraction_through}
+        return {
+            "n_walls": self.n_walls,
+            "frames_measured": int(len(self.frames)),
+            "mean_cm": self.mean_cm,
+            "p99_cm": self.p99_cm,
+            "max_cm": self.max_cm,
+            "fraction_over_1cm": self.fraction_through,
+        }
 
 
-def beyond_wall(points: np.ndarray, roots: np.ndarray, wall, period: float | None
-                ) -> tuple[np.ndarray, np.ndarray]:
+def beyond_wall(points: np.ndarray, roots: np.ndarray, wall, period: float | None) -> tuple[np.ndarray, np.ndarray]:
     """How far points lie beyond one wall's face, seen from their character's root.
 
     Args:

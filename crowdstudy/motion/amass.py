@@ -44,8 +44,9 @@ def _field(data, key: str, path) -> np.ndarray:
         raise InvalidInputError(f"AMASS file {path}: field {key!r} is not numeric ({exc})") from None
 
 
-def load_amass(path: str | Path, *, up: str = "y", name: str | None = None,
-               rest_joints: np.ndarray | None = None) -> MotionClip:
+def load_amass(
+    path: str | Path, *, up: str = "y", name: str | None = None, rest_joints: np.ndarray | None = None
+) -> MotionClip:
     """Read an SMPL/AMASS pose file as a non-looping clip (kind "mocap").
 
     Args:
@@ -79,11 +80,13 @@ def load_amass(path: str | Path, *, up: str = "y", name: str | None = None,
             raise InvalidInputError(f"AMASS file {path}: truncated or corrupt archive ({exc})") from None
     if poses.ndim != 2 or poses.shape[1] not in (66, 72, 156, 165) or poses.shape[0] < 1:
         raise InvalidInputError(
-            f"AMASS file {path}: field 'poses' must have shape (T, 72) (or 66/156/165 columns), got {poses.shape}")
+            f"AMASS file {path}: field 'poses' must have shape (T, 72) (or 66/156/165 columns), got {poses.shape}"
+        )
     n = poses.shape[0]
     if trans.shape != (n, 3):
-        raise InvalidInputError(f"AMASS file {path}: field 'trans' must have shape ({n}, 3) to match 'poses', "
-                                f"got {trans.shape}")
+        raise InvalidInputError(
+            f"AMASS file {path}: field 'trans' must have shape ({n}, 3) to match 'poses', got {trans.shape}"
+        )
     if rate.size != 1 or not np.isfinite(rate).all() or float(rate.reshape(-1)[0]) <= 0:
         raise InvalidInputError(f"AMASS file {path}: field {key!r} must be one positive number, got {rate!r}")
     for field, arr in (("poses", poses), ("trans", trans)):
@@ -93,7 +96,7 @@ def load_amass(path: str | Path, *, up: str = "y", name: str | None = None,
     fps = float(rate.reshape(-1)[0])
     aa = np.zeros((n, NUM_JOINTS, 3))
     body = 24 if poses.shape[1] == 72 else 22
-    aa[:, :body] = poses[:, :body * 3].reshape(n, body, 3)
+    aa[:, :body] = poses[:, : body * 3].reshape(n, body, 3)
     local = axis_angle_to_matrix(aa)
     world = _WORLD[up]
     local[:, 1:] = _CANONICAL @ local[:, 1:] @ _CANONICAL.T
@@ -109,5 +112,12 @@ def load_amass(path: str | Path, *, up: str = "y", name: str | None = None,
     root = root.copy()
     root[:, 2] += ANKLE_HEIGHT - feet
     meta = {"source": str(path), "format": f"smpl-{poses.shape[1]}", "up": up, "frames": n}
-    return MotionClip(name=name or path.stem, kind="mocap", fps=fps, joint_rotations=rotations,
-                      root_translation=root, loop=False, meta=meta)
+    return MotionClip(
+        name=name or path.stem,
+        kind="mocap",
+        fps=fps,
+        joint_rotations=rotations,
+        root_translation=root,
+        loop=False,
+        meta=meta,
+    )

@@ -22,8 +22,14 @@ import dataclasses
 import numpy as np
 
 from crowdstudy.body import load_body
-from crowdstudy.body.rotations import (axis_angle_to_quaternion, quat_about_z, quat_conjugate, quat_multiply,
-                                       quat_nearest_sign, quaternion_to_axis_angle)
+from crowdstudy.body.rotations import (
+    axis_angle_to_quaternion,
+    quat_about_z,
+    quat_conjugate,
+    quat_multiply,
+    quat_nearest_sign,
+    quaternion_to_axis_angle,
+)
 from crowdstudy.body.skeleton import DEFAULT_PELVIS_HEIGHT, JOINT_INDEX, JOINT_NAMES, PARENTS, mirror_pose
 from crowdstudy.errors import InvalidInputError
 from crowdstudy.motion.clip import MotionClip
@@ -34,8 +40,16 @@ from crowdstudy.motion.selfcontact import clear_hands
 from crowdstudy.provenance import provenance
 from crowdstudy.scene import Crowd, CrowdAnimation
 
-__all__ = ["build_baseline", "animate_stationary", "animate_walking", "body_scales", "gait_blend",
-           "loop_cycles", "MAX_LOOP_TEMPO_CHANGE", "LOOP_DISSOLVE_SECONDS"]
+__all__ = [
+    "build_baseline",
+    "animate_stationary",
+    "animate_walking",
+    "body_scales",
+    "gait_blend",
+    "loop_cycles",
+    "MAX_LOOP_TEMPO_CHANGE",
+    "LOOP_DISSOLVE_SECONDS",
+]
 
 #: Standard deviation of the random yaw around facing the stage (rad, about 8 degrees).
 YAW_JITTER_SD = 0.14
@@ -55,8 +69,14 @@ DEFAULT_TEMPO = 120.0
 #: Default range of the per-dancer scale of upper-body movement.
 AMPLITUDE_RANGE = (0.85, 1.15)
 #: Joints whose movement ``amplitude`` scales: spine, neck, head, collars and arms.
-_UPPER_BODY = np.array([JOINT_INDEX[n] for n in JOINT_NAMES if n.startswith(("spine", "neck", "head")) or
-                        n.split("_", 1)[-1] in ("collar", "shoulder", "elbow", "wrist", "hand")])
+_UPPER_BODY = np.array(
+    [
+        JOINT_INDEX[n]
+        for n in JOINT_NAMES
+        if n.startswith(("spine", "neck", "head"))
+        or n.split("_", 1)[-1] in ("collar", "shoulder", "elbow", "wrist", "hand")
+    ]
+)
 #: Seconds of extra corridor animation past the stimulus duration, cross-dissolved into the
 #: video's first frames so the loop seam is not seen as a jump (``meta["loop"]`` "dissolve").
 LOOP_DISSOLVE_SECONDS = 0.5
@@ -135,18 +155,31 @@ def loop_cycles(natural_frames: float, n_frames: int, max_change: float = MAX_LO
     ratio = float(n_frames) / float(natural_frames)
     best = 0
     for k in {max(1, int(np.floor(ratio))), max(1, int(np.ceil(ratio)))}:
-        if best == 0 or abs(np.log(ratio / k)) < abs(np.log(ratio / best)) or \
-                (abs(np.log(ratio / k)) == abs(np.log(ratio / best)) and k < best):
+        if (
+            best == 0
+            or abs(np.log(ratio / k)) < abs(np.log(ratio / best))
+            or (abs(np.log(ratio / k)) == abs(np.log(ratio / best)) and k < best)
+        ):
             best = k
     tempo = natural_frames * best / n_frames
     return best if abs(tempo - 1.0) <= max_change + 1e-12 else 0
 
 
-def animate_stationary(crowd: Crowd, *, duration: float = 20.0, fps: float = 30.0, seed=0,
-                       bodies: list[dict] | None = None, clip_names: list[str] | None = None,
-                       yaw_jitter: float = YAW_JITTER_SD, tempo: float | None = DEFAULT_TEMPO, mirror: float = 0.5,
-                       amplitude: tuple[float, float] = AMPLITUDE_RANGE, clear_self_contact: bool = True,
-                       meta: dict | None = None) -> CrowdAnimation:
+def animate_stationary(
+    crowd: Crowd,
+    *,
+    duration: float = 20.0,
+    fps: float = 30.0,
+    seed=0,
+    bodies: list[dict] | None = None,
+    clip_names: list[str] | None = None,
+    yaw_jitter: float = YAW_JITTER_SD,
+    tempo: float | None = DEFAULT_TEMPO,
+    mirror: float = 0.5,
+    amplitude: tuple[float, float] = AMPLITUDE_RANGE,
+    clear_self_contact: bool = True,
+    meta: dict | None = None,
+) -> CrowdAnimation:
     """A dancing crowd on the layout ``crowd`` (its first frame).
 
     Args:
@@ -197,7 +230,7 @@ def animate_stationary(crowd: Crowd, *, duration: float = 20.0, fps: float = 30.
     clips = _dance_clips(names, tempo, fps, n_frames)
     rng = _rng(seed, 1)
     dancers = _draw_dancers(rng, clips, n, yaw_jitter, mirror, amplitude)
-    if crowd.headings is not None:                 # face the crowd's headings (the stage: +y)
+    if crowd.headings is not None:  # face the crowd's headings (the stage: +y)
         dancers.yaw = dancers.yaw + crowd.headings[0] - np.pi / 2
     bodies = _bodies(n, seed, bodies)
     rest, scale, ankle_height = _body_geometry(bodies)
@@ -215,22 +248,34 @@ def animate_stationary(crowd: Crowd, *, duration: float = 20.0, fps: float = 30.
         if loop.beat_offset is not None:
             dancers.beat_offset[members] = loop.beat_offset
         dancers.loop_frames[members] = loop.n_loop / loop.step
-        rot[:, members], root[:, members] = _dance_poses(clip, loop, n_frames, dancers, members, xy[members],
-                                                         scale[members])
+        rot[:, members], root[:, members] = _dance_poses(
+            clip, loop, n_frames, dancers, members, xy[members], scale[members]
+        )
         dancers.phase[members] = loop.start * clip.duration / loop.n_loop
     rot = plant_legs(rot, root, rest, scale, ankle_height)
-    if clear_self_contact:                     # hands out of each character's own (wider) body
+    if clear_self_contact:  # hands out of each character's own (wider) body
         rot = clear_hands(rot, root, [load_body(b) for b in bodies], fps)
-    out_meta = {"method": "Baseline", "scenario": crowd.meta.get("scenario", "concert"),
-                "tempo": None if tempo is None else float(tempo),
-                "provenance": provenance(seed if not isinstance(seed, np.random.Generator) else None)}
-    out_meta.update({k: crowd.meta[k] for k in ("floor", "stage_distance", "stage_front", "obstacles")
-                     if k in crowd.meta})     # the scene's static geometry, for the later stages
+    out_meta = {
+        "method": "Baseline",
+        "scenario": crowd.meta.get("scenario", "concert"),
+        "tempo": None if tempo is None else float(tempo),
+        "provenance": provenance(seed if not isinstance(seed, np.random.Generator) else None),
+    }
+    out_meta.update(
+        {k: crowd.meta[k] for k in ("floor", "stage_distance", "stage_front", "obstacles") if k in crowd.meta}
+    )  # the scene's static geometry, for the later stages
     out_meta.update(meta or {})
     loop_meta = {"mode": "periodic", "frames": int(n_frames)} if periodic else {"mode": "none"}
-    return CrowdAnimation(joint_names=JOINT_NAMES, parents=PARENTS, root_translation=root, joint_rotations=rot,
-                          fps=fps, bodies=tuple(bodies), clips=_dance_records(names, dancers, scale),
-                          meta={"loop": loop_meta, **out_meta})
+    return CrowdAnimation(
+        joint_names=JOINT_NAMES,
+        parents=PARENTS,
+        root_translation=root,
+        joint_rotations=rot,
+        fps=fps,
+        bodies=tuple(bodies),
+        clips=_dance_records(names, dancers, scale),
+        meta={"loop": loop_meta, **out_meta},
+    )
 
 
 def _check_dance_options(amplitude: tuple[float, float], mirror: float) -> tuple[float, float]:
@@ -254,8 +299,11 @@ def _dance_clips(names: list[str], tempo: float | None, fps: float, n_frames: in
     for name in names:
         clip = load_clip(name)
         if clip.meta.get("mocap"):
-            clip = idle_loop(name, fps, n_frames) if clip.meta.get("idle") or tempo is None else \
-                dance_loop(name, float(tempo), fps, n_frames / fps)
+            clip = (
+                idle_loop(name, fps, n_frames)
+                if clip.meta.get("idle") or tempo is None
+                else dance_loop(name, float(tempo), fps, n_frames / fps)
+            )
         clips.append(clip)
     return clips
 
@@ -278,18 +326,33 @@ class _Dancers:
     beat_offset: np.ndarray
 
 
-def _draw_dancers(rng: np.random.Generator, clips: list[MotionClip], n: int, yaw_jitter: float, mirror: float,
-                  amplitude: tuple[float, float]) -> _Dancers:
+def _draw_dancers(
+    rng: np.random.Generator,
+    clips: list[MotionClip],
+    n: int,
+    yaw_jitter: float,
+    mirror: float,
+    amplitude: tuple[float, float],
+) -> _Dancers:
     """The random draws of ``n`` dancers, in this order: clips dealt so each is used about
     equally often, phases, yaws (clipped at 2.5 ``yaw_jitter``), mirroring, amplitudes."""
     choice = rng.permutation(np.resize(np.arange(len(clips)), n))
     phase = rng.uniform(0.0, 1.0, n) * np.array([clips[c].duration for c in choice])
-    yaw = np.clip(rng.normal(0.0, yaw_jitter, n), -2.5 * yaw_jitter, 2.5 * yaw_jitter) if yaw_jitter > 0 \
-        else np.zeros(n)
+    yaw = (
+        np.clip(rng.normal(0.0, yaw_jitter, n), -2.5 * yaw_jitter, 2.5 * yaw_jitter) if yaw_jitter > 0 else np.zeros(n)
+    )
     mirrored = rng.uniform(0.0, 1.0, n) < float(mirror)
     amp = rng.uniform(amplitude[0], amplitude[1], n)
-    return _Dancers(choice=choice, phase=phase, yaw=yaw, mirrored=mirrored, amp=amp, tempo_ratio=np.ones(n),
-                    loop_frames=np.ones(n), beat_offset=np.full(n, -1, dtype=np.int64))
+    return _Dancers(
+        choice=choice,
+        phase=phase,
+        yaw=yaw,
+        mirrored=mirrored,
+        amp=amp,
+        tempo_ratio=np.ones(n),
+        loop_frames=np.ones(n),
+        beat_offset=np.full(n, -1, dtype=np.int64),
+    )
 
 
 @dataclasses.dataclass(frozen=True)
@@ -307,8 +370,9 @@ class _DanceLoop:
     periodic: bool
 
 
-def _dance_schedule(clip: MotionClip, phase: np.ndarray, rng: np.random.Generator, fps: float,
-                    n_frames: int) -> _DanceLoop:
+def _dance_schedule(
+    clip: MotionClip, phase: np.ndarray, rng: np.random.Generator, fps: float, n_frames: int
+) -> _DanceLoop:
     """The loop of ``clip`` for its M dancers at ``phase`` (M,) seconds: a motion-captured
     loop is played frame by frame from a random whole beat (drawn from ``rng``); a
     procedural one is time-warped so a whole number of loops fills ``n_frames``."""
@@ -317,29 +381,47 @@ def _dance_schedule(clip: MotionClip, phase: np.ndarray, rng: np.random.Generato
         n_loop = clip.n_frames
         bf = int(clip.meta.get("beat_frames", 1))
         start = bf * rng.integers(0, max(1, n_loop // bf), phase.size)
-        return _DanceLoop(n_loop=n_loop, step=1, start=start, tempo_ratio=clip.meta.get("tempo_ratio", 1.0),
-                          beat_offset=start // bf if "beat_frames" in clip.meta else None,
-                          periodic=n_frames % n_loop == 0)
+        return _DanceLoop(
+            n_loop=n_loop,
+            step=1,
+            start=start,
+            tempo_ratio=clip.meta.get("tempo_ratio", 1.0),
+            beat_offset=start // bf if "beat_frames" in clip.meta else None,
+            periodic=n_frames % n_loop == 0,
+        )
     # A whole number of loops in the T frames (time-warped to fit: frame T would be
     # frame 0), sampled on a table of n_loop phases advanced `step` entries per frame.
     cycles = loop_cycles(clip.duration * fps, n_frames)
     if cycles:
         g = int(np.gcd(n_frames, cycles))
-        n_loop, step = n_frames // g, cycles // g                       # n_loop / step = T / cycles
-    else:                                  # shorter than a loop: the natural length
+        n_loop, step = n_frames // g, cycles // g  # n_loop / step = T / cycles
+    else:  # shorter than a loop: the natural length
         n_loop, step = max(4, int(round(clip.duration * fps))), 1
-    return _DanceLoop(n_loop=n_loop, step=step, start=np.floor(phase / clip.duration * n_loop).astype(np.int64),
-                      tempo_ratio=clip.duration * fps * step / n_loop, beat_offset=None, periodic=bool(cycles))
+    return _DanceLoop(
+        n_loop=n_loop,
+        step=step,
+        start=np.floor(phase / clip.duration * n_loop).astype(np.int64),
+        tempo_ratio=clip.duration * fps * step / n_loop,
+        beat_offset=None,
+        periodic=bool(cycles),
+    )
 
 
-def _dance_poses(clip: MotionClip, loop: _DanceLoop, n_frames: int, dancers: _Dancers, members: np.ndarray,
-                 xy: np.ndarray, scale: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def _dance_poses(
+    clip: MotionClip,
+    loop: _DanceLoop,
+    n_frames: int,
+    dancers: _Dancers,
+    members: np.ndarray,
+    xy: np.ndarray,
+    scale: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray]:
     """The M dancers ``members`` of ``clip`` over ``n_frames`` frames: joint rotations
     (T, M, 24, 3) axis-angle and pelvis positions (T, M, 3) m, mirrored and amplitude-scaled
     as drawn, turned by their yaw and standing at ``xy`` (M, 2) m; ``scale`` (M,) leg scales."""
     quat_table, root_table = clip.loop_table(loop.n_loop)
-    idx = (loop.start[None, :] + loop.step * np.arange(n_frames)[:, None]) % loop.n_loop   # (T, M)
-    quat = quat_table[idx]                                                  # (T, M, 24, 4)
+    idx = (loop.start[None, :] + loop.step * np.arange(n_frames)[:, None]) % loop.n_loop  # (T, M)
+    quat = quat_table[idx]  # (T, M, 24, 4)
     local = root_table[idx]
     flip = dancers.mirrored[members]
     if flip.any():
@@ -361,11 +443,24 @@ def _dance_poses(clip: MotionClip, loop: _DanceLoop, n_frames: int, dancers: _Da
 def _dance_records(names: list[str], dancers: _Dancers, scale: np.ndarray) -> tuple[dict, ...]:
     """``CrowdAnimation.clips`` of the dancers (see :func:`animate_stationary`)."""
     d = dancers
-    return tuple({"kind": "dance", "clips": [names[c]], "weights": [1.0], "phase": float(ph),
-                  "yaw": float(y), "scale": float(s), "tempo": float(tp), "loop_frames": float(lf),
-                  "mirrored": bool(mi), "amplitude": float(am), "beat_offset": int(bo)}
-                 for c, ph, y, s, tp, lf, mi, am, bo in zip(d.choice, d.phase, d.yaw, scale, d.tempo_ratio,
-                                                           d.loop_frames, d.mirrored, d.amp, d.beat_offset))
+    return tuple(
+        {
+            "kind": "dance",
+            "clips": [names[c]],
+            "weights": [1.0],
+            "phase": float(ph),
+            "yaw": float(y),
+            "scale": float(s),
+            "tempo": float(tp),
+            "loop_frames": float(lf),
+            "mirrored": bool(mi),
+            "amplitude": float(am),
+            "beat_offset": int(bo),
+        }
+        for c, ph, y, s, tp, lf, mi, am, bo in zip(
+            d.choice, d.phase, d.yaw, scale, d.tempo_ratio, d.loop_frames, d.mirrored, d.amp, d.beat_offset
+        )
+    )
 
 
 def _scale_upper_body(quat: np.ndarray, table: np.ndarray, amp: np.ndarray) -> np.ndarray:
@@ -374,7 +469,7 @@ def _scale_upper_body(quat: np.ndarray, table: np.ndarray, amp: np.ndarray) -> n
     if np.allclose(amp, 1.0):
         return quat
     mean = np.sum(quat_nearest_sign(table, table[:1]), axis=0)
-    mean /= np.linalg.norm(mean, axis=-1, keepdims=True)                     # (24, 4)
+    mean /= np.linalg.norm(mean, axis=-1, keepdims=True)  # (24, 4)
     out = quat.copy()
     j = _UPPER_BODY
     rel = quat_multiply(quat_conjugate(mean[j]), quat[..., j, :])
@@ -390,8 +485,10 @@ def _check_walks(walks) -> list[MotionClip]:
         raise InvalidInputError(f"walks: expected at least 2 walking clips, got {len(walks)}")
     for c in walks:
         if not isinstance(c, MotionClip) or not c.loop or c.speed is None or "stride_length" not in c.meta:
-            raise InvalidInputError(f"walks: clip {getattr(c, 'name', c)!r} is not a looping walking clip with a "
-                                    "speed and meta 'stride_length'")
+            raise InvalidInputError(
+                f"walks: clip {getattr(c, 'name', c)!r} is not a looping walking clip with a "
+                "speed and meta 'stride_length'"
+            )
     speeds = [c.speed for c in walks]
     if len(set(speeds)) != len(speeds):
         raise InvalidInputError(f"walks: clip speeds must differ, got {speeds}")
@@ -443,8 +540,11 @@ def _resample_track(positions: np.ndarray, fps_in: float, fps_out: float) -> np.
     t_in = np.arange(positions.shape[0]) / fps_in
     n_out = int(np.floor(t_in[-1] * fps_out + 1e-9)) + 1
     t_out = np.arange(n_out) / fps_out
-    idx = np.clip(np.searchsorted(t_in, t_out, side="right") - 1, 0, len(t_in) - 2) if len(t_in) > 1 \
+    idx = (
+        np.clip(np.searchsorted(t_in, t_out, side="right") - 1, 0, len(t_in) - 2)
+        if len(t_in) > 1
         else np.zeros(n_out, dtype=int)
+    )
     if len(t_in) == 1:
         return np.repeat(positions, n_out, axis=0)
     frac = ((t_out - t_in[idx]) * fps_in)[:, None, None]
@@ -468,10 +568,19 @@ def _headings(vel: np.ndarray, speed: np.ndarray, initial: np.ndarray, fps: floa
     return ang
 
 
-def animate_walking(crowd: Crowd, *, fps: float | None = None, seed=0, bodies: list[dict] | None = None,
-                    facing: str = "auto", velocity_smoothing: float = 0.12, heading_smoothing: float = 0.25,
-                    dissolve_frames: int = 0, meta: dict | None = None,
-                    walks: list[MotionClip] | None = None) -> CrowdAnimation:
+def animate_walking(
+    crowd: Crowd,
+    *,
+    fps: float | None = None,
+    seed=0,
+    bodies: list[dict] | None = None,
+    facing: str = "auto",
+    velocity_smoothing: float = 0.12,
+    heading_smoothing: float = 0.25,
+    dissolve_frames: int = 0,
+    meta: dict | None = None,
+    walks: list[MotionClip] | None = None,
+) -> CrowdAnimation:
     """Walking characters along the trajectories of ``crowd``.
 
     Args:
@@ -505,10 +614,15 @@ def animate_walking(crowd: Crowd, *, fps: float | None = None, seed=0, bodies: l
     """
     fps_out, pos = _walking_track(crowd, fps)
     n_frames, n = pos.shape[:2]
-    if isinstance(dissolve_frames, bool) or not isinstance(dissolve_frames, (int, np.integer)) \
-            or not 0 <= dissolve_frames <= n_frames // 2:
-        raise InvalidInputError(f"dissolve_frames: expected an integer in [0, {n_frames // 2}] (at most half of "
-                                f"the {n_frames} frames), got {dissolve_frames!r}")
+    if (
+        isinstance(dissolve_frames, bool)
+        or not isinstance(dissolve_frames, (int, np.integer))
+        or not 0 <= dissolve_frames <= n_frames // 2
+    ):
+        raise InvalidInputError(
+            f"dissolve_frames: expected an integer in [0, {n_frames // 2}] (at most half of "
+            f"the {n_frames} frames), got {dissolve_frames!r}"
+        )
     rng = _rng(seed, 2)
     phase0 = rng.uniform(0.0, 1.0, n)
     bodies = _bodies(n, seed, bodies)
@@ -526,20 +640,43 @@ def animate_walking(crowd: Crowd, *, fps: float | None = None, seed=0, bodies: l
     strike, flat_len, stance_len = (np.einsum("tnk,kf->tnf", weights, x) for x in _contact_table(walks))
     foot_phase = np.mod(phase[..., None] - strike, 1.0)
     rot = plant_legs(rot, root, rest, scale, ankle_height, foot_phase, flat_len, stance_len)
-    records = tuple({"kind": "walk", "clips": [c.name for c in walks],
-                     "weights": [float(x) for x in weights[:, i].mean(axis=0)], "phase": float(phase0[i]),
-                     "scale": float(scale[i]), "mean_speed": float(speed[:, i].mean())} for i in range(n))
-    out_meta = {"method": "Baseline", "scenario": crowd.meta.get("scenario", "corridor"),
-                "provenance": provenance(seed if not isinstance(seed, np.random.Generator) else None)}
+    records = tuple(
+        {
+            "kind": "walk",
+            "clips": [c.name for c in walks],
+            "weights": [float(x) for x in weights[:, i].mean(axis=0)],
+            "phase": float(phase0[i]),
+            "scale": float(scale[i]),
+            "mean_speed": float(speed[:, i].mean()),
+        }
+        for i in range(n)
+    )
+    out_meta = {
+        "method": "Baseline",
+        "scenario": crowd.meta.get("scenario", "corridor"),
+        "provenance": provenance(seed if not isinstance(seed, np.random.Generator) else None),
+    }
     if crowd.meta.get("periodic"):
         out_meta["periodic"] = dict(crowd.meta["periodic"])
-    out_meta.update({k: crowd.meta[k] for k in ("floor", "corridor_width", "corridor_length", "obstacles")
-                     if k in crowd.meta})     # the scene's static geometry, for the later stages
+    out_meta.update(
+        {k: crowd.meta[k] for k in ("floor", "corridor_width", "corridor_length", "obstacles") if k in crowd.meta}
+    )  # the scene's static geometry, for the later stages
     out_meta.update(meta or {})
-    loop = {"mode": "dissolve", "frames": int(dissolve_frames), "video_frames": int(n_frames - dissolve_frames)} \
-        if dissolve_frames else {"mode": "none"}
-    return CrowdAnimation(joint_names=JOINT_NAMES, parents=PARENTS, root_translation=root, joint_rotations=rot,
-                          fps=fps_out, bodies=tuple(bodies), clips=records, meta={"loop": loop, **out_meta})
+    loop = (
+        {"mode": "dissolve", "frames": int(dissolve_frames), "video_frames": int(n_frames - dissolve_frames)}
+        if dissolve_frames
+        else {"mode": "none"}
+    )
+    return CrowdAnimation(
+        joint_names=JOINT_NAMES,
+        parents=PARENTS,
+        root_translation=root,
+        joint_rotations=rot,
+        fps=fps_out,
+        bodies=tuple(bodies),
+        clips=records,
+        meta={"loop": loop, **out_meta},
+    )
 
 
 def _walking_track(crowd: Crowd, fps: float | None) -> tuple[float, np.ndarray]:
@@ -568,8 +705,9 @@ def _walking_velocity(pos: np.ndarray, fps: float, smoothing: float) -> tuple[np
     return vel, np.linalg.norm(vel, axis=-1)
 
 
-def _walking_heading(crowd: Crowd, facing: str, vel: np.ndarray, speed: np.ndarray, fps: float,
-                     smoothing: float) -> np.ndarray:
+def _walking_heading(
+    crowd: Crowd, facing: str, vel: np.ndarray, speed: np.ndarray, fps: float, smoothing: float
+) -> np.ndarray:
     """(T, N) facing angles (rad from +x) at ``fps``: the crowd's headings (``facing``
     "crowd", or "auto" when it has them) smoothed over ``smoothing / 3`` s, else the
     direction of the velocity ``vel`` (T, N, 2) smoothed over ``smoothing`` s."""
@@ -584,26 +722,30 @@ def _walking_heading(crowd: Crowd, facing: str, vel: np.ndarray, speed: np.ndarr
         heads = np.unwrap(crowd.headings, axis=0)
         if fps != crowd.fps:
             heads = _resample_track(heads[..., None], crowd.fps, fps)[..., 0]
-        return gaussian_filter1d(heads, smoothing / 3 * fps, axis=0, mode="nearest") \
-            if smoothing > 0 and n_frames > 1 else heads
+        return (
+            gaussian_filter1d(heads, smoothing / 3 * fps, axis=0, mode="nearest")
+            if smoothing > 0 and n_frames > 1
+            else heads
+        )
     initial = crowd.headings[0] if crowd.headings is not None else np.full(n, np.pi / 2)
     return _headings(vel, speed, initial, fps, smoothing)
 
 
-def _gait_phase(pos: np.ndarray, speed: np.ndarray, scale: np.ndarray, walks: list[MotionClip],
-                phase0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def _gait_phase(
+    pos: np.ndarray, speed: np.ndarray, scale: np.ndarray, walks: list[MotionClip], phase0: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
     """Blend weights (T, N, K) of the K walking clips at each character's speed (T, N) m/s
     over its leg scale (N,), and the gait phase (T, N) in cycles from ``phase0`` (N,): the
     distance walked (from the positions ``pos`` (T, N, 2) m) over the blended stride."""
     clip_speeds = np.array([c.speed for c in walks])
     strides = np.array([c.meta["stride_length"] for c in walks])
-    weights = gait_blend(speed / scale, clip_speeds)                        # (T, N, K)
-    stride = (weights @ strides) * scale                                    # (T, N) metres per cycle
+    weights = gait_blend(speed / scale, clip_speeds)  # (T, N, K)
+    stride = (weights @ strides) * scale  # (T, N) metres per cycle
     # Below the slowest clip, strides shorten (as in slow human walking: about 75 steps
     # per minute at 0.5 m/s rather than a slow-motion 0.8 m/s gait); the foot locking in
     # plant_legs keeps the planted feet still while the legs take the shorter steps.
-    stride = stride * np.sqrt(np.clip(speed / scale / clip_speeds[0], _MIN_STRIDE_FACTOR ** 2, 1.0))
-    step = np.linalg.norm(np.diff(pos, axis=0), axis=-1)                    # (T-1, N)
+    stride = stride * np.sqrt(np.clip(speed / scale / clip_speeds[0], _MIN_STRIDE_FACTOR**2, 1.0))
+    step = np.linalg.norm(np.diff(pos, axis=0), axis=-1)  # (T-1, N)
     dphase = step / (0.5 * (stride[1:] + stride[:-1]))
     n = pos.shape[1]
     return weights, phase0 + np.concatenate([np.zeros((1, n)), np.cumsum(dphase, axis=0)], axis=0)
@@ -617,8 +759,8 @@ def _blend_gaits(walks: list[MotionClip], weights: np.ndarray, phase: np.ndarray
     linearly interpolated between neighbouring table entries (nlerp, signs taken nearest
     the first term's)."""
     tables = [c.loop_table(_GAIT_SAMPLES) for c in walks]
-    quat_tab = np.stack([q for q, _ in tables])                             # (K, S, J, 4)
-    root_tab = np.stack([r for _, r in tables])                             # (K, S, 3)
+    quat_tab = np.stack([q for q, _ in tables])  # (K, S, J, 4)
+    root_tab = np.stack([r for _, r in tables])  # (K, S, 3)
     lo = np.clip(np.argmax(weights > 0, axis=-1), 0, len(walks) - 2)
     w_hi = np.take_along_axis(weights, (lo + 1)[..., None], axis=-1)[..., 0]
     # a clip of c gait cycles spans c units of the gait phase (every cycle starts at a left heel strike)
@@ -642,9 +784,17 @@ def _blend_gaits(walks: list[MotionClip], weights: np.ndarray, phase: np.ndarray
     return quat, root_local
 
 
-def build_baseline(design, stage, level: str, *, duration: float | None = None, fps: float | None = None,
-                   seed: int | None = None, dissolve: float | None = None,
-                   body_model: str = "makehuman") -> CrowdAnimation:
+def build_baseline(
+    design,
+    stage,
+    level: str,
+    *,
+    duration: float | None = None,
+    fps: float | None = None,
+    seed: int | None = None,
+    dissolve: float | None = None,
+    body_model: str = "makehuman",
+) -> CrowdAnimation:
     """The Baseline animation of one (stage, density) cell of a study design.
 
     Args:
@@ -672,14 +822,23 @@ def build_baseline(design, stage, level: str, *, duration: float | None = None, 
         design = load_design(design)
     st = design.stage(str(stage))
     if level not in design.densities:
-        raise InvalidInputError(f"level: unknown density level {level!r}; "
-                                f"expected one of {', '.join(design.densities)}")
+        raise InvalidInputError(
+            f"level: unknown density level {level!r}; expected one of {', '.join(design.densities)}"
+        )
     seed = design.cell_seed(st, level) if seed is None else int(seed)
     duration = float(design.duration if duration is None else duration)
     fps = float(design.fps if fps is None else fps)
-    meta = {"stage": st.key, "stage_number": st.number, "scenario": st.scenario, "density_level": level,
-            "density": design.densities[level], "n_characters": design.n_characters(level), "seed": seed,
-            "method": "Baseline", "provenance": provenance(seed, design=design.source)}
+    meta = {
+        "stage": st.key,
+        "stage_number": st.number,
+        "scenario": st.scenario,
+        "density_level": level,
+        "density": design.densities[level],
+        "n_characters": design.n_characters(level),
+        "seed": seed,
+        "method": "Baseline",
+        "provenance": provenance(seed, design=design.source),
+    }
     if st.scenario == "concert":
         from crowdstudy.layout import concert_layout
 
@@ -687,8 +846,16 @@ def build_baseline(design, stage, level: str, *, duration: float | None = None, 
         sc = design.scenarios[st.scenario].params
         names = list_clips("dance", "procedural") if sc.get("motion", "mocap") == "procedural" else None
         bodies = _sampled(crowd.n_agents, seed, body_model)
-        return animate_stationary(crowd, duration=duration, fps=fps, seed=seed, clip_names=names,
-                                  tempo=sc.get("tempo", DEFAULT_TEMPO), meta=meta, bodies=bodies)
+        return animate_stationary(
+            crowd,
+            duration=duration,
+            fps=fps,
+            seed=seed,
+            clip_names=names,
+            tempo=sc.get("tempo", DEFAULT_TEMPO),
+            meta=meta,
+            bodies=bodies,
+        )
     if st.scenario == "corridor":
         from crowdstudy.navigation import corridor_crowd
 
@@ -701,6 +868,13 @@ def build_baseline(design, stage, level: str, *, duration: float | None = None, 
         crowd = corridor_crowd(design, level, seed, duration=(n_video + n_dissolve) / fps, fps=fps)
         sc = design.scenarios[st.scenario].params
         walks = walk_clips("procedural") if sc.get("motion", "mocap") == "procedural" else None
-        return animate_walking(crowd, fps=fps, seed=seed, dissolve_frames=n_dissolve, walks=walks, meta=meta,
-                               bodies=_sampled(crowd.n_agents, seed, body_model))
+        return animate_walking(
+            crowd,
+            fps=fps,
+            seed=seed,
+            dissolve_frames=n_dissolve,
+            walks=walks,
+            meta=meta,
+            bodies=_sampled(crowd.n_agents, seed, body_model),
+        )
     raise InvalidInputError(f"stage {st.key!r}: scenario {st.scenario!r} has no Baseline animation")

@@ -33,12 +33,20 @@ import numpy as np
 from crowdstudy.errors import InvalidInputError
 from crowdstudy.motion.clip import MotionClip
 
-__all__ = ["BeatCurve", "beat_curve", "beats_per_bounce", "warp_to_tempo", "low_points", "beat_offset",
-           "bounce_phase", "circular_spread"]
+__all__ = [
+    "BeatCurve",
+    "beat_curve",
+    "beats_per_bounce",
+    "warp_to_tempo",
+    "low_points",
+    "beat_offset",
+    "bounce_phase",
+    "circular_spread",
+]
 
-_BAND = (0.6, 4.0)          # Hz, the bounce band
+_BAND = (0.6, 4.0)  # Hz, the bounce band
 _PERIOD_RANGE = (0.28, 1.5)  # s, bounce periods searched
-_RATE_LIMITS = (0.7, 1.4)    # phase rate, relative to the median
+_RATE_LIMITS = (0.7, 1.4)  # phase rate, relative to the median
 
 
 @dataclasses.dataclass(frozen=True)
@@ -72,7 +80,7 @@ def beat_curve(height: np.ndarray, fps: float, *, period: float | None = None) -
     if z.ndim != 1 or len(z) < int(2 * fps):
         raise InvalidInputError(f"beat_curve: expected a 1-D height signal of at least 2 s, got shape {z.shape}")
     band = _bandpass(z, fps, *_BAND)
-    ac = np.correlate(band, band, "full")[len(band) - 1:]
+    ac = np.correlate(band, band, "full")[len(band) - 1 :]
     ac = ac / max(ac[0], 1e-18)
     lags = np.arange(len(ac)) / fps
     ok = (lags >= _PERIOD_RANGE[0]) & (lags <= min(_PERIOD_RANGE[1], 0.5 * lags[-1]))
@@ -92,7 +100,7 @@ def beat_curve(height: np.ndarray, fps: float, *, period: float | None = None) -
     strength = float(np.interp(found, lags, ac))
     t = np.arange(len(z)) / fps
     coef = np.sum(band * np.exp(-2j * np.pi * t / found))
-    phi = float(np.angle(coef))                     # band ~ cos(2 pi t / P + phi)
+    phi = float(np.angle(coef))  # band ~ cos(2 pi t / P + phi)
     bounces = t / found + phi / (2.0 * np.pi) - 0.5
     bounces = bounces - np.floor(bounces[0])
     return BeatCurve(bounces=bounces, period=found, method=method, strength=strength)
@@ -105,7 +113,9 @@ def beats_per_bounce(period: float, bpm: float, choices=(0.5, 1.0, 2.0, 4.0)) ->
     return float(min(choices, key=lambda k: abs(np.log(bpm / (natural * k)))))
 
 
-def warp_to_tempo(clip: MotionClip, beats: np.ndarray, bpm: float, fps: float, *, name: str | None = None) -> MotionClip:
+def warp_to_tempo(
+    clip: MotionClip, beats: np.ndarray, bpm: float, fps: float, *, name: str | None = None
+) -> MotionClip:
     """``clip`` resampled at ``fps`` on the beat grid of ``bpm``.
 
     Args:
@@ -118,16 +128,23 @@ def warp_to_tempo(clip: MotionClip, beats: np.ndarray, bpm: float, fps: float, *
     """
     b = np.asarray(beats, dtype=np.float64)
     if b.shape != (clip.n_frames,) or np.any(np.diff(b) <= 0):
-        raise InvalidInputError(f"warp_to_tempo: beats must be ({clip.n_frames},) and increasing for clip {clip.name!r}")
+        raise InvalidInputError(
+            f"warp_to_tempo: beats must be ({clip.n_frames},) and increasing for clip {clip.name!r}"
+        )
     start = float(np.ceil(b[0] - 1e-9))
     n_out = int(np.floor((b[-1] - start) * 60.0 / bpm * fps + 1e-9)) + 1
     target = start + np.arange(n_out) * bpm / 60.0 / fps
     t_src = np.interp(target, b, np.arange(clip.n_frames) / clip.fps)
     rot, root = clip.sample(t_src)
-    natural = (b[-1] - b[0]) / (clip.n_frames - 1) * clip.fps * 60.0      # beats per minute in the take
-    return dataclasses.replace(clip, name=name or clip.name, fps=float(fps), joint_rotations=rot,
-                               root_translation=root, meta={**clip.meta, "bpm": float(bpm),
-                                                            "tempo_ratio": float(bpm / natural)})
+    natural = (b[-1] - b[0]) / (clip.n_frames - 1) * clip.fps * 60.0  # beats per minute in the take
+    return dataclasses.replace(
+        clip,
+        name=name or clip.name,
+        fps=float(fps),
+        joint_rotations=rot,
+        root_translation=root,
+        meta={**clip.meta, "bpm": float(bpm), "tempo_ratio": float(bpm / natural)},
+    )
 
 
 def circular_spread(phases: np.ndarray) -> dict:
@@ -187,6 +204,9 @@ def bounce_phase(heights: np.ndarray, fps: float, bpm: float) -> dict:
             m = np.mean(np.exp(1j * theta))
             phase[i], consistency[i] = float(np.angle(m)), float(np.abs(m))
             pooled.append(theta)
-    spread = circular_spread(np.concatenate(pooled)) if pooled else {"resultant": 0.0, "circular_sd": float("inf"),
-                                                                      "mean": 0.0}
+    spread = (
+        circular_spread(np.concatenate(pooled))
+        if pooled
+        else {"resultant": 0.0, "circular_sd": float("inf"), "mean": 0.0}
+    )
     return {"phase": phase, "consistency": consistency, "lows": counts, **spread}

@@ -38,12 +38,26 @@ __all__ = ["BvhSkeleton", "parse_bvh", "load_bvh", "save_bvh"]
 _AXES = {"X": 0, "Y": 1, "Z": 2}
 _CHANNELS = {"Xposition", "Yposition", "Zposition", "Xrotation", "Yrotation", "Zrotation"}
 #: Our joint -> the joint whose direction from it defines its bone (for rest alignment).
-_BONE_CHILD = {"left_hip": "left_knee", "right_hip": "right_knee", "spine1": "spine2", "left_knee": "left_ankle",
-               "right_knee": "right_ankle", "spine2": "spine3", "left_ankle": "left_foot",
-               "right_ankle": "right_foot", "spine3": "neck", "neck": "head", "left_collar": "left_shoulder",
-               "right_collar": "right_shoulder", "left_shoulder": "left_elbow", "right_shoulder": "right_elbow",
-               "left_elbow": "left_wrist", "right_elbow": "right_wrist", "left_wrist": "left_hand",
-               "right_wrist": "right_hand"}
+_BONE_CHILD = {
+    "left_hip": "left_knee",
+    "right_hip": "right_knee",
+    "spine1": "spine2",
+    "left_knee": "left_ankle",
+    "right_knee": "right_ankle",
+    "spine2": "spine3",
+    "left_ankle": "left_foot",
+    "right_ankle": "right_foot",
+    "spine3": "neck",
+    "neck": "head",
+    "left_collar": "left_shoulder",
+    "right_collar": "right_shoulder",
+    "left_shoulder": "left_elbow",
+    "right_shoulder": "right_elbow",
+    "left_elbow": "left_wrist",
+    "right_elbow": "right_wrist",
+    "left_wrist": "left_hand",
+    "right_wrist": "right_hand",
+}
 
 
 class BvhSkeleton:
@@ -89,7 +103,7 @@ class BvhSkeleton:
         col = 0
         for j in range(n_b):
             chans = self.channels[j]
-            values = self.motion[:, col:col + len(chans)]
+            values = self.motion[:, col : col + len(chans)]
             col += len(chans)
             offset = np.broadcast_to(self.offsets[j], (n_f, 3)).copy()
             rot_axes = ""
@@ -100,8 +114,11 @@ class BvhSkeleton:
                 else:
                     rot_axes += ch[0]
                     rot_cols.append(k)
-            local = Rotation.from_euler(rot_axes, values[:, rot_cols], degrees=True).as_matrix() if rot_axes \
+            local = (
+                Rotation.from_euler(rot_axes, values[:, rot_cols], degrees=True).as_matrix()
+                if rot_axes
                 else np.broadcast_to(np.eye(3), (n_f, 3, 3))
+            )
             p = self.parents[j]
             if p < 0:
                 glob[:, j] = local
@@ -134,8 +151,16 @@ def parse_bvh(path: str | Path) -> BvhSkeleton:
     hierarchy, i = _parse_hierarchy(lines, path)
     n_channels = sum(len(c) for c in hierarchy.channels)
     frame_time, motion = _parse_motion(lines, i, n_channels, path)
-    return BvhSkeleton(hierarchy.names, hierarchy.parents, hierarchy.offsets, hierarchy.channels, hierarchy.ends,
-                       frame_time, motion, str(path))
+    return BvhSkeleton(
+        hierarchy.names,
+        hierarchy.parents,
+        hierarchy.offsets,
+        hierarchy.channels,
+        hierarchy.ends,
+        frame_time,
+        motion,
+        str(path),
+    )
 
 
 def _read_lines(path: Path) -> list[str]:
@@ -170,7 +195,7 @@ class _Hierarchy:
     channels: list[list[str]] = dataclasses.field(default_factory=list)
     ends: list[list[float]] = dataclasses.field(default_factory=list)
     stack: list[int] = dataclasses.field(default_factory=list)
-    pending: int | None = None      # the block whose '{' is expected
+    pending: int | None = None  # the block whose '{' is expected
     in_end: bool = False
 
     def read(self, toks: list[str], n: int) -> None:
@@ -269,12 +294,15 @@ def _parse_hierarchy(lines: list[str], path: Path) -> tuple[_Hierarchy, int]:
     if motion_line is None:
         _fail(path, None, "field 'MOTION': missing (truncated file?)")
     if hierarchy.stack:
-        _fail(path, motion_line, f"the hierarchy is not closed (joint {hierarchy.names[hierarchy.stack[-1]]!r} "
-                                 "has no '}')")
+        _fail(
+            path,
+            motion_line,
+            f"the hierarchy is not closed (joint {hierarchy.names[hierarchy.stack[-1]]!r} has no '}}')",
+        )
     if not hierarchy.names:
         _fail(path, motion_line, "the hierarchy has no joints")
     for name, offset in zip(hierarchy.names, hierarchy.offsets):
-        if offset is None:          # a joint line without its block
+        if offset is None:  # a joint line without its block
             _fail(path, motion_line, f"field 'OFFSET': missing for joint {name!r}")
     return hierarchy, motion_line
 
@@ -289,7 +317,7 @@ def _motion_header(lines: list[str], i: int, key: str, path: Path) -> tuple[str,
     text, n = lines[i].strip(), i + 1
     if not text.startswith(key):
         _fail(path, n, f"field {key!r}: expected it here, got {text[:40]!r}")
-    return text[len(key):].strip(), n, i + 1
+    return text[len(key) :].strip(), n, i + 1
 
 
 def _parse_motion(lines: list[str], i: int, n_channels: int, path: Path) -> tuple[float, np.ndarray]:
@@ -370,8 +398,9 @@ def _swing(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return axis_angle_to_matrix(axis / s * np.arctan2(s, c))
 
 
-def load_bvh(path: str | Path, skeleton: str = "auto", *, rest_joints: np.ndarray | None = None,
-             name: str | None = None) -> MotionClip:
+def load_bvh(
+    path: str | Path, skeleton: str = "auto", *, rest_joints: np.ndarray | None = None, name: str | None = None
+) -> MotionClip:
     """Read a BVH file and retarget it to the 24-joint skeleton.
 
     Args:
@@ -411,7 +440,7 @@ def load_bvh(path: str | Path, skeleton: str = "auto", *, rest_joints: np.ndarra
         end_pos = rest_bvh[a] + bvh.end_sites[a] if end is None else rest_bvh[bvh.names.index(end)]
         if not np.all(np.isfinite(end_pos)):
             raise InvalidInputError(f"BVH file {path}: joint {anchor!r} has no end site to place {j!r}")
-        index[j] = a                      # rotates with its anchor
+        index[j] = a  # rotates with its anchor
         at[j] = rest_bvh[a] + fraction * (end_pos - rest_bvh[a])
     # The file's axes, snapped to its coordinate axes (mocap frames are axis aligned; the
     # rest pose itself may lean a little).
@@ -421,11 +450,18 @@ def load_bvh(path: str | Path, skeleton: str = "auto", *, rest_joints: np.ndarra
     forward = np.cross(left, up)
     frame_bvh = np.stack([left, forward, up], axis=1)
     frame_ours = np.array([[-1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]).T
-    conv = frame_ours @ frame_bvh.T                                   # file frame -> ours
+    conv = frame_ours @ frame_bvh.T  # file frame -> ours
 
     def leg_length(points) -> float:
-        return float(np.mean([np.linalg.norm(points[f"{s}_knee"] - points[f"{s}_hip"])
-                              + np.linalg.norm(points[f"{s}_ankle"] - points[f"{s}_knee"]) for s in ("left", "right")]))
+        return float(
+            np.mean(
+                [
+                    np.linalg.norm(points[f"{s}_knee"] - points[f"{s}_hip"])
+                    + np.linalg.norm(points[f"{s}_ankle"] - points[f"{s}_knee"])
+                    for s in ("left", "right")
+                ]
+            )
+        )
 
     ours_at = {j: rest[JOINT_INDEX[j]] for j in JOINT_NAMES}
     file_leg = leg_length(at)
@@ -447,7 +483,7 @@ def load_bvh(path: str | Path, skeleton: str = "auto", *, rest_joints: np.ndarra
             align[j] = align[PARENTS[j]]
     glob_file, pos_file = bvh.global_transforms()
     sel = [index[j] for j in JOINT_NAMES]
-    glob = np.einsum("ab,fjbc,dc->fjad", conv, glob_file[:, sel], conv) @ align   # (F, 24, 3, 3)
+    glob = np.einsum("ab,fjbc,dc->fjad", conv, glob_file[:, sel], conv) @ align  # (F, 24, 3, 3)
     local = glob.copy()
     local[:, 1:] = np.swapaxes(glob[:, PARENTS[1:]], -1, -2) @ glob[:, 1:]
     root = np.einsum("ab,fb->fa", conv, pos_file[:, index["pelvis"]]) * unit
@@ -456,22 +492,43 @@ def load_bvh(path: str | Path, skeleton: str = "auto", *, rest_joints: np.ndarra
     # Ground on a low percentile of the lower ankle (robust to a calibration frame).
     feet = float(np.percentile(joints[:, [JOINT_INDEX["left_ankle"], JOINT_INDEX["right_ankle"]], 2].min(axis=1), 5))
     root[:, 2] += ANKLE_HEIGHT * _leg_ratio(rest) - feet
-    meta = {"source": str(path), "skeleton": convention, "unit_scale": unit, "frames": bvh.n_frames,
-            "frame_time": bvh.frame_time}
-    return MotionClip(name=name or Path(path).stem, kind="mocap", fps=1.0 / bvh.frame_time,
-                      joint_rotations=rotations, root_translation=root, loop=False, meta=meta)
+    meta = {
+        "source": str(path),
+        "skeleton": convention,
+        "unit_scale": unit,
+        "frames": bvh.n_frames,
+        "frame_time": bvh.frame_time,
+    }
+    return MotionClip(
+        name=name or Path(path).stem,
+        kind="mocap",
+        fps=1.0 / bvh.frame_time,
+        joint_rotations=rotations,
+        root_translation=root,
+        loop=False,
+        meta=meta,
+    )
 
 
 def _leg_ratio(rest: np.ndarray) -> float:
     """Leg length of ``rest`` over the authoring skeleton's."""
-    legs = [np.linalg.norm(rest[JOINT_INDEX[f"{s}_knee"]] - rest[JOINT_INDEX[f"{s}_hip"]])
-            + np.linalg.norm(rest[JOINT_INDEX[f"{s}_ankle"]] - rest[JOINT_INDEX[f"{s}_knee"]])
-            for s in ("left", "right")]
+    legs = [
+        np.linalg.norm(rest[JOINT_INDEX[f"{s}_knee"]] - rest[JOINT_INDEX[f"{s}_hip"]])
+        + np.linalg.norm(rest[JOINT_INDEX[f"{s}_ankle"]] - rest[JOINT_INDEX[f"{s}_knee"]])
+        for s in ("left", "right")
+    ]
     return float(np.mean(legs)) / LEG_LENGTH
 
 
-def save_bvh(clip: MotionClip, path: str | Path, *, naming: str = "mixamo", rest_joints: np.ndarray | None = None,
-             units_per_metre: float = 100.0, order: str = "ZXY") -> Path:
+def save_bvh(
+    clip: MotionClip,
+    path: str | Path,
+    *,
+    naming: str = "mixamo",
+    rest_joints: np.ndarray | None = None,
+    units_per_metre: float = 100.0,
+    order: str = "ZXY",
+) -> Path:
     """Write a clip as a BVH file on our skeleton: Y up, facing +z, left at +x (the usual
     BVH frame), ``units_per_metre`` file units per metre, Euler channels in ``order``.
 

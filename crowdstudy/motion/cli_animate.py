@@ -20,23 +20,33 @@ __all__ = ["configure", "run"]
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("crowd", nargs="?", default=None,
-                        help="a Crowd .npz (layout -> dancing crowd, trajectories -> walking crowd); "
-                             "without it the cells of --design are animated")
-    parser.add_argument("--design", default=None, help="study design TOML (default: the paper's, shipped in the package)")
-    parser.add_argument("--stage", default=None,
-                        help="stationary | walking | all (or 1 | 2); required without a crowd file")
+    parser.add_argument(
+        "crowd",
+        nargs="?",
+        default=None,
+        help="a Crowd .npz (layout -> dancing crowd, trajectories -> walking crowd); "
+        "without it the cells of --design are animated",
+    )
+    parser.add_argument(
+        "--design", default=None, help="study design TOML (default: the paper's, shipped in the package)"
+    )
+    parser.add_argument(
+        "--stage", default=None, help="stationary | walking | all (or 1 | 2); required without a crowd file"
+    )
     parser.add_argument("--density", default="all", help="density level D1..D5 or 'all' (default all)")
-    parser.add_argument("--out", required=True,
-                        help="output .npz (one animation) or directory (files S<stage>-<level>-Baseline.npz)")
+    parser.add_argument(
+        "--out", required=True, help="output .npz (one animation) or directory (files S<stage>-<level>-Baseline.npz)"
+    )
     parser.add_argument("--duration", type=float, default=None, help="seconds (default the design's video duration)")
     parser.add_argument("--fps", type=float, default=None, help="frames per second (default the design's / crowd's)")
     parser.add_argument("--seed", type=int, default=None, help="seed (default the design's seed of each cell)")
 
 
 def _summary(anim, path: Path) -> str:
-    return (f"wrote {path} ({anim.n_characters} characters, {anim.n_frames} frames at {anim.fps:g} fps, "
-            f"{anim.meta.get('scenario', '?')})")
+    return (
+        f"wrote {path} ({anim.n_characters} characters, {anim.n_frames} frames at {anim.fps:g} fps, "
+        f"{anim.meta.get('scenario', '?')})"
+    )
 
 
 def run(args: argparse.Namespace) -> int:
@@ -58,8 +68,13 @@ def run(args: argparse.Namespace) -> int:
         meta["seed"] = seed
         meta["source"] = str(args.crowd)
         if crowd.n_frames == 1:
-            anim = animate_stationary(crowd, duration=args.duration or design.duration, fps=args.fps or design.fps,
-                                      seed=seed, meta={**meta, "stage": "stationary"})
+            anim = animate_stationary(
+                crowd,
+                duration=args.duration or design.duration,
+                fps=args.fps or design.fps,
+                seed=seed,
+                meta={**meta, "stage": "stationary"},
+            )
         else:
             if args.duration is not None:
                 raise InvalidInputError("--duration: a trajectory file sets the duration; leave it out")
@@ -76,8 +91,9 @@ def run(args: argparse.Namespace) -> int:
     levels = list(design.densities) if args.density == "all" else [args.density]
     for level in levels:
         if level not in design.densities:
-            raise InvalidInputError(f"--density: unknown level {level!r}; expected one of "
-                                    f"{', '.join(design.densities)} or 'all'")
+            raise InvalidInputError(
+                f"--density: unknown level {level!r}; expected one of {', '.join(design.densities)} or 'all'"
+            )
     cells = [(st, level) for st in stages for level in levels]
     if len(cells) > 1 and out.suffix == ".npz":
         raise InvalidInputError(f"--out: {len(cells)} animations need a directory, got the file {str(out)!r}")

@@ -25,8 +25,11 @@ def configure(parser: argparse.ArgumentParser) -> None:
     sub.add_parser("list", help="the shipped clips: name, kind, source, length")
     b = sub.add_parser("build-library", help="convert the CMU BVH takes into the package's clip library")
     b.add_argument("--source", required=True, help="folder of the BVH takes (shared/data/mocap)")
-    b.add_argument("--out", default=None,
-                   help="output folder (default: crowdstudy/motion/mocap in a source checkout; required otherwise)")
+    b.add_argument(
+        "--out",
+        default=None,
+        help="output folder (default: crowdstudy/motion/mocap in a source checkout; required otherwise)",
+    )
     b.add_argument("--take", action="append", default=None, help="only this take (repeatable)")
     r = sub.add_parser("report", help="loops, beat, hands, feet and walks of the library, measured")
     r.add_argument("--design", default=None, help="study design TOML (default: the paper's)")
@@ -43,11 +46,19 @@ def _list() -> int:
         for kind in ("dance", "idle", "walk"):
             for name in list_clips(kind, source):
                 c = load_clip(name)
-                rows.append({"clip": name, "kind": kind, "source": c.meta.get("trial", source),
-                             "default": "yes" if source == "mocap" and name in list_clips(kind, source,
-                                                                                          default_only=True) else "",
-                             "seconds": round(c.duration, 2), "loop": "yes" if c.loop else "take",
-                             "speed": "" if c.speed is None else round(c.speed, 2)})
+                rows.append(
+                    {
+                        "clip": name,
+                        "kind": kind,
+                        "source": c.meta.get("trial", source),
+                        "default": "yes"
+                        if source == "mocap" and name in list_clips(kind, source, default_only=True)
+                        else "",
+                        "seconds": round(c.duration, 2),
+                        "loop": "yes" if c.loop else "take",
+                        "speed": "" if c.speed is None else round(c.speed, 2),
+                    }
+                )
     print(format_table(rows))
     return 0
 
@@ -77,12 +88,17 @@ def _report(args) -> int:
         check_output_path(args.json, "--json")
     design = load_design(args.design)
     if args.level not in design.densities:
-        raise InvalidInputError(f"--level: unknown density level {args.level!r}; expected one of "
-                                f"{', '.join(design.densities)}")
+        raise InvalidInputError(
+            f"--level: unknown density level {args.level!r}; expected one of {', '.join(design.densities)}"
+        )
     rep = motion_report(design, level=args.level, with_hands=not args.no_hands)
-    titles = {"dances": "Dances: loops on the beat", "beat": f"Concert {args.level}: bounce against the beat",
-              "hands": "Hands inside the own body beyond 2 cm (6 bodies)", "feet": "Foot skate per contact",
-              "walks": "Walking loops"}
+    titles = {
+        "dances": "Dances: loops on the beat",
+        "beat": f"Concert {args.level}: bounce against the beat",
+        "hands": "Hands inside the own body beyond 2 cm (6 bodies)",
+        "feet": "Foot skate per contact",
+        "walks": "Walking loops",
+    }
     for key, title in titles.items():
         if key in rep:
             print(f"\n{title}\n{format_table(rep[key])}")

@@ -20,8 +20,12 @@ import functools
 
 import numpy as np
 
-from crowdstudy.body.rotations import (axis_angle_to_quaternion, quat_align_signs, quat_nearest_sign,
-                                       quaternion_to_axis_angle)
+from crowdstudy.body.rotations import (
+    axis_angle_to_quaternion,
+    quat_align_signs,
+    quat_nearest_sign,
+    quaternion_to_axis_angle,
+)
 from crowdstudy.body.skeleton import DEFAULT_REST_JOINTS, NUM_JOINTS, forward_kinematics
 from crowdstudy.errors import InvalidInputError
 
@@ -35,10 +39,10 @@ def catmull_rom_weights(frac: np.ndarray) -> np.ndarray:
     evaluated at ``i + frac`` (frac (...,) in [0, 1)); C1 across samples, exact at them."""
     u = np.asarray(frac, dtype=np.float64)
     u2, u3 = u * u, u * u * u
-    return np.stack([-0.5 * u3 + u2 - 0.5 * u,
-                     1.5 * u3 - 2.5 * u2 + 1.0,
-                     -1.5 * u3 + 2.0 * u2 + 0.5 * u,
-                     0.5 * u3 - 0.5 * u2], axis=-1)
+    return np.stack(
+        [-0.5 * u3 + u2 - 0.5 * u, 1.5 * u3 - 2.5 * u2 + 1.0, -1.5 * u3 + 2.0 * u2 + 0.5 * u, 0.5 * u3 - 0.5 * u2],
+        axis=-1,
+    )
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -80,11 +84,14 @@ class MotionClip:
         rot = np.asarray(self.joint_rotations, dtype=np.float64)
         root = np.asarray(self.root_translation, dtype=np.float64)
         if rot.ndim != 3 or rot.shape[1:] != (NUM_JOINTS, 3) or rot.shape[0] < 1:
-            raise InvalidInputError(f"{where}: field 'joint_rotations' must have shape (T, {NUM_JOINTS}, 3), "
-                                    f"got {rot.shape}")
+            raise InvalidInputError(
+                f"{where}: field 'joint_rotations' must have shape (T, {NUM_JOINTS}, 3), got {rot.shape}"
+            )
         if root.shape != (rot.shape[0], 3):
-            raise InvalidInputError(f"{where}: field 'root_translation' must have shape ({rot.shape[0]}, 3) "
-                                    f"to match joint_rotations, got {root.shape}")
+            raise InvalidInputError(
+                f"{where}: field 'root_translation' must have shape ({rot.shape[0]}, 3) "
+                f"to match joint_rotations, got {root.shape}"
+            )
         for field, arr in (("joint_rotations", rot), ("root_translation", root)):
             if not np.all(np.isfinite(arr)):
                 raise InvalidInputError(f"{where}: field {field!r} holds non-finite values")
@@ -141,8 +148,8 @@ class MotionClip:
         Returns ``(quaternions (..., 24, 4), root_translation (..., 3) metres)``.
         """
         idx, frac = self._neighbours(times)
-        weights = catmull_rom_weights(frac)                        # (..., 4)
-        q = self.quaternions[idx]                                 # (..., 4, J, 4)
+        weights = catmull_rom_weights(frac)  # (..., 4)
+        q = self.quaternions[idx]  # (..., 4, J, 4)
         q = quat_nearest_sign(q, q[..., 1:2, :, :])
         quat = np.einsum("...k,...kjc->...jc", weights, q)
         quat /= np.linalg.norm(quat, axis=-1, keepdims=True)
@@ -176,7 +183,7 @@ class MotionClip:
             out[..., 1] = self.speed * t
         return out
 
-    def resample(self, fps: float) -> "MotionClip":
+    def resample(self, fps: float) -> MotionClip:
         """The same motion at another frame rate (a loop keeps its period, rounded to frames)."""
         fps = float(fps)
         if not np.isfinite(fps) or fps <= 0:
@@ -211,9 +218,9 @@ def seam_discontinuity(clip: MotionClip, rest_joints: np.ndarray | None = None) 
     if not clip.loop:
         raise InvalidInputError(f"seam_discontinuity: clip {clip.name!r} does not loop")
     pos = clip.joint_positions(rest_joints)
-    ext = np.concatenate([pos[-2:], pos, pos[:2]], axis=0)   # frames -2 .. T+1
-    step = np.linalg.norm(np.diff(ext, axis=0), axis=-1).max(axis=-1)       # T+3 steps
-    accel = np.linalg.norm(np.diff(ext, 2, axis=0), axis=-1).max(axis=-1)   # T+2 second differences
+    ext = np.concatenate([pos[-2:], pos, pos[:2]], axis=0)  # frames -2 .. T+1
+    step = np.linalg.norm(np.diff(ext, axis=0), axis=-1).max(axis=-1)  # T+3 steps
+    accel = np.linalg.norm(np.diff(ext, 2, axis=0), axis=-1).max(axis=-1)  # T+2 second differences
     # step k of ext spans ext[k] -> ext[k+1]; the seam step is T-1 -> 0, i.e. ext[T+1] -> ext[T+2]
     n = clip.n_frames
     seam_steps = [n + 1]
@@ -221,5 +228,9 @@ def seam_discontinuity(clip: MotionClip, rest_joints: np.ndarray | None = None) 
     # second difference k is centred on ext[k+1]; frames T-1 and 0 sit at ext[T+1], ext[T+2]
     seam_acc = [n, n + 1]
     inner_acc = np.arange(2, n)
-    return {"step_seam": float(step[seam_steps].max()), "step_max": float(step[inner_steps].max()),
-            "accel_seam": float(accel[seam_acc].max()), "accel_max": float(accel[inner_acc].max())}
+    return {
+        "step_seam": float(step[seam_steps].max()),
+        "step_max": float(step[inner_steps].max()),
+        "accel_seam": float(accel[seam_acc].max()),
+        "accel_max": float(accel[inner_acc].max()),
+    }

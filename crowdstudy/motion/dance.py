@@ -27,8 +27,19 @@ from crowdstudy.motion.rig import ANKLE_HEIGHT, REST, PoseControls, assemble_pos
 
 __all__ = ["DanceSpec", "DANCES", "generate_dance", "ARM_PATTERNS"]
 
-ARM_PATTERNS = ("relaxed", "groove", "pump_right", "pump_alternate", "pump_both", "raise_both", "hands_up_sway",
-                "clap", "clap_overhead", "wave_right", "raise_slow")
+ARM_PATTERNS = (
+    "relaxed",
+    "groove",
+    "pump_right",
+    "pump_alternate",
+    "pump_both",
+    "raise_both",
+    "hands_up_sway",
+    "clap",
+    "clap_overhead",
+    "wave_right",
+    "raise_slow",
+)
 _GRAVITY = 9.81
 
 
@@ -75,34 +86,134 @@ class DanceSpec:
 
 DANCES: tuple[DanceSpec, ...] = (
     DanceSpec("dance_nod_bounce", 92, "easy knee bounce with head nods, arms hanging", bounce=0.035, nod=0.22),
-    DanceSpec("dance_sway_relaxed", 96, "slow side-to-side sway with a side tilt of the head", sway=0.05,
-              sway_beats=4, head_tilt=0.10, bounce=0.012, bounce_every=2),
-    DanceSpec("dance_fist_pump_right", 128, "right fist pumping on every beat, bounce and nod", bounce=0.03,
-              nod=0.10, arms="pump_right"),
-    DanceSpec("dance_fist_pump_alternate", 124, "alternating fist pumps, slight sway", bounce=0.025,
-              arms="pump_alternate", arm_beats=2, sway=0.02, sway_beats=2),
-    DanceSpec("dance_clap_front", 110, "clapping in front of the chest on every beat", bounce=0.02, nod=0.08,
-              arms="clap"),
-    DanceSpec("dance_clap_overhead", 120, "overhead claps on 2 and 4 with a sway", arms="clap_overhead",
-              arm_beats=2, sway=0.03, sway_beats=4, bounce=0.015),
-    DanceSpec("dance_jump_arms_v", 136, "jumping every second beat with both arms up in a V", jump=0.11,
-              jump_every=2, arms="raise_both", arm_beats=4),
-    DanceSpec("dance_pogo_pump", 140, "small pogo hops on every beat with both fists pumping", jump=0.05,
-              jump_every=1, arms="pump_both"),
-    DanceSpec("dance_hands_up_sway", 100, "hands up, swaying left and right over four beats",
-              arms="hands_up_sway", arm_beats=4, sway=0.04, sway_beats=4, head_tilt=0.06),
-    DanceSpec("dance_step_touch_clap", 116, "side step-touch with claps on the beat", step=0.18, arms="clap",
-              arm_beats=2, bounce=0.015),
-    DanceSpec("dance_twist_groove", 104, "hip twist with bent-elbow groove", twist=0.22, twist_beats=2,
-              arms="groove", bounce=0.02),
-    DanceSpec("dance_wave_right", 108, "right arm waving overhead, head tilting with it", arms="wave_right",
-              arm_beats=4, sway=0.025, sway_beats=4, head_tilt=0.08, nod=0.05, nod_every=2),
-    DanceSpec("dance_headbang", 132, "forward lean and strong head-banging, pumping bounce", lean=0.15, nod=0.38,
-              bounce=0.03, arms="groove", arm_beats=2),
-    DanceSpec("dance_slow_raise", 90, "both arms rising and falling over four beats, leaning back slightly",
-              lean=-0.05, arms="raise_slow", arm_beats=4, sway=0.03, sway_beats=4),
-    DanceSpec("dance_jump_clap", 126, "a jump every four beats, overhead claps in between", jump=0.14,
-              jump_every=4, arms="clap_overhead", arm_beats=1, bounce=0.015),
+    DanceSpec(
+        "dance_sway_relaxed",
+        96,
+        "slow side-to-side sway with a side tilt of the head",
+        sway=0.05,
+        sway_beats=4,
+        head_tilt=0.10,
+        bounce=0.012,
+        bounce_every=2,
+    ),
+    DanceSpec(
+        "dance_fist_pump_right",
+        128,
+        "right fist pumping on every beat, bounce and nod",
+        bounce=0.03,
+        nod=0.10,
+        arms="pump_right",
+    ),
+    DanceSpec(
+        "dance_fist_pump_alternate",
+        124,
+        "alternating fist pumps, slight sway",
+        bounce=0.025,
+        arms="pump_alternate",
+        arm_beats=2,
+        sway=0.02,
+        sway_beats=2,
+    ),
+    DanceSpec(
+        "dance_clap_front", 110, "clapping in front of the chest on every beat", bounce=0.02, nod=0.08, arms="clap"
+    ),
+    DanceSpec(
+        "dance_clap_overhead",
+        120,
+        "overhead claps on 2 and 4 with a sway",
+        arms="clap_overhead",
+        arm_beats=2,
+        sway=0.03,
+        sway_beats=4,
+        bounce=0.015,
+    ),
+    DanceSpec(
+        "dance_jump_arms_v",
+        136,
+        "jumping every second beat with both arms up in a V",
+        jump=0.11,
+        jump_every=2,
+        arms="raise_both",
+        arm_beats=4,
+    ),
+    DanceSpec(
+        "dance_pogo_pump",
+        140,
+        "small pogo hops on every beat with both fists pumping",
+        jump=0.05,
+        jump_every=1,
+        arms="pump_both",
+    ),
+    DanceSpec(
+        "dance_hands_up_sway",
+        100,
+        "hands up, swaying left and right over four beats",
+        arms="hands_up_sway",
+        arm_beats=4,
+        sway=0.04,
+        sway_beats=4,
+        head_tilt=0.06,
+    ),
+    DanceSpec(
+        "dance_step_touch_clap",
+        116,
+        "side step-touch with claps on the beat",
+        step=0.18,
+        arms="clap",
+        arm_beats=2,
+        bounce=0.015,
+    ),
+    DanceSpec(
+        "dance_twist_groove",
+        104,
+        "hip twist with bent-elbow groove",
+        twist=0.22,
+        twist_beats=2,
+        arms="groove",
+        bounce=0.02,
+    ),
+    DanceSpec(
+        "dance_wave_right",
+        108,
+        "right arm waving overhead, head tilting with it",
+        arms="wave_right",
+        arm_beats=4,
+        sway=0.025,
+        sway_beats=4,
+        head_tilt=0.08,
+        nod=0.05,
+        nod_every=2,
+    ),
+    DanceSpec(
+        "dance_headbang",
+        132,
+        "forward lean and strong head-banging, pumping bounce",
+        lean=0.15,
+        nod=0.38,
+        bounce=0.03,
+        arms="groove",
+        arm_beats=2,
+    ),
+    DanceSpec(
+        "dance_slow_raise",
+        90,
+        "both arms rising and falling over four beats, leaning back slightly",
+        lean=-0.05,
+        arms="raise_slow",
+        arm_beats=4,
+        sway=0.03,
+        sway_beats=4,
+    ),
+    DanceSpec(
+        "dance_jump_clap",
+        126,
+        "a jump every four beats, overhead claps in between",
+        jump=0.14,
+        jump_every=4,
+        arms="clap_overhead",
+        arm_beats=1,
+        bounce=0.015,
+    ),
 )
 
 
@@ -120,7 +231,7 @@ def _arm_controls(spec: DanceSpec, b: np.ndarray) -> tuple[np.ndarray, np.ndarra
     """Wrist targets (T, 2, 3), elbow poles (T, 2, 3), wrist flex (T, 2) in (out, fwd, up) units."""
     t = b.shape[0]
     a = b / spec.arm_beats
-    swing = np.sin(np.pi * b)                       # 2-beat arm swing for relaxed arms
+    swing = np.sin(np.pi * b)  # 2-beat arm swing for relaxed arms
     relaxed = np.stack([np.full(t, 0.10), 0.10 + 0.05 * swing, np.full(t, -0.985)], axis=-1)
     relaxed_pole = np.array([0.1, -1.0, 0.0])
     target = np.stack([relaxed, relaxed * [1, -1, 1] + [0, 0.2, 0]], axis=1)
@@ -131,8 +242,9 @@ def _arm_controls(spec: DanceSpec, b: np.ndarray) -> tuple[np.ndarray, np.ndarra
     pump_pole = np.array([1.0, -0.3, -0.5])
     if mode == "groove":
         for s in range(2):
-            target[:, s] = np.stack([np.full(t, 0.05), 0.5 + 0.12 * np.sin(2 * np.pi * a + np.pi * s),
-                                     -0.45 + 0.08 * _pulse(b)], axis=-1)
+            target[:, s] = np.stack(
+                [np.full(t, 0.05), 0.5 + 0.12 * np.sin(2 * np.pi * a + np.pi * s), -0.45 + 0.08 * _pulse(b)], axis=-1
+            )
         pole[:] = [0.4, -1.0, -0.4]
         flex[:] = 0.2
     elif mode in ("pump_right", "pump_alternate", "pump_both"):
@@ -172,7 +284,7 @@ def _arm_controls(spec: DanceSpec, b: np.ndarray) -> tuple[np.ndarray, np.ndarra
     elif mode == "raise_slow":
         # The straight arm sweeps up sideways: a great-circle arc at a constant reach.
         r = (1.0 - np.cos(2 * np.pi * a)) / 2.0
-        angle = np.radians(-80.0) + np.radians(150.0) * r      # elevation above the horizontal
+        angle = np.radians(-80.0) + np.radians(150.0) * r  # elevation above the horizontal
         for s in range(2):
             target[:, s] = 0.95 * np.stack([np.cos(angle) * 0.97, np.full(t, 0.2), np.sin(angle)], axis=-1)
             pole[:, s] = _lerp(relaxed_pole, [0.3, -1.0, 0.0], r)
@@ -197,7 +309,8 @@ def generate_dance(spec: DanceSpec, fps: float = 60.0) -> MotionClip:
         value = getattr(spec, field)
         if value < 1 or spec.beats % value:
             raise InvalidInputError(
-                f"DanceSpec {spec.name!r}: field {field!r} = {value} must divide beats = {spec.beats}")
+                f"DanceSpec {spec.name!r}: field {field!r} = {value} must divide beats = {spec.beats}"
+            )
     if spec.jump_every and spec.beats % spec.jump_every:
         raise InvalidInputError(f"DanceSpec {spec.name!r}: field 'jump_every' must divide beats = {spec.beats}")
     if not 40 <= spec.bpm <= 220:
@@ -247,8 +360,8 @@ def generate_dance(spec: DanceSpec, fps: float = 60.0) -> MotionClip:
     knee_pole[:, 0] = [-np.sin(toe_out) - 0.1, np.cos(toe_out), 0.0]
     knee_pole[:, 1] = [np.sin(toe_out) + 0.1, np.cos(toe_out), 0.0]
 
-    pelvis_pitch = 0.3 * spec.lean + 1.5 * drop          # forward tilt (rad) when the knees bend
-    pelvis_roll = -0.8 * x                                # the loaded hip rises (rad per m of shift)
+    pelvis_pitch = 0.3 * spec.lean + 1.5 * drop  # forward tilt (rad) when the knees bend
+    pelvis_roll = -0.8 * x  # the loaded hip rises (rad per m of shift)
     root_rot = yaw_roll_pitch(yaw, pelvis_roll, -pelvis_pitch)
     root_xy = np.stack([x, np.full(n, 0.0)], axis=-1)
     zmax = max_pelvis_height(root_xy, root_rot, ankle)
@@ -256,24 +369,43 @@ def generate_dance(spec: DanceSpec, fps: float = 60.0) -> MotionClip:
     base = np.min((zmax + drop - flight)[grounded]) if np.any(grounded) else np.min(zmax + drop - flight)
     root_pos = np.concatenate([root_xy, (base - drop + flight)[:, None]], axis=-1)
 
-    trunk_pitch = 0.7 * spec.lean + 1.0 * drop           # forward flexion of the spine (rad)
+    trunk_pitch = 0.7 * spec.lean + 1.0 * drop  # forward flexion of the spine (rad)
     trunk_roll = 1.6 * x
     trunk_yaw = -1.3 * yaw
     spine = tuple(yaw_roll_pitch(w * trunk_yaw, w * trunk_roll, -w * trunk_pitch) for w in (0.35, 0.35, 0.3))
     nod = spec.nod * _pulse(b / spec.nod_every, 2.0)
     tilt = spec.head_tilt * sway_s
-    head_yaw = 0.6 * (yaw + trunk_yaw) * -1.0           # keep looking at the stage
+    head_yaw = 0.6 * (yaw + trunk_yaw) * -1.0  # keep looking at the stage
     neck = yaw_roll_pitch(0.5 * head_yaw, 0.4 * tilt - 0.2 * trunk_roll, -(0.4 * nod - 0.3 * spec.lean))
     head = yaw_roll_pitch(0.5 * head_yaw, 0.6 * tilt - 0.2 * trunk_roll, -(0.6 * nod - 0.3 * spec.lean))
 
     wrist, pole, flex = _arm_controls(spec, b)
     collar = 0.25 * np.clip(wrist[:, :, 2], 0.0, 1.0)
-    controls = PoseControls(root_pos=root_pos, root_rot=root_rot, spine=spine, neck=neck, head=head,
-                            collar_raise=collar, wrist_target=wrist, elbow_pole=pole, wrist_flex=flex,
-                            ankle_target=ankle, foot_rot=foot_rot, knee_pole=knee_pole, toe_bend=np.zeros((n, 2)))
+    controls = PoseControls(
+        root_pos=root_pos,
+        root_rot=root_rot,
+        spine=spine,
+        neck=neck,
+        head=head,
+        collar_raise=collar,
+        wrist_target=wrist,
+        elbow_pole=pole,
+        wrist_flex=flex,
+        ankle_target=ankle,
+        foot_rot=foot_rot,
+        knee_pole=knee_pole,
+        toe_bend=np.zeros((n, 2)),
+    )
     rot, root = assemble_pose(controls)
-    meta = {"bpm": spec.bpm, "beats": spec.beats, "description": spec.description, "arms": spec.arms,
-            "moves": [m for m in ("bounce", "sway", "twist", "lean", "nod", "head_tilt", "jump", "step")
-                      if getattr(spec, m)]}
-    return MotionClip(name=spec.name, kind="dance", fps=fps, joint_rotations=rot, root_translation=root,
-                      loop=True, meta=meta)
+    meta = {
+        "bpm": spec.bpm,
+        "beats": spec.beats,
+        "description": spec.description,
+        "arms": spec.arms,
+        "moves": [
+            m for m in ("bounce", "sway", "twist", "lean", "nod", "head_tilt", "jump", "step") if getattr(spec, m)
+        ],
+    }
+    return MotionClip(
+        name=spec.name, kind="dance", fps=fps, joint_rotations=rot, root_translation=root, loop=True, meta=meta
+    )

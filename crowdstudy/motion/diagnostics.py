@@ -32,20 +32,26 @@ def joint_positions(anim: CrowdAnimation, rest_joints: np.ndarray | None = None)
     rest = np.asarray(rest_joints, dtype=np.float64)
     if rest.shape != (anim.n_characters, anim.n_joints, 3):
         raise InvalidInputError(
-            f"rest_joints: expected shape ({anim.n_characters}, {anim.n_joints}, 3), got {rest.shape}")
+            f"rest_joints: expected shape ({anim.n_characters}, {anim.n_joints}, 3), got {rest.shape}"
+        )
     return forward_kinematics(rest[None], anim.joint_rotations, anim.root_translation, anim.parents)[1]
 
 
-def foot_skate(anim: CrowdAnimation, *, height_tol: float = 0.01, speed_tol: float | None = None,
-               rest_joints: np.ndarray | None = None) -> np.ndarray:
+def foot_skate(
+    anim: CrowdAnimation,
+    *,
+    height_tol: float = 0.01,
+    speed_tol: float | None = None,
+    rest_joints: np.ndarray | None = None,
+) -> np.ndarray:
     """Horizontal travel (m) of every foot contact: a 1-D array, one entry per contact
     (all characters, the 4 foot joints). See the module docstring for the definition."""
     pos = joint_positions(anim, rest_joints)
     out = []
     for name in FOOT_JOINTS:
-        p = pos[:, :, JOINT_INDEX[name]]                                  # (T, N, 3)
+        p = pos[:, :, JOINT_INDEX[name]]  # (T, N, 3)
         z = p[..., 2]
-        step = np.linalg.norm(np.diff(p[..., :2], axis=0), axis=-1)       # (T-1, N)
+        step = np.linalg.norm(np.diff(p[..., :2], axis=0), axis=-1)  # (T-1, N)
         contact = (z[:-1] < z.min(axis=0) + height_tol) & (z[1:] < z.min(axis=0) + height_tol)
         if speed_tol is not None:
             contact &= step * anim.fps < speed_tol

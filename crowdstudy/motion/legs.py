@@ -31,8 +31,9 @@ def _segment_starts(mask: np.ndarray, wrapped: np.ndarray) -> np.ndarray:
     return np.where(mask, idx, -1)
 
 
-def _lock_offsets(ankle: np.ndarray, ball: np.ndarray, foot_phase: np.ndarray, flat_end: float,
-                  stance_end: float) -> np.ndarray:
+def _lock_offsets(
+    ankle: np.ndarray, ball: np.ndarray, foot_phase: np.ndarray, flat_end: float, stance_end: float
+) -> np.ndarray:
     """(T, N, 3) horizontal corrections of an ankle target that pin the foot on the floor.
 
     ankle, ball: (T, N, 3) the clip's ankle and ball-of-foot positions; foot_phase: (T, N)
@@ -55,7 +56,7 @@ def _lock_offsets(ankle: np.ndarray, ball: np.ndarray, foot_phase: np.ndarray, f
     s0 = np.maximum(start, 0)
     before = np.maximum(s0 - 1, 0)
     was_flat = flat[before, cols] & (start > 0)
-    held = ankle[np.maximum(flat_start[before, cols], 0), cols, :2] - ankle[s0, cols, :2]   # flat offset at s0
+    held = ankle[np.maximum(flat_start[before, cols], 0), cols, :2] - ankle[s0, cols, :2]  # flat offset at s0
     ball_lock = ball[s0, cols, :2] + np.where(was_flat[..., None], held, 0.0)
     offset[..., :2] = np.where((start >= 0)[..., None], ball_lock - ball[..., :2], offset[..., :2])
     # swing: carry the last stance offset, fading out by the next heel strike
@@ -66,10 +67,17 @@ def _lock_offsets(ankle: np.ndarray, ball: np.ndarray, foot_phase: np.ndarray, f
     return np.where(swing[..., None], offset[np.maximum(last, 0), cols] * fade[..., None], offset)
 
 
-def plant_legs(joint_rotations: np.ndarray, root_translation: np.ndarray, rest_joints: np.ndarray,
-               scale: np.ndarray, ankle_height: np.ndarray, foot_phase: np.ndarray | None = None,
-               flat_end: float | np.ndarray = 0.0, stance_end: float | np.ndarray = 0.0,
-               ankle_offsets: np.ndarray | None = None) -> np.ndarray:
+def plant_legs(
+    joint_rotations: np.ndarray,
+    root_translation: np.ndarray,
+    rest_joints: np.ndarray,
+    scale: np.ndarray,
+    ankle_height: np.ndarray,
+    foot_phase: np.ndarray | None = None,
+    flat_end: float | np.ndarray = 0.0,
+    stance_end: float | np.ndarray = 0.0,
+    ankle_offsets: np.ndarray | None = None,
+) -> np.ndarray:
     """Re-solve the legs so each body puts its ankles where the clip put them.
 
     The clips are authored on :data:`DEFAULT_REST_JOINTS`; a body with other proportions
@@ -110,15 +118,25 @@ def plant_legs(joint_rotations: np.ndarray, root_translation: np.ndarray, rest_j
             # the body's own ball of the foot (its ankle-to-toe offset, not the authoring
             # skeleton's): that is the point that must not slide while the heel rises
             ball_pos = ankle_pos + np.einsum("tnab,nb->tna", g_ankle, rest_joints[:, ankle + 3] - rest_joints[:, ankle])
-            fe, se = (np.broadcast_to(np.asarray(x, dtype=np.float64), foot_phase.shape)[..., k]
-                      for x in (flat_end, stance_end))
+            fe, se = (
+                np.broadcast_to(np.asarray(x, dtype=np.float64), foot_phase.shape)[..., k]
+                for x in (flat_end, stance_end)
+            )
             ankle_pos += _lock_offsets(ankle_pos, ball_pos, foot_phase[..., k], fe, se)
         if ankle_offsets is not None:
             ankle_pos = ankle_pos + ankle_offsets[..., k, :]
         pole = 2.0 * knee_pos - hip_pos - ankle_pos + 0.02 * g_hip[..., :, 1]
         body_hip = root_translation + np.einsum("tnab,nb->tna", pelvis, rest_joints[:, hip] - rest_joints[:, 0])
-        loc_a, loc_b, glob_b = two_bone_ik(body_hip, ankle_pos, pole, pelvis, rest_joints[:, hip],
-                                           rest_joints[:, knee], rest_joints[:, ankle], np.array([0.0, 1.0, 0.0]))
+        loc_a, loc_b, glob_b = two_bone_ik(
+            body_hip,
+            ankle_pos,
+            pole,
+            pelvis,
+            rest_joints[:, hip],
+            rest_joints[:, knee],
+            rest_joints[:, ankle],
+            np.array([0.0, 1.0, 0.0]),
+        )
         out[:, :, hip] = matrix_to_axis_angle(loc_a)
         out[:, :, knee] = matrix_to_axis_angle(loc_b)
         out[:, :, ankle] = matrix_to_axis_angle(np.swapaxes(glob_b, -1, -2) @ g_ankle)

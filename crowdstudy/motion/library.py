@@ -53,7 +53,7 @@ def list_clips(kind: str | None = None, source: str = "mocap", *, default_only: 
     return [name for name, (k, _) in _specs().items() if kind is None or k == kind]
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def load_clip(name: str) -> MotionClip:
     """The shipped clip called ``name`` (see :func:`list_clips`, either source)."""
     specs = _specs()
@@ -68,8 +68,9 @@ def load_clip(name: str) -> MotionClip:
         return generate_walk(spec)
     if name in mocap_names():
         return load_mocap(name)
-    raise InvalidInputError(f"clip name: unknown clip {name!r}; expected one of "
-                            f"{', '.join(mocap_names() + list(specs))}")
+    raise InvalidInputError(
+        f"clip name: unknown clip {name!r}; expected one of {', '.join(mocap_names() + list(specs))}"
+    )
 
 
 def walk_clips(source: str = "mocap") -> list[MotionClip]:

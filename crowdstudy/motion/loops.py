@@ -46,8 +46,17 @@ def in_place_positions(clip: MotionClip) -> np.ndarray:
     return pos
 
 
-def find_loop(positions: np.ndarray, lengths, *, window: int, min_start: int, tolerance: float = 1.3,
-              end_margin: int = 0, start_step: int = 1, accept: float = 0.0) -> LoopChoice:
+def find_loop(
+    positions: np.ndarray,
+    lengths,
+    *,
+    window: int,
+    min_start: int,
+    tolerance: float = 1.3,
+    end_margin: int = 0,
+    start_step: int = 1,
+    accept: float = 0.0,
+) -> LoopChoice:
     """The loop ``[a, a + L)`` of a take whose two cut points match best.
 
     Args:
@@ -78,38 +87,57 @@ def find_loop(positions: np.ndarray, lengths, *, window: int, min_start: int, to
             continue
         starts = np.arange(lo, hi + 1, step)
         a = starts[:, None] + offsets[None, :]
-        d = flat[a] - flat[a + length]                                   # (S, 2w+1, J*3)
+        d = flat[a] - flat[a + length]  # (S, 2w+1, J*3)
         score = np.einsum("swc,swc->s", d, d) / (len(offsets) * pos.shape[1])
         k = int(np.argmin(score))
         results[length] = (float(score[k]), int(starts[k]))
     if not results:
-        raise InvalidInputError(f"find_loop: no loop of lengths {sorted(set(int(x) for x in lengths))} frames fits "
-                                f"a take of {n} frames (window {window}, start >= {min_start})")
+        raise InvalidInputError(
+            f"find_loop: no loop of lengths {sorted(set(int(x) for x in lengths))} frames fits "
+            f"a take of {n} frames (window {window}, start >= {min_start})"
+        )
     best = min(s for s, _ in results.values())
     length = max(L for L, (s, _) in results.items() if s <= max(tolerance * best, accept) + 1e-12)
     score, start = results[length]
     return LoopChoice(start=start, length=length, score=score, best_score=best)
 
 
-def make_loop(clip: MotionClip, start: int, length: int, blend: int, *, name: str | None = None,
-              meta: dict | None = None, speed: float | None = None, kind: str | None = None) -> MotionClip:
+def make_loop(
+    clip: MotionClip,
+    start: int,
+    length: int,
+    blend: int,
+    *,
+    name: str | None = None,
+    meta: dict | None = None,
+    speed: float | None = None,
+    kind: str | None = None,
+) -> MotionClip:
     """The looping clip of frames ``[start, start + length)`` of ``clip``, its seam blended over
     the last ``blend`` frames into the frames before ``start`` (see the module docstring)."""
     n = clip.n_frames
     if not (0 < length and blend >= 0 and start >= blend and start + length <= n and blend < length):
-        raise InvalidInputError(f"make_loop: loop [{start}, {start + length}) with a {blend}-frame blend does not fit "
-                                f"clip {clip.name!r} of {n} frames (needs start >= blend)")
-    quat = clip.quaternions[start:start + length].copy()
-    root = clip.root_translation[start:start + length].copy()
+        raise InvalidInputError(
+            f"make_loop: loop [{start}, {start + length}) with a {blend}-frame blend does not fit "
+            f"clip {clip.name!r} of {n} frames (needs start >= blend)"
+        )
+    quat = clip.quaternions[start : start + length].copy()
+    root = clip.root_translation[start : start + length].copy()
     if blend:
         i = np.arange(length - blend, length)
-        w = smoothstep5((i - (length - blend) + 1) / (blend + 1))        # -> 1 at the seam
-        src = i - length + start                                         # frames before `start`
+        w = smoothstep5((i - (length - blend) + 1) / (blend + 1))  # -> 1 at the seam
+        src = i - length + start  # frames before `start`
         quat[i] = quat_blend(quat[i], clip.quaternions[src], w[:, None])
         root[i] = (1.0 - w)[:, None] * root[i] + w[:, None] * clip.root_translation[src]
     quat = quat_align_signs(quat, axis=0)
     info = {"loop_source": {"start": int(start), "length": int(length), "blend": int(blend)}}
-    return MotionClip(name=name or clip.name, kind=kind or clip.kind, fps=clip.fps,
-                      joint_rotations=quaternion_to_axis_angle(quat), root_translation=root,
-                      speed=clip.speed if speed is None else speed, loop=True,
-                      meta={**clip.meta, **info, **(meta or {})})
+    return MotionClip(
+        name=name or clip.name,
+        kind=kind or clip.kind,
+        fps=clip.fps,
+        joint_rotations=quaternion_to_axis_angle(quat),
+        root_translation=root,
+        speed=clip.speed if speed is None else speed,
+        loop=True,
+        meta={**clip.meta, **info, **(meta or {})},
+    )

@@ -37,17 +37,27 @@ import numpy as np
 from crowdstudy.body.rotations import axis_angle_to_matrix, matrix_to_axis_angle, rot_z
 from crowdstudy.body.skeleton import DEFAULT_REST_JOINTS, JOINT_INDEX, PARENTS, forward_kinematics
 from crowdstudy.errors import InvalidInputError
-from crowdstudy.motion.legs import plant_legs
 from crowdstudy.motion.clip import MotionClip
+from crowdstudy.motion.legs import plant_legs
 from crowdstudy.motion.posing import planted_runs, smoothstep5
 from crowdstudy.motion.rig import ANKLE_HEIGHT
 
-__all__ = ["clean_take", "outlier_ends", "turn_about_z", "face_forward", "remove_drift", "shrink_steps",
-           "foot_contacts", "lock_feet", "lock_loop_feet", "MAX_EXCURSION"]
+__all__ = [
+    "clean_take",
+    "outlier_ends",
+    "turn_about_z",
+    "face_forward",
+    "remove_drift",
+    "shrink_steps",
+    "foot_contacts",
+    "lock_feet",
+    "lock_loop_feet",
+    "MAX_EXCURSION",
+]
 
-_MIN_CONTACT = 0.12    # s, shortest contact kept
-_MAX_GAP = 0.08        # s, shorter gaps inside a contact are filled
-_FADE = 0.3            # s, longest fade-out of a lock offset after lift-off
+_MIN_CONTACT = 0.12  # s, shortest contact kept
+_MAX_GAP = 0.08  # s, shorter gaps inside a contact are filled
+_FADE = 0.3  # s, longest fade-out of a lock offset after lift-off
 #: Default largest wander (m, 95th percentile) of a dancer's feet centre around its spot.
 MAX_EXCURSION = 0.12
 
@@ -104,8 +114,9 @@ def foot_contacts(clip: MotionClip, *, height_tol: float = 0.035, speed_tol: flo
         vel = gaussian_filter1d(np.gradient(ankle[:, :2], axis=0) * clip.fps, 0.03 * clip.fps, axis=0, mode="nearest")
         low_a = np.percentile(ankle[:, 2], 2)
         low_t = np.percentile(toe[:, 2], 2)
-        planted = ((ankle[:, 2] < low_a + height_tol) | (toe[:, 2] < low_t + 0.025)) & \
-            (np.linalg.norm(vel, axis=1) < speed_tol)
+        planted = ((ankle[:, 2] < low_a + height_tol) | (toe[:, 2] < low_t + 0.025)) & (
+            np.linalg.norm(vel, axis=1) < speed_tol
+        )
         gaps = planted_runs(~planted)
         for a, b in gaps:
             if 0 < a and b < len(planted) and (b - a) < _MAX_GAP * clip.fps:
@@ -129,7 +140,7 @@ def _held(values: np.ndarray, contacts: np.ndarray, fps: float) -> np.ndarray:
         fade = max(1, min(int(round(_FADE * fps)), int(0.8 * (nxt - b))))
         u = np.arange(1, fade + 1) / fade
         end = min(b + fade, n)
-        off[b:end] = off[b - 1] * (1.0 - smoothstep5(u[:end - b]))[:, None]
+        off[b:end] = off[b - 1] * (1.0 - smoothstep5(u[: end - b]))[:, None]
     return off
 
 
@@ -146,7 +157,7 @@ def _step_lift(offset: np.ndarray, contacts: np.ndarray) -> np.ndarray:
             continue
         end = b + int(span[-1]) + 2
         u = (np.arange(b, min(end, len(offset))) - b + 1) / (end - b + 1)
-        lift[b:b + len(u)] = min(0.04, 0.4 * float(np.linalg.norm(offset[b - 1]))) * np.sin(np.pi * u) ** 2
+        lift[b : b + len(u)] = min(0.04, 0.4 * float(np.linalg.norm(offset[b - 1]))) * np.sin(np.pi * u) ** 2
     return lift
 
 
@@ -178,14 +189,21 @@ def lock_feet(clip: MotionClip, contacts: np.ndarray) -> MotionClip:
     for k, side in enumerate(("left", "right")):
         ja, jt = JOINT_INDEX[f"{side}_ankle"], JOINT_INDEX[f"{side}_foot"]
         offsets[:, k, :2] = _held(pos[:, ja, :2], contacts[:, k], clip.fps)
-        offsets[:, k, 2] = _step_lift(offsets[:, k, :2], contacts[:, k]) + \
-            _approach_lift(pos[:, ja, 2], contacts[:, k], clip.fps)
+        offsets[:, k, 2] = _step_lift(offsets[:, k, :2], contacts[:, k]) + _approach_lift(
+            pos[:, ja, 2], contacts[:, k], clip.fps
+        )
         toe = pos[:, jt] - pos[:, ja]
         yaw = np.unwrap(np.arctan2(toe[:, 1], toe[:, 0]))
         turn = rot_z(_held(yaw[:, None], contacts[:, k], clip.fps)[:, 0])
         rot[:, ja] = matrix_to_axis_angle(np.swapaxes(glob[:, PARENTS[ja]], -1, -2) @ turn @ glob[:, ja])
-    rot = plant_legs(rot[:, None], clip.root_translation[:, None], DEFAULT_REST_JOINTS[None], np.ones(1),
-                     np.array([ANKLE_HEIGHT]), ankle_offsets=offsets[:, None])[:, 0]
+    rot = plant_legs(
+        rot[:, None],
+        clip.root_translation[:, None],
+        DEFAULT_REST_JOINTS[None],
+        np.ones(1),
+        np.array([ANKLE_HEIGHT]),
+        ankle_offsets=offsets[:, None],
+    )[:, 0]
     return dataclasses.replace(clip, joint_rotations=rot)
 
 
@@ -198,7 +216,7 @@ def _contact_offsets(values: np.ndarray, contacts: np.ndarray) -> np.ndarray:
         return np.broadcast_to(values.mean(axis=0), values.shape).copy()
     held = [values[a:b].mean(axis=0) for a, b in runs]
     out = np.empty(values.shape)
-    out[:runs[0][0]] = held[0]
+    out[: runs[0][0]] = held[0]
     for r, (a, b) in enumerate(runs):
         out[a:b] = held[r]
         end = runs[r + 1][0] if r + 1 < len(runs) else n
@@ -227,15 +245,21 @@ def shrink_steps(clip: MotionClip, factor: float) -> MotionClip:
     stance width, heights, arms and torso are unchanged: the steps get shorter."""
     if factor >= 1.0:
         return clip
-    shift = (factor - 1.0) * _feet_centre(clip)                                               # (T, 2)
+    shift = (factor - 1.0) * _feet_centre(clip)  # (T, 2)
     contacts = foot_contacts(clip)
     new_root = clip.root_translation.copy()
     new_root[:, :2] += shift
     offsets = np.zeros((clip.n_frames, 2, 3))
     for k in range(2):
-        offsets[:, k, :2] = _contact_offsets(shift, contacts[:, k]) - shift      # FK already moved by `shift`
-    rot = plant_legs(clip.joint_rotations[:, None], new_root[:, None], DEFAULT_REST_JOINTS[None], np.ones(1),
-                     np.array([ANKLE_HEIGHT]), ankle_offsets=offsets[:, None])[:, 0]
+        offsets[:, k, :2] = _contact_offsets(shift, contacts[:, k]) - shift  # FK already moved by `shift`
+    rot = plant_legs(
+        clip.joint_rotations[:, None],
+        new_root[:, None],
+        DEFAULT_REST_JOINTS[None],
+        np.ones(1),
+        np.array([ANKLE_HEIGHT]),
+        ankle_offsets=offsets[:, None],
+    )[:, 0]
     return dataclasses.replace(clip, joint_rotations=rot, root_translation=new_root)
 
 
@@ -247,10 +271,14 @@ def lock_loop_feet(loop: MotionClip) -> MotionClip:
     if not loop.loop:
         raise InvalidInputError(f"lock_loop_feet: clip {loop.name!r} does not loop")
     n = loop.n_frames
-    tiled = dataclasses.replace(loop, loop=False, joint_rotations=np.tile(loop.joint_rotations, (3, 1, 1)),
-                                root_translation=np.tile(loop.root_translation, (3, 1)))
+    tiled = dataclasses.replace(
+        loop,
+        loop=False,
+        joint_rotations=np.tile(loop.joint_rotations, (3, 1, 1)),
+        root_translation=np.tile(loop.root_translation, (3, 1)),
+    )
     locked = lock_feet(tiled, foot_contacts(tiled))
-    return dataclasses.replace(loop, joint_rotations=locked.joint_rotations[n:2 * n])
+    return dataclasses.replace(loop, joint_rotations=locked.joint_rotations[n : 2 * n])
 
 
 #: mean gaze pitch (degrees, negative = down) of a cleaned take, relative to the chest
@@ -260,7 +288,9 @@ GAZE_PITCH = -4.0
 def _gaze_pitch(clip: MotionClip) -> np.ndarray:
     """(T,) degrees: the face direction's elevation in the chest's (spine3) frame."""
     glob, _ = forward_kinematics(DEFAULT_REST_JOINTS, clip.joint_rotations, clip.root_translation)
-    local = np.einsum("tba,tb->ta", glob[:, JOINT_INDEX["spine3"]], glob[:, JOINT_INDEX["head"]] @ np.array([0, 1.0, 0]))
+    local = np.einsum(
+        "tba,tb->ta", glob[:, JOINT_INDEX["spine3"]], glob[:, JOINT_INDEX["head"]] @ np.array([0, 1.0, 0])
+    )
     return np.degrees(np.arctan2(local[:, 2], np.hypot(local[:, 0], local[:, 1])))
 
 
@@ -282,7 +312,7 @@ def outlier_ends(clip: MotionClip, *, window: float = 0.5, factor: float = 5.0) 
     exceeds ``factor`` times the take's median (and 3 cm) cuts the take after / before it
     (e.g. a hand that jumps 7 cm between the first two frames of a standing take)."""
     pos = clip.joint_positions()
-    step = np.linalg.norm(np.diff(pos, axis=0), axis=-1).max(axis=1)              # (T-1,) m per frame
+    step = np.linalg.norm(np.diff(pos, axis=0), axis=-1).max(axis=1)  # (T-1,) m per frame
     bad = step > max(factor * float(np.median(step)), 0.03)
     k = max(1, int(round(window * clip.fps)))
     head = np.flatnonzero(bad[:k])
@@ -292,9 +322,16 @@ def outlier_ends(clip: MotionClip, *, window: float = 0.5, factor: float = 5.0) 
     return first / clip.fps, last / clip.fps
 
 
-def clean_take(clip: MotionClip, *, trim_start: float = 0.0, trim_end: float | None = None,
-               drift_sigma: float | None = 1.5, max_excursion: float | None = MAX_EXCURSION, fps: float = 60.0,
-               name: str | None = None) -> MotionClip:
+def clean_take(
+    clip: MotionClip,
+    *,
+    trim_start: float = 0.0,
+    trim_end: float | None = None,
+    drift_sigma: float | None = 1.5,
+    max_excursion: float | None = MAX_EXCURSION,
+    fps: float = 60.0,
+    name: str | None = None,
+) -> MotionClip:
     """A dance or idle take ready for the crowd (see the module docstring): trimmed to
     ``[trim_start, trim_end)`` s, resampled to ``fps``, facing +y on its spot (slow drift
     removed over ``drift_sigma`` s; None keeps it), steps shrunk (:func:`shrink_steps`) so
@@ -308,12 +345,12 @@ def clean_take(clip: MotionClip, *, trim_start: float = 0.0, trim_end: float | N
     t0 = max(float(trim_start), auto0)
     t1 = min(clip.duration if trim_end is None else min(float(trim_end), clip.duration), auto1)
     if not 0.0 <= t0 < t1:
-        raise InvalidInputError(f"clean_take: trim [{trim_start}, {trim_end}) s is empty for clip {clip.name!r} "
-                                f"of {clip.duration:.2f} s")
+        raise InvalidInputError(
+            f"clean_take: trim [{trim_start}, {trim_end}) s is empty for clip {clip.name!r} of {clip.duration:.2f} s"
+        )
     n = int(np.floor((t1 - t0) * fps + 1e-9)) + 1
     rot, root = clip.sample(t0 + np.arange(n) / fps)
-    take = dataclasses.replace(clip, name=name or clip.name, fps=float(fps), joint_rotations=rot,
-                               root_translation=root)
+    take = dataclasses.replace(clip, name=name or clip.name, fps=float(fps), joint_rotations=rot, root_translation=root)
     take = face_forward(take)
     if drift_sigma is not None:
         take = remove_drift(take, drift_sigma)
@@ -324,6 +361,12 @@ def clean_take(clip: MotionClip, *, trim_start: float = 0.0, trim_end: float | N
         take = shrink_steps(take, scale)
     contacts = foot_contacts(take)
     take = level_head(lock_feet(take, contacts))
-    meta = {**clip.meta, "trim": [t0, t1], "drift_sigma": drift_sigma, "step_scale": scale, "gaze_pitch": GAZE_PITCH,
-            "contact_share": [float(x) for x in contacts.mean(axis=0)]}
+    meta = {
+        **clip.meta,
+        "trim": [t0, t1],
+        "drift_sigma": drift_sigma,
+        "step_scale": scale,
+        "gaze_pitch": GAZE_PITCH,
+        "contact_share": [float(x) for x in contacts.mean(axis=0)],
+    }
     return dataclasses.replace(take, meta=meta)

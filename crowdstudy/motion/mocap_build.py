@@ -35,18 +35,30 @@ def default_output() -> Path:
 
 def _pack(clip: MotionClip, spec: TakeSpec) -> tuple[dict[str, np.ndarray], dict]:
     quat = axis_angle_to_quaternion(clip.joint_rotations)
-    quat = quat * np.where(quat[..., 3:] < 0.0, -1.0, 1.0)          # w >= 0: no sign flips to store
-    arrays = {f"{spec.name}.quat": quat.astype(np.float16),
-              f"{spec.name}.root": clip.root_translation.astype(np.float32)}
+    quat = quat * np.where(quat[..., 3:] < 0.0, -1.0, 1.0)  # w >= 0: no sign flips to store
+    arrays = {
+        f"{spec.name}.quat": quat.astype(np.float16),
+        f"{spec.name}.root": clip.root_translation.astype(np.float32),
+    }
     meta = {k: v for k, v in clip.meta.items() if k != "source"}
-    info = {"kind": spec.kind, "fps": clip.fps, "loop": clip.loop, "speed": clip.speed, "file": spec.file,
-            "trial": f"CMU {spec.trial}", "description": spec.description, "default": spec.default,
-            "licence": LICENCE, "meta": json.loads(json.dumps(meta, default=float))}
+    info = {
+        "kind": spec.kind,
+        "fps": clip.fps,
+        "loop": clip.loop,
+        "speed": clip.speed,
+        "file": spec.file,
+        "trial": f"CMU {spec.trial}",
+        "description": spec.description,
+        "default": spec.default,
+        "licence": LICENCE,
+        "meta": json.loads(json.dumps(meta, default=float)),
+    }
     return arrays, info
 
 
-def build_library(source: str | Path, out: str | Path, *, names: list[str] | None = None,
-                  progress: bool = False) -> Path:
+def build_library(
+    source: str | Path, out: str | Path, *, names: list[str] | None = None, progress: bool = False
+) -> Path:
     """Convert the takes of :data:`TAKES` (all, or ``names``) from the BVH folder ``source``
     into ``out/takes.npz`` and ``out/library.json``; returns ``out``."""
     source, out = Path(source), Path(out)
@@ -73,10 +85,17 @@ def build_library(source: str | Path, out: str | Path, *, names: list[str] | Non
         if t.kind == "dance":
             bc = beat_curve(clip.root_translation[:, 2], clip.fps, period=t.bounce_period)
             lows = [round(float(x), 6) for x in low_points(clip.root_translation[:, 2], clip.fps)]
-            clip = dataclasses.replace(clip, meta={**clip.meta, "bounce_period": bc.period,
-                                                   "bounce_lows": lows,
-                                                   "bounce_method": bc.method, "bounce_strength": bc.strength,
-                                                   "bounce_beats": t.bounce_beats})
+            clip = dataclasses.replace(
+                clip,
+                meta={
+                    **clip.meta,
+                    "bounce_period": bc.period,
+                    "bounce_lows": lows,
+                    "bounce_method": bc.method,
+                    "bounce_strength": bc.strength,
+                    "bounce_beats": t.bounce_beats,
+                },
+            )
         a, info = _pack(clip, t)
         arrays.update(a)
         library[t.name] = info

@@ -45,13 +45,17 @@ from crowdstudy.errors import InvalidInputError
 from crowdstudy.motion.clip import MotionClip, seam_discontinuity
 from crowdstudy.motion.mocap import level_head, turn_about_z
 
-__all__ = ["WALK_FILES", "FPS", "build_walk_loops", "build_walk_loop", "foot_events", "loop_foot_skate",
-           "gait_report"]
+__all__ = ["WALK_FILES", "FPS", "build_walk_loops", "build_walk_loop", "foot_events", "loop_foot_skate", "gait_report"]
 
 #: The straight walking takes used (``shared/data/mocap``), about 0.4 to 1.9 m/s.
-WALK_FILES = ("cmu_142_07_walk_slow_short_steps.bvh.gz", "cmu_139_28_walk_slow.bvh.gz",
-              "cmu_104_02_walk_neutral.bvh.gz", "cmu_81_02_walk_normal.bvh.gz", "cmu_82_13_walk_brisk.bvh.gz",
-              "cmu_132_20_walk_fast.bvh.gz")
+WALK_FILES = (
+    "cmu_142_07_walk_slow_short_steps.bvh.gz",
+    "cmu_139_28_walk_slow.bvh.gz",
+    "cmu_104_02_walk_neutral.bvh.gz",
+    "cmu_81_02_walk_normal.bvh.gz",
+    "cmu_82_13_walk_brisk.bvh.gz",
+    "cmu_132_20_walk_fast.bvh.gz",
+)
 #: Working frame rate (frames/s); the loops keep about this rate with an exact period.
 FPS = 60.0
 #: mean gaze pitch of a walker relative to its chest, degrees: the captured walkers lean their
@@ -113,7 +117,7 @@ def foot_events(pos: np.ndarray, fps: float, speed: float) -> dict[str, dict[str
         enter = va < 0.1 + 0.45 * speed
         leave = vb > 0.15 + 0.8 * speed
         spans: list[list[int]] = []
-        state, start = None, 0          # None until the first swing is seen (skip a partial stance)
+        state, start = None, 0  # None until the first swing is seen (skip a partial stance)
         for t in range(len(za)):
             if state is None:
                 state = False if leave[t] else None
@@ -122,21 +126,22 @@ def foot_events(pos: np.ndarray, fps: float, speed: float) -> dict[str, dict[str
             elif state and leave[t]:
                 state = False
                 if spans and start - spans[-1][1] < 0.15 * fps:
-                    spans[-1][1] = t                  # a brief slip of a planted foot: one stance
+                    spans[-1][1] = t  # a brief slip of a planted foot: one stance
                 else:
                     spans.append([start, t])
         spans = [sp for sp in spans if sp[1] - sp[0] >= 0.1 * fps]
         reach = int(0.15 * fps)
-        for i, sp in enumerate(spans):        # the toe leaves where the ball rises from its stance height
-            low = zb[sp[0]:sp[1]].min() + 0.012
+        for i, sp in enumerate(spans):  # the toe leaves where the ball rises from its stance height
+            low = zb[sp[0] : sp[1]].min() + 0.012
             last = min(spans[i + 1][0] - 1 if i + 1 < len(spans) else len(zb) - 1, sp[1] + reach)
             while sp[1] < last and zb[sp[1]] < low:
                 sp[1] += 1
         strikes = [a for a, _ in spans]
         offs = [b for _, b in spans]
         flats = [a + int(np.flatnonzero(za[a:b] < za[a:b].min() + 0.01)[-1]) for a, b in spans]
-        out[side] = {k: np.asarray(v, dtype=np.int64) for k, v in
-                     (("strike", strikes), ("flat_end", flats), ("toe_off", offs))}
+        out[side] = {
+            k: np.asarray(v, dtype=np.int64) for k, v in (("strike", strikes), ("flat_end", flats), ("toe_off", offs))
+        }
     return out
 
 
@@ -151,12 +156,12 @@ def _level_floor(clip: MotionClip, events: dict) -> MotionClip:
     for side in _SIDES:
         for a, b in zip(events[side]["strike"], events[side]["flat_end"]):
             t.append(np.arange(a, b + 1))
-            z.append(pos[a:b + 1, JOINT_INDEX[f"{side}_ankle"], 2])
+            z.append(pos[a : b + 1, JOINT_INDEX[f"{side}_ankle"], 2])
     t, z = np.concatenate(t), np.concatenate(z)
     slope, icpt = np.polyfit(t.astype(np.float64), z, 1)
     root = clip.root_translation.copy()
     frames = np.arange(clip.n_frames)
-    ground = np.percentile(z - slope * t, 20)                     # a low flat-foot ankle height, levelled
+    ground = np.percentile(z - slope * t, 20)  # a low flat-foot ankle height, levelled
     root[:, 2] -= slope * frames + ground - ANKLE_HEIGHT
     return dataclasses.replace(clip, root_translation=root)
 
@@ -196,13 +201,13 @@ def _loop_contacts(ev: dict, n: int, cycles: int) -> dict[str, dict[str, float]]
     out: dict[str, dict[str, float]] = {}
     for side in _SIDES:
         st = ev[side]["strike"]
-        sel = (st >= n) & (st < 2 * n)                       # stances starting in the middle copy
+        sel = (st >= n) & (st < 2 * n)  # stances starting in the middle copy
         ph = (st[sel] - n) / per
-        strike = float(np.mod(np.angle(np.mean(np.exp(2j * np.pi * ph))) / (2 * np.pi), 1.0))   # circular mean
+        strike = float(np.mod(np.angle(np.mean(np.exp(2j * np.pi * ph))) / (2 * np.pi), 1.0))  # circular mean
         strike = 0.0 if strike > 1.0 - 1e-9 else strike
         out[side] = {"strike": strike}
         for key in ("flat_end", "toe_off"):
-            dur = float(np.mean(ev[side][key][sel] - st[sel]) / per)    # cycles since the strike
+            dur = float(np.mean(ev[side][key][sel] - st[sel]) / per)  # cycles since the strike
             out[side][key] = float(np.mod(strike + dur, 1.0))
     return out
 
@@ -232,11 +237,11 @@ def _lock_offsets(pos: np.ndarray, ev: dict, fps: float) -> np.ndarray:
         default = int(np.median(swings)) if len(swings) else int(0.4 * (to[0] - st[0]) + 1)
         off = np.zeros((t_all, 2))
         for i, (a, f, e) in enumerate(zip(st, fl, to)):
-            held = np.median(ankle[a:f + 1], axis=0)
+            held = np.median(ankle[a : f + 1], axis=0)
             stance = np.zeros((e + 1 - a, 2))
-            stance[:f + 1 - a] = held - ankle[a:f + 1]
-            stance[f + 1 - a:] = ball[f] + stance[f - a] - ball[f + 1:e + 1]
-            off[a:e + 1] += stance
+            stance[: f + 1 - a] = held - ankle[a : f + 1]
+            stance[f + 1 - a :] = ball[f] + stance[f - a] - ball[f + 1 : e + 1]
+            off[a : e + 1] += stance
             before = st[i] - to[i - 1] if i else default
             after = st[i + 1] - e if i + 1 < len(st) else default
             j = np.arange(1, int(0.4 * before) + 1)
@@ -246,7 +251,7 @@ def _lock_offsets(pos: np.ndarray, ev: dict, fps: float) -> np.ndarray:
             # keep the ankle HOVER above its stance height until it has slowed down (the strike)
             j = np.arange(1, int(0.5 * before) + 1)
             j = j[a - j >= 0]
-            floor = za[a:f + 1].min() + HOVER
+            floor = za[a : f + 1].min() + HOVER
             lift[a - j] = np.maximum(floor - za[a - j], 0.0) * smoothstep5(j / (0.05 * fps))
             j = np.arange(1, int(0.45 * after) + 1)
             j = j[e + j < t_all]
@@ -274,13 +279,13 @@ def _hold_foot_yaw(rot: np.ndarray, root: np.ndarray, ev: dict) -> np.ndarray:
         delta = np.zeros(len(yaw))
         st, fl, to = (ev[side][x] for x in ("strike", "flat_end", "toe_off"))
         for i, (a, f) in enumerate(zip(st, fl)):
-            d = np.angle(np.exp(1j * (yaw[f] - yaw[a:f + 1])))
-            delta[a:f + 1] = d
+            d = np.angle(np.exp(1j * (yaw[f] - yaw[a : f + 1])))
+            delta[a : f + 1] = d
             before = a - to[i - 1] if i else int(0.5 * (f - a)) + 1
             j = np.arange(1, int(0.4 * before) + 1)
             j = j[a - j >= 0]
             delta[a - j] = d[0] * (1.0 - smoothstep5(j / (0.4 * before)))
-        turn = rot_z(delta)                                              # (T, 3, 3)
+        turn = rot_z(delta)  # (T, 3, 3)
         local = np.swapaxes(glob[:, PARENTS[ja]], -1, -2) @ turn @ glob[:, ja]
         out[:, ja] = matrix_to_axis_angle(local)
     return out
@@ -298,8 +303,14 @@ def _lock_feet(clip: MotionClip, pos3: np.ndarray, ev: dict) -> MotionClip:
     rot = _hold_foot_yaw(rot, root, ev)
     pos3 = forward_kinematics(DEFAULT_REST_JOINTS, rot, root)[1]
     offsets = _lock_offsets(pos3, ev, clip.fps)[:, None]
-    new = plant_legs(rot[:, None], root[:, None], DEFAULT_REST_JOINTS[None], np.ones(1), np.array([ANKLE_HEIGHT]),
-                     ankle_offsets=offsets)[n:2 * n, 0]
+    new = plant_legs(
+        rot[:, None],
+        root[:, None],
+        DEFAULT_REST_JOINTS[None],
+        np.ones(1),
+        np.array([ANKLE_HEIGHT]),
+        ankle_offsets=offsets,
+    )[n : 2 * n, 0]
     return dataclasses.replace(clip, joint_rotations=new)
 
 
@@ -341,7 +352,7 @@ def build_walk_loop(path: str | Path, *, fps: float = FPS, max_cycles: int = 2) 
     left = ev["left"]["strike"]
     if len(left) < 2:
         raise InvalidInputError(f"{path.name}: found {len(left)} left heel strikes, need 2 to measure the gait cycle")
-    period = float(np.median(np.diff(left)))                             # frames per gait cycle
+    period = float(np.median(np.diff(left)))  # frames per gait cycle
     blend = int(round(BLEND_SECONDS * fps))
     window = int(round(MATCH_SECONDS * fps))
     choice = None
@@ -362,7 +373,7 @@ def build_walk_loop(path: str | Path, *, fps: float = FPS, max_cycles: int = 2) 
     turned = turn_about_z(raw, float(np.pi / 2 - np.arctan2(d[1], d[0])), root[a, :2])
     rt = turned.root_translation.copy()
     rt[:, 1] -= speed * (np.arange(raw.n_frames) - a) / fps
-    rt[:, :2] -= rt[a:a + length, :2].mean(axis=0)
+    rt[:, :2] -= rt[a : a + length, :2].mean(axis=0)
     in_place = dataclasses.replace(turned, root_translation=rt)
     loop = make_loop(in_place, a, length, blend, name=stem, kind="walk", speed=speed)
     # phase 0 = left heel strike; every gait cycle gets the same number of frames
@@ -379,23 +390,38 @@ def build_walk_loop(path: str | Path, *, fps: float = FPS, max_cycles: int = 2) 
     n = per_cycle * cycles
     new_fps = n / loop.duration
     r = r.copy()
-    r[:, 1] += speed * (times - (s[0] / fps) - np.arange(n) / new_fps)   # same world path, new clock
+    r[:, 1] += speed * (times - (s[0] / fps) - np.arange(n) / new_fps)  # same world path, new clock
     r[:, :2] -= r[:, :2].mean(axis=0)
     trial = "_".join(stem.split("_")[1:3])
-    warped = MotionClip(name=stem, kind="walk", fps=new_fps, joint_rotations=quaternion_to_axis_angle(quat),
-                        root_translation=r, speed=speed, loop=True)
-    ev = _middle_events(warped, _world_positions(warped, 3), cycles)    # contact timing from the capture
+    warped = MotionClip(
+        name=stem,
+        kind="walk",
+        fps=new_fps,
+        joint_rotations=quaternion_to_axis_angle(quat),
+        root_translation=r,
+        speed=speed,
+        loop=True,
+    )
+    ev = _middle_events(warped, _world_positions(warped, 3), cycles)  # contact timing from the capture
     warped = _steady_pelvis(warped, cycles)
     pos3 = _world_positions(warped, 3)
     contacts = _loop_contacts(ev, n, cycles)
     locked = level_head(_lock_feet(warped, pos3, ev), WALK_GAZE_PITCH)
     cycle_s = loop.duration / cycles
-    meta = {"description": f"CMU {trial} motion capture walk", "source": path.name, "trial": trial,
-            "cadence": 120.0 / cycle_s, "stride_length": speed * cycle_s, "cycle": cycle_s, "cycles": cycles,
-            "contacts": contacts, "lock_lead": LOCK_LEAD, "lock_lag": LOCK_LAG,
-            "duty_factor": float(np.mean([np.mod(contacts[x]["toe_off"] - contacts[x]["strike"], 1.0)
-                                          for x in _SIDES])),
-            "loop_source": {"start": int(a), "length": int(length), "blend": int(blend), "fps": float(fps)}}
+    meta = {
+        "description": f"CMU {trial} motion capture walk",
+        "source": path.name,
+        "trial": trial,
+        "cadence": 120.0 / cycle_s,
+        "stride_length": speed * cycle_s,
+        "cycle": cycle_s,
+        "cycles": cycles,
+        "contacts": contacts,
+        "lock_lead": LOCK_LEAD,
+        "lock_lag": LOCK_LAG,
+        "duty_factor": float(np.mean([np.mod(contacts[x]["toe_off"] - contacts[x]["strike"], 1.0) for x in _SIDES])),
+        "loop_source": {"start": int(a), "length": int(length), "blend": int(blend), "fps": float(fps)},
+    }
     return dataclasses.replace(locked, meta=meta)
 
 
@@ -417,9 +443,16 @@ def loop_foot_skate(clip: MotionClip, repeats: int = 3, height_tol: float = 0.01
     from crowdstudy.scene import CrowdAnimation
 
     rot, root = _world(clip, repeats)
-    anim = CrowdAnimation(joint_names=JOINT_NAMES, parents=PARENTS, root_translation=root[:, None],
-                          joint_rotations=rot[:, None], fps=clip.fps, bodies=({},), clips=({"kind": "walk"},),
-                          meta={"scenario": "corridor"})
+    anim = CrowdAnimation(
+        joint_names=JOINT_NAMES,
+        parents=PARENTS,
+        root_translation=root[:, None],
+        joint_rotations=rot[:, None],
+        fps=clip.fps,
+        bodies=({},),
+        clips=({"kind": "walk"},),
+        meta={"scenario": "corridor"},
+    )
     return foot_skate(anim, height_tol=height_tol, rest_joints=DEFAULT_REST_JOINTS[None])
 
 
@@ -430,13 +463,18 @@ def gait_report(clip: MotionClip) -> dict:
     and the seam (:func:`~crowdstudy.motion.clip.seam_discontinuity`)."""
     pos = clip.joint_positions()
     n, cyc = clip.n_frames, int(clip.meta.get("cycles", 1))
-    out: dict = {"speed": clip.speed, "cadence": clip.meta["cadence"], "stride": clip.meta["stride_length"],
-                 "cycles": cyc}
+    out: dict = {
+        "speed": clip.speed,
+        "cadence": clip.meta["cadence"],
+        "stride": clip.meta["stride_length"],
+        "cycles": cyc,
+    }
     for side in _SIDES:
         hip, knee, ankle = (pos[:, JOINT_INDEX[f"{side}_{j}"]] for j in ("hip", "knee", "ankle"))
         a, b = hip - knee, ankle - knee
-        ang = np.degrees(np.arccos(np.clip(np.sum(a * b, -1) / np.linalg.norm(a, axis=-1)
-                                           / np.linalg.norm(b, axis=-1), -1, 1)))
+        ang = np.degrees(
+            np.arccos(np.clip(np.sum(a * b, -1) / np.linalg.norm(a, axis=-1) / np.linalg.norm(b, axis=-1), -1, 1))
+        )
         f = (np.round((clip.meta["contacts"][side]["strike"] + np.arange(cyc)) * n / cyc).astype(int)) % n
         out[f"{side}_knee_at_strike"] = float(ang[f].mean())
         w = pos[:, JOINT_INDEX[f"{side}_wrist"], 1] - pos[:, 0, 1]

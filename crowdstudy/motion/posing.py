@@ -26,9 +26,18 @@ def hinge_frame(direction: np.ndarray, hinge: np.ndarray) -> np.ndarray:
     return np.stack([d, np.cross(h, d), h], axis=-1)
 
 
-def two_bone_ik(root_pos: np.ndarray, target: np.ndarray, pole: np.ndarray, parent_rot: np.ndarray,
-                rest_a: np.ndarray, rest_b: np.ndarray, rest_c: np.ndarray, rest_pole: np.ndarray,
-                *, max_reach: float = 0.999) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def two_bone_ik(
+    root_pos: np.ndarray,
+    target: np.ndarray,
+    pole: np.ndarray,
+    parent_rot: np.ndarray,
+    rest_a: np.ndarray,
+    rest_b: np.ndarray,
+    rest_c: np.ndarray,
+    rest_pole: np.ndarray,
+    *,
+    max_reach: float = 0.999,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Analytic IK of a chain a -> b -> c (hip-knee-ankle, shoulder-elbow-wrist).
 
     Args:
@@ -94,7 +103,7 @@ def planted_runs(mask: np.ndarray, *, periodic: bool = False) -> list[tuple[int,
         return []
     if mask.all():
         return [(0, n)]
-    shift = int(np.argmin(mask)) if periodic else 0        # start the scan on a free frame
+    shift = int(np.argmin(mask)) if periodic else 0  # start the scan on a free frame
     m = np.roll(mask, -shift)
     edges = np.diff(np.concatenate([[0], m.astype(np.int8), [0]]))
     starts, stops = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)

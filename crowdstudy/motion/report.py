@@ -38,11 +38,19 @@ def _dances(tempo: float, fps: float, duration: float) -> list[dict]:
         take = load_clip(name)
         loop = dance_loop(name, tempo, fps, duration)
         seam = seam_discontinuity(loop)
-        rows.append({"dance": name, "default": name in list_clips("dance", default_only=True),
-                     "bounce_period_s": round(take.meta["bounce_period"], 3), "bounce": take.meta["bounce_method"],
-                     "tempo_ratio": round(loop.meta["tempo_ratio"], 3), "loop_beats": loop.meta["beats"],
-                     "loop_s": round(loop.duration, 2), "seam_ratio": round(seam["step_seam"] / seam["step_max"], 2),
-                     "step_scale": round(take.meta.get("step_scale", 1.0), 2)})
+        rows.append(
+            {
+                "dance": name,
+                "default": name in list_clips("dance", default_only=True),
+                "bounce_period_s": round(take.meta["bounce_period"], 3),
+                "bounce": take.meta["bounce_method"],
+                "tempo_ratio": round(loop.meta["tempo_ratio"], 3),
+                "loop_beats": loop.meta["beats"],
+                "loop_s": round(loop.duration, 2),
+                "seam_ratio": round(seam["step_seam"] / seam["step_max"], 2),
+                "step_scale": round(take.meta.get("step_scale", 1.0), 2),
+            }
+        )
     return rows
 
 
@@ -53,16 +61,26 @@ def _beat(design, level: str, tempo: float) -> list[dict]:
     seed = design.cell_seed(st, level)
     crowd = concert_layout(design, level, seed)
     rows = []
-    for label, kwargs in (("procedural clips", {"clip_names": list_clips("dance", "procedural")}),
-                          ("motion capture, own tempo", {"tempo": None}),
-                          (f"motion capture on {tempo:g} bpm", {"tempo": tempo})):
-        anim = animate_stationary(crowd, duration=design.duration, fps=design.fps, seed=seed,
-                                  clear_self_contact=False, **kwargs)
+    for label, kwargs in (
+        ("procedural clips", {"clip_names": list_clips("dance", "procedural")}),
+        ("motion capture, own tempo", {"tempo": None}),
+        (f"motion capture on {tempo:g} bpm", {"tempo": tempo}),
+    ):
+        anim = animate_stationary(
+            crowd, duration=design.duration, fps=design.fps, seed=seed, clear_self_contact=False, **kwargs
+        )
         r = bounce_phase(anim.root_translation[:, :, 2], anim.fps, tempo)
         keep = r["consistency"] > 0.3
         spread = circular_spread(r["phase"][keep]) if keep.any() else {"circular_sd": float("nan")}
-        rows.append({"motion": label, "resultant": round(r["resultant"], 3), "circular_sd": round(r["circular_sd"], 3),
-                     "consistent": f"{int(keep.sum())}/{keep.size}", "phase_spread": round(spread["circular_sd"], 3)})
+        rows.append(
+            {
+                "motion": label,
+                "resultant": round(r["resultant"], 3),
+                "circular_sd": round(r["circular_sd"], 3),
+                "consistent": f"{int(keep.sum())}/{keep.size}",
+                "phase_spread": round(spread["circular_sd"], 3),
+            }
+        )
     return rows
 
 
@@ -78,23 +96,38 @@ def _hands(fps: float) -> list[dict]:
         after = max(float(hand_penetration(b, fixed[:, i], root[:, i]).max()) for i, b in enumerate(bodies))
         worst = [self_penetration(b, fixed[:, i], root[:, i]) for i, b in enumerate(bodies)]
         w = max(worst, key=lambda r: r["p95_depth"])
-        rows.append({"clip": name, "default": name in list_clips("dance", default_only=True),
-                     "hands_before_cm": round(100 * before, 1), "hands_after_cm": round(100 * after, 1),
-                     "any_pair_p95_cm": round(100 * w["p95_depth"], 1), "pair": "-".join(w["worst_pair"])})
+        rows.append(
+            {
+                "clip": name,
+                "default": name in list_clips("dance", default_only=True),
+                "hands_before_cm": round(100 * before, 1),
+                "hands_after_cm": round(100 * after, 1),
+                "any_pair_p95_cm": round(100 * w["p95_depth"], 1),
+                "pair": "-".join(w["worst_pair"]),
+            }
+        )
     return rows
 
 
 def _skate(values: np.ndarray) -> dict:
-    return {"contacts": int(values.size), "p50_cm": round(100 * float(np.percentile(values, 50)), 2),
-            "p95_cm": round(100 * float(np.percentile(values, 95)), 2), "max_cm": round(100 * float(values.max()), 2)}
+    return {
+        "contacts": int(values.size),
+        "p50_cm": round(100 * float(np.percentile(values, 50)), 2),
+        "p95_cm": round(100 * float(np.percentile(values, 95)), 2),
+        "max_cm": round(100 * float(values.max()), 2),
+    }
 
 
 def motion_report(design, *, level: str = "D5", with_hands: bool = True) -> dict:
     """The tables described in the module docstring for ``design`` (its concert tempo,
     video duration and frame rate) and the density ``level``."""
     tempo = float(design.scenarios["concert"].params.get("tempo", 120.0))
-    out = {"tempo": tempo, "level": level, "dances": _dances(tempo, float(design.fps), float(design.duration)),
-           "beat": _beat(design, level, tempo)}
+    out = {
+        "tempo": tempo,
+        "level": level,
+        "dances": _dances(tempo, float(design.fps), float(design.duration)),
+        "beat": _beat(design, level, tempo),
+    }
     if with_hands:
         out["hands"] = _hands(float(design.fps))
     feet = []
@@ -109,7 +142,14 @@ def motion_report(design, *, level: str = "D5", with_hands: bool = True) -> dict
         pos = np.stack([np.zeros(n), clip.speed * t], axis=-1)[:, None]
         crowd = Crowd(positions=pos, radius=0.2, fps=clip.fps, meta={"scenario": "corridor"})
         anim = animate_walking(crowd, seed=0, walks=[clip, *[c for c in walk_clips() if c is not clip][:1]])
-        walks.append({"walk": clip.name, "speed_m_s": round(clip.speed, 2), "cadence": round(clip.meta["cadence"], 1),
-                      "stride_m": round(clip.meta["stride_length"], 2), **_skate(foot_skate(anim))})
+        walks.append(
+            {
+                "walk": clip.name,
+                "speed_m_s": round(clip.speed, 2),
+                "cadence": round(clip.meta["cadence"], 1),
+                "stride_m": round(clip.meta["stride_length"], 2),
+                **_skate(foot_skate(anim)),
+            }
+        )
     out["walks"] = walks
     return out

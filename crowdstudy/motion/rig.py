@@ -14,12 +14,25 @@ import dataclasses
 import numpy as np
 
 from crowdstudy.body.rotations import axis_angle_to_matrix, matrix_to_axis_angle, rot_y
-from crowdstudy.body.skeleton import (DEFAULT_PELVIS_HEIGHT, DEFAULT_REST_JOINTS, JOINT_INDEX, NUM_JOINTS,
-                                      forward_kinematics)
+from crowdstudy.body.skeleton import (
+    DEFAULT_PELVIS_HEIGHT,
+    DEFAULT_REST_JOINTS,
+    JOINT_INDEX,
+    NUM_JOINTS,
+    forward_kinematics,
+)
 from crowdstudy.motion.posing import two_bone_ik
 
-__all__ = ["PoseControls", "assemble_pose", "max_pelvis_height", "REST", "ANKLE_HEIGHT", "FOOT_HEIGHT",
-           "LEG_LENGTH", "ARM_REACH"]
+__all__ = [
+    "PoseControls",
+    "assemble_pose",
+    "max_pelvis_height",
+    "REST",
+    "ANKLE_HEIGHT",
+    "FOOT_HEIGHT",
+    "LEG_LENGTH",
+    "ARM_REACH",
+]
 
 REST = np.array(DEFAULT_REST_JOINTS)
 _J = JOINT_INDEX
@@ -29,11 +42,15 @@ ANKLE_HEIGHT = float(DEFAULT_PELVIS_HEIGHT + REST[_J["left_ankle"], 2])
 #: Height of the foot (toe) joint above the floor in the rest pose (m).
 FOOT_HEIGHT = float(DEFAULT_PELVIS_HEIGHT + REST[_J["left_foot"], 2])
 #: Thigh + shank length of the authoring skeleton (m).
-LEG_LENGTH = float(np.linalg.norm(REST[_J["left_knee"]] - REST[_J["left_hip"]])
-                   + np.linalg.norm(REST[_J["left_ankle"]] - REST[_J["left_knee"]]))
+LEG_LENGTH = float(
+    np.linalg.norm(REST[_J["left_knee"]] - REST[_J["left_hip"]])
+    + np.linalg.norm(REST[_J["left_ankle"]] - REST[_J["left_knee"]])
+)
 #: Upper arm + forearm length of the authoring skeleton (m).
-ARM_REACH = float(np.linalg.norm(REST[_J["left_elbow"]] - REST[_J["left_shoulder"]])
-                  + np.linalg.norm(REST[_J["left_wrist"]] - REST[_J["left_elbow"]]))
+ARM_REACH = float(
+    np.linalg.norm(REST[_J["left_elbow"]] - REST[_J["left_shoulder"]])
+    + np.linalg.norm(REST[_J["left_wrist"]] - REST[_J["left_elbow"]])
+)
 
 
 @dataclasses.dataclass
@@ -80,8 +97,13 @@ def _side_to_world(vec: np.ndarray, side: int) -> np.ndarray:
     return out
 
 
-def max_pelvis_height(root_xy: np.ndarray, root_rot: np.ndarray, ankle_target: np.ndarray,
-                      reach: float = 0.975, active: np.ndarray | None = None) -> np.ndarray:
+def max_pelvis_height(
+    root_xy: np.ndarray,
+    root_rot: np.ndarray,
+    ankle_target: np.ndarray,
+    reach: float = 0.975,
+    active: np.ndarray | None = None,
+) -> np.ndarray:
     """(T,) highest pelvis z for which both ankles are within ``reach`` of the leg length.
 
     root_xy: (T, 2) metres; root_rot: (T, 3, 3); ankle_target: (T, 2, 3) metres;
@@ -121,8 +143,9 @@ def assemble_pose(c: PoseControls) -> tuple[np.ndarray, np.ndarray]:
         target = pos[:, sh] + np.einsum("tab,tb->ta", chest, _side_to_world(c.wrist_target[:, side], side) * ARM_REACH)
         pole = np.einsum("tab,tb->ta", chest, _side_to_world(c.elbow_pole[:, side], side))
         rest_pole = np.array([0.0, -1.0, 0.0])
-        loc_a, loc_b, glob_b = two_bone_ik(pos[:, sh], target, pole, glob[:, collar], REST[sh], REST[el], REST[wr],
-                                           rest_pole)
+        loc_a, loc_b, glob_b = two_bone_ik(
+            pos[:, sh], target, pole, glob[:, collar], REST[sh], REST[el], REST[wr], rest_pole
+        )
         local[:, sh], local[:, el] = loc_a, loc_b
         # Wrist flexion: palm towards the forearm's flexion side (about the elbow hinge).
         flex = c.wrist_flex[:, side] * (1.0 if side == 0 else -1.0)
@@ -131,8 +154,16 @@ def assemble_pose(c: PoseControls) -> tuple[np.ndarray, np.ndarray]:
     pelvis = glob[:, 0]
     for side, prefix in enumerate(("left", "right")):
         hip, knee, ankle, foot = (_J[f"{prefix}_{n}"] for n in ("hip", "knee", "ankle", "foot"))
-        loc_a, loc_b, glob_b = two_bone_ik(pos[:, hip], c.ankle_target[:, side], c.knee_pole[:, side], pelvis,
-                                           REST[hip], REST[knee], REST[ankle], np.array([0.0, 1.0, 0.0]))
+        loc_a, loc_b, glob_b = two_bone_ik(
+            pos[:, hip],
+            c.ankle_target[:, side],
+            c.knee_pole[:, side],
+            pelvis,
+            REST[hip],
+            REST[knee],
+            REST[ankle],
+            np.array([0.0, 1.0, 0.0]),
+        )
         local[:, hip], local[:, knee] = loc_a, loc_b
         local[:, ankle] = np.swapaxes(glob_b, -1, -2) @ c.foot_rot[:, side]
         local[:, foot] = _about_axis(np.array([1.0, 0.0, 0.0]), c.toe_bend[:, side])

@@ -24,8 +24,13 @@ from __future__ import annotations
 import numpy as np
 
 from crowdstudy.body.capsules import closest_points_on_segments, posed_capsules, segment_distance, touching_pairs
-from crowdstudy.body.rotations import (axis_angle_to_matrix, matrix_to_axis_angle, matrix_to_quaternion,
-                                       quat_blend, quaternion_to_matrix)
+from crowdstudy.body.rotations import (
+    axis_angle_to_matrix,
+    matrix_to_axis_angle,
+    matrix_to_quaternion,
+    quat_blend,
+    quaternion_to_matrix,
+)
 from crowdstudy.body.skeleton import JOINT_INDEX, JOINT_NAMES, NUM_JOINTS, forward_kinematics
 from crowdstudy.motion.posing import hold_peaks, smoothstep5, two_bone_ik
 
@@ -39,8 +44,8 @@ SLACK = 0.02
 HAND_BONES = {side: (JOINT_INDEX[f"{side}_wrist"], JOINT_INDEX[f"{side}_hand"]) for side in ("left", "right")}
 #: The bones a hand must stay out of: pelvis, spine, head.
 BODY_BONES = tuple(JOINT_INDEX[n] for n in ("pelvis", "spine1", "spine2", "spine3", "head"))
-_SMOOTH = 0.06      # s, Gaussian smoothing of the hand offsets
-_HOLD = 0.1         # s, an offset is held this long around its peak before it is smoothed
+_SMOOTH = 0.06  # s, Gaussian smoothing of the hand offsets
+_HOLD = 0.1  # s, an offset is held this long around its peak before it is smoothed
 _ITERATIONS = 3
 
 
@@ -56,7 +61,7 @@ def _pushes(start: np.ndarray, end: np.ndarray, radius: np.ndarray, slack: float
             s, t, dist = closest_points_on_segments(start[:, h, None], end[:, h, None], start[:, body], end[:, body])
             cp = start[:, h, None] + s[..., None] * (end[:, h, None] - start[:, h, None])
             cq = start[:, body] + t[..., None] * (end[:, body] - start[:, body])
-            over = radius[h] + radius[body][None, :] - dist - slack                          # (T, B)
+            over = radius[h] + radius[body][None, :] - dist - slack  # (T, B)
             normal = (cp - cq) / np.maximum(dist, 1e-9)[..., None]
             vec = np.where((over > 0)[..., None], normal * over[..., None], 0.0).sum(axis=1)  # (T, 3)
             bigger = np.linalg.norm(vec, axis=-1) > np.linalg.norm(push[:, k], axis=-1)
@@ -65,16 +70,18 @@ def _pushes(start: np.ndarray, end: np.ndarray, radius: np.ndarray, slack: float
     return push, depth
 
 
-def hand_penetration(body, joint_rotations: np.ndarray, root_translation: np.ndarray,
-                     slack: float = SLACK) -> np.ndarray:
+def hand_penetration(
+    body, joint_rotations: np.ndarray, root_translation: np.ndarray, slack: float = SLACK
+) -> np.ndarray:
     """(T, 2) deepest overlap (m) of each (left, right) hand with the torso and head capsules
     of ``body`` beyond ``slack``, for poses (T, 24, 3) / (T, 3)."""
     start, end = posed_capsules(body, joint_rotations, root_translation)
     return _pushes(start, end, np.asarray(body.capsules.radius, dtype=np.float64), slack)[1]
 
 
-def self_penetration(body, joint_rotations: np.ndarray, root_translation: np.ndarray, *,
-                     tolerance: float = 0.01) -> dict:
+def self_penetration(
+    body, joint_rotations: np.ndarray, root_translation: np.ndarray, *, tolerance: float = 0.01
+) -> dict:
     """How far a clip's own capsules interpenetrate on ``body``.
 
     Counts the pairs the physics tests (not parent-child, not within ``r_i + r_j +
@@ -94,9 +101,14 @@ def self_penetration(body, joint_rotations: np.ndarray, root_translation: np.nda
     f = int(np.argmax(worst))
     p = int(np.argmax(depth[f]))
     hands = _pushes(start, end, np.asarray(caps.radius, dtype=np.float64), SLACK)[1].max(axis=1)
-    return {"max_depth": float(worst.max()), "p95_depth": float(np.percentile(worst, 95)),
-            "worst_pair": (JOINT_NAMES[i[p]], JOINT_NAMES[j[p]]), "worst_frame": f,
-            "hands_max": float(hands.max()), "hands_p95": float(np.percentile(hands, 95))}
+    return {
+        "max_depth": float(worst.max()),
+        "p95_depth": float(np.percentile(worst, 95)),
+        "worst_pair": (JOINT_NAMES[i[p]], JOINT_NAMES[j[p]]),
+        "worst_frame": f,
+        "hands_max": float(hands.max()),
+        "hands_p95": float(np.percentile(hands, 95)),
+    }
 
 
 def _smooth(push: np.ndarray, fps: float) -> np.ndarray:
@@ -108,8 +120,9 @@ def _smooth(push: np.ndarray, fps: float) -> np.ndarray:
     return gaussian_filter1d(held, _SMOOTH * fps, axis=0, mode="nearest")
 
 
-def clear_hands(joint_rotations: np.ndarray, root_translation: np.ndarray, bodies: list, fps: float, *,
-                slack: float = SLACK) -> np.ndarray:
+def clear_hands(
+    joint_rotations: np.ndarray, root_translation: np.ndarray, bodies: list, fps: float, *, slack: float = SLACK
+) -> np.ndarray:
     """(T, N, 24, 3) rotations with each character's hands moved out of its own torso and
     head (see the module docstring). ``bodies``: N loaded bodies (``rest_joints``,
     ``capsules``); ``root_translation`` (T, N, 3) m."""
@@ -145,10 +158,19 @@ def _solve_arms(rot: np.ndarray, root: np.ndarray, rest: np.ndarray, offset: np.
             continue
         target = pos[:, wr] + offset[:, k]
         pole = pos[:, el] - pos[:, sh]
-        loc_a, loc_b, glob_b = two_bone_ik(pos[:, sh], target, pole, glob[:, co], rest[sh], rest[el], rest[wr],
-                                           np.array([0.0, -1.0, 0.0]), max_reach=0.995)
-        loc_c = np.swapaxes(glob_b, -1, -2) @ glob[:, wr]                   # keep the hand's orientation
-        w = smoothstep5(size / 0.01)[:, None, None]                          # 0 without offset, 1 beyond 1 cm
+        loc_a, loc_b, glob_b = two_bone_ik(
+            pos[:, sh],
+            target,
+            pole,
+            glob[:, co],
+            rest[sh],
+            rest[el],
+            rest[wr],
+            np.array([0.0, -1.0, 0.0]),
+            max_reach=0.995,
+        )
+        loc_c = np.swapaxes(glob_b, -1, -2) @ glob[:, wr]  # keep the hand's orientation
+        w = smoothstep5(size / 0.01)[:, None, None]  # 0 without offset, 1 beyond 1 cm
         moved = size > 0
         for j, new in ((sh, loc_a), (el, loc_b), (wr, loc_c)):
             out[moved, j] = matrix_to_axis_angle(_blend(orig[moved, j], new[moved], w[moved]))

@@ -25,14 +25,23 @@ import dataclasses
 import numpy as np
 
 from crowdstudy.body.rotations import rot_x, rot_z, yaw_roll_pitch
+from crowdstudy.body.skeleton import JOINT_INDEX
 from crowdstudy.errors import InvalidInputError
 from crowdstudy.motion.clip import MotionClip
 from crowdstudy.motion.posing import lift_profile, smoothstep5
-from crowdstudy.body.skeleton import JOINT_INDEX
 from crowdstudy.motion.rig import ANKLE_HEIGHT, REST, PoseControls, assemble_pose, max_pelvis_height
 
-__all__ = ["WalkSpec", "WALKS", "generate_walk", "DUTY_FACTOR", "FLAT_STANCE_END", "FOOT_PHASE_OFFSET",
-           "LANDING_HOVER", "LIFT_OFF", "procedural_contacts"]
+__all__ = [
+    "WalkSpec",
+    "WALKS",
+    "generate_walk",
+    "DUTY_FACTOR",
+    "FLAT_STANCE_END",
+    "FOOT_PHASE_OFFSET",
+    "LANDING_HOVER",
+    "LIFT_OFF",
+    "procedural_contacts",
+]
 
 #: Fraction of the gait cycle each foot is on the ground (same for every clip so blends
 #: of clips keep their contacts aligned).
@@ -56,10 +65,16 @@ def procedural_contacts() -> dict:
     ``{"left": {"strike", "flat_end", "toe_off"}, "right": ...}``, ``lock_lead`` (the
     foot is over its landing spot :data:`LANDING_HOVER` of the swing before the strike)
     and ``lock_lag`` (it only lifts for :data:`LIFT_OFF` of the swing after toe-off)."""
-    contacts = {side: {"strike": off, "flat_end": (off + FLAT_STANCE_END) % 1.0, "toe_off": (off + DUTY_FACTOR) % 1.0}
-                for side, off in zip(("left", "right"), FOOT_PHASE_OFFSET)}
-    return {"contacts": contacts, "lock_lead": LANDING_HOVER * (1.0 - DUTY_FACTOR),
-            "lock_lag": LIFT_OFF * (1.0 - DUTY_FACTOR), "cycles": 1}
+    contacts = {
+        side: {"strike": off, "flat_end": (off + FLAT_STANCE_END) % 1.0, "toe_off": (off + DUTY_FACTOR) % 1.0}
+        for side, off in zip(("left", "right"), FOOT_PHASE_OFFSET)
+    }
+    return {
+        "contacts": contacts,
+        "lock_lead": LANDING_HOVER * (1.0 - DUTY_FACTOR),
+        "lock_lag": LIFT_OFF * (1.0 - DUTY_FACTOR),
+        "cycles": 1,
+    }
 
 
 @dataclasses.dataclass(frozen=True)
@@ -107,12 +122,12 @@ def _foot_trajectories(phase: np.ndarray, v: float, stride: float, beta: float, 
     ``lead``: the fraction of the flat-foot travel spent ahead of the hip.
     """
     n = phase.shape[0]
-    heel_off = beta - (0.20 + 0.03 * v)          # start of the roll over the ball
-    roll_max = 0.75 + 0.15 * v                   # foot pitch at toe-off (rad, heel up)
-    strike = 0.20                                # toes-up pitch at heel strike (rad)
-    clearance = 0.05 + 0.01 * v                  # extra ankle lift in early swing (m)
+    heel_off = beta - (0.20 + 0.03 * v)  # start of the roll over the ball
+    roll_max = 0.75 + 0.15 * v  # foot pitch at toe-off (rad, heel up)
+    strike = 0.20  # toes-up pitch at heel strike (rad)
+    clearance = 0.05 + 0.01 * v  # extra ankle lift in early swing (m)
     width = 0.095 - 0.006 * v
-    y_strike = lead * stride * heel_off          # ankle ahead of the hip at heel strike (m)
+    y_strike = lead * stride * heel_off  # ankle ahead of the hip at heel strike (m)
     ankle = np.zeros((n, 2, 3))
     foot_rot = np.zeros((n, 2, 3, 3))
     toe_bend = np.zeros((n, 2))
@@ -126,10 +141,11 @@ def _foot_trajectories(phase: np.ndarray, v: float, stride: float, beta: float, 
 
         def flat_ankle(p):
             p = np.asarray(p, dtype=np.float64)
-            return np.stack([np.full(p.shape, sign * width), y_strike - stride * p,
-                             np.full(p.shape, ANKLE_HEIGHT)], axis=-1)
+            return np.stack(
+                [np.full(p.shape, sign * width), y_strike - stride * p, np.full(p.shape, ANKLE_HEIGHT)], axis=-1
+            )
 
-        def pitched(p):                           # (..., 3, 3) foot rotation at pitch p
+        def pitched(p):  # (..., 3, 3) foot rotation at pitch p
             return yaw_m @ rot_x(np.asarray(p, dtype=np.float64))
 
         flatten = strike * (1.0 - smoothstep5(ph / 0.1))
@@ -147,11 +163,12 @@ def _foot_trajectories(phase: np.ndarray, v: float, stride: float, beta: float, 
         # the swing, and the heel comes straight down at the end.
         swing = toe_off + (land - toe_off) * smoothstep5((u - LIFT_OFF) / (1.0 - LIFT_OFF - LANDING_HOVER))[:, None]
         swing[:, 2] = toe_off[2] + (land[2] - toe_off[2]) * smoothstep5(u)
-        swing[:, 1] -= stride * (ph - beta)       # ground -> the frame moving at v
+        swing[:, 1] -= stride * (ph - beta)  # ground -> the frame moving at v
         swing[:, 2] += clearance * lift_profile(u / 0.7) + 0.025 * lift_profile((u - 0.5) / 0.5)
         ankle[:, side] = np.where(in_swing[:, None], swing, stance)
-        toe_bend[:, side] = np.where(in_swing, roll_max * (1.0 - smoothstep5(u / 0.5)),
-                                     np.where(ph < heel_off, 0.0, -rolling))
+        toe_bend[:, side] = np.where(
+            in_swing, roll_max * (1.0 - smoothstep5(u / 0.5)), np.where(ph < heel_off, 0.0, -rolling)
+        )
     return ankle, foot_rot, toe_bend
 
 
@@ -170,8 +187,10 @@ def generate_walk(spec: WalkSpec, fps: float = 60.0) -> MotionClip:
 
     ankle, foot_rot, toe_bend = _foot_trajectories(phase, v, stride, beta)
     toe_out = _TOE_OUT
-    knee_pole = np.stack([np.stack([np.full(n, s * (np.sin(toe_out) + 0.05)), np.full(n, 1.0), np.zeros(n)], -1)
-                          for s in (-1.0, 1.0)], axis=1)
+    knee_pole = np.stack(
+        [np.stack([np.full(n, s * (np.sin(toe_out) + 0.05)), np.full(n, 1.0), np.zeros(n)], -1) for s in (-1.0, 1.0)],
+        axis=1,
+    )
 
     mid = beta / 2.0
     bob = (0.008 + 0.01 * v) * np.cos(2.0 * two_pi * (phase - mid))
@@ -188,7 +207,7 @@ def generate_walk(spec: WalkSpec, fps: float = 60.0) -> MotionClip:
 
     trunk_yaw = -1.8 * yaw
     trunk_roll = -0.7 * roll
-    lean = 0.02 + 0.03 * v - pitch_fwd               # net forward lean of the thorax
+    lean = 0.02 + 0.03 * v - pitch_fwd  # net forward lean of the thorax
     spine = tuple(yaw_roll_pitch(w * trunk_yaw, w * trunk_roll, np.full(n, -w * lean)) for w in (0.35, 0.35, 0.3))
     head_yaw = -(yaw + trunk_yaw)
     neck = yaw_roll_pitch(0.5 * head_yaw, -0.15 * roll, np.full(n, 0.5 * (pitch_fwd + lean) - 0.02))
@@ -197,18 +216,36 @@ def generate_walk(spec: WalkSpec, fps: float = 60.0) -> MotionClip:
     swing_amp = 0.22 + 0.14 * v
     wrist = np.zeros((n, 2, 3))
     for side, sign in ((0, -1.0), (1, 1.0)):
-        alpha = sign * swing_amp * np.cos(two_pi * phase)        # upper arm angle, forward > 0
+        alpha = sign * swing_amp * np.cos(two_pi * phase)  # upper arm angle, forward > 0
         elbow = 0.2 + 0.22 * v + 0.5 * np.maximum(alpha, 0.0)
         upper = np.stack([np.full(n, 0.12), np.sin(alpha), -np.cos(alpha)], axis=-1)
         fore = np.stack([np.full(n, 0.02), np.sin(alpha + elbow), -np.cos(alpha + elbow)], axis=-1)
         wrist[:, side] = 0.5 * (upper / np.linalg.norm(upper, axis=-1, keepdims=True) + fore)
     pole = np.broadcast_to([0.15, -1.0, 0.0], (n, 2, 3)).copy()
-    controls = PoseControls(root_pos=root_pos, root_rot=root_rot, spine=spine, neck=neck, head=head,
-                            collar_raise=np.zeros((n, 2)), wrist_target=wrist, elbow_pole=pole,
-                            wrist_flex=np.full((n, 2), 0.1), ankle_target=ankle, foot_rot=foot_rot,
-                            knee_pole=knee_pole, toe_bend=toe_bend)
+    controls = PoseControls(
+        root_pos=root_pos,
+        root_rot=root_rot,
+        spine=spine,
+        neck=neck,
+        head=head,
+        collar_raise=np.zeros((n, 2)),
+        wrist_target=wrist,
+        elbow_pole=pole,
+        wrist_flex=np.full((n, 2), 0.1),
+        ankle_target=ankle,
+        foot_rot=foot_rot,
+        knee_pole=knee_pole,
+        toe_bend=toe_bend,
+    )
     rot, root = assemble_pose(controls)
-    meta = {"description": spec.description, "cadence": spec.cadence, "stride_length": stride,
-            "duty_factor": beta, "cycle": period, **procedural_contacts()}
-    return MotionClip(name=spec.name, kind="walk", fps=fps, joint_rotations=rot, root_translation=root,
-                      speed=v, loop=True, meta=meta)
+    meta = {
+        "description": spec.description,
+        "cadence": spec.cadence,
+        "stride_length": stride,
+        "duty_factor": beta,
+        "cycle": period,
+        **procedural_contacts(),
+    }
+    return MotionClip(
+        name=spec.name, kind="walk", fps=fps, joint_rotations=rot, root_translation=root, speed=v, loop=True, meta=meta
+    )

@@ -6,9 +6,26 @@
 * :mod:`crowdstudy.navigation.plot`: figures of layouts and trajectories.
 """
 
-from crowdstudy.navigation.corridor import (MAX_TURN_RATE, RHO_JAM, SAFETY_MARGIN, corridor_crowd, smooth_headings,
-                                            speed_factor, trajectory_summary)
+from crowdstudy.navigation.corridor import (
+    MAX_TURN_RATE,
+    RHO_JAM,
+    SAFETY_MARGIN,
+    corridor_crowd,
+    smooth_headings,
+    speed_factor,
+    trajectory_summary,
+)
 from crowdstudy.navigation.orca import ORCAParams, ORCASimulator, segments_to_obstacle_vertices
 
-__all__ = ["ORCAParams", "ORCASimulator", "segments_to_obstacle_vertices", "corridor_crowd", "smooth_headings",
-           "speed_factor", "trajectory_summary", "RHO_JAM", "MAX_TURN_RATE", "SAFETY_MARGIN"]
+__all__ = [
+    "ORCAParams",
+    "ORCASimulator",
+    "segments_to_obstacle_vertices",
+    "corridor_crowd",
+    "smooth_headings",
+    "speed_factor",
+    "trajectory_summary",
+    "RHO_JAM",
+    "MAX_TURN_RATE",
+    "SAFETY_MARGIN",
+]

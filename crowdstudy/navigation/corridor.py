@@ -51,15 +51,22 @@ from crowdstudy.navigation.orca import ORCAParams, ORCASimulator
 from crowdstudy.provenance import provenance
 from crowdstudy.scene import Crowd
 
-__all__ = ["corridor_crowd", "smooth_headings", "speed_factor", "trajectory_summary", "RHO_JAM", "MAX_TURN_RATE",
-           "SAFETY_MARGIN"]
+__all__ = [
+    "corridor_crowd",
+    "smooth_headings",
+    "speed_factor",
+    "trajectory_summary",
+    "RHO_JAM",
+    "MAX_TURN_RATE",
+    "SAFETY_MARGIN",
+]
 
-RHO_JAM = 12.0                      # agents / m^2 where the linear speed-density relation reaches 0
-MAX_TURN_RATE = math.pi             # rad/s (180 deg/s) for a walking agent
-SAFETY_MARGIN = 1.03                # simulated radius / disc radius
+RHO_JAM = 12.0  # agents / m^2 where the linear speed-density relation reaches 0
+MAX_TURN_RATE = math.pi  # rad/s (180 deg/s) for a walking agent
+SAFETY_MARGIN = 1.03  # simulated radius / disc radius
 _MAX_SUBSTEP = 1.0 / 60.0
-_LANE_GAIN = 0.5                    # 1/s, lateral pull towards the lane centre (bidirectional)
-_LANE_CLIP = 0.3                    # largest lateral part of the preferred velocity (fraction of the speed)
+_LANE_GAIN = 0.5  # 1/s, lateral pull towards the lane centre (bidirectional)
+_LANE_CLIP = 0.3  # largest lateral part of the preferred velocity (fraction of the speed)
 
 
 def speed_factor(density: float) -> float:
@@ -71,8 +78,16 @@ def _wrap_angle(a):
     return (a + np.pi) % (2 * np.pi) - np.pi
 
 
-def smooth_headings(velocities, fps: float, initial=None, *, max_rate: float = MAX_TURN_RATE,
-                    time_constant: float = 0.25, min_speed: float = 0.15, walk_speed: float = 0.5) -> np.ndarray:
+def smooth_headings(
+    velocities,
+    fps: float,
+    initial=None,
+    *,
+    max_rate: float = MAX_TURN_RATE,
+    time_constant: float = 0.25,
+    min_speed: float = 0.15,
+    walk_speed: float = 0.5,
+) -> np.ndarray:
     """Facing directions that follow the walking direction smoothly.
 
     A first-order low-pass filter (``time_constant`` seconds) on the direction of motion,
@@ -115,8 +130,15 @@ def smooth_headings(velocities, fps: float, initial=None, *, max_rate: float = M
     return out
 
 
-def _separate(points: np.ndarray, min_dist: float, x0: float, length: float, y_lim: float,
-              lanes: np.ndarray | None = None, max_iter: int = 2000) -> np.ndarray:
+def _separate(
+    points: np.ndarray,
+    min_dist: float,
+    x0: float,
+    length: float,
+    y_lim: float,
+    lanes: np.ndarray | None = None,
+    max_iter: int = 2000,
+) -> np.ndarray:
     """Push discs apart (minimum image along x) until all centres are ``min_dist`` apart
     and ``|y| <= y_lim``; with ``lanes`` (N,) = +-1, agent i also keeps to its own half
     (``lanes * y <= -min_dist / 2``: +1 below the centre line, -1 above it).
@@ -147,13 +169,25 @@ def _separate(points: np.ndarray, min_dist: float, x0: float, length: float, y_l
         np.add.at(move, pairs[:, 1], push)
         pts += move
         pts[:, 1] = np.clip(pts[:, 1], lo, hi)
-    raise InvalidInputError(f"level: could not separate the discs (min distance {min_dist:.3g} m) in the corridor; "
-                            "the density is too high for the disc radius")
+    raise InvalidInputError(
+        f"level: could not separate the discs (min distance {min_dist:.3g} m) in the corridor; "
+        "the density is too high for the disc radius"
+    )
 
 
-def corridor_crowd(design, level: str, seed, *, duration: float | None = None, fps: float | None = None,
-                   direction: str | None = None, warm_up: float = 3.0, params: ORCAParams | None = None,
-                   device: str | None = "cpu", progress: bool = False) -> Crowd:
+def corridor_crowd(
+    design,
+    level: str,
+    seed,
+    *,
+    duration: float | None = None,
+    fps: float | None = None,
+    direction: str | None = None,
+    warm_up: float = 3.0,
+    params: ORCAParams | None = None,
+    device: str | None = "cpu",
+    progress: bool = False,
+) -> Crowd:
     """Trajectories of the corridor crowd of one density level.
 
     Args:
@@ -177,15 +211,23 @@ def corridor_crowd(design, level: str, seed, *, duration: float | None = None, f
         wall segments [[[x0, y0], [x1, y1]], ...] m exactly as ORCA saw them (the section's
         walls extended by one period on each side).
     """
-    setup = _corridor_setup(design, level, seed, duration=duration, fps=fps, direction=direction, warm_up=warm_up,
-                            params=params)
+    setup = _corridor_setup(
+        design, level, seed, duration=duration, fps=fps, direction=direction, warm_up=warm_up, params=params
+    )
     n, fps, n_frames, substeps = setup.n, setup.fps, setup.n_frames, setup.substeps
     signs, pos, speeds = _initial_agents(setup)
     lane_y = -signs * setup.width / 4 if setup.direction == "bidirectional" else None
     preferred = functools.partial(_preferred_velocities, signs=signs, speeds=speeds, lane_y=lane_y)
     walls_section, walls_sim = _corridor_walls(setup.x0, setup.length, setup.half_w)
-    sim = ORCASimulator(pos, setup.r_sim, speeds + 0.3, params=setup.orca, obstacles=walls_sim,
-                        periodic=(setup.x0, setup.length), device=device)
+    sim = ORCASimulator(
+        pos,
+        setup.r_sim,
+        speeds + 0.3,
+        params=setup.orca,
+        obstacles=walls_sim,
+        periodic=(setup.x0, setup.length),
+        device=device,
+    )
 
     warm_frames = int(round(warm_up * fps))
     bar = None
@@ -251,13 +293,23 @@ class _CorridorSetup:
         return self.width / 2
 
 
-def _corridor_setup(design, level: str, seed, *, duration: float | None, fps: float | None, direction: str | None,
-                    warm_up: float, params: ORCAParams | None) -> _CorridorSetup:
+def _corridor_setup(
+    design,
+    level: str,
+    seed,
+    *,
+    duration: float | None,
+    fps: float | None,
+    direction: str | None,
+    warm_up: float,
+    params: ORCAParams | None,
+) -> _CorridorSetup:
     """The arguments of :func:`corridor_crowd` checked (InvalidInputError naming the
     argument) and resolved against the design's ``[scenarios.corridor]``."""
     if level not in design.densities:
-        raise InvalidInputError(f"level: unknown density level {level!r}; "
-                                f"expected one of {', '.join(design.densities)}")
+        raise InvalidInputError(
+            f"level: unknown density level {level!r}; expected one of {', '.join(design.densities)}"
+        )
     sc = design.scenarios["corridor"]
     width, length = float(sc["width"]), float(sc["length"])
     v0, v_sd = float(sc["preferred_speed"]), float(sc["preferred_speed_sd"])
@@ -280,15 +332,31 @@ def _corridor_setup(design, level: str, seed, *, duration: float | None, fps: fl
     density = float(design.densities[level])
     radius = disc_radius(density)
     substeps = max(1, int(math.ceil((1.0 / fps) / _MAX_SUBSTEP - 1e-9)))
-    base = params or ORCAParams(neighbor_dist=min(1.5, 0.45 * length), max_neighbors=10, time_horizon=1.0,
-                                time_horizon_obst=0.5)
+    base = params or ORCAParams(
+        neighbor_dist=min(1.5, 0.45 * length), max_neighbors=10, time_horizon=1.0, time_horizon_obst=0.5
+    )
     factor = speed_factor(density)
-    return _CorridorSetup(level=level, n=design.n_characters(level), density=density, radius=radius,
-                          r_sim=SAFETY_MARGIN * radius, width=width, length=length, direction=direction, v0=v0,
-                          v_sd=v_sd, speed_factor=factor, v_mean=v0 * factor, fps=fps,
-                          n_frames=max(1, int(round(duration * fps))), substeps=substeps, warm_up=warm_up,
-                          orca=dataclasses.replace(base, time_step=1.0 / (fps * substeps)), rng=rng,
-                          seed_value=seed_value)
+    return _CorridorSetup(
+        level=level,
+        n=design.n_characters(level),
+        density=density,
+        radius=radius,
+        r_sim=SAFETY_MARGIN * radius,
+        width=width,
+        length=length,
+        direction=direction,
+        v0=v0,
+        v_sd=v_sd,
+        speed_factor=factor,
+        v_mean=v0 * factor,
+        fps=fps,
+        n_frames=max(1, int(round(duration * fps))),
+        substeps=substeps,
+        warm_up=warm_up,
+        orca=dataclasses.replace(base, time_step=1.0 / (fps * substeps)),
+        rng=rng,
+        seed_value=seed_value,
+    )
 
 
 def _initial_agents(s: _CorridorSetup) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -301,23 +369,30 @@ def _initial_agents(s: _CorridorSetup) -> tuple[np.ndarray, np.ndarray, np.ndarr
     signs = np.ones(n)
     if s.direction == "bidirectional":
         order = np.argsort(layout.points[:, 1], kind="stable")
-        signs[order[n - n // 2:]] = -1.0           # the +y half walks towards -x
-    pos = _separate(layout.points, 2 * r_sim, s.x0, s.length, s.half_w - r_sim * 1.001,
-                    lanes=signs if s.direction == "bidirectional" else None)
+        signs[order[n - n // 2 :]] = -1.0  # the +y half walks towards -x
+    pos = _separate(
+        layout.points,
+        2 * r_sim,
+        s.x0,
+        s.length,
+        s.half_w - r_sim * 1.001,
+        lanes=signs if s.direction == "bidirectional" else None,
+    )
     v_mean = s.v_mean
     speeds = np.clip(s.rng.normal(v_mean, s.v_sd * s.speed_factor, n), 0.5 * v_mean, 1.5 * v_mean)
     return signs, pos, speeds
 
 
-def _preferred_velocities(current: np.ndarray, *, signs: np.ndarray, speeds: np.ndarray,
-                          lane_y: np.ndarray | None) -> np.ndarray:
+def _preferred_velocities(
+    current: np.ndarray, *, signs: np.ndarray, speeds: np.ndarray, lane_y: np.ndarray | None
+) -> np.ndarray:
     """(N, 2) m/s preferred velocities at positions ``current`` (N, 2) m: ``speeds`` (N,)
     along ``signs`` (N,) +-x; with ``lane_y`` (N,) m, a gentle lateral pull towards that
     line (keep right), at most ``_LANE_CLIP`` of the speed."""
     vy = np.zeros(len(signs))
-    if lane_y is not None:     # keep right: a gentle pull towards the own half's centre line
+    if lane_y is not None:  # keep right: a gentle pull towards the own half's centre line
         vy = np.clip(_LANE_GAIN * (lane_y - current[:, 1]), -_LANE_CLIP * speeds, _LANE_CLIP * speeds)
-    vx = signs * np.sqrt(np.maximum(speeds ** 2 - vy ** 2, 0.0))
+    vx = signs * np.sqrt(np.maximum(speeds**2 - vy**2, 0.0))
     return np.stack([vx, vy], axis=1)
 
 
@@ -331,32 +406,60 @@ def _corridor_walls(x0: float, length: float, half_w: float) -> tuple[np.ndarray
     return walls_section, walls_sim
 
 
-def _corridor_result(s: _CorridorSetup, positions: np.ndarray, signs: np.ndarray, speeds: np.ndarray,
-                     walls_section: np.ndarray, walls_sim: np.ndarray) -> Crowd:
+def _corridor_result(
+    s: _CorridorSetup,
+    positions: np.ndarray,
+    signs: np.ndarray,
+    speeds: np.ndarray,
+    walls_section: np.ndarray,
+    walls_sim: np.ndarray,
+) -> Crowd:
     """The :class:`Crowd` of the simulated ``positions`` (T + 1, N, 2) m (frame -1 first):
     mean velocities over each frame, frame 0 shifted by whole periods into the section,
     smoothed headings and the meta of :func:`corridor_crowd`."""
     fps, length, width, x0, half_w = s.fps, s.length, s.width, s.x0, s.half_w
-    velocities = np.diff(positions, axis=0) * fps        # mean velocity over each frame
+    velocities = np.diff(positions, axis=0) * fps  # mean velocity over each frame
     positions = positions[1:]
     # shift each agent by whole periods so frame 0 lies in the section (still unwrapped in time)
     positions[..., 0] -= length * np.floor((positions[0, :, 0] - x0) / length)[None]
     headings = smooth_headings(velocities, fps, initial=np.where(signs > 0, 0.0, np.pi))
     region = np.array([[x0, -half_w], [x0 + length, -half_w], [x0 + length, half_w], [x0, half_w]])
     meta = {
-        "scenario": "corridor", "density_level": s.level, "density": s.density, "n_characters": s.n,
-        "seed": s.seed_value, "width": width, "length": length, "direction": s.direction,
-        "directions": signs.astype(int).tolist(), "radius": s.radius, "simulated_radius": s.r_sim,
-        "preferred_speed": s.v_mean, "speed_factor": s.speed_factor, "preferred_speeds": speeds.tolist(),
-        "warm_up": float(s.warm_up), "substeps": s.substeps, "orca": dataclasses.asdict(s.orca),
+        "scenario": "corridor",
+        "density_level": s.level,
+        "density": s.density,
+        "n_characters": s.n,
+        "seed": s.seed_value,
+        "width": width,
+        "length": length,
+        "direction": s.direction,
+        "directions": signs.astype(int).tolist(),
+        "radius": s.radius,
+        "simulated_radius": s.r_sim,
+        "preferred_speed": s.v_mean,
+        "speed_factor": s.speed_factor,
+        "preferred_speeds": speeds.tolist(),
+        "warm_up": float(s.warm_up),
+        "substeps": s.substeps,
+        "orca": dataclasses.asdict(s.orca),
         "periodic": {"axis": 0, "length": length},
         # the scene's static geometry, read by later stages instead of a design
-        "floor": {"width": length, "depth": width}, "corridor_width": width, "corridor_length": length,
+        "floor": {"width": length, "depth": width},
+        "corridor_width": width,
+        "corridor_length": length,
         "obstacles": walls_sim.tolist(),
         "provenance": provenance(s.seed_value, stage="navigation"),
     }
-    return Crowd(positions=positions, radius=np.full(s.n, s.radius), fps=fps, velocities=velocities,
-                 headings=headings, obstacles=walls_section, region=region, meta=meta)
+    return Crowd(
+        positions=positions,
+        radius=np.full(s.n, s.radius),
+        fps=fps,
+        velocities=velocities,
+        headings=headings,
+        obstacles=walls_section,
+        region=region,
+        meta=meta,
+    )
 
 
 def trajectory_summary(crowd: Crowd, tolerance: float = 0.01) -> dict:
@@ -376,7 +479,7 @@ def trajectory_summary(crowd: Crowd, tolerance: float = 0.01) -> dict:
     max_overlap, pairs = -math.inf, 0
     iu = np.triu_indices(n, k=1)
     for start in range(0, t_count, 64):
-        chunk = pos[start:start + 64]
+        chunk = pos[start : start + 64]
         rel = chunk[:, :, None, :] - chunk[:, None, :, :]
         if length:
             rel[..., 0] -= length * np.round(rel[..., 0] / length)
@@ -395,7 +498,7 @@ def trajectory_summary(crowd: Crowd, tolerance: float = 0.01) -> dict:
             y = pos[..., 1]
             gaps = []
             for wy in ys:
-                side = np.sign(np.median(y) - wy) or 1.0     # the side the crowd is on
+                side = np.sign(np.median(y) - wy) or 1.0  # the side the crowd is on
                 gaps.append(np.min(side * (y - wy) - r[None, :]))
             clearance = float(min(gaps))
     mean_speed = None if crowd.velocities is None else float(np.linalg.norm(crowd.velocities, axis=2).mean())
@@ -403,6 +506,12 @@ def trajectory_summary(crowd: Crowd, tolerance: float = 0.01) -> dict:
     if crowd.headings is not None and t_count > 1:
         dh = _wrap_angle(np.diff(crowd.headings, axis=0))
         turn = float(np.abs(dh).max() * crowd.fps)
-    return {"n_agents": n, "n_frames": t_count, "max_overlap": max_overlap if n > 1 else None,
-            "overlapping_pairs": pairs, "wall_clearance": clearance, "mean_speed": mean_speed,
-            "max_turn_rate": turn}
+    return {
+        "n_agents": n,
+        "n_frames": t_count,
+        "max_overlap": max_overlap if n > 1 else None,
+        "overlapping_pairs": pairs,
+        "wall_clearance": clearance,
+        "mean_speed": mean_speed,
+        "max_turn_rate": turn,
+    }

@@ -30,7 +30,7 @@ from crowdstudy.errors import InvalidInputError
 
 __all__ = ["ORCAParams", "ORCASimulator", "segments_to_obstacle_vertices"]
 
-_HOST_SORT_MAX = 2048        # on the CPU device, sort up to this many cell keys with numpy
+_HOST_SORT_MAX = 2048  # on the CPU device, sort up to this many cell keys with numpy
 
 
 @dataclasses.dataclass(frozen=True)
@@ -86,11 +86,16 @@ def segments_to_obstacle_vertices(segments) -> dict[str, np.ndarray]:
     m = seg.shape[0]
     point = seg.reshape(2 * m, 2)
     idx = np.arange(2 * m)
-    partner = idx ^ 1                                   # 2k <-> 2k + 1
+    partner = idx ^ 1  # 2k <-> 2k + 1
     direction = point[partner] - point
     direction /= np.linalg.norm(direction, axis=1, keepdims=True)
-    return {"point": point.astype(np.float32), "next": partner.astype(np.int32), "prev": partner.astype(np.int32),
-            "direction": direction.astype(np.float32), "convex": np.ones(2 * m, dtype=np.int32)}
+    return {
+        "point": point.astype(np.float32),
+        "next": partner.astype(np.int32),
+        "prev": partner.astype(np.int32),
+        "direction": direction.astype(np.float32),
+        "convex": np.ones(2 * m, dtype=np.int32),
+    }
 
 
 def _per_agent(value, n: int, name: str) -> np.ndarray:
@@ -119,8 +124,18 @@ class ORCASimulator:
             / ``"auto"`` for CUDA when present.
     """
 
-    def __init__(self, positions, radius, max_speed, *, params: ORCAParams | None = None, obstacles=None,
-                 periodic: tuple[float, float] | None = None, velocities=None, device: str | None = "cpu"):
+    def __init__(
+        self,
+        positions,
+        radius,
+        max_speed,
+        *,
+        params: ORCAParams | None = None,
+        obstacles=None,
+        periodic: tuple[float, float] | None = None,
+        velocities=None,
+        device: str | None = "cpu",
+    ):
         from crowdstudy.warp_runtime import get_warp, resolve_device
 
         pos = np.asarray(positions, dtype=np.float64)
@@ -143,8 +158,10 @@ class ORCASimulator:
             if not (math.isfinite(x0) and math.isfinite(length) and length > 0):
                 raise InvalidInputError(f"periodic: expected a finite x0 and a positive length, got {periodic!r}")
             if self.params.neighbor_dist >= length / 2:
-                raise InvalidInputError(f"params.neighbor_dist: {self.params.neighbor_dist} m must be below half the "
-                                        f"period ({length / 2} m) for minimum-image neighbours")
+                raise InvalidInputError(
+                    f"params.neighbor_dist: {self.params.neighbor_dist} m must be below half the "
+                    f"period ({length / 2} m) for minimum-image neighbours"
+                )
             self.periodic = (x0, length)
         vel = np.zeros_like(pos) if velocities is None else np.asarray(velocities, dtype=np.float64)
         if vel.shape != pos.shape or not np.all(np.isfinite(vel)):
@@ -156,7 +173,7 @@ class ORCASimulator:
         wp = get_warp()
         self._wp = wp
         dev = self.device
-        wp.load_module(orca_kernels, device=dev)    # compile (or load from the cache) before the first step
+        wp.load_module(orca_kernels, device=dev)  # compile (or load from the cache) before the first step
         f32 = np.float32
         self._pos = wp.array(pos.astype(f32), dtype=wp.vec2, device=dev)
         self._vel = wp.array(vel.astype(f32), dtype=wp.vec2, device=dev)
@@ -178,16 +195,21 @@ class ORCASimulator:
         self._pd = wp.zeros((n, k + mo), dtype=wp.vec2, device=dev)
         self._cell_start = wp.zeros(1, dtype=int, device=dev)
         self._cell_end = wp.zeros(1, dtype=int, device=dev)
-        self._cmd_keys = None                    # recorded launches, see _record_launches
+        self._cmd_keys = None  # recorded launches, see _record_launches
         segs = np.zeros((0, 2, 2)) if obstacles is None else np.asarray(obstacles, dtype=np.float64)
         if segs.size and (segs.ndim != 3 or segs.shape[1:] != (2, 2)):
             raise InvalidInputError(f"obstacles: expected (M, 2, 2) wall segments, got shape {segs.shape}")
         self.obstacles = segs.reshape(-1, 2, 2)
         verts = segments_to_obstacle_vertices(self.obstacles) if len(self.obstacles) else None
         self._n_obs = 0 if verts is None else len(verts["point"])
-        if verts is None:   # one dummy vertex keeps the kernel signature; n_obs = 0 skips it
-            verts = {"point": np.zeros((1, 2), f32), "next": np.zeros(1, np.int32), "prev": np.zeros(1, np.int32),
-                     "direction": np.zeros((1, 2), f32), "convex": np.zeros(1, np.int32)}
+        if verts is None:  # one dummy vertex keeps the kernel signature; n_obs = 0 skips it
+            verts = {
+                "point": np.zeros((1, 2), f32),
+                "next": np.zeros(1, np.int32),
+                "prev": np.zeros(1, np.int32),
+                "direction": np.zeros((1, 2), f32),
+                "convex": np.zeros(1, np.int32),
+            }
         self._obs_point = wp.array(verts["point"], dtype=wp.vec2, device=dev)
         self._obs_next = wp.array(verts["next"], dtype=int, device=dev)
         self._obs_prev = wp.array(verts["prev"], dtype=int, device=dev)
@@ -222,7 +244,7 @@ class ORCASimulator:
             x0, length = self.periodic
             nx = max(1, int(length // nd))
             lo_x, width_x = x0, length / nx
-        else:   # bounds snapped to multiples of nd so the grid changes only now and then
+        else:  # bounds snapped to multiples of nd so the grid changes only now and then
             lo_x, hi_x = nd * math.floor(float(pos[:, 0].min()) / nd), float(pos[:, 0].max())
             nx = max(1, int((hi_x - lo_x) // nd) + 1)
             width_x = nd
@@ -249,22 +271,71 @@ class ORCASimulator:
         wp, p, dev = self._wp, self.params, self.device
         x0, length = self.periodic if self.periodic is not None else (0.0, 1.0)
         periodic = 0 if self.periodic is None else 1
-        self._cmd_keys = wp.launch(k.cell_keys, dim=self.n, device=dev, record_cmd=True, inputs=[
-            self._pos, origin_v, inv_v, nx, ny, periodic, x0, length, self._keys, self._ids])
-        self._cmd_ranges = wp.launch(k.cell_ranges, dim=self.n, device=dev, record_cmd=True, inputs=[
-            self._keys, self.n, self._cell_start, self._cell_end])
-        self._cmd_velocities = wp.launch(k.compute_velocities, dim=self.n, device=dev, record_cmd=True, inputs=[
-            self._pos, self._vel, self._pref, self._radius, self._max_speed,
-            self._ids, self._cell_start, self._cell_end,
-            origin_v, inv_v, nx, ny, periodic, x0, length,
-            float(p.neighbor_dist), int(p.max_neighbors), float(p.time_horizon), float(p.time_horizon_obst),
-            float(p.time_step),
-            self._obs_point, self._obs_next, self._obs_prev, self._obs_dir, self._obs_convex, self._n_obs,
-            int(p.max_obstacle_neighbors),
-            self._nb_idx, self._nb_d2, self._ob_idx, self._ob_d2, self._lp, self._ld, self._pp, self._pd,
-            self._new_vel])
-        self._cmd_integrate = wp.launch(k.integrate, dim=self.n, device=dev, record_cmd=True, inputs=[
-            self._pos, self._vel, self._new_vel, float(p.time_step)])
+        self._cmd_keys = wp.launch(
+            k.cell_keys,
+            dim=self.n,
+            device=dev,
+            record_cmd=True,
+            inputs=[self._pos, origin_v, inv_v, nx, ny, periodic, x0, length, self._keys, self._ids],
+        )
+        self._cmd_ranges = wp.launch(
+            k.cell_ranges,
+            dim=self.n,
+            device=dev,
+            record_cmd=True,
+            inputs=[self._keys, self.n, self._cell_start, self._cell_end],
+        )
+        self._cmd_velocities = wp.launch(
+            k.compute_velocities,
+            dim=self.n,
+            device=dev,
+            record_cmd=True,
+            inputs=[
+                self._pos,
+                self._vel,
+                self._pref,
+                self._radius,
+                self._max_speed,
+                self._ids,
+                self._cell_start,
+                self._cell_end,
+                origin_v,
+                inv_v,
+                nx,
+                ny,
+                periodic,
+                x0,
+                length,
+                float(p.neighbor_dist),
+                int(p.max_neighbors),
+                float(p.time_horizon),
+                float(p.time_horizon_obst),
+                float(p.time_step),
+                self._obs_point,
+                self._obs_next,
+                self._obs_prev,
+                self._obs_dir,
+                self._obs_convex,
+                self._n_obs,
+                int(p.max_obstacle_neighbors),
+                self._nb_idx,
+                self._nb_d2,
+                self._ob_idx,
+                self._ob_d2,
+                self._lp,
+                self._ld,
+                self._pp,
+                self._pd,
+                self._new_vel,
+            ],
+        )
+        self._cmd_integrate = wp.launch(
+            k.integrate,
+            dim=self.n,
+            device=dev,
+            record_cmd=True,
+            inputs=[self._pos, self._vel, self._new_vel, float(p.time_step)],
+        )
         self._recorded_grid = (origin_v, inv_v, nx, ny)
 
     def step(self, n_steps: int = 1) -> None:
@@ -295,10 +366,10 @@ class ORCASimulator:
                     cmd.set_param_by_name("ny", ny)
                 self._recorded_grid = (origin_v, inv_v, nx, ny)
             self._cmd_keys.launch()
-            if self.device == "cpu" and self.n <= _HOST_SORT_MAX:   # cheaper than a launch for small crowds
-                keys = self._keys.numpy()[:self.n]
+            if self.device == "cpu" and self.n <= _HOST_SORT_MAX:  # cheaper than a launch for small crowds
+                keys = self._keys.numpy()[: self.n]
                 order = np.argsort(keys, kind="stable")
-                self._ids.numpy()[:self.n] = order
+                self._ids.numpy()[: self.n] = order
                 keys[:] = keys[order]
             else:
                 wp.utils.radix_sort_pairs(self._keys, self._ids, self.n)

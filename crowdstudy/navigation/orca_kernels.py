@@ -26,10 +26,10 @@ from crowdstudy.warp_runtime import get_warp
 
 __all__ = ["cell_keys", "cell_ranges", "integrate", "compute_velocities"]
 
-get_warp()      # the project's kernel cache and log level, set before this module can compile
-wp.set_module_options({"enable_backward": False})     # forward only: halves the compile time
+get_warp()  # the project's kernel cache and log level, set before this module can compile
+wp.set_module_options({"enable_backward": False})  # forward only: halves the compile time
 
-EPSILON = wp.constant(1.0e-5)      # RVO_EPSILON
+EPSILON = wp.constant(1.0e-5)  # RVO_EPSILON
 BIG = wp.constant(1.0e30)
 
 
@@ -58,9 +58,18 @@ def grid_cell(p: wp.vec2, origin: wp.vec2, inv_cell: wp.vec2, nx: int, ny: int):
 
 
 @wp.kernel
-def cell_keys(pos: wp.array(dtype=wp.vec2), origin: wp.vec2, inv_cell: wp.vec2, nx: int, ny: int,
-              periodic: int, x0: float, length: float,
-              keys: wp.array(dtype=int), values: wp.array(dtype=int)):
+def cell_keys(
+    pos: wp.array(dtype=wp.vec2),
+    origin: wp.vec2,
+    inv_cell: wp.vec2,
+    nx: int,
+    ny: int,
+    periodic: int,
+    x0: float,
+    length: float,
+    keys: wp.array(dtype=int),
+    values: wp.array(dtype=int),
+):
     """The grid cell of agent i (thread) as its sort key (``iy * nx + ix``) and i as its
     value (wrapped into the periodic range first when ``periodic``)."""
     i = wp.tid()
@@ -89,8 +98,7 @@ def cell_ranges(keys: wp.array(dtype=int), n: int, cell_start: wp.array(dtype=in
 
 
 @wp.kernel
-def integrate(pos: wp.array(dtype=wp.vec2), vel: wp.array(dtype=wp.vec2), new_vel: wp.array(dtype=wp.vec2),
-              dt: float):
+def integrate(pos: wp.array(dtype=wp.vec2), vel: wp.array(dtype=wp.vec2), new_vel: wp.array(dtype=wp.vec2), dt: float):
     """Explicit Euler step of agent i (thread): v <- new_vel (m/s), p <- p + v dt (m, s)."""
     i = wp.tid()
     v = new_vel[i]
@@ -100,9 +108,18 @@ def integrate(pos: wp.array(dtype=wp.vec2), vel: wp.array(dtype=wp.vec2), new_ve
 
 # --- linear programs (RVO2's linearProgram1/2/3) -------------------------------------------
 
+
 @wp.func
-def lp1(lp: wp.array2d(dtype=wp.vec2), ld: wp.array2d(dtype=wp.vec2), row: int, line_no: int, radius: float,
-        opt: wp.vec2, direction_opt: int, result: wp.vec2):
+def lp1(
+    lp: wp.array2d(dtype=wp.vec2),
+    ld: wp.array2d(dtype=wp.vec2),
+    row: int,
+    line_no: int,
+    radius: float,
+    opt: wp.vec2,
+    direction_opt: int,
+    result: wp.vec2,
+):
     """Optimum on line ``line_no`` subject to lines [0, line_no) and the speed disc."""
     p = lp[row, line_no]
     d = ld[row, line_no]
@@ -141,8 +158,15 @@ def lp1(lp: wp.array2d(dtype=wp.vec2), ld: wp.array2d(dtype=wp.vec2), row: int, 
 
 
 @wp.func
-def lp2(lp: wp.array2d(dtype=wp.vec2), ld: wp.array2d(dtype=wp.vec2), row: int, n_lines: int, radius: float,
-        opt: wp.vec2, direction_opt: int):
+def lp2(
+    lp: wp.array2d(dtype=wp.vec2),
+    ld: wp.array2d(dtype=wp.vec2),
+    row: int,
+    n_lines: int,
+    radius: float,
+    opt: wp.vec2,
+    direction_opt: int,
+):
     """Closest feasible point to ``opt`` (or furthest along it); returns (result, first failing line or n_lines)."""
     result = opt
     if direction_opt != 0:
@@ -160,9 +184,18 @@ def lp2(lp: wp.array2d(dtype=wp.vec2), ld: wp.array2d(dtype=wp.vec2), row: int, 
 
 
 @wp.func
-def lp3(lp: wp.array2d(dtype=wp.vec2), ld: wp.array2d(dtype=wp.vec2),
-        pp: wp.array2d(dtype=wp.vec2), pd: wp.array2d(dtype=wp.vec2), row: int,
-        n_lines: int, n_obst: int, begin: int, radius: float, start: wp.vec2):
+def lp3(
+    lp: wp.array2d(dtype=wp.vec2),
+    ld: wp.array2d(dtype=wp.vec2),
+    pp: wp.array2d(dtype=wp.vec2),
+    pd: wp.array2d(dtype=wp.vec2),
+    row: int,
+    n_lines: int,
+    n_obst: int,
+    begin: int,
+    radius: float,
+    start: wp.vec2,
+):
     """Minimise the largest violation of the agent lines, obstacle lines kept hard."""
     result = start
     distance = float(0.0)
@@ -197,6 +230,7 @@ def lp3(lp: wp.array2d(dtype=wp.vec2), ld: wp.array2d(dtype=wp.vec2),
 
 # --- the velocity kernel -------------------------------------------------------------------
 
+
 @wp.func
 def leg_left(rel: wp.vec2, leg: float, r: float, dist_sq: float):
     """Direction of the left leg of the velocity obstacle of a disc of radius ``r`` (m) at
@@ -211,9 +245,19 @@ def leg_right(rel: wp.vec2, leg: float, r: float, dist_sq: float):
 
 
 @wp.func
-def obstacle_neighbours(i: int, pw: wp.vec2, r: float, vmax: float, time_horizon_obst: float,
-                        obs_point: wp.array(dtype=wp.vec2), obs_next: wp.array(dtype=int), n_obs: int,
-                        max_obst_neighbors: int, ob_idx: wp.array2d(dtype=int), ob_d2: wp.array2d(dtype=float)):
+def obstacle_neighbours(
+    i: int,
+    pw: wp.vec2,
+    r: float,
+    vmax: float,
+    time_horizon_obst: float,
+    obs_point: wp.array(dtype=wp.vec2),
+    obs_next: wp.array(dtype=int),
+    n_obs: int,
+    max_obst_neighbors: int,
+    ob_idx: wp.array2d(dtype=int),
+    ob_d2: wp.array2d(dtype=float),
+):
     """The obstacle edges agent ``i`` (at ``pw``, the periodic frame) may reach within
     ``time_horizon_obst``: directed edges seen from their right side, the nearest
     ``max_obst_neighbors`` into row i of ``ob_idx`` / ``ob_d2`` (squared distance, m^2),
@@ -254,11 +298,25 @@ def obstacle_neighbours(i: int, pw: wp.vec2, r: float, vmax: float, time_horizon
 
 
 @wp.func
-def agent_neighbours(i: int, p: wp.vec2, pw: wp.vec2, pos: wp.array(dtype=wp.vec2),
-                     sorted_ids: wp.array(dtype=int), cell_start: wp.array(dtype=int),
-                     cell_end: wp.array(dtype=int), origin: wp.vec2, inv_cell: wp.vec2, nx: int, ny: int,
-                     periodic: int, length: float, neighbor_dist: float, max_neighbors: int,
-                     nb_idx: wp.array2d(dtype=int), nb_d2: wp.array2d(dtype=float)):
+def agent_neighbours(
+    i: int,
+    p: wp.vec2,
+    pw: wp.vec2,
+    pos: wp.array(dtype=wp.vec2),
+    sorted_ids: wp.array(dtype=int),
+    cell_start: wp.array(dtype=int),
+    cell_end: wp.array(dtype=int),
+    origin: wp.vec2,
+    inv_cell: wp.vec2,
+    nx: int,
+    ny: int,
+    periodic: int,
+    length: float,
+    neighbor_dist: float,
+    max_neighbors: int,
+    nb_idx: wp.array2d(dtype=int),
+    nb_d2: wp.array2d(dtype=float),
+):
     """The ``max_neighbors`` agents nearest to agent ``i`` within ``neighbor_dist`` (m),
     from the grid cells around it (minimum image along x when ``periodic``), into row i of
     ``nb_idx`` / ``nb_d2``, nearest first; the search range shrinks to the farthest kept
@@ -311,8 +369,16 @@ def agent_neighbours(i: int, p: wp.vec2, pw: wp.vec2, pos: wp.array(dtype=wp.vec
 
 
 @wp.func
-def already_covered(i: int, n_lines: int, rel1: wp.vec2, rel2: wp.vec2, inv_tho: float, r: float,
-                    lp: wp.array2d(dtype=wp.vec2), ld: wp.array2d(dtype=wp.vec2)):
+def already_covered(
+    i: int,
+    n_lines: int,
+    rel1: wp.vec2,
+    rel2: wp.vec2,
+    inv_tho: float,
+    r: float,
+    lp: wp.array2d(dtype=wp.vec2),
+    ld: wp.array2d(dtype=wp.vec2),
+):
     """1 when both ends of an obstacle edge (``rel1``, ``rel2``: relative to the agent, m)
     lie beyond one of the agent's first ``n_lines`` ORCA lines: the edge adds nothing."""
     for m in range(n_lines):
@@ -323,44 +389,65 @@ def already_covered(i: int, n_lines: int, rel1: wp.vec2, rel2: wp.vec2, inv_tho:
 
 
 @wp.func
-def collision_line(o1: int, o2: int, rel1: wp.vec2, rel2: wp.vec2, s: float, dist_sq1: float, dist_sq2: float,
-                   dist_sq_line: float, radius_sq: float, obs_dir: wp.array(dtype=wp.vec2),
-                   obs_convex: wp.array(dtype=int)):
+def collision_line(
+    o1: int,
+    o2: int,
+    rel1: wp.vec2,
+    rel2: wp.vec2,
+    s: float,
+    dist_sq1: float,
+    dist_sq2: float,
+    dist_sq_line: float,
+    radius_sq: float,
+    obs_dir: wp.array(dtype=wp.vec2),
+    obs_convex: wp.array(dtype=int),
+):
     """An agent already colliding with the edge o1 -> o2 (s: its foot point's parameter on
     the edge, squared distances in m^2): (1, direction) when the collision adds the line
     through the origin along ``direction``, (2, _) when it adds none, (0, _) when there is
     no collision."""
     if s < 0.0 and dist_sq1 <= radius_sq:
-        if obs_convex[o1] != 0:                       # collision with the left vertex
+        if obs_convex[o1] != 0:  # collision with the left vertex
             return 1, wp.normalize(wp.vec2(-rel1[1], rel1[0]))
         return 2, wp.vec2(0.0, 0.0)
     if s > 1.0 and dist_sq2 <= radius_sq:
-        if obs_convex[o2] != 0 and det2(rel2, obs_dir[o2]) >= 0.0:   # collision with the right vertex
+        if obs_convex[o2] != 0 and det2(rel2, obs_dir[o2]) >= 0.0:  # collision with the right vertex
             return 1, wp.normalize(wp.vec2(-rel2[1], rel2[0]))
         return 2, wp.vec2(0.0, 0.0)
-    if s >= 0.0 and s < 1.0 and dist_sq_line <= radius_sq:        # collision with the edge
+    if s >= 0.0 and s < 1.0 and dist_sq_line <= radius_sq:  # collision with the edge
         return 1, -obs_dir[o1]
     return 0, wp.vec2(0.0, 0.0)
 
 
 @wp.func
-def obstacle_legs(o1: int, o2: int, rel1: wp.vec2, rel2: wp.vec2, s: float, dist_sq1: float, dist_sq2: float,
-                  dist_sq_line: float, r: float, radius_sq: float, obs_dir: wp.array(dtype=wp.vec2),
-                  obs_convex: wp.array(dtype=int)):
+def obstacle_legs(
+    o1: int,
+    o2: int,
+    rel1: wp.vec2,
+    rel2: wp.vec2,
+    s: float,
+    dist_sq1: float,
+    dist_sq2: float,
+    dist_sq_line: float,
+    r: float,
+    radius_sq: float,
+    obs_dir: wp.array(dtype=wp.vec2),
+    obs_convex: wp.array(dtype=int),
+):
     """The legs of the truncated velocity obstacle of the edge o1 -> o2 when the agent does
     not collide with it. Seen obliquely, one vertex defines both legs and becomes both
     ends (o1 = o2). Returns (ok, o1, o2, left_leg, right_leg); ok = 0 when that vertex is
     not convex (the edge adds no line)."""
     left_leg = wp.vec2(0.0, 0.0)
     right_leg = wp.vec2(0.0, 0.0)
-    if s < 0.0 and dist_sq_line <= radius_sq:        # seen obliquely: the left vertex defines it
+    if s < 0.0 and dist_sq_line <= radius_sq:  # seen obliquely: the left vertex defines it
         if obs_convex[o1] == 0:
             return 0, o1, o2, left_leg, right_leg
         leg1 = wp.sqrt(dist_sq1 - radius_sq)
         left_leg = leg_left(rel1, leg1, r, dist_sq1)
         right_leg = leg_right(rel1, leg1, r, dist_sq1)
         return 1, o1, o1, left_leg, right_leg
-    if s > 1.0 and dist_sq_line <= radius_sq:        # seen obliquely: the right vertex defines it
+    if s > 1.0 and dist_sq_line <= radius_sq:  # seen obliquely: the right vertex defines it
         if obs_convex[o2] == 0:
             return 0, o1, o2, left_leg, right_leg
         leg2 = wp.sqrt(dist_sq2 - radius_sq)
@@ -379,9 +466,20 @@ def obstacle_legs(o1: int, o2: int, rel1: wp.vec2, rel2: wp.vec2, s: float, dist
 
 
 @wp.func
-def obstacle_vo_line(v: wp.vec2, o1: int, o2: int, rel1: wp.vec2, rel2: wp.vec2, left_leg: wp.vec2,
-                     right_leg: wp.vec2, r: float, inv_tho: float, obs_prev: wp.array(dtype=int),
-                     obs_dir: wp.array(dtype=wp.vec2), obs_convex: wp.array(dtype=int)):
+def obstacle_vo_line(
+    v: wp.vec2,
+    o1: int,
+    o2: int,
+    rel1: wp.vec2,
+    rel2: wp.vec2,
+    left_leg: wp.vec2,
+    right_leg: wp.vec2,
+    r: float,
+    inv_tho: float,
+    obs_prev: wp.array(dtype=int),
+    obs_dir: wp.array(dtype=wp.vec2),
+    obs_convex: wp.array(dtype=int),
+):
     """The ORCA line of the truncated velocity obstacle of an edge (ends o1, o2 relative to
     the agent at ``rel1``, ``rel2``, m; legs from ``obstacle_legs``): the velocity ``v``
     (m/s) is projected on the nearest of the cut-off circles, the cut-off line and the
@@ -410,10 +508,10 @@ def obstacle_vo_line(v: wp.vec2, o1: int, o2: int, rel1: wp.vec2, rel2: wp.vec2,
     t_left = wp.dot(v - left_cut, ll)
     t_right = wp.dot(v - right_cut, rl)
     if (t < 0.0 and t_left < 0.0) or (same != 0 and t_left < 0.0 and t_right < 0.0):
-        unit_w = wp.normalize(v - left_cut)                  # project on the left cut-off circle
+        unit_w = wp.normalize(v - left_cut)  # project on the left cut-off circle
         return 1, left_cut + r * inv_tho * unit_w, wp.vec2(unit_w[1], -unit_w[0])
     if t > 1.0 and t_right < 0.0:
-        unit_w = wp.normalize(v - right_cut)                 # project on the right cut-off circle
+        unit_w = wp.normalize(v - right_cut)  # project on the right cut-off circle
         return 1, right_cut + r * inv_tho * unit_w, wp.vec2(unit_w[1], -unit_w[0])
     d_cut = BIG
     if t >= 0.0 and t <= 1.0 and same == 0:
@@ -424,24 +522,36 @@ def obstacle_vo_line(v: wp.vec2, o1: int, o2: int, rel1: wp.vec2, rel2: wp.vec2,
     d_right = BIG
     if t_right >= 0.0:
         d_right = wp.length_sq(v - (right_cut + t_right * rl))
-    if d_cut <= d_left and d_cut <= d_right:                 # project on the cut-off line
+    if d_cut <= d_left and d_cut <= d_right:  # project on the cut-off line
         direction = -obs_dir[o1]
         return 1, left_cut + r * inv_tho * wp.vec2(-direction[1], direction[0]), direction
-    if d_left <= d_right:                                    # project on the left leg
+    if d_left <= d_right:  # project on the left leg
         if left_foreign == 0:
             return 1, left_cut + r * inv_tho * wp.vec2(-ll[1], ll[0]), ll
         return 0, wp.vec2(0.0, 0.0), wp.vec2(0.0, 0.0)
-    if right_foreign == 0:                                   # project on the right leg
+    if right_foreign == 0:  # project on the right leg
         direction = -rl
         return 1, right_cut + r * inv_tho * wp.vec2(-direction[1], direction[0]), direction
     return 0, wp.vec2(0.0, 0.0), wp.vec2(0.0, 0.0)
 
 
 @wp.func
-def obstacle_lines(i: int, pw: wp.vec2, v: wp.vec2, r: float, n_ob: int, time_horizon_obst: float,
-                   obs_point: wp.array(dtype=wp.vec2), obs_next: wp.array(dtype=int), obs_prev: wp.array(dtype=int),
-                   obs_dir: wp.array(dtype=wp.vec2), obs_convex: wp.array(dtype=int),
-                   ob_idx: wp.array2d(dtype=int), lp: wp.array2d(dtype=wp.vec2), ld: wp.array2d(dtype=wp.vec2)):
+def obstacle_lines(
+    i: int,
+    pw: wp.vec2,
+    v: wp.vec2,
+    r: float,
+    n_ob: int,
+    time_horizon_obst: float,
+    obs_point: wp.array(dtype=wp.vec2),
+    obs_next: wp.array(dtype=int),
+    obs_prev: wp.array(dtype=int),
+    obs_dir: wp.array(dtype=wp.vec2),
+    obs_convex: wp.array(dtype=int),
+    ob_idx: wp.array2d(dtype=int),
+    lp: wp.array2d(dtype=wp.vec2),
+    ld: wp.array2d(dtype=wp.vec2),
+):
     """The ORCA lines of agent ``i``'s ``n_ob`` obstacle neighbours (RVO2's rules), into
     row i of ``lp`` (points, m/s) and ``ld`` (unit directions) from slot 0. Returns their
     count."""
@@ -460,8 +570,9 @@ def obstacle_lines(i: int, pw: wp.vec2, v: wp.vec2, r: float, n_ob: int, time_ho
         obstacle_vec = obs_point[o2] - obs_point[o1]
         s = wp.dot(-rel1, obstacle_vec) / wp.length_sq(obstacle_vec)
         dist_sq_line = wp.length_sq(-rel1 - s * obstacle_vec)
-        hit, direction = collision_line(o1, o2, rel1, rel2, s, dist_sq1, dist_sq2, dist_sq_line, radius_sq,
-                                        obs_dir, obs_convex)
+        hit, direction = collision_line(
+            o1, o2, rel1, rel2, s, dist_sq1, dist_sq2, dist_sq_line, radius_sq, obs_dir, obs_convex
+        )
         if hit != 0:
             if hit == 1:
                 lp[i, n_lines] = wp.vec2(0.0, 0.0)
@@ -469,12 +580,25 @@ def obstacle_lines(i: int, pw: wp.vec2, v: wp.vec2, r: float, n_ob: int, time_ho
                 n_lines = n_lines + 1
             continue
         # no collision: legs of the truncated velocity obstacle
-        ok, e1, e2, left_leg, right_leg = obstacle_legs(o1, o2, rel1, rel2, s, dist_sq1, dist_sq2, dist_sq_line,
-                                                        r, radius_sq, obs_dir, obs_convex)
+        ok, e1, e2, left_leg, right_leg = obstacle_legs(
+            o1, o2, rel1, rel2, s, dist_sq1, dist_sq2, dist_sq_line, r, radius_sq, obs_dir, obs_convex
+        )
         if ok == 0:
             continue
-        emit, point, line_dir = obstacle_vo_line(v, e1, e2, obs_point[e1] - pw, obs_point[e2] - pw, left_leg,
-                                                 right_leg, r, inv_tho, obs_prev, obs_dir, obs_convex)
+        emit, point, line_dir = obstacle_vo_line(
+            v,
+            e1,
+            e2,
+            obs_point[e1] - pw,
+            obs_point[e2] - pw,
+            left_leg,
+            right_leg,
+            r,
+            inv_tho,
+            obs_prev,
+            obs_dir,
+            obs_convex,
+        )
         if emit != 0:
             lp[i, n_lines] = point
             ld[i, n_lines] = line_dir
@@ -483,10 +607,24 @@ def obstacle_lines(i: int, pw: wp.vec2, v: wp.vec2, r: float, n_ob: int, time_ho
 
 
 @wp.func
-def agent_lines(i: int, p: wp.vec2, v: wp.vec2, r: float, n_nb: int, n_lines: int, pos: wp.array(dtype=wp.vec2),
-                vel: wp.array(dtype=wp.vec2), radius: wp.array(dtype=float), periodic: int, length: float,
-                time_horizon: float, time_step: float, nb_idx: wp.array2d(dtype=int),
-                lp: wp.array2d(dtype=wp.vec2), ld: wp.array2d(dtype=wp.vec2)):
+def agent_lines(
+    i: int,
+    p: wp.vec2,
+    v: wp.vec2,
+    r: float,
+    n_nb: int,
+    n_lines: int,
+    pos: wp.array(dtype=wp.vec2),
+    vel: wp.array(dtype=wp.vec2),
+    radius: wp.array(dtype=float),
+    periodic: int,
+    length: float,
+    time_horizon: float,
+    time_step: float,
+    nb_idx: wp.array2d(dtype=int),
+    lp: wp.array2d(dtype=wp.vec2),
+    ld: wp.array2d(dtype=wp.vec2),
+):
     """The ORCA lines of agent ``i``'s ``n_nb`` agent neighbours (each takes half the
     avoidance), into row i of ``lp`` / ``ld`` after the first ``n_lines``. Returns the
     new line count."""
@@ -505,23 +643,23 @@ def agent_lines(i: int, p: wp.vec2, v: wp.vec2, r: float, n_nb: int, n_lines: in
         direction = wp.vec2(0.0, 0.0)
         u = wp.vec2(0.0, 0.0)
         if dist_sq > comb_sq:
-            w = rel_v - inv_th * rel                # from the cut-off centre to the relative velocity
+            w = rel_v - inv_th * rel  # from the cut-off centre to the relative velocity
             w_len_sq = wp.length_sq(w)
             dot1 = wp.dot(w, rel)
             if dot1 < 0.0 and dot1 * dot1 > comb_sq * w_len_sq:
-                w_len = wp.sqrt(w_len_sq)           # project on the cut-off circle
+                w_len = wp.sqrt(w_len_sq)  # project on the cut-off circle
                 unit_w = w / w_len
                 direction = wp.vec2(unit_w[1], -unit_w[0])
                 u = (comb * inv_th - w_len) * unit_w
             else:
-                leg = wp.sqrt(dist_sq - comb_sq)    # project on a leg
+                leg = wp.sqrt(dist_sq - comb_sq)  # project on a leg
                 if det2(rel, w) > 0.0:
                     direction = leg_left(rel, leg, comb, dist_sq)
                 else:
                     direction = -leg_right(rel, leg, comb, dist_sq)
                 u = wp.dot(rel_v, direction) * direction - rel_v
         else:
-            w = rel_v - inv_dt * rel                # overlapping: cut-off circle of one time step
+            w = rel_v - inv_dt * rel  # overlapping: cut-off circle of one time step
             w_len = wp.length(w)
             unit_w = w / w_len
             direction = wp.vec2(unit_w[1], -unit_w[0])
@@ -534,18 +672,43 @@ def agent_lines(i: int, p: wp.vec2, v: wp.vec2, r: float, n_nb: int, n_lines: in
 
 @wp.kernel
 def compute_velocities(
-        pos: wp.array(dtype=wp.vec2), vel: wp.array(dtype=wp.vec2), pref: wp.array(dtype=wp.vec2),
-        radius: wp.array(dtype=float), max_speed: wp.array(dtype=float),
-        sorted_ids: wp.array(dtype=int), cell_start: wp.array(dtype=int), cell_end: wp.array(dtype=int),
-        origin: wp.vec2, inv_cell: wp.vec2, nx: int, ny: int, periodic: int, x0: float, length: float,
-        neighbor_dist: float, max_neighbors: int, time_horizon: float, time_horizon_obst: float, time_step: float,
-        obs_point: wp.array(dtype=wp.vec2), obs_next: wp.array(dtype=int), obs_prev: wp.array(dtype=int),
-        obs_dir: wp.array(dtype=wp.vec2), obs_convex: wp.array(dtype=int), n_obs: int, max_obst_neighbors: int,
-        nb_idx: wp.array2d(dtype=int), nb_d2: wp.array2d(dtype=float),
-        ob_idx: wp.array2d(dtype=int), ob_d2: wp.array2d(dtype=float),
-        lp: wp.array2d(dtype=wp.vec2), ld: wp.array2d(dtype=wp.vec2),
-        pp: wp.array2d(dtype=wp.vec2), pd: wp.array2d(dtype=wp.vec2),
-        new_vel: wp.array(dtype=wp.vec2)):
+    pos: wp.array(dtype=wp.vec2),
+    vel: wp.array(dtype=wp.vec2),
+    pref: wp.array(dtype=wp.vec2),
+    radius: wp.array(dtype=float),
+    max_speed: wp.array(dtype=float),
+    sorted_ids: wp.array(dtype=int),
+    cell_start: wp.array(dtype=int),
+    cell_end: wp.array(dtype=int),
+    origin: wp.vec2,
+    inv_cell: wp.vec2,
+    nx: int,
+    ny: int,
+    periodic: int,
+    x0: float,
+    length: float,
+    neighbor_dist: float,
+    max_neighbors: int,
+    time_horizon: float,
+    time_horizon_obst: float,
+    time_step: float,
+    obs_point: wp.array(dtype=wp.vec2),
+    obs_next: wp.array(dtype=int),
+    obs_prev: wp.array(dtype=int),
+    obs_dir: wp.array(dtype=wp.vec2),
+    obs_convex: wp.array(dtype=int),
+    n_obs: int,
+    max_obst_neighbors: int,
+    nb_idx: wp.array2d(dtype=int),
+    nb_d2: wp.array2d(dtype=float),
+    ob_idx: wp.array2d(dtype=int),
+    ob_d2: wp.array2d(dtype=float),
+    lp: wp.array2d(dtype=wp.vec2),
+    ld: wp.array2d(dtype=wp.vec2),
+    pp: wp.array2d(dtype=wp.vec2),
+    pd: wp.array2d(dtype=wp.vec2),
+    new_vel: wp.array(dtype=wp.vec2),
+):
     """The new velocity (m/s) of agent i (thread): the obstacle and agent neighbours, their
     ORCA lines (obstacles first: kept hard by the 3D program), then the velocity closest to
     the preferred one ``pref[i]`` within ``max_speed[i]`` that satisfies them all (2D
@@ -560,17 +723,37 @@ def compute_velocities(
     v = vel[i]
     r = radius[i]
     vmax = max_speed[i]
-    pw = p                                   # position in the periodic frame (obstacles, grid)
+    pw = p  # position in the periodic frame (obstacles, grid)
     if periodic != 0:
         pw = wp.vec2(wrap_coord(p[0], x0, length), p[1])
-    n_ob = obstacle_neighbours(i, pw, r, vmax, time_horizon_obst, obs_point, obs_next, n_obs, max_obst_neighbors,
-                               ob_idx, ob_d2)
-    n_nb = agent_neighbours(i, p, pw, pos, sorted_ids, cell_start, cell_end, origin, inv_cell, nx, ny, periodic,
-                            length, neighbor_dist, max_neighbors, nb_idx, nb_d2)
-    n_obst_lines = obstacle_lines(i, pw, v, r, n_ob, time_horizon_obst, obs_point, obs_next, obs_prev, obs_dir,
-                                  obs_convex, ob_idx, lp, ld)
-    n_lines = agent_lines(i, p, v, r, n_nb, n_obst_lines, pos, vel, radius, periodic, length, time_horizon,
-                          time_step, nb_idx, lp, ld)
+    n_ob = obstacle_neighbours(
+        i, pw, r, vmax, time_horizon_obst, obs_point, obs_next, n_obs, max_obst_neighbors, ob_idx, ob_d2
+    )
+    n_nb = agent_neighbours(
+        i,
+        p,
+        pw,
+        pos,
+        sorted_ids,
+        cell_start,
+        cell_end,
+        origin,
+        inv_cell,
+        nx,
+        ny,
+        periodic,
+        length,
+        neighbor_dist,
+        max_neighbors,
+        nb_idx,
+        nb_d2,
+    )
+    n_obst_lines = obstacle_lines(
+        i, pw, v, r, n_ob, time_horizon_obst, obs_point, obs_next, obs_prev, obs_dir, obs_convex, ob_idx, lp, ld
+    )
+    n_lines = agent_lines(
+        i, p, v, r, n_nb, n_obst_lines, pos, vel, radius, periodic, length, time_horizon, time_step, nb_idx, lp, ld
+    )
     result, fail = lp2(lp, ld, i, n_lines, vmax, pref[i], 0)
     if fail < n_lines:
         result = lp3(lp, ld, pp, pd, i, n_lines, n_obst_lines, fail, vmax, result)

@@ -31,8 +31,11 @@ def draw_trajectories(ax, crowd: Crowd, title: str | None = None, every: int = 1
             pieces = [xy]
         for piece in pieces:
             ax.plot(piece[:, 0], piece[:, 1], lw=0.7, alpha=0.7, color=cmap(i / max(n - 1, 1)))
-    last = crowd.replace(positions=crowd.positions[-1:], velocities=None,
-                         headings=None if crowd.headings is None else crowd.headings[-1:])
+    last = crowd.replace(
+        positions=crowd.positions[-1:],
+        velocities=None,
+        headings=None if crowd.headings is None else crowd.headings[-1:],
+    )
     draw_layout(ax, last)
     if title:
         ax.set_title(title, fontsize=9)
@@ -64,8 +67,10 @@ def plot_layouts_and_trajectories(layouts: list[Crowd], corridor: Crowd | None, 
         ax = fig.add_subplot(grid[rows - 1, :])
         m = corridor.meta
         speed = float(np.linalg.norm(corridor.velocities, axis=2).mean()) if corridor.velocities is not None else None
-        title = (f"corridor {m.get('density_level', '')} ({m.get('direction', '')}): {corridor.n_agents} agents, "
-                 f"{corridor.n_frames / corridor.fps:.1f} s")
+        title = (
+            f"corridor {m.get('density_level', '')} ({m.get('direction', '')}): {corridor.n_agents} agents, "
+            f"{corridor.n_frames / corridor.fps:.1f} s"
+        )
         if speed is not None:
             title += f", mean speed {speed:.2f} m/s"
         draw_trajectories(ax, corridor, title=title)

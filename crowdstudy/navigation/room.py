@@ -31,12 +31,12 @@ class RoomScenario:
     """The room benchmark's set-up (metres, seconds)."""
 
     n_agents: int = 1000
-    density: float = 1.5            # agents per m^2
+    density: float = 1.5  # agents per m^2
     radius: float = 0.2
     preferred_speed: float = 1.2
     preferred_speed_sd: float = 0.1
     max_speed: float = 1.5
-    safety_margin: float = 1.0      # simulated radius / disc radius (overlaps are counted on ``radius``)
+    safety_margin: float = 1.0  # simulated radius / disc radius (overlaps are counted on ``radius``)
     params: ORCAParams = ORCAParams()
     n_goals: int = 32
     seed: int = 0
@@ -60,10 +60,18 @@ class RoomScenario:
         if self.n_agents < 1:
             raise InvalidInputError(f"n_agents: expected >= 1, got {self.n_agents}")
         rng = np.random.default_rng(self.seed)
-        layout = poisson_disk((self.side, self.side), self.n_agents, seed=rng, margin=self.simulated_radius + 0.05,
-                              min_distance=2.1 * self.simulated_radius)
-        speeds = np.clip(rng.normal(self.preferred_speed, self.preferred_speed_sd, self.n_agents),
-                         0.5 * self.preferred_speed, self.max_speed)
+        layout = poisson_disk(
+            (self.side, self.side),
+            self.n_agents,
+            seed=rng,
+            margin=self.simulated_radius + 0.05,
+            min_distance=2.1 * self.simulated_radius,
+        )
+        speeds = np.clip(
+            rng.normal(self.preferred_speed, self.preferred_speed_sd, self.n_agents),
+            0.5 * self.preferred_speed,
+            self.max_speed,
+        )
         h = self.side / 2 - self.simulated_radius - 0.2
         goals = rng.uniform(-h, h, size=(self.n_agents, self.n_goals, 2))
         return layout.points, speeds, goals
@@ -76,9 +84,9 @@ class RoomRun:
     engine: str
     step_times: list[float]
     mean_speed: float
-    overlaps: int           # pair-frames overlapping by more than 1 % of the radius
-    max_overlap: float      # largest overlap depth / radius over the checked frames
-    outside: int            # agent-frames outside the room
+    overlaps: int  # pair-frames overlapping by more than 1 % of the radius
+    max_overlap: float  # largest overlap depth / radius over the checked frames
+    outside: int  # agent-frames outside the room
     positions: np.ndarray
 
     @property
@@ -116,8 +124,15 @@ class _Steer:
         return d / np.maximum(dist, 1e-9)[:, None] * self.speeds[:, None]
 
 
-def run_room(scenario: RoomScenario, steps: int, *, engine: str = "crowdstudy", check_every: int = 10,
-             device: str | None = "cpu", progress=None) -> RoomRun:
+def run_room(
+    scenario: RoomScenario,
+    steps: int,
+    *,
+    engine: str = "crowdstudy",
+    check_every: int = 10,
+    device: str | None = "cpu",
+    progress=None,
+) -> RoomRun:
     """Run the room scenario for ``steps`` steps through ``engine`` ("crowdstudy" or "pyrvo").
 
     Only the engine's step is timed (for pyrvo ``do_step``; setting preferred velocities and
@@ -129,8 +144,9 @@ def run_room(scenario: RoomScenario, steps: int, *, engine: str = "crowdstudy", 
     n = scenario.n_agents
     walls = scenario.walls()
     if engine == "crowdstudy":
-        sim = ORCASimulator(pos0, scenario.simulated_radius, scenario.max_speed, params=p, obstacles=walls,
-                            device=device)
+        sim = ORCASimulator(
+            pos0, scenario.simulated_radius, scenario.max_speed, params=p, obstacles=walls, device=device
+        )
 
         def set_pref(pref):
             sim.set_preferred_velocities(pref)
@@ -149,8 +165,14 @@ def run_room(scenario: RoomScenario, steps: int, *, engine: str = "crowdstudy", 
             raise MissingDependencyError("pyrvo is not installed: pip install 'crowdstudy[peers]' (or pyrvo)") from None
         sim = pyrvo.RVOSimulator()
         sim.set_time_step(float(p.time_step))
-        sim.set_agent_defaults(float(p.neighbor_dist), int(p.max_neighbors), float(p.time_horizon),
-                               float(p.time_horizon_obst), float(scenario.simulated_radius), float(scenario.max_speed))
+        sim.set_agent_defaults(
+            float(p.neighbor_dist),
+            int(p.max_neighbors),
+            float(p.time_horizon),
+            float(p.time_horizon_obst),
+            float(scenario.simulated_radius),
+            float(scenario.max_speed),
+        )
         for q in pos0:
             sim.add_agent((float(q[0]), float(q[1])))
         for a, b in walls:
@@ -188,5 +210,12 @@ def run_room(scenario: RoomScenario, steps: int, *, engine: str = "crowdstudy", 
             outside += int(np.sum(np.any(np.abs(pos) > half, axis=1)))
         if progress is not None:
             progress.update(1)
-    return RoomRun(engine=engine, step_times=times, mean_speed=speed_sum / max(steps, 1), overlaps=overlaps,
-                   max_overlap=max_overlap, outside=outside, positions=pos)
+    return RoomRun(
+        engine=engine,
+        step_times=times,
+        mean_speed=speed_sum / max(steps, 1),
+        overlaps=overlaps,
+        max_overlap=max_overlap,
+        outside=outside,
+        positions=pos,
+    )

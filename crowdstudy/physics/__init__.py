@@ -21,5 +21,16 @@ from crowdstudy.physics.model import Model, ModelBuilder
 from crowdstudy.physics.solver import Solver
 from crowdstudy.physics.state import Control, State
 
-__all__ = ["PhysicsConfig", "ModelBuilder", "Model", "State", "Control", "Solver", "CollisionPipeline", "Contacts",
-           "CrowdCorrector", "correct", "damping_study"]
+__all__ = [
+    "PhysicsConfig",
+    "ModelBuilder",
+    "Model",
+    "State",
+    "Control",
+    "Solver",
+    "CollisionPipeline",
+    "Contacts",
+    "CrowdCorrector",
+    "correct",
+    "damping_study",
+]

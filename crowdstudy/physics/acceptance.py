@@ -24,14 +24,23 @@ def profile_columns(ours) -> dict:
     (``PhysicsConfig.for_density``): ``crowd_density`` (characters/m^2), ``profile_weight``,
     ``mesh_skin_max`` (m), ``output_hold``."""
     phys = ours.meta["physics"]
-    return {"crowd_density": phys["crowd_density"], "profile_weight": phys["profile_weight"],
-            "mesh_skin_max": phys["config"]["skin"]["max"], "output_hold": phys["config"]["output"]["hold"]}
+    return {
+        "crowd_density": phys["crowd_density"],
+        "profile_weight": phys["profile_weight"],
+        "mesh_skin_max": phys["config"]["skin"]["max"],
+        "output_hold": phys["config"]["output"]["hold"],
+    }
 
 
-def measure_bars(duration: float, frame_stride: int = 10, config=None,
-                 cells: Sequence[tuple[str, str]] | None = None, seeds: Sequence[int | None] = (None,),
-                 tolerances: BarTolerances | None = None,
-                 report: Callable[[dict], None] | None = None) -> list[dict]:
+def measure_bars(
+    duration: float,
+    frame_stride: int = 10,
+    config=None,
+    cells: Sequence[tuple[str, str]] | None = None,
+    seeds: Sequence[int | None] = (None,),
+    tolerances: BarTolerances | None = None,
+    report: Callable[[dict], None] | None = None,
+) -> list[dict]:
     """Every (stage, density) cell of the study, ``duration`` seconds each: one row per cell
     and seed (:func:`measure_cell`), cells in the design's order (stationary, then walking;
     levels sparsest first), each cell's seeds in the given order.
@@ -57,8 +66,17 @@ def measure_bars(duration: float, frame_stride: int = 10, config=None,
     return rows
 
 
-def measure_cell(design, stage: str, li: int, level: str, seed: int | None, duration: float, frame_stride: int,
-                 config, tolerances: BarTolerances | None = None) -> dict:
+def measure_cell(
+    design,
+    stage: str,
+    li: int,
+    level: str,
+    seed: int | None,
+    duration: float,
+    frame_stride: int,
+    config,
+    tolerances: BarTolerances | None = None,
+) -> dict:
     """One crowd of one cell (``level``, the ``li``-th of the design's levels), corrected and
     measured: overlap (mesh and capsule, m^3 per character, every ``frame_stride``-th frame,
     and Ours / Baseline as ``mesh_ratio``/``capsule_ratio``), tracking error (cm; with its
@@ -82,17 +100,24 @@ def measure_cell(design, stage: str, li: int, level: str, seed: int | None, dura
     wall = time.perf_counter() - t0
     frames = np.arange(0, base.n_frames, frame_stride)
     study_seed = design.cell_seed(design.stage(stage), level)
-    row = {"stage": stage, "level": level, "seed": int(base.meta["seed"]),
-           "study_seed": int(base.meta["seed"]) == study_seed, "characters": base.n_characters,
-           "frames": base.n_frames, "loop": loop_mode(base),
-           "tracking_bar_cm": tolerances.tracking_cm(li, len(levels)), **profile_columns(ours)}
+    row = {
+        "stage": stage,
+        "level": level,
+        "seed": int(base.meta["seed"]),
+        "study_seed": int(base.meta["seed"]) == study_seed,
+        "characters": base.n_characters,
+        "frames": base.n_frames,
+        "loop": loop_mode(base),
+        "tracking_bar_cm": tolerances.tracking_cm(li, len(levels)),
+        **profile_columns(ours),
+    }
     for geom in ("mesh", "capsule"):
         ob = overlap_volume(base, geometry=geom, frames=frames).mean
         oo = overlap_volume(ours, geometry=geom, frames=frames).mean
         row[f"{geom}_baseline_m3"] = ob
         row[f"{geom}_ours_m3"] = oo
         row[f"{geom}_ratio"] = oo / max(ob, 1e-12)
-    for name, a in (("baseline", base), ("ours", ours)):     # skin through the walls (not a bar)
+    for name, a in (("baseline", base), ("ours", ours)):  # skin through the walls (not a bar)
         walls = wall_penetration(a, frames=frames)
         row[f"wall_p99_cm_{name}"], row[f"wall_max_cm_{name}"] = walls.p99_cm, walls.max_cm
     parts = tracking_parts(ours, base)
@@ -102,7 +127,7 @@ def measure_cell(design, stage: str, li: int, level: str, seed: int | None, dura
     row.update(smoothness_columns(base, ours))
     row["bars_failed"] = failed_bars(check_bars(row, tolerances, li, len(levels)))
     limited = (ours.meta.get("physics") or {}).get("speed_limit") or {}
-    row["speed_limited_characters"] = len(limited.get("characters", ()))   # re-timed by the speed limit
+    row["speed_limited_characters"] = len(limited.get("characters", ()))  # re-timed by the speed limit
     row["correct_wall_s"] = wall
-    row["ms_per_step_wall"] = run_timings["ms_per_step"]     # the clip's steps only
+    row["ms_per_step_wall"] = run_timings["ms_per_step"]  # the clip's steps only
     return row

@@ -43,8 +43,16 @@ import numpy as np
 from crowdstudy.scene_meta import wall_segments
 from crowdstudy.warp_runtime import get_warp, host_threads, run_parallel
 
-__all__ = ["Contacts", "CollisionPipeline", "sample_static_walls", "sweep_pairs",
-           "KIND_GROUND", "KIND_ENVIRONMENT", "KIND_INTER", "KIND_INTRA"]
+__all__ = [
+    "Contacts",
+    "CollisionPipeline",
+    "sample_static_walls",
+    "sweep_pairs",
+    "KIND_GROUND",
+    "KIND_ENVIRONMENT",
+    "KIND_INTER",
+    "KIND_INTRA",
+]
 
 #: contact kinds (``Contacts.kind``; the kernels write them as these literals)
 KIND_GROUND, KIND_ENVIRONMENT, KIND_INTER, KIND_INTRA = 0, 1, 2, 3
@@ -59,8 +67,9 @@ _MIN_CHARACTERS_SWEEP = 200
 _MIN_CHARACTERS_PARALLEL = 200
 
 
-def launch_sweep(char_lo, char_hi, order, sorted_lo_x, pair_count, pair_capacity: int,
-                 pair_i, pair_j, pair_shift) -> None:
+def launch_sweep(
+    char_lo, char_hi, order, sorted_lo_x, pair_count, pair_capacity: int, pair_i, pair_j, pair_shift
+) -> None:
     """Launch ``sweep_kernel`` on the CPU: ``char_lo``, ``char_hi`` the boxes' corners (CPU
     Warp arrays of vec3, m, read here as numpy too); ``order`` and ``sorted_lo_x`` Warp
     scratch arrays of length n."""
@@ -73,8 +82,12 @@ def launch_sweep(char_lo, char_hi, order, sorted_lo_x, pair_count, pair_capacity
     hi = char_hi.numpy()
     reach = float(np.max(hi[:, 0] - lo[:, 0])) + 1e-3 if len(lo) else 0.0
     pair_count.zero_()
-    get_warp().launch(sweep_kernel, len(lo), [char_lo, char_hi, order, sorted_lo_x, reach, pair_count,
-                                              pair_capacity, pair_i, pair_j, pair_shift], device="cpu")
+    get_warp().launch(
+        sweep_kernel,
+        len(lo),
+        [char_lo, char_hi, order, sorted_lo_x, reach, pair_count, pair_capacity, pair_i, pair_j, pair_shift],
+        device="cpu",
+    )
 
 
 def sweep_pairs(lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -85,10 +98,14 @@ def sweep_pairs(lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]
     lo = np.ascontiguousarray(lo, np.float32)
     hi = np.ascontiguousarray(hi, np.float32)
     n = len(lo)
-    cap = max(min(n * (n - 1) // 2, 32 * n), 1)          # grown below if the boxes overlap more
+    cap = max(min(n * (n - 1) // 2, 32 * n), 1)  # grown below if the boxes overlap more
     count = wp.zeros(1, dtype=wp.int32, device="cpu")
-    boxes = (wp.array(lo, dtype=wp.vec3, device="cpu"), wp.array(hi, dtype=wp.vec3, device="cpu"),
-             wp.zeros(max(n, 1), dtype=wp.int32, device="cpu"), wp.zeros(max(n, 1), dtype=wp.float32, device="cpu"))
+    boxes = (
+        wp.array(lo, dtype=wp.vec3, device="cpu"),
+        wp.array(hi, dtype=wp.vec3, device="cpu"),
+        wp.zeros(max(n, 1), dtype=wp.int32, device="cpu"),
+        wp.zeros(max(n, 1), dtype=wp.float32, device="cpu"),
+    )
     while True:
         pi, pj = wp.zeros(cap, dtype=wp.int32, device="cpu"), wp.zeros(cap, dtype=wp.int32, device="cpu")
         shift = wp.zeros(cap, dtype=wp.float32, device="cpu")
@@ -99,8 +116,9 @@ def sweep_pairs(lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]
         cap = m
 
 
-def sample_static_walls(walls: np.ndarray, *, height: float = 2.2, spacing: float = 0.04,
-                        period: float | None = None, overhang: float = 0.6) -> np.ndarray:
+def sample_static_walls(
+    walls: np.ndarray, *, height: float = 2.2, spacing: float = 0.04, period: float | None = None, overhang: float = 0.6
+) -> np.ndarray:
     """Point samples (P, 3) of vertical walls standing on the floor.
 
     Args:
@@ -121,8 +139,10 @@ def sample_static_walls(walls: np.ndarray, *, height: float = 2.2, spacing: floa
                 t0, t1 = max(t0, 0.0), min(t1, 1.0)
                 if t1 <= t0:
                     continue
-                (x0, y0), (x1, y1) = ((x0 + t0 * (x1 - x0), y0 + t0 * (y1 - y0)),
-                                      (x0 + t1 * (x1 - x0), y0 + t1 * (y1 - y0)))
+                (x0, y0), (x1, y1) = (
+                    (x0 + t0 * (x1 - x0), y0 + t0 * (y1 - y0)),
+                    (x0 + t1 * (x1 - x0), y0 + t1 * (y1 - y0)),
+                )
         length = float(np.hypot(x1 - x0, y1 - y0))
         n = max(int(np.ceil(length / spacing)), 1) + 1
         t = np.linspace(0.0, 1.0, n)
@@ -154,21 +174,32 @@ class Contacts:
     kind: object
 
     @classmethod
-    def allocate(cls, capacity: int, device: str) -> "Contacts":
+    def allocate(cls, capacity: int, device: str) -> Contacts:
         wp = get_warp()
-        return cls(capacity=int(capacity), count=wp.zeros(1, dtype=wp.int32, device=device),
-                   body_a=wp.zeros(capacity, dtype=wp.int32, device=device),
-                   body_b=wp.zeros(capacity, dtype=wp.int32, device=device),
-                   normal=wp.zeros(capacity, dtype=wp.vec3, device=device),
-                   depth=wp.zeros(capacity, dtype=wp.float32, device=device),
-                   lever_a=wp.zeros(capacity, dtype=wp.vec3, device=device),
-                   lever_b=wp.zeros(capacity, dtype=wp.vec3, device=device),
-                   stiffness=wp.zeros(capacity, dtype=wp.float32, device=device),
-                   kind=wp.zeros(capacity, dtype=wp.int32, device=device))
+        return cls(
+            capacity=int(capacity),
+            count=wp.zeros(1, dtype=wp.int32, device=device),
+            body_a=wp.zeros(capacity, dtype=wp.int32, device=device),
+            body_b=wp.zeros(capacity, dtype=wp.int32, device=device),
+            normal=wp.zeros(capacity, dtype=wp.vec3, device=device),
+            depth=wp.zeros(capacity, dtype=wp.float32, device=device),
+            lever_a=wp.zeros(capacity, dtype=wp.vec3, device=device),
+            lever_b=wp.zeros(capacity, dtype=wp.vec3, device=device),
+            stiffness=wp.zeros(capacity, dtype=wp.float32, device=device),
+            kind=wp.zeros(capacity, dtype=wp.int32, device=device),
+        )
 
     def buffers(self) -> list:
-        return [self.body_a, self.body_b, self.normal, self.depth, self.lever_a, self.lever_b, self.stiffness,
-                self.kind]
+        return [
+            self.body_a,
+            self.body_b,
+            self.normal,
+            self.depth,
+            self.lever_a,
+            self.lever_b,
+            self.stiffness,
+            self.kind,
+        ]
 
     def n_active(self) -> int:
         """Contacts stored (host sync on CUDA)."""
@@ -193,8 +224,15 @@ class CollisionPipeline:
             contacts of every capsule end (``wall_kernel``, stiffness ``config.contacts.wall_stiffness``).
     """
 
-    def __init__(self, model, config, *, static_points: np.ndarray | None = None, period: float | None = None,
-                 static_walls: np.ndarray | None = None):
+    def __init__(
+        self,
+        model,
+        config,
+        *,
+        static_points: np.ndarray | None = None,
+        period: float | None = None,
+        static_walls: np.ndarray | None = None,
+    ):
         self.model = model
         self.config = config
         wp = get_warp()
@@ -204,9 +242,9 @@ class CollisionPipeline:
         self.speculative = float(config.contacts.speculative_distance)
         self.p0w = wp.zeros(nb, dtype=wp.vec3, device=dev)
         self.p1w = wp.zeros(nb, dtype=wp.vec3, device=dev)
-        self.centre = wp.zeros(nb, dtype=wp.vec3, device=dev)     # capsule midpoints (m)
-        self.half = wp.zeros(nb, dtype=wp.float32, device=dev)    # capsule half lengths (m)
-        self.centre_t = wp.zeros(nb, dtype=wp.vec3, device=dev)   # the same in the target pose
+        self.centre = wp.zeros(nb, dtype=wp.vec3, device=dev)  # capsule midpoints (m)
+        self.half = wp.zeros(nb, dtype=wp.float32, device=dev)  # capsule half lengths (m)
+        self.centre_t = wp.zeros(nb, dtype=wp.vec3, device=dev)  # the same in the target pose
         self.half_t = wp.zeros(nb, dtype=wp.float32, device=dev)
         self.char_lo = wp.zeros(n, dtype=wp.vec3, device=dev)
         self.char_hi = wp.zeros(n, dtype=wp.vec3, device=dev)
@@ -220,8 +258,12 @@ class CollisionPipeline:
         na = nb if self.pass_on else 1
         self.p0a = wp.zeros(na, dtype=wp.vec3, device=dev)
         self.p1a = wp.zeros(na, dtype=wp.vec3, device=dev)
-        self._ahead_scratch = (wp.zeros(n, dtype=wp.vec3, device=dev), wp.zeros(n, dtype=wp.vec3, device=dev),
-                               wp.zeros(na, dtype=wp.vec3, device=dev), wp.zeros(na, dtype=wp.float32, device=dev))
+        self._ahead_scratch = (
+            wp.zeros(n, dtype=wp.vec3, device=dev),
+            wp.zeros(n, dtype=wp.vec3, device=dev),
+            wp.zeros(na, dtype=wp.vec3, device=dev),
+            wp.zeros(na, dtype=wp.float32, device=dev),
+        )
         self.pair_capacity = max(16 * n, 64)
         self.pair_count = wp.zeros(1, dtype=wp.int32, device=dev)
         self.pair_i = wp.zeros(self.pair_capacity, dtype=wp.int32, device=dev)
@@ -239,10 +281,12 @@ class CollisionPipeline:
         self.n_static_points = 0 if pts is None else len(pts)
         walls = wall_segments([] if static_walls is None else static_walls, "static_walls")
         self.n_static_walls = len(walls)
-        self.walls = wp.array(walls.reshape(-1, 4).astype(np.float32), dtype=wp.vec4, device=dev) if len(walls) else None
-        self._scratch = None      # the second host thread's contact buffer (CPU)
+        self.walls = (
+            wp.array(walls.reshape(-1, 4).astype(np.float32), dtype=wp.vec4, device=dev) if len(walls) else None
+        )
+        self._scratch = None  # the second host thread's contact buffer (CPU)
         self._sweep_scratch = None  # the sweep's sorted order and lower x (CPU)
-        self._split = 0.75        # share of the narrow-phase threads run by the first host thread
+        self._split = 0.75  # share of the narrow-phase threads run by the first host thread
 
     def default_capacity(self) -> int:
         return int(self.config.contacts.max_per_character) * self.model.n_characters + 2 * self.model.n_bodies
@@ -275,24 +319,78 @@ class CollisionPipeline:
         nj, n = m.n_joints, m.n_characters
         spec = self.speculative
 
-        def capsules_now() -> None:         # the state's capsules and character AABBs
-            wp.launch(k.capsules_world_kernel, n, [state.x, state.q, W["cap_p0"], W["cap_p1"], W["cap_radius"],
-                                                   W["cap_skin"], nj, margin + spec, self.p0w, self.p1w,
-                                                   self.char_lo, self.char_hi, self.centre, self.half], device=dev)
+        def capsules_now() -> None:  # the state's capsules and character AABBs
+            wp.launch(
+                k.capsules_world_kernel,
+                n,
+                [
+                    state.x,
+                    state.q,
+                    W["cap_p0"],
+                    W["cap_p1"],
+                    W["cap_radius"],
+                    W["cap_skin"],
+                    nj,
+                    margin + spec,
+                    self.p0w,
+                    self.p1w,
+                    self.char_lo,
+                    self.char_hi,
+                    self.centre,
+                    self.half,
+                ],
+                device=dev,
+            )
 
-        def capsules_target() -> None:      # ... in the target pose and in the look-ahead pose
+        def capsules_target() -> None:  # ... in the target pose and in the look-ahead pose
             if relative:
-                wp.launch(k.capsules_world_kernel, n, [control.t_x, control.t_glob, W["cap_p0"], W["cap_p1"],
-                                                       W["cap_radius"], W["cap_skin"], nj, 0.0, self.p0t, self.p1t,
-                                                       self.t_lo, self.t_hi, self.centre_t, self.half_t], device=dev)
+                wp.launch(
+                    k.capsules_world_kernel,
+                    n,
+                    [
+                        control.t_x,
+                        control.t_glob,
+                        W["cap_p0"],
+                        W["cap_p1"],
+                        W["cap_radius"],
+                        W["cap_skin"],
+                        nj,
+                        0.0,
+                        self.p0t,
+                        self.p1t,
+                        self.t_lo,
+                        self.t_hi,
+                        self.centre_t,
+                        self.half_t,
+                    ],
+                    device=dev,
+                )
             if pass_on:
                 lo, hi, centre, half = self._ahead_scratch
-                wp.launch(k.capsules_world_kernel, n, [control.t_x_ahead, control.t_glob_ahead, W["cap_p0"],
-                                                       W["cap_p1"], W["cap_radius"], W["cap_skin"], nj, 0.0, self.p0a,
-                                                       self.p1a, lo, hi, centre, half], device=dev)
+                wp.launch(
+                    k.capsules_world_kernel,
+                    n,
+                    [
+                        control.t_x_ahead,
+                        control.t_glob_ahead,
+                        W["cap_p0"],
+                        W["cap_p1"],
+                        W["cap_radius"],
+                        W["cap_skin"],
+                        nj,
+                        0.0,
+                        self.p0a,
+                        self.p1a,
+                        lo,
+                        hi,
+                        centre,
+                        half,
+                    ],
+                    device=dev,
+                )
 
         if (relative or pass_on) and dev == "cpu" and n >= _MIN_CHARACTERS_PARALLEL and host_threads() >= 2:
-            run_parallel(capsules_now, capsules_target)      # disjoint outputs: the same bits either way
+            run_parallel(capsules_now, capsules_target)  # disjoint outputs: the same bits either way
         else:
             capsules_now()
             capsules_target()
@@ -310,19 +408,72 @@ class CollisionPipeline:
         out = [contacts.count, contacts.capacity, *contacts.buffers()]
         band = float(cfg.contacts.activation)
         if cfg.contacts.ground_stiffness > 0:
-            wp.launch(k.ground_kernel, nb, [state.x, self.p0w, self.p1w, W["cap_radius"], relative, self.p0t,
-                                            self.p1t, band, spec, float(cfg.contacts.ground_stiffness), *out], device=dev)
+            wp.launch(
+                k.ground_kernel,
+                nb,
+                [
+                    state.x,
+                    self.p0w,
+                    self.p1w,
+                    W["cap_radius"],
+                    relative,
+                    self.p0t,
+                    self.p1t,
+                    band,
+                    spec,
+                    float(cfg.contacts.ground_stiffness),
+                    *out,
+                ],
+                device=dev,
+            )
         if self.bvh is not None and self.static_enabled and cfg.contacts.environment_stiffness > 0:
-            wp.launch(k.environment_kernel, nb, [state.x, self.p0w, self.p1w, W["cap_radius"], W["cap_skin"],
-                                                 W["body_char"],
-                                                 self.char_lo, self.char_hi, self.bvh.id, self.points, self.env_lo,
-                                                 self.env_hi, self.period, margin, spec,
-                                                 float(cfg.contacts.environment_stiffness), *out], device=dev)
+            wp.launch(
+                k.environment_kernel,
+                nb,
+                [
+                    state.x,
+                    self.p0w,
+                    self.p1w,
+                    W["cap_radius"],
+                    W["cap_skin"],
+                    W["body_char"],
+                    self.char_lo,
+                    self.char_hi,
+                    self.bvh.id,
+                    self.points,
+                    self.env_lo,
+                    self.env_hi,
+                    self.period,
+                    margin,
+                    spec,
+                    float(cfg.contacts.environment_stiffness),
+                    *out,
+                ],
+                device=dev,
+            )
         if self.walls is not None and self.static_enabled and cfg.contacts.wall_stiffness > 0:
-            side = control.t_x if control is not None else state.x      # whose root gives each wall's free side
-            wp.launch(k.wall_kernel, nb, [state.x, self.p0w, self.p1w, W["cap_radius"], W["cap_skin"], W["body_char"],
-                                          nj, side, self.walls, self.period, margin, spec, float(cfg.contacts.wall_stiffness),
-                                          *out], device=dev)
+            side = control.t_x if control is not None else state.x  # whose root gives each wall's free side
+            wp.launch(
+                k.wall_kernel,
+                nb,
+                [
+                    state.x,
+                    self.p0w,
+                    self.p1w,
+                    W["cap_radius"],
+                    W["cap_skin"],
+                    W["body_char"],
+                    nj,
+                    side,
+                    self.walls,
+                    self.period,
+                    margin,
+                    spec,
+                    float(cfg.contacts.wall_stiffness),
+                    *out,
+                ],
+                device=dev,
+            )
 
     def _character_pairs(self) -> int:
         """The broad phase: the overlapping character AABBs into ``pair_i``, ``pair_j``,
@@ -336,23 +487,46 @@ class CollisionPipeline:
         if n > 1 and cfg.contacts.stiffness > 0:
             if dev == "cpu" and self.period <= 0.0 and n >= _MIN_CHARACTERS_SWEEP:
                 if self._sweep_scratch is None:
-                    self._sweep_scratch = (wp.zeros(n, dtype=wp.int32, device=dev),
-                                           wp.zeros(n, dtype=wp.float32, device=dev))
-                launch_sweep(self.char_lo, self.char_hi, *self._sweep_scratch, self.pair_count, self.pair_capacity,
-                             self.pair_i, self.pair_j, self.pair_shift)
+                    self._sweep_scratch = (
+                        wp.zeros(n, dtype=wp.int32, device=dev),
+                        wp.zeros(n, dtype=wp.float32, device=dev),
+                    )
+                launch_sweep(
+                    self.char_lo,
+                    self.char_hi,
+                    *self._sweep_scratch,
+                    self.pair_count,
+                    self.pair_capacity,
+                    self.pair_i,
+                    self.pair_j,
+                    self.pair_shift,
+                )
             else:
                 self.pair_count.zero_()
-                wp.launch(k.broadphase_kernel, n, [self.char_lo, self.char_hi, self.period, self.pair_count,
-                                                   self.pair_capacity, self.pair_i, self.pair_j, self.pair_shift],
-                          device=dev)
+                wp.launch(
+                    k.broadphase_kernel,
+                    n,
+                    [
+                        self.char_lo,
+                        self.char_hi,
+                        self.period,
+                        self.pair_count,
+                        self.pair_capacity,
+                        self.pair_i,
+                        self.pair_j,
+                        self.pair_shift,
+                    ],
+                    device=dev,
+                )
             n_pairs = int(self.pair_count.numpy()[0])
             if n_pairs > self.pair_capacity:
                 self.dropped_pairs += n_pairs - self.pair_capacity
                 n_pairs = self.pair_capacity
         return n_pairs
 
-    def _pair_contacts(self, state, contacts: Contacts, relative: int, pass_on: int, margin: float,
-                       n_pairs: int) -> None:
+    def _pair_contacts(
+        self, state, contacts: Contacts, relative: int, pass_on: int, margin: float, n_pairs: int
+    ) -> None:
         """The inter-body contacts of the first ``n_pairs`` character pairs (the narrow
         phase) and the intra-body contacts, appended to ``contacts``: on the CPU with two
         host threads, split over both (see below)."""
@@ -367,21 +541,65 @@ class CollisionPipeline:
         n_intra = W["intra_pairs"].shape[0]
         intra_on = bool(cfg.contacts.intra_body and n_intra and cfg.contacts.intra_stiffness > 0)
 
-        def narrow(buf, lo: int, hi: int) -> None:     # the pairs [lo, hi) into buf
+        def narrow(buf, lo: int, hi: int) -> None:  # the pairs [lo, hi) into buf
             if hi > lo:
-                wp.launch(k.narrowphase_kernel, hi - lo,
-                          [state.x, self.p0w, self.p1w, W["cap_radius"], W["cap_skin"], self.centre, self.half,
-                           self.char_lo, self.char_hi, self.pair_i, self.pair_j, self.pair_shift, nj, margin, spec,
-                           float(cfg.contacts.stiffness), buf.count, buf.capacity, *buf.buffers(), int(lo),
-                           pass_on, self.p0a, self.p1a, float(cfg.contacts.pass_width)],
-                          device=dev)
+                wp.launch(
+                    k.narrowphase_kernel,
+                    hi - lo,
+                    [
+                        state.x,
+                        self.p0w,
+                        self.p1w,
+                        W["cap_radius"],
+                        W["cap_skin"],
+                        self.centre,
+                        self.half,
+                        self.char_lo,
+                        self.char_hi,
+                        self.pair_i,
+                        self.pair_j,
+                        self.pair_shift,
+                        nj,
+                        margin,
+                        spec,
+                        float(cfg.contacts.stiffness),
+                        buf.count,
+                        buf.capacity,
+                        *buf.buffers(),
+                        int(lo),
+                        pass_on,
+                        self.p0a,
+                        self.p1a,
+                        float(cfg.contacts.pass_width),
+                    ],
+                    device=dev,
+                )
 
         def intra(buf) -> None:
             if intra_on:
-                wp.launch(k.intra_kernel, n_intra, [state.x, self.p0w, self.p1w, W["cap_radius"], self.centre,
-                                                    self.half, W["intra_pairs"], relative, self.p0t, self.p1t,
-                                                    band, spec, float(cfg.contacts.intra_stiffness), buf.count,
-                                                    buf.capacity, *buf.buffers()], device=dev)
+                wp.launch(
+                    k.intra_kernel,
+                    n_intra,
+                    [
+                        state.x,
+                        self.p0w,
+                        self.p1w,
+                        W["cap_radius"],
+                        self.centre,
+                        self.half,
+                        W["intra_pairs"],
+                        relative,
+                        self.p0t,
+                        self.p1t,
+                        band,
+                        spec,
+                        float(cfg.contacts.intra_stiffness),
+                        buf.count,
+                        buf.capacity,
+                        *buf.buffers(),
+                    ],
+                    device=dev,
+                )
 
         total = n_pairs
         if dev != "cpu" or host_threads() < 2 or total * nj + n_intra < _MIN_SPLIT_THREADS:
@@ -413,7 +631,7 @@ class CollisionPipeline:
         intra-body pairs)."""
         if cut <= 0 or total <= 0 or t0 <= 0.0:
             return
-        per = t0 / cut                               # s per character pair
-        rest = max(t1 - per * (total - cut), 0.0)    # the intra pairs
+        per = t0 / cut  # s per character pair
+        rest = max(t1 - per * (total - cut), 0.0)  # the intra pairs
         target = min(max((per * total + rest) / (2.0 * per * total), 0.05), 0.95)
         self._split = 0.5 * self._split + 0.5 * target

@@ -21,11 +21,19 @@ import warp as wp
 
 from crowdstudy.warp_runtime import get_warp
 
-__all__ = ["capsules_world_kernel", "ground_kernel", "broadphase_kernel", "sweep_kernel", "narrowphase_kernel",
-           "intra_kernel", "environment_kernel", "wall_kernel"]
+__all__ = [
+    "capsules_world_kernel",
+    "ground_kernel",
+    "broadphase_kernel",
+    "sweep_kernel",
+    "narrowphase_kernel",
+    "intra_kernel",
+    "environment_kernel",
+    "wall_kernel",
+]
 
-get_warp()      # the project's kernel cache and log level, set before this module can compile
-wp.set_module_options({"enable_backward": False})     # forward only: no adjoints to compile
+get_warp()  # the project's kernel cache and log level, set before this module can compile
+wp.set_module_options({"enable_backward": False})  # forward only: no adjoints to compile
 
 
 @wp.func
@@ -65,12 +73,26 @@ def segment_params(p0: wp.vec3, p1: wp.vec3, q0: wp.vec3, q1: wp.vec3):
 
 
 @wp.func
-def push_contact(count: wp.array(dtype=wp.int32), capacity: int, a: int, b: int, n: wp.vec3, depth: float,
-                 lever_a: wp.vec3, lever_b: wp.vec3, k: float, kind: int,
-                 c_a: wp.array(dtype=wp.int32), c_b: wp.array(dtype=wp.int32),
-                 c_n: wp.array(dtype=wp.vec3), c_depth: wp.array(dtype=float),
-                 c_la: wp.array(dtype=wp.vec3), c_lb: wp.array(dtype=wp.vec3),
-                 c_k: wp.array(dtype=float), c_kind: wp.array(dtype=wp.int32)):
+def push_contact(
+    count: wp.array(dtype=wp.int32),
+    capacity: int,
+    a: int,
+    b: int,
+    n: wp.vec3,
+    depth: float,
+    lever_a: wp.vec3,
+    lever_b: wp.vec3,
+    k: float,
+    kind: int,
+    c_a: wp.array(dtype=wp.int32),
+    c_b: wp.array(dtype=wp.int32),
+    c_n: wp.array(dtype=wp.vec3),
+    c_depth: wp.array(dtype=float),
+    c_la: wp.array(dtype=wp.vec3),
+    c_lb: wp.array(dtype=wp.vec3),
+    c_k: wp.array(dtype=float),
+    c_kind: wp.array(dtype=wp.int32),
+):
     """Append one contact to the contact arrays (C,) at the next slot of ``count``; a
     contact past ``capacity`` is counted but not stored (the caller sees the overflow)."""
     idx = wp.atomic_add(count, 0, 1)
@@ -87,13 +109,22 @@ def push_contact(count: wp.array(dtype=wp.int32), capacity: int, a: int, b: int,
 
 
 @wp.kernel
-def capsules_world_kernel(x: wp.array(dtype=wp.vec3), q: wp.array(dtype=wp.quat),
-                          cap_p0: wp.array(dtype=wp.vec3), cap_p1: wp.array(dtype=wp.vec3),
-                          cap_radius: wp.array(dtype=float), cap_skin: wp.array(dtype=float),
-                          n_joints: int, grow: float,
-                          p0w: wp.array(dtype=wp.vec3), p1w: wp.array(dtype=wp.vec3),
-                          char_lo: wp.array(dtype=wp.vec3), char_hi: wp.array(dtype=wp.vec3),
-                          centre: wp.array(dtype=wp.vec3), half: wp.array(dtype=float)):
+def capsules_world_kernel(
+    x: wp.array(dtype=wp.vec3),
+    q: wp.array(dtype=wp.quat),
+    cap_p0: wp.array(dtype=wp.vec3),
+    cap_p1: wp.array(dtype=wp.vec3),
+    cap_radius: wp.array(dtype=float),
+    cap_skin: wp.array(dtype=float),
+    n_joints: int,
+    grow: float,
+    p0w: wp.array(dtype=wp.vec3),
+    p1w: wp.array(dtype=wp.vec3),
+    char_lo: wp.array(dtype=wp.vec3),
+    char_hi: wp.array(dtype=wp.vec3),
+    centre: wp.array(dtype=wp.vec3),
+    half: wp.array(dtype=float),
+):
     """World capsule end points (m), their midpoints and half lengths (m: the bounding
     spheres of the narrow phase) and one AABB per character (thread), grown by ``grow``."""
     i = wp.tid()
@@ -116,13 +147,28 @@ def capsules_world_kernel(x: wp.array(dtype=wp.vec3), q: wp.array(dtype=wp.quat)
 
 
 @wp.kernel
-def ground_kernel(x: wp.array(dtype=wp.vec3), p0w: wp.array(dtype=wp.vec3), p1w: wp.array(dtype=wp.vec3),
-                  cap_radius: wp.array(dtype=float), relative: int, p0t: wp.array(dtype=wp.vec3),
-                  p1t: wp.array(dtype=wp.vec3), band: float, spec: float, k: float,
-                  count: wp.array(dtype=wp.int32), capacity: int,
-                  c_a: wp.array(dtype=wp.int32), c_b: wp.array(dtype=wp.int32), c_n: wp.array(dtype=wp.vec3),
-                  c_depth: wp.array(dtype=float), c_la: wp.array(dtype=wp.vec3), c_lb: wp.array(dtype=wp.vec3),
-                  c_k: wp.array(dtype=float), c_kind: wp.array(dtype=wp.int32)):
+def ground_kernel(
+    x: wp.array(dtype=wp.vec3),
+    p0w: wp.array(dtype=wp.vec3),
+    p1w: wp.array(dtype=wp.vec3),
+    cap_radius: wp.array(dtype=float),
+    relative: int,
+    p0t: wp.array(dtype=wp.vec3),
+    p1t: wp.array(dtype=wp.vec3),
+    band: float,
+    spec: float,
+    k: float,
+    count: wp.array(dtype=wp.int32),
+    capacity: int,
+    c_a: wp.array(dtype=wp.int32),
+    c_b: wp.array(dtype=wp.int32),
+    c_n: wp.array(dtype=wp.vec3),
+    c_depth: wp.array(dtype=float),
+    c_la: wp.array(dtype=wp.vec3),
+    c_lb: wp.array(dtype=wp.vec3),
+    c_k: wp.array(dtype=float),
+    c_kind: wp.array(dtype=wp.int32),
+):
     """Both end spheres of each capsule (thread) against the floor z = 0.
 
     With ``relative`` only the depth beyond the TARGET pose's own counts (p0t, p1t: the
@@ -143,15 +189,22 @@ def ground_kernel(x: wp.array(dtype=wp.vec3), p0w: wp.array(dtype=wp.vec3), p1w:
         if relative != 0:
             depth = depth - wp.max(r - pt[2] + band, 0.0)
         if depth > -spec:
-            push_contact(count, capacity, b, -1, up, depth, p - x[b], zero, k, 0,
-                         c_a, c_b, c_n, c_depth, c_la, c_lb, c_k, c_kind)
+            push_contact(
+                count, capacity, b, -1, up, depth, p - x[b], zero, k, 0, c_a, c_b, c_n, c_depth, c_la, c_lb, c_k, c_kind
+            )
 
 
 @wp.kernel
-def broadphase_kernel(char_lo: wp.array(dtype=wp.vec3), char_hi: wp.array(dtype=wp.vec3), period: float,
-                      pair_count: wp.array(dtype=wp.int32), pair_capacity: int,
-                      pair_i: wp.array(dtype=wp.int32), pair_j: wp.array(dtype=wp.int32),
-                      pair_shift: wp.array(dtype=float)):
+def broadphase_kernel(
+    char_lo: wp.array(dtype=wp.vec3),
+    char_hi: wp.array(dtype=wp.vec3),
+    period: float,
+    pair_count: wp.array(dtype=wp.int32),
+    pair_capacity: int,
+    pair_i: wp.array(dtype=wp.int32),
+    pair_j: wp.array(dtype=wp.int32),
+    pair_shift: wp.array(dtype=float),
+):
     """Character AABB pairs (i < j) that overlap, with the x shift (m) bringing j next to
     i under the minimum-image convention (``period`` > 0 in periodic scenes).
 
@@ -184,11 +237,18 @@ def broadphase_kernel(char_lo: wp.array(dtype=wp.vec3), char_hi: wp.array(dtype=
 
 
 @wp.kernel
-def sweep_kernel(char_lo: wp.array(dtype=wp.vec3), char_hi: wp.array(dtype=wp.vec3),
-                 order: wp.array(dtype=wp.int32), sorted_lo_x: wp.array(dtype=float), reach: float,
-                 pair_count: wp.array(dtype=wp.int32), pair_capacity: int,
-                 pair_i: wp.array(dtype=wp.int32), pair_j: wp.array(dtype=wp.int32),
-                 pair_shift: wp.array(dtype=float)):
+def sweep_kernel(
+    char_lo: wp.array(dtype=wp.vec3),
+    char_hi: wp.array(dtype=wp.vec3),
+    order: wp.array(dtype=wp.int32),
+    sorted_lo_x: wp.array(dtype=float),
+    reach: float,
+    pair_count: wp.array(dtype=wp.int32),
+    pair_capacity: int,
+    pair_i: wp.array(dtype=wp.int32),
+    pair_j: wp.array(dtype=wp.int32),
+    pair_shift: wp.array(dtype=float),
+):
     """``broadphase_kernel``'s pairs without a period, in O(n k): the characters sorted by
     their AABB's lower x (``order``, ``sorted_lo_x``); character i (thread) binary-searches
     the first that starts within ``reach`` m (the widest box along x, plus slack) before
@@ -232,7 +292,7 @@ def sweep_kernel(char_lo: wp.array(dtype=wp.vec3), char_hi: wp.array(dtype=wp.ve
             pair_shift[idx] = 0.0
     if start >= 0:
         end = wp.min(pair_count[0], pair_capacity)
-        for s in range(start + 1, end):          # insertion sort of this character's pairs by j
+        for s in range(start + 1, end):  # insertion sort of this character's pairs by j
             v = pair_j[s]
             t = s - 1
             while t >= start and pair_j[t] > v:
@@ -242,20 +302,39 @@ def sweep_kernel(char_lo: wp.array(dtype=wp.vec3), char_hi: wp.array(dtype=wp.ve
 
 
 @wp.kernel
-def narrowphase_kernel(x: wp.array(dtype=wp.vec3), p0w: wp.array(dtype=wp.vec3), p1w: wp.array(dtype=wp.vec3),
-                       cap_radius: wp.array(dtype=float), cap_skin: wp.array(dtype=float),
-                       centre: wp.array(dtype=wp.vec3), half: wp.array(dtype=float),
-                       char_lo: wp.array(dtype=wp.vec3), char_hi: wp.array(dtype=wp.vec3),
-                       pair_i: wp.array(dtype=wp.int32), pair_j: wp.array(dtype=wp.int32),
-                       pair_shift: wp.array(dtype=float),
-                       n_joints: int, margin: float, spec: float, k: float,
-                       count: wp.array(dtype=wp.int32), capacity: int,
-                       c_a: wp.array(dtype=wp.int32), c_b: wp.array(dtype=wp.int32),
-                       c_n: wp.array(dtype=wp.vec3), c_depth: wp.array(dtype=float),
-                       c_la: wp.array(dtype=wp.vec3), c_lb: wp.array(dtype=wp.vec3),
-                       c_k: wp.array(dtype=float), c_kind: wp.array(dtype=wp.int32), offset: int,
-                       pass_on: int, p0a: wp.array(dtype=wp.vec3), p1a: wp.array(dtype=wp.vec3),
-                       pass_width: float):
+def narrowphase_kernel(
+    x: wp.array(dtype=wp.vec3),
+    p0w: wp.array(dtype=wp.vec3),
+    p1w: wp.array(dtype=wp.vec3),
+    cap_radius: wp.array(dtype=float),
+    cap_skin: wp.array(dtype=float),
+    centre: wp.array(dtype=wp.vec3),
+    half: wp.array(dtype=float),
+    char_lo: wp.array(dtype=wp.vec3),
+    char_hi: wp.array(dtype=wp.vec3),
+    pair_i: wp.array(dtype=wp.int32),
+    pair_j: wp.array(dtype=wp.int32),
+    pair_shift: wp.array(dtype=float),
+    n_joints: int,
+    margin: float,
+    spec: float,
+    k: float,
+    count: wp.array(dtype=wp.int32),
+    capacity: int,
+    c_a: wp.array(dtype=wp.int32),
+    c_b: wp.array(dtype=wp.int32),
+    c_n: wp.array(dtype=wp.vec3),
+    c_depth: wp.array(dtype=float),
+    c_la: wp.array(dtype=wp.vec3),
+    c_lb: wp.array(dtype=wp.vec3),
+    c_k: wp.array(dtype=float),
+    c_kind: wp.array(dtype=wp.int32),
+    offset: int,
+    pass_on: int,
+    p0a: wp.array(dtype=wp.vec3),
+    p1a: wp.array(dtype=wp.vec3),
+    pass_width: float,
+):
     """Pair of characters (thread + ``offset``): first the second character's capsules
     that may touch the first (a bit mask); then each capsule of the first character, in
     joint order: its bounding sphere against the second character's AABB, then against
@@ -334,22 +413,57 @@ def narrowphase_kernel(x: wp.array(dtype=wp.vec3), p0w: wp.array(dtype=wp.vec3),
                     qb = p0a[bb] + sv + sa[1] * (p1a[bb] - p0a[bb])
                     through = -wp.dot(qa - qb, n)
                     apart = wp.length(qa - qb) - (ra + rb + margin)
-                    k_pair = k * (1.0 - wp.clamp(through / pass_width, 0.0, 1.0)
-                                  * wp.clamp(apart / pass_width, 0.0, 1.0))
-                push_contact(count, capacity, ba, bb, n, depth, pa - x[ba], pb - (x[bb] + sv), k_pair, 2,
-                             c_a, c_b, c_n, c_depth, c_la, c_lb, c_k, c_kind)
+                    k_pair = k * (
+                        1.0 - wp.clamp(through / pass_width, 0.0, 1.0) * wp.clamp(apart / pass_width, 0.0, 1.0)
+                    )
+                push_contact(
+                    count,
+                    capacity,
+                    ba,
+                    bb,
+                    n,
+                    depth,
+                    pa - x[ba],
+                    pb - (x[bb] + sv),
+                    k_pair,
+                    2,
+                    c_a,
+                    c_b,
+                    c_n,
+                    c_depth,
+                    c_la,
+                    c_lb,
+                    c_k,
+                    c_kind,
+                )
 
 
 @wp.kernel
-def intra_kernel(x: wp.array(dtype=wp.vec3), p0w: wp.array(dtype=wp.vec3), p1w: wp.array(dtype=wp.vec3),
-                 cap_radius: wp.array(dtype=float), centre: wp.array(dtype=wp.vec3), half: wp.array(dtype=float),
-                 pairs: wp.array2d(dtype=wp.int32), relative: int,
-                 p0t: wp.array(dtype=wp.vec3), p1t: wp.array(dtype=wp.vec3), band: float, spec: float, k: float,
-                 count: wp.array(dtype=wp.int32), capacity: int,
-                 c_a: wp.array(dtype=wp.int32), c_b: wp.array(dtype=wp.int32),
-                 c_n: wp.array(dtype=wp.vec3), c_depth: wp.array(dtype=float),
-                 c_la: wp.array(dtype=wp.vec3), c_lb: wp.array(dtype=wp.vec3),
-                 c_k: wp.array(dtype=float), c_kind: wp.array(dtype=wp.int32)):
+def intra_kernel(
+    x: wp.array(dtype=wp.vec3),
+    p0w: wp.array(dtype=wp.vec3),
+    p1w: wp.array(dtype=wp.vec3),
+    cap_radius: wp.array(dtype=float),
+    centre: wp.array(dtype=wp.vec3),
+    half: wp.array(dtype=float),
+    pairs: wp.array2d(dtype=wp.int32),
+    relative: int,
+    p0t: wp.array(dtype=wp.vec3),
+    p1t: wp.array(dtype=wp.vec3),
+    band: float,
+    spec: float,
+    k: float,
+    count: wp.array(dtype=wp.int32),
+    capacity: int,
+    c_a: wp.array(dtype=wp.int32),
+    c_b: wp.array(dtype=wp.int32),
+    c_n: wp.array(dtype=wp.vec3),
+    c_depth: wp.array(dtype=float),
+    c_la: wp.array(dtype=wp.vec3),
+    c_lb: wp.array(dtype=wp.vec3),
+    c_k: wp.array(dtype=float),
+    c_kind: wp.array(dtype=wp.int32),
+):
     """One intra-body capsule pair per thread: bounding spheres, then exact distance.
 
     With ``relative``, pairs that interpenetrate in the animation's TARGET pose (p0t,
@@ -378,22 +492,57 @@ def intra_kernel(x: wp.array(dtype=wp.vec3), p0w: wp.array(dtype=wp.vec3), p1w: 
         dt_ = (p0t[ba] + st_t[0] * (p1t[ba] - p0t[ba])) - (p0t[bb] + st_t[1] * (p1t[bb] - p0t[bb]))
         depth = depth - wp.max(ra + rb - wp.length(dt_) + band, 0.0)
     if depth > -spec and dist > 1.0e-6:
-        push_contact(count, capacity, ba, bb, d / dist, depth, pa - x[ba], pb - x[bb], k, 3,
-                     c_a, c_b, c_n, c_depth, c_la, c_lb, c_k, c_kind)
+        push_contact(
+            count,
+            capacity,
+            ba,
+            bb,
+            d / dist,
+            depth,
+            pa - x[ba],
+            pb - x[bb],
+            k,
+            3,
+            c_a,
+            c_b,
+            c_n,
+            c_depth,
+            c_la,
+            c_lb,
+            c_k,
+            c_kind,
+        )
 
 
 @wp.kernel
-def environment_kernel(x: wp.array(dtype=wp.vec3), p0w: wp.array(dtype=wp.vec3), p1w: wp.array(dtype=wp.vec3),
-                       cap_radius: wp.array(dtype=float), cap_skin: wp.array(dtype=float),
-                       body_char: wp.array(dtype=wp.int32),
-                       char_lo: wp.array(dtype=wp.vec3), char_hi: wp.array(dtype=wp.vec3),
-                       bvh: wp.uint64, points: wp.array(dtype=wp.vec3), env_lo: wp.vec3, env_hi: wp.vec3,
-                       period: float, margin: float, spec: float, k: float,
-                       count: wp.array(dtype=wp.int32), capacity: int,
-                       c_a: wp.array(dtype=wp.int32), c_b: wp.array(dtype=wp.int32),
-                       c_n: wp.array(dtype=wp.vec3), c_depth: wp.array(dtype=float),
-                       c_la: wp.array(dtype=wp.vec3), c_lb: wp.array(dtype=wp.vec3),
-                       c_k: wp.array(dtype=float), c_kind: wp.array(dtype=wp.int32)):
+def environment_kernel(
+    x: wp.array(dtype=wp.vec3),
+    p0w: wp.array(dtype=wp.vec3),
+    p1w: wp.array(dtype=wp.vec3),
+    cap_radius: wp.array(dtype=float),
+    cap_skin: wp.array(dtype=float),
+    body_char: wp.array(dtype=wp.int32),
+    char_lo: wp.array(dtype=wp.vec3),
+    char_hi: wp.array(dtype=wp.vec3),
+    bvh: wp.uint64,
+    points: wp.array(dtype=wp.vec3),
+    env_lo: wp.vec3,
+    env_hi: wp.vec3,
+    period: float,
+    margin: float,
+    spec: float,
+    k: float,
+    count: wp.array(dtype=wp.int32),
+    capacity: int,
+    c_a: wp.array(dtype=wp.int32),
+    c_b: wp.array(dtype=wp.int32),
+    c_n: wp.array(dtype=wp.vec3),
+    c_depth: wp.array(dtype=float),
+    c_la: wp.array(dtype=wp.vec3),
+    c_lb: wp.array(dtype=wp.vec3),
+    c_k: wp.array(dtype=float),
+    c_kind: wp.array(dtype=wp.int32),
+):
     """Capsule (thread) against the static sample points (m) of the scene's BVH; in
     periodic scenes the capsule is wrapped into [0, period) along x first."""
     b = wp.tid()
@@ -430,20 +579,54 @@ def environment_kernel(x: wp.array(dtype=wp.vec3), p0w: wp.array(dtype=wp.vec3),
         dist = wp.length(d)
         depth = r - dist
         if depth > -spec and dist > 1.0e-6:
-            push_contact(count, capacity, b, -1, d / dist, depth, c - (x[b] + sv), wp.vec3(0.0, 0.0, 0.0), k, 1,
-                         c_a, c_b, c_n, c_depth, c_la, c_lb, c_k, c_kind)
+            push_contact(
+                count,
+                capacity,
+                b,
+                -1,
+                d / dist,
+                depth,
+                c - (x[b] + sv),
+                wp.vec3(0.0, 0.0, 0.0),
+                k,
+                1,
+                c_a,
+                c_b,
+                c_n,
+                c_depth,
+                c_la,
+                c_lb,
+                c_k,
+                c_kind,
+            )
 
 
 @wp.kernel
-def wall_kernel(x: wp.array(dtype=wp.vec3), p0w: wp.array(dtype=wp.vec3), p1w: wp.array(dtype=wp.vec3),
-                cap_radius: wp.array(dtype=float), cap_skin: wp.array(dtype=float),
-                body_char: wp.array(dtype=wp.int32), n_joints: int, side_x: wp.array(dtype=wp.vec3),
-                walls: wp.array(dtype=wp.vec4), period: float, margin: float, spec: float, k: float,
-                count: wp.array(dtype=wp.int32), capacity: int,
-                c_a: wp.array(dtype=wp.int32), c_b: wp.array(dtype=wp.int32),
-                c_n: wp.array(dtype=wp.vec3), c_depth: wp.array(dtype=float),
-                c_la: wp.array(dtype=wp.vec3), c_lb: wp.array(dtype=wp.vec3),
-                c_k: wp.array(dtype=float), c_kind: wp.array(dtype=wp.int32)):
+def wall_kernel(
+    x: wp.array(dtype=wp.vec3),
+    p0w: wp.array(dtype=wp.vec3),
+    p1w: wp.array(dtype=wp.vec3),
+    cap_radius: wp.array(dtype=float),
+    cap_skin: wp.array(dtype=float),
+    body_char: wp.array(dtype=wp.int32),
+    n_joints: int,
+    side_x: wp.array(dtype=wp.vec3),
+    walls: wp.array(dtype=wp.vec4),
+    period: float,
+    margin: float,
+    spec: float,
+    k: float,
+    count: wp.array(dtype=wp.int32),
+    capacity: int,
+    c_a: wp.array(dtype=wp.int32),
+    c_b: wp.array(dtype=wp.int32),
+    c_n: wp.array(dtype=wp.vec3),
+    c_depth: wp.array(dtype=float),
+    c_la: wp.array(dtype=wp.vec3),
+    c_lb: wp.array(dtype=wp.vec3),
+    c_k: wp.array(dtype=float),
+    c_kind: wp.array(dtype=wp.int32),
+):
     """Both end spheres of each capsule (thread) against each wall (x0, y0, x1, y1), m: a
     vertical plane through the segment, one-sided. Its free side is the side of the
     character's root in ``side_x`` (the animation's target pose when known): a hand that
@@ -497,6 +680,24 @@ def wall_kernel(x: wp.array(dtype=wp.vec3), p0w: wp.array(dtype=wp.vec3), p1w: w
                 if t >= 0.0 and t <= 1.0:
                     depth = r - (ex * nx + ey * ny)
                     if depth > -spec:
-                        push_contact(count, capacity, b, -1, normal, depth, p - x[b], wp.vec3(0.0, 0.0, 0.0),
-                                     k, 1, c_a, c_b, c_n, c_depth, c_la, c_lb, c_k, c_kind)
+                        push_contact(
+                            count,
+                            capacity,
+                            b,
+                            -1,
+                            normal,
+                            depth,
+                            p - x[b],
+                            wp.vec3(0.0, 0.0, 0.0),
+                            k,
+                            1,
+                            c_a,
+                            c_b,
+                            c_n,
+                            c_depth,
+                            c_la,
+                            c_lb,
+                            c_k,
+                            c_kind,
+                        )
                     break

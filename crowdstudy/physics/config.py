@@ -51,34 +51,59 @@ import numpy as np
 from crowdstudy.body.capsules import capsule_skin
 from crowdstudy.errors import InvalidInputError
 from crowdstudy.physics.config_keys import leaves, resolve_changes
-from crowdstudy.physics.config_sections import (BodyConfig, ContactsConfig, ControlConfig, DensityProfile, FeetConfig,
-                                                OutputConfig, SkinConfig, SolverConfig, check_value, field_types)
+from crowdstudy.physics.config_sections import (
+    BodyConfig,
+    ContactsConfig,
+    ControlConfig,
+    DensityProfile,
+    FeetConfig,
+    OutputConfig,
+    SkinConfig,
+    SolverConfig,
+    check_value,
+    field_types,
+)
 
 __all__ = ["PhysicsConfig"]
 
 #: the paper's controller (:meth:`PhysicsConfig.paper_controller`)
-_PAPER_CONTROLLER = {"control.root_translation_stiffness": 1.0e4, "control.root_translation_reach": 0.0,
-                     "control.pose_translation_stiffness": 0.0, "control.pose_translation_damping_scale": 0.0,
-                     "control.arm_scale": 1.0}
+_PAPER_CONTROLLER = {
+    "control.root_translation_stiffness": 1.0e4,
+    "control.root_translation_reach": 0.0,
+    "control.pose_translation_stiffness": 0.0,
+    "control.pose_translation_damping_scale": 0.0,
+    "control.arm_scale": 1.0,
+}
 
 #: what the paper's method alone has (:meth:`PhysicsConfig.paper`): everything this project
 #: adds to it switched off
 _PAPER_METHOD = {
     **_PAPER_CONTROLLER,
     # the plain implicit-Euler prediction x + h v with gravity applied
-    "solver.feedforward": False, "solver.settle_time": 0.0,
+    "solver.feedforward": False,
+    "solver.settle_time": 0.0,
     # Eq. 4 on every joint, pelvis and feet stiffer; no translational springs but the root's
-    "control.trunk_scale": 1.0, "control.feet_translation_stiffness": 0.0,
+    "control.trunk_scale": 1.0,
+    "control.feet_translation_stiffness": 0.0,
     "control.feet_translation_damping_scale": 0.0,
     "feet.anchor_stiffness": 0.0,
     # the four penalty contacts (k/2) depth^2 on bare capsules, nothing ahead of a contact
-    "contacts.margin": 0.0, "contacts.speculative_distance": 0.0, "contacts.activation": 0.0,
-    "contacts.release_width": 0.0, "contacts.pass_ahead": 0.0, "contacts.stiffening_depth": 0.0,
+    "contacts.margin": 0.0,
+    "contacts.speculative_distance": 0.0,
+    "contacts.activation": 0.0,
+    "contacts.release_width": 0.0,
+    "contacts.pass_ahead": 0.0,
+    "contacts.stiffening_depth": 0.0,
     "contacts.target_relative_self": False,
-    "skin.percentile": 0.0, "skin.max": 0.0, "skin.hand_scale": 0.0,
+    "skin.percentile": 0.0,
+    "skin.max": 0.0,
+    "skin.hand_scale": 0.0,
     # no output stage: the simulated poses are the output (a periodic clip still closes its loop)
-    "output.smoothing": 0.0, "output.smoothing_root": 0.0, "output.hold": 0.0,
-    "output.speed_limit": False, "output.foot_lock": False,
+    "output.smoothing": 0.0,
+    "output.smoothing_root": 0.0,
+    "output.hold": 0.0,
+    "output.speed_limit": False,
+    "output.foot_lock": False,
 }
 
 
@@ -97,7 +122,7 @@ def _apply(obj, changes: dict[str, object]):
     return dataclasses.replace(obj, **updates)
 
 
-def _build(base: "PhysicsConfig", changes: dict[str, object], where: str) -> "PhysicsConfig":
+def _build(base: PhysicsConfig, changes: dict[str, object], where: str) -> PhysicsConfig:
     """``base`` with ``changes`` ({dotted path: value}) checked and made; errors name ``where``."""
     fields = leaves(type(base))
     for path, value in changes.items():
@@ -108,7 +133,7 @@ def _build(base: "PhysicsConfig", changes: dict[str, object], where: str) -> "Ph
             raise InvalidInputError(f"{where}: {exc}") from None
     try:
         return _apply(base, changes)
-    except InvalidInputError as exc:          # a rule between fields (the profile's order)
+    except InvalidInputError as exc:  # a rule between fields (the profile's order)
         raise InvalidInputError(f"{where}: {exc}") from None
 
 
@@ -156,7 +181,7 @@ class PhysicsConfig:
         ``profile``: 0 at the sparse end and below, 1 at the dense end and above."""
         return self.profile.weight(density)
 
-    def for_density(self, density: float) -> "PhysicsConfig":
+    def for_density(self, density: float) -> PhysicsConfig:
         """The configuration a crowd of ``density`` characters per m^2 is corrected with:
         every field that follows the profile (None) set to ``profile.at(density)``'s value,
         the others kept. The copy is final: resolving it again changes nothing, and a
@@ -164,14 +189,17 @@ class PhysicsConfig:
         if not self.follows_profile:
             return self
         point = self.profile.at(density)
-        skin = dataclasses.replace(self.skin, max=point.skin_max if self.skin.max is None else self.skin.max,
-                                   hand_scale=point.skin_hand_scale if self.skin.hand_scale is None
-                                   else self.skin.hand_scale)
-        output = dataclasses.replace(self.output, hold=point.output_hold if self.output.hold is None
-                                     else self.output.hold)
+        skin = dataclasses.replace(
+            self.skin,
+            max=point.skin_max if self.skin.max is None else self.skin.max,
+            hand_scale=point.skin_hand_scale if self.skin.hand_scale is None else self.skin.hand_scale,
+        )
+        output = dataclasses.replace(
+            self.output, hold=point.output_hold if self.output.hold is None else self.output.hold
+        )
         return dataclasses.replace(self, skin=skin, output=output)
 
-    def for_dense_crowd(self) -> "PhysicsConfig":
+    def for_dense_crowd(self) -> PhysicsConfig:
         """:meth:`for_density` at the profile's dense end: what a consumer with no crowd to
         measure uses (a :class:`~crowdstudy.physics.corrector.CrowdCorrector` fed frame by
         frame, :func:`~crowdstudy.physics.output_stage.finish_crowd`, :meth:`mesh_skin`)."""
@@ -179,7 +207,7 @@ class PhysicsConfig:
 
     # -- copies --------------------------------------------------------------------------
     @classmethod
-    def paper_controller(cls, changes: Mapping[str, object] | None = None, /, **fields) -> "PhysicsConfig":
+    def paper_controller(cls, changes: Mapping[str, object] | None = None, /, **fields) -> PhysicsConfig:
         """The paper's controller: the root held by a linear translation spring (1e4 N/m,
         our value; the paper gives none) and every other body only through its joint
         rotation (Eq. 4), no world-space pose springs, no pose damper, the arms at the
@@ -191,7 +219,7 @@ class PhysicsConfig:
         return cls().with_values(_PAPER_CONTROLLER).with_values(changes, **fields)
 
     @classmethod
-    def paper(cls, changes: Mapping[str, object] | None = None, /, **fields) -> "PhysicsConfig":
+    def paper(cls, changes: Mapping[str, object] | None = None, /, **fields) -> PhysicsConfig:
         """The paper's method alone: inertia and gravity (the plain prediction ``x + h v``),
         soft ball joints, the PD control of Eq. 4 with d = 0.006 and stiffer pelvis and feet
         (the root also held by a linear translation spring, as :meth:`paper_controller`),
@@ -206,17 +234,19 @@ class PhysicsConfig:
         ``changes``/``fields``: further fields to set (:meth:`with_values`)."""
         return cls().with_values(_PAPER_METHOD).with_values(changes, **fields)
 
-    def replace(self, **sections) -> "PhysicsConfig":
+    def replace(self, **sections) -> PhysicsConfig:
         """A validated copy with whole sections replaced (``control=ControlConfig(...)``);
         :meth:`with_values` sets single fields."""
         names = [f.name for f in dataclasses.fields(self)]
         unknown = sorted(set(sections) - set(names))
         if unknown:
-            raise InvalidInputError(f"PhysicsConfig.replace: unknown section(s) {unknown}; expected some of {names} "
-                                    "(set single fields with with_values, e.g. with_values(damping=0.01))")
+            raise InvalidInputError(
+                f"PhysicsConfig.replace: unknown section(s) {unknown}; expected some of {names} "
+                "(set single fields with with_values, e.g. with_values(damping=0.01))"
+            )
         return dataclasses.replace(self, **sections)
 
-    def with_values(self, changes: Mapping[str, object] | None = None, /, **fields) -> "PhysicsConfig":
+    def with_values(self, changes: Mapping[str, object] | None = None, /, **fields) -> PhysicsConfig:
         """A validated copy with fields set by dotted path (``{"control.damping": 0.01}``),
         by a field name that occurs once (``damping=0.01``) or a former flat name, as
         :meth:`from_overrides` takes them."""
@@ -227,8 +257,14 @@ class PhysicsConfig:
         return type(self).from_overrides({**changes, **fields}, where="PhysicsConfig.with_values", base=self)
 
     @classmethod
-    def from_overrides(cls, overrides: Mapping[str, object], *, where: str = "config",
-                       base: "PhysicsConfig | None" = None, strings: bool = False) -> "PhysicsConfig":
+    def from_overrides(
+        cls,
+        overrides: Mapping[str, object],
+        *,
+        where: str = "config",
+        base: PhysicsConfig | None = None,
+        strings: bool = False,
+    ) -> PhysicsConfig:
         """``base`` (default: the defaults) with the fields of ``overrides`` set.
 
         Args:
@@ -259,7 +295,7 @@ class PhysicsConfig:
         return dataclasses.asdict(self)
 
     @classmethod
-    def from_dict(cls, data: Mapping[str, object], *, where: str = "PhysicsConfig.from_dict") -> "PhysicsConfig":
+    def from_dict(cls, data: Mapping[str, object], *, where: str = "PhysicsConfig.from_dict") -> PhysicsConfig:
         """The configuration :meth:`as_dict` gave ``data`` (sections as nested dicts, dotted
         paths only; fields left out keep their defaults): ``from_dict(c.as_dict()) == c``."""
         return _build(cls(), resolve_changes(data, cls, where=where, paths_only=True), where)

@@ -33,20 +33,27 @@ from crowdstudy.physics.config import PhysicsConfig
 __all__ = ["CONFIG_HELP", "add_config_option", "load_config_file", "config_from_cli"]
 
 _DENSE = PhysicsConfig().profile.dense
-CONFIG_HELP = ("physics settings: a TOML file with PhysicsConfig's sections ([control] damping = 0.01) and/or "
-               "KEY=VALUE items applied on top of it; KEY is a dotted path (control.damping, contacts.stiffness, "
-               "profile.sparse.skin_max) or a field name that occurs once (damping, cg_tolerance). skin.max, "
-               "skin.hand_scale and output.hold follow the crowd's density (profile.sparse below "
-               "profile.sparse.crowd_density, profile.dense above profile.dense.crowd_density) unless given a "
-               f"number: skin.max={_DENSE.skin_max:g} skin.hand_scale={_DENSE.skin_hand_scale:g} "
-               f"output.hold={_DENSE.output_hold:g} gives every crowd the dense profile")
+CONFIG_HELP = (
+    "physics settings: a TOML file with PhysicsConfig's sections ([control] damping = 0.01) and/or "
+    "KEY=VALUE items applied on top of it; KEY is a dotted path (control.damping, contacts.stiffness, "
+    "profile.sparse.skin_max) or a field name that occurs once (damping, cg_tolerance). skin.max, "
+    "skin.hand_scale and output.hold follow the crowd's density (profile.sparse below "
+    "profile.sparse.crowd_density, profile.dense above profile.dense.crowd_density) unless given a "
+    f"number: skin.max={_DENSE.skin_max:g} skin.hand_scale={_DENSE.skin_hand_scale:g} "
+    f"output.hold={_DENSE.output_hold:g} gives every crowd the dense profile"
+)
 
 
 def add_config_option(parser: argparse.ArgumentParser, what: str = "") -> None:
     """Add ``--config [FILE.toml] [KEY=VALUE ...]`` to ``parser`` (``what``: a note on
     what the settings are for, put before the common help)."""
-    parser.add_argument("--config", nargs="*", default=[], metavar="FILE.toml|KEY=VALUE",
-                        help=(what + "; " if what else "") + CONFIG_HELP)
+    parser.add_argument(
+        "--config",
+        nargs="*",
+        default=[],
+        metavar="FILE.toml|KEY=VALUE",
+        help=(what + "; " if what else "") + CONFIG_HELP,
+    )
 
 
 def load_config_file(path: str | Path, *, base: PhysicsConfig | None = None, option: str = "--config") -> PhysicsConfig:

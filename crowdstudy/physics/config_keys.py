@@ -28,8 +28,16 @@ from collections.abc import Mapping
 from crowdstudy.errors import InvalidInputError
 from crowdstudy.physics.config_sections import DensityProfile, field_types
 
-__all__ = ["FORMER_NAMES", "RETIRED_NAMES", "Leaf", "leaves", "sections", "resolve_key", "resolve_changes",
-           "parse_text"]
+__all__ = [
+    "FORMER_NAMES",
+    "RETIRED_NAMES",
+    "Leaf",
+    "leaves",
+    "sections",
+    "resolve_key",
+    "resolve_changes",
+    "parse_text",
+]
 
 #: The flat names of the configuration before it had sections, for the fields whose new
 #: name is not simply the same leaf name: former name -> dotted path.
@@ -61,14 +69,16 @@ FORMER_NAMES: dict[str, str] = {
 }
 
 _DENSE = DensityProfile().dense
-_FOLLOW = ("none (the default) follows the crowd's density between profile.sparse.{p} and profile.dense.{p}; "
-           "a number fixes it for every crowd")
+_FOLLOW = (
+    "none (the default) follows the crowd's density between profile.sparse.{p} and profile.dense.{p}; "
+    "a number fixes it for every crowd"
+)
 #: Former flat names whose meaning depended on another field: what to set instead.
 RETIRED_NAMES: dict[str, str] = {
     "crowd_adaptive": "the skins and the hold follow the crowd's density while skin.max, skin.hand_scale and "
-                      "output.hold are none (the default); give those three numbers to fix them for every crowd "
-                      f"(the dense profile: skin.max={_DENSE.skin_max:g} skin.hand_scale={_DENSE.skin_hand_scale:g} "
-                      f"output.hold={_DENSE.output_hold:g})",
+    "output.hold are none (the default); give those three numbers to fix them for every crowd "
+    f"(the dense profile: skin.max={_DENSE.skin_max:g} skin.hand_scale={_DENSE.skin_hand_scale:g} "
+    f"output.hold={_DENSE.output_hold:g})",
     "mesh_skin_max": "set skin.max: " + _FOLLOW.format(p="skin_max"),
     "mesh_skin_hand_scale": "set skin.hand_scale: " + _FOLLOW.format(p="skin_hand_scale"),
     "output_hold": "set output.hold: " + _FOLLOW.format(p="output_hold"),
@@ -117,8 +127,9 @@ def _flatten(mapping: Mapping, where: str, prefix: str, known_sections: list[str
         key = f"{prefix}{key.strip()}"
         if isinstance(value, Mapping):
             if key not in known_sections:
-                raise InvalidInputError(f"{where}: [{key}] is not a section of PhysicsConfig; its sections are "
-                                        f"{', '.join(known_sections)}")
+                raise InvalidInputError(
+                    f"{where}: [{key}] is not a section of PhysicsConfig; its sections are {', '.join(known_sections)}"
+                )
             out.extend(_flatten(value, where, key + ".", known_sections))
         else:
             out.append((key, value))
@@ -127,8 +138,11 @@ def _flatten(mapping: Mapping, where: str, prefix: str, known_sections: list[str
 
 def _unknown(key: str, names: list[str], where: str) -> InvalidInputError:
     close = difflib.get_close_matches(key, names, n=1, cutoff=0.6)
-    hint = f" (did you mean {close[0]}?)" if close else \
-        " (a dotted path such as control.damping, or a field name such as damping)"
+    hint = (
+        f" (did you mean {close[0]}?)"
+        if close
+        else " (a dotted path such as control.damping, or a field name such as damping)"
+    )
     return InvalidInputError(f"{where}: unknown PhysicsConfig field {key!r}{hint}")
 
 
@@ -141,8 +155,9 @@ def resolve_key(key: str, cls: type, where: str, *, paths_only: bool = False) ->
     known_sections = sections(cls)
     if key in known_sections:
         example = next(p for p in fields if p.startswith(key + "."))
-        raise InvalidInputError(f"{where}: {key!r} is a section of PhysicsConfig, not a field; set its fields "
-                                f"(e.g. {example})")
+        raise InvalidInputError(
+            f"{where}: {key!r} is a section of PhysicsConfig, not a field; set its fields (e.g. {example})"
+        )
     by_leaf: dict[str, list[str]] = {}
     for path in fields:
         by_leaf.setdefault(path.rsplit(".", 1)[-1], []).append(path)
@@ -155,8 +170,7 @@ def resolve_key(key: str, cls: type, where: str, *, paths_only: bool = False) ->
     if len(found) == 1:
         return found[0]
     if len(found) > 1:
-        raise InvalidInputError(f"{where}: PhysicsConfig field {key!r} is ambiguous; name one of "
-                                f"{', '.join(found)}")
+        raise InvalidInputError(f"{where}: PhysicsConfig field {key!r} is ambiguous; name one of {', '.join(found)}")
     if key in FORMER_NAMES:
         return FORMER_NAMES[key]
     raise _unknown(key, names + list(FORMER_NAMES), where)
@@ -188,8 +202,9 @@ def parse_text(raw: str, leaf: Leaf, where: str) -> object:
     raise InvalidInputError(f"{where}: {leaf.path} expects {what}, got {raw!r}")
 
 
-def resolve_changes(changes: Mapping, cls: type, *, where: str, strings: bool = False,
-                    paths_only: bool = False) -> dict[str, object]:
+def resolve_changes(
+    changes: Mapping, cls: type, *, where: str, strings: bool = False, paths_only: bool = False
+) -> dict[str, object]:
     """{dotted path: value} of ``changes`` (keys as in the module's docstring, nested
     mappings for sections). With ``strings``, a ``str`` value is parsed
     (:func:`parse_text`); values are checked by the caller. A field named twice is an

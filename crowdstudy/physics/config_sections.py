@@ -30,8 +30,18 @@ import numpy as np
 from crowdstudy.body.capsules import SKIN_HAND_SCALE, SKIN_MAX, SKIN_PERCENTILE
 from crowdstudy.errors import InvalidInputError
 
-__all__ = ["SolverConfig", "BodyConfig", "ControlConfig", "FeetConfig", "ContactsConfig", "SkinConfig",
-           "OutputConfig", "ProfilePoint", "DensityProfile", "check_value"]
+__all__ = [
+    "SolverConfig",
+    "BodyConfig",
+    "ControlConfig",
+    "FeetConfig",
+    "ContactsConfig",
+    "SkinConfig",
+    "OutputConfig",
+    "ProfilePoint",
+    "DensityProfile",
+    "check_value",
+]
 
 
 @functools.cache
@@ -114,8 +124,7 @@ class SolverConfig(_Section):
     """
 
     WHERE: ClassVar[str] = "PhysicsConfig.solver"
-    POSITIVE: ClassVar[frozenset[str]] = frozenset({"dt", "cg_tolerance", "cg_max_iterations",
-                                                    "damping_reference_dt"})
+    POSITIVE: ClassVar[frozenset[str]] = frozenset({"dt", "cg_tolerance", "cg_max_iterations", "damping_reference_dt"})
 
     dt: float = 1.0 / 60.0
     cg_tolerance: float = 3e-3
@@ -466,15 +475,18 @@ class DensityProfile(_Section):
     WHERE: ClassVar[str] = "PhysicsConfig.profile"
 
     sparse: ProfilePoint = ProfilePoint(crowd_density=4.5, skin_max=0.04, skin_hand_scale=1.0, output_hold=0.8)
-    dense: ProfilePoint = ProfilePoint(crowd_density=6.0, skin_max=SKIN_MAX, skin_hand_scale=SKIN_HAND_SCALE,
-                                       output_hold=0.6)
+    dense: ProfilePoint = ProfilePoint(
+        crowd_density=6.0, skin_max=SKIN_MAX, skin_hand_scale=SKIN_HAND_SCALE, output_hold=0.6
+    )
 
     def __post_init__(self) -> None:
         super().__post_init__()
         if not self.dense.crowd_density > self.sparse.crowd_density:
-            raise InvalidInputError(f"{self.WHERE}.dense.crowd_density: expected more than "
-                                    f"profile.sparse.crowd_density ({self.sparse.crowd_density!r}), "
-                                    f"got {self.dense.crowd_density!r}")
+            raise InvalidInputError(
+                f"{self.WHERE}.dense.crowd_density: expected more than "
+                f"profile.sparse.crowd_density ({self.sparse.crowd_density!r}), "
+                f"got {self.dense.crowd_density!r}"
+            )
 
     def weight(self, density: float) -> float:
         """How far ``density`` (characters per m^2) lies towards the dense end: 0 at the
@@ -491,9 +503,12 @@ class DensityProfile(_Section):
         w = self.weight(density)
 
         def mix(sparse: float, dense: float) -> float:
-            return float((1.0 - w) * sparse + w * dense)      # exactly either end at its weight
+            return float((1.0 - w) * sparse + w * dense)  # exactly either end at its weight
 
         s, d = self.sparse, self.dense
-        return ProfilePoint(crowd_density=float(density), skin_max=mix(s.skin_max, d.skin_max),
-                            skin_hand_scale=mix(s.skin_hand_scale, d.skin_hand_scale),
-                            output_hold=mix(s.output_hold, d.output_hold))
+        return ProfilePoint(
+            crowd_density=float(density),
+            skin_max=mix(s.skin_max, d.skin_max),
+            skin_hand_scale=mix(s.skin_hand_scale, d.skin_hand_scale),
+            output_hold=mix(s.output_hold, d.output_hold),
+        )

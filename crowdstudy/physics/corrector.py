@@ -65,9 +65,20 @@ class CrowdCorrector:
         n_frames: frame slots kept on the device (offline use uploads a whole clip).
     """
 
-    def __init__(self, bodies, *, config: PhysicsConfig | None = None, device: str | None = None,
-                 fps: float = 30.0, periodic_length: float | None = None, static_points=None, static_walls=None,
-                 linear_solver: LinearSolver | None = None, n_frames: int = 2, profile: bool = False):
+    def __init__(
+        self,
+        bodies,
+        *,
+        config: PhysicsConfig | None = None,
+        device: str | None = None,
+        fps: float = 30.0,
+        periodic_length: float | None = None,
+        static_points=None,
+        static_walls=None,
+        linear_solver: LinearSolver | None = None,
+        n_frames: int = 2,
+        profile: bool = False,
+    ):
         config = PhysicsConfig() if config is None else config
         if not isinstance(config, PhysicsConfig):
             raise InvalidInputError(f"config: expected a PhysicsConfig, got {type(config).__name__}")
@@ -84,8 +95,9 @@ class CrowdCorrector:
         self.states = [State(self.model), State(self.model)]
         self.control = Control(self.model, n_frames=max(2, n_frames))
         self.control.ahead_frames = float(self.config.contacts.pass_ahead) * self.fps
-        self.pipeline = CollisionPipeline(self.model, self.config, static_points=static_points,
-                                          period=periodic_length, static_walls=static_walls)
+        self.pipeline = CollisionPipeline(
+            self.model, self.config, static_points=static_points, period=periodic_length, static_walls=static_walls
+        )
         self.contacts = Contacts.allocate(self.pipeline.default_capacity(), self.model.device)
         self.solver = Solver(self.model, self.config, linear_solver=linear_solver, profile=profile)
         wp = self.solver.wp
@@ -106,9 +118,12 @@ class CrowdCorrector:
     def _place(self) -> None:
         from crowdstudy.physics.kernels import set_state_kernel
 
-        self.solver.wp.launch(set_state_kernel, self.model.n_bodies,
-                              [self.control.t_x, self.control.t_glob, self.state.x, self.state.q, self.state.v,
-                               self.state.w], device=self.model.device)
+        self.solver.wp.launch(
+            set_state_kernel,
+            self.model.n_bodies,
+            [self.control.t_x, self.control.t_glob, self.state.x, self.state.q, self.state.v, self.state.w],
+            device=self.model.device,
+        )
         self.solver.reset_foot_anchors()
 
     def reset(self, joint_rotations: np.ndarray, root_translation: np.ndarray, *, settle: bool = False) -> None:
@@ -163,9 +178,21 @@ class CrowdCorrector:
         from crowdstudy.physics.kernels import project_kernel
 
         m = self.model
-        self.solver.wp.launch(project_kernel, m.n_bodies, [self.state.x, self.state.q, m.wp["body_parent"],
-                                                           m.wp["anchor_child"], m.n_joints, int(frame), out_rot,
-                                                           out_root], device=m.device)
+        self.solver.wp.launch(
+            project_kernel,
+            m.n_bodies,
+            [
+                self.state.x,
+                self.state.q,
+                m.wp["body_parent"],
+                m.wp["anchor_child"],
+                m.n_joints,
+                int(frame),
+                out_rot,
+                out_root,
+            ],
+            device=m.device,
+        )
 
     def step(self, joint_rotations: np.ndarray, root_translation: np.ndarray):
         """Feed the next target frame; returns the corrected pose of that frame:
@@ -187,15 +214,15 @@ class CrowdCorrector:
 class _Run:
     """One offline correction being set up and run (:func:`correct`)."""
 
-    anim: object                 # the input CrowdAnimation
-    config: PhysicsConfig        # resolved for the crowd
-    density: float               # the crowd's measured density, characters per m^2
-    weight: float | None         # its profile weight
+    anim: object  # the input CrowdAnimation
+    config: PhysicsConfig  # resolved for the crowd
+    density: float  # the crowd's measured density, characters per m^2
+    weight: float | None  # its profile weight
     bodies: list
     corr: CrowdCorrector
-    looped: bool                 # corrected as a loop
-    warmup: int                  # frames simulated before the clip (a loop's end)
-    blend: int                   # frames simulated past it, cross-faded into its start
+    looped: bool  # corrected as a loop
+    warmup: int  # frames simulated before the clip (a loop's end)
+    blend: int  # frames simulated past it, cross-faded into its start
 
 
 def _loop_schedule(anim, config: PhysicsConfig) -> tuple[np.ndarray, bool, int, int]:
@@ -212,8 +239,7 @@ def _loop_schedule(anim, config: PhysicsConfig) -> tuple[np.ndarray, bool, int, 
     return schedule, looped, warmup, blend
 
 
-def _set_up(anim, config: PhysicsConfig | None, bodies, device: str | None,
-            linear_solver: LinearSolver | None) -> _Run:
+def _set_up(anim, config: PhysicsConfig | None, bodies, device: str | None, linear_solver: LinearSolver | None) -> _Run:
     """Check the input, resolve the configuration for its crowd, build the corrector and
     upload the frames to simulate."""
     from crowdstudy.body.skeleton import PARENTS
@@ -228,9 +254,17 @@ def _set_up(anim, config: PhysicsConfig | None, bodies, device: str | None,
     if len(bodies) != anim.n_characters:
         raise InvalidInputError(f"bodies: expected {anim.n_characters} body models, got {len(bodies)}")
     schedule, looped, warmup, blend = _loop_schedule(anim, config)
-    corr = CrowdCorrector(bodies, config=config, device=device, fps=anim.fps, periodic_length=anim.periodic_length,
-                          static_walls=static_walls_from_meta(anim.meta), linear_solver=linear_solver,
-                          n_frames=len(schedule), profile=False)
+    corr = CrowdCorrector(
+        bodies,
+        config=config,
+        device=device,
+        fps=anim.fps,
+        periodic_length=anim.periodic_length,
+        static_walls=static_walls_from_meta(anim.meta),
+        linear_solver=linear_solver,
+        n_frames=len(schedule),
+        profile=False,
+    )
     corr.control.set_frames(anim.joint_rotations, anim.root_translation, start=0, frames=schedule)
     return _Run(anim, config, density, weight, bodies, corr, looped, warmup, blend)
 
@@ -269,18 +303,26 @@ def _simulate(run: _Run, progress: bool) -> tuple[object, object, dict[str, obje
     return out_rot, out_root, clock
 
 
-def _fill_timings(timings: dict, run: _Run, clock: dict[str, object], t_setup: float, t_output: float,
-                  t_end: float) -> None:
+def _fill_timings(
+    timings: dict, run: _Run, clock: dict[str, object], t_setup: float, t_output: float, t_end: float
+) -> None:
     """``timings`` (see :func:`correct`) from the clock readings."""
     corr = run.corr
     frame_seconds = clock["frame_seconds"]
     timed = frame_seconds if round(run.config.solver.settle_time / corr.dt) > 0 else frame_seconds[1:]
     timed_steps = len(timed) * corr.substeps
-    timings.update({"setup_seconds": clock["start"] - t_setup, "settle_seconds": clock["settled"] - clock["start"],
-                    "simulate_seconds": float(sum(frame_seconds)), "output_seconds": t_end - t_output,
-                    "wall_seconds": t_end - clock["start"], "steps": corr.steps,
-                    "timed_steps": timed_steps,
-                    "ms_per_step": 1000.0 * sum(timed) / timed_steps if timed_steps else None})
+    timings.update(
+        {
+            "setup_seconds": clock["start"] - t_setup,
+            "settle_seconds": clock["settled"] - clock["start"],
+            "simulate_seconds": float(sum(frame_seconds)),
+            "output_seconds": t_end - t_output,
+            "wall_seconds": t_end - clock["start"],
+            "steps": corr.steps,
+            "timed_steps": timed_steps,
+            "ms_per_step": 1000.0 * sum(timed) / timed_steps if timed_steps else None,
+        }
+    )
 
 
 def _physics_meta(run: _Run, speed_report) -> dict:
@@ -289,21 +331,37 @@ def _physics_meta(run: _Run, speed_report) -> dict:
     corr = run.corr
     iters = np.asarray(corr.cg_iterations) if corr.cg_iterations else np.zeros(1)
     counts = corr.contact_counts
-    return {"config": run.config.as_dict(), "crowd_density": run.density, "profile_weight": run.weight,
-            "device": corr.model.device, "linear_solver": corr.solver.linear_solver,
-            "steps": corr.steps, "substeps_per_frame": corr.substeps, "dt": corr.dt,
-            "cg_iterations_mean": float(iters.mean()), "cg_iterations_max": int(iters.max()),
-            "static_walls": corr.pipeline.n_static_walls,
-            "contacts_mean": float(np.mean(counts)) if counts else 0.0,
-            "contacts_max": int(max(counts, default=0)),
-            "contacts_dropped_steps": int(sum(c > corr.contacts.capacity for c in counts)),
-            "pairs_dropped": int(corr.pipeline.dropped_pairs),
-            "loop": {"periodic": bool(run.looped), "warmup_frames": run.warmup, "blend_frames": run.blend},
-            "speed_limit": speed_report.as_dict() if speed_report is not None else None}
+    return {
+        "config": run.config.as_dict(),
+        "crowd_density": run.density,
+        "profile_weight": run.weight,
+        "device": corr.model.device,
+        "linear_solver": corr.solver.linear_solver,
+        "steps": corr.steps,
+        "substeps_per_frame": corr.substeps,
+        "dt": corr.dt,
+        "cg_iterations_mean": float(iters.mean()),
+        "cg_iterations_max": int(iters.max()),
+        "static_walls": corr.pipeline.n_static_walls,
+        "contacts_mean": float(np.mean(counts)) if counts else 0.0,
+        "contacts_max": int(max(counts, default=0)),
+        "contacts_dropped_steps": int(sum(c > corr.contacts.capacity for c in counts)),
+        "pairs_dropped": int(corr.pipeline.dropped_pairs),
+        "loop": {"periodic": bool(run.looped), "warmup_frames": run.warmup, "blend_frames": run.blend},
+        "speed_limit": speed_report.as_dict() if speed_report is not None else None,
+    }
 
 
-def correct(anim, config: PhysicsConfig | None = None, *, device: str | None = None, progress: bool = True,
-            bodies=None, linear_solver: LinearSolver | None = None, timings: dict | None = None):
+def correct(
+    anim,
+    config: PhysicsConfig | None = None,
+    *,
+    device: str | None = None,
+    progress: bool = True,
+    bodies=None,
+    linear_solver: LinearSolver | None = None,
+    timings: dict | None = None,
+):
     """Resolve the collisions of a whole animation (Baseline -> Ours).
 
     Args:
@@ -358,14 +416,27 @@ def correct(anim, config: PhysicsConfig | None = None, *, device: str | None = N
     t_output = time.perf_counter()
     m = run.corr.model
     rest = np.stack([np.asarray(b.rest_joints, np.float64) for b in run.bodies])
-    rot, root, speed_report = finish_crowd(out_rot.numpy().reshape(-1, m.n_characters, m.n_joints, 3),
-                                           out_root.numpy(), anim.joint_rotations, anim.root_translation, rest,
-                                           anim.fps, run.config, warmup=run.warmup, blend=run.blend,
-                                           looped=run.looped, periodic_length=anim.periodic_length,
-                                           progress=progress)
+    rot, root, speed_report = finish_crowd(
+        out_rot.numpy().reshape(-1, m.n_characters, m.n_joints, 3),
+        out_root.numpy(),
+        anim.joint_rotations,
+        anim.root_translation,
+        rest,
+        anim.fps,
+        run.config,
+        warmup=run.warmup,
+        blend=run.blend,
+        looped=run.looped,
+        periodic_length=anim.periodic_length,
+        progress=progress,
+    )
     if timings is not None:
         _fill_timings(timings, run, clock, t_setup, t_output, time.perf_counter())
-    meta = {"method": "Ours", "physics": _physics_meta(run, speed_report), "baseline_method": anim.meta.get("method"),
-            "baseline_provenance": anim.meta.get("provenance"),
-            "provenance": provenance(anim.meta.get("seed"), stage="physics")}
+    meta = {
+        "method": "Ours",
+        "physics": _physics_meta(run, speed_report),
+        "baseline_method": anim.meta.get("method"),
+        "baseline_provenance": anim.meta.get("provenance"),
+        "provenance": provenance(anim.meta.get("seed"), stage="physics"),
+    }
     return anim.replace(root_translation=root, joint_rotations=rot, meta=meta)

@@ -18,8 +18,8 @@ from crowdstudy.physics.config import PhysicsConfig
 
 __all__ = ["local_density", "crowd_density", "crowd_config"]
 
-NEIGHBOURS = 4        # k: the ring of nearest neighbours a character's room is judged by
-SAMPLES = 60          # frames sampled at most (evenly) per animation
+NEIGHBOURS = 4  # k: the ring of nearest neighbours a character's room is judged by
+SAMPLES = 60  # frames sampled at most (evenly) per animation
 
 
 def local_density(root_xy: np.ndarray, *, k: int = NEIGHBOURS, period: float | None = None) -> np.ndarray:
@@ -54,14 +54,14 @@ def local_density(root_xy: np.ndarray, *, k: int = NEIGHBOURS, period: float | N
             # a torus along x only: y spread over a box far larger than the crowd
             span = float(np.ptp(pts[:, 1])) + 1.0
             x = np.mod(pts[:, 0], period)
-            x[x >= period] = 0.0                          # mod of a tiny negative x rounds up to the period
+            x[x >= period] = 0.0  # mod of a tiny negative x rounds up to the period
             pts = np.column_stack([x, pts[:, 1] - pts[:, 1].min()])
             tree = cKDTree(pts, boxsize=[period, 4.0 * span])
         else:
             tree = cKDTree(pts)
         dist, _ = tree.query(pts, k + 1)
-        r_k = np.maximum(dist[:, -1], 1e-3)               # two roots in one place: 1 mm
-        density[f] = k / (np.pi * r_k ** 2)
+        r_k = np.maximum(dist[:, -1], 1e-3)  # two roots in one place: 1 mm
+        density[f] = k / (np.pi * r_k**2)
     return np.median(density, axis=0)
 
 

@@ -17,8 +17,9 @@ from crowdstudy.errors import InvalidInputError
 __all__ = ["damping_study", "recovery_metrics"]
 
 
-def recovery_metrics(time: np.ndarray, position: np.ndarray, target: float, release_time: float,
-                     tolerance: float = 0.02) -> dict:
+def recovery_metrics(
+    time: np.ndarray, position: np.ndarray, target: float, release_time: float, tolerance: float = 0.02
+) -> dict:
     """Return time, overshoot and oscillation count of a recovery curve.
 
     Args:
@@ -46,8 +47,12 @@ def recovery_metrics(time: np.ndarray, position: np.ndarray, target: float, rele
     signs = np.sign(e[np.abs(e) > 1e-3])
     crossings = int(np.count_nonzero(np.diff(signs))) if len(signs) > 1 else 0
     at1 = float(np.abs(np.interp(1.0, t, e))) if len(t) else float("nan")
-    return {"return_time": ret, "overshoot": float(max(e.max(initial=0.0), 0.0)), "crossings": crossings,
-            "error_at_1s": at1}
+    return {
+        "return_time": ret,
+        "overshoot": float(max(e.max(initial=0.0), 0.0)),
+        "crossings": crossings,
+        "error_at_1s": at1,
+    }
 
 
 def _default_body():
@@ -57,8 +62,16 @@ def _default_body():
     return load_body(sample_bodies(2, 0)[1])
 
 
-def damping_study(dampings=(0.0, 0.006, 0.06), *, release_time: float = 3.5, duration: float = 6.0,
-                  push: float = 0.25, body=None, config=None, device: str | None = None) -> dict:
+def damping_study(
+    dampings=(0.0, 0.006, 0.06),
+    *,
+    release_time: float = 3.5,
+    duration: float = 6.0,
+    push: float = 0.25,
+    body=None,
+    config=None,
+    device: str | None = None,
+) -> dict:
     """Recovery curves for several damping values d (Fig. 4).
 
     Args:
@@ -87,8 +100,9 @@ def damping_study(dampings=(0.0, 0.006, 0.06), *, release_time: float = 3.5, dur
     base = config or PhysicsConfig.paper_controller()
     rest = np.asarray(body.rest_joints)
     caps = body.capsules
-    pelvis_h = float(getattr(body, "pelvis_height", 0.0) or
-                     -(np.minimum(caps.start[:, 2], caps.end[:, 2]) - caps.radius).min())
+    pelvis_h = float(
+        getattr(body, "pelvis_height", 0.0) or -(np.minimum(caps.start[:, 2], caps.end[:, 2]) - caps.radius).min()
+    )
     rot = np.zeros((1, rest.shape[0], 3))
     root = np.array([[0.0, 0.0, pelvis_h]])
     # obstacle: a sampled plane just in front of the torso of the held-back character

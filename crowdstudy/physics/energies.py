@@ -17,8 +17,18 @@ import numpy as np
 from crowdstudy.body.capsules import closest_points_on_segments
 from crowdstudy.body.rotations import skew
 
-__all__ = ["foot_planted_weight", "foot_anchor_update", "foot_anchor_energy", "vee_asym", "inertia_energy", "gravity_energy", "ball_joint_energy", "control_energy",
-           "root_translation_energy", "contact_energy"]
+__all__ = [
+    "foot_planted_weight",
+    "foot_anchor_update",
+    "foot_anchor_energy",
+    "vee_asym",
+    "inertia_energy",
+    "gravity_energy",
+    "ball_joint_energy",
+    "control_energy",
+    "root_translation_energy",
+    "contact_energy",
+]
 
 
 def vee_asym(m: np.ndarray) -> np.ndarray:

@@ -24,9 +24,17 @@ from __future__ import annotations
 
 import numpy as np
 
-from crowdstudy.body.rotations import (axis_angle_to_quaternion, matrix_to_axis_angle, matrix_to_quaternion,
-                                       quat_blend, quat_conjugate, quat_multiply, quaternion_to_axis_angle,
-                                       quaternion_to_matrix, rotation_between)
+from crowdstudy.body.rotations import (
+    axis_angle_to_quaternion,
+    matrix_to_axis_angle,
+    matrix_to_quaternion,
+    quat_blend,
+    quat_conjugate,
+    quat_multiply,
+    quaternion_to_axis_angle,
+    quaternion_to_matrix,
+    rotation_between,
+)
 from crowdstudy.body.skeleton import JOINT_INDEX, PARENTS, forward_kinematics
 from crowdstudy.errors import InvalidInputError
 from crowdstudy.motion.posing import hold_peaks, planted_runs, smoothstep5, two_bone_ik
@@ -61,25 +69,33 @@ def close_loop(rot: np.ndarray, root: np.ndarray, n_frames: int, warmup: int, bl
     """
     total = warmup + n_frames + blend
     if rot.shape[0] != total or root.shape[0] != total:
-        raise InvalidInputError(f"rot/root: expected {total} frames (warmup + n_frames + blend), "
-                                f"got {rot.shape[0]} and {root.shape[0]}")
+        raise InvalidInputError(
+            f"rot/root: expected {total} frames (warmup + n_frames + blend), got {rot.shape[0]} and {root.shape[0]}"
+        )
     if blend > n_frames:
         raise InvalidInputError(f"blend: expected at most n_frames = {n_frames}, got {blend}")
-    out_rot = rot[warmup:warmup + n_frames].copy()
-    out_root = root[warmup:warmup + n_frames].copy()
+    out_rot = rot[warmup : warmup + n_frames].copy()
+    out_root = root[warmup : warmup + n_frames].copy()
     if blend:
-        w = smoothstep5((np.arange(blend) + 1.0) / (blend + 1.0))     # weight of the clip's own frame
+        w = smoothstep5((np.arange(blend) + 1.0) / (blend + 1.0))  # weight of the clip's own frame
         cont = slice(warmup + n_frames, total)
-        q = quat_blend(axis_angle_to_quaternion(rot[cont]), axis_angle_to_quaternion(out_rot[:blend]),
-                       w[:, None, None])
+        q = quat_blend(axis_angle_to_quaternion(rot[cont]), axis_angle_to_quaternion(out_rot[:blend]), w[:, None, None])
         out_rot[:blend] = quaternion_to_axis_angle(q)
         out_root[:blend] = (1.0 - w)[:, None, None] * root[cont] + w[:, None, None] * out_root[:blend]
     return out_rot, out_root
 
 
-def smooth_deviation(rot: np.ndarray, root: np.ndarray, ref_rot: np.ndarray, ref_root: np.ndarray,
-                     sigma_frames: float, *, periodic: bool = False, root_sigma_frames: float | None = None,
-                     hold: float = 0.0):
+def smooth_deviation(
+    rot: np.ndarray,
+    root: np.ndarray,
+    ref_rot: np.ndarray,
+    ref_root: np.ndarray,
+    sigma_frames: float,
+    *,
+    periodic: bool = False,
+    root_sigma_frames: float | None = None,
+    hold: float = 0.0,
+):
     """Low-pass the deviation of (rot, root) from (ref_rot, ref_root) along time.
 
     Args:
@@ -99,8 +115,9 @@ def smooth_deviation(rot: np.ndarray, root: np.ndarray, ref_rot: np.ndarray, ref
     """
     root_sigma = sigma_frames if root_sigma_frames is None else root_sigma_frames
     if sigma_frames < 0 or root_sigma < 0:
-        raise InvalidInputError(f"sigma_frames, root_sigma_frames: expected >= 0, got {sigma_frames!r}, "
-                                f"{root_sigma_frames!r}")
+        raise InvalidInputError(
+            f"sigma_frames, root_sigma_frames: expected >= 0, got {sigma_frames!r}, {root_sigma_frames!r}"
+        )
     if (sigma_frames == 0 and root_sigma == 0) or rot.shape[0] < 2:
         return rot, root
     from scipy.ndimage import gaussian_filter1d
@@ -121,8 +138,9 @@ def smooth_deviation(rot: np.ndarray, root: np.ndarray, ref_rot: np.ndarray, ref
     return out, ref_root + offset
 
 
-def planted_frames(ref_joint: np.ndarray, fps: float, planted_speed: float, planted_height: float,
-                    periodic: bool) -> np.ndarray:
+def planted_frames(
+    ref_joint: np.ndarray, fps: float, planted_speed: float, planted_height: float, periodic: bool
+) -> np.ndarray:
     """(T,) frames at which a reference joint (T, 3) is planted.
 
     A STEP t -> t + 1 is planted when slow (below ``planted_speed`` m/s horizontally) and
@@ -134,7 +152,7 @@ def planted_frames(ref_joint: np.ndarray, fps: float, planted_speed: float, plan
     height = 0.5 * (nxt[:, 2] + ref_joint[:, 2])
     step = (speed < planted_speed) & (height <= ref_joint[:, 2].min() + planted_height)
     if not periodic:
-        step[-1] = False                       # no step from the last frame to the first
+        step[-1] = False  # no step from the last frame to the first
     return step | np.roll(step, 1)
 
 
@@ -176,7 +194,7 @@ def _foot_hold(ankle: np.ndarray, ref_ankle: np.ndarray, contact: np.ndarray, pe
     pull = np.zeros((n, 2))
     weight = np.zeros(n)
     runs = planted_runs(contact, periodic=periodic)
-    ends = []                                   # (start, stop, offset at the start, offset at the end)
+    ends = []  # (start, stop, offset at the start, offset at the end)
     for start, stop in runs:
         idx = np.arange(start, stop) % n
         dev = ankle[idx, :2] - ref_ankle[idx, :2]
@@ -223,16 +241,17 @@ def _foot_hold(ankle: np.ndarray, ref_ankle: np.ndarray, contact: np.ndarray, pe
     return pull, weight
 
 
-def _ankle_about_ball(hip: np.ndarray, reach: np.ndarray, ball: np.ndarray, foot: np.ndarray,
-                     target: np.ndarray) -> np.ndarray:
+def _ankle_about_ball(
+    hip: np.ndarray, reach: np.ndarray, ball: np.ndarray, foot: np.ndarray, target: np.ndarray
+) -> np.ndarray:
     """Ankles (M, 3) at ``reach`` m from the hip and ``foot`` m from the ball (both (M,)),
     the point of that circle nearest the ``target`` ankle; straight from the hip towards
     the ball where the two spheres do not meet."""
     axis = ball - hip
     dist = np.maximum(np.linalg.norm(axis, axis=-1), 1e-9)
     e = axis / dist[:, None]
-    along = np.clip((dist ** 2 + reach ** 2 - foot ** 2) / (2.0 * dist), -reach, reach)
-    radius = np.sqrt(np.maximum(reach ** 2 - along ** 2, 0.0))
+    along = np.clip((dist**2 + reach**2 - foot**2) / (2.0 * dist), -reach, reach)
+    radius = np.sqrt(np.maximum(reach**2 - along**2, 0.0))
     side = target - hip
     side = side - np.sum(side * e, axis=-1, keepdims=True) * e
     side /= np.maximum(np.linalg.norm(side, axis=-1, keepdims=True), 1e-9)
@@ -265,10 +284,19 @@ def _soft_reach(hip: np.ndarray, ankle: np.ndarray, target: np.ndarray, length: 
     return hip + v * (new / np.maximum(d, 1e-9))[:, None]
 
 
-def lock_planted_feet(rot: np.ndarray, root: np.ndarray, ref_rot: np.ndarray, ref_root: np.ndarray,
-                      rest_joints: np.ndarray, fps: float, *, planted_speed: float = 0.02,
-                      planted_height: float = 0.03, periodic: bool = False,
-                      ref_kinematics: tuple | None = None) -> np.ndarray:
+def lock_planted_feet(
+    rot: np.ndarray,
+    root: np.ndarray,
+    ref_rot: np.ndarray,
+    ref_root: np.ndarray,
+    rest_joints: np.ndarray,
+    fps: float,
+    *,
+    planted_speed: float = 0.02,
+    planted_height: float = 0.03,
+    periodic: bool = False,
+    ref_kinematics: tuple | None = None,
+) -> np.ndarray:
     """Hold the output's feet where they stand while the reference's are planted (two-bone
     leg IK).
 
@@ -299,27 +327,35 @@ def lock_planted_feet(rot: np.ndarray, root: np.ndarray, ref_rot: np.ndarray, re
     out = np.array(rot, dtype=np.float64, copy=True)
     n_chars = rot.shape[1]
     for hip, knee, ankle in LEGS:
-        toe = ankle + 3                                  # the ball of the foot (left_foot / right_foot)
+        toe = ankle + 3  # the ball of the foot (left_foot / right_foot)
         target = pos[:, :, ankle].copy()
         weight = np.zeros(target.shape[:2])
-        ball_only = np.zeros(target.shape[:2], bool)                       # heel rise: the ball planted alone
+        ball_only = np.zeros(target.shape[:2], bool)  # heel rise: the ball planted alone
         for i in range(n_chars):
             flat = planted_frames(ref_pos[:, i, ankle], fps, planted_speed, planted_height, periodic)
             ball = planted_frames(ref_pos[:, i, toe], fps, planted_speed, planted_height, periodic)
             ball_only[:, i] = ball & ~flat
             pull, weight[:, i] = _foot_hold(pos[:, i, ankle], ref_pos[:, i, ankle], flat | ball, periodic)
             target[:, i, :2] += pull
-        moved = weight > 0                                                          # (T, N)
+        moved = weight > 0  # (T, N)
         if not moved.any():
             continue
         t_idx, c_idx = np.nonzero(moved)
-        pole = (2.0 * pos[t_idx, c_idx, knee] - pos[t_idx, c_idx, hip] - pos[t_idx, c_idx, ankle]
-                + 0.02 * glob[t_idx, c_idx, hip][:, :, 1])
+        pole = (
+            2.0 * pos[t_idx, c_idx, knee]
+            - pos[t_idx, c_idx, hip]
+            - pos[t_idx, c_idx, ankle]
+            + 0.02 * glob[t_idx, c_idx, hip][:, :, 1]
+        )
         pelvis = glob[t_idx, c_idx, 0]
         hip_pos = pos[t_idx, c_idx, hip]
-        goal = _soft_reach(hip_pos, pos[t_idx, c_idx, ankle], target[t_idx, c_idx],
-                           np.linalg.norm(rest[c_idx, knee] - rest[c_idx, hip], axis=-1)
-                           + np.linalg.norm(rest[c_idx, ankle] - rest[c_idx, knee], axis=-1))
+        goal = _soft_reach(
+            hip_pos,
+            pos[t_idx, c_idx, ankle],
+            target[t_idx, c_idx],
+            np.linalg.norm(rest[c_idx, knee] - rest[c_idx, hip], axis=-1)
+            + np.linalg.norm(rest[c_idx, ankle] - rest[c_idx, knee], axis=-1),
+        )
         # in a heel rise the ball stays where the target puts it: where the leg cannot reach
         # the target, the heel rises further (the foot turns about the ball) instead of the
         # ball sliding
@@ -329,18 +365,31 @@ def lock_planted_feet(rot: np.ndarray, root: np.ndarray, ref_rot: np.ndarray, re
             tl, cl = t_idx[lift], c_idx[lift]
             arm = np.einsum("mab,mb->ma", ref_glob[tl, cl, ankle], rest[cl, toe] - rest[cl, ankle])
             ball_at = aim[lift] + arm
-            goal[lift] = _ankle_about_ball(hip_pos[lift], np.linalg.norm(goal[lift] - hip_pos[lift], axis=-1),
-                                           ball_at, np.linalg.norm(arm, axis=-1), aim[lift])
+            goal[lift] = _ankle_about_ball(
+                hip_pos[lift],
+                np.linalg.norm(goal[lift] - hip_pos[lift], axis=-1),
+                ball_at,
+                np.linalg.norm(arm, axis=-1),
+                aim[lift],
+            )
             turn = rotation_between(arm, ball_at - goal[lift])
-        loc_a, loc_b, glob_b = two_bone_ik(hip_pos, goal, pole, pelvis,
-                                           rest[c_idx, hip], rest[c_idx, knee], rest[c_idx, ankle],
-                                           np.array([0.0, 1.0, 0.0]))
+        loc_a, loc_b, glob_b = two_bone_ik(
+            hip_pos,
+            goal,
+            pole,
+            pelvis,
+            rest[c_idx, hip],
+            rest[c_idx, knee],
+            rest[c_idx, ankle],
+            np.array([0.0, 1.0, 0.0]),
+        )
         out[t_idx, c_idx, hip] = matrix_to_axis_angle(loc_a)
         out[t_idx, c_idx, knee] = matrix_to_axis_angle(loc_b)
         # the held foot takes the reference's world orientation (it does not turn on the floor)
         w = weight[t_idx, c_idx]
-        foot = quat_blend(matrix_to_quaternion(glob[t_idx, c_idx, ankle]),
-                          matrix_to_quaternion(ref_glob[t_idx, c_idx, ankle]), w)
+        foot = quat_blend(
+            matrix_to_quaternion(glob[t_idx, c_idx, ankle]), matrix_to_quaternion(ref_glob[t_idx, c_idx, ankle]), w
+        )
         foot_rot = quaternion_to_matrix(foot)
         if len(lift):
             foot_rot[lift] = turn @ foot_rot[lift]

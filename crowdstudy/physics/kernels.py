@@ -26,11 +26,19 @@ import warp as wp
 
 from crowdstudy.warp_runtime import get_warp
 
-__all__ = ["targets_kernel", "predict_kernel", "joint_terms_kernel", "assemble_bodies_kernel", "update_kernel",
-           "project_kernel", "set_state_kernel", "foot_anchor_kernel"]
+__all__ = [
+    "targets_kernel",
+    "predict_kernel",
+    "joint_terms_kernel",
+    "assemble_bodies_kernel",
+    "update_kernel",
+    "project_kernel",
+    "set_state_kernel",
+    "foot_anchor_kernel",
+]
 
-get_warp()      # the project's kernel cache and log level, set before this module can compile
-wp.set_module_options({"enable_backward": False})     # forward only: no adjoints to compile
+get_warp()  # the project's kernel cache and log level, set before this module can compile
+wp.set_module_options({"enable_backward": False})  # forward only: no adjoints to compile
 
 
 @wp.func
@@ -69,17 +77,31 @@ def quat_nlerp(a: wp.quat, b: wp.quat, t: float):
     s = 1.0
     if d < 0.0:
         s = -1.0
-    return wp.normalize(wp.quat((1.0 - t) * a[0] + s * t * b[0], (1.0 - t) * a[1] + s * t * b[1],
-                                (1.0 - t) * a[2] + s * t * b[2], (1.0 - t) * a[3] + s * t * b[3]))
+    return wp.normalize(
+        wp.quat(
+            (1.0 - t) * a[0] + s * t * b[0],
+            (1.0 - t) * a[1] + s * t * b[1],
+            (1.0 - t) * a[2] + s * t * b[2],
+            (1.0 - t) * a[3] + s * t * b[3],
+        )
+    )
 
 
 @wp.kernel
-def targets_kernel(anim_q: wp.array2d(dtype=wp.quat), anim_root: wp.array2d(dtype=wp.vec3),
-                   f0: int, f1: int, alpha: float, n_joints: int,
-                   body_parent: wp.array(dtype=wp.int32), anchor_parent: wp.array(dtype=wp.vec3),
-                   anchor_child: wp.array(dtype=wp.vec3),
-                   target_rel: wp.array(dtype=wp.quat), target_glob: wp.array(dtype=wp.quat),
-                   target_x: wp.array(dtype=wp.vec3)):
+def targets_kernel(
+    anim_q: wp.array2d(dtype=wp.quat),
+    anim_root: wp.array2d(dtype=wp.vec3),
+    f0: int,
+    f1: int,
+    alpha: float,
+    n_joints: int,
+    body_parent: wp.array(dtype=wp.int32),
+    anchor_parent: wp.array(dtype=wp.vec3),
+    anchor_child: wp.array(dtype=wp.vec3),
+    target_rel: wp.array(dtype=wp.quat),
+    target_glob: wp.array(dtype=wp.quat),
+    target_x: wp.array(dtype=wp.vec3),
+):
     """Target pose of one character (thread) at ``(1 - alpha) frame f0 + alpha frame f1``.
 
     anim_q: (F, B) joint rotations (root global, others parent-relative), unit quats.
@@ -104,12 +126,23 @@ def targets_kernel(anim_q: wp.array2d(dtype=wp.quat), anim_root: wp.array2d(dtyp
 
 
 @wp.kernel
-def predict_kernel(x: wp.array(dtype=wp.vec3), q: wp.array(dtype=wp.quat), v: wp.array(dtype=wp.vec3),
-                   w: wp.array(dtype=wp.vec3), h: float, feedforward: int,
-                   t_x: wp.array(dtype=wp.vec3), t_x_old: wp.array(dtype=wp.vec3),
-                   t_x_older: wp.array(dtype=wp.vec3), t_glob: wp.array(dtype=wp.quat),
-                   t_glob_old: wp.array(dtype=wp.quat), t_glob_older: wp.array(dtype=wp.quat),
-                   x_pred: wp.array(dtype=wp.vec3), q_pred: wp.array(dtype=wp.quat), offset: int):
+def predict_kernel(
+    x: wp.array(dtype=wp.vec3),
+    q: wp.array(dtype=wp.quat),
+    v: wp.array(dtype=wp.vec3),
+    w: wp.array(dtype=wp.vec3),
+    h: float,
+    feedforward: int,
+    t_x: wp.array(dtype=wp.vec3),
+    t_x_old: wp.array(dtype=wp.vec3),
+    t_x_older: wp.array(dtype=wp.vec3),
+    t_glob: wp.array(dtype=wp.quat),
+    t_glob_old: wp.array(dtype=wp.quat),
+    t_glob_older: wp.array(dtype=wp.quat),
+    x_pred: wp.array(dtype=wp.vec3),
+    q_pred: wp.array(dtype=wp.quat),
+    offset: int,
+):
     """Inertial prediction x~ = x + h v (m), R~ = exp(h [w]x) R (w in rad/s, world frame).
 
     With ``feedforward`` the prediction also continues the ANIMATION's own acceleration:
@@ -134,8 +167,7 @@ def predict_kernel(x: wp.array(dtype=wp.vec3), q: wp.array(dtype=wp.quat), v: wp
 
 
 @wp.func
-def control_gradient(rp: wp.mat33, rc: wp.mat33, target: wp.mat33, damp_ref: wp.mat33, k: float,
-                     dh2: float):
+def control_gradient(rp: wp.mat33, rc: wp.mat33, target: wp.mat33, damp_ref: wp.mat33, k: float, dh2: float):
     """Gradient (w.r.t. the child's world rotation increment) of Eq. 4 on R = Rp^T Rc.
 
     E = k/2 |R - target|^2 + dh2/2 |R - damp_ref|^2, dh2 = d / h^2 (J); the parent's
@@ -147,9 +179,16 @@ def control_gradient(rp: wp.mat33, rc: wp.mat33, target: wp.mat33, damp_ref: wp.
 
 
 @wp.func
-def joint_control_terms(b: int, parent: int, q: wp.array(dtype=wp.quat), q_old: wp.array(dtype=wp.quat),
-                        t_rel: wp.array(dtype=wp.quat), t_rel_old: wp.array(dtype=wp.quat),
-                        k: float, dh2: float):
+def joint_control_terms(
+    b: int,
+    parent: int,
+    q: wp.array(dtype=wp.quat),
+    q_old: wp.array(dtype=wp.quat),
+    t_rel: wp.array(dtype=wp.quat),
+    t_rel_old: wp.array(dtype=wp.quat),
+    k: float,
+    dh2: float,
+):
     """Child-side rotational gradient of the PD term of the joint between parent and b."""
     rp = wp.quat_to_matrix(q[parent])
     rc = wp.quat_to_matrix(q[b])
@@ -160,13 +199,24 @@ def joint_control_terms(b: int, parent: int, q: wp.array(dtype=wp.quat), q_old: 
 
 
 @wp.kernel
-def joint_terms_kernel(q: wp.array(dtype=wp.quat), q_old: wp.array(dtype=wp.quat),
-                       t_rel: wp.array(dtype=wp.quat), t_rel_old: wp.array(dtype=wp.quat),
-                       body_parent: wp.array(dtype=wp.int32), anchor_parent: wp.array(dtype=wp.vec3),
-                       anchor_child: wp.array(dtype=wp.vec3), body_k: wp.array(dtype=float),
-                       body_d: wp.array(dtype=float), h: float, damp_scale: float,
-                       lever_p: wp.array(dtype=wp.vec3), lever_c: wp.array(dtype=wp.vec3),
-                       ctrl_c: wp.array(dtype=float), ctrl_g: wp.array(dtype=wp.vec3), offset: int):
+def joint_terms_kernel(
+    q: wp.array(dtype=wp.quat),
+    q_old: wp.array(dtype=wp.quat),
+    t_rel: wp.array(dtype=wp.quat),
+    t_rel_old: wp.array(dtype=wp.quat),
+    body_parent: wp.array(dtype=wp.int32),
+    anchor_parent: wp.array(dtype=wp.vec3),
+    anchor_child: wp.array(dtype=wp.vec3),
+    body_k: wp.array(dtype=float),
+    body_d: wp.array(dtype=float),
+    h: float,
+    damp_scale: float,
+    lever_p: wp.array(dtype=wp.vec3),
+    lever_c: wp.array(dtype=wp.vec3),
+    ctrl_c: wp.array(dtype=float),
+    ctrl_g: wp.array(dtype=wp.vec3),
+    offset: int,
+):
     """The joint of body b = thread + ``offset`` (b the child), at the predicted
     orientations: the world lever arms on the parent (lever_p, m) and on b (lever_c, m),
     the control coupling 2 (k + d/h^2) (ctrl_c) and the child-side gradient of its PD
@@ -190,8 +240,17 @@ def joint_terms_kernel(q: wp.array(dtype=wp.quat), q_old: wp.array(dtype=wp.quat
 
 
 @wp.func
-def translation_pd_terms(e: wp.vec3, dv: wp.vec3, kt: float, dth2: float, reach: float, kt_far: float,
-                         eye: wp.mat33, gt: wp.vec3, a: wp.mat33):
+def translation_pd_terms(
+    e: wp.vec3,
+    dv: wp.vec3,
+    kt: float,
+    dth2: float,
+    reach: float,
+    kt_far: float,
+    eye: wp.mat33,
+    gt: wp.vec3,
+    a: wp.mat33,
+):
     """Absolute translation PD of a body (root; feet and pose springs when enabled) added to
     its gradient ``gt`` (N) and translation block ``a`` (N/m): kt/2 |e|^2 + dt/(2 h^2)
     |dv|^2, e = x - x^ the deviation from the target (m), dv = (x - x_old) - (x^ - x^_old)
@@ -208,9 +267,21 @@ def translation_pd_terms(e: wp.vec3, dv: wp.vec3, kt: float, dth2: float, reach:
 
 
 @wp.func
-def joint_child_terms(k_joint: float, r_p: wp.vec3, r_c: wp.vec3, x_p: wp.vec3, x_b: wp.vec3, ctrl_g: wp.vec3,
-                      ctrl_c: float, eye: wp.mat33, gt: wp.vec3, gr: wp.vec3, a: wp.mat33, bb: wp.mat33,
-                      c: wp.mat33):
+def joint_child_terms(
+    k_joint: float,
+    r_p: wp.vec3,
+    r_c: wp.vec3,
+    x_p: wp.vec3,
+    x_b: wp.vec3,
+    ctrl_g: wp.vec3,
+    ctrl_c: float,
+    eye: wp.mat33,
+    gt: wp.vec3,
+    gr: wp.vec3,
+    a: wp.mat33,
+    bb: wp.mat33,
+    c: wp.mat33,
+):
     """Body b as the CHILD of joint (p, b): the soft ball joint k_j/2 |x_p + r_p - x_b -
     r_c|^2 (Gauss-Newton; r_p, r_c the world lever arms, m; k_j N/m) and the joint's PD
     term (gradient ``ctrl_g`` N m, coupling ``ctrl_c``, from ``joint_terms_kernel``) added
@@ -229,9 +300,21 @@ def joint_child_terms(k_joint: float, r_p: wp.vec3, r_c: wp.vec3, x_p: wp.vec3, 
 
 
 @wp.func
-def joint_parent_terms(k_joint: float, r_p: wp.vec3, r_c: wp.vec3, x_b: wp.vec3, x_ch: wp.vec3, ctrl_g: wp.vec3,
-                       ctrl_c: float, eye: wp.mat33, gt: wp.vec3, gr: wp.vec3, a: wp.mat33, bb: wp.mat33,
-                       c: wp.mat33):
+def joint_parent_terms(
+    k_joint: float,
+    r_p: wp.vec3,
+    r_c: wp.vec3,
+    x_b: wp.vec3,
+    x_ch: wp.vec3,
+    ctrl_g: wp.vec3,
+    ctrl_c: float,
+    eye: wp.mat33,
+    gt: wp.vec3,
+    gr: wp.vec3,
+    a: wp.mat33,
+    bb: wp.mat33,
+    c: wp.mat33,
+):
     """Body b as the PARENT of joint (b, ch): the same spring and PD term as
     ``joint_child_terms`` seen from the parent's side (the PD gradient negated). Returns
     the new (gt, gr, a, bb, c)."""
@@ -249,20 +332,39 @@ def joint_parent_terms(k_joint: float, r_p: wp.vec3, r_c: wp.vec3, x_b: wp.vec3,
 
 @wp.kernel
 def assemble_bodies_kernel(
-        x: wp.array(dtype=wp.vec3), q: wp.array(dtype=wp.quat),
-        x_old: wp.array(dtype=wp.vec3), q_old: wp.array(dtype=wp.quat),
-        t_rel: wp.array(dtype=wp.quat), t_rel_old: wp.array(dtype=wp.quat),
-        t_x: wp.array(dtype=wp.vec3), t_x_old: wp.array(dtype=wp.vec3),
-        body_mass: wp.array(dtype=float), body_J: wp.array(dtype=wp.mat33),
-        body_parent: wp.array(dtype=wp.int32), body_children: wp.array2d(dtype=wp.int32),
-        body_k: wp.array(dtype=float), body_d: wp.array(dtype=float),
-        body_kt: wp.array(dtype=float), body_dt: wp.array(dtype=float), body_reach: wp.array(dtype=float),
-        body_kt_far: wp.array(dtype=float),
-        h: float, gravity: float, k_joint: float, damp_scale: float,
-        grad_t: wp.array(dtype=wp.vec3), grad_r: wp.array(dtype=wp.vec3),
-        hess_a: wp.array(dtype=wp.mat33), hess_b: wp.array(dtype=wp.mat33), hess_c: wp.array(dtype=wp.mat33),
-        lever_p: wp.array(dtype=wp.vec3), lever_c: wp.array(dtype=wp.vec3), ctrl_c: wp.array(dtype=float),
-        ctrl_g: wp.array(dtype=wp.vec3), offset: int):
+    x: wp.array(dtype=wp.vec3),
+    q: wp.array(dtype=wp.quat),
+    x_old: wp.array(dtype=wp.vec3),
+    q_old: wp.array(dtype=wp.quat),
+    t_rel: wp.array(dtype=wp.quat),
+    t_rel_old: wp.array(dtype=wp.quat),
+    t_x: wp.array(dtype=wp.vec3),
+    t_x_old: wp.array(dtype=wp.vec3),
+    body_mass: wp.array(dtype=float),
+    body_J: wp.array(dtype=wp.mat33),
+    body_parent: wp.array(dtype=wp.int32),
+    body_children: wp.array2d(dtype=wp.int32),
+    body_k: wp.array(dtype=float),
+    body_d: wp.array(dtype=float),
+    body_kt: wp.array(dtype=float),
+    body_dt: wp.array(dtype=float),
+    body_reach: wp.array(dtype=float),
+    body_kt_far: wp.array(dtype=float),
+    h: float,
+    gravity: float,
+    k_joint: float,
+    damp_scale: float,
+    grad_t: wp.array(dtype=wp.vec3),
+    grad_r: wp.array(dtype=wp.vec3),
+    hess_a: wp.array(dtype=wp.mat33),
+    hess_b: wp.array(dtype=wp.mat33),
+    hess_c: wp.array(dtype=wp.mat33),
+    lever_p: wp.array(dtype=wp.vec3),
+    lever_c: wp.array(dtype=wp.vec3),
+    ctrl_c: wp.array(dtype=float),
+    ctrl_g: wp.array(dtype=wp.vec3),
+    offset: int,
+):
     """Gradient (N, N m) and diagonal Hessian block of every body (b = thread + ``offset``)
     at the predicted state.
 
@@ -307,13 +409,15 @@ def assemble_bodies_kernel(
         gr += control_gradient(eye, rb, tgt, damp_ref, k, dh2)
         c += (2.0 * (k + dh2)) * eye
     else:
-        gt, gr, a, bb, c = joint_child_terms(k_joint, lever_p[b], lever_c[b], x[p], x[b], ctrl_g[b], ctrl_c[b],
-                                             eye, gt, gr, a, bb, c)
+        gt, gr, a, bb, c = joint_child_terms(
+            k_joint, lever_p[b], lever_c[b], x[p], x[b], ctrl_g[b], ctrl_c[b], eye, gt, gr, a, bb, c
+        )
     for s in range(body_children.shape[1]):
         ch = body_children[b, s]
         if ch >= 0:
-            gt, gr, a, bb, c = joint_parent_terms(k_joint, lever_p[ch], lever_c[ch], x[b], x[ch], ctrl_g[ch],
-                                                  ctrl_c[ch], eye, gt, gr, a, bb, c)
+            gt, gr, a, bb, c = joint_parent_terms(
+                k_joint, lever_p[ch], lever_c[ch], x[b], x[ch], ctrl_g[ch], ctrl_c[ch], eye, gt, gr, a, bb, c
+            )
     grad_t[b] = gt
     grad_r[b] = gr
     hess_a[b] = a
@@ -322,11 +426,20 @@ def assemble_bodies_kernel(
 
 
 @wp.kernel
-def update_kernel(x_pred: wp.array(dtype=wp.vec3), q_pred: wp.array(dtype=wp.quat),
-                  x_old: wp.array(dtype=wp.vec3), q_old: wp.array(dtype=wp.quat),
-                  dx: wp.array(dtype=wp.vec3), dw: wp.array(dtype=wp.vec3), h: float,
-                  x_new: wp.array(dtype=wp.vec3), q_new: wp.array(dtype=wp.quat),
-                  v_new: wp.array(dtype=wp.vec3), w_new: wp.array(dtype=wp.vec3), offset: int):
+def update_kernel(
+    x_pred: wp.array(dtype=wp.vec3),
+    q_pred: wp.array(dtype=wp.quat),
+    x_old: wp.array(dtype=wp.vec3),
+    q_old: wp.array(dtype=wp.quat),
+    dx: wp.array(dtype=wp.vec3),
+    dw: wp.array(dtype=wp.vec3),
+    h: float,
+    x_new: wp.array(dtype=wp.vec3),
+    q_new: wp.array(dtype=wp.quat),
+    v_new: wp.array(dtype=wp.vec3),
+    w_new: wp.array(dtype=wp.vec3),
+    offset: int,
+):
     """Apply the Newton increment; velocities (m/s, rad/s) from the change over h.
     Body b = thread + ``offset``."""
     b = wp.tid() + offset
@@ -339,10 +452,16 @@ def update_kernel(x_pred: wp.array(dtype=wp.vec3), q_pred: wp.array(dtype=wp.qua
 
 
 @wp.kernel
-def project_kernel(x: wp.array(dtype=wp.vec3), q: wp.array(dtype=wp.quat),
-                   body_parent: wp.array(dtype=wp.int32), anchor_child: wp.array(dtype=wp.vec3),
-                   n_joints: int, frame: int,
-                   out_rot: wp.array2d(dtype=wp.vec3), out_root: wp.array2d(dtype=wp.vec3)):
+def project_kernel(
+    x: wp.array(dtype=wp.vec3),
+    q: wp.array(dtype=wp.quat),
+    body_parent: wp.array(dtype=wp.int32),
+    anchor_child: wp.array(dtype=wp.vec3),
+    n_joints: int,
+    frame: int,
+    out_rot: wp.array2d(dtype=wp.vec3),
+    out_root: wp.array2d(dtype=wp.vec3),
+):
     """Joint rotations (axis-angle, rad; root global, others R_parent^T R_child) and the
     pelvis joint position (m) of the rigid state, written to row ``frame`` of the outputs."""
     b = wp.tid()
@@ -355,9 +474,14 @@ def project_kernel(x: wp.array(dtype=wp.vec3), q: wp.array(dtype=wp.quat),
 
 
 @wp.kernel
-def set_state_kernel(target_x: wp.array(dtype=wp.vec3), target_glob: wp.array(dtype=wp.quat),
-                     x: wp.array(dtype=wp.vec3), q: wp.array(dtype=wp.quat),
-                     v: wp.array(dtype=wp.vec3), w: wp.array(dtype=wp.vec3)):
+def set_state_kernel(
+    target_x: wp.array(dtype=wp.vec3),
+    target_glob: wp.array(dtype=wp.quat),
+    x: wp.array(dtype=wp.vec3),
+    q: wp.array(dtype=wp.quat),
+    v: wp.array(dtype=wp.vec3),
+    w: wp.array(dtype=wp.vec3),
+):
     """Place every body at its target, at rest."""
     b = wp.tid()
     x[b] = target_x[b]
@@ -367,15 +491,29 @@ def set_state_kernel(target_x: wp.array(dtype=wp.vec3), target_glob: wp.array(dt
 
 
 @wp.kernel
-def foot_anchor_kernel(feet: wp.array(dtype=wp.int32), x_pred: wp.array(dtype=wp.vec3),
-                       x_old: wp.array(dtype=wp.vec3), t_x: wp.array(dtype=wp.vec3),
-                       t_x_old: wp.array(dtype=wp.vec3), offset: wp.array(dtype=wp.vec3),
-                       weight: wp.array(dtype=float), stepping: wp.array(dtype=wp.int32),
-                       body_kt: wp.array(dtype=float), body_dt: wp.array(dtype=float), h: float,
-                       damp_scale: float,
-                       planted_speed: float, k_anchor: float, c_anchor: float, max_force: float,
-                       release_distance: float, rejoin_distance: float,
-                       grad_t: wp.array(dtype=wp.vec3), hess_a: wp.array(dtype=wp.mat33), offset_feet: int):
+def foot_anchor_kernel(
+    feet: wp.array(dtype=wp.int32),
+    x_pred: wp.array(dtype=wp.vec3),
+    x_old: wp.array(dtype=wp.vec3),
+    t_x: wp.array(dtype=wp.vec3),
+    t_x_old: wp.array(dtype=wp.vec3),
+    offset: wp.array(dtype=wp.vec3),
+    weight: wp.array(dtype=float),
+    stepping: wp.array(dtype=wp.int32),
+    body_kt: wp.array(dtype=float),
+    body_dt: wp.array(dtype=float),
+    h: float,
+    damp_scale: float,
+    planted_speed: float,
+    k_anchor: float,
+    c_anchor: float,
+    max_force: float,
+    release_distance: float,
+    rejoin_distance: float,
+    grad_t: wp.array(dtype=wp.vec3),
+    hess_a: wp.array(dtype=wp.mat33),
+    offset_feet: int,
+):
     """Stance-foot anchor (static friction of planted feet), added to the assembled system.
     Foot i = thread + ``offset_feet`` of ``feet``.
 

@@ -30,17 +30,35 @@ import warp as wp
 
 from crowdstudy.warp_runtime import get_warp
 
-__all__ = ["contact_assemble_kernel", "precond_kernel", "tree_factor_kernel", "tree_precond_kernel",
-           "pcg_fused_kernel", "pcg_split_init_kernel", "pcg_split_matvec_kernel", "pcg_split_update_kernel",
-           "triplets_bodies_kernel", "triplets_contacts_kernel", "unpack_kernel", "bsr_from_triplets"]
+__all__ = [
+    "contact_assemble_kernel",
+    "precond_kernel",
+    "tree_factor_kernel",
+    "tree_precond_kernel",
+    "pcg_fused_kernel",
+    "pcg_split_init_kernel",
+    "pcg_split_matvec_kernel",
+    "pcg_split_update_kernel",
+    "triplets_bodies_kernel",
+    "triplets_contacts_kernel",
+    "unpack_kernel",
+    "bsr_from_triplets",
+]
 
-get_warp()      # the project's kernel cache and log level, set before this module can compile
-wp.set_module_options({"enable_backward": False})     # forward only: no adjoints to compile
+get_warp()  # the project's kernel cache and log level, set before this module can compile
+wp.set_module_options({"enable_backward": False})  # forward only: no adjoints to compile
 
 
 @wp.func
-def release_scale(a: int, b: int, n_joints: int, x: wp.array(dtype=wp.vec3), t_x: wp.array(dtype=wp.vec3),
-                  release0: float, release_width: float):
+def release_scale(
+    a: int,
+    b: int,
+    n_joints: int,
+    x: wp.array(dtype=wp.vec3),
+    t_x: wp.array(dtype=wp.vec3),
+    release0: float,
+    release_width: float,
+):
     """Factor in [0, 1] on the penalty of an inter-body contact between bodies a and b.
 
     A limb held farther than ``release0`` m from where its animation puts it RELATIVE to
@@ -51,8 +69,7 @@ def release_scale(a: int, b: int, n_joints: int, x: wp.array(dtype=wp.vec3), t_x
     pushed as a whole keeps its contacts."""
     ra = (a / n_joints) * n_joints
     rb = (b / n_joints) * n_joints
-    dev = wp.max(wp.length((x[a] - t_x[a]) - (x[ra] - t_x[ra])),
-                 wp.length((x[b] - t_x[b]) - (x[rb] - t_x[rb])))
+    dev = wp.max(wp.length((x[a] - t_x[a]) - (x[ra] - t_x[ra])), wp.length((x[b] - t_x[b]) - (x[rb] - t_x[rb])))
     return wp.clamp(1.0 - (dev - release0) / release_width, 0.0, 1.0)
 
 
@@ -87,10 +104,18 @@ def penalty_force(depth: float, k_c: float, activation: float, stiffen: float, k
 
 
 @wp.func
-def add_contact_terms(body: int, f: float, k: float, u_t: wp.vec3, u_r: wp.vec3,
-                      grad_t: wp.array(dtype=wp.vec3), grad_r: wp.array(dtype=wp.vec3),
-                      hess_a: wp.array(dtype=wp.mat33), hess_b: wp.array(dtype=wp.mat33),
-                      hess_c: wp.array(dtype=wp.mat33)):
+def add_contact_terms(
+    body: int,
+    f: float,
+    k: float,
+    u_t: wp.vec3,
+    u_r: wp.vec3,
+    grad_t: wp.array(dtype=wp.vec3),
+    grad_r: wp.array(dtype=wp.vec3),
+    hess_a: wp.array(dtype=wp.mat33),
+    hess_b: wp.array(dtype=wp.mat33),
+    hess_c: wp.array(dtype=wp.mat33),
+):
     """Add a contact's gradient f u (N, N m) and Gauss-Newton blocks k u u^T to ``body``
     (atomics: several contacts touch a body); u = (u_t, u_r) the depth's gradient with
     respect to the body's increments (dx, dw)."""
@@ -103,11 +128,20 @@ def add_contact_terms(body: int, f: float, k: float, u_t: wp.vec3, u_r: wp.vec3,
 
 
 @wp.func
-def add_ground_friction(a: int, n: wp.vec3, lever: wp.vec3, friction: float, h: float,
-                        v: wp.array(dtype=wp.vec3), w: wp.array(dtype=wp.vec3),
-                        grad_t: wp.array(dtype=wp.vec3), grad_r: wp.array(dtype=wp.vec3),
-                        hess_a: wp.array(dtype=wp.mat33), hess_b: wp.array(dtype=wp.mat33),
-                        hess_c: wp.array(dtype=wp.mat33)):
+def add_ground_friction(
+    a: int,
+    n: wp.vec3,
+    lever: wp.vec3,
+    friction: float,
+    h: float,
+    v: wp.array(dtype=wp.vec3),
+    w: wp.array(dtype=wp.vec3),
+    grad_t: wp.array(dtype=wp.vec3),
+    grad_r: wp.array(dtype=wp.vec3),
+    hess_a: wp.array(dtype=wp.mat33),
+    hess_b: wp.array(dtype=wp.mat33),
+    hess_c: wp.array(dtype=wp.mat33),
+):
     """Viscous friction of a ground contact of body ``a`` (normal ``n``, lever arm
     ``lever`` m): (c/(2h)) |P_t dp|^2, dp the contact point's displacement over the step
     and P_t the tangent projector, i.e. a force c v_t (c = ``friction``, N s/m) against
@@ -126,22 +160,43 @@ def add_ground_friction(a: int, n: wp.vec3, lever: wp.vec3, friction: float, h: 
 
 
 @wp.kernel
-def contact_assemble_kernel(count: wp.array(dtype=wp.int32), capacity: int,
-                            c_a: wp.array(dtype=wp.int32), c_b: wp.array(dtype=wp.int32),
-                            c_n: wp.array(dtype=wp.vec3), c_depth: wp.array(dtype=float),
-                            c_la: wp.array(dtype=wp.vec3), c_lb: wp.array(dtype=wp.vec3),
-                            c_k: wp.array(dtype=float), c_kind: wp.array(dtype=wp.int32), friction: float,
-                            activation: float, release0: float, release_width: float, stiffen: float,
-                            n_joints: int,
-                            x: wp.array(dtype=wp.vec3), t_x: wp.array(dtype=wp.vec3),
-                            v: wp.array(dtype=wp.vec3), w: wp.array(dtype=wp.vec3), h: float,
-                            grad_t: wp.array(dtype=wp.vec3), grad_r: wp.array(dtype=wp.vec3),
-                            hess_a: wp.array(dtype=wp.mat33), hess_b: wp.array(dtype=wp.mat33),
-                            hess_c: wp.array(dtype=wp.mat33),
-                            u_at: wp.array(dtype=wp.vec3), u_ar: wp.array(dtype=wp.vec3),
-                            u_bt: wp.array(dtype=wp.vec3), u_br: wp.array(dtype=wp.vec3),
-                            k_eff: wp.array(dtype=float), contact_list: wp.array(dtype=wp.int32), use_list: int,
-                            lo: int, hi: int):
+def contact_assemble_kernel(
+    count: wp.array(dtype=wp.int32),
+    capacity: int,
+    c_a: wp.array(dtype=wp.int32),
+    c_b: wp.array(dtype=wp.int32),
+    c_n: wp.array(dtype=wp.vec3),
+    c_depth: wp.array(dtype=float),
+    c_la: wp.array(dtype=wp.vec3),
+    c_lb: wp.array(dtype=wp.vec3),
+    c_k: wp.array(dtype=float),
+    c_kind: wp.array(dtype=wp.int32),
+    friction: float,
+    activation: float,
+    release0: float,
+    release_width: float,
+    stiffen: float,
+    n_joints: int,
+    x: wp.array(dtype=wp.vec3),
+    t_x: wp.array(dtype=wp.vec3),
+    v: wp.array(dtype=wp.vec3),
+    w: wp.array(dtype=wp.vec3),
+    h: float,
+    grad_t: wp.array(dtype=wp.vec3),
+    grad_r: wp.array(dtype=wp.vec3),
+    hess_a: wp.array(dtype=wp.mat33),
+    hess_b: wp.array(dtype=wp.mat33),
+    hess_c: wp.array(dtype=wp.mat33),
+    u_at: wp.array(dtype=wp.vec3),
+    u_ar: wp.array(dtype=wp.vec3),
+    u_bt: wp.array(dtype=wp.vec3),
+    u_br: wp.array(dtype=wp.vec3),
+    k_eff: wp.array(dtype=float),
+    contact_list: wp.array(dtype=wp.int32),
+    use_list: int,
+    lo: int,
+    hi: int,
+):
     """Penalty of one contact (thread) on its depth d (m). d(q) is linear in the increments
     with gradient u_a = -(n, l_a x n), u_b = (n, l_b x n); linearised to the prediction
     (q_t + h v). Gradient phi'(d) u, Gauss-Newton Hessian phi''(d) u u^T (``penalty_force``;
@@ -197,9 +252,14 @@ def contact_assemble_kernel(count: wp.array(dtype=wp.int32), capacity: int,
 
 
 @wp.kernel
-def precond_kernel(hess_a: wp.array(dtype=wp.mat33), hess_b: wp.array(dtype=wp.mat33),
-                   hess_c: wp.array(dtype=wp.mat33), p_tt: wp.array(dtype=wp.mat33),
-                   p_tr: wp.array(dtype=wp.mat33), p_rr: wp.array(dtype=wp.mat33)):
+def precond_kernel(
+    hess_a: wp.array(dtype=wp.mat33),
+    hess_b: wp.array(dtype=wp.mat33),
+    hess_c: wp.array(dtype=wp.mat33),
+    p_tt: wp.array(dtype=wp.mat33),
+    p_tr: wp.array(dtype=wp.mat33),
+    p_rr: wp.array(dtype=wp.mat33),
+):
     """Inverse of each 6x6 diagonal block [[A, B], [B^T, C]] by its Schur complement."""
     i = wp.tid()
     a = hess_a[i]
@@ -214,12 +274,22 @@ def precond_kernel(hess_a: wp.array(dtype=wp.mat33), hess_b: wp.array(dtype=wp.m
 
 
 @wp.func
-def body_rows(lo: int, hi: int, x_t: wp.array(dtype=wp.vec3), x_r: wp.array(dtype=wp.vec3),
-              hess_a: wp.array(dtype=wp.mat33), hess_b: wp.array(dtype=wp.mat33),
-              hess_c: wp.array(dtype=wp.mat33), parent: wp.array(dtype=wp.int32),
-              lever_p: wp.array(dtype=wp.vec3), lever_c: wp.array(dtype=wp.vec3),
-              ctrl_c: wp.array(dtype=float), k_joint: float,
-              y_t: wp.array(dtype=wp.vec3), y_r: wp.array(dtype=wp.vec3)):
+def body_rows(
+    lo: int,
+    hi: int,
+    x_t: wp.array(dtype=wp.vec3),
+    x_r: wp.array(dtype=wp.vec3),
+    hess_a: wp.array(dtype=wp.mat33),
+    hess_b: wp.array(dtype=wp.mat33),
+    hess_c: wp.array(dtype=wp.mat33),
+    parent: wp.array(dtype=wp.int32),
+    lever_p: wp.array(dtype=wp.vec3),
+    lever_c: wp.array(dtype=wp.vec3),
+    ctrl_c: wp.array(dtype=float),
+    k_joint: float,
+    y_t: wp.array(dtype=wp.vec3),
+    y_r: wp.array(dtype=wp.vec3),
+):
     """y = (diagonal blocks + joint couplings) x on bodies [lo, hi) (whole characters:
     a joint's parent is in its child's character), sequentially."""
     for i in range(lo, hi):
@@ -242,14 +312,29 @@ def body_rows(lo: int, hi: int, x_t: wp.array(dtype=wp.vec3), x_r: wp.array(dtyp
 
 
 @wp.func
-def matvec(nb: int, n_contacts: int, x_t: wp.array(dtype=wp.vec3), x_r: wp.array(dtype=wp.vec3),
-           hess_a: wp.array(dtype=wp.mat33), hess_b: wp.array(dtype=wp.mat33), hess_c: wp.array(dtype=wp.mat33),
-           parent: wp.array(dtype=wp.int32), lever_p: wp.array(dtype=wp.vec3), lever_c: wp.array(dtype=wp.vec3),
-           ctrl_c: wp.array(dtype=float), k_joint: float,
-           c_a: wp.array(dtype=wp.int32), c_b: wp.array(dtype=wp.int32),
-           u_at: wp.array(dtype=wp.vec3), u_ar: wp.array(dtype=wp.vec3),
-           u_bt: wp.array(dtype=wp.vec3), u_br: wp.array(dtype=wp.vec3), k_eff: wp.array(dtype=float),
-           y_t: wp.array(dtype=wp.vec3), y_r: wp.array(dtype=wp.vec3)):
+def matvec(
+    nb: int,
+    n_contacts: int,
+    x_t: wp.array(dtype=wp.vec3),
+    x_r: wp.array(dtype=wp.vec3),
+    hess_a: wp.array(dtype=wp.mat33),
+    hess_b: wp.array(dtype=wp.mat33),
+    hess_c: wp.array(dtype=wp.mat33),
+    parent: wp.array(dtype=wp.int32),
+    lever_p: wp.array(dtype=wp.vec3),
+    lever_c: wp.array(dtype=wp.vec3),
+    ctrl_c: wp.array(dtype=float),
+    k_joint: float,
+    c_a: wp.array(dtype=wp.int32),
+    c_b: wp.array(dtype=wp.int32),
+    u_at: wp.array(dtype=wp.vec3),
+    u_ar: wp.array(dtype=wp.vec3),
+    u_bt: wp.array(dtype=wp.vec3),
+    u_br: wp.array(dtype=wp.vec3),
+    k_eff: wp.array(dtype=float),
+    y_t: wp.array(dtype=wp.vec3),
+    y_r: wp.array(dtype=wp.vec3),
+):
     """y = H x, sequentially: diagonal blocks, joint couplings, contact couplings."""
     body_rows(0, nb, x_t, x_r, hess_a, hess_b, hess_c, parent, lever_p, lever_c, ctrl_c, k_joint, y_t, y_r)
     for i in range(n_contacts):
@@ -327,12 +412,21 @@ def joint_apply_t(kj: float, rp: wp.vec3, rc: wp.vec3, cc: float, y: wp.spatial_
 
 
 @wp.kernel
-def tree_factor_kernel(n_joints: int, hess_a: wp.array(dtype=wp.mat33), hess_b: wp.array(dtype=wp.mat33),
-                       hess_c: wp.array(dtype=wp.mat33), parent: wp.array(dtype=wp.int32),
-                       lever_p: wp.array(dtype=wp.vec3), lever_c: wp.array(dtype=wp.vec3),
-                       ctrl_c: wp.array(dtype=float), k_joint: float,
-                       work: wp.array(dtype=wp.spatial_matrix), dinv: wp.array(dtype=wp.spatial_matrix),
-                       lmat: wp.array(dtype=wp.spatial_matrix), offset: int):
+def tree_factor_kernel(
+    n_joints: int,
+    hess_a: wp.array(dtype=wp.mat33),
+    hess_b: wp.array(dtype=wp.mat33),
+    hess_c: wp.array(dtype=wp.mat33),
+    parent: wp.array(dtype=wp.int32),
+    lever_p: wp.array(dtype=wp.vec3),
+    lever_c: wp.array(dtype=wp.vec3),
+    ctrl_c: wp.array(dtype=float),
+    k_joint: float,
+    work: wp.array(dtype=wp.spatial_matrix),
+    dinv: wp.array(dtype=wp.spatial_matrix),
+    lmat: wp.array(dtype=wp.spatial_matrix),
+    offset: int,
+):
     """Exact block LDL^T of one character's (thread + ``offset``) 6J x 6J block (diagonal
     blocks plus joint couplings, a tree): leaves are eliminated into their parents
     (parents[j] < j)."""
@@ -355,11 +449,22 @@ def tree_factor_kernel(n_joints: int, hess_a: wp.array(dtype=wp.mat33), hess_b: 
 
 
 @wp.func
-def tree_apply(lo: int, hi: int, parent: wp.array(dtype=wp.int32), r_t: wp.array(dtype=wp.vec3),
-               r_r: wp.array(dtype=wp.vec3), dinv: wp.array(dtype=wp.spatial_matrix),
-               lmat: wp.array(dtype=wp.spatial_matrix), lever_p: wp.array(dtype=wp.vec3),
-               lever_c: wp.array(dtype=wp.vec3), ctrl_c: wp.array(dtype=float), k_joint: float,
-               y6: wp.array(dtype=wp.spatial_vector), z_t: wp.array(dtype=wp.vec3), z_r: wp.array(dtype=wp.vec3)):
+def tree_apply(
+    lo: int,
+    hi: int,
+    parent: wp.array(dtype=wp.int32),
+    r_t: wp.array(dtype=wp.vec3),
+    r_r: wp.array(dtype=wp.vec3),
+    dinv: wp.array(dtype=wp.spatial_matrix),
+    lmat: wp.array(dtype=wp.spatial_matrix),
+    lever_p: wp.array(dtype=wp.vec3),
+    lever_c: wp.array(dtype=wp.vec3),
+    ctrl_c: wp.array(dtype=float),
+    k_joint: float,
+    y6: wp.array(dtype=wp.spatial_vector),
+    z_t: wp.array(dtype=wp.vec3),
+    z_r: wp.array(dtype=wp.vec3),
+):
     """z = P r on bodies [lo, hi) (whole characters) with P the inverse of every
     character's tree block (sequential); the joint blocks O^T from the levers
     (``joint_apply_t``)."""
@@ -385,13 +490,22 @@ def tree_apply(lo: int, hi: int, parent: wp.array(dtype=wp.int32), r_t: wp.array
 
 
 @wp.kernel
-def tree_precond_kernel(n_joints: int, parent: wp.array(dtype=wp.int32),
-                        dinv: wp.array(dtype=wp.spatial_matrix), lmat: wp.array(dtype=wp.spatial_matrix),
-                        lever_p: wp.array(dtype=wp.vec3), lever_c: wp.array(dtype=wp.vec3),
-                        ctrl_c: wp.array(dtype=float), k_joint: float,
-                        x: wp.array(dtype=wp.spatial_vector),
-                        y: wp.array(dtype=wp.spatial_vector), z: wp.array(dtype=wp.spatial_vector),
-                        alpha: float, beta: float, work: wp.array(dtype=wp.spatial_vector)):
+def tree_precond_kernel(
+    n_joints: int,
+    parent: wp.array(dtype=wp.int32),
+    dinv: wp.array(dtype=wp.spatial_matrix),
+    lmat: wp.array(dtype=wp.spatial_matrix),
+    lever_p: wp.array(dtype=wp.vec3),
+    lever_c: wp.array(dtype=wp.vec3),
+    ctrl_c: wp.array(dtype=float),
+    k_joint: float,
+    x: wp.array(dtype=wp.spatial_vector),
+    y: wp.array(dtype=wp.spatial_vector),
+    z: wp.array(dtype=wp.spatial_vector),
+    alpha: float,
+    beta: float,
+    work: wp.array(dtype=wp.spatial_vector),
+):
     """z = alpha P x + beta y, P the tree solve of one character (thread); for
     ``warp.optim.linear`` solvers (a LinearOperator preconditioner, CPU or CUDA)."""
     i = wp.tid()
@@ -416,8 +530,14 @@ def tree_precond_kernel(n_joints: int, parent: wp.array(dtype=wp.int32),
 
 
 @wp.func
-def dot6(lo: int, hi: int, a_t: wp.array(dtype=wp.vec3), a_r: wp.array(dtype=wp.vec3),
-         b_t: wp.array(dtype=wp.vec3), b_r: wp.array(dtype=wp.vec3)):
+def dot6(
+    lo: int,
+    hi: int,
+    a_t: wp.array(dtype=wp.vec3),
+    a_r: wp.array(dtype=wp.vec3),
+    b_t: wp.array(dtype=wp.vec3),
+    b_r: wp.array(dtype=wp.vec3),
+):
     """sum over bodies [lo, hi) of a . b (translation and rotation parts), in order."""
     total = float(0.0)
     for i in range(lo, hi):
@@ -426,9 +546,16 @@ def dot6(lo: int, hi: int, a_t: wp.array(dtype=wp.vec3), a_r: wp.array(dtype=wp.
 
 
 @wp.func
-def pcg_start(lo: int, hi: int, grad_t: wp.array(dtype=wp.vec3), grad_r: wp.array(dtype=wp.vec3),
-              x_t: wp.array(dtype=wp.vec3), x_r: wp.array(dtype=wp.vec3),
-              r_t: wp.array(dtype=wp.vec3), r_r: wp.array(dtype=wp.vec3)):
+def pcg_start(
+    lo: int,
+    hi: int,
+    grad_t: wp.array(dtype=wp.vec3),
+    grad_r: wp.array(dtype=wp.vec3),
+    x_t: wp.array(dtype=wp.vec3),
+    x_r: wp.array(dtype=wp.vec3),
+    r_t: wp.array(dtype=wp.vec3),
+    r_r: wp.array(dtype=wp.vec3),
+):
     """x = 0, r = -g on bodies [lo, hi); returns their |r|^2."""
     bn = float(0.0)
     for i in range(lo, hi):
@@ -443,10 +570,19 @@ def pcg_start(lo: int, hi: int, grad_t: wp.array(dtype=wp.vec3), grad_r: wp.arra
 
 
 @wp.func
-def pcg_advance(lo: int, hi: int, alpha: float, p_t: wp.array(dtype=wp.vec3), p_r: wp.array(dtype=wp.vec3),
-                q_t: wp.array(dtype=wp.vec3), q_r: wp.array(dtype=wp.vec3),
-                x_t: wp.array(dtype=wp.vec3), x_r: wp.array(dtype=wp.vec3),
-                r_t: wp.array(dtype=wp.vec3), r_r: wp.array(dtype=wp.vec3)):
+def pcg_advance(
+    lo: int,
+    hi: int,
+    alpha: float,
+    p_t: wp.array(dtype=wp.vec3),
+    p_r: wp.array(dtype=wp.vec3),
+    q_t: wp.array(dtype=wp.vec3),
+    q_r: wp.array(dtype=wp.vec3),
+    x_t: wp.array(dtype=wp.vec3),
+    x_r: wp.array(dtype=wp.vec3),
+    r_t: wp.array(dtype=wp.vec3),
+    r_r: wp.array(dtype=wp.vec3),
+):
     """x += alpha p, r -= alpha q on bodies [lo, hi); returns their new |r|^2."""
     rr2 = float(0.0)
     for i in range(lo, hi):
@@ -461,14 +597,25 @@ def pcg_advance(lo: int, hi: int, alpha: float, p_t: wp.array(dtype=wp.vec3), p_
 
 
 @wp.func
-def apply_precond(mode: int, nb: int, parent: wp.array(dtype=wp.int32),
-                  r_t: wp.array(dtype=wp.vec3), r_r: wp.array(dtype=wp.vec3),
-                  p_tt: wp.array(dtype=wp.mat33), p_tr: wp.array(dtype=wp.mat33), p_rr: wp.array(dtype=wp.mat33),
-                  dinv: wp.array(dtype=wp.spatial_matrix), lmat: wp.array(dtype=wp.spatial_matrix),
-                  lever_p: wp.array(dtype=wp.vec3), lever_c: wp.array(dtype=wp.vec3),
-                  ctrl_c: wp.array(dtype=float), k_joint: float,
-                  y6: wp.array(dtype=wp.spatial_vector), z_t: wp.array(dtype=wp.vec3),
-                  z_r: wp.array(dtype=wp.vec3)):
+def apply_precond(
+    mode: int,
+    nb: int,
+    parent: wp.array(dtype=wp.int32),
+    r_t: wp.array(dtype=wp.vec3),
+    r_r: wp.array(dtype=wp.vec3),
+    p_tt: wp.array(dtype=wp.mat33),
+    p_tr: wp.array(dtype=wp.mat33),
+    p_rr: wp.array(dtype=wp.mat33),
+    dinv: wp.array(dtype=wp.spatial_matrix),
+    lmat: wp.array(dtype=wp.spatial_matrix),
+    lever_p: wp.array(dtype=wp.vec3),
+    lever_c: wp.array(dtype=wp.vec3),
+    ctrl_c: wp.array(dtype=float),
+    k_joint: float,
+    y6: wp.array(dtype=wp.spatial_vector),
+    z_t: wp.array(dtype=wp.vec3),
+    z_r: wp.array(dtype=wp.vec3),
+):
     """z = P r: mode 1 the per-character tree solve, mode 0 the 6x6 block Jacobi. Returns r.z."""
     if mode == 1:
         tree_apply(0, nb, parent, r_t, r_r, dinv, lmat, lever_p, lever_c, ctrl_c, k_joint, y6, z_t, z_r)
@@ -481,30 +628,70 @@ def apply_precond(mode: int, nb: int, parent: wp.array(dtype=wp.int32),
 
 
 @wp.kernel
-def pcg_fused_kernel(nb: int, count: wp.array(dtype=wp.int32), capacity: int,
-                     hess_a: wp.array(dtype=wp.mat33), hess_b: wp.array(dtype=wp.mat33),
-                     hess_c: wp.array(dtype=wp.mat33), p_tt: wp.array(dtype=wp.mat33),
-                     p_tr: wp.array(dtype=wp.mat33), p_rr: wp.array(dtype=wp.mat33),
-                     precond_mode: int, dinv: wp.array(dtype=wp.spatial_matrix),
-                     lmat: wp.array(dtype=wp.spatial_matrix), y6: wp.array(dtype=wp.spatial_vector),
-                     parent: wp.array(dtype=wp.int32), lever_p: wp.array(dtype=wp.vec3),
-                     lever_c: wp.array(dtype=wp.vec3), ctrl_c: wp.array(dtype=float), k_joint: float,
-                     c_a: wp.array(dtype=wp.int32), c_b: wp.array(dtype=wp.int32),
-                     u_at: wp.array(dtype=wp.vec3), u_ar: wp.array(dtype=wp.vec3),
-                     u_bt: wp.array(dtype=wp.vec3), u_br: wp.array(dtype=wp.vec3), k_eff: wp.array(dtype=float),
-                     grad_t: wp.array(dtype=wp.vec3), grad_r: wp.array(dtype=wp.vec3),
-                     tol: float, max_iter: int,
-                     x_t: wp.array(dtype=wp.vec3), x_r: wp.array(dtype=wp.vec3),
-                     r_t: wp.array(dtype=wp.vec3), r_r: wp.array(dtype=wp.vec3),
-                     z_t: wp.array(dtype=wp.vec3), z_r: wp.array(dtype=wp.vec3),
-                     p_t: wp.array(dtype=wp.vec3), p_r: wp.array(dtype=wp.vec3),
-                     q_t: wp.array(dtype=wp.vec3), q_r: wp.array(dtype=wp.vec3),
-                     stats: wp.array(dtype=float)):
+def pcg_fused_kernel(
+    nb: int,
+    count: wp.array(dtype=wp.int32),
+    capacity: int,
+    hess_a: wp.array(dtype=wp.mat33),
+    hess_b: wp.array(dtype=wp.mat33),
+    hess_c: wp.array(dtype=wp.mat33),
+    p_tt: wp.array(dtype=wp.mat33),
+    p_tr: wp.array(dtype=wp.mat33),
+    p_rr: wp.array(dtype=wp.mat33),
+    precond_mode: int,
+    dinv: wp.array(dtype=wp.spatial_matrix),
+    lmat: wp.array(dtype=wp.spatial_matrix),
+    y6: wp.array(dtype=wp.spatial_vector),
+    parent: wp.array(dtype=wp.int32),
+    lever_p: wp.array(dtype=wp.vec3),
+    lever_c: wp.array(dtype=wp.vec3),
+    ctrl_c: wp.array(dtype=float),
+    k_joint: float,
+    c_a: wp.array(dtype=wp.int32),
+    c_b: wp.array(dtype=wp.int32),
+    u_at: wp.array(dtype=wp.vec3),
+    u_ar: wp.array(dtype=wp.vec3),
+    u_bt: wp.array(dtype=wp.vec3),
+    u_br: wp.array(dtype=wp.vec3),
+    k_eff: wp.array(dtype=float),
+    grad_t: wp.array(dtype=wp.vec3),
+    grad_r: wp.array(dtype=wp.vec3),
+    tol: float,
+    max_iter: int,
+    x_t: wp.array(dtype=wp.vec3),
+    x_r: wp.array(dtype=wp.vec3),
+    r_t: wp.array(dtype=wp.vec3),
+    r_r: wp.array(dtype=wp.vec3),
+    z_t: wp.array(dtype=wp.vec3),
+    z_r: wp.array(dtype=wp.vec3),
+    p_t: wp.array(dtype=wp.vec3),
+    p_r: wp.array(dtype=wp.vec3),
+    q_t: wp.array(dtype=wp.vec3),
+    q_r: wp.array(dtype=wp.vec3),
+    stats: wp.array(dtype=float),
+):
     """PCG for H x = -g in one launch (one thread; for the CPU). stats = (iterations, |r|/|b|)."""
     nc = wp.min(count[0], capacity)
     bnorm2 = pcg_start(0, nb, grad_t, grad_r, x_t, x_r, r_t, r_r)
-    rz = apply_precond(precond_mode, nb, parent, r_t, r_r, p_tt, p_tr, p_rr, dinv, lmat, lever_p, lever_c,
-                       ctrl_c, k_joint, y6, z_t, z_r)
+    rz = apply_precond(
+        precond_mode,
+        nb,
+        parent,
+        r_t,
+        r_r,
+        p_tt,
+        p_tr,
+        p_rr,
+        dinv,
+        lmat,
+        lever_p,
+        lever_c,
+        ctrl_c,
+        k_joint,
+        y6,
+        z_t,
+        z_r,
+    )
     for i in range(nb):
         p_t[i] = z_t[i]
         p_r[i] = z_r[i]
@@ -514,8 +701,29 @@ def pcg_fused_kernel(nb: int, count: wp.array(dtype=wp.int32), capacity: int,
         rel = 1.0
     tol2 = tol * tol * bnorm2
     while it < max_iter and rel > tol:
-        matvec(nb, nc, p_t, p_r, hess_a, hess_b, hess_c, parent, lever_p, lever_c, ctrl_c, k_joint,
-               c_a, c_b, u_at, u_ar, u_bt, u_br, k_eff, q_t, q_r)
+        matvec(
+            nb,
+            nc,
+            p_t,
+            p_r,
+            hess_a,
+            hess_b,
+            hess_c,
+            parent,
+            lever_p,
+            lever_c,
+            ctrl_c,
+            k_joint,
+            c_a,
+            c_b,
+            u_at,
+            u_ar,
+            u_bt,
+            u_br,
+            k_eff,
+            q_t,
+            q_r,
+        )
         pq = dot6(0, nb, p_t, p_r, q_t, q_r)
         if pq <= 0.0:
             break
@@ -525,9 +733,25 @@ def pcg_fused_kernel(nb: int, count: wp.array(dtype=wp.int32), capacity: int,
         rel = wp.sqrt(rr2 / bnorm2)
         if rr2 <= tol2:
             break
-        rz_new = apply_precond(precond_mode, nb, parent, r_t, r_r, p_tt, p_tr, p_rr, dinv, lmat, lever_p,
-                               lever_c, ctrl_c, k_joint, y6,
-                               z_t, z_r)
+        rz_new = apply_precond(
+            precond_mode,
+            nb,
+            parent,
+            r_t,
+            r_r,
+            p_tt,
+            p_tr,
+            p_rr,
+            dinv,
+            lmat,
+            lever_p,
+            lever_c,
+            ctrl_c,
+            k_joint,
+            y6,
+            z_t,
+            z_r,
+        )
         beta = rz_new / rz
         rz = rz_new
         for i in range(nb):
@@ -538,17 +762,30 @@ def pcg_fused_kernel(nb: int, count: wp.array(dtype=wp.int32), capacity: int,
 
 
 @wp.kernel
-def pcg_split_init_kernel(lo: int, hi: int, part: int, grad_t: wp.array(dtype=wp.vec3),
-                          grad_r: wp.array(dtype=wp.vec3), parent: wp.array(dtype=wp.int32),
-                          dinv: wp.array(dtype=wp.spatial_matrix), lmat: wp.array(dtype=wp.spatial_matrix),
-                          lever_p: wp.array(dtype=wp.vec3), lever_c: wp.array(dtype=wp.vec3),
-                          ctrl_c: wp.array(dtype=float), k_joint: float,
-                          y6: wp.array(dtype=wp.spatial_vector),
-                          x_t: wp.array(dtype=wp.vec3), x_r: wp.array(dtype=wp.vec3),
-                          r_t: wp.array(dtype=wp.vec3), r_r: wp.array(dtype=wp.vec3),
-                          z_t: wp.array(dtype=wp.vec3), z_r: wp.array(dtype=wp.vec3),
-                          p_t: wp.array(dtype=wp.vec3), p_r: wp.array(dtype=wp.vec3),
-                          sums: wp.array(dtype=float)):
+def pcg_split_init_kernel(
+    lo: int,
+    hi: int,
+    part: int,
+    grad_t: wp.array(dtype=wp.vec3),
+    grad_r: wp.array(dtype=wp.vec3),
+    parent: wp.array(dtype=wp.int32),
+    dinv: wp.array(dtype=wp.spatial_matrix),
+    lmat: wp.array(dtype=wp.spatial_matrix),
+    lever_p: wp.array(dtype=wp.vec3),
+    lever_c: wp.array(dtype=wp.vec3),
+    ctrl_c: wp.array(dtype=float),
+    k_joint: float,
+    y6: wp.array(dtype=wp.spatial_vector),
+    x_t: wp.array(dtype=wp.vec3),
+    x_r: wp.array(dtype=wp.vec3),
+    r_t: wp.array(dtype=wp.vec3),
+    r_r: wp.array(dtype=wp.vec3),
+    z_t: wp.array(dtype=wp.vec3),
+    z_r: wp.array(dtype=wp.vec3),
+    p_t: wp.array(dtype=wp.vec3),
+    p_r: wp.array(dtype=wp.vec3),
+    sums: wp.array(dtype=float),
+):
     """Split PCG, start, on bodies [lo, hi) (whole characters; one thread): x = 0,
     r = -g, z = P r (the character preconditioner), the direction buffer p zeroed;
     partial sums |r|^2 -> sums[4 part], r.z -> sums[4 part + 1]."""
@@ -561,21 +798,38 @@ def pcg_split_init_kernel(lo: int, hi: int, part: int, grad_t: wp.array(dtype=wp
 
 
 @wp.kernel
-def pcg_split_matvec_kernel(lo: int, hi: int, part: int, beta: float, n_list: int,
-                            contact_list: wp.array(dtype=wp.int32),
-                            hess_a: wp.array(dtype=wp.mat33), hess_b: wp.array(dtype=wp.mat33),
-                            hess_c: wp.array(dtype=wp.mat33), parent: wp.array(dtype=wp.int32),
-                            lever_p: wp.array(dtype=wp.vec3), lever_c: wp.array(dtype=wp.vec3),
-                            ctrl_c: wp.array(dtype=float), k_joint: float,
-                            c_a: wp.array(dtype=wp.int32), c_b: wp.array(dtype=wp.int32),
-                            u_at: wp.array(dtype=wp.vec3), u_ar: wp.array(dtype=wp.vec3),
-                            u_bt: wp.array(dtype=wp.vec3), u_br: wp.array(dtype=wp.vec3),
-                            k_eff: wp.array(dtype=float),
-                            z_t: wp.array(dtype=wp.vec3), z_r: wp.array(dtype=wp.vec3),
-                            po_t: wp.array(dtype=wp.vec3), po_r: wp.array(dtype=wp.vec3),
-                            p_t: wp.array(dtype=wp.vec3), p_r: wp.array(dtype=wp.vec3),
-                            q_t: wp.array(dtype=wp.vec3), q_r: wp.array(dtype=wp.vec3),
-                            sums: wp.array(dtype=float)):
+def pcg_split_matvec_kernel(
+    lo: int,
+    hi: int,
+    part: int,
+    beta: float,
+    n_list: int,
+    contact_list: wp.array(dtype=wp.int32),
+    hess_a: wp.array(dtype=wp.mat33),
+    hess_b: wp.array(dtype=wp.mat33),
+    hess_c: wp.array(dtype=wp.mat33),
+    parent: wp.array(dtype=wp.int32),
+    lever_p: wp.array(dtype=wp.vec3),
+    lever_c: wp.array(dtype=wp.vec3),
+    ctrl_c: wp.array(dtype=float),
+    k_joint: float,
+    c_a: wp.array(dtype=wp.int32),
+    c_b: wp.array(dtype=wp.int32),
+    u_at: wp.array(dtype=wp.vec3),
+    u_ar: wp.array(dtype=wp.vec3),
+    u_bt: wp.array(dtype=wp.vec3),
+    u_br: wp.array(dtype=wp.vec3),
+    k_eff: wp.array(dtype=float),
+    z_t: wp.array(dtype=wp.vec3),
+    z_r: wp.array(dtype=wp.vec3),
+    po_t: wp.array(dtype=wp.vec3),
+    po_r: wp.array(dtype=wp.vec3),
+    p_t: wp.array(dtype=wp.vec3),
+    p_r: wp.array(dtype=wp.vec3),
+    q_t: wp.array(dtype=wp.vec3),
+    q_r: wp.array(dtype=wp.vec3),
+    sums: wp.array(dtype=float),
+):
     """Split PCG, one iteration's direction and product on bodies [lo, hi) (one
     thread): p = z + beta p_old (``po``, the previous direction buffer) into ``p``, then
     q = H p for these rows with the same terms in the same order as ``matvec``; the
@@ -604,17 +858,31 @@ def pcg_split_matvec_kernel(lo: int, hi: int, part: int, beta: float, n_list: in
 
 
 @wp.kernel
-def pcg_split_update_kernel(lo: int, hi: int, part: int, alpha: float,
-                            p_t: wp.array(dtype=wp.vec3), p_r: wp.array(dtype=wp.vec3),
-                            q_t: wp.array(dtype=wp.vec3), q_r: wp.array(dtype=wp.vec3),
-                            x_t: wp.array(dtype=wp.vec3), x_r: wp.array(dtype=wp.vec3),
-                            r_t: wp.array(dtype=wp.vec3), r_r: wp.array(dtype=wp.vec3),
-                            parent: wp.array(dtype=wp.int32), dinv: wp.array(dtype=wp.spatial_matrix),
-                            lmat: wp.array(dtype=wp.spatial_matrix), lever_p: wp.array(dtype=wp.vec3),
-                            lever_c: wp.array(dtype=wp.vec3), ctrl_c: wp.array(dtype=float), k_joint: float,
-                            y6: wp.array(dtype=wp.spatial_vector),
-                            z_t: wp.array(dtype=wp.vec3), z_r: wp.array(dtype=wp.vec3),
-                            sums: wp.array(dtype=float)):
+def pcg_split_update_kernel(
+    lo: int,
+    hi: int,
+    part: int,
+    alpha: float,
+    p_t: wp.array(dtype=wp.vec3),
+    p_r: wp.array(dtype=wp.vec3),
+    q_t: wp.array(dtype=wp.vec3),
+    q_r: wp.array(dtype=wp.vec3),
+    x_t: wp.array(dtype=wp.vec3),
+    x_r: wp.array(dtype=wp.vec3),
+    r_t: wp.array(dtype=wp.vec3),
+    r_r: wp.array(dtype=wp.vec3),
+    parent: wp.array(dtype=wp.int32),
+    dinv: wp.array(dtype=wp.spatial_matrix),
+    lmat: wp.array(dtype=wp.spatial_matrix),
+    lever_p: wp.array(dtype=wp.vec3),
+    lever_c: wp.array(dtype=wp.vec3),
+    ctrl_c: wp.array(dtype=float),
+    k_joint: float,
+    y6: wp.array(dtype=wp.spatial_vector),
+    z_t: wp.array(dtype=wp.vec3),
+    z_r: wp.array(dtype=wp.vec3),
+    sums: wp.array(dtype=float),
+):
     """Split PCG, one iteration's step on bodies [lo, hi) (one thread): x += alpha p,
     r -= alpha q, z = P r; partial |r|^2 -> sums[4 part + 3], r.z -> sums[4 part + 1]."""
     sums[4 * part + 3] = pcg_advance(lo, hi, alpha, p_t, p_r, q_t, q_r, x_t, x_r, r_t, r_r)
@@ -623,13 +891,23 @@ def pcg_split_update_kernel(lo: int, hi: int, part: int, alpha: float,
 
 
 @wp.kernel
-def triplets_bodies_kernel(nb: int, hess_a: wp.array(dtype=wp.mat33), hess_b: wp.array(dtype=wp.mat33),
-                           hess_c: wp.array(dtype=wp.mat33), parent: wp.array(dtype=wp.int32),
-                           lever_p: wp.array(dtype=wp.vec3), lever_c: wp.array(dtype=wp.vec3),
-                           ctrl_c: wp.array(dtype=float), k_joint: float,
-                           grad_t: wp.array(dtype=wp.vec3), grad_r: wp.array(dtype=wp.vec3),
-                           rows: wp.array(dtype=wp.int32), cols: wp.array(dtype=wp.int32),
-                           vals: wp.array(dtype=wp.spatial_matrix), rhs: wp.array(dtype=wp.spatial_vector)):
+def triplets_bodies_kernel(
+    nb: int,
+    hess_a: wp.array(dtype=wp.mat33),
+    hess_b: wp.array(dtype=wp.mat33),
+    hess_c: wp.array(dtype=wp.mat33),
+    parent: wp.array(dtype=wp.int32),
+    lever_p: wp.array(dtype=wp.vec3),
+    lever_c: wp.array(dtype=wp.vec3),
+    ctrl_c: wp.array(dtype=float),
+    k_joint: float,
+    grad_t: wp.array(dtype=wp.vec3),
+    grad_r: wp.array(dtype=wp.vec3),
+    rows: wp.array(dtype=wp.int32),
+    cols: wp.array(dtype=wp.int32),
+    vals: wp.array(dtype=wp.spatial_matrix),
+    rhs: wp.array(dtype=wp.spatial_vector),
+):
     """BSR triplets: the diagonal block of body i and its joint's two off-diagonal blocks."""
     i = wp.tid()
     b = hess_b[i]
@@ -662,13 +940,21 @@ def triplets_bodies_kernel(nb: int, hess_a: wp.array(dtype=wp.mat33), hess_b: wp
 
 
 @wp.kernel
-def triplets_contacts_kernel(offset: int, count: wp.array(dtype=wp.int32), capacity: int,
-                             c_a: wp.array(dtype=wp.int32), c_b: wp.array(dtype=wp.int32),
-                             u_at: wp.array(dtype=wp.vec3), u_ar: wp.array(dtype=wp.vec3),
-                             u_bt: wp.array(dtype=wp.vec3), u_br: wp.array(dtype=wp.vec3),
-                             k_eff: wp.array(dtype=float),
-                             rows: wp.array(dtype=wp.int32), cols: wp.array(dtype=wp.int32),
-                             vals: wp.array(dtype=wp.spatial_matrix)):
+def triplets_contacts_kernel(
+    offset: int,
+    count: wp.array(dtype=wp.int32),
+    capacity: int,
+    c_a: wp.array(dtype=wp.int32),
+    c_b: wp.array(dtype=wp.int32),
+    u_at: wp.array(dtype=wp.vec3),
+    u_ar: wp.array(dtype=wp.vec3),
+    u_bt: wp.array(dtype=wp.vec3),
+    u_br: wp.array(dtype=wp.vec3),
+    k_eff: wp.array(dtype=float),
+    rows: wp.array(dtype=wp.int32),
+    cols: wp.array(dtype=wp.int32),
+    vals: wp.array(dtype=wp.spatial_matrix),
+):
     """BSR triplets of the body-body contact couplings k u_a u_b^T (zero blocks otherwise)."""
     i = wp.tid()
     j = offset + 2 * i
@@ -680,8 +966,12 @@ def triplets_contacts_kernel(offset: int, count: wp.array(dtype=wp.int32), capac
         k = k_eff[i]
     if b >= 0 and k > 0.0:
         a = c_a[i]
-        o = block66(k * wp.outer(u_at[i], u_bt[i]), k * wp.outer(u_at[i], u_br[i]),
-                    k * wp.outer(u_ar[i], u_bt[i]), k * wp.outer(u_ar[i], u_br[i]))
+        o = block66(
+            k * wp.outer(u_at[i], u_bt[i]),
+            k * wp.outer(u_at[i], u_br[i]),
+            k * wp.outer(u_ar[i], u_bt[i]),
+            k * wp.outer(u_ar[i], u_br[i]),
+        )
         rows[j] = a
         cols[j] = b
         vals[j] = o
@@ -698,8 +988,7 @@ def triplets_contacts_kernel(offset: int, count: wp.array(dtype=wp.int32), capac
 
 
 @wp.kernel
-def unpack_kernel(x6: wp.array(dtype=wp.spatial_vector), x_t: wp.array(dtype=wp.vec3),
-                  x_r: wp.array(dtype=wp.vec3)):
+def unpack_kernel(x6: wp.array(dtype=wp.spatial_vector), x_t: wp.array(dtype=wp.vec3), x_r: wp.array(dtype=wp.vec3)):
     """Split a packed (B,) spatial_vector solution (dx m, dw rad) into its translation and
     rotation parts, (B,) vec3 each."""
     i = wp.tid()

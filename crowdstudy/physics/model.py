@@ -23,8 +23,17 @@ from crowdstudy.body.capsules import closest_points_on_segments
 from crowdstudy.body.skeleton import ARM_JOINTS, JOINT_INDEX, PARENTS
 from crowdstudy.errors import InvalidInputError
 
-__all__ = ["ModelBuilder", "Model", "capsule_mass_properties",
-           "GROUP_BODY", "GROUP_PELVIS", "GROUP_FEET", "GROUP_ARM", "GROUP_TRUNK", "MAX_CHILDREN"]
+__all__ = [
+    "ModelBuilder",
+    "Model",
+    "capsule_mass_properties",
+    "GROUP_BODY",
+    "GROUP_PELVIS",
+    "GROUP_FEET",
+    "GROUP_ARM",
+    "GROUP_TRUNK",
+    "MAX_CHILDREN",
+]
 
 GROUP_BODY, GROUP_PELVIS, GROUP_FEET, GROUP_ARM, GROUP_TRUNK = 0, 1, 2, 3, 4
 MAX_CHILDREN = 4
@@ -144,8 +153,10 @@ class ModelBuilder:
         except AttributeError:
             raise InvalidInputError("capsules: expected an object with start, end and radius arrays") from None
         if start.shape != (n_j, 3) or end.shape != (n_j, 3) or radius.shape != (n_j,):
-            raise InvalidInputError(f"capsules: expected start/end ({n_j}, 3) and radius ({n_j},), got "
-                                    f"{start.shape}, {end.shape}, {radius.shape}")
+            raise InvalidInputError(
+                f"capsules: expected start/end ({n_j}, 3) and radius ({n_j},), got "
+                f"{start.shape}, {end.shape}, {radius.shape}"
+            )
         if not (np.all(np.isfinite(start)) and np.all(np.isfinite(end)) and np.all(radius > 0)):
             raise InvalidInputError("capsules: end points must be finite and radii positive")
         skin = np.zeros(n_j) if skin is None else np.asarray(skin, np.float64)
@@ -154,8 +165,9 @@ class ModelBuilder:
         self._chars.append((rest, start, end, radius, skin))
         return len(self._chars) - 1
 
-    def finalize(self, *, density: float = 1000.0, device: str | None = None,
-                 intra_touch_tolerance: float = 0.01) -> Model:
+    def finalize(
+        self, *, density: float = 1000.0, device: str | None = None, intra_touch_tolerance: float = 0.01
+    ) -> Model:
         """Build the model and upload it to ``device`` (see ``resolve_device``).
 
         ``intra_touch_tolerance`` (m): capsule pairs closer than the sum of their radii plus
@@ -185,17 +197,16 @@ class ModelBuilder:
             raise InvalidInputError(f"parents: a joint has more than {MAX_CHILDREN} children")
         tmpl_children = np.full((n_j, MAX_CHILDREN), -1, np.int64)
         for j, k in enumerate(kids):
-            tmpl_children[j, :len(k)] = k
+            tmpl_children[j, : len(k)] = k
         body_children = np.where(tmpl_children[body_joint] >= 0, offset[:, None] + tmpl_children[body_joint], -1)
-        joint_rest = rest.reshape(-1, 3)                       # joint j's rest position, per body
+        joint_rest = rest.reshape(-1, 3)  # joint j's rest position, per body
         par_com = com[np.maximum(body_parent, 0)]
         anchor_parent = np.where(body_parent[:, None] >= 0, joint_rest - par_com, 0.0)
         anchor_child = joint_rest - com
         group = np.full(n_j, GROUP_BODY, np.int64)
         for name in _PELVIS_GROUP_JOINTS:
             group[JOINT_INDEX[name]] = GROUP_PELVIS
-        for names, g in ((_FEET_GROUP_JOINTS, GROUP_FEET), (ARM_JOINTS, GROUP_ARM),
-                         (_TRUNK_GROUP_JOINTS, GROUP_TRUNK)):
+        for names, g in ((_FEET_GROUP_JOINTS, GROUP_FEET), (ARM_JOINTS, GROUP_ARM), (_TRUNK_GROUP_JOINTS, GROUP_TRUNK)):
             for name in names:
                 group[JOINT_INDEX[name]] = g
         body_group = group[body_joint] if n_j == len(group) else np.zeros(n * n_j, np.int64)
@@ -203,17 +214,31 @@ class ModelBuilder:
         ii, jj = np.triu_indices(n_j, k=1)
         pairs = []
         for c in range(n):
-            s, e, r = start[c * n_j:(c + 1) * n_j], end[c * n_j:(c + 1) * n_j], radius[c * n_j:(c + 1) * n_j]
+            s, e, r = start[c * n_j : (c + 1) * n_j], end[c * n_j : (c + 1) * n_j], radius[c * n_j : (c + 1) * n_j]
             _, _, dist = closest_points_on_segments(s[ii], e[ii], s[jj], e[jj])
             keep = (parents[jj] != ii) & (parents[ii] != jj) & (dist > r[ii] + r[jj] + intra_touch_tolerance)
             pairs.append(np.stack([ii[keep], jj[keep]], 1) + c * n_j)
         intra = np.concatenate(pairs).astype(np.int64) if pairs else np.zeros((0, 2), np.int64)
         char_mass = mass.reshape(n, n_j).sum(1)
 
-        host = dict(body_mass=mass, body_J=J, body_com_rest=com, cap_p0=start - com, cap_p1=end - com,
-                    cap_radius=radius, cap_skin=skin, body_char=body_char, body_joint=body_joint, body_parent=body_parent,
-                    body_children=body_children, anchor_parent=anchor_parent, anchor_child=anchor_child,
-                    body_group=body_group, intra_pairs=intra, char_mass=char_mass)
+        host = dict(
+            body_mass=mass,
+            body_J=J,
+            body_com_rest=com,
+            cap_p0=start - com,
+            cap_p1=end - com,
+            cap_radius=radius,
+            cap_skin=skin,
+            body_char=body_char,
+            body_joint=body_joint,
+            body_parent=body_parent,
+            body_children=body_children,
+            anchor_parent=anchor_parent,
+            anchor_child=anchor_child,
+            body_group=body_group,
+            intra_pairs=intra,
+            char_mass=char_mass,
+        )
         wp = get_warp()
         f32 = np.float32
         dev = dict(
@@ -229,11 +254,15 @@ class ModelBuilder:
             anchor_parent=wp.array(anchor_parent.astype(f32), dtype=wp.vec3, device=device),
             anchor_child=wp.array(anchor_child.astype(f32), dtype=wp.vec3, device=device),
             body_group=wp.array(body_group.astype(np.int32), dtype=wp.int32, device=device),
-            intra_pairs=wp.array(intra.astype(np.int32).reshape(-1, 2) if len(intra) else
-                                 np.zeros((0, 2), np.int32), dtype=wp.int32, device=device),
+            intra_pairs=wp.array(
+                intra.astype(np.int32).reshape(-1, 2) if len(intra) else np.zeros((0, 2), np.int32),
+                dtype=wp.int32,
+                device=device,
+            ),
         )
         for arr in host.values():
             arr.flags.writeable = False
         rest.flags.writeable = False
-        return Model(n_characters=n, n_joints=n_j, parents=parents.copy(), rest_joints=rest, device=device,
-                     wp=dev, **host)
+        return Model(
+            n_characters=n, n_joints=n_j, parents=parents.copy(), rest_joints=rest, device=device, wp=dev, **host
+        )

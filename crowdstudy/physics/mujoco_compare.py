@@ -22,9 +22,22 @@ __all__ = ["MujocoScenario", "MUJOCO_COLUMNS", "compare_mujoco", "mark_best"]
 MujocoScenario = Literal["concert", "corridor"]
 
 #: the columns of the comparison's table, in order
-MUJOCO_COLUMNS = ["scene", "method", "setting", "dt_ms", "cpu_ms_per_step", "wall_ms_per_step", "cpu_ms_per_60th",
-                  "wall_ms_per_60th", "x_ours_cpu_per_60th", "mesh_overlap_vs_baseline",
-                  "capsule_overlap_vs_baseline", "tracking_cm", "jerk_vs_baseline", "best"]
+MUJOCO_COLUMNS = [
+    "scene",
+    "method",
+    "setting",
+    "dt_ms",
+    "cpu_ms_per_step",
+    "wall_ms_per_step",
+    "cpu_ms_per_60th",
+    "wall_ms_per_60th",
+    "x_ours_cpu_per_60th",
+    "mesh_overlap_vs_baseline",
+    "capsule_overlap_vs_baseline",
+    "tracking_cm",
+    "jerk_vs_baseline",
+    "best",
+]
 
 
 def _d5_scene(kind: MujocoScenario, duration: float):
@@ -34,9 +47,14 @@ def _d5_scene(kind: MujocoScenario, duration: float):
     return build_baseline(load_design(), "stationary" if kind == "concert" else "walking", "D5", duration=duration)
 
 
-def compare_mujoco(duration: float = 4.0, scenes: Sequence[MujocoScenario] = ("concert", "corridor"),
-                   settings: Sequence[str] | None = None, frame_stride: int = 10, steps: int = 200,
-                   report: Callable[[dict], None] | None = None) -> list[dict]:
+def compare_mujoco(
+    duration: float = 4.0,
+    scenes: Sequence[MujocoScenario] = ("concert", "corridor"),
+    settings: Sequence[str] | None = None,
+    frame_stride: int = 10,
+    steps: int = 200,
+    report: Callable[[dict], None] | None = None,
+) -> list[dict]:
     """Ours and MuJoCo (each of ``settings``, names of
     :data:`~crowdstudy.physics.mujoco_peer.MUJOCO_SETTINGS`; default all) side by side on the
     D5 ``scenes``, ``duration`` s each: cost per step and per simulated 1/60 s (Ours timed
@@ -59,19 +77,35 @@ def compare_mujoco(duration: float = 4.0, scenes: Sequence[MujocoScenario] = ("c
         jerk_base = mean_jerk(base)
         ours = correct(base, progress=False, device="cpu")
         t = time_steps(base, min(steps, 2 * (base.n_frames - 1)))
-        runs = [("Ours", "crowdstudy (Warp CPU)", ours,
-                 {"cpu_ms_per_step": t["total_cpu_ms"], "wall_ms_per_step": t["total_wall_ms"],
-                  "dt": 1.0 / 60.0, "steps_per_60th": 1.0})]
+        runs = [
+            (
+                "Ours",
+                "crowdstudy (Warp CPU)",
+                ours,
+                {
+                    "cpu_ms_per_step": t["total_cpu_ms"],
+                    "wall_ms_per_step": t["total_wall_ms"],
+                    "dt": 1.0 / 60.0,
+                    "steps_per_60th": 1.0,
+                },
+            )
+        ]
         for name in settings:
             mj, mj_t = mujoco_peer(base, setting=name)
             runs.append(("MuJoCo", name, mj, mj_t))
         for method, setting, a, tm in runs:
-            row = {"scene": f"{kind} D5", "method": method, "setting": setting,
-                   "characters": base.n_characters, "frames": base.n_frames,
-                   "dt_ms": 1000 * tm["dt"],
-                   "cpu_ms_per_step": tm["cpu_ms_per_step"], "wall_ms_per_step": tm["wall_ms_per_step"],
-                   "cpu_ms_per_60th": tm["cpu_ms_per_step"] * tm["steps_per_60th"],
-                   "wall_ms_per_60th": tm["wall_ms_per_step"] * tm["steps_per_60th"]}
+            row = {
+                "scene": f"{kind} D5",
+                "method": method,
+                "setting": setting,
+                "characters": base.n_characters,
+                "frames": base.n_frames,
+                "dt_ms": 1000 * tm["dt"],
+                "cpu_ms_per_step": tm["cpu_ms_per_step"],
+                "wall_ms_per_step": tm["wall_ms_per_step"],
+                "cpu_ms_per_60th": tm["cpu_ms_per_step"] * tm["steps_per_60th"],
+                "wall_ms_per_60th": tm["wall_ms_per_step"] * tm["steps_per_60th"],
+            }
             for g in ("mesh", "capsule"):
                 overlap = overlap_volume(a, geometry=g, frames=frames).mean
                 row[f"{g}_overlap_vs_baseline"] = overlap / max(ov_base[g], 1e-12)
@@ -82,12 +116,22 @@ def compare_mujoco(duration: float = 4.0, scenes: Sequence[MujocoScenario] = ("c
             rows.append(row)
             if report is not None:
                 report(row)
-        mark_best(rows[-len(runs):])
-        rows.append({"scene": f"{kind} D5", "method": "Baseline", "setting": "input",
-                     "characters": base.n_characters, "frames": base.n_frames,
-                     "mesh_overlap_vs_baseline": 1.0, "capsule_overlap_vs_baseline": 1.0,
-                     "tracking_cm": 0.0, "jerk_vs_baseline": 1.0,
-                     "mesh_baseline_m3": ov_base["mesh"], "capsule_baseline_m3": ov_base["capsule"]})
+        mark_best(rows[-len(runs) :])
+        rows.append(
+            {
+                "scene": f"{kind} D5",
+                "method": "Baseline",
+                "setting": "input",
+                "characters": base.n_characters,
+                "frames": base.n_frames,
+                "mesh_overlap_vs_baseline": 1.0,
+                "capsule_overlap_vs_baseline": 1.0,
+                "tracking_cm": 0.0,
+                "jerk_vs_baseline": 1.0,
+                "mesh_baseline_m3": ov_base["mesh"],
+                "capsule_baseline_m3": ov_base["capsule"],
+            }
+        )
     return rows
 
 
@@ -98,7 +142,10 @@ def mark_best(rows: list[dict], tracking_slack: float = 1.25) -> None:
     for r in rows:
         r["x_ours_cpu_per_60th"] = r["cpu_ms_per_60th"] / max(ref["cpu_ms_per_60th"], 1e-12)
         r["best"] = ""
-    ok = [r for r in rows[1:] if r["tracking_cm"] <= tracking_slack * ref["tracking_cm"]
-          and "UNSTABLE" not in r["setting"]]
+    ok = [
+        r
+        for r in rows[1:]
+        if r["tracking_cm"] <= tracking_slack * ref["tracking_cm"] and "UNSTABLE" not in r["setting"]
+    ]
     if ok:
         min(ok, key=lambda r: r["mesh_overlap_vs_baseline"])["best"] = "*"

@@ -43,8 +43,18 @@ import numpy as np
 from crowdstudy.errors import InvalidInputError, MissingDependencyError
 from crowdstudy.physics.crowding import crowd_config
 
-__all__ = ["MujocoSettings", "MUJOCO_SETTINGS", "WALL_DEPTH", "import_mujoco", "resolve_setting",
-           "check_timeconsts", "interpolated_targets", "rigid_to_animation", "MujocoScene", "mujoco_peer"]
+__all__ = [
+    "MujocoSettings",
+    "MUJOCO_SETTINGS",
+    "WALL_DEPTH",
+    "import_mujoco",
+    "resolve_setting",
+    "check_timeconsts",
+    "interpolated_targets",
+    "rigid_to_animation",
+    "MujocoScene",
+    "mujoco_peer",
+]
 
 #: m, how deep MuJoCo's wall boxes reach behind the wall's face (away from the crowd)
 WALL_DEPTH = 0.5
@@ -68,15 +78,23 @@ class MujocoSettings:
 
 #: the tunings compared with Ours, by name
 MUJOCO_SETTINGS: dict[str, MujocoSettings] = {
-    "weld0.05": MujocoSettings(substeps=2, weld_solref=(0.05, 1.0), contact_solref=(0.0334, 1.0),
-                               solimp=(0.9, 0.95, 0.001), joint_damping=1.0),
-    "weld0.1-stiffcontact": MujocoSettings(substeps=2, weld_solref=(0.1, 1.0), contact_solref=(0.0334, 1.0),
-                                           solimp=(0.95, 0.99, 0.001), joint_damping=1.0),
-    "weld0.05-dt1/120": MujocoSettings(substeps=4, weld_solref=(0.05, 1.0), contact_solref=(0.0167, 1.0),
-                                       solimp=(0.95, 0.99, 0.001), joint_damping=1.0),
+    "weld0.05": MujocoSettings(
+        substeps=2, weld_solref=(0.05, 1.0), contact_solref=(0.0334, 1.0), solimp=(0.9, 0.95, 0.001), joint_damping=1.0
+    ),
+    "weld0.1-stiffcontact": MujocoSettings(
+        substeps=2, weld_solref=(0.1, 1.0), contact_solref=(0.0334, 1.0), solimp=(0.95, 0.99, 0.001), joint_damping=1.0
+    ),
+    "weld0.05-dt1/120": MujocoSettings(
+        substeps=4, weld_solref=(0.05, 1.0), contact_solref=(0.0167, 1.0), solimp=(0.95, 0.99, 0.001), joint_damping=1.0
+    ),
     # stiffer welds (MuJoCo clamps a timeconst below 2 steps, so this needs the 1/120 s step)
-    "weld0.025-dt1/120": MujocoSettings(substeps=4, weld_solref=(0.025, 1.0), contact_solref=(0.0167, 1.0),
-                                        solimp=(0.95, 0.99, 0.001), joint_damping=1.0),
+    "weld0.025-dt1/120": MujocoSettings(
+        substeps=4,
+        weld_solref=(0.025, 1.0),
+        contact_solref=(0.0167, 1.0),
+        solimp=(0.95, 0.99, 0.001),
+        joint_damping=1.0,
+    ),
 }
 
 
@@ -85,8 +103,9 @@ def import_mujoco() -> Any:
     try:
         import mujoco
     except ImportError as exc:
-        raise MissingDependencyError("the MuJoCo peer needs the mujoco package: pip install 'crowdstudy[peers]'") \
-            from exc
+        raise MissingDependencyError(
+            "the MuJoCo peer needs the mujoco package: pip install 'crowdstudy[peers]'"
+        ) from exc
     return mujoco
 
 
@@ -95,8 +114,9 @@ def resolve_setting(setting: str | MujocoSettings) -> MujocoSettings:
     if isinstance(setting, MujocoSettings):
         return setting
     if setting not in MUJOCO_SETTINGS:
-        raise InvalidInputError(f"setting: expected a MujocoSettings or one of {list(MUJOCO_SETTINGS)}, "
-                                f"got {setting!r}")
+        raise InvalidInputError(
+            f"setting: expected a MujocoSettings or one of {list(MUJOCO_SETTINGS)}, got {setting!r}"
+        )
     return MUJOCO_SETTINGS[setting]
 
 
@@ -106,8 +126,10 @@ def check_timeconsts(setting: MujocoSettings, dt: float) -> None:
     for key in ("weld_solref", "contact_solref"):
         timeconst = float(getattr(setting, key)[0])
         if timeconst < 2.0 * dt - 1e-9:
-            raise InvalidInputError(f"MuJoCo setting {key}: time constant {timeconst:g} s is under 2 steps "
-                                    f"({2.0 * dt:.4g} s at a {dt:.4g} s step), which MuJoCo clamps to 2 steps")
+            raise InvalidInputError(
+                f"MuJoCo setting {key}: time constant {timeconst:g} s is under 2 steps "
+                f"({2.0 * dt:.4g} s at a {dt:.4g} s step), which MuJoCo clamps to 2 steps"
+            )
 
 
 def interpolated_targets(anim_q, anim_root, rests, f0: int, f1: int, alpha: float):
@@ -181,10 +203,13 @@ class MujocoScene:
         period = anim.periodic_length
         self.ghost_shift = np.array([-period, period]) if period else np.zeros(0)
         # capsule ends in the rest frame, (N, J, 3) each
-        self._cap_ends = ((cm.cap_p0 + cm.body_com_rest).reshape(self.n, self.nj, 3),
-                          (cm.cap_p1 + cm.body_com_rest).reshape(self.n, self.nj, 3))
-        self.xml = "".join([*self._header_xml(), *self._walls_xml(period), *self._bodies_xml(),
-                            *self._constraints_xml()])
+        self._cap_ends = (
+            (cm.cap_p0 + cm.body_com_rest).reshape(self.n, self.nj, 3),
+            (cm.cap_p1 + cm.body_com_rest).reshape(self.n, self.nj, 3),
+        )
+        self.xml = "".join(
+            [*self._header_xml(), *self._walls_xml(period), *self._bodies_xml(), *self._constraints_xml()]
+        )
         self.model = model = mujoco.MjModel.from_xml_string(self.xml)
         self.data = mujoco.MjData(model)
         self._index(model)
@@ -192,7 +217,7 @@ class MujocoScene:
 
     # -- the MJCF --------------------------------------------------------------------------
     def _solref(self, value) -> str:
-        return f'{value[0]:g} {value[1]:g}'
+        return f"{value[0]:g} {value[1]:g}"
 
     def _solimp(self) -> str:
         return " ".join(f"{v:g}" for v in self.setting.solimp)
@@ -201,14 +226,16 @@ class MujocoScene:
         """Options, the core/hull geom classes and the ground plane."""
         config, st = self.config, self.setting
         g = -float(config.body.gravity)
-        return [f'<mujoco><option timestep="{self.dt:.10g}" gravity="0 0 {g:g}" integrator="implicitfast"/>',
-                '<size memory="1G"/>',
-                f'<default><geom condim="1" solref="{self._solref(st.contact_solref)}" solimp="{self._solimp()}"/>'
-                f'<default class="core"><geom contype="2" conaffinity="0" density="{config.body.density:g}" group="1"/>'
-                '</default>'
-                f'<default class="hull"><geom contype="1" conaffinity="1" density="0" '
-                f'margin="{float(config.contacts.margin):g}" group="2"/></default></default><worldbody>',
-                '<geom name="ground" type="plane" size="0 0 0.1" contype="0" conaffinity="2"/>']
+        return [
+            f'<mujoco><option timestep="{self.dt:.10g}" gravity="0 0 {g:g}" integrator="implicitfast"/>',
+            '<size memory="1G"/>',
+            f'<default><geom condim="1" solref="{self._solref(st.contact_solref)}" solimp="{self._solimp()}"/>'
+            f'<default class="core"><geom contype="2" conaffinity="0" density="{config.body.density:g}" group="1"/>'
+            "</default>"
+            f'<default class="hull"><geom contype="1" conaffinity="1" density="0" '
+            f'margin="{float(config.contacts.margin):g}" group="2"/></default></default><worldbody>',
+            '<geom name="ground" type="plane" size="0 0 0.1" contype="0" conaffinity="2"/>',
+        ]
 
     def _walls_xml(self, period) -> list[str]:
         """The scene's walls as boxes WALL_DEPTH deep behind their faces."""
@@ -219,7 +246,7 @@ class MujocoScene:
         x_lo = float(self.anim_root[..., 0].min()) - 3.0
         x_hi = float(self.anim_root[..., 0].max()) + 3.0
         for w, ((x0, y0), (x1, y1)) in enumerate(walls):
-            if period and abs(y1 - y0) < 1e-9:          # periodic: cover the whole (unwrapped) run
+            if period and abs(y1 - y0) < 1e-9:  # periodic: cover the whole (unwrapped) run
                 x0, x1 = min(x0, x1, x_lo), max(x0, x1, x_hi)
             c = 0.5 * np.array([x0 + x1, y0 + y1])
             half = 0.5 * float(np.hypot(x1 - x0, y1 - y0))
@@ -231,8 +258,10 @@ class MujocoScene:
             if np.mean((self.anim_root[0, :, :2] - c) @ normal) < 0:
                 normal = -normal
             c = c - 0.5 * WALL_DEPTH * normal
-            parts.append(f'<geom name="wall{w}" type="box" pos="{c[0]:.5f} {c[1]:.5f} 1.1" euler="0 0 {ang:.6f}" '
-                         f'size="{half:.5f} {0.5 * WALL_DEPTH:.5f} 1.1" contype="0" conaffinity="1"/>')
+            parts.append(
+                f'<geom name="wall{w}" type="box" pos="{c[0]:.5f} {c[1]:.5f} 1.1" euler="0 0 {ang:.6f}" '
+                f'size="{half:.5f} {0.5 * WALL_DEPTH:.5f} 1.1" contype="0" conaffinity="1"/>'
+            )
         return parts
 
     def _segment(self, i: int, j: int) -> str:
@@ -256,43 +285,50 @@ class MujocoScene:
         def body_xml(i, j):
             p = PARENTS[j]
             pos = self.anim_root[0, i] if p < 0 else self.rests[i, j] - self.rests[i, p]
-            joint = '<freejoint/>' if p < 0 else f'<joint type="ball" damping="{jd:g}" armature="0.01"/>'
+            joint = "<freejoint/>" if p < 0 else f'<joint type="ball" damping="{jd:g}" armature="0.01"/>'
             kids = "".join(body_xml(i, c) for c in range(nj) if PARENTS[c] == j)
             seg = self._segment(i, j)
-            return (f'<body name="c{i}b{j}" pos="{pos[0]:.6f} {pos[1]:.6f} {pos[2]:.6f}">{joint}'
-                    f'<geom name="core{i}_{j}" class="core" type="capsule" {seg} size="{rad[i, j]:.9g}"/>'
-                    f'<geom name="hull{i}_{j}" class="hull" type="capsule" {seg} size="{hull[i, j]:.9g}"/>'
-                    f'{kids}</body>')
+            return (
+                f'<body name="c{i}b{j}" pos="{pos[0]:.6f} {pos[1]:.6f} {pos[2]:.6f}">{joint}'
+                f'<geom name="core{i}_{j}" class="core" type="capsule" {seg} size="{rad[i, j]:.9g}"/>'
+                f'<geom name="hull{i}_{j}" class="hull" type="capsule" {seg} size="{hull[i, j]:.9g}"/>'
+                f"{kids}</body>"
+            )
 
         parts = [body_xml(i, 0) for i in range(n)]
         parts += [f'<body name="m{i}b{j}" mocap="true"/>' for i in range(n) for j in range(nj)]
         for k in range(len(self.ghost_shift)):
             for i in range(n):
                 for j in range(nj):
-                    parts.append(f'<body name="g{k}c{i}b{j}" mocap="true"><geom class="hull" contype="0" '
-                                 f'conaffinity="1" type="capsule" {self._segment(i, j)} size="{hull[i, j]:.9g}"/>'
-                                 '</body>')
+                    parts.append(
+                        f'<body name="g{k}c{i}b{j}" mocap="true"><geom class="hull" contype="0" '
+                        f'conaffinity="1" type="capsule" {self._segment(i, j)} size="{hull[i, j]:.9g}"/>'
+                        "</body>"
+                    )
         return parts
 
     def _constraints_xml(self) -> list[str]:
         """The self-contact pairs, the exclusions within each character, and the welds."""
         n, nj, st = self.n, self.nj, self.setting
         solref, solimp = self._solref(st.contact_solref), self._solimp()
-        parts = ['</worldbody><contact>']
+        parts = ["</worldbody><contact>"]
         for a, b in self.cs_model.intra_pairs:
             ia, ja, ib, jb = a // nj, a % nj, b // nj, b % nj
-            parts.append(f'<pair geom1="core{ia}_{ja}" geom2="core{ib}_{jb}" condim="1" '
-                         f'solref="{solref}" solimp="{solimp}"/>')
+            parts.append(
+                f'<pair geom1="core{ia}_{ja}" geom2="core{ib}_{jb}" condim="1" solref="{solref}" solimp="{solimp}"/>'
+            )
         for i in range(n):
             for a in range(nj):
                 for b in range(a + 1, nj):
                     parts.append(f'<exclude body1="c{i}b{a}" body2="c{i}b{b}"/>')
-        parts.append('</contact><equality>')
+        parts.append("</contact><equality>")
         for i in range(n):
             for j in range(nj):
-                parts.append(f'<weld body1="m{i}b{j}" body2="c{i}b{j}" relpose="0 0 0 1 0 0 0" '
-                             f'solref="{self._solref(st.weld_solref)}" solimp="{solimp}"/>')
-        parts.append('</equality></mujoco>')
+                parts.append(
+                    f'<weld body1="m{i}b{j}" body2="c{i}b{j}" relpose="0 0 0 1 0 0 0" '
+                    f'solref="{self._solref(st.weld_solref)}" solimp="{solimp}"/>'
+                )
+        parts.append("</equality></mujoco>")
         return parts
 
     def _index(self, model) -> None:
@@ -302,8 +338,13 @@ class MujocoScene:
         B, G = mujoco.mjtObj.mjOBJ_BODY, mujoco.mjtObj.mjOBJ_GEOM
         self.body_id = np.array([[name(B, f"c{i}b{j}") for j in range(nj)] for i in range(n)])
         self.mocap_id = np.array([[model.body_mocapid[name(B, f"m{i}b{j}")] for j in range(nj)] for i in range(n)])
-        self.ghost_mocap = np.array([[[model.body_mocapid[name(B, f"g{k}c{i}b{j}")] for j in range(nj)]
-                                      for i in range(n)] for k in range(len(self.ghost_shift))], dtype=np.int64)
+        self.ghost_mocap = np.array(
+            [
+                [[model.body_mocapid[name(B, f"g{k}c{i}b{j}")] for j in range(nj)] for i in range(n)]
+                for k in range(len(self.ghost_shift))
+            ],
+            dtype=np.int64,
+        )
         self.hull_geom = np.array([[name(G, f"hull{i}_{j}") for j in range(nj)] for i in range(n)])
         self.core_geom = np.array([[name(G, f"core{i}_{j}") for j in range(nj)] for i in range(n)])
 
@@ -326,10 +367,10 @@ class MujocoScene:
                 jid = m.body_jntadr[self.body_id[i, j]]
                 adr = m.jnt_qposadr[jid]
                 if j == 0:
-                    d.qpos[adr:adr + 3] = self.anim_root[frame, i]
-                    d.qpos[adr + 3:adr + 7] = local[i, 0][[3, 0, 1, 2]]
+                    d.qpos[adr : adr + 3] = self.anim_root[frame, i]
+                    d.qpos[adr + 3 : adr + 7] = local[i, 0][[3, 0, 1, 2]]
                 else:
-                    d.qpos[adr:adr + 4] = local[i, j][[3, 0, 1, 2]]
+                    d.qpos[adr : adr + 4] = local[i, j][[3, 0, 1, 2]]
         self.mujoco.mj_forward(m, d)
         self._move_ghosts()
 
@@ -371,7 +412,7 @@ class MujocoScene:
             if a // nj == b // nj:
                 pairs.add((min(a, b), max(a, b)))
         excluded = {(int(s) >> 16, int(s) & 0xFFFF) for s in m.exclude_signature}
-        for i in range(self.n):           # dynamic (contype/conaffinity) pairs not excluded
+        for i in range(self.n):  # dynamic (contype/conaffinity) pairs not excluded
             ids = self.body_id[i]
             for a in range(nj):
                 for b in range(a + 1, nj):
@@ -389,8 +430,11 @@ def _geoms_filter(m, ba: int, bb: int) -> bool:
     """Whether any geoms of bodies ba and bb pass MuJoCo's contype/conaffinity filter."""
     ga = range(m.body_geomadr[ba], m.body_geomadr[ba] + m.body_geomnum[ba])
     gb = range(m.body_geomadr[bb], m.body_geomadr[bb] + m.body_geomnum[bb])
-    return any((m.geom_contype[x] & m.geom_conaffinity[y]) or (m.geom_contype[y] & m.geom_conaffinity[x])
-               for x in ga for y in gb)
+    return any(
+        (m.geom_contype[x] & m.geom_conaffinity[y]) or (m.geom_contype[y] & m.geom_conaffinity[x])
+        for x in ga
+        for y in gb
+    )
 
 
 def mujoco_peer(anim, config=None, setting: str | MujocoSettings = "weld0.05", *, settle: bool = True):
@@ -423,10 +467,14 @@ def mujoco_peer(anim, config=None, setting: str | MujocoSettings = "weld0.05", *
             out_rot[f:], out_root[f:] = anim.joint_rotations[f:], anim.root_translation[f:]
             break
     res = anim.replace(root_translation=out_root, joint_rotations=out_rot, meta={"method": "MuJoCo"})
-    timing = {"cpu_ms_per_step": statistics.median(t[1] for t in times),
-              "wall_ms_per_step": statistics.median(t[0] for t in times),
-              "dt": scene.dt, "steps_per_60th": scene.substeps * anim.fps / 60.0, "unstable": unstable,
-              "nbody": int(scene.model.nbody), "ngeom": int(scene.model.ngeom),
-              "contacts": float(scene.data.ncon)}
+    timing = {
+        "cpu_ms_per_step": statistics.median(t[1] for t in times),
+        "wall_ms_per_step": statistics.median(t[0] for t in times),
+        "dt": scene.dt,
+        "steps_per_60th": scene.substeps * anim.fps / 60.0,
+        "unstable": unstable,
+        "nbody": int(scene.model.nbody),
+        "ngeom": int(scene.model.ngeom),
+        "contacts": float(scene.data.ncon),
+    }
     return res, timing
-

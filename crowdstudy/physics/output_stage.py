@@ -40,6 +40,7 @@ def _blocks(n: int, chunk: int) -> list[tuple[int, int]]:
 def _map(fn, items, threads: int, bar=None) -> list:
     """``[fn(item) for item in items]`` on up to ``threads`` threads, in order; ``bar`` (a
     tqdm bar or None) advances as each item finishes."""
+
     def tick(result):
         if bar is not None:
             bar.update(1)
@@ -54,12 +55,21 @@ def _map(fn, items, threads: int, bar=None) -> list:
         return [future.result() for future in futures]
 
 
-def crowd_speed_limit(ref_rot: np.ndarray, ref_root: np.ndarray, rest_joints: np.ndarray, fps: float,
-                      margin: float, *, periodic_length: float | None = None, chunk: int = OUTPUT_CHUNK,
-                      threads: int = 1) -> float:
+def crowd_speed_limit(
+    ref_rot: np.ndarray,
+    ref_root: np.ndarray,
+    rest_joints: np.ndarray,
+    fps: float,
+    margin: float,
+    *,
+    periodic_length: float | None = None,
+    chunk: int = OUTPUT_CHUNK,
+    threads: int = 1,
+) -> float:
     """The limit :func:`~crowdstudy.physics.speed_limit.limit_joint_speed` takes by default,
     found block by block: the input crowd's fastest joint over its own steps (the seam of a
     loop not counted), m/s, plus ``margin`` m/s."""
+
     def fastest(block):
         c0, c1 = block
         _, pos = forward_kinematics(rest_joints[None, c0:c1], ref_rot[:, c0:c1], ref_root[:, c0:c1], parents=PARENTS)
@@ -70,19 +80,33 @@ def crowd_speed_limit(ref_rot: np.ndarray, ref_root: np.ndarray, rest_joints: np
 
 def _merge(reports: list[tuple[int, SpeedLimitReport]], limit: float) -> SpeedLimitReport:
     return SpeedLimitReport(
-        limit_m_s=float(limit), fast_samples=sum(r.fast_samples for _, r in reports),
+        limit_m_s=float(limit),
+        fast_samples=sum(r.fast_samples for _, r in reports),
         characters=tuple(c0 + c for c0, r in reports for c in r.characters),
         rounds=max(r.rounds for _, r in reports),
         max_speed_before_m_s=max(r.max_speed_before_m_s for _, r in reports),
         max_speed_after_m_s=max(r.max_speed_after_m_s for _, r in reports),
-        unresolved=sum(r.unresolved for _, r in reports))
+        unresolved=sum(r.unresolved for _, r in reports),
+    )
 
 
-def finish_crowd(sim_rot: np.ndarray, sim_root: np.ndarray, ref_rot: np.ndarray, ref_root: np.ndarray,
-                 rest_joints: np.ndarray, fps: float, config: PhysicsConfig, *, warmup: int = 0, blend: int = 0,
-                 looped: bool = False, periodic_length: float | None = None, chunk: int = OUTPUT_CHUNK,
-                 threads: int | None = None,
-                 progress: bool = False) -> tuple[np.ndarray, np.ndarray, SpeedLimitReport | None]:
+def finish_crowd(
+    sim_rot: np.ndarray,
+    sim_root: np.ndarray,
+    ref_rot: np.ndarray,
+    ref_root: np.ndarray,
+    rest_joints: np.ndarray,
+    fps: float,
+    config: PhysicsConfig,
+    *,
+    warmup: int = 0,
+    blend: int = 0,
+    looped: bool = False,
+    periodic_length: float | None = None,
+    chunk: int = OUTPUT_CHUNK,
+    threads: int | None = None,
+    progress: bool = False,
+) -> tuple[np.ndarray, np.ndarray, SpeedLimitReport | None]:
     """The simulated poses -> the "Ours" animation.
 
     Args:
@@ -115,9 +139,11 @@ def finish_crowd(sim_rot: np.ndarray, sim_root: np.ndarray, ref_rot: np.ndarray,
     n_frames, n_chars = ref_rot.shape[:2]
     total = warmup + n_frames + blend
     if sim_rot.shape != (total,) + ref_rot.shape[1:] or sim_root.shape != (total, n_chars, 3):
-        raise InvalidInputError(f"sim_rot, sim_root: expected {(total,) + ref_rot.shape[1:]} and "
-                                f"{(total, n_chars, 3)} (warmup + T + blend frames), got {sim_rot.shape} and "
-                                f"{sim_root.shape}")
+        raise InvalidInputError(
+            f"sim_rot, sim_root: expected {(total,) + ref_rot.shape[1:]} and "
+            f"{(total, n_chars, 3)} (warmup + T + blend frames), got {sim_rot.shape} and "
+            f"{sim_root.shape}"
+        )
     if rest.shape != (n_chars,) + ref_rot.shape[2:]:
         raise InvalidInputError(f"rest_joints: expected {(n_chars,) + ref_rot.shape[2:]}, got {rest.shape}")
     if chunk < 1:
@@ -126,8 +152,16 @@ def finish_crowd(sim_rot: np.ndarray, sim_root: np.ndarray, ref_rot: np.ndarray,
     out_cfg = config.for_dense_crowd().output
     limit = None
     if out_cfg.speed_limit:
-        limit = crowd_speed_limit(ref_rot, ref_root, rest, fps, out_cfg.speed_limit_margin,
-                                  periodic_length=periodic_length, chunk=chunk, threads=threads)
+        limit = crowd_speed_limit(
+            ref_rot,
+            ref_root,
+            rest,
+            fps,
+            out_cfg.speed_limit_margin,
+            periodic_length=periodic_length,
+            chunk=chunk,
+            threads=threads,
+        )
     out_rot = np.empty(ref_rot.shape)
     out_root = np.empty(ref_root.shape)
 
@@ -138,18 +172,48 @@ def finish_crowd(sim_rot: np.ndarray, sim_root: np.ndarray, ref_rot: np.ndarray,
         r_rot, r_root, r_rest = ref_rot[:, c0:c1], ref_root[:, c0:c1], rest[c0:c1]
         if looped:
             rot, root = close_loop(rot, root, n_frames, warmup, blend)
-        rot, root = smooth_deviation(rot, root, r_rot, r_root, out_cfg.smoothing * fps, periodic=looped,
-                                     root_sigma_frames=out_cfg.smoothing_root * fps, hold=out_cfg.hold)
+        rot, root = smooth_deviation(
+            rot,
+            root,
+            r_rot,
+            r_root,
+            out_cfg.smoothing * fps,
+            periodic=looped,
+            root_sigma_frames=out_cfg.smoothing_root * fps,
+            hold=out_cfg.hold,
+        )
         # the input's kinematics, once for the foot lock and the speed limit
-        r_fk = forward_kinematics(r_rest[None], r_rot, r_root, parents=PARENTS) \
-            if out_cfg.foot_lock or limit is not None else None
+        r_fk = (
+            forward_kinematics(r_rest[None], r_rot, r_root, parents=PARENTS)
+            if out_cfg.foot_lock or limit is not None
+            else None
+        )
         if out_cfg.foot_lock:
-            rot = lock_planted_feet(rot, root, r_rot, r_root, r_rest, fps, planted_speed=out_cfg.foot_lock_speed,
-                                    periodic=looped, ref_kinematics=r_fk)
+            rot = lock_planted_feet(
+                rot,
+                root,
+                r_rot,
+                r_root,
+                r_rest,
+                fps,
+                planted_speed=out_cfg.foot_lock_speed,
+                periodic=looped,
+                ref_kinematics=r_fk,
+            )
         report = None
         if limit is not None:
-            rot, report = limit_joint_speed(rot, root, r_rot, r_root, r_rest, fps, limit=limit, periodic=looped,
-                                            periodic_length=periodic_length, ref_kinematics=r_fk)
+            rot, report = limit_joint_speed(
+                rot,
+                root,
+                r_rot,
+                r_root,
+                r_rest,
+                fps,
+                limit=limit,
+                periodic=looped,
+                periodic_length=periodic_length,
+                ref_kinematics=r_fk,
+            )
         out_rot[:, c0:c1] = rot
         out_root[:, c0:c1] = root
         return c0, report

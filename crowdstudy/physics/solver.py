@@ -98,8 +98,15 @@ class Solver:
     After each step :attr:`last_cg` holds ``(iterations, relative residual)``.
     """
 
-    def __init__(self, model, config, *, linear_solver: LinearSolver | None = None, profile: bool = False,
-                 preconditioner: Preconditioner = "character"):
+    def __init__(
+        self,
+        model,
+        config,
+        *,
+        linear_solver: LinearSolver | None = None,
+        profile: bool = False,
+        preconditioner: Preconditioner = "character",
+    ):
         self.model = model
         self.config = config
         wp = get_warp()
@@ -124,30 +131,38 @@ class Solver:
         self.p_tt, self.p_tr, self.p_rr = m3(), m3(), m3()
         self.lever_p, self.lever_c = z3(), z3()
         self.ctrl_c = wp.zeros(nb, dtype=wp.float32, device=dev)
-        self.ctrl_g = wp.zeros(nb, dtype=wp.vec3, device=dev)     # each joint's PD gradient on its child (N m)
+        self.ctrl_g = wp.zeros(nb, dtype=wp.vec3, device=dev)  # each joint's PD gradient on its child (N m)
         self.dx, self.dw = z3(), z3()
         self.work = [z3() for _ in range(8)]
-        self.work_split = [z3(), z3()]     # the split PCG's second direction buffer (t, r)
+        self.work_split = [z3(), z3()]  # the split PCG's second direction buffer (t, r)
         self.split_sums = wp.zeros(8, dtype=wp.float32, device=dev)
-        self._split_lists = None           # its per-half contact lists
-        self._split_cmds = None            # its recorded launches (and the buffers they were recorded on)
+        self._split_lists = None  # its per-half contact lists
+        self._split_cmds = None  # its recorded launches (and the buffers they were recorded on)
         self.stats = wp.zeros(2, dtype=wp.float32, device=dev)
         s6 = lambda: wp.zeros(nb, dtype=wp.spatial_matrix, device=dev)  # noqa: E731
         self.tree_work, self.tree_dinv, self.tree_l = s6(), s6(), s6()
         self.y6 = wp.zeros(nb, dtype=wp.spatial_vector, device=dev)
         groups = model.body_group
         ctl = config.control
-        scale = np.select([groups == GROUP_PELVIS, groups == GROUP_FEET, groups == GROUP_ARM, groups == GROUP_TRUNK],
-                          [ctl.pelvis_scale, ctl.feet_scale, ctl.arm_scale, ctl.trunk_scale], 1.0)
+        scale = np.select(
+            [groups == GROUP_PELVIS, groups == GROUP_FEET, groups == GROUP_ARM, groups == GROUP_TRUNK],
+            [ctl.pelvis_scale, ctl.feet_scale, ctl.arm_scale, ctl.trunk_scale],
+            1.0,
+        )
         self.body_k = wp.array((ctl.stiffness * scale).astype(np.float32), dtype=wp.float32, device=dev)
         self.body_d = wp.array((ctl.damping * scale).astype(np.float32), dtype=wp.float32, device=dev)
         root = model.body_parent < 0
         feet = np.isin(model.body_joint, FEET_TRANSLATION_JOINTS)
-        kt = np.where(root, ctl.root_translation_stiffness,
-                      np.where(feet, ctl.feet_translation_stiffness, ctl.pose_translation_stiffness))
-        dtr = ctl.damping * np.where(root, ctl.root_translation_damping_scale,
-                                     np.where(feet, ctl.feet_translation_damping_scale,
-                                              ctl.pose_translation_damping_scale))
+        kt = np.where(
+            root,
+            ctl.root_translation_stiffness,
+            np.where(feet, ctl.feet_translation_stiffness, ctl.pose_translation_stiffness),
+        )
+        dtr = ctl.damping * np.where(
+            root,
+            ctl.root_translation_damping_scale,
+            np.where(feet, ctl.feet_translation_damping_scale, ctl.pose_translation_damping_scale),
+        )
         self.body_kt = wp.array(kt.astype(np.float32), dtype=wp.float32, device=dev)
         self.body_dt = wp.array(dtr.astype(np.float32), dtype=wp.float32, device=dev)
         reach = np.where(root, ctl.root_translation_reach, np.where(feet, 0.0, ctl.pose_translation_reach))
@@ -158,7 +173,7 @@ class Solver:
         self.foot_offset = z3()
         self.foot_stepping = wp.zeros(nb, dtype=wp.int32, device=dev)
         self.foot_weight = wp.zeros(max(int(feet.sum()), 1), dtype=wp.float32, device=dev)
-        self._feet_host = np.nonzero(feet)[0]        # feet_index on the host (sorted)
+        self._feet_host = np.nonzero(feet)[0]  # feet_index on the host (sorted)
         self._no_list = wp.zeros(1, dtype=wp.int32, device=dev)
         self._assembly_lists = None
         self._contact_capacity = -1
@@ -189,58 +204,180 @@ class Solver:
 
     def assemble(self, state_in, control, contacts, dt: float) -> None:
         """Prediction, gradient and diagonal Hessian blocks (bodies, then contacts)."""
-        from crowdstudy.physics import kernels as kb, linear as ks
+        from crowdstudy.physics import kernels as kb
+        from crowdstudy.physics import linear as ks
 
         wp, m, cfg = self.wp, self.model, self.config
         W, dev = m.wp, m.device
         self._contact_buffers(contacts.capacity)
         ff = bool(cfg.solver.feedforward)
         damp_scale = float(dt) / float(cfg.solver.damping_reference_dt)
-        def bodies(lo: int, hi: int) -> None:    # prediction and body terms of bodies [lo, hi)
+
+        def bodies(lo: int, hi: int) -> None:  # prediction and body terms of bodies [lo, hi)
             if hi <= lo:
                 return
-            wp.launch(kb.predict_kernel, hi - lo,
-                      [state_in.x, state_in.q, state_in.v, state_in.w, float(dt), int(ff), control.t_x,
-                       control.t_x_old, control.t_x_older, control.t_glob, control.t_glob_old, control.t_glob_older,
-                       self.x_pred, self.q_pred, int(lo)], device=dev)
-            wp.launch(kb.joint_terms_kernel, hi - lo,
-                      [self.q_pred, state_in.q, control.t_rel, control.t_rel_old, W["body_parent"],
-                       W["anchor_parent"], W["anchor_child"], self.body_k, self.body_d, float(dt), damp_scale,
-                       self.lever_p, self.lever_c, self.ctrl_c, self.ctrl_g, int(lo)], device=dev)
-            wp.launch(kb.assemble_bodies_kernel, hi - lo,
-                      [self.x_pred, self.q_pred, state_in.x, state_in.q, control.t_rel, control.t_rel_old,
-                       control.t_x, control.t_x_old, W["body_mass"], W["body_J"], W["body_parent"],
-                       W["body_children"], self.body_k, self.body_d, self.body_kt, self.body_dt, self.body_reach,
-                       self.body_kt_far, float(dt), 0.0 if ff else float(cfg.body.gravity),
-                       float(cfg.body.joint_stiffness), damp_scale, self.grad_t, self.grad_r, self.hess_a, self.hess_b,
-                       self.hess_c, self.lever_p, self.lever_c, self.ctrl_c, self.ctrl_g, int(lo)], device=dev)
+            wp.launch(
+                kb.predict_kernel,
+                hi - lo,
+                [
+                    state_in.x,
+                    state_in.q,
+                    state_in.v,
+                    state_in.w,
+                    float(dt),
+                    int(ff),
+                    control.t_x,
+                    control.t_x_old,
+                    control.t_x_older,
+                    control.t_glob,
+                    control.t_glob_old,
+                    control.t_glob_older,
+                    self.x_pred,
+                    self.q_pred,
+                    int(lo),
+                ],
+                device=dev,
+            )
+            wp.launch(
+                kb.joint_terms_kernel,
+                hi - lo,
+                [
+                    self.q_pred,
+                    state_in.q,
+                    control.t_rel,
+                    control.t_rel_old,
+                    W["body_parent"],
+                    W["anchor_parent"],
+                    W["anchor_child"],
+                    self.body_k,
+                    self.body_d,
+                    float(dt),
+                    damp_scale,
+                    self.lever_p,
+                    self.lever_c,
+                    self.ctrl_c,
+                    self.ctrl_g,
+                    int(lo),
+                ],
+                device=dev,
+            )
+            wp.launch(
+                kb.assemble_bodies_kernel,
+                hi - lo,
+                [
+                    self.x_pred,
+                    self.q_pred,
+                    state_in.x,
+                    state_in.q,
+                    control.t_rel,
+                    control.t_rel_old,
+                    control.t_x,
+                    control.t_x_old,
+                    W["body_mass"],
+                    W["body_J"],
+                    W["body_parent"],
+                    W["body_children"],
+                    self.body_k,
+                    self.body_d,
+                    self.body_kt,
+                    self.body_dt,
+                    self.body_reach,
+                    self.body_kt_far,
+                    float(dt),
+                    0.0 if ff else float(cfg.body.gravity),
+                    float(cfg.body.joint_stiffness),
+                    damp_scale,
+                    self.grad_t,
+                    self.grad_r,
+                    self.hess_a,
+                    self.hess_b,
+                    self.hess_c,
+                    self.lever_p,
+                    self.lever_c,
+                    self.ctrl_c,
+                    self.ctrl_g,
+                    int(lo),
+                ],
+                device=dev,
+            )
 
         n_feet = self.feet_index.shape[0] if cfg.feet.anchor_stiffness > 0 else 0
 
-        def feet(f0: int, f1: int) -> None:     # the stance anchors of feet [f0, f1) (feet_index order)
+        def feet(f0: int, f1: int) -> None:  # the stance anchors of feet [f0, f1) (feet_index order)
             if f1 > f0:
-                wp.launch(kb.foot_anchor_kernel, f1 - f0,
-                          [self.feet_index, self.x_pred, state_in.x, control.t_x, control.t_x_old, self.foot_offset,
-                           self.foot_weight, self.foot_stepping, self.body_kt, self.body_dt, float(dt), damp_scale,
-                           float(cfg.feet.planted_speed),
-                           float(cfg.feet.anchor_stiffness), float(cfg.feet.anchor_damping),
-                           float(cfg.feet.anchor_max_force), float(cfg.feet.release_distance),
-                           float(cfg.feet.rejoin_distance), self.grad_t, self.hess_a, int(f0)],
-                          device=dev)
+                wp.launch(
+                    kb.foot_anchor_kernel,
+                    f1 - f0,
+                    [
+                        self.feet_index,
+                        self.x_pred,
+                        state_in.x,
+                        control.t_x,
+                        control.t_x_old,
+                        self.foot_offset,
+                        self.foot_weight,
+                        self.foot_stepping,
+                        self.body_kt,
+                        self.body_dt,
+                        float(dt),
+                        damp_scale,
+                        float(cfg.feet.planted_speed),
+                        float(cfg.feet.anchor_stiffness),
+                        float(cfg.feet.anchor_damping),
+                        float(cfg.feet.anchor_max_force),
+                        float(cfg.feet.release_distance),
+                        float(cfg.feet.rejoin_distance),
+                        self.grad_t,
+                        self.hess_a,
+                        int(f0),
+                    ],
+                    device=dev,
+                )
 
         def contact_terms(n_threads: int, contact_list, use_list: int, lo: int, hi: int) -> None:
             if n_threads:
-                wp.launch(ks.contact_assemble_kernel, n_threads,
-                          [contacts.count, contacts.capacity, contacts.body_a, contacts.body_b, contacts.normal,
-                           contacts.depth, contacts.lever_a, contacts.lever_b, contacts.stiffness, contacts.kind,
-                           float(cfg.contacts.ground_friction), float(cfg.contacts.activation),
-                           float(cfg.contacts.release_distance), float(cfg.contacts.release_width),
-                           float(cfg.contacts.stiffening_depth), m.n_joints,
-                           state_in.x, control.t_x,
-                           state_in.v,
-                           state_in.w, float(dt), self.grad_t, self.grad_r, self.hess_a, self.hess_b, self.hess_c,
-                           self.u_at, self.u_ar, self.u_bt, self.u_br, self.k_eff, contact_list, int(use_list),
-                           int(lo), int(hi)], device=dev)
+                wp.launch(
+                    ks.contact_assemble_kernel,
+                    n_threads,
+                    [
+                        contacts.count,
+                        contacts.capacity,
+                        contacts.body_a,
+                        contacts.body_b,
+                        contacts.normal,
+                        contacts.depth,
+                        contacts.lever_a,
+                        contacts.lever_b,
+                        contacts.stiffness,
+                        contacts.kind,
+                        float(cfg.contacts.ground_friction),
+                        float(cfg.contacts.activation),
+                        float(cfg.contacts.release_distance),
+                        float(cfg.contacts.release_width),
+                        float(cfg.contacts.stiffening_depth),
+                        m.n_joints,
+                        state_in.x,
+                        control.t_x,
+                        state_in.v,
+                        state_in.w,
+                        float(dt),
+                        self.grad_t,
+                        self.grad_r,
+                        self.hess_a,
+                        self.hess_b,
+                        self.hess_c,
+                        self.u_at,
+                        self.u_ar,
+                        self.u_bt,
+                        self.u_br,
+                        self.k_eff,
+                        contact_list,
+                        int(use_list),
+                        int(lo),
+                        int(hi),
+                    ],
+                    device=dev,
+                )
 
         # on the CPU the host reads the contact count for free: launch only the stored
         # contacts (the kernel skips the rest); on CUDA the whole capacity (no host sync)
@@ -259,12 +396,17 @@ class Solver:
         a = contacts.body_a.numpy()[:n_launch]
         b = contacts.body_b.numpy()[:n_launch]
         self._assembly_lists, counts = self._half_lists(
-            self._assembly_lists, contacts.capacity, ((a < cut) | ((b >= 0) & (b < cut)), (a >= cut) | (b >= cut)))
+            self._assembly_lists, contacts.capacity, ((a < cut) | ((b >= 0) & (b < cut)), (a >= cut) | (b >= cut))
+        )
         feet_cut = int(np.searchsorted(self._feet_host, cut)) if n_feet else 0
-        run_parallel(lambda: (bodies(0, cut), feet(0, feet_cut),
-                              contact_terms(counts[0], self._assembly_lists[0], 1, 0, cut)),
-                     lambda: (bodies(cut, m.n_bodies), feet(feet_cut, n_feet),
-                              contact_terms(counts[1], self._assembly_lists[1], 1, cut, m.n_bodies)))
+        run_parallel(
+            lambda: (bodies(0, cut), feet(0, feet_cut), contact_terms(counts[0], self._assembly_lists[0], 1, 0, cut)),
+            lambda: (
+                bodies(cut, m.n_bodies),
+                feet(feet_cut, n_feet),
+                contact_terms(counts[1], self._assembly_lists[1], 1, cut, m.n_bodies),
+            ),
+        )
 
     def _half_lists(self, lists, capacity: int, masks) -> tuple[list, list[int]]:
         """The contacts selected by each of the two ``masks`` (the two halves of the crowd),
@@ -275,7 +417,7 @@ class Solver:
         counts = []
         for lst, mine in zip(lists, masks):
             idx = np.flatnonzero(mine).astype(np.int32)
-            lst.numpy()[:len(idx)] = idx
+            lst.numpy()[: len(idx)] = idx
             counts.append(len(idx))
         return lists, counts
 
@@ -283,8 +425,11 @@ class Solver:
         """Whether the assembly runs as two halves of the crowd at once (CPU, two host
         threads, at least ``_MIN_CHARACTERS_SPLIT_ASSEMBLY`` characters; the same bits
         either way)."""
-        return (self.model.device == "cpu" and host_threads() >= 2
-                and self.model.n_characters >= _MIN_CHARACTERS_SPLIT_ASSEMBLY)
+        return (
+            self.model.device == "cpu"
+            and host_threads() >= 2
+            and self.model.n_characters >= _MIN_CHARACTERS_SPLIT_ASSEMBLY
+        )
 
     def solve(self, contacts) -> None:
         """Solve H [dx; dw] = -g into ``self.dx``, ``self.dw``."""
@@ -293,21 +438,58 @@ class Solver:
         wp, m, cfg = self.wp, self.model, self.config
         dev, nb = m.device, m.n_bodies
         if self.linear_solver == "fused" and self._split_pcg():
-            self._solve_split(contacts)         # factorises each half's characters with its start
+            self._solve_split(contacts)  # factorises each half's characters with its start
         elif self.linear_solver == "fused":
             mode = 1 if self.preconditioner == "character" else 0
             if mode:
                 self._factor_tree()
             else:
-                wp.launch(ks.precond_kernel, nb, [self.hess_a, self.hess_b, self.hess_c, self.p_tt, self.p_tr,
-                                                  self.p_rr], device=dev)
-            wp.launch(ks.pcg_fused_kernel, 1,
-                      [nb, contacts.count, contacts.capacity, self.hess_a, self.hess_b, self.hess_c, self.p_tt,
-                       self.p_tr, self.p_rr, mode, self.tree_dinv, self.tree_l, self.y6,
-                       m.wp["body_parent"], self.lever_p, self.lever_c, self.ctrl_c,
-                       float(cfg.body.joint_stiffness), contacts.body_a, contacts.body_b, self.u_at, self.u_ar,
-                       self.u_bt, self.u_br, self.k_eff, self.grad_t, self.grad_r, float(cfg.solver.cg_tolerance),
-                       int(cfg.solver.cg_max_iterations), self.dx, self.dw, *self.work, self.stats], device=dev)
+                wp.launch(
+                    ks.precond_kernel,
+                    nb,
+                    [self.hess_a, self.hess_b, self.hess_c, self.p_tt, self.p_tr, self.p_rr],
+                    device=dev,
+                )
+            wp.launch(
+                ks.pcg_fused_kernel,
+                1,
+                [
+                    nb,
+                    contacts.count,
+                    contacts.capacity,
+                    self.hess_a,
+                    self.hess_b,
+                    self.hess_c,
+                    self.p_tt,
+                    self.p_tr,
+                    self.p_rr,
+                    mode,
+                    self.tree_dinv,
+                    self.tree_l,
+                    self.y6,
+                    m.wp["body_parent"],
+                    self.lever_p,
+                    self.lever_c,
+                    self.ctrl_c,
+                    float(cfg.body.joint_stiffness),
+                    contacts.body_a,
+                    contacts.body_b,
+                    self.u_at,
+                    self.u_ar,
+                    self.u_bt,
+                    self.u_br,
+                    self.k_eff,
+                    self.grad_t,
+                    self.grad_r,
+                    float(cfg.solver.cg_tolerance),
+                    int(cfg.solver.cg_max_iterations),
+                    self.dx,
+                    self.dw,
+                    *self.work,
+                    self.stats,
+                ],
+                device=dev,
+            )
             st = self.stats.numpy()
             self.last_cg = (int(st[0]), float(st[1]))
         else:
@@ -332,14 +514,49 @@ class Solver:
             self._rhs = wp.zeros(nb, dtype=wp.spatial_vector, device=dev)
             self._x6 = wp.zeros(nb, dtype=wp.spatial_vector, device=dev)
             self._trip_n = n_trip
-        wp.launch(ks.triplets_bodies_kernel, nb,
-                  [nb, self.hess_a, self.hess_b, self.hess_c, m.wp["body_parent"], self.lever_p, self.lever_c,
-                   self.ctrl_c, float(cfg.body.joint_stiffness), self.grad_t, self.grad_r, self._rows, self._cols,
-                   self._vals, self._rhs], device=dev)
+        wp.launch(
+            ks.triplets_bodies_kernel,
+            nb,
+            [
+                nb,
+                self.hess_a,
+                self.hess_b,
+                self.hess_c,
+                m.wp["body_parent"],
+                self.lever_p,
+                self.lever_c,
+                self.ctrl_c,
+                float(cfg.body.joint_stiffness),
+                self.grad_t,
+                self.grad_r,
+                self._rows,
+                self._cols,
+                self._vals,
+                self._rhs,
+            ],
+            device=dev,
+        )
         if cap:
-            wp.launch(ks.triplets_contacts_kernel, cap,
-                      [3 * nb, contacts.count, cap, contacts.body_a, contacts.body_b, self.u_at, self.u_ar,
-                       self.u_bt, self.u_br, self.k_eff, self._rows, self._cols, self._vals], device=dev)
+            wp.launch(
+                ks.triplets_contacts_kernel,
+                cap,
+                [
+                    3 * nb,
+                    contacts.count,
+                    cap,
+                    contacts.body_a,
+                    contacts.body_b,
+                    self.u_at,
+                    self.u_ar,
+                    self.u_bt,
+                    self.u_br,
+                    self.k_eff,
+                    self._rows,
+                    self._cols,
+                    self._vals,
+                ],
+                device=dev,
+            )
         return self._rows, self._cols, self._vals, self._rhs
 
     def _split_characters(self, run) -> None:
@@ -359,8 +576,11 @@ class Solver:
         preconditioner on the CPU with at least ``_MIN_CHARACTERS_SPLIT_PCG`` characters).
         It depends on the crowd only, never on the threads at hand, so a crowd gives the
         same bits on any machine: with one host thread the halves run one after the other."""
-        return (self.model.device == "cpu" and self.preconditioner == "character"
-                and self.model.n_characters >= _MIN_CHARACTERS_SPLIT_PCG)
+        return (
+            self.model.device == "cpu"
+            and self.preconditioner == "character"
+            and self.model.n_characters >= _MIN_CHARACTERS_SPLIT_PCG
+        )
 
     def _solve_split(self, contacts) -> None:
         """The PCG of ``pcg_fused_kernel`` over the two halves of the crowd (the bodies of
@@ -375,11 +595,14 @@ class Solver:
         init, matvec, update = self._split_commands(contacts, cut)
         # each half factorises its characters' tree blocks, then starts its PCG rows
         half = m.n_characters // 2
-        run_parallel(lambda: (self._factor_range(0, half), init[0].launch()),
-                     lambda: (self._factor_range(half, m.n_characters), init[1].launch()))
+        run_parallel(
+            lambda: (self._factor_range(0, half), init[0].launch()),
+            lambda: (self._factor_range(half, m.n_characters), init[1].launch()),
+        )
         s = self.split_sums.numpy()
-        it, rel = self._split_iterations(matvec, update, np.float32(s[0]) + np.float32(s[4]),
-                                         np.float32(s[1]) + np.float32(s[5]))
+        it, rel = self._split_iterations(
+            matvec, update, np.float32(s[0]) + np.float32(s[4]), np.float32(s[1]) + np.float32(s[5])
+        )
         self.last_cg = (it, float(rel))
 
     def _split_commands(self, contacts, cut: int) -> tuple[list, list, list]:
@@ -388,20 +611,27 @@ class Solver:
         set."""
         m, cfg = self.model, self.config
         halves = ((0, 0, cut), (1, cut, m.n_bodies))
-        levers = (self.lever_p, self.lever_c, self.ctrl_c, float(cfg.body.joint_stiffness))   # the joint blocks
+        levers = (self.lever_p, self.lever_c, self.ctrl_c, float(cfg.body.joint_stiffness))  # the joint blocks
         # the body-body contacts of each half (a contact across the cut is in both)
         n_act = contacts.n_active()
         a = contacts.body_a.numpy()[:n_act]
         b = contacts.body_b.numpy()[:n_act]
         coupled = (b >= 0) & (self.k_eff.numpy()[:n_act] > 0)
         self._split_lists, counts = self._half_lists(
-            self._split_lists, contacts.capacity,
-            (coupled & ((a < cut) | (b < cut)), coupled & ((a >= cut) | (b >= cut))))
+            self._split_lists,
+            contacts.capacity,
+            (coupled & ((a < cut) | (b < cut)), coupled & ((a >= cut) | (b >= cut))),
+        )
 
         # the ten launches, recorded once per set of buffers (packing their arguments cost
         # about 1 ms a step at 1,000 characters); each step sets the contact counts
-        key = (id(contacts.body_a), id(contacts.body_b), id(self.u_at), id(self.k_eff),
-               *(id(lst) for lst in self._split_lists))
+        key = (
+            id(contacts.body_a),
+            id(contacts.body_b),
+            id(self.u_at),
+            id(self.k_eff),
+            *(id(lst) for lst in self._split_lists),
+        )
         if self._split_cmds is None or self._split_cmds[0] != key:
             self._split_cmds = (key, self._record_split(contacts, halves, levers))
         init, matvec, update = self._split_cmds[1]
@@ -460,6 +690,7 @@ class Solver:
                     cmd.launch()
                 finally:
                     barrier.wait()
+
             try:
                 out = iterate(phase)
             except BaseException:
@@ -468,7 +699,7 @@ class Solver:
             if part == 0:
                 result.append(out)
 
-        def both(cmds, buf, value) -> None:     # one phase of both halves, from this thread
+        def both(cmds, buf, value) -> None:  # one phase of both halves, from this thread
             pair = [cmds[0][buf], cmds[1][buf]]
             for cmd in pair:
                 cmd.set_param_at_index(3, value)
@@ -495,19 +726,98 @@ class Solver:
 
         init, matvec, update = [], [], []
         for (part, lo, hi), lst in zip(halves, self._split_lists):
-            init.append(record(ks.pcg_split_init_kernel,
-                               [lo, hi, part, self.grad_t, self.grad_r, parent, self.tree_dinv, self.tree_l,
-                                *levers, self.y6, self.dx, self.dw, r_t, r_r, z_t, z_r, po_t, po_r, sums]))
+            init.append(
+                record(
+                    ks.pcg_split_init_kernel,
+                    [
+                        lo,
+                        hi,
+                        part,
+                        self.grad_t,
+                        self.grad_r,
+                        parent,
+                        self.tree_dinv,
+                        self.tree_l,
+                        *levers,
+                        self.y6,
+                        self.dx,
+                        self.dw,
+                        r_t,
+                        r_r,
+                        z_t,
+                        z_r,
+                        po_t,
+                        po_r,
+                        sums,
+                    ],
+                )
+            )
             mv, up = [], []
             for (pot, por), (pnt, pnr) in (((po_t, po_r), (p_t, p_r)), ((p_t, p_r), (po_t, po_r))):
-                mv.append(record(ks.pcg_split_matvec_kernel,
-                                 [lo, hi, part, 0.0, 0, lst, self.hess_a, self.hess_b, self.hess_c, parent,
-                                  self.lever_p, self.lever_c, self.ctrl_c, float(cfg.body.joint_stiffness),
-                                  contacts.body_a, contacts.body_b, self.u_at, self.u_ar, self.u_bt, self.u_br,
-                                  self.k_eff, z_t, z_r, pot, por, pnt, pnr, q_t, q_r, sums]))
-                up.append(record(ks.pcg_split_update_kernel,
-                                 [lo, hi, part, 0.0, pnt, pnr, q_t, q_r, self.dx, self.dw, r_t, r_r, parent,
-                                  self.tree_dinv, self.tree_l, *levers, self.y6, z_t, z_r, sums]))
+                mv.append(
+                    record(
+                        ks.pcg_split_matvec_kernel,
+                        [
+                            lo,
+                            hi,
+                            part,
+                            0.0,
+                            0,
+                            lst,
+                            self.hess_a,
+                            self.hess_b,
+                            self.hess_c,
+                            parent,
+                            self.lever_p,
+                            self.lever_c,
+                            self.ctrl_c,
+                            float(cfg.body.joint_stiffness),
+                            contacts.body_a,
+                            contacts.body_b,
+                            self.u_at,
+                            self.u_ar,
+                            self.u_bt,
+                            self.u_br,
+                            self.k_eff,
+                            z_t,
+                            z_r,
+                            pot,
+                            por,
+                            pnt,
+                            pnr,
+                            q_t,
+                            q_r,
+                            sums,
+                        ],
+                    )
+                )
+                up.append(
+                    record(
+                        ks.pcg_split_update_kernel,
+                        [
+                            lo,
+                            hi,
+                            part,
+                            0.0,
+                            pnt,
+                            pnr,
+                            q_t,
+                            q_r,
+                            self.dx,
+                            self.dw,
+                            r_t,
+                            r_r,
+                            parent,
+                            self.tree_dinv,
+                            self.tree_l,
+                            *levers,
+                            self.y6,
+                            z_t,
+                            z_r,
+                            sums,
+                        ],
+                    )
+                )
             matvec.append(mv)
             update.append(up)
 
@@ -519,10 +829,26 @@ class Solver:
 
         m, cfg = self.model, self.config
         if c1 > c0:
-            self.wp.launch(ks.tree_factor_kernel, c1 - c0,
-                           [m.n_joints, self.hess_a, self.hess_b, self.hess_c, m.wp["body_parent"],
-                            self.lever_p, self.lever_c, self.ctrl_c, float(cfg.body.joint_stiffness), self.tree_work,
-                            self.tree_dinv, self.tree_l, int(c0)], device=m.device)
+            self.wp.launch(
+                ks.tree_factor_kernel,
+                c1 - c0,
+                [
+                    m.n_joints,
+                    self.hess_a,
+                    self.hess_b,
+                    self.hess_c,
+                    m.wp["body_parent"],
+                    self.lever_p,
+                    self.lever_c,
+                    self.ctrl_c,
+                    float(cfg.body.joint_stiffness),
+                    self.tree_work,
+                    self.tree_dinv,
+                    self.tree_l,
+                    int(c0),
+                ],
+                device=m.device,
+            )
 
     def _factor_tree(self) -> None:
         self._split_characters(self._factor_range)
@@ -543,17 +869,42 @@ class Solver:
             work = self.y6
 
             def matvec(x, y, z, alpha, beta):
-                wp.launch(ks.tree_precond_kernel, m.n_characters,
-                          [m.n_joints, m.wp["body_parent"], self.tree_dinv, self.tree_l, self.lever_p,
-                           self.lever_c, self.ctrl_c, float(cfg.body.joint_stiffness), x, y, z,
-                           float(alpha), float(beta), work], device=m.device)
+                wp.launch(
+                    ks.tree_precond_kernel,
+                    m.n_characters,
+                    [
+                        m.n_joints,
+                        m.wp["body_parent"],
+                        self.tree_dinv,
+                        self.tree_l,
+                        self.lever_p,
+                        self.lever_c,
+                        self.ctrl_c,
+                        float(cfg.body.joint_stiffness),
+                        x,
+                        y,
+                        z,
+                        float(alpha),
+                        float(beta),
+                        work,
+                    ],
+                    device=m.device,
+                )
 
             precond = wl.LinearOperator(self._bsr.shape, self._bsr.dtype, self._bsr.device, matvec)
         else:
             precond = wl.preconditioner(self._bsr, ptype="block_jacobi_sequential")
         self._x6.zero_()
-        it, res, atol = wl.cg(self._bsr, rhs, self._x6, tol=float(cfg.solver.cg_tolerance),
-                              maxiter=int(cfg.solver.cg_max_iterations), M=precond, check_every=5, use_cuda_graph=False)
+        it, res, atol = wl.cg(
+            self._bsr,
+            rhs,
+            self._x6,
+            tol=float(cfg.solver.cg_tolerance),
+            maxiter=int(cfg.solver.cg_max_iterations),
+            M=precond,
+            check_every=5,
+            use_cuda_graph=False,
+        )
         wp.launch(ks.unpack_kernel, nb, [self._x6, self.dx, self.dw], device=m.device)
         # cg returns the absolute residual and atol = tol * |b|: report |r| / |b| like the others
         rel = float(res) * float(cfg.solver.cg_tolerance) / float(atol) if float(atol) > 0 else float(res)
@@ -568,11 +919,18 @@ class Solver:
         r, c, v, b = rows.numpy(), cols.numpy(), vals.numpy().astype(np.float64), rhs.numpy().astype(np.float64)
         A = bsr_from_triplets(r, c, v, nb)
         inv = np.linalg.inv(v[:nb])  # the first nb triplets are the full diagonal blocks
-        M = spl.LinearOperator(A.shape, matvec=lambda x: np.einsum("bij,bj->bi", inv, x.reshape(nb, 6)).ravel(),
-                               dtype=np.float64)
+        M = spl.LinearOperator(
+            A.shape, matvec=lambda x: np.einsum("bij,bj->bi", inv, x.reshape(nb, 6)).ravel(), dtype=np.float64
+        )
         counter = [0]
-        x, _ = spl.cg(A, b.ravel(), rtol=float(cfg.solver.cg_tolerance), maxiter=int(cfg.solver.cg_max_iterations), M=M,
-                      callback=lambda _x: counter.__setitem__(0, counter[0] + 1))
+        x, _ = spl.cg(
+            A,
+            b.ravel(),
+            rtol=float(cfg.solver.cg_tolerance),
+            maxiter=int(cfg.solver.cg_max_iterations),
+            M=M,
+            callback=lambda _x: counter.__setitem__(0, counter[0] + 1),
+        )
         x = x.reshape(nb, 6).astype(np.float32)
         self.dx.assign(wp.array(np.ascontiguousarray(x[:, :3]), dtype=wp.vec3, device=self.model.device))
         self.dw.assign(wp.array(np.ascontiguousarray(x[:, 3:]), dtype=wp.vec3, device=self.model.device))
@@ -587,9 +945,25 @@ class Solver:
         def update(c0: int, c1: int) -> None:
             lo, hi = c0 * m.n_joints, c1 * m.n_joints
             if hi > lo:
-                wp.launch(kb.update_kernel, hi - lo, [self.x_pred, self.q_pred, state_in.x, state_in.q, self.dx,
-                                                      self.dw, float(dt), state_out.x, state_out.q, state_out.v,
-                                                      state_out.w, int(lo)], device=m.device)
+                wp.launch(
+                    kb.update_kernel,
+                    hi - lo,
+                    [
+                        self.x_pred,
+                        self.q_pred,
+                        state_in.x,
+                        state_in.q,
+                        self.dx,
+                        self.dw,
+                        float(dt),
+                        state_out.x,
+                        state_out.q,
+                        state_out.v,
+                        state_out.w,
+                        int(lo),
+                    ],
+                    device=m.device,
+                )
 
         self._split_characters(update)
 

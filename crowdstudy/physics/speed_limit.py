@@ -28,8 +28,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from crowdstudy.body.rotations import (axis_angle_to_quaternion, quat_conjugate, quat_multiply,
-                                       quaternion_to_axis_angle)
+from crowdstudy.body.rotations import axis_angle_to_quaternion, quat_conjugate, quat_multiply, quaternion_to_axis_angle
 from crowdstudy.body.skeleton import JOINT_INDEX, PARENTS, forward_kinematics
 from crowdstudy.errors import InvalidInputError
 from crowdstudy.metrics import joint_speeds
@@ -66,10 +65,15 @@ class SpeedLimitReport:
     unresolved: int
 
     def as_dict(self) -> dict:
-        return {"limit_m_s": self.limit_m_s, "fast_samples": self.fast_samples,
-                "characters": list(self.characters), "rounds": self.rounds,
-                "max_speed_before_m_s": self.max_speed_before_m_s,
-                "max_speed_after_m_s": self.max_speed_after_m_s, "unresolved": self.unresolved}
+        return {
+            "limit_m_s": self.limit_m_s,
+            "fast_samples": self.fast_samples,
+            "characters": list(self.characters),
+            "rounds": self.rounds,
+            "max_speed_before_m_s": self.max_speed_before_m_s,
+            "max_speed_after_m_s": self.max_speed_after_m_s,
+            "unresolved": self.unresolved,
+        }
 
 
 def _leg_side(joint: int) -> int:
@@ -101,7 +105,7 @@ def _window(fast_steps: np.ndarray, n_frames: int, width: float, periodic: bool)
     t = np.arange(n_frames, dtype=np.float64)
     w = np.zeros(n_frames)
     for s in np.unique(fast_steps):
-        for centre in (s, s + 1):                       # a step s joins frames s and s + 1
+        for centre in (s, s + 1):  # a step s joins frames s and s + 1
             d = np.abs(t - (centre % n_frames))
             if periodic:
                 d = np.minimum(d, n_frames - d)
@@ -117,12 +121,25 @@ def fastest_reference_joint(ref_pos: np.ndarray, fps: float, periodic_length: fl
     return float(speed.max()) if speed.size else 0.0
 
 
-def limit_joint_speed(rot: np.ndarray, root: np.ndarray, ref_rot: np.ndarray, ref_root: np.ndarray,
-                      rest_joints: np.ndarray, fps: float, *, margin: float = 0.3,
-                      limit: float | None = None, periodic: bool = False, sigma0: float = 1.0,
-                      growth: float = 1.5, max_rounds: int = 12, planted_speed: float = 0.02,
-                      planted_height: float = 0.03, periodic_length: float | None = None,
-                      ref_kinematics: tuple | None = None) -> tuple[np.ndarray, SpeedLimitReport]:
+def limit_joint_speed(
+    rot: np.ndarray,
+    root: np.ndarray,
+    ref_rot: np.ndarray,
+    ref_root: np.ndarray,
+    rest_joints: np.ndarray,
+    fps: float,
+    *,
+    margin: float = 0.3,
+    limit: float | None = None,
+    periodic: bool = False,
+    sigma0: float = 1.0,
+    growth: float = 1.5,
+    max_rounds: int = 12,
+    planted_speed: float = 0.02,
+    planted_height: float = 0.03,
+    periodic_length: float | None = None,
+    ref_kinematics: tuple | None = None,
+) -> tuple[np.ndarray, SpeedLimitReport]:
     """Re-time the correction where it makes a joint faster than ``limit``.
 
     Args:
@@ -150,8 +167,10 @@ def limit_joint_speed(rot: np.ndarray, root: np.ndarray, ref_rot: np.ndarray, re
     """
     rot, root, ref_rot, ref_root = _checked_motions(rot, root, ref_rot, ref_root)
     if fps <= 0 or margin < 0 or sigma0 <= 0 or growth <= 1.0 or max_rounds < 1:
-        raise InvalidInputError(f"fps > 0, margin >= 0, sigma0 > 0, growth > 1 and max_rounds >= 1 expected: got "
-                                f"{fps!r}, {margin!r}, {sigma0!r}, {growth!r}, {max_rounds!r}")
+        raise InvalidInputError(
+            f"fps > 0, margin >= 0, sigma0 > 0, growth > 1 and max_rounds >= 1 expected: got "
+            f"{fps!r}, {margin!r}, {sigma0!r}, {growth!r}, {max_rounds!r}"
+        )
     rest = np.asarray(rest_joints, np.float64)
     n_frames = rot.shape[0]
     if ref_kinematics is None:
@@ -167,8 +186,15 @@ def limit_joint_speed(rot: np.ndarray, root: np.ndarray, ref_rot: np.ndarray, re
     out = rot.copy()
     if not n_fast or n_frames < 3:
         return out, SpeedLimitReport(float(limit), n_fast, (), 0, before, before, n_fast)
-    settings = _Retiming(fps=fps, limit=limit, sigma0=sigma0, growth=growth, max_rounds=max_rounds,
-                         periodic=periodic, periodic_length=periodic_length)
+    settings = _Retiming(
+        fps=fps,
+        limit=limit,
+        sigma0=sigma0,
+        growth=growth,
+        max_rounds=max_rounds,
+        periodic=periodic,
+        periodic_length=periodic_length,
+    )
     q_ref = axis_angle_to_quaternion(ref_rot)
     touched, most_rounds = [], 0
     for c in np.unique(np.nonzero(fast)[1]):
@@ -180,22 +206,30 @@ def limit_joint_speed(rot: np.ndarray, root: np.ndarray, ref_rot: np.ndarray, re
             most_rounds = max(most_rounds, rounds)
             speed[:, c] = spd
     after = float(speed.max())
-    return out, SpeedLimitReport(float(limit), n_fast, tuple(touched), most_rounds, before, after,
-                                 int((speed > limit).sum()))
+    return out, SpeedLimitReport(
+        float(limit), n_fast, tuple(touched), most_rounds, before, after, int((speed > limit).sum())
+    )
 
 
-def _checked_motions(rot: np.ndarray, root: np.ndarray, ref_rot: np.ndarray,
-                     ref_root: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+def _checked_motions(
+    rot: np.ndarray, root: np.ndarray, ref_rot: np.ndarray, ref_root: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """The output and reference motions of :func:`limit_joint_speed` as float64, their
     shapes checked: rotations (T, N, J, 3) rad, roots (T, N, 3) m."""
     rot = np.asarray(rot, np.float64)
     ref_rot = np.asarray(ref_rot, np.float64)
     root = np.asarray(root, np.float64)
     ref_root = np.asarray(ref_root, np.float64)
-    if rot.shape != ref_rot.shape or rot.ndim != 4 or root.shape != rot.shape[:2] + (3,) \
-            or ref_root.shape != root.shape:
-        raise InvalidInputError(f"rot, ref_rot (T, N, J, 3) and root, ref_root (T, N, 3): got {rot.shape}, "
-                                f"{ref_rot.shape}, {root.shape}, {ref_root.shape}")
+    if (
+        rot.shape != ref_rot.shape
+        or rot.ndim != 4
+        or root.shape != rot.shape[:2] + (3,)
+        or ref_root.shape != root.shape
+    ):
+        raise InvalidInputError(
+            f"rot, ref_rot (T, N, J, 3) and root, ref_root (T, N, 3): got {rot.shape}, "
+            f"{ref_rot.shape}, {root.shape}, {ref_root.shape}"
+        )
     return rot, root, ref_rot, ref_root
 
 
@@ -214,17 +248,30 @@ class _Retiming:
     periodic_length: float | None
 
 
-def _swing_frames(ref_pos: np.ndarray, fps: float, planted_speed: float, planted_height: float,
-                  periodic: bool) -> list[np.ndarray]:
+def _swing_frames(
+    ref_pos: np.ndarray, fps: float, planted_speed: float, planted_height: float, periodic: bool
+) -> list[np.ndarray]:
     """Per leg (left, right), the (T,) frames where neither the reference's ankle nor its
     ball is planted; ``ref_pos`` (T, 24, 3) m, one character's joints."""
-    return [~(planted_frames(ref_pos[:, leg[2]], fps, planted_speed, planted_height, periodic)
-              | planted_frames(ref_pos[:, leg[3]], fps, planted_speed, planted_height, periodic))
-            for leg in _LEGS]
+    return [
+        ~(
+            planted_frames(ref_pos[:, leg[2]], fps, planted_speed, planted_height, periodic)
+            | planted_frames(ref_pos[:, leg[3]], fps, planted_speed, planted_height, periodic)
+        )
+        for leg in _LEGS
+    ]
 
 
-def _retime_character(out: np.ndarray, c: int, q_ref: np.ndarray, speed: np.ndarray, free: list[np.ndarray],
-                      rest: np.ndarray, root: np.ndarray, settings: _Retiming) -> tuple[int, np.ndarray]:
+def _retime_character(
+    out: np.ndarray,
+    c: int,
+    q_ref: np.ndarray,
+    speed: np.ndarray,
+    free: list[np.ndarray],
+    rest: np.ndarray,
+    root: np.ndarray,
+    settings: _Retiming,
+) -> tuple[int, np.ndarray]:
     """Re-time character ``c``'s deviation from its reference (quaternions ``q_ref`` (T, 24,
     4)) in ``out`` (T, N, 24, 3) rad, in place, round by round with a wider kernel until no
     joint is faster than the limit. ``speed`` (T', 24) m/s its joint speeds now, ``free``
@@ -238,12 +285,12 @@ def _retime_character(out: np.ndarray, c: int, q_ref: np.ndarray, speed: np.ndar
         if not steps.size:
             break
         w = _window(steps, n_frames, 2.0 * sigma, settings.periodic)
-        groups: dict[int, set[int]] = {}                    # chain joints by their window
+        groups: dict[int, set[int]] = {}  # chain joints by their window
         for jt in np.unique(joints):
             side = _leg_side(int(jt))
             groups.setdefault(side, set()).update(_chain(int(jt)))
         if not _retime_chains(out, c, delta, q_ref, w, groups, free, sigma, settings.periodic):
-            break                     # only the root, pelvis or spine1, or planted legs, are fast
+            break  # only the root, pelvis or spine1, or planted legs, are fast
         rounds += 1
         _, pc = forward_kinematics(rest[None], out[:, c], root, parents=PARENTS)
         speed = joint_speeds(pc, settings.fps, periodic_length=settings.periodic_length, seam=settings.periodic)
@@ -251,8 +298,17 @@ def _retime_character(out: np.ndarray, c: int, q_ref: np.ndarray, speed: np.ndar
     return rounds, speed
 
 
-def _retime_chains(out: np.ndarray, c: int, delta: np.ndarray, q_ref: np.ndarray, w: np.ndarray,
-                   groups: dict[int, set[int]], free: list[np.ndarray], sigma: float, periodic: bool) -> bool:
+def _retime_chains(
+    out: np.ndarray,
+    c: int,
+    delta: np.ndarray,
+    q_ref: np.ndarray,
+    w: np.ndarray,
+    groups: dict[int, set[int]],
+    free: list[np.ndarray],
+    sigma: float,
+    periodic: bool,
+) -> bool:
     """One round for character ``c``: each chain of ``groups`` ({leg side or -1: joints})
     has its deviation ``delta`` (T, 24, 3) rad blended, by the window ``w`` (T,) (times its
     leg's swing frames), towards its Gaussian low-pass of ``sigma`` frames; ``delta`` and

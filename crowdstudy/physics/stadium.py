@@ -32,8 +32,9 @@ def stadium_crowd(n: int, level: str, duration: float, seed: int = 1):
     design = load_design()
     crowd = concert_layout(design, level, seed, n_characters=n)
     meta = {k: crowd.meta[k] for k in ("density_level", "density", "n_characters")}
-    return animate_stationary(crowd, duration=duration, fps=design.fps, seed=seed,
-                              meta={**meta, "seed": seed, "stage": "stationary"})
+    return animate_stationary(
+        crowd, duration=duration, fps=design.fps, seed=seed, meta={**meta, "seed": seed, "stage": "stationary"}
+    )
 
 
 class BodyProxy:
@@ -60,13 +61,25 @@ def central_subset(anim, k: int) -> np.ndarray:
 
 def select_characters(anim, idx):
     """The animation of the characters ``idx`` only (their bodies and clips with them)."""
-    return anim.replace(root_translation=anim.root_translation[:, idx], joint_rotations=anim.joint_rotations[:, idx],
-                        bodies=tuple(anim.bodies[i] for i in idx), clips=tuple(anim.clips[i] for i in idx))
+    return anim.replace(
+        root_translation=anim.root_translation[:, idx],
+        joint_rotations=anim.joint_rotations[:, idx],
+        bodies=tuple(anim.bodies[i] for i in idx),
+        clips=tuple(anim.clips[i] for i in idx),
+    )
 
 
-def stadium_run(n: int, level: str = "D3", duration: float = 20.0, frame_stride: int = 10,
-                overlap_characters: int = 300, light_bodies: bool = False, config=None,
-                tolerances: BarTolerances | None = None, report: Callable[[dict], None] | None = None) -> dict:
+def stadium_run(
+    n: int,
+    level: str = "D3",
+    duration: float = 20.0,
+    frame_stride: int = 10,
+    overlap_characters: int = 300,
+    light_bodies: bool = False,
+    config=None,
+    tolerances: BarTolerances | None = None,
+    report: Callable[[dict], None] | None = None,
+) -> dict:
     """``correct()`` on a stadium crowd (:func:`stadium_crowd`): wall time, ms per step, peak
     memory, NaN/stability, and the bars (:func:`~crowdstudy.metrics.check_bars`; ``tolerances``,
     None: the defaults) of Ours against its Baseline; ``report`` is called with the row.
@@ -105,15 +118,29 @@ def stadium_run(n: int, level: str = "D3", duration: float = 20.0, frame_stride:
     finite = bool(np.all(np.isfinite(ours.root_translation)) and np.all(np.isfinite(ours.joint_rotations)))
     # stable: no body ran away from its animation (the largest root deviation, m)
     max_dev = float(np.max(np.linalg.norm(ours.root_translation - base.root_translation, axis=-1)))
-    row = {"stage": "stationary", "level": level, "characters": n, "frames": base.n_frames, "seconds": duration,
-           "animate_s": t_anim, "correct_wall_s": wall, "correct_cpu_s": cpu,
-           "setup_s": timings.get("setup_seconds"), "simulate_s": timings.get("simulate_seconds"),
-           "output_s": timings.get("output_seconds"), "ms_per_step_wall": timings.get("ms_per_step"),
-           "steps": timings.get("steps"), "finite": finite, "max_root_deviation_m": max_dev,
-           "baseline_rss_mib": rss_base - rss0, "peak_rss_mib": peak,
-           "peak_kib_per_character": 1024.0 * (peak - rss0) / n,
-           "bodies": "proxies (rest joints, capsules, vertices)" if light_bodies else "full body models",
-           "loop": loop_mode(base), **profile_columns(ours)}
+    row = {
+        "stage": "stationary",
+        "level": level,
+        "characters": n,
+        "frames": base.n_frames,
+        "seconds": duration,
+        "animate_s": t_anim,
+        "correct_wall_s": wall,
+        "correct_cpu_s": cpu,
+        "setup_s": timings.get("setup_seconds"),
+        "simulate_s": timings.get("simulate_seconds"),
+        "output_s": timings.get("output_seconds"),
+        "ms_per_step_wall": timings.get("ms_per_step"),
+        "steps": timings.get("steps"),
+        "finite": finite,
+        "max_root_deviation_m": max_dev,
+        "baseline_rss_mib": rss_base - rss0,
+        "peak_rss_mib": peak,
+        "peak_kib_per_character": 1024.0 * (peak - rss0) / n,
+        "bodies": "proxies (rest joints, capsules, vertices)" if light_bodies else "full body models",
+        "loop": loop_mode(base),
+        **profile_columns(ours),
+    }
     sub = central_subset(base, min(overlap_characters, n))
     frames = np.arange(0, base.n_frames, frame_stride)
     for geom in ("mesh", "capsule"):
@@ -121,18 +148,25 @@ def stadium_run(n: int, level: str = "D3", duration: float = 20.0, frame_stride:
         ro = overlap_volume(select_characters(ours, sub), geometry=geom, frames=frames)
         ob, oo = rb.mean, ro.mean
         row[f"{geom}_baseline_m3"], row[f"{geom}_ours_m3"], row[f"{geom}_ratio"] = ob, oo, oo / max(ob, 1e-12)
-        if geom == "mesh":      # per character, for the neighbourhoods below
+        if geom == "mesh":  # per character, for the neighbourhoods below
             mesh_per_character = (rb.per_character.mean(axis=0), ro.per_character.mean(axis=0))
     row["overlap_subset"] = f"{len(sub)} central characters, every {frame_stride}th frame"
     # the same overlap neighbourhood by neighbourhood: study-cell-sized tiles of the floor
     tile = (float(design.floor_width), float(design.floor_depth))
-    ratios = tile_ratios(base.root_translation[0, sub, :2], *mesh_per_character, tile,
-                         min_characters=max(1, design.n_characters(level) // 2))
+    ratios = tile_ratios(
+        base.root_translation[0, sub, :2],
+        *mesh_per_character,
+        tile,
+        min_characters=max(1, design.n_characters(level) // 2),
+    )
     row["tile_m"] = f"{tile[0]:g} x {tile[1]:g}"
     row["tiles"] = len(ratios)
     if len(ratios):
         row["mesh_ratio_tile_min"], row["mesh_ratio_tile_median"], row["mesh_ratio_tile_max"] = (
-            float(ratios.min()), float(np.median(ratios)), float(ratios.max()))
+            float(ratios.min()),
+            float(np.median(ratios)),
+            float(ratios.max()),
+        )
         row["tiles_over_overlap_bar"] = f"{int(np.sum(ratios > tolerances.overlap_ratio))}/{len(ratios)}"
     row["tracking_cm"] = tracking_error(ours, base, bodies=bodies)
     row.update(smoothness_columns(base, ours, bodies))

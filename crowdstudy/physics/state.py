@@ -75,8 +75,13 @@ class Control:
         self.t_glob_ahead = wp.zeros(nb, dtype=wp.quat, device=dev)
         self.t_x_ahead = wp.zeros(nb, dtype=wp.vec3, device=dev)
 
-    def set_frames(self, joint_rotations: np.ndarray, root_translation: np.ndarray, start: int = 0,
-                   frames: np.ndarray | None = None) -> None:
+    def set_frames(
+        self,
+        joint_rotations: np.ndarray,
+        root_translation: np.ndarray,
+        start: int = 0,
+        frames: np.ndarray | None = None,
+    ) -> None:
         """Upload frames: joint_rotations (F, N, J, 3) axis-angle rad, root_translation (F, N, 3) m,
         into the slots from ``start``. ``frames``: which of the F frames to upload, in slot
         order (an integer index; None: all of them): a looped clip's schedule is gathered a
@@ -87,15 +92,21 @@ class Control:
         if rot.ndim == 3:
             rot, root = rot[None], root[None]
         if rot.shape[1:] != (m.n_characters, m.n_joints, 3) or root.shape != (rot.shape[0], m.n_characters, 3):
-            raise InvalidInputError(f"joint_rotations/root_translation: expected (F, {m.n_characters}, {m.n_joints}, 3)"
-                                    f" and (F, {m.n_characters}, 3), got {rot.shape} and {root.shape}")
+            raise InvalidInputError(
+                f"joint_rotations/root_translation: expected (F, {m.n_characters}, {m.n_joints}, 3)"
+                f" and (F, {m.n_characters}, 3), got {rot.shape} and {root.shape}"
+            )
         if frames is None:
             frames = np.arange(rot.shape[0])
         frames = np.asarray(frames)
-        if frames.ndim != 1 or frames.dtype.kind not in "iu" or (
-                len(frames) and (frames.min() < 0 or frames.max() >= rot.shape[0])):
-            raise InvalidInputError(f"frames: expected a 1-D integer index into the {rot.shape[0]} frames given, "
-                                    f"got {frames!r}")
+        if (
+            frames.ndim != 1
+            or frames.dtype.kind not in "iu"
+            or (len(frames) and (frames.min() < 0 or frames.max() >= rot.shape[0]))
+        ):
+            raise InvalidInputError(
+                f"frames: expected a 1-D integer index into the {rot.shape[0]} frames given, got {frames!r}"
+            )
         f = len(frames)
         if start < 0 or start + f > self.anim_q.shape[0]:
             raise InvalidInputError(f"start: frames [{start}, {start + f}) do not fit the {self.anim_q.shape[0]} slots")
@@ -105,9 +116,10 @@ class Control:
         for f0 in range(0, f, step):
             f1 = min(f, f0 + step)
             quats = axis_angle_to_quaternion(rot[frames[f0:f1]]).reshape(f1 - f0, -1, 4).astype(np.float32)
-            self.anim_q[start + f0:start + f1].assign(wp.array(quats, dtype=wp.quat, device=m.device))
-        self.anim_root[start:start + f].assign(wp.array(root[frames].astype(np.float32), dtype=wp.vec3,
-                                                        device=m.device))
+            self.anim_q[start + f0 : start + f1].assign(wp.array(quats, dtype=wp.quat, device=m.device))
+        self.anim_root[start : start + f].assign(
+            wp.array(root[frames].astype(np.float32), dtype=wp.vec3, device=m.device)
+        )
 
     def advance(self, f0: int, f1: int, alpha: float) -> None:
         """Shift the targets (current -> old -> older) and compute the target between frames
@@ -122,23 +134,39 @@ class Control:
         args = [m.n_joints, m.wp["body_parent"], m.wp["anchor_parent"], m.wp["anchor_child"]]
 
         def current() -> None:
-            wp.launch(targets_kernel, m.n_characters,
-                      [self.anim_q, self.anim_root, int(f0), int(f1), float(alpha), *args,
-                       self.t_rel, self.t_glob, self.t_x], device=m.device)
+            wp.launch(
+                targets_kernel,
+                m.n_characters,
+                [self.anim_q, self.anim_root, int(f0), int(f1), float(alpha), *args, self.t_rel, self.t_glob, self.t_x],
+                device=m.device,
+            )
 
         def ahead() -> None:
             last = self.anim_q.shape[0] - 1
             at = min(f0 + alpha * (f1 - f0) + self.ahead_frames, float(last))
             g0 = int(np.floor(at))
             g1 = min(g0 + 1, last)
-            wp.launch(targets_kernel, m.n_characters,
-                      [self.anim_q, self.anim_root, g0, g1, float(at - g0), *args,
-                       self.t_rel_ahead, self.t_glob_ahead, self.t_x_ahead], device=m.device)
+            wp.launch(
+                targets_kernel,
+                m.n_characters,
+                [
+                    self.anim_q,
+                    self.anim_root,
+                    g0,
+                    g1,
+                    float(at - g0),
+                    *args,
+                    self.t_rel_ahead,
+                    self.t_glob_ahead,
+                    self.t_x_ahead,
+                ],
+                device=m.device,
+            )
 
         if self.ahead_frames <= 0:
             current()
         elif m.device == "cpu" and m.n_characters >= _MIN_CHARACTERS_PARALLEL and host_threads() >= 2:
-            run_parallel(current, ahead)          # disjoint outputs: the same bits either way
+            run_parallel(current, ahead)  # disjoint outputs: the same bits either way
         else:
             current()
             ahead()
@@ -150,4 +178,3 @@ class Control:
             old.assign(self.t_glob)
         for old in (self.t_x_old, self.t_x_older):
             old.assign(self.t_x)
-

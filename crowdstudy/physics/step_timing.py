@@ -33,8 +33,13 @@ def tile_crowd(anim, n: int, spacing: float = 3.2):
         clips += list(anim.clips)
     root = np.concatenate(roots, 1)[:, :n]
     rot = np.concatenate(rots, 1)[:, :n]
-    return anim.replace(root_translation=root, joint_rotations=rot, bodies=tuple(bodies[:n]), clips=tuple(clips[:n]),
-                        meta={"scenario": "tiled"})
+    return anim.replace(
+        root_translation=root,
+        joint_rotations=rot,
+        bodies=tuple(bodies[:n]),
+        clips=tuple(clips[:n]),
+        meta={"scenario": "tiled"},
+    )
 
 
 def timed_corrector(anim, **kw):

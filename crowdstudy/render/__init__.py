@@ -22,8 +22,14 @@ import importlib
 
 __all__ = ["render_frame", "render_video", "build_stimuli", "CrowdRenderer", "Camera", "free_camera"]
 
-_WHERE = {"render_frame": "renderer", "CrowdRenderer": "renderer", "render_video": "video",
-          "build_stimuli": "stimuli", "Camera": "camera", "free_camera": "camera"}
+_WHERE = {
+    "render_frame": "renderer",
+    "CrowdRenderer": "renderer",
+    "render_video": "video",
+    "build_stimuli": "stimuli",
+    "Camera": "camera",
+    "free_camera": "camera",
+}
 
 
 def __getattr__(name: str):

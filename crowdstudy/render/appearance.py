@@ -32,8 +32,18 @@ from crowdstudy.errors import InvalidInputError
 from crowdstudy.render.garments import surface_codes
 from crowdstudy.render.palette import HAIR, SHIRTS, SHOES, SKIN_TONES, TROUSERS, srgb_to_linear
 
-__all__ = ["Appearance", "assign_appearance", "paint_textures", "RACE_SKIN", "TEXTURE_SIZE", "TEXTURE_ARRAY_BUDGET",
-           "skin_tone", "nearest_painted", "fill_from_nearest", "texture_size"]
+__all__ = [
+    "Appearance",
+    "assign_appearance",
+    "paint_textures",
+    "RACE_SKIN",
+    "TEXTURE_SIZE",
+    "TEXTURE_ARRAY_BUDGET",
+    "skin_tone",
+    "nearest_painted",
+    "fill_from_nearest",
+    "texture_size",
+]
 
 #: sRGB skin tone of each MakeHuman ancestry (african, asian, caucasian), blended in linear RGB
 RACE_SKIN = ((92, 58, 40), (206, 160, 122), (222, 176, 148))
@@ -44,7 +54,7 @@ BELTS = ((40, 28, 20), (20, 20, 22), (95, 60, 35))
 TEXTURE_SIZE = 1024
 #: painted layers kept in memory across renderers of the same characters (the stimulus set
 #: renders every crowd from four viewpoints, Baseline and Ours with the same looks)
-_PAINT_CACHE_BYTES = 512 * 2 ** 20
+_PAINT_CACHE_BYTES = 512 * 2**20
 _PAINTED: collections.OrderedDict = collections.OrderedDict()
 _NEAREST: dict = {}
 
@@ -52,7 +62,7 @@ _NEAREST: dict = {}
 #: bytes the albedo texture array (one layer per character, mipmaps included) may take:
 #: Mesa's llvmpipe refuses an array of 2 GiB or more (GL_OUT_OF_MEMORY), which 400
 #: characters at 1024^2 texels reach
-TEXTURE_ARRAY_BUDGET = 1536 * 2 ** 20
+TEXTURE_ARRAY_BUDGET = 1536 * 2**20
 
 
 def texture_size(height: int, n_characters: int = 1) -> int:
@@ -72,10 +82,12 @@ def _check_allocated(ctx, tex, layers: int, size: int) -> None:
     error = ctx.error
     if error != "GL_NO_ERROR":
         tex.release()
-        raise InvalidInputError(f"paint_textures: the GL driver could not hold {layers} layers of {size}^2 texels "
-                                f"({_array_bytes(size, layers) / 2 ** 30:.1f} GiB with mipmaps; {error}); "
-                                f"use texture_size(height, n_characters), which keeps within "
-                                f"{TEXTURE_ARRAY_BUDGET / 2 ** 30:.1f} GiB")
+        raise InvalidInputError(
+            f"paint_textures: the GL driver could not hold {layers} layers of {size}^2 texels "
+            f"({_array_bytes(size, layers) / 2**30:.1f} GiB with mipmaps; {error}); "
+            f"use texture_size(height, n_characters), which keeps within "
+            f"{TEXTURE_ARRAY_BUDGET / 2**30:.1f} GiB"
+        )
 
 
 def _array_bytes(size: int, layers: int) -> int:
@@ -86,6 +98,7 @@ def _array_bytes(size: int, layers: int) -> int:
 @dataclasses.dataclass(frozen=True)
 class Appearance:
     """One character's looks. Colours are linear RGB (3,) floats; lengths metres."""
+
     skin: tuple
     hair: tuple
     brow: tuple
@@ -96,15 +109,15 @@ class Appearance:
     shoes: tuple
     sole: tuple
     belt_color: tuple
-    sleeve: float          # beyond the shoulder joint; >= 1 means to the wrist
+    sleeve: float  # beyond the shoulder joint; >= 1 means to the wrist
     neck_drop: float
     vneck: bool
-    legwear: str           # "trousers", "shorts" or "skirt"
-    hem: float             # m above the knee joint (shorts, skirt) or above the ankle (trousers)
+    legwear: str  # "trousers", "shorts" or "skirt"
+    hem: float  # m above the knee joint (shorts, skirt) or above the ankle (trousers)
     belt: bool
     boots: bool
-    hairstyle: tuple       # fringe drop, nape drop, bald crown (0/1), strand contrast
-    hair_volume: float     # m the hair stands off the scalp
+    hairstyle: tuple  # fringe drop, nape drop, bald crown (0/1), strand contrast
+    hair_volume: float  # m the hair stands off the scalp
 
 
 def _lin(rgb) -> tuple:
@@ -131,8 +144,9 @@ def assign_appearance(records: list[dict], choice: np.ndarray, seed: int) -> lis
     (skin, hair, shirt, trousers, shoes; neighbours already differ)."""
     choice = np.asarray(choice)
     if choice.shape != (len(records), 5):
-        raise InvalidInputError(f"choice: expected shape ({len(records)}, 5) (assign_colors' palette indices), "
-                                f"got {choice.shape}")
+        raise InvalidInputError(
+            f"choice: expected shape ({len(records)}, 5) (assign_colors' palette indices), got {choice.shape}"
+        )
     out = []
     for i, rec in enumerate(records):
         rng = np.random.default_rng([int(seed) & 0xFFFFFFFF, i, 7])
@@ -152,23 +166,41 @@ def assign_appearance(records: list[dict], choice: np.ndarray, seed: int) -> lis
             legwear = "skirt"
         elif r > 0.8:
             legwear = "shorts"
-        hem = {"trousers": float(0.0 if rng.random() < 0.7 else rng.uniform(0.03, 0.06)),
-               "shorts": float(rng.uniform(0.03, 0.09)),
-               "skirt": float(rng.uniform(-0.04, 0.06))}[legwear]
+        hem = {
+            "trousers": float(0.0 if rng.random() < 0.7 else rng.uniform(0.03, 0.06)),
+            "shorts": float(rng.uniform(0.03, 0.09)),
+            "skirt": float(rng.uniform(-0.04, 0.06)),
+        }[legwear]
         bald = (not female) and age > 40 and rng.random() < 0.35
-        style = (float(rng.uniform(0.0, 0.025) if female else rng.uniform(-0.012, 0.01)),
-                 float(rng.uniform(0.015, 0.05) if female else rng.uniform(-0.005, 0.012)),
-                 1.0 if bald else 0.0, 0.35)
-        out.append(Appearance(
-            skin=tuple(skin), hair=tuple(hair), brow=tuple(0.65 * hair + 0.02), iris=_lin(iris),
-            lip=tuple(np.clip(skin * np.array([0.95, 0.55, 0.55]), 0, 1)), shirt=_lin(SHIRTS[choice[i, 2]]),
-            trousers=_lin(TROUSERS[choice[i, 3]]), shoes=_lin(SHOES[choice[i, 4]]),
-            sole=_lin(SOLES[int(rng.integers(len(SOLES)))]), belt_color=_lin(BELTS[int(rng.integers(len(BELTS)))]),
-            sleeve=10.0 if long_sleeves else float(rng.uniform(0.07, 0.15)),
-            neck_drop=float(rng.uniform(0.015, 0.05)), vneck=bool(rng.random() < 0.3), legwear=legwear, hem=hem,
-            belt=bool(legwear != "skirt" and rng.random() < 0.45), boots=bool(rng.random() < 0.15),
-            hairstyle=style,
-            hair_volume=float(rng.uniform(0.008, 0.02) if female else rng.uniform(0.003, 0.009))))
+        style = (
+            float(rng.uniform(0.0, 0.025) if female else rng.uniform(-0.012, 0.01)),
+            float(rng.uniform(0.015, 0.05) if female else rng.uniform(-0.005, 0.012)),
+            1.0 if bald else 0.0,
+            0.35,
+        )
+        out.append(
+            Appearance(
+                skin=tuple(skin),
+                hair=tuple(hair),
+                brow=tuple(0.65 * hair + 0.02),
+                iris=_lin(iris),
+                lip=tuple(np.clip(skin * np.array([0.95, 0.55, 0.55]), 0, 1)),
+                shirt=_lin(SHIRTS[choice[i, 2]]),
+                trousers=_lin(TROUSERS[choice[i, 3]]),
+                shoes=_lin(SHOES[choice[i, 4]]),
+                sole=_lin(SOLES[int(rng.integers(len(SOLES)))]),
+                belt_color=_lin(BELTS[int(rng.integers(len(BELTS)))]),
+                sleeve=10.0 if long_sleeves else float(rng.uniform(0.07, 0.15)),
+                neck_drop=float(rng.uniform(0.015, 0.05)),
+                vneck=bool(rng.random() < 0.3),
+                legwear=legwear,
+                hem=hem,
+                belt=bool(legwear != "skirt" and rng.random() < 0.45),
+                boots=bool(rng.random() < 0.15),
+                hairstyle=style,
+                hair_volume=float(rng.uniform(0.008, 0.02) if female else rng.uniform(0.003, 0.009)),
+            )
+        )
     return out
 
 
@@ -184,11 +216,17 @@ def _landmarks(body) -> dict:
     head_w = np.asarray(body.weights)[:, J["head"]]
     skull = verts[(head_w > 0.9) & (np.abs(verts[:, 2] - eye[2] - 0.045) < 0.006) & (verts[:, 1] < eye[1] - 0.03)]
     ear_ax = float(np.abs(skull[:, 0]).max()) + 0.004 if len(skull) else 0.075
-    return {"neck": joints[J["neck"]], "eye": eye, "shoulder_ax": float(abs(joints[J["left_shoulder"], 0])),
-            "wrist_ax": float(abs(joints[J["left_wrist"], 0])), "knee_z": float(joints[J["left_knee"], 2]),
-            "ankle_z": float(joints[J["left_ankle"], 2]), "floor": float(verts[:, 2].min()),
-            "waist": float(joints[J["pelvis"], 2] + 0.7 * (joints[J["spine1"], 2] - joints[J["pelvis"], 2])),
-            "ear_ax": ear_ax}
+    return {
+        "neck": joints[J["neck"]],
+        "eye": eye,
+        "shoulder_ax": float(abs(joints[J["left_shoulder"], 0])),
+        "wrist_ax": float(abs(joints[J["left_wrist"], 0])),
+        "knee_z": float(joints[J["left_knee"], 2]),
+        "ankle_z": float(joints[J["left_ankle"], 2]),
+        "floor": float(verts[:, 2].min()),
+        "waist": float(joints[J["pelvis"], 2] + 0.7 * (joints[J["spine1"], 2] - joints[J["pelvis"], 2])),
+        "ear_ax": ear_ax,
+    }
 
 
 def _uniforms(look: Appearance, marks: dict) -> dict:
@@ -197,21 +235,45 @@ def _uniforms(look: Appearance, marks: dict) -> dict:
         end = max(shoe_top + 0.004, marks["ankle_z"] + look.hem)
     else:
         end = marks["knee_z"] + look.hem
-    return {"u_skin": look.skin, "u_hair": look.hair, "u_brow": look.brow, "u_shirt": look.shirt,
-            "u_trousers": look.trousers, "u_shoes": look.shoes, "u_sole": look.sole, "u_iris": look.iris,
-            "u_lip": look.lip, "u_belt_color": look.belt_color,
-            "u_sleeve": float(min(look.sleeve, marks["wrist_ax"] - marks["shoulder_ax"] - 0.015)),
-            "u_neck_drop": look.neck_drop, "u_vneck": int(look.vneck), "u_trouser_end": float(end),
-            "u_waist": marks["waist"], "u_shoe_top": float(shoe_top), "u_floor": marks["floor"],
-            "u_belt": int(look.belt), "u_hairstyle": look.hairstyle, "u_neck": tuple(marks["neck"]),
-            "u_eye": tuple(marks["eye"]), "u_shoulder_ax": marks["shoulder_ax"], "u_ear_ax": marks["ear_ax"]}
+    return {
+        "u_skin": look.skin,
+        "u_hair": look.hair,
+        "u_brow": look.brow,
+        "u_shirt": look.shirt,
+        "u_trousers": look.trousers,
+        "u_shoes": look.shoes,
+        "u_sole": look.sole,
+        "u_iris": look.iris,
+        "u_lip": look.lip,
+        "u_belt_color": look.belt_color,
+        "u_sleeve": float(min(look.sleeve, marks["wrist_ax"] - marks["shoulder_ax"] - 0.015)),
+        "u_neck_drop": look.neck_drop,
+        "u_vneck": int(look.vneck),
+        "u_trouser_end": float(end),
+        "u_waist": marks["waist"],
+        "u_shoe_top": float(shoe_top),
+        "u_floor": marks["floor"],
+        "u_belt": int(look.belt),
+        "u_hairstyle": look.hairstyle,
+        "u_neck": tuple(marks["neck"]),
+        "u_eye": tuple(marks["eye"]),
+        "u_shoulder_ax": marks["shoulder_ax"],
+        "u_ear_ax": marks["ear_ax"],
+    }
 
 
 def _regions(weights: np.ndarray) -> np.ndarray:
     """(V, 4) summed skin weights: arms (collar excluded), legs, feet, head and neck."""
     w = np.asarray(weights, dtype=np.float64)
-    return np.stack([w[:, 16:24].sum(axis=1), w[:, [1, 2, 4, 5]].sum(axis=1), w[:, [7, 8, 10, 11]].sum(axis=1),
-                     w[:, [12, 15]].sum(axis=1)], axis=1).astype(np.float32)
+    return np.stack(
+        [
+            w[:, 16:24].sum(axis=1),
+            w[:, [1, 2, 4, 5]].sum(axis=1),
+            w[:, [7, 8, 10, 11]].sum(axis=1),
+            w[:, [12, 15]].sum(axis=1),
+        ],
+        axis=1,
+    ).astype(np.float32)
 
 
 def paint_textures(ctx, bodies: list, looks: list[Appearance], program, *, size: int = TEXTURE_SIZE):
@@ -228,7 +290,7 @@ def paint_textures(ctx, bodies: list, looks: list[Appearance], program, *, size:
     n = len(bodies)
     textured = [i for i, b in enumerate(bodies) if getattr(b, "surface", None) is not None]
     layer_size = size if textured else 1
-    _ = ctx.error                               # clear an earlier error: the next check is this array's
+    _ = ctx.error  # clear an earlier error: the next check is this array's
     tex = ctx.texture_array((layer_size, layer_size, max(n, 1)), 4)
     _check_allocated(ctx, tex, n, layer_size)
     codes: list = [None] * n
@@ -252,14 +314,20 @@ def paint_textures(ctx, bodies: list, looks: list[Appearance], program, *, size:
                 tex.write(filled, viewport=(0, 0, i, size, size, 1))
                 continue
             if key not in cache:
-                static = np.concatenate([surf.uv, _regions(np.asarray(body.weights)[surf.vertex]),
-                                         surf.part[:, None].astype(np.float32)], axis=1).astype(np.float32)
+                static = np.concatenate(
+                    [surf.uv, _regions(np.asarray(body.weights)[surf.vertex]), surf.part[:, None].astype(np.float32)],
+                    axis=1,
+                ).astype(np.float32)
                 cache[key] = (ctx.buffer(static.tobytes()), ctx.buffer(surf.faces.astype(np.uint32).tobytes()))
             vbo_static, ibo = cache[key]
             rest = np.asarray(body.rest_vertices, dtype=np.float32)[surf.vertex]
             vbo_rest = ctx.buffer(np.ascontiguousarray(rest).tobytes())
-            vao = ctx.vertex_array(program, [(vbo_static, "2f 4f 1f", "in_uv", "in_regions", "in_part"),
-                                             (vbo_rest, "3f", "in_rest")], index_buffer=ibo, index_element_size=4)
+            vao = ctx.vertex_array(
+                program,
+                [(vbo_static, "2f 4f 1f", "in_uv", "in_regions", "in_part"), (vbo_rest, "3f", "in_rest")],
+                index_buffer=ibo,
+                index_element_size=4,
+            )
             for name, value in _uniforms(look, _landmarks(body)).items():
                 if name in program:
                     program[name].value = value

@@ -37,9 +37,25 @@ from crowdstudy.render.garments import dress_body
 from crowdstudy.render.palette import assign_colors
 from crowdstudy.render.scene import Environment, build_environment, split_floor
 
-__all__ = ["RenderOptions", "CrowdAssets", "FrameBones", "CharacterMeshes", "LodLevel", "Lighting",
-           "EnvironmentParts", "lod_levels", "shadow_receivers", "scenario_of", "wrap_offsets", "wrapped_roots",
-           "N_BONES", "COPIES", "BOUND_RADIUS", "LOD_PIXELS", "DRESS_MIN_HEIGHT"]
+__all__ = [
+    "RenderOptions",
+    "CrowdAssets",
+    "FrameBones",
+    "CharacterMeshes",
+    "LodLevel",
+    "Lighting",
+    "EnvironmentParts",
+    "lod_levels",
+    "shadow_receivers",
+    "scenario_of",
+    "wrap_offsets",
+    "wrapped_roots",
+    "N_BONES",
+    "COPIES",
+    "BOUND_RADIUS",
+    "LOD_PIXELS",
+    "DRESS_MIN_HEIGHT",
+]
 
 N_BONES = 24
 #: periodic copies drawn of a corridor's crowd: at k * L along x, k in COPIES
@@ -51,7 +67,7 @@ LOD_PIXELS = (600.0, 300.0)
 #: image height (px) from which the characters' surfaces are dressed (cloth, shoes, hair
 #: volume); below it the dressing would move the surface by less than a pixel
 DRESS_MIN_HEIGHT = 540
-_CHUNK = 32          # frames of skinning matrices computed at once
+_CHUNK = 32  # frames of skinning matrices computed at once
 
 
 @dataclasses.dataclass(frozen=True)
@@ -67,6 +83,7 @@ class RenderOptions:
             height: 3000 at 1080p, scaled down to 600 for small previews.
         static_layer: draw what the characters do not change once per view.
     """
+
     width: int
     height: int
     msaa: int
@@ -76,9 +93,17 @@ class RenderOptions:
     static_layer: bool
 
     @classmethod
-    def validated(cls, *, width: int = 1920, height: int = 1080, msaa: int = 4, shadows: bool = True,
-                  shadow_size: int = 2048, max_faces: int | str | None = "auto",
-                  static_layer: bool = True) -> RenderOptions:
+    def validated(
+        cls,
+        *,
+        width: int = 1920,
+        height: int = 1080,
+        msaa: int = 4,
+        shadows: bool = True,
+        shadow_size: int = 2048,
+        max_faces: int | str | None = "auto",
+        static_layer: bool = True,
+    ) -> RenderOptions:
         """The options, or an :class:`InvalidInputError` naming the bad one."""
         for name, value in (("width", width), ("height", height)):
             if not isinstance(value, (int, np.integer)) or value < 16 or value > 8192:
@@ -91,8 +116,15 @@ class RenderOptions:
             raise InvalidInputError(f"max_faces: expected 'auto', None or an integer >= 100, got {max_faces!r}")
         if not isinstance(shadow_size, (int, np.integer)) or not 64 <= shadow_size <= 8192:
             raise InvalidInputError(f"shadow_size: expected an integer in [64, 8192], got {shadow_size!r}")
-        return cls(width=int(width), height=int(height), msaa=int(msaa), shadows=bool(shadows),
-                   shadow_size=int(shadow_size), max_faces=max_faces, static_layer=bool(static_layer))
+        return cls(
+            width=int(width),
+            height=int(height),
+            msaa=int(msaa),
+            shadows=bool(shadows),
+            shadow_size=int(shadow_size),
+            max_faces=max_faces,
+            static_layer=bool(static_layer),
+        )
 
 
 def scenario_of(anim) -> str:
@@ -124,6 +156,7 @@ class CrowdAssets:
         colors: (N, 6, 3) float32 linear-RGB clothing colours (palette.REGIONS order).
         looks: N :class:`~crowdstudy.render.appearance.Appearance`.
     """
+
     anim: object
     design: object
     env: Environment
@@ -133,15 +166,19 @@ class CrowdAssets:
     looks: list
 
     @classmethod
-    def build(cls, anim, design=None, *, body_loader=None, color_seed: int | None = None,
-              color_positions=None) -> CrowdAssets:
+    def build(
+        cls, anim, design=None, *, body_loader=None, color_seed: int | None = None, color_positions=None
+    ) -> CrowdAssets:
         """Load the bodies and choose the colours and looks (see ``CrowdRenderer``'s
         ``body_loader``, ``color_seed`` and ``color_positions``)."""
         if design is None:
             from crowdstudy.design import load_design
+
             design = load_design()
         if anim.n_joints != N_BONES:
-            raise InvalidInputError(f"anim.joint_names: the renderer needs the {N_BONES}-joint skeleton, got {anim.n_joints}")
+            raise InvalidInputError(
+                f"anim.joint_names: the renderer needs the {N_BONES}-joint skeleton, got {anim.n_joints}"
+            )
         env = build_environment(scenario_of(anim), design)
         loader = body_loader or default_body_loader
         bodies = [loader(rec) for rec in anim.bodies]
@@ -154,8 +191,9 @@ class CrowdAssets:
             raise InvalidInputError(f"color_positions: expected shape ({n}, 2), got {color_positions.shape}")
         colors, choice = assign_colors(color_positions, seed, period=anim.periodic_length)
         looks = assign_appearance(list(anim.bodies), choice, seed)
-        return cls(anim=anim, design=design, env=env, period=anim.periodic_length, bodies=bodies, colors=colors,
-                   looks=looks)
+        return cls(
+            anim=anim, design=design, env=env, period=anim.periodic_length, bodies=bodies, colors=colors, looks=looks
+        )
 
     def wrapped_roots(self, frame: int) -> np.ndarray:
         """(N, 3) pelvis positions of ``frame`` as drawn (periodic scenes wrapped into
@@ -206,7 +244,7 @@ def lod_levels(pixels, n_levels: int = len(LOD_PIXELS) + 1) -> np.ndarray:
     ``n_levels - 1``; a smaller character never gets a finer level than a larger one."""
     p = np.asarray(pixels, dtype=np.float64)
     level = np.zeros(p.shape, dtype=np.int64)
-    for k, bound in enumerate(LOD_PIXELS[:max(0, int(n_levels) - 1)]):
+    for k, bound in enumerate(LOD_PIXELS[: max(0, int(n_levels) - 1)]):
         level[p < bound] = k + 1
     return level
 
@@ -215,6 +253,7 @@ def lod_levels(pixels, n_levels: int = len(LOD_PIXELS) + 1) -> np.ndarray:
 class LodLevel:
     """One level of detail: the template groups of every character at this level's face
     count, for characters between ``min_pixels`` and ``max_pixels`` tall on screen."""
+
     groups: list[BodyGroup]
     min_pixels: float
     max_pixels: float
@@ -243,6 +282,7 @@ class CharacterMeshes:
         max_faces: faces per template of the finest level (None = full meshes).
         lods: the levels of detail, finest first; shadow casters use the last.
     """
+
     drawn_bodies: list
     surface_codes: list
     surface_scale: float
@@ -263,9 +303,15 @@ class CharacterMeshes:
         scale = float(np.clip(SURFACE_FACE_SCALE * height / 1080, 1.0, SURFACE_FACE_SCALE))
         finest = group_bodies(drawn, max_faces=max_faces, surface_scale=scale)
         faces = _lod_face_counts(max_faces)
-        bounds = [np.inf, *LOD_PIXELS[:len(faces) - 1], 0.0]
-        lods = [LodLevel(finest if k == 0 else group_bodies(drawn, max_faces=f, surface_scale=scale),
-                         min_pixels=bounds[k + 1], max_pixels=bounds[k]) for k, f in enumerate(faces)]
+        bounds = [np.inf, *LOD_PIXELS[: len(faces) - 1], 0.0]
+        lods = [
+            LodLevel(
+                finest if k == 0 else group_bodies(drawn, max_faces=f, surface_scale=scale),
+                min_pixels=bounds[k + 1],
+                max_pixels=bounds[k],
+            )
+            for k, f in enumerate(faces)
+        ]
         return cls(drawn_bodies=drawn, surface_codes=codes, surface_scale=scale, max_faces=max_faces, lods=lods)
 
 
@@ -300,12 +346,13 @@ class Lighting:
         direction: (3,) unit vector towards the key light.
         view_proj: (4, 4) the key light's world-to-clip matrix (row-major).
     """
+
     direction: np.ndarray
     view_proj: np.ndarray
     color: tuple = (1.55, 1.48, 1.38)
     sky: tuple = (0.36, 0.39, 0.46)
     ground: tuple = (0.16, 0.15, 0.14)
-    fog_density: float = 0.012   # 1/m
+    fog_density: float = 0.012  # 1/m
 
     @classmethod
     def for_scene(cls, env: Environment, period: float | None) -> Lighting:
@@ -381,6 +428,7 @@ class EnvironmentParts:
         walls_static: no character's shadow can reach the walls (they may go into the
             static layers).
     """
+
     triangles: dict[str, np.ndarray]
     walls_static: bool
 

@@ -15,16 +15,15 @@ import numpy as np
 
 from crowdstudy.errors import InvalidInputError
 
-__all__ = ["BodyGroup", "group_bodies", "region_scores", "vertex_normals", "default_body_loader",
-           "REGION_JOINTS"]
+__all__ = ["BodyGroup", "group_bodies", "region_scores", "vertex_normals", "default_body_loader", "REGION_JOINTS"]
 
 #: Joints (SMPL order) whose skin weights define the colour regions of palette.REGIONS.
 REGION_JOINTS = {
-    0: (15, 12, 20, 21, 22, 23),      # skin: head, neck, wrists, hands
-    2: (3, 6, 9, 13, 14, 16, 17),     # shirt: spine, collars, upper arms
-    3: (18, 19),                      # sleeve: forearms (skin or shirt per character)
-    4: (0, 1, 2, 4, 5),               # trousers: pelvis, thighs, shins
-    5: (7, 8, 10, 11),                # shoes: ankles, feet
+    0: (15, 12, 20, 21, 22, 23),  # skin: head, neck, wrists, hands
+    2: (3, 6, 9, 13, 14, 16, 17),  # shirt: spine, collars, upper arms
+    3: (18, 19),  # sleeve: forearms (skin or shirt per character)
+    4: (0, 1, 2, 4, 5),  # trousers: pelvis, thighs, shins
+    5: (7, 8, 10, 11),  # shoes: ankles, feet
 }
 _HEAD = 15
 #: textured bodies (face, hands and feet in the geometry, not in colour regions) keep this
@@ -50,7 +49,7 @@ def vertex_normals(vertices: np.ndarray, faces: np.ndarray, weld: np.ndarray | N
     f = np.asarray(faces, dtype=np.int64)
     fn = np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]])
     key = np.arange(len(v)) if weld is None else np.asarray(weld, dtype=np.int64)
-    at = key[f.T.reshape(-1)]            # corner 0 of every face, then corner 1, then corner 2
+    at = key[f.T.reshape(-1)]  # corner 0 of every face, then corner 1, then corner 2
     m = int(key.max()) + 1 if len(key) else 0
     n = np.stack([np.bincount(at, weights=np.tile(fn[:, c], 3), minlength=m) for c in range(3)], axis=1)[key]
     length = np.linalg.norm(n, axis=1, keepdims=True)
@@ -63,8 +62,11 @@ def _full_weights(body, n_vertices: int) -> np.ndarray:
         return np.asarray(w, dtype=np.float64)
     idx, val = body.top_weights()
     full = np.zeros((n_vertices, 24))
-    np.add.at(full, (np.repeat(np.arange(n_vertices), idx.shape[1]), np.asarray(idx).reshape(-1)),
-              np.asarray(val, dtype=np.float64).reshape(-1))
+    np.add.at(
+        full,
+        (np.repeat(np.arange(n_vertices), idx.shape[1]), np.asarray(idx).reshape(-1)),
+        np.asarray(val, dtype=np.float64).reshape(-1),
+    )
     return full
 
 
@@ -83,9 +85,17 @@ def region_scores(body) -> np.ndarray:
     for region, joints in REGION_JOINTS.items():
         scores[:, region] = weights[:, list(joints)].sum(axis=1)
     rel = verts - np.asarray(body.rest_joints, dtype=np.float64)[_HEAD]
-    hairness = np.clip(np.maximum.reduce([(rel[:, 2] - 0.115) / 0.02,
-                                          np.minimum((0.0 - rel[:, 1]) / 0.02, (rel[:, 2] - 0.03) / 0.02),
-                                          np.minimum((0.04 - rel[:, 1]) / 0.02, (rel[:, 2] - 0.095) / 0.02)]), 0, 1)
+    hairness = np.clip(
+        np.maximum.reduce(
+            [
+                (rel[:, 2] - 0.115) / 0.02,
+                np.minimum((0.0 - rel[:, 1]) / 0.02, (rel[:, 2] - 0.03) / 0.02),
+                np.minimum((0.04 - rel[:, 1]) / 0.02, (rel[:, 2] - 0.095) / 0.02),
+            ]
+        ),
+        0,
+        1,
+    )
     head = weights[:, _HEAD] + weights[:, 12] * 0.0
     scores[:, 1] = head * hairness
     scores[:, 0] -= head * hairness
@@ -102,8 +112,13 @@ def _decimation(vertices: np.ndarray, faces: np.ndarray, max_faces: int | None):
     """
     if max_faces is None or len(faces) <= max_faces:
         return None
-    key = (hashlib.sha1(np.ascontiguousarray(vertices, dtype=np.float64).tobytes()
-                        + np.ascontiguousarray(faces, dtype=np.int64).tobytes()).hexdigest(), int(max_faces))
+    key = (
+        hashlib.sha1(
+            np.ascontiguousarray(vertices, dtype=np.float64).tobytes()
+            + np.ascontiguousarray(faces, dtype=np.int64).tobytes()
+        ).hexdigest(),
+        int(max_faces),
+    )
     if key not in _DECIMATIONS:
         if len(_DECIMATIONS) > 64:
             _DECIMATIONS.clear()
@@ -115,12 +130,15 @@ def _decimate(vertices: np.ndarray, faces: np.ndarray, max_faces: int):
     try:
         import fast_simplification
     except ImportError:
-        warnings.warn("fast-simplification is not installed: rendering the full-resolution body meshes "
-                      "(slower); `pip install 'crowdstudy[render]'`", RuntimeWarning, stacklevel=3)
+        warnings.warn(
+            "fast-simplification is not installed: rendering the full-resolution body meshes "
+            "(slower); `pip install 'crowdstudy[render]'`",
+            RuntimeWarning,
+            stacklevel=3,
+        )
         return None
     vertices, faces = np.array(vertices, dtype=np.float64), np.array(faces, dtype=np.int64)  # writable copies
-    _, _, collapses = fast_simplification.simplify(vertices, faces, target_count=int(max_faces),
-                                                   return_collapses=True)
+    _, _, collapses = fast_simplification.simplify(vertices, faces, target_count=int(max_faces), return_collapses=True)
     _, dec_faces, mapping = fast_simplification.replay_simplification(vertices, faces, collapses)
     return np.asarray(dec_faces, dtype=np.int64), np.asarray(mapping, dtype=np.int64)
 
@@ -148,6 +166,7 @@ class BodyGroup:
         material: (V, 3) float32 texture coordinates and part (1 = eye) of textured groups.
         textured: whether the group is drawn with per-character textures.
     """
+
     key: str
     members: np.ndarray
     faces: np.ndarray
@@ -163,8 +182,9 @@ class BodyGroup:
         return self.joints.shape[0]
 
 
-def group_bodies(bodies: list, *, max_faces: int | None = 8000,
-                 surface_scale: float = SURFACE_FACE_SCALE) -> list[BodyGroup]:
+def group_bodies(
+    bodies: list, *, max_faces: int | None = 8000, surface_scale: float = SURFACE_FACE_SCALE
+) -> list[BodyGroup]:
     """Group loaded bodies by template (and identical skinning weights).
 
     Args:
@@ -182,8 +202,14 @@ def group_bodies(bodies: list, *, max_faces: int | None = 8000,
             if not hasattr(body, name):
                 raise InvalidInputError(f"bodies[{i}]: body object lacks {name!r} (expected a crowdstudy.body.Body)")
         verts, faces, weights, uv, part, weld = _render_arrays(body)
-        key = (str(getattr(body, "template_key", "")), faces.shape, len(verts), uv is not None,
-               hash(faces.tobytes()), hash(np.asarray(body.top_weights()[0]).tobytes()))
+        key = (
+            str(getattr(body, "template_key", "")),
+            faces.shape,
+            len(verts),
+            uv is not None,
+            hash(faces.tobytes()),
+            hash(np.asarray(body.top_weights()[0]).tobytes()),
+        )
         if key not in groups:
             if uv is None:
                 dec = _decimation(verts, faces, max_faces)
@@ -193,8 +219,9 @@ def group_bodies(bodies: list, *, max_faces: int | None = 8000,
                     dec_faces, mapping = dec
                 cluster, gather, new_uv = mapping, np.arange(int(mapping.max()) + 1), None
             else:
-                dec = _surface_decimation(verts, faces, weld, uv,
-                                          None if max_faces is None else int(max_faces * surface_scale))
+                dec = _surface_decimation(
+                    verts, faces, weld, uv, None if max_faces is None else int(max_faces * surface_scale)
+                )
                 if dec is None:
                     dec_faces, cluster, gather, new_uv = faces, np.arange(len(verts)), np.arange(len(verts)), uv
                 else:
@@ -205,17 +232,29 @@ def group_bodies(bodies: list, *, max_faces: int | None = 8000,
             joints = np.argsort(-w, axis=1)[:, :4].astype(np.int32)
             vals = np.take_along_axis(w, joints, axis=1)
             vals = (vals / np.maximum(vals.sum(axis=1, keepdims=True), 1e-12)).astype(np.float32)
-            scores = (np.zeros((n_out, 6), np.float32) if uv is not None
-                      else _cluster_mean(region_scores(body), cluster, n_clusters)[gather].astype(np.float32))
+            scores = (
+                np.zeros((n_out, 6), np.float32)
+                if uv is not None
+                else _cluster_mean(region_scores(body), cluster, n_clusters)[gather].astype(np.float32)
+            )
             material = np.zeros((n_out, 3), np.float32)
             if uv is not None:
                 material[:, :2] = new_uv
                 material[:, 2] = _cluster_mean(part.astype(np.float64), cluster, n_clusters)[gather] > 0.5
-            groups[key] = {"members": [], "faces": np.ascontiguousarray(dec_faces, dtype=np.uint32),
-                           "joints": joints, "weights": vals, "cluster": cluster, "gather": gather,
-                           "n_clusters": n_clusters, "scores": scores, "material": material,
-                           "textured": uv is not None,
-                           "weld": None if uv is None else (weld if dec is None else gather), "rest": []}
+            groups[key] = {
+                "members": [],
+                "faces": np.ascontiguousarray(dec_faces, dtype=np.uint32),
+                "joints": joints,
+                "weights": vals,
+                "cluster": cluster,
+                "gather": gather,
+                "n_clusters": n_clusters,
+                "scores": scores,
+                "material": material,
+                "textured": uv is not None,
+                "weld": None if uv is None else (weld if dec is None else gather),
+                "rest": [],
+            }
         g = groups[key]
         dec_verts = _cluster_mean(verts, g["cluster"], g["n_clusters"])[g["gather"]]
         rest = np.zeros((len(g["gather"]), 2, 4), dtype=np.float32)
@@ -224,9 +263,20 @@ def group_bodies(bodies: list, *, max_faces: int | None = 8000,
         rest[:, 1, :3] = vertex_normals(dec_verts, g["faces"], g["weld"])
         g["members"].append(i)
         g["rest"].append(rest)
-    return [BodyGroup(key=key[0], members=np.asarray(g["members"]), faces=g["faces"], joints=g["joints"],
-                      weights=g["weights"], scores=g["scores"], rest=np.stack(g["rest"]), material=g["material"],
-                      textured=g["textured"]) for key, g in groups.items()]
+    return [
+        BodyGroup(
+            key=key[0],
+            members=np.asarray(g["members"]),
+            faces=g["faces"],
+            joints=g["joints"],
+            weights=g["weights"],
+            scores=g["scores"],
+            rest=np.stack(g["rest"]),
+            material=g["material"],
+            textured=g["textured"],
+        )
+        for key, g in groups.items()
+    ]
 
 
 def _render_arrays(body):
@@ -240,12 +290,17 @@ def _render_arrays(body):
     if surface is None:
         return verts, np.ascontiguousarray(body.faces, dtype=np.int64), weights, None, None, None
     weld = np.asarray(surface.vertex, dtype=np.int64)
-    return (verts[weld], np.ascontiguousarray(surface.faces, dtype=np.int64), weights[weld],
-            np.asarray(surface.uv), np.asarray(surface.part), weld)
+    return (
+        verts[weld],
+        np.ascontiguousarray(surface.faces, dtype=np.int64),
+        weights[weld],
+        np.asarray(surface.uv),
+        np.asarray(surface.part),
+        weld,
+    )
 
 
-def _surface_decimation(verts: np.ndarray, faces: np.ndarray, weld: np.ndarray, uv: np.ndarray,
-                        max_faces: int | None):
+def _surface_decimation(verts: np.ndarray, faces: np.ndarray, weld: np.ndarray, uv: np.ndarray, max_faces: int | None):
     """Decimate a UV-split surface without tearing its seams or mixing its charts.
 
     The welded mesh (render vertices merged by ``weld``) is simplified; a new vertex is a
@@ -261,8 +316,13 @@ def _surface_decimation(verts: np.ndarray, faces: np.ndarray, weld: np.ndarray, 
     the copies of a cluster on both sides of a seam coincide: no cracks. Cached."""
     if max_faces is None or len(faces) <= max_faces:
         return None
-    key = ("surface", hashlib.sha1(np.ascontiguousarray(faces, dtype=np.int64).tobytes()
-                                   + np.ascontiguousarray(weld, dtype=np.int64).tobytes()).hexdigest(), int(max_faces))
+    key = (
+        "surface",
+        hashlib.sha1(
+            np.ascontiguousarray(faces, dtype=np.int64).tobytes() + np.ascontiguousarray(weld, dtype=np.int64).tobytes()
+        ).hexdigest(),
+        int(max_faces),
+    )
     if key in _DECIMATIONS:
         return _DECIMATIONS[key]
     from scipy.sparse import coo_matrix

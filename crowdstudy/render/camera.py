@@ -50,6 +50,7 @@ def perspective(fov_y_deg: float, aspect: float, near: float, far: float) -> np.
 @dataclasses.dataclass(frozen=True)
 class Camera:
     """A pinhole camera. ``eye``, ``target``: (3,) metres; ``fov``: vertical, degrees."""
+
     eye: tuple[float, float, float]
     target: tuple[float, float, float]
     fov: float = 45.0
@@ -88,8 +89,9 @@ def _box_corners(extent: tuple[float, float], height: float) -> np.ndarray:
     return np.array([[sx * w / 2, sy * d / 2, z] for sx in (-1, 1) for sy in (-1, 1) for z in (0.0, height)])
 
 
-def frame_viewpoint(viewpoint, extent: tuple[float, float], aspect: float, *,
-                    height: float = DEFAULT_BODY_HEIGHT, margin: float = 0.94) -> Camera:
+def frame_viewpoint(
+    viewpoint, extent: tuple[float, float], aspect: float, *, height: float = DEFAULT_BODY_HEIGHT, margin: float = 0.94
+) -> Camera:
     """The camera of a design viewpoint framing the box ``extent`` x [0, ``height``].
 
     Args:
@@ -135,8 +137,14 @@ def frame_viewpoint(viewpoint, extent: tuple[float, float], aspect: float, *,
     target = target + shift
     dist = solve(target)
     eye = target + dist * direction
-    return Camera(eye=tuple(float(v) for v in eye), target=tuple(float(v) for v in target), fov=float(viewpoint.fov),
-                  near=max(0.05, dist * 0.02), far=dist + 60.0, name=getattr(viewpoint, "id", "viewpoint"))
+    return Camera(
+        eye=tuple(float(v) for v in eye),
+        target=tuple(float(v) for v in target),
+        fov=float(viewpoint.fov),
+        near=max(0.05, dist * 0.02),
+        far=dist + 60.0,
+        name=getattr(viewpoint, "id", "viewpoint"),
+    )
 
 
 def free_camera(eye, target, fov: float = 45.0) -> Camera:
@@ -149,5 +157,11 @@ def free_camera(eye, target, fov: float = 45.0) -> Camera:
     if not 1.0 <= fov <= 170.0:
         raise InvalidInputError(f"free camera: fov must be in [1, 170] degrees, got {fov!r}")
     dist = float(np.linalg.norm(e - t))
-    return Camera(eye=tuple(map(float, e)), target=tuple(map(float, t)), fov=float(fov), near=max(0.02, dist * 0.01),
-                  far=dist + 80.0, name="free")
+    return Camera(
+        eye=tuple(map(float, e)),
+        target=tuple(map(float, t)),
+        fov=float(fov),
+        near=max(0.02, dist * 0.01),
+        far=dist + 80.0,
+        name="free",
+    )

@@ -26,8 +26,11 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--span", type=float, default=2.0, help="seconds covered by the 8 frames (default 2)")
     parser.add_argument("--frames", type=int, default=8, help="frames per row (default 8)")
     parser.add_argument("--side", action="store_true", help="view from the side (+x) instead of the front (+y)")
-    parser.add_argument("--reference", default=None,
-                        help="the Baseline of a corrected animation: each character gets a Baseline row above its own")
+    parser.add_argument(
+        "--reference",
+        default=None,
+        help="the Baseline of a corrected animation: each character gets a Baseline row above its own",
+    )
     parser.add_argument("--out", required=True, help="output PNG")
 
 
@@ -52,10 +55,13 @@ def run(args: argparse.Namespace) -> int:
         try:
             chars = [int(c) for c in args.characters.split(",")]
         except ValueError:
-            raise InvalidInputError(f"--characters: expected comma-separated integers, got {args.characters!r}") from None
+            raise InvalidInputError(
+                f"--characters: expected comma-separated integers, got {args.characters!r}"
+            ) from None
         anim = CrowdAnimation.load(args.animation)
         ref = CrowdAnimation.load(args.reference) if args.reference else None
-        path = animation_sheet(anim, out, chars, start=args.start, span=args.span, side=args.side,
-                               frames=args.frames, reference=ref)
+        path = animation_sheet(
+            anim, out, chars, start=args.start, span=args.span, side=args.side, frames=args.frames, reference=ref
+        )
     print(f"wrote {path}")
     return 0

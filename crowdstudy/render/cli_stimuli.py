@@ -1,8 +1,8 @@
 """``crowdstudy stimuli``: build the whole stimulus video set and its manifest.
 
-    crowdstudy stimuli --design stimuli/study.toml --out stimuli/videos
-    crowdstudy stimuli --out build/quick --preset quick --workers 2
-    crowdstudy stimuli --out /shared/stimuli --scheduler tcp://10.0.0.5:8786
+crowdstudy stimuli --design stimuli/study.toml --out stimuli/videos
+crowdstudy stimuli --out build/quick --preset quick --workers 2
+crowdstudy stimuli --out /shared/stimuli --scheduler tcp://10.0.0.5:8786
 """
 
 from __future__ import annotations
@@ -17,14 +17,25 @@ def configure(parser: argparse.ArgumentParser) -> None:
 
     parser.add_argument("--design", help="study design TOML (default stimuli/study.toml)")
     parser.add_argument("--out", required=True, help="output folder (videos/, animations/, manifest.json/.csv)")
-    parser.add_argument("--preset", choices=("quick", "full"), default="full",
-                        help="full: the design's 1920x1080, 20 s; quick: 320x180, 2 s (same character counts)")
-    parser.add_argument("--duration", type=float, metavar="SECONDS",
-                        help="seconds per video instead of the preset's (a short pilot set; at most the design's)")
+    parser.add_argument(
+        "--preset",
+        choices=("quick", "full"),
+        default="full",
+        help="full: the design's 1920x1080, 20 s; quick: 320x180, 2 s (same character counts)",
+    )
+    parser.add_argument(
+        "--duration",
+        type=float,
+        metavar="SECONDS",
+        help="seconds per video instead of the preset's (a short pilot set; at most the design's)",
+    )
     parser.add_argument("--scheduler", help="Dask distributed scheduler address, tcp://HOST:PORT")
     parser.add_argument("--workers", type=int, help="local worker processes (default one per 4 CPUs; 0 = in process)")
-    add_config_option(parser, "the physics of Ours, as for `crowdstudy correct --config`; a change re-makes the "
-                              "Ours animations and videos on resume")
+    add_config_option(
+        parser,
+        "the physics of Ours, as for `crowdstudy correct --config`; a change re-makes the "
+        "Ours animations and videos on resume",
+    )
     parser.add_argument("--quiet", action="store_true", help="no progress bars")
 
 
@@ -37,7 +48,15 @@ def run(args: argparse.Namespace) -> int:
     check_output_dir(args.out, "--out")
     design = load_design(args.design)
     physics = config_from_cli(args.config)
-    manifest = build_stimuli(design, args.out, preset=args.preset, duration=args.duration, scheduler=args.scheduler,
-                             workers=args.workers, progress=not args.quiet, physics=physics)
+    manifest = build_stimuli(
+        design,
+        args.out,
+        preset=args.preset,
+        duration=args.duration,
+        scheduler=args.scheduler,
+        workers=args.workers,
+        progress=not args.quiet,
+        physics=physics,
+    )
     print(f"stimuli: {len(manifest['stimuli'])} videos listed in {args.out}/manifest.json and manifest.csv")
     return 0

@@ -21,9 +21,11 @@ _local = threading.local()
 
 
 def _install_hint() -> str:
-    return ("install EGL and Mesa: `sudo apt-get install " + " ".join(EGL_PACKAGES) + "` (Debian/Ubuntu; "
-            "on an NVIDIA machine the driver's libEGL_nvidia provides it), and the Python packages with "
-            "`pip install 'crowdstudy[render]'`")
+    return (
+        "install EGL and Mesa: `sudo apt-get install " + " ".join(EGL_PACKAGES) + "` (Debian/Ubuntu; "
+        "on an NVIDIA machine the driver's libEGL_nvidia provides it), and the Python packages with "
+        "`pip install 'crowdstudy[render]'`"
+    )
 
 
 def get_context():
@@ -48,7 +50,8 @@ def get_context():
     except Exception as exc:  # glcontext raises plain Exceptions for a missing libEGL or display
         raise MissingDependencyError(
             f"cannot create a headless OpenGL {REQUIRED_GL_VERSION // 100}.{REQUIRED_GL_VERSION % 100 // 10} "
-            f"context through EGL ({exc}); {_install_hint()}") from None
+            f"context through EGL ({exc}); {_install_hint()}"
+        ) from None
     _local.ctx = ctx
     return ctx
 
@@ -56,5 +59,9 @@ def get_context():
 def context_info() -> dict:
     """Renderer, version and vendor strings of the current thread's context."""
     ctx = get_context()
-    return {"renderer": ctx.info.get("GL_RENDERER", "?"), "version": ctx.info.get("GL_VERSION", "?"),
-            "vendor": ctx.info.get("GL_VENDOR", "?"), "max_samples": int(ctx.max_samples)}
+    return {
+        "renderer": ctx.info.get("GL_RENDERER", "?"),
+        "version": ctx.info.get("GL_VERSION", "?"),
+        "vendor": ctx.info.get("GL_VENDOR", "?"),
+        "max_samples": int(ctx.max_samples),
+    }

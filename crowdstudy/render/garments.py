@@ -27,12 +27,12 @@ __all__ = ["CODES", "CLOTH_LIFT", "SHOE_LIFT", "surface_codes", "vertex_codes", 
 #: alpha code (round(alpha / 255 * 10)) -> what the texel shows
 CODES = {10: "skin", 9: "hair", 8: "shirt", 7: "trousers", 6: "shoes", 5: "eye"}
 _PRIORITY = {"hair": 5, "shoes": 4, "trousers": 3, "shirt": 2, "skin": 1, "eye": 0}
-CLOTH_LIFT = 0.004   # m, fabric over the skin
-SHOE_LIFT = 0.006    # m
-_SMOOTH_CLOTH = 12   # Taubin rounds under clothes
-_SMOOTH_SHOES = 6    # rounds of spatial averaging that fuse the toes into a shoe tip
+CLOTH_LIFT = 0.004  # m, fabric over the skin
+SHOE_LIFT = 0.006  # m
+_SMOOTH_CLOTH = 12  # Taubin rounds under clothes
+_SMOOTH_SHOES = 6  # rounds of spatial averaging that fuse the toes into a shoe tip
 _TOE_RADIUS = 0.015  # m
-_TAPER = 3           # rings over which a lift fades
+_TAPER = 3  # rings over which a lift fades
 
 
 def surface_codes(image: np.ndarray, uv: np.ndarray) -> np.ndarray:

@@ -29,22 +29,36 @@ from crowdstudy.render.bodies import BodyGroup
 from crowdstudy.render.scene import Environment
 from crowdstudy.render.venue import BOB_AMPLITUDE
 
-__all__ = ["GpuObjects", "Programs", "GroupBuffers", "CharacterResources", "EnvironmentBuffers", "ShadowMap",
-           "ColorTargets", "paint_albedo", "shader_source", "compile_program", "group_vertex_array", "set_uniform",
-           "gl_matrix", "REST_WIDTH"]
+__all__ = [
+    "GpuObjects",
+    "Programs",
+    "GroupBuffers",
+    "CharacterResources",
+    "EnvironmentBuffers",
+    "ShadowMap",
+    "ColorTargets",
+    "paint_albedo",
+    "shader_source",
+    "compile_program",
+    "group_vertex_array",
+    "set_uniform",
+    "gl_matrix",
+    "REST_WIDTH",
+]
 
 #: texels per row of a group's rest-shape texture
 REST_WIDTH = 4096
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def shader_source(name: str) -> str:
     """The text of ``shaders/<name>`` (shipped with the package)."""
     return resources.files("crowdstudy.render").joinpath("shaders", name).read_text(encoding="utf-8")
 
 
-def compile_program(ctx, vert: str, frag: str, *, lit_vertex: bool = False, lit_fragment: bool = False,
-                    defines: tuple[str, ...] = ()):
+def compile_program(
+    ctx, vert: str, frag: str, *, lit_vertex: bool = False, lit_fragment: bool = False, defines: tuple[str, ...] = ()
+):
     """Compile a program from the shader files ``vert`` and ``frag``; ``lit_*`` prepend the
     lighting functions (``lighting.glsl``) to that stage, ``defines`` are set to 1 in both."""
     head = "#version 330 core\n" + "".join(f"#define {d} 1\n" for d in defines)
@@ -57,9 +71,16 @@ def compile_program(ctx, vert: str, frag: str, *, lit_vertex: bool = False, lit_
 def group_vertex_array(ctx, prog, vbo, inst, ibo):
     """The vertex array of one template group for ``prog`` (a program on ``character.vert``):
     the group's static attributes ``vbo``, its per-instance buffer ``inst``, its faces ``ibo``."""
-    return ctx.vertex_array(prog, [(vbo, "4i 4f 4f 2f 3f", "in_joints", "in_weights", "in_scores_a", "in_scores_b",
-                                    "in_material"), (inst, "1i 1i 1f /i", "in_char", "in_member", "in_shift")],
-                            index_buffer=ibo, index_element_size=4, skip_errors=True)
+    return ctx.vertex_array(
+        prog,
+        [
+            (vbo, "4i 4f 4f 2f 3f", "in_joints", "in_weights", "in_scores_a", "in_scores_b", "in_material"),
+            (inst, "1i 1i 1f /i", "in_char", "in_member", "in_shift"),
+        ],
+        index_buffer=ibo,
+        index_element_size=4,
+        skip_errors=True,
+    )
 
 
 def set_uniform(prog, name: str, value) -> None:
@@ -107,6 +128,7 @@ class Programs:
     (the ground characters' shadows can reach), ``floor_plain`` (the rest of the ground,
     without the shadow lookup), ``venue`` (the cut-away elements, lit per vertex, no
     shadows)."""
+
     character: object
     variants: dict
     depth: object
@@ -121,19 +143,34 @@ class Programs:
     def compile(cls, objects: GpuObjects) -> Programs:
         ctx, own = objects.ctx, objects.own
         character = own(compile_program(ctx, "character.vert", "character.frag", lit_vertex=True, lit_fragment=True))
-        variants = {kind: own(compile_program(ctx, "character.vert", "character.frag", lit_vertex=True,
-                                              lit_fragment=True, defines=(define,)))
-                    for kind, define in ((True, "TEXTURED_ONLY"), (False, "REGIONS_ONLY"))}
+        variants = {
+            kind: own(
+                compile_program(
+                    ctx, "character.vert", "character.frag", lit_vertex=True, lit_fragment=True, defines=(define,)
+                )
+            )
+            for kind, define in ((True, "TEXTURED_ONLY"), (False, "REGIONS_ONLY"))
+        }
         depth = own(compile_program(ctx, "character.vert", "depth.frag"))
         static = own(compile_program(ctx, "static.vert", "static.frag", lit_fragment=True))
         floor = own(compile_program(ctx, "static.vert", "static.frag", lit_fragment=True, defines=("FLOOR",)))
-        floor_plain = own(compile_program(ctx, "static.vert", "static.frag", lit_fragment=True,
-                                          defines=("FLOOR", "UNSHADOWED")))
-        venue = own(compile_program(ctx, "static.vert", "static.frag", lit_vertex=True,
-                                    defines=("VERTEX_LIT", "UNSHADOWED")))
-        return cls(character=character, variants=variants, depth=depth, static=static, floor=floor,
-                   floor_plain=floor_plain, venue=venue, id=own(compile_program(ctx, "character.vert", "id.frag")),
-                   overlap=own(compile_program(ctx, "character.vert", "overlap.frag")))
+        floor_plain = own(
+            compile_program(ctx, "static.vert", "static.frag", lit_fragment=True, defines=("FLOOR", "UNSHADOWED"))
+        )
+        venue = own(
+            compile_program(ctx, "static.vert", "static.frag", lit_vertex=True, defines=("VERTEX_LIT", "UNSHADOWED"))
+        )
+        return cls(
+            character=character,
+            variants=variants,
+            depth=depth,
+            static=static,
+            floor=floor,
+            floor_plain=floor_plain,
+            venue=venue,
+            id=own(compile_program(ctx, "character.vert", "id.frag")),
+            overlap=own(compile_program(ctx, "character.vert", "overlap.frag")),
+        )
 
     @property
     def lit(self) -> tuple:
@@ -149,8 +186,16 @@ class Programs:
         """The programs on ``character.vert`` (each template group has a vertex array for each)."""
         return (self.character, *self.variants.values(), self.depth, self.id, self.overlap)
 
-    def set_constants(self, lighting: Lighting, env: Environment, *, shadows: bool, shadow_size: int,
-                      n_characters: int, period: float | None) -> None:
+    def set_constants(
+        self,
+        lighting: Lighting,
+        env: Environment,
+        *,
+        shadows: bool,
+        shadow_size: int,
+        n_characters: int,
+        period: float | None,
+    ) -> None:
         """The uniforms that stay for the renderer's life: the lights, fog, shadow map,
         texture units, the venue's pool of light and the figures' bob, the crowd's size and
         period."""
@@ -204,6 +249,7 @@ class GroupBuffers:
         inst: instance buffer ((character, member, x shift) per drawn instance), of which
             the first ``count`` are drawn (set by the character pass).
     """
+
     group: BodyGroup
     level: int
     coarse: bool
@@ -222,22 +268,30 @@ class CharacterResources:
     of region-coloured bodies), ``tex_albedo`` (the painted texture array), ``groups``
     (:class:`GroupBuffers` of every level of detail, finest first; ``n_levels`` levels)."""
 
-    def __init__(self, objects: GpuObjects, meshes: CharacterMeshes, colors: np.ndarray, tex_albedo,
-                 programs: Programs):
+    def __init__(
+        self, objects: GpuObjects, meshes: CharacterMeshes, colors: np.ndarray, tex_albedo, programs: Programs
+    ):
         import moderngl
 
         ctx, own = objects.ctx, objects.own
         n = len(colors)
         self.tex_albedo = tex_albedo
         self.tex_bones = own(ctx.texture((3 * N_BONES, n), 4, dtype="f4"))
-        self.tex_colors = own(ctx.texture((6, n), 4, data=np.concatenate(
-            [colors, np.ones((n, 6, 1), np.float32)], axis=2).astype("f4").tobytes(), dtype="f4"))
+        self.tex_colors = own(
+            ctx.texture(
+                (6, n),
+                4,
+                data=np.concatenate([colors, np.ones((n, 6, 1), np.float32)], axis=2).astype("f4").tobytes(),
+                dtype="f4",
+            )
+        )
         for tex in (self.tex_bones, self.tex_colors):
             tex.filter = (moderngl.NEAREST, moderngl.NEAREST)
         self.n_levels = len(meshes.lods)
         last = self.n_levels - 1
-        self.groups = [self._group(objects, g, k, k == last, programs)
-                       for k, lod in enumerate(meshes.lods) for g in lod.groups]
+        self.groups = [
+            self._group(objects, g, k, k == last, programs) for k, lod in enumerate(meshes.lods) for g in lod.groups
+        ]
 
     @staticmethod
     def _group(objects: GpuObjects, g: BodyGroup, level: int, coarse: bool, programs: Programs) -> GroupBuffers:
@@ -245,19 +299,33 @@ class CharacterResources:
 
         ctx, own = objects.ctx, objects.own
         material = g.material if g.material is not None else np.zeros((g.n_vertices, 3), np.float32)
-        vbo = own(ctx.buffer(np.concatenate([g.joints.view(np.float32), g.weights, g.scores, material],
-                                            axis=1).astype(np.float32, copy=False).tobytes()))
+        vbo = own(
+            ctx.buffer(
+                np.concatenate([g.joints.view(np.float32), g.weights, g.scores, material], axis=1)
+                .astype(np.float32, copy=False)
+                .tobytes()
+            )
+        )
         ibo = own(ctx.buffer(g.faces.astype(np.uint32).tobytes()))
         texels = g.rest.reshape(-1, 4)
         rows = -(-len(texels) // REST_WIDTH)
         padded = np.zeros((rows * REST_WIDTH, 4), np.float32)
-        padded[:len(texels)] = texels
+        padded[: len(texels)] = texels
         rest = own(ctx.texture((REST_WIDTH, rows), 4, data=padded.tobytes(), dtype="f4"))
         rest.filter = (moderngl.NEAREST, moderngl.NEAREST)
         inst = own(ctx.buffer(reserve=len(g.members) * len(COPIES) * 12, dynamic=True))
         vaos = {prog: own(group_vertex_array(ctx, prog, vbo, inst, ibo)) for prog in programs.characters}
-        return GroupBuffers(group=g, level=level, coarse=coarse, vbo=vbo, ibo=ibo, rest=rest, rest_width=REST_WIDTH,
-                            inst=inst, vaos=vaos)
+        return GroupBuffers(
+            group=g,
+            level=level,
+            coarse=coarse,
+            vbo=vbo,
+            ibo=ibo,
+            rest=rest,
+            rest_width=REST_WIDTH,
+            inst=inst,
+            vaos=vaos,
+        )
 
     def upload_bones(self, skinning: np.ndarray) -> None:
         """Upload one frame's (N, 24, 3, 4) skinning matrices."""
@@ -271,8 +339,12 @@ class EnvironmentBuffers:
 
     def __init__(self, objects: GpuObjects, parts: EnvironmentParts, programs: Programs, n_cut_corners: int):
         ctx, own = objects.ctx, objects.own
-        program = {"walls": programs.static, "cutaway": programs.venue, "floor_shadowed": programs.floor,
-                   "floor_plain": programs.floor_plain}
+        program = {
+            "walls": programs.static,
+            "cutaway": programs.venue,
+            "floor_shadowed": programs.floor,
+            "floor_plain": programs.floor_plain,
+        }
         self.vaos: dict = {}
         self.cut_ibo = None
         for name, tris in parts.triangles.items():
@@ -282,9 +354,15 @@ class EnvironmentBuffers:
             ibo = None
             if name == "cutaway":
                 ibo = self.cut_ibo = own(ctx.buffer(reserve=4 * max(1, n_cut_corners), dynamic=True))
-            self.vaos[name] = own(ctx.vertex_array(program[name], [(buf, "3f 3f 4f", "in_position", "in_normal",
-                                                                    "in_color")], index_buffer=ibo,
-                                                   index_element_size=4, skip_errors=True))
+            self.vaos[name] = own(
+                ctx.vertex_array(
+                    program[name],
+                    [(buf, "3f 3f 4f", "in_position", "in_normal", "in_color")],
+                    index_buffer=ibo,
+                    index_element_size=4,
+                    skip_errors=True,
+                )
+            )
 
 
 class ShadowMap:
@@ -315,8 +393,11 @@ class ColorTargets:
         self.samples = int(min(msaa, ctx.max_samples)) if msaa > 1 else 0
         size = (width, height)
         self.fbo_msaa = self.layer_framebuffer() if self.samples else None
-        self.fbo_out = own(ctx.framebuffer(color_attachments=[own(ctx.renderbuffer(size, 4))],
-                                           depth_attachment=own(ctx.depth_renderbuffer(size))))
+        self.fbo_out = own(
+            ctx.framebuffer(
+                color_attachments=[own(ctx.renderbuffer(size, 4))], depth_attachment=own(ctx.depth_renderbuffer(size))
+            )
+        )
 
     @property
     def draw(self):
@@ -327,8 +408,12 @@ class ColorTargets:
         """A new colour (RGBA8) + depth framebuffer like the draw target."""
         ctx, own = self.objects.ctx, self.objects.own
         size = (self.width, self.height)
-        return own(ctx.framebuffer(color_attachments=[own(ctx.renderbuffer(size, 4, samples=self.samples))],
-                                   depth_attachment=own(ctx.depth_renderbuffer(size, samples=self.samples))))
+        return own(
+            ctx.framebuffer(
+                color_attachments=[own(ctx.renderbuffer(size, 4, samples=self.samples))],
+                depth_attachment=own(ctx.depth_renderbuffer(size, samples=self.samples)),
+            )
+        )
 
     def layer_bytes(self) -> int:
         """Bytes of one framebuffer like the draw target: RGBA8 colour and a 32-bit depth per sample."""

@@ -46,6 +46,7 @@ class OverlapFrame:
         red_fraction: mask pixels / all pixels.
         crowd_fraction: mask pixels / pixels covered by characters (0 when none).
     """
+
     image: np.ndarray
     mask: np.ndarray
     red_fraction: float
@@ -81,7 +82,7 @@ def _candidates(start, end, radius, period: float | None) -> np.ndarray:
     n = start.shape[0]
     lo = np.minimum(start, end) - radius[..., None]
     hi = np.maximum(start, end) + radius[..., None]
-    body_lo, body_hi = lo.min(axis=1), hi.max(axis=1)           # (N, 3)
+    body_lo, body_hi = lo.min(axis=1), hi.max(axis=1)  # (N, 3)
     out = np.zeros((n, _MAX_CANDIDATES + 1), np.float32)
     centre = 0.5 * (body_lo + body_hi)
     for a in range(n):
@@ -97,7 +98,7 @@ def _candidates(start, end, radius, period: float | None) -> np.ndarray:
             keep = np.argsort(np.linalg.norm(mid - centre[a], axis=1))[:_MAX_CANDIDATES]
             owners, bones = owners[keep], bones[keep]
         out[a, 0] = len(owners)
-        out[a, 1:1 + len(owners)] = np.sort(owners * 24 + bones)   # sorted: overlap.frag bisects by owner
+        out[a, 1 : 1 + len(owners)] = np.sort(owners * 24 + bones)  # sorted: overlap.frag bisects by owner
     return out
 
 
@@ -125,8 +126,9 @@ class OverlapPass:
             prog[name].value = unit
         prog["u_period"].value = float(characters.period or 0.0)
 
-    def run(self, vp: np.ndarray, capsules: tuple[np.ndarray, np.ndarray, np.ndarray], *,
-            tolerance: float = 0.005) -> tuple[np.ndarray, int]:
+    def run(
+        self, vp: np.ndarray, capsules: tuple[np.ndarray, np.ndarray, np.ndarray], *, tolerance: float = 0.005
+    ) -> tuple[np.ndarray, int]:
         """The overlapping pixels seen through ``vp`` (world-to-clip) of the world
         ``capsules`` (start, end, radius; :func:`capsules_from_skinning`), fragments deeper
         than ``tolerance`` m inside another character counting: ``(mask, crowd_pixels)``,
@@ -165,8 +167,15 @@ class OverlapPass:
         return mask, int(np.count_nonzero(ids > -0.5))
 
     def release(self) -> None:
-        for o in (self.fbo_ids, self.depth_ids, self.tex_ids, self.fbo_mask, self.tex_mask, self.tex_caps,
-                  self.tex_cand):
+        for o in (
+            self.fbo_ids,
+            self.depth_ids,
+            self.tex_ids,
+            self.fbo_mask,
+            self.tex_mask,
+            self.tex_caps,
+            self.tex_cand,
+        ):
             o.release()
 
 
@@ -183,5 +192,9 @@ def overlap_frame(picture: np.ndarray | None, mask: np.ndarray, crowd_pixels: in
         picture = 0.3 * picture + 0.7 * (0.85 * luma[..., None] + 30.0)
         picture[mask] = 0.15 * picture[mask] + 0.85 * RED
         out = np.clip(picture, 0, 255).astype(np.uint8)
-    return OverlapFrame(image=out, mask=mask, red_fraction=n_red / mask.size,
-                        crowd_fraction=n_red / crowd_pixels if crowd_pixels else 0.0)
+    return OverlapFrame(
+        image=out,
+        mask=mask,
+        red_fraction=n_red / mask.size,
+        crowd_fraction=n_red / crowd_pixels if crowd_pixels else 0.0,
+    )

@@ -11,7 +11,18 @@ import numpy as np
 
 from crowdstudy.errors import InvalidInputError
 
-__all__ = ["REGIONS", "MIN_SKIN_DELTA_E", "srgb_to_lab", "SKIN_TONES", "HAIR", "SHIRTS", "TROUSERS", "SHOES", "assign_colors", "srgb_to_linear"]
+__all__ = [
+    "REGIONS",
+    "MIN_SKIN_DELTA_E",
+    "srgb_to_lab",
+    "SKIN_TONES",
+    "HAIR",
+    "SHIRTS",
+    "TROUSERS",
+    "SHOES",
+    "assign_colors",
+    "srgb_to_linear",
+]
 
 REGIONS = ("skin", "hair", "shirt", "sleeve", "trousers", "shoes")
 
@@ -20,17 +31,61 @@ REGIONS = ("skin", "hair", "shirt", "sleeve", "trousers", "shoes")
 MIN_SKIN_DELTA_E = 15.0
 
 # A wide range of human skin tones, from very light to very dark.
-SKIN_TONES = ((255, 224, 196), (241, 194, 160), (234, 189, 157), (224, 172, 135), (198, 145, 107),
-              (176, 122, 86), (160, 106, 72), (141, 85, 54), (115, 70, 44), (92, 56, 36), (70, 44, 30),
-              (229, 184, 143))
-HAIR = ((25, 20, 18), (44, 32, 25), (72, 50, 34), (104, 72, 46), (150, 110, 65), (196, 160, 105),
-        (130, 60, 35), (150, 150, 150), (60, 45, 38))
-SHIRTS = ((200, 40, 45), (40, 90, 170), (245, 245, 240), (30, 30, 35), (60, 140, 80), (240, 190, 40),
-          (130, 60, 140), (240, 120, 40), (90, 170, 200), (170, 170, 175), (120, 25, 45), (235, 150, 170),
-          (25, 60, 100), (110, 120, 60), (200, 90, 110), (80, 180, 160),
-          (70, 70, 80), (190, 210, 90))
-TROUSERS = ((45, 60, 95), (60, 85, 130), (25, 25, 30), (90, 90, 95), (150, 150, 120),
-            (70, 80, 50), (110, 125, 150), (200, 195, 185))
+SKIN_TONES = (
+    (255, 224, 196),
+    (241, 194, 160),
+    (234, 189, 157),
+    (224, 172, 135),
+    (198, 145, 107),
+    (176, 122, 86),
+    (160, 106, 72),
+    (141, 85, 54),
+    (115, 70, 44),
+    (92, 56, 36),
+    (70, 44, 30),
+    (229, 184, 143),
+)
+HAIR = (
+    (25, 20, 18),
+    (44, 32, 25),
+    (72, 50, 34),
+    (104, 72, 46),
+    (150, 110, 65),
+    (196, 160, 105),
+    (130, 60, 35),
+    (150, 150, 150),
+    (60, 45, 38),
+)
+SHIRTS = (
+    (200, 40, 45),
+    (40, 90, 170),
+    (245, 245, 240),
+    (30, 30, 35),
+    (60, 140, 80),
+    (240, 190, 40),
+    (130, 60, 140),
+    (240, 120, 40),
+    (90, 170, 200),
+    (170, 170, 175),
+    (120, 25, 45),
+    (235, 150, 170),
+    (25, 60, 100),
+    (110, 120, 60),
+    (200, 90, 110),
+    (80, 180, 160),
+    (70, 70, 80),
+    (190, 210, 90),
+)
+TROUSERS = (
+    (45, 60, 95),
+    (60, 85, 130),
+    (25, 25, 30),
+    (90, 90, 95),
+    (150, 150, 120),
+    (70, 80, 50),
+    (110, 125, 150),
+    (200, 195, 185),
+)
 SHOES = ((235, 235, 230), (20, 20, 22), (120, 120, 125), (150, 40, 35), (40, 60, 110))
 
 
@@ -40,7 +95,9 @@ def srgb_to_lab(rgb) -> np.ndarray:
     m = np.array([[0.4124, 0.3576, 0.1805], [0.2126, 0.7152, 0.0722], [0.0193, 0.1192, 0.9505]])
     xyz = c @ m.T / np.array([0.95047, 1.0, 1.08883])
     f = np.where(xyz > 0.008856, np.cbrt(xyz), 7.787 * xyz + 16.0 / 116.0)
-    return np.stack([116.0 * f[..., 1] - 16.0, 500.0 * (f[..., 0] - f[..., 1]), 200.0 * (f[..., 1] - f[..., 2])], axis=-1)
+    return np.stack(
+        [116.0 * f[..., 1] - 16.0, 500.0 * (f[..., 0] - f[..., 1]), 200.0 * (f[..., 1] - f[..., 2])], axis=-1
+    )
 
 
 def srgb_to_linear(rgb: np.ndarray) -> np.ndarray:
@@ -58,8 +115,9 @@ def _neighbour_pairs(positions: np.ndarray, radius: float, period: float | None)
     return [set(np.flatnonzero(row < radius).tolist()) for row in dist]
 
 
-def assign_colors(positions: np.ndarray, seed: int, *, radius: float = 0.9,
-                  period: float | None = None) -> tuple[np.ndarray, np.ndarray]:
+def assign_colors(
+    positions: np.ndarray, seed: int, *, radius: float = 0.9, period: float | None = None
+) -> tuple[np.ndarray, np.ndarray]:
     """Colours of N characters; characters closer than ``radius`` never share a shirt or
     trouser colour.
 

@@ -22,12 +22,29 @@ import numpy as np
 
 from crowdstudy.errors import InvalidInputError
 from crowdstudy.render.assets import BOUND_RADIUS, COPIES, lod_levels
-from crowdstudy.render.gpu import (CharacterResources, ColorTargets, EnvironmentBuffers, Programs, ShadowMap,
-                                  gl_matrix, set_uniform)
+from crowdstudy.render.gpu import (
+    CharacterResources,
+    ColorTargets,
+    EnvironmentBuffers,
+    Programs,
+    ShadowMap,
+    gl_matrix,
+    set_uniform,
+)
 from crowdstudy.render.scene import Environment
 
-__all__ = ["CharacterPass", "ShadowPass", "EnvironmentPass", "StaticLayers", "ColorPass", "cull_back_faces",
-           "display_color", "ENV_PARTS", "MAX_LAYERS", "LAYER_BUDGET"]
+__all__ = [
+    "CharacterPass",
+    "ShadowPass",
+    "EnvironmentPass",
+    "StaticLayers",
+    "ColorPass",
+    "cull_back_faces",
+    "display_color",
+    "ENV_PARTS",
+    "MAX_LAYERS",
+    "LAYER_BUDGET",
+]
 
 #: the environment's parts: the ground with and without the shadow lookup, the venue's
 #: static cut-away elements, its audience figures, the walls
@@ -41,6 +58,7 @@ LAYER_BUDGET = 2 << 30
 def cull_back_faces(ctx, on: bool) -> None:
     """Cull back faces (counter-clockwise front faces) or stop culling."""
     import moderngl
+
     if on:
         ctx.enable(moderngl.CULL_FACE)
         ctx.front_face = "ccw"
@@ -66,8 +84,9 @@ def _frustum_planes(vp: np.ndarray) -> np.ndarray:
 _INSTANCE = np.dtype([("c", "<i4"), ("m", "<i4"), ("s", "<f4")])
 
 
-def _instance_table(members: np.ndarray, roots: np.ndarray, planes: np.ndarray, copies, period: float | None,
-                    lod: tuple | None) -> np.ndarray:
+def _instance_table(
+    members: np.ndarray, roots: np.ndarray, planes: np.ndarray, copies, period: float | None, lod: tuple | None
+) -> np.ndarray:
     """The instances of one template group: (character, member index, x shift) of each of
     its ``members`` (and periodic copy) whose bounding sphere reaches into the frustum
     ``planes``, sorted front to back. ``lod`` (eye, focal length px, level, number of
@@ -131,7 +150,7 @@ class CharacterPass:
     def instances(self, gl) -> np.ndarray:
         """The instances selected of one group (``resources.groups`` entry): a structured
         array of character ``c``, member ``m``, x shift ``s`` (m)."""
-        return np.frombuffer(gl.inst.read(), dtype=_INSTANCE)[:gl.count]
+        return np.frombuffer(gl.inst.read(), dtype=_INSTANCE)[: gl.count]
 
     def draw(self, prog, vp: np.ndarray) -> None:
         """Draw the selected instances of every group with ``prog`` seen through ``vp``."""
@@ -158,13 +177,13 @@ class ShadowPass:
     the shadow map, seen from the key light (``light_vp``); nothing when ``enabled`` is
     False."""
 
-    def __init__(self, ctx, shadow_map: ShadowMap, characters: CharacterPass, light_vp: np.ndarray, *,
-                 enabled: bool):
+    def __init__(self, ctx, shadow_map: ShadowMap, characters: CharacterPass, light_vp: np.ndarray, *, enabled: bool):
         self.ctx, self.shadow_map, self.characters = ctx, shadow_map, characters
         self.light_vp, self.enabled = light_vp, enabled
 
     def run(self, roots: np.ndarray, camera) -> None:
         import moderngl
+
         if not self.enabled:
             return
         ctx, fbo, size = self.ctx, self.shadow_map.fbo, self.shadow_map.size
@@ -197,7 +216,7 @@ class EnvironmentPass:
 
     def __init__(self, ctx, buffers: EnvironmentBuffers, programs: Programs, env: Environment, fps: float):
         self.ctx, self.buffers, self.programs, self.env, self.fps = ctx, buffers, programs, env, fps
-        self.cut_count, self.cut_static = 0, 0    # corners kept; of them the static elements'
+        self.cut_count, self.cut_static = 0, 0  # corners kept; of them the static elements'
         #: frames after which the audience's bob repeats (None: not a whole number of frames)
         self.beat_frames = _beat_period(fps, env.beat_hz)
 
@@ -254,14 +273,20 @@ class StaticLayers:
     empty when not ``enabled``. A layer is drawn on first use after :meth:`invalidate`
     (a new camera or cut-away) into the same framebuffer."""
 
-    def __init__(self, ctx, targets: ColorTargets, environment: EnvironmentPass, *, enabled: bool,
-                 walls_static: bool):
+    def __init__(self, ctx, targets: ColorTargets, environment: EnvironmentPass, *, enabled: bool, walls_static: bool):
         self.ctx, self.targets, self.environment = ctx, targets, environment
         period = environment.beat_frames
         figures = period is not None and period <= MAX_LAYERS and period * targets.layer_bytes() <= LAYER_BUDGET
-        self.parts = frozenset(({"floor_plain", "cut_static"} | ({"walls"} if walls_static else set())
-                                | ({"cut_figures"} if figures else set())) if enabled else ())
-        self.layers: dict = {}        # beat phase (float32, or None) -> framebuffer
+        self.parts = frozenset(
+            (
+                {"floor_plain", "cut_static"}
+                | ({"walls"} if walls_static else set())
+                | ({"cut_figures"} if figures else set())
+            )
+            if enabled
+            else ()
+        )
+        self.layers: dict = {}  # beat phase (float32, or None) -> framebuffer
         self.drawn: set = set()
 
     def phases(self) -> int:
@@ -275,6 +300,7 @@ class StaticLayers:
     def get(self, beat: float):
         """The layer of beat phase ``beat``, drawn if not yet since :meth:`invalidate`."""
         import moderngl
+
         key = beat if "cut_figures" in self.parts else None
         if key not in self.layers:
             self.layers[key] = self.targets.layer_framebuffer()
@@ -295,8 +321,16 @@ class ColorPass:
     colour), then the characters (front to back: the environment they hide fails the early
     depth test), then the parts of the environment not in the layer."""
 
-    def __init__(self, ctx, programs: Programs, characters: CharacterPass, environment: EnvironmentPass,
-                 layers: StaticLayers, shadow_map: ShadowMap, targets: ColorTargets):
+    def __init__(
+        self,
+        ctx,
+        programs: Programs,
+        characters: CharacterPass,
+        environment: EnvironmentPass,
+        layers: StaticLayers,
+        shadow_map: ShadowMap,
+        targets: ColorTargets,
+    ):
         self.ctx, self.programs, self.characters = ctx, programs, characters
         self.environment, self.layers, self.shadow_map, self.targets = environment, layers, shadow_map, targets
 
@@ -312,6 +346,7 @@ class ColorPass:
         beat phase ``beat``; the characters' bones and instances must be loaded and
         selected, the shadow map drawn."""
         import moderngl
+
         ctx, size = self.ctx, (0, 0, self.targets.width, self.targets.height)
         ctx.enable(moderngl.DEPTH_TEST)
         ctx.disable(moderngl.CULL_FACE)
@@ -323,7 +358,7 @@ class ColorPass:
             layer = self.layers.get(beat)
             fbo.use()
             ctx.viewport = size
-            ctx.copy_framebuffer(fbo, layer)   # colour and depth, sample by sample
+            ctx.copy_framebuffer(fbo, layer)  # colour and depth, sample by sample
             parts = ENV_PARTS - self.layers.parts
         else:
             fbo.use()

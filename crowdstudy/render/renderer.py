@@ -63,12 +63,26 @@ from __future__ import annotations
 import numpy as np
 
 from crowdstudy.errors import InvalidInputError
-from crowdstudy.render.assets import (CharacterMeshes, CrowdAssets, EnvironmentParts, FrameBones, Lighting,
-                                     RenderOptions, wrapped_roots)
+from crowdstudy.render.assets import (
+    CharacterMeshes,
+    CrowdAssets,
+    EnvironmentParts,
+    FrameBones,
+    Lighting,
+    RenderOptions,
+    wrapped_roots,
+)
 from crowdstudy.render.camera import Camera, frame_viewpoint
 from crowdstudy.render.context import get_context
-from crowdstudy.render.gpu import (CharacterResources, ColorTargets, EnvironmentBuffers, GpuObjects, Programs,
-                                  ShadowMap, paint_albedo)
+from crowdstudy.render.gpu import (
+    CharacterResources,
+    ColorTargets,
+    EnvironmentBuffers,
+    GpuObjects,
+    Programs,
+    ShadowMap,
+    paint_albedo,
+)
 from crowdstudy.render.passes import CharacterPass, ColorPass, EnvironmentPass, ShadowPass, StaticLayers
 from crowdstudy.render.venue import visible_indices
 
@@ -81,8 +95,10 @@ def resolve_camera(view, design, env_extent: tuple[float, float], aspect: float)
         return view
     if isinstance(view, str):
         if view not in design.viewpoints:
-            raise InvalidInputError(f"viewpoint: unknown viewpoint {view!r}; the design defines "
-                                    f"{', '.join(design.viewpoints)} (or use a free camera)")
+            raise InvalidInputError(
+                f"viewpoint: unknown viewpoint {view!r}; the design defines "
+                f"{', '.join(design.viewpoints)} (or use a free camera)"
+            )
         view = design.viewpoints[view]
     return frame_viewpoint(view, env_extent, aspect)
 
@@ -117,15 +133,35 @@ class CrowdRenderer:
     (GPU); ``characters``, ``shadow_pass``, ``environment``, ``layers``, ``color_pass``.
     """
 
-    def __init__(self, anim, *, design=None, width: int = 1920, height: int = 1080, msaa: int = 4,
-                 shadows: bool = True, shadow_size: int = 2048, body_loader=None, color_seed: int | None = None,
-                 max_faces: int | str | None = "auto", color_positions=None, static_layer: bool = True):
-        self.options = opts = RenderOptions.validated(width=width, height=height, msaa=msaa, shadows=shadows,
-                                                      shadow_size=shadow_size, max_faces=max_faces,
-                                                      static_layer=static_layer)
+    def __init__(
+        self,
+        anim,
+        *,
+        design=None,
+        width: int = 1920,
+        height: int = 1080,
+        msaa: int = 4,
+        shadows: bool = True,
+        shadow_size: int = 2048,
+        body_loader=None,
+        color_seed: int | None = None,
+        max_faces: int | str | None = "auto",
+        color_positions=None,
+        static_layer: bool = True,
+    ):
+        self.options = opts = RenderOptions.validated(
+            width=width,
+            height=height,
+            msaa=msaa,
+            shadows=shadows,
+            shadow_size=shadow_size,
+            max_faces=max_faces,
+            static_layer=static_layer,
+        )
         self.width, self.height, self.shadows = opts.width, opts.height, opts.shadows
-        self.assets = a = CrowdAssets.build(anim, design, body_loader=body_loader, color_seed=color_seed,
-                                            color_positions=color_positions)
+        self.assets = a = CrowdAssets.build(
+            anim, design, body_loader=body_loader, color_seed=color_seed, color_positions=color_positions
+        )
         self.ctx = ctx = get_context()
         self.gpu = gpu = GpuObjects(ctx)
         self._overlap = None
@@ -142,17 +178,26 @@ class CrowdRenderer:
         parts = EnvironmentParts.build(a.anim, a.env, self.lighting, shadows=opts.shadows)
         buffers = EnvironmentBuffers(gpu, parts, programs, len(a.env.cutaway.indices))
         self.targets = ColorTargets(gpu, opts.width, opts.height, opts.msaa)
-        programs.set_constants(self.lighting, a.env, shadows=opts.shadows, shadow_size=opts.shadow_size,
-                               n_characters=a.anim.n_characters, period=a.period)
+        programs.set_constants(
+            self.lighting,
+            a.env,
+            shadows=opts.shadows,
+            shadow_size=opts.shadow_size,
+            n_characters=a.anim.n_characters,
+            period=a.period,
+        )
         # the passes
         self.characters = CharacterPass(ctx, self.character_resources, programs, period=a.period, height=opts.height)
-        self.shadow_pass = ShadowPass(ctx, self.shadow_map, self.characters, self.lighting.view_proj,
-                                      enabled=opts.shadows)
+        self.shadow_pass = ShadowPass(
+            ctx, self.shadow_map, self.characters, self.lighting.view_proj, enabled=opts.shadows
+        )
         self.environment = EnvironmentPass(ctx, buffers, programs, a.env, a.anim.fps)
-        self.layers = StaticLayers(ctx, self.targets, self.environment, enabled=opts.static_layer,
-                                   walls_static=parts.walls_static)
-        self.color_pass = ColorPass(ctx, programs, self.characters, self.environment, self.layers, self.shadow_map,
-                                    self.targets)
+        self.layers = StaticLayers(
+            ctx, self.targets, self.environment, enabled=opts.static_layer, walls_static=parts.walls_static
+        )
+        self.color_pass = ColorPass(
+            ctx, programs, self.characters, self.environment, self.layers, self.shadow_map, self.targets
+        )
 
     # -- the CPU assets, by their names --------------------------------------------------
     anim = property(lambda self: self.assets.anim, doc="The animation.")
@@ -173,8 +218,14 @@ class CrowdRenderer:
         """Use a viewpoint id ("V1".."V4"), a design Viewpoint or a :class:`Camera`."""
         self.camera = resolve_camera(view, self.design, self.env.extent, self.width / self.height)
         if self.environment.has_cutaway:  # the cutaway: drop the elements between this camera and the crowd
-            self.set_cutaway(visible_indices(self.env.cutaway, self.camera.eye, self.env.extent,
-                                             self.camera.view_projection(self.width / self.height)))
+            self.set_cutaway(
+                visible_indices(
+                    self.env.cutaway,
+                    self.camera.eye,
+                    self.env.extent,
+                    self.camera.view_projection(self.width / self.height),
+                )
+            )
         self.layers.invalidate()
         return self.camera
 
@@ -243,13 +294,14 @@ class CrowdRenderer:
         surface point must lie inside another character to count; ``image`` False: the
         mask and fractions only, without rendering the picture."""
         from crowdstudy.render.overlap_view import OverlapPass, capsules_from_skinning, overlap_frame
+
         if self._overlap is None:
             self._overlap = OverlapPass(self.ctx, self.characters, self.width, self.height, self.anim.n_characters)
         if image:
-            picture = self.render(frame)   # the normal look; also the frame's bones and instances
+            picture = self.render(frame)  # the normal look; also the frame's bones and instances
         else:
             picture = None
-            self.prepare(frame)            # the camera's instances, as render leaves them
+            self.prepare(frame)  # the camera's instances, as render leaves them
         capsules = capsules_from_skinning(self.bodies, self.skinning(frame))
         vp = self.camera.view_projection(self.width / self.height)
         mask, crowd_pixels = self._overlap.run(vp, capsules, tolerance=tolerance)
@@ -267,6 +319,7 @@ class CrowdRenderer:
         if not self.layers.parts:
             return 0
         import moderngl
+
         self.color_pass.bind_camera(camera.view_projection(self.width / self.height), camera.eye)
         self.ctx.disable(moderngl.CULL_FACE)
         n = self.layers.phases()
@@ -296,11 +349,23 @@ def baseline_color_positions(path) -> np.ndarray:
     """(N, 2) frame-0 floor positions of an animation file (wrapped into the periodic
     section), the ``color_positions`` that give its corrected version the same colours."""
     from crowdstudy.scene import CrowdAnimation
+
     return wrapped_roots(CrowdAnimation.load(path), 0)[:, :2].copy()
 
 
-def render_frame(anim, viewpoint, frame: int, *, width: int = 1920, height: int = 1080, overlap_view: bool = False,
-                 msaa: int = 4, design=None, body_loader=None, color_positions=None) -> np.ndarray:
+def render_frame(
+    anim,
+    viewpoint,
+    frame: int,
+    *,
+    width: int = 1920,
+    height: int = 1080,
+    overlap_view: bool = False,
+    msaa: int = 4,
+    design=None,
+    body_loader=None,
+    color_positions=None,
+) -> np.ndarray:
     """Render one frame.
 
     Args:
@@ -311,8 +376,15 @@ def render_frame(anim, viewpoint, frame: int, *, width: int = 1920, height: int 
     Returns:
         (H, W, 3) uint8 image, first row at the top.
     """
-    with CrowdRenderer(anim, design=design, width=width, height=height, msaa=msaa, body_loader=body_loader,
-                       color_positions=color_positions) as r:
+    with CrowdRenderer(
+        anim,
+        design=design,
+        width=width,
+        height=height,
+        msaa=msaa,
+        body_loader=body_loader,
+        color_positions=color_positions,
+    ) as r:
         r.set_view(viewpoint)
         if overlap_view:
             return r.overlap(frame).image

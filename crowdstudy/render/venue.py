@@ -26,8 +26,18 @@ import numpy as np
 
 from crowdstudy.render.palette import srgb_to_linear
 
-__all__ = ["Elements", "audience", "stage", "hall", "occluding", "visible_indices", "KEEP_OUT", "BOB_AMPLITUDE",
-           "PATTERN_EMISSIVE", "PATTERN_FIGURE"]
+__all__ = [
+    "Elements",
+    "audience",
+    "stage",
+    "hall",
+    "occluding",
+    "visible_indices",
+    "KEEP_OUT",
+    "BOB_AMPLITUDE",
+    "PATTERN_EMISSIVE",
+    "PATTERN_FIGURE",
+]
 
 #: metres added to each side of the crowd area that no audience figure enters (the D5
 #: concert's dancers reach 0.58 m beyond the 3 m x 3 m area with their hands)
@@ -49,6 +59,7 @@ class Elements:
         count: (E,) int, entries of each element in ``indices``.
         lo, hi: (E, 3) float64 bounding box corners of each element (m).
     """
+
     vertices: np.ndarray
     indices: np.ndarray
     first: np.ndarray
@@ -57,19 +68,20 @@ class Elements:
     hi: np.ndarray
 
     @staticmethod
-    def join(parts: list) -> "Elements":
+    def join(parts: list) -> Elements:
         """Elements from a list of per-element meshes: (V, 10) rows, 3 per triangle, or a
         ``(rows, faces)`` pair with (T, 3) corner indices into the rows."""
         verts, faces = [], []
         for p in parts:
-            rows, f = (p if isinstance(p, tuple) else (p, np.arange(len(p)).reshape(-1, 3)))
+            rows, f = p if isinstance(p, tuple) else (p, np.arange(len(p)).reshape(-1, 3))
             if len(f):
                 verts.append(np.asarray(rows, dtype=np.float32))
                 faces.append(np.asarray(f, dtype=np.int64).reshape(-1))
         if not verts:
             z = np.zeros((0, 3))
-            return Elements(np.zeros((0, 10), np.float32), np.zeros(0, np.uint32), np.zeros(0, int),
-                            np.zeros(0, int), z, z.copy())
+            return Elements(
+                np.zeros((0, 10), np.float32), np.zeros(0, np.uint32), np.zeros(0, int), np.zeros(0, int), z, z.copy()
+            )
         offset = np.concatenate([[0], np.cumsum([len(v) for v in verts])[:-1]])
         count = np.array([len(f) for f in faces])
         first = np.concatenate([[0], np.cumsum(count)[:-1]])
@@ -79,12 +91,12 @@ class Elements:
         return Elements(np.concatenate(verts), indices, first, count, lo, hi)
 
     @staticmethod
-    def concat(groups: list["Elements"]) -> "Elements":
+    def concat(groups: list[Elements]) -> Elements:
         """The elements of several groups, in order."""
         parts = []
         for g in groups:
             for a, n in zip(g.first, g.count):
-                idx = g.indices[a:a + n].astype(np.int64)
+                idx = g.indices[a : a + n].astype(np.int64)
                 used, local = np.unique(idx, return_inverse=True)
                 parts.append((g.vertices[used], local.reshape(-1, 3)))
         return Elements.join(parts)
@@ -170,8 +182,9 @@ def _template(arms: str, detail: int) -> tuple[np.ndarray, np.ndarray, np.ndarra
     parts = []
     if detail:
         for sx in (-1, 1):
-            parts.append((_lathe([(0.0, 0.035, 0.042, sx * 0.05, 0.01), (0.47, 0.05, 0.05, sx * 0.052, 0.0)], 4,
-                                 cap=False), 0))
+            parts.append(
+                (_lathe([(0.0, 0.035, 0.042, sx * 0.05, 0.01), (0.47, 0.05, 0.05, sx * 0.052, 0.0)], 4, cap=False), 0)
+            )
     else:
         parts.append((_lathe([(0.0, 0.085, 0.04, 0, 0.01), (0.47, 0.1, 0.05, 0, 0.0)], 4, cap=False), 0))
     torso = [(0.46, 0.10, 0.06, 0, 0), (0.79, 0.125 if detail else 0.14, 0.065, 0, 0), (0.82, 0.06, 0.045, 0, 0)]
@@ -188,8 +201,18 @@ def _template(arms: str, detail: int) -> tuple[np.ndarray, np.ndarray, np.ndarra
         wrist = shoulder + 0.85 * (hand - shoulder)
         parts.append((_limb(shoulder, wrist, 0.027, 0.022, 4), 1))
         parts.append((_limb(wrist, hand, 0.022, 0.018, 3), 2))
-    parts.append((_lathe([(0.81, 0.028, 0.028, 0, 0.0), (0.86, 0.045, 0.05, 0, 0.005),
-                          (0.93, 0.047, 0.055, 0, 0.0)][::1 if detail else 2], k, cap=False), 2))
+    parts.append(
+        (
+            _lathe(
+                [(0.81, 0.028, 0.028, 0, 0.0), (0.86, 0.045, 0.05, 0, 0.005), (0.93, 0.047, 0.055, 0, 0.0)][
+                    :: 1 if detail else 2
+                ],
+                k,
+                cap=False,
+            ),
+            2,
+        )
+    )
     parts.append((_lathe([(0.93, 0.047, 0.055, 0, 0.0), (0.99, 0.03, 0.035, 0, -0.005)], k), 3))
     pts, nrm, faces, ids = [], [], [], []
     offset = 0
@@ -200,15 +223,34 @@ def _template(arms: str, detail: int) -> tuple[np.ndarray, np.ndarray, np.ndarra
     return np.concatenate(pts), np.concatenate(nrm), np.concatenate(faces), np.concatenate(ids)
 
 
-_SHIRTS = ((24, 24, 28), (40, 40, 46), (18, 18, 20), (70, 30, 34), (30, 44, 80), (60, 62, 70), (84, 80, 76),
-           (40, 66, 52), (96, 54, 38), (64, 40, 76), (104, 96, 82), (28, 52, 70))
+_SHIRTS = (
+    (24, 24, 28),
+    (40, 40, 46),
+    (18, 18, 20),
+    (70, 30, 34),
+    (30, 44, 80),
+    (60, 62, 70),
+    (84, 80, 76),
+    (40, 66, 52),
+    (96, 54, 38),
+    (64, 40, 76),
+    (104, 96, 82),
+    (28, 52, 70),
+)
 _TROUSERS = ((22, 24, 32), (34, 44, 66), (28, 28, 30), (56, 56, 60), (70, 62, 48), (40, 52, 78))
 _SKIN = ((190, 156, 134), (170, 130, 102), (144, 104, 78), (116, 80, 58), (90, 62, 44), (70, 48, 34))
 _HAIR = ((22, 18, 16), (44, 32, 24), (78, 56, 36), (130, 100, 64), (110, 110, 110))
 
 
-def audience(area: tuple[float, float], hall: tuple[float, float, float, float], seed: int, *,
-             spacing: tuple[float, float] = (0.62, 0.78), near: float = 4.0, stage_y: float | None = None) -> Elements:
+def audience(
+    area: tuple[float, float],
+    hall: tuple[float, float, float, float],
+    seed: int,
+    *,
+    spacing: tuple[float, float] = (0.62, 0.78),
+    near: float = 4.0,
+    stage_y: float | None = None,
+) -> Elements:
     """Low-detail standing figures filling the hall floor around the crowd area.
 
     Args:
@@ -246,8 +288,9 @@ def audience(area: tuple[float, float], hall: tuple[float, float, float, float],
         if not drop[i]:
             drop[j] = True
     pos, detail = pos[~drop], detail[~drop]
-    inside = (pos[:, 0] > x0 + radius) & (pos[:, 0] < x1 - radius) & (pos[:, 1] > y0 + radius) & \
-        (pos[:, 1] < y1 - radius)
+    inside = (
+        (pos[:, 0] > x0 + radius) & (pos[:, 0] < x1 - radius) & (pos[:, 1] > y0 + radius) & (pos[:, 1] < y1 - radius)
+    )
     pos, detail = pos[inside], detail[inside]
     n = len(pos)
     stature = np.clip(rng.normal(1.72, 0.08, n), 1.5, 1.95)
@@ -277,11 +320,13 @@ def audience(area: tuple[float, float], hall: tuple[float, float, float, float],
 def _box(lo, hi, color, pattern: float = 0.0) -> np.ndarray:
     """An axis-aligned box, outward faces, no bottom."""
     (x0, y0, z0), (x1, y1, z1) = lo, hi
-    quads = [[(x0, y0, z1), (x1, y0, z1), (x1, y1, z1), (x0, y1, z1)],
-             [(x0, y0, z0), (x1, y0, z0), (x1, y0, z1), (x0, y0, z1)],
-             [(x1, y1, z0), (x0, y1, z0), (x0, y1, z1), (x1, y1, z1)],
-             [(x0, y1, z0), (x0, y0, z0), (x0, y0, z1), (x0, y1, z1)],
-             [(x1, y0, z0), (x1, y1, z0), (x1, y1, z1), (x1, y0, z1)]]
+    quads = [
+        [(x0, y0, z1), (x1, y0, z1), (x1, y1, z1), (x0, y1, z1)],
+        [(x0, y0, z0), (x1, y0, z0), (x1, y0, z1), (x0, y0, z1)],
+        [(x1, y1, z0), (x0, y1, z0), (x0, y1, z1), (x1, y1, z1)],
+        [(x0, y1, z0), (x0, y0, z0), (x0, y0, z1), (x0, y1, z1)],
+        [(x1, y0, z0), (x1, y1, z0), (x1, y1, z1), (x1, y0, z1)],
+    ]
     q = np.array(quads, dtype=np.float64)
     t = np.concatenate([q[:, [0, 1, 2]], q[:, [0, 2, 3]]])
     p, n = _tris(t)
@@ -309,20 +354,33 @@ def stage(front: float) -> Elements:
     w, d, h = 10.0, 5.0, 0.9
     back = front + d
     steel, black = lin((150, 150, 156)), lin((20, 20, 24))
-    parts = [_box((-w / 2, front, 0), (w / 2, back, h), lin((40, 40, 46))),
-             _box((-w / 2, back - 0.3, 0), (w / 2, back, 7.0), lin((16, 16, 22)))]
+    parts = [
+        _box((-w / 2, front, 0), (w / 2, back, h), lin((40, 40, 46))),
+        _box((-w / 2, back - 0.3, 0), (w / 2, back, 7.0), lin((16, 16, 22))),
+    ]
     # the LED wall: 16 x 6 panels showing a soft blue-violet wave
     xs, zs = np.linspace(-3.6, 3.6, 17), np.linspace(1.6, 5.2, 7)
     for i in range(16):
         for j in range(6):
             wave = 0.5 + 0.5 * math.sin(0.7 * i - 0.9 * j) * math.cos(0.35 * i + 0.5 * j)
             color = lin((30 + 90 * wave, 50 + 40 * wave, 130 + 110 * wave)) * (0.6 + 0.8 * wave)
-            parts.append(_panel(xs[i] + 0.01, xs[i + 1] - 0.01, back - 0.31, zs[j] + 0.01, zs[j + 1] - 0.01, color,
-                                PATTERN_EMISSIVE, -1))
+            parts.append(
+                _panel(
+                    xs[i] + 0.01,
+                    xs[i + 1] - 0.01,
+                    back - 0.31,
+                    zs[j] + 0.01,
+                    zs[j + 1] - 0.01,
+                    color,
+                    PATTERN_EMISSIVE,
+                    -1,
+                )
+            )
     for sx in (-1, 1):
         x0 = sx * (w / 2 - 0.6)
-        parts.append(_box((min(x0, x0 + sx * 0.9), front + 0.3, h), (max(x0, x0 + sx * 0.9), front + 1.1, h + 1.8),
-                          black))
+        parts.append(
+            _box((min(x0, x0 + sx * 0.9), front + 0.3, h), (max(x0, x0 + sx * 0.9), front + 1.1, h + 1.8), black)
+        )
         parts.append(_box((sx * w / 2 - 0.15, front + 0.4, 0), (sx * w / 2 + 0.15, front + 0.7, 6.5), steel))
     parts.append(_box((-w / 2 - 0.15, front + 0.4, 6.2), (w / 2 + 0.15, front + 0.7, 6.5), steel))
     for k, x in enumerate(np.linspace(-4.0, 4.0, 9)):  # lamps hanging under the truss, lenses toward -y
@@ -363,8 +421,9 @@ def hall(rect: tuple[float, float, float, float], height: float) -> tuple[np.nda
     return np.concatenate(walls), Elements.join(fittings)
 
 
-def occluding(elements: Elements, eye, extent: tuple[float, float], *, height: float = 2.0, margin: float = 0.3,
-              near: float = 3.5) -> np.ndarray:
+def occluding(
+    elements: Elements, eye, extent: tuple[float, float], *, height: float = 2.0, margin: float = 0.3, near: float = 3.5
+) -> np.ndarray:
     """(E,) bool: the elements a camera at ``eye`` must leave out (the cutaway): those whose
     bounding box meets a sight line from the eye to the crowd box (the area ``extent``
     grown by ``margin`` metres, from the floor to ``height``), sampled on a 7 x 7 x 4
@@ -373,11 +432,12 @@ def occluding(elements: Elements, eye, extent: tuple[float, float], *, height: f
         return np.zeros(0, dtype=bool)
     eye = np.asarray(eye, dtype=np.float64)
     hw, hd = extent[0] / 2 + margin, extent[1] / 2 + margin
-    g = np.stack(np.meshgrid(np.linspace(-hw, hw, 7), np.linspace(-hd, hd, 7), np.linspace(0.0, height, 4)),
-                 axis=-1).reshape(-1, 3)
-    direction = g - eye                                              # (P, 3) segment eye -> point
+    g = np.stack(
+        np.meshgrid(np.linspace(-hw, hw, 7), np.linspace(-hd, hd, 7), np.linspace(0.0, height, 4)), axis=-1
+    ).reshape(-1, 3)
+    direction = g - eye  # (P, 3) segment eye -> point
     inv = 1.0 / np.where(np.abs(direction) < 1e-12, 1e-12, direction)
-    t0 = (elements.lo[:, None, :] - eye) * inv[None]                 # (E, P, 3)
+    t0 = (elements.lo[:, None, :] - eye) * inv[None]  # (E, P, 3)
     t1 = (elements.hi[:, None, :] - eye) * inv[None]
     enter = np.minimum(t0, t1).max(axis=2)
     leave = np.maximum(t0, t1).min(axis=2)
@@ -404,4 +464,4 @@ def visible_indices(elements: Elements, eye, extent: tuple[float, float], view_p
         return np.zeros(0, np.uint32)
     centre = 0.5 * (elements.lo[keep] + elements.hi[keep])
     keep = keep[np.argsort(np.linalg.norm(centre - np.asarray(eye, dtype=np.float64), axis=1), kind="stable")]
-    return np.concatenate([elements.indices[elements.first[e]:elements.first[e] + elements.count[e]] for e in keep])
+    return np.concatenate([elements.indices[elements.first[e] : elements.first[e] + elements.count[e]] for e in keep])

@@ -32,8 +32,18 @@ import numpy as np
 from crowdstudy.errors import InvalidInputError, MissingDependencyError
 from crowdstudy.paths import check_output_path
 
-__all__ = ["find_ffmpeg", "VideoWriter", "render_video", "sha256_file", "probe_video",
-           "FramePlan", "blend_frames", "video_frame_count", "BT709_SCALE", "BT709_TAGS"]
+__all__ = [
+    "find_ffmpeg",
+    "VideoWriter",
+    "render_video",
+    "sha256_file",
+    "probe_video",
+    "FramePlan",
+    "blend_frames",
+    "video_frame_count",
+    "BT709_SCALE",
+    "BT709_TAGS",
+]
 
 
 #: ffmpeg filter converting rgb24 to yuv420p with the BT.709 matrix, limited range
@@ -49,10 +59,12 @@ def find_ffmpeg() -> str:
         return exe
     try:
         import imageio_ffmpeg
+
         return imageio_ffmpeg.get_ffmpeg_exe()
     except Exception:  # not installed, or its binary is missing for this platform
-        raise MissingDependencyError("no ffmpeg found: install it with `sudo apt-get install ffmpeg` "
-                                     "or `pip install imageio-ffmpeg`") from None
+        raise MissingDependencyError(
+            "no ffmpeg found: install it with `sudo apt-get install ffmpeg` or `pip install imageio-ffmpeg`"
+        ) from None
 
 
 def sha256_file(path: str | Path) -> str:
@@ -74,8 +86,17 @@ class VideoWriter:
         preset: x264 speed preset.
     """
 
-    def __init__(self, path: str | Path, width: int, height: int, fps: float, *, crf: int = 18,
-                 preset: str = "medium", bottom_up: bool = True):
+    def __init__(
+        self,
+        path: str | Path,
+        width: int,
+        height: int,
+        fps: float,
+        *,
+        crf: int = 18,
+        preset: str = "medium",
+        bottom_up: bool = True,
+    ):
         if width % 2 or height % 2:
             raise InvalidInputError(f"width/height: H.264 yuv420p needs even sizes, got {width}x{height}")
         self.path = check_output_path(path)
@@ -86,11 +107,44 @@ class VideoWriter:
         # so (BT.709 primaries, transfer, matrix): players and browsers assume BT.709 for HD
         # and decode these colours back; ffmpeg's default (BT.601, untagged) shifts them
         vf = ",".join((["vflip"] if bottom_up else []) + [BT709_SCALE])
-        cmd = [find_ffmpeg(), "-hide_banner", "-loglevel", "error", "-y", "-f", "rawvideo", "-pix_fmt", "rgb24",
-               "-s", f"{width}x{height}", "-framerate", f"{fps:g}", "-i", "pipe:0", "-vf", vf, "-c:v", "libx264",
-               "-preset", preset, "-crf", str(int(crf)), "-pix_fmt", "yuv420p", *BT709_TAGS,
-               "-movflags", "+faststart",
-               "-threads", "2", "-fflags", "+bitexact", "-flags:v", "+bitexact", "-an", str(self.part)]
+        cmd = [
+            find_ffmpeg(),
+            "-hide_banner",
+            "-loglevel",
+            "error",
+            "-y",
+            "-f",
+            "rawvideo",
+            "-pix_fmt",
+            "rgb24",
+            "-s",
+            f"{width}x{height}",
+            "-framerate",
+            f"{fps:g}",
+            "-i",
+            "pipe:0",
+            "-vf",
+            vf,
+            "-c:v",
+            "libx264",
+            "-preset",
+            preset,
+            "-crf",
+            str(int(crf)),
+            "-pix_fmt",
+            "yuv420p",
+            *BT709_TAGS,
+            "-movflags",
+            "+faststart",
+            "-threads",
+            "2",
+            "-fflags",
+            "+bitexact",
+            "-flags:v",
+            "+bitexact",
+            "-an",
+            str(self.part),
+        ]
         self.proc = subprocess.Popen(cmd, stdin=subprocess.PIPE, stderr=subprocess.PIPE)
         self._queue: queue.Queue = queue.Queue(maxsize=2)
         self._error: BaseException | None = None
@@ -160,15 +214,38 @@ def probe_video(path: str | Path) -> dict:
     exe = shutil.which("ffprobe")
     if not exe:
         raise MissingDependencyError("ffprobe not found: `sudo apt-get install ffmpeg`")
-    out = subprocess.run([exe, "-v", "error", "-select_streams", "v:0", "-count_frames", "-show_entries",
-                          "stream=codec_name,pix_fmt,width,height,nb_read_frames,r_frame_rate,"
-                          "color_space,color_primaries,color_transfer,color_range", "-of",
-                          "default=noprint_wrappers=1", str(path)], capture_output=True, text=True, check=True).stdout
+    out = subprocess.run(
+        [
+            exe,
+            "-v",
+            "error",
+            "-select_streams",
+            "v:0",
+            "-count_frames",
+            "-show_entries",
+            "stream=codec_name,pix_fmt,width,height,nb_read_frames,r_frame_rate,"
+            "color_space,color_primaries,color_transfer,color_range",
+            "-of",
+            "default=noprint_wrappers=1",
+            str(path),
+        ],
+        capture_output=True,
+        text=True,
+        check=True,
+    ).stdout
     info = dict(line.split("=", 1) for line in out.strip().splitlines() if "=" in line)
-    return {"codec": info.get("codec_name"), "pix_fmt": info.get("pix_fmt"), "width": int(info["width"]),
-            "height": int(info["height"]), "frames": int(info["nb_read_frames"]), "rate": info.get("r_frame_rate"),
-            "color_space": info.get("color_space"), "color_primaries": info.get("color_primaries"),
-            "color_transfer": info.get("color_transfer"), "color_range": info.get("color_range")}
+    return {
+        "codec": info.get("codec_name"),
+        "pix_fmt": info.get("pix_fmt"),
+        "width": int(info["width"]),
+        "height": int(info["height"]),
+        "frames": int(info["nb_read_frames"]),
+        "rate": info.get("r_frame_rate"),
+        "color_space": info.get("color_space"),
+        "color_primaries": info.get("color_primaries"),
+        "color_transfer": info.get("color_transfer"),
+        "color_range": info.get("color_range"),
+    }
 
 
 @dataclasses.dataclass(frozen=True)
@@ -176,9 +253,10 @@ class FramePlan:
     """What each video frame shows: animation frame ``source[i]``, blended (when
     ``partner[i] >= 0``) with animation frame ``partner[i]``: ``weight[i] * source +
     (1 - weight[i]) * partner`` in linear light."""
-    source: np.ndarray      # (F,) int
-    partner: np.ndarray     # (F,) int, -1 = no blend
-    weight: np.ndarray      # (F,) float, weight of source (1 without a blend)
+
+    source: np.ndarray  # (F,) int
+    partner: np.ndarray  # (F,) int, -1 = no blend
+    weight: np.ndarray  # (F,) float, weight of source (1 without a blend)
 
     def __len__(self) -> int:
         return len(self.source)
@@ -209,8 +287,10 @@ def _frame_plan(anim, duration: float | None, fps: float) -> FramePlan:
     if not np.isfinite(duration) or duration <= 0:
         raise InvalidInputError(f"duration: expected a positive number of seconds, got {duration!r}")
     if duration > anim.duration + 0.5 / anim.fps:
-        raise InvalidInputError(f"duration: {duration:g} s is longer than the animation ({anim.duration:g} s, "
-                                f"{anim.n_frames} frames at {anim.fps:g} fps)")
+        raise InvalidInputError(
+            f"duration: {duration:g} s is longer than the animation ({anim.duration:g} s, "
+            f"{anim.n_frames} frames at {anim.fps:g} fps)"
+        )
     n = max(1, int(round(duration * fps)))
     source = np.minimum(np.round(np.arange(n) * anim.fps / fps).astype(int), anim.n_frames - 1)
     partner = np.full(n, -1, dtype=int)
@@ -247,10 +327,26 @@ def blend_frames(a, b, weight: float):
     return out.tobytes() if as_bytes else out.reshape(np.shape(a))
 
 
-def render_video(anim, viewpoint, out_path, *, width: int | None = None, height: int | None = None,
-                 duration: float | None = None, fps: float | None = None, msaa: int = 4, overlap_view: bool = False,
-                 design=None, progress: bool = True, body_loader=None, crf: int = 18, preset: str = "medium",
-                 shadows: bool = True, red_sample_frames: int = 0, color_positions=None) -> dict:
+def render_video(
+    anim,
+    viewpoint,
+    out_path,
+    *,
+    width: int | None = None,
+    height: int | None = None,
+    duration: float | None = None,
+    fps: float | None = None,
+    msaa: int = 4,
+    overlap_view: bool = False,
+    design=None,
+    progress: bool = True,
+    body_loader=None,
+    crf: int = 18,
+    preset: str = "medium",
+    shadows: bool = True,
+    red_sample_frames: int = 0,
+    color_positions=None,
+) -> dict:
     """Render an animation to an MP4.
 
     Args:
@@ -283,6 +379,7 @@ def render_video(anim, viewpoint, out_path, *, width: int | None = None, height:
 
     if design is None:
         from crowdstudy.design import load_design
+
         design = load_design()
     width = int(width or design.video_width)
     height = int(height or design.video_height)
@@ -294,8 +391,16 @@ def render_video(anim, viewpoint, out_path, *, width: int | None = None, height:
     t0 = time.perf_counter()
     clock = _Clock()
     red: list[float] = []
-    with CrowdRenderer(anim, design=design, width=width, height=height, msaa=msaa, shadows=shadows,
-                       body_loader=body_loader, color_positions=color_positions) as renderer:
+    with CrowdRenderer(
+        anim,
+        design=design,
+        width=width,
+        height=height,
+        msaa=msaa,
+        shadows=shadows,
+        body_loader=body_loader,
+        color_positions=color_positions,
+    ) as renderer:
         renderer.set_view(viewpoint)
         renderer.draw_layers()
         clock.lap("setup")
@@ -312,15 +417,27 @@ def render_video(anim, viewpoint, out_path, *, width: int | None = None, height:
             raise
         clock.lap("frames")
         if not overlap_view and red_sample_frames > 0:
-            for src in plan.source[np.linspace(0, len(plan) - 1, min(red_sample_frames, len(plan))).round().astype(int)]:
+            for src in plan.source[
+                np.linspace(0, len(plan) - 1, min(red_sample_frames, len(plan))).round().astype(int)
+            ]:
                 red.append(renderer.overlap(int(src), image=False).red_fraction)
         clock.lap("red")
     seconds = time.perf_counter() - t0
-    return {"path": str(out_path), "frames": int(len(plan)), "width": width, "height": height, "fps": fps,
-            "duration": len(plan) / fps, "sha256": sha256_file(out_path), "seconds": seconds,
-            "seconds_per_frame": seconds / len(plan), "red_fraction": red,
-            "mean_red_fraction": float(np.mean(red)) if red else None, "dissolve_frames": plan.n_blended,
-            "timings": clock.laps}
+    return {
+        "path": str(out_path),
+        "frames": int(len(plan)),
+        "width": width,
+        "height": height,
+        "fps": fps,
+        "duration": len(plan) / fps,
+        "sha256": sha256_file(out_path),
+        "seconds": seconds,
+        "seconds_per_frame": seconds / len(plan),
+        "red_fraction": red,
+        "mean_red_fraction": float(np.mean(red)) if red else None,
+        "dissolve_frames": plan.n_blended,
+        "timings": clock.laps,
+    }
 
 
 def _write_overlap_frames(renderer, plan: FramePlan, writer: VideoWriter, frames) -> list[float]:
@@ -332,8 +449,11 @@ def _write_overlap_frames(renderer, plan: FramePlan, writer: VideoWriter, frames
     for i in frames:
         frame = renderer.overlap(int(plan.source[i]))
         red.append(frame.red_fraction)
-        image = frame.image if plan.partner[i] < 0 else \
-            blend_frames(frame.image, later[int(plan.partner[i])], plan.weight[i])
+        image = (
+            frame.image
+            if plan.partner[i] < 0
+            else blend_frames(frame.image, later[int(plan.partner[i])], plan.weight[i])
+        )
         writer.write(image)
     return red
 
@@ -349,7 +469,7 @@ def _write_frames(renderer, plan: FramePlan, writer: VideoWriter, frames, clock:
         pending = None
         for i in frames:
             src = int(plan.source[i])
-            if plan.partner[i] >= 0:           # a dissolve frame: rendered synchronously
+            if plan.partner[i] >= 0:  # a dissolve frame: rendered synchronously
                 if pending is not None:
                     writer.write(pbos[pending].read())
                     pending = None
@@ -357,7 +477,7 @@ def _write_frames(renderer, plan: FramePlan, writer: VideoWriter, frames, clock:
                 continue
             renderer.render_into(src, pbos[i % 2])
             if i == 0:
-                clock.lap("first_frame")   # and the programs' first use (llvmpipe compiles them)
+                clock.lap("first_frame")  # and the programs' first use (llvmpipe compiles them)
             if pending is not None:
                 writer.write(pbos[pending].read())
             pending = i % 2
@@ -380,7 +500,7 @@ class _Clock:
     def _now() -> tuple[float, float]:
         try:
             import resource
-        except ImportError:   # not on Windows: the children's CPU time is not counted there
+        except ImportError:  # not on Windows: the children's CPU time is not counted there
             return time.perf_counter(), time.process_time()
         child = resource.getrusage(resource.RUSAGE_CHILDREN)
         return time.perf_counter(), time.process_time() + child.ru_utime + child.ru_stime

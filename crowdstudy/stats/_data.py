@@ -39,6 +39,7 @@ class CellMatrix:
     by listwise deletion; ``aggregated``: True when some subject x cell had several rows
     (averaged, as afex does, with a warning unless asked not to).
     """
+
     values: np.ndarray
     subjects: tuple
     factors: tuple[str, ...]
@@ -97,8 +98,9 @@ def _wide_to_long(data: pd.DataFrame, within: list[str], subject: str | None) ->
     return long, "value", names, subj
 
 
-def cell_matrix(data: pd.DataFrame, dv: str | None, within, subject: str | None, *,
-                missing: str = "raise", duplicates: str = "warn") -> CellMatrix:
+def cell_matrix(
+    data: pd.DataFrame, dv: str | None, within, subject: str | None, *, missing: str = "raise", duplicates: str = "warn"
+) -> CellMatrix:
     """Validate ``data`` and arrange it as a subject x cell matrix (see :class:`CellMatrix`).
 
     Long input: one row per observation with columns ``subject``, the ``within`` factors and
@@ -125,7 +127,9 @@ def cell_matrix(data: pd.DataFrame, dv: str | None, within, subject: str | None,
         raise InvalidInputError(f"within lists a factor twice: {within}")
     for role, col in [("dv", dv), ("subject", subject), *[("within", w) for w in within]]:
         if not isinstance(col, str) or col not in data.columns:
-            raise InvalidInputError(f"{role} column {col!r} is not in the data; columns: {', '.join(map(str, data.columns))}")
+            raise InvalidInputError(
+                f"{role} column {col!r} is not in the data; columns: {', '.join(map(str, data.columns))}"
+            )
     if subject in within or dv in within or dv == subject:
         raise InvalidInputError(f"dv {dv!r}, subject {subject!r} and within {within} must be distinct columns")
     y = data[dv]
@@ -147,8 +151,9 @@ def cell_matrix(data: pd.DataFrame, dv: str | None, within, subject: str | None,
     levels = [factor_levels(data[w]) for w in within]
     for w, lv in zip(within, levels):
         if len(lv) < 2:
-            raise InvalidInputError(f"within factor {w!r} has a single level {plain(lv[0])}; "
-                                    f"a factor needs >= 2 levels")
+            raise InvalidInputError(
+                f"within factor {w!r} has a single level {plain(lv[0])}; a factor needs >= 2 levels"
+            )
     frame = pd.DataFrame({"_s": data[subject].to_numpy(), "_y": y.to_numpy()})
     for i, w in enumerate(within):
         frame[f"_f{i}"] = data[w].to_numpy()
@@ -160,8 +165,10 @@ def cell_matrix(data: pd.DataFrame, dv: str | None, within, subject: str | None,
         many = counts[counts > 1]
         key = many.index[0]
         where = ", ".join(f"{w}={plain(c)}" for w, c in zip(within, key[1:]))
-        text = (f"subject {plain(key[0])} has {int(many.iloc[0])} {dv!r} values for the cell {where} "
-                f"({len(many)} subject x cell combination(s) with more than one row)")
+        text = (
+            f"subject {plain(key[0])} has {int(many.iloc[0])} {dv!r} values for the cell {where} "
+            f"({len(many)} subject x cell combination(s) with more than one row)"
+        )
         if duplicates == "raise":
             raise InvalidInputError(text + "; one value per subject and cell expected")
         warnings.warn(text + "; averaged (as afex's fun_aggregate = mean)", UserWarning, stacklevel=3)
@@ -180,13 +187,22 @@ def cell_matrix(data: pd.DataFrame, dv: str | None, within, subject: str | None,
             where = ", ".join(f"{w}={plain(c)}" for w, c in zip(within, cell))
             raise InvalidInputError(
                 f"subject {plain(subjects[s])} has no {dv!r} value for the cell {where} "
-                f"({len(bad_rows)} subject(s) lack some cell); pass missing='drop' (CLI: --missing drop) for listwise deletion")
+                f"({len(bad_rows)} subject(s) lack some cell); pass missing='drop' (CLI: --missing drop) for listwise deletion"
+            )
         dropped = tuple(subjects[i] for i in bad_rows)
         keep = ~holes.any(axis=1)
         values = values[keep]
         subjects = tuple(s for s, k in zip(subjects, keep) if k)
     if len(subjects) < 2:
-        raise InvalidInputError(f"need at least 2 subjects with every cell, got {len(subjects)}"
-                                + (f" after dropping {len(dropped)}" if dropped else ""))
-    return CellMatrix(values=values, subjects=tuple(subjects), factors=tuple(within), levels=tuple(levels),
-                      dropped=dropped, aggregated=aggregated)
+        raise InvalidInputError(
+            f"need at least 2 subjects with every cell, got {len(subjects)}"
+            + (f" after dropping {len(dropped)}" if dropped else "")
+        )
+    return CellMatrix(
+        values=values,
+        subjects=tuple(subjects),
+        factors=tuple(within),
+        levels=tuple(levels),
+        dropped=dropped,
+        aggregated=aggregated,
+    )

@@ -14,8 +14,8 @@ from scipy.special import gammaln, ndtr
 
 __all__ = ["studentized_range_sf", "studentized_range_ppf", "range_cdf"]
 
-_X12, _W12 = np.polynomial.legendre.leggauss(12)      # inner quadrature (range of normals)
-_X16, _W16 = np.polynomial.legendre.leggauss(16)      # outer quadrature (error df)
+_X12, _W12 = np.polynomial.legendre.leggauss(12)  # inner quadrature (range of normals)
+_X16, _W16 = np.polynomial.legendre.leggauss(16)  # outer quadrature (error df)
 _INV_SQRT_2PI = 1.0 / np.sqrt(2.0 * np.pi)
 
 
@@ -31,14 +31,14 @@ def range_cdf(w, n_means: int) -> np.ndarray:
     k = float(n_means)
     half = 0.5 * w
     first = 2.0 * ndtr(half) - 1.0
-    first = np.where(first >= np.exp(-50.0 / k), first ** k, 0.0)
+    first = np.where(first >= np.exp(-50.0 / k), first**k, 0.0)
     parts = np.where(w > 3.0, 2, 3)
-    width = (8.0 - half) / parts                               # each part's length
+    width = (8.0 - half) / parts  # each part's length
     total = np.zeros_like(w)
     for part in range(3):
         lo = half + part * width
         centre = lo + 0.5 * width
-        y = centre[:, None] + 0.5 * width[:, None] * _X12[None, :]          # (n, 12)
+        y = centre[:, None] + 0.5 * width[:, None] * _X12[None, :]  # (n, 12)
         diff = ndtr(y) - ndtr(y - w[:, None])
         keep = (y * y <= 60.0) & (diff >= np.exp(-30.0 / (k - 1.0))) & (part < parts)[:, None]
         with np.errstate(invalid="ignore", over="ignore", divide="ignore"):
@@ -74,17 +74,17 @@ def studentized_range_sf(q, n_means: int, df: float) -> np.ndarray:
     half_df = 0.5 * df
     ulen = 1.0 if df <= 100 else 0.5 if df <= 800 else 0.25 if df <= 5000 else 0.125
     lead = half_df * np.log(df) - df * np.log(2.0) - gammaln(half_df) + np.log(ulen)
-    centres = (2.0 * np.arange(1, 51) - 1.0) * ulen                          # (50,)
-    t = centres[:, None] + _X16[None, :] * ulen                               # (50, 16)
+    centres = (2.0 * np.arange(1, 51) - 1.0) * ulen  # (50,)
+    t = centres[:, None] + _X16[None, :] * ulen  # (50, 16)
     log_dens = lead + (half_df - 1.0) * np.log(t) - t * (0.25 * df)
     use = log_dens >= -30.0
     weight = np.where(use, _W16[None, :] * np.exp(np.where(use, log_dens, 0.0)), 0.0)
     idx = np.nonzero(use.ravel())[0]
-    args = (qw[:, None] * np.sqrt(0.5 * t.ravel()[idx])[None, :])              # (nq, used)
+    args = qw[:, None] * np.sqrt(0.5 * t.ravel()[idx])[None, :]  # (nq, used)
     inner = range_cdf(args.ravel(), n_means).reshape(args.shape)
     contrib = np.zeros((len(qw), t.size))
     contrib[:, idx] = inner * weight.ravel()[idx][None, :]
-    per_interval = contrib.reshape(len(qw), 50, 16).sum(axis=2)               # (nq, 50)
+    per_interval = contrib.reshape(len(qw), 50, 16).sum(axis=2)  # (nq, 50)
     stop = (np.arange(1, 51) * ulen >= 1.0)[None, :] & (per_interval <= 1e-14)
     first_stop = np.where(stop.any(axis=1), stop.argmax(axis=1), 50)
     mask = np.arange(50)[None, :] < first_stop[:, None]
@@ -98,9 +98,12 @@ def _qtukey_start(p: float, n_means: float, df: float) -> float:
     ``qtukey`` uses it."""
     ps = 0.5 - 0.5 * p
     yi = np.sqrt(np.log(1.0 / (ps * ps)))
-    t = yi + ((((yi * -0.453642210148e-04 - 0.204231210125) * yi - 0.342242088547) * yi - 1.0) * yi
-              + 0.322232421088) / ((((yi * 0.38560700634e-02 + 0.103537752850) * yi + 0.531103462366) * yi
-                                   + 0.588581570495) * yi + 0.993484626060e-01)
+    t = yi + (
+        (((yi * -0.453642210148e-04 - 0.204231210125) * yi - 0.342242088547) * yi - 1.0) * yi + 0.322232421088
+    ) / (
+        (((yi * 0.38560700634e-02 + 0.103537752850) * yi + 0.531103462366) * yi + 0.588581570495) * yi
+        + 0.993484626060e-01
+    )
     if df < 120.0:
         t += (t * t * t + t) / df / 4.0
     q = 0.8832 - 0.2368 * t

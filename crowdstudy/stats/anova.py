@@ -36,10 +36,33 @@ __all__ = ["rm_anova", "anova_from_cells", "ANOVA_COLUMNS", "helmert", "effect_c
 
 #: Columns of the table returned by :func:`rm_anova`, in order.
 ANOVA_COLUMNS = (
-    "Source", "SS", "ddof1", "ddof2", "MS", "SS_error", "MSE", "F", "p_unc",
-    "eps_GG", "eps_HF", "ddof1_GG", "ddof2_GG", "p_GG_corr", "p_HF_corr",
-    "W_spher", "chi2_spher", "ddof_spher", "p_spher", "sphericity",
-    "ng2", "np2", "correction_applied", "ddof1_used", "ddof2_used", "p", "n_subjects",
+    "Source",
+    "SS",
+    "ddof1",
+    "ddof2",
+    "MS",
+    "SS_error",
+    "MSE",
+    "F",
+    "p_unc",
+    "eps_GG",
+    "eps_HF",
+    "ddof1_GG",
+    "ddof2_GG",
+    "p_GG_corr",
+    "p_HF_corr",
+    "W_spher",
+    "chi2_spher",
+    "ddof_spher",
+    "p_spher",
+    "sphericity",
+    "ng2",
+    "np2",
+    "correction_applied",
+    "ddof1_used",
+    "ddof2_used",
+    "p",
+    "n_subjects",
 )
 
 
@@ -77,10 +100,9 @@ def _mauchly(sspe: np.ndarray, n_cells: int, df: int) -> tuple[float, float, int
         # singular and the test is undefined
         return float("nan"), float("nan"), pp * (pp + 1) // 2 - 1, float("nan")
     log_w = logdet - pp * np.log(tr / pp)
-    rho = 1.0 - (2 * pp ** 2 + pp + 2) / (6.0 * pp * df)
+    rho = 1.0 - (2 * pp**2 + pp + 2) / (6.0 * pp * df)
     # car uses the number of response columns (n_cells) in the last factor of w2.
-    w2 = ((pp + 2) * (pp - 1) * (pp - 2) * (2 * pp ** 3 + 6 * pp ** 2 + 3 * n_cells + 2)
-          / (288.0 * (df * pp * rho) ** 2))
+    w2 = (pp + 2) * (pp - 1) * (pp - 2) * (2 * pp**3 + 6 * pp**2 + 3 * n_cells + 2) / (288.0 * (df * pp * rho) ** 2)
     z = -df * rho * log_w
     f = pp * (pp + 1) // 2 - 1
     pr1 = _st.chi2.sf(z, f)
@@ -104,7 +126,7 @@ def _table(cm: CellMatrix, correction: str, alpha: float) -> pd.DataFrame:
     shape = cm.shape
     mean_all = y.mean(axis=1)
     ss_subjects = float(((mean_all - mean_all.mean()) ** 2).sum() * c)
-    tiny = 1e-12 * float((y * y).sum())          # rounding level of the sums of squares
+    tiny = 1e-12 * float((y * y).sum())  # rounding level of the sums of squares
     rows = []
     for term in effect_terms(len(shape)):
         cmat = effect_contrasts(shape, term)
@@ -116,28 +138,56 @@ def _table(cm: CellMatrix, correction: str, alpha: float) -> pd.DataFrame:
         sspe = zc.T @ zc
         ss_err = float(np.trace(sspe))
         df1, df2 = float(p), float(p * (n - 1))
-        undefined = ss <= tiny and ss_err <= tiny       # 0/0: no variation at all
+        undefined = ss <= tiny and ss_err <= tiny  # 0/0: no variation at all
         if undefined:
             f_val = float("nan")
         else:
             f_val = (ss / df1) / (ss_err / df2) if ss_err > tiny else np.inf
         p_unc = float(_st.f.sf(f_val, df1, df2)) if not undefined else float("nan")
-        row = {"Source": ":".join(cm.factors[i] for i in term), "SS": ss, "ddof1": df1, "ddof2": df2,
-               "MS": ss / df1, "SS_error": ss_err, "MSE": ss_err / df2, "F": f_val, "p_unc": p_unc,
-               "_undefined": undefined}
+        row = {
+            "Source": ":".join(cm.factors[i] for i in term),
+            "SS": ss,
+            "ddof1": df1,
+            "ddof2": df2,
+            "MS": ss / df1,
+            "SS_error": ss_err,
+            "MSE": ss_err / df2,
+            "F": f_val,
+            "p_unc": p_unc,
+            "_undefined": undefined,
+        }
         if p > 1:
             gg = float(np.trace(sspe) ** 2 / (p * np.sum(sspe * sspe))) if ss_err > tiny else 1.0 / p
             hf = (n * p * gg - 2.0) / (p * (n - 1 - p * gg))
             w, chi2, fdf, p_sph = _mauchly(sspe, c, n - 1)
             hf_c = min(1.0, hf)
-            row.update(eps_GG=gg, eps_HF=hf, ddof1_GG=df1 * gg, ddof2_GG=df2 * gg,
-                       p_GG_corr=float(_st.f.sf(f_val, df1 * gg, df2 * gg)),
-                       p_HF_corr=float(_st.f.sf(f_val, df1 * hf_c, df2 * hf_c)),
-                       W_spher=w, chi2_spher=chi2, ddof_spher=float(fdf), p_spher=p_sph,
-                       sphericity=bool(p_sph >= alpha) if np.isfinite(p_sph) else False)
+            row.update(
+                eps_GG=gg,
+                eps_HF=hf,
+                ddof1_GG=df1 * gg,
+                ddof2_GG=df2 * gg,
+                p_GG_corr=float(_st.f.sf(f_val, df1 * gg, df2 * gg)),
+                p_HF_corr=float(_st.f.sf(f_val, df1 * hf_c, df2 * hf_c)),
+                W_spher=w,
+                chi2_spher=chi2,
+                ddof_spher=float(fdf),
+                p_spher=p_sph,
+                sphericity=bool(p_sph >= alpha) if np.isfinite(p_sph) else False,
+            )
         else:
-            row.update(eps_GG=1.0, eps_HF=1.0, ddof1_GG=df1, ddof2_GG=df2, p_GG_corr=p_unc, p_HF_corr=p_unc,
-                       W_spher=1.0, chi2_spher=0.0, ddof_spher=0.0, p_spher=1.0, sphericity=True)
+            row.update(
+                eps_GG=1.0,
+                eps_HF=1.0,
+                ddof1_GG=df1,
+                ddof2_GG=df2,
+                p_GG_corr=p_unc,
+                p_HF_corr=p_unc,
+                W_spher=1.0,
+                chi2_spher=0.0,
+                ddof_spher=0.0,
+                p_spher=1.0,
+                sphericity=True,
+            )
         rows.append(row)
     errors_total = ss_subjects + sum(np.unique([r["SS_error"] for r in rows]))
     for row in rows:
@@ -156,9 +206,18 @@ def _table(cm: CellMatrix, correction: str, alpha: float) -> pd.DataFrame:
     return table
 
 
-def rm_anova(data: pd.DataFrame, dv: str | None, within, subject: str | None, *, correction="auto",
-             effsize: str = "np2", alpha: float = 0.05, missing: str = "raise",
-             duplicates: str = "warn") -> pd.DataFrame:
+def rm_anova(
+    data: pd.DataFrame,
+    dv: str | None,
+    within,
+    subject: str | None,
+    *,
+    correction="auto",
+    effsize: str = "np2",
+    alpha: float = 0.05,
+    missing: str = "raise",
+    duplicates: str = "warn",
+) -> pd.DataFrame:
     """Repeated-measures ANOVA with any number of within-subject factors.
 
     Parameters
@@ -222,20 +281,32 @@ def rm_anova(data: pd.DataFrame, dv: str | None, within, subject: str | None, *,
     return anova_from_cells(cm, correction=correction, effsize=effsize, alpha=alpha, _mode=mode)
 
 
-def anova_from_cells(cm: CellMatrix, *, correction="auto", effsize: str = "np2", alpha: float = 0.05,
-                     _mode: str | None = None) -> pd.DataFrame:
+def anova_from_cells(
+    cm: CellMatrix, *, correction="auto", effsize: str = "np2", alpha: float = 0.05, _mode: str | None = None
+) -> pd.DataFrame:
     """:func:`rm_anova` on an already validated :class:`~crowdstudy.stats._data.CellMatrix`."""
     mode = _mode or _correction_mode(correction)
     table = _table(cm, mode, float(alpha))
     notes = []
     if cm.dropped:
-        notes.append(f"listwise deletion: {len(cm.dropped)} subject(s) without every cell removed "
-                     f"({', '.join(map(str, cm.dropped))}); {len(cm.subjects)} analysed")
+        notes.append(
+            f"listwise deletion: {len(cm.dropped)} subject(s) without every cell removed "
+            f"({', '.join(map(str, cm.dropped))}); {len(cm.subjects)} analysed"
+        )
     if table.attrs["undefined"]:
-        notes.append(f"F undefined (effect and error sums of squares both ~0: no variation in the scores) for "
-                     f"{', '.join(table.attrs['undefined'])}")
+        notes.append(
+            f"F undefined (effect and error sums of squares both ~0: no variation in the scores) for "
+            f"{', '.join(table.attrs['undefined'])}"
+        )
     note = "; ".join(notes)
-    table.attrs.update(factors=list(cm.factors), levels={f: list(lv) for f, lv in zip(cm.factors, cm.levels)},
-                       correction={"auto": "auto", "always": True, "never": False}[mode], alpha=float(alpha),
-                       effsize=effsize, dropped_subjects=list(cm.dropped), note=note, aggregated=cm.aggregated)
+    table.attrs.update(
+        factors=list(cm.factors),
+        levels={f: list(lv) for f, lv in zip(cm.factors, cm.levels)},
+        correction={"auto": "auto", "always": True, "never": False}[mode],
+        alpha=float(alpha),
+        effsize=effsize,
+        dropped_subjects=list(cm.dropped),
+        note=note,
+        aggregated=cm.aggregated,
+    )
     return table

@@ -40,23 +40,39 @@ def shapiro_from_cells(cm: CellMatrix, *, alpha: float = 0.05) -> pd.DataFrame:
             w, p = float(w), float(p)
         else:
             w = p = float("nan")
-        rows.append({**dict(zip(cm.factors, cell)), "cell": " ".join(map(str, cell)), "n": len(r), "W": w, "p": p,
-                     "normal": bool(p >= alpha) if np.isfinite(p) else True})
+        rows.append(
+            {
+                **dict(zip(cm.factors, cell)),
+                "cell": " ".join(map(str, cell)),
+                "n": len(r),
+                "W": w,
+                "p": p,
+                "normal": bool(p >= alpha) if np.isfinite(p) else True,
+            }
+        )
     return pd.DataFrame(rows)
 
 
-def shapiro_by_cell(data: pd.DataFrame, dv: str | None, within, subject: str | None, *, alpha: float = 0.05,
-                    missing: str = "raise") -> pd.DataFrame:
+def shapiro_by_cell(
+    data: pd.DataFrame, dv: str | None, within, subject: str | None, *, alpha: float = 0.05, missing: str = "raise"
+) -> pd.DataFrame:
     """:func:`shapiro_from_cells` from long or wide data (arguments as ``rm_anova``)."""
     return shapiro_from_cells(cell_matrix(data, dv, within, subject, missing=missing), alpha=alpha)
 
 
-def qq_figure_from_cells(cm: CellMatrix, out_path: str | Path, *, title: str | None = None,
-                         shapiro: pd.DataFrame | None = None, dpi: int = 110) -> Path:
+def qq_figure_from_cells(
+    cm: CellMatrix,
+    out_path: str | Path,
+    *,
+    title: str | None = None,
+    shapiro: pd.DataFrame | None = None,
+    dpi: int = 110,
+) -> Path:
     """Grid of normal Q-Q plots of the residuals, one panel per cell (rows: levels of the
     first factor; columns: combinations of the others), Shapiro-Wilk p in each panel.
     Saved to ``out_path`` (PNG/PDF/SVG by extension)."""
     import matplotlib
+
     matplotlib.use("Agg", force=False)
     import matplotlib.pyplot as plt
     import matplotlib.ticker
@@ -71,10 +87,22 @@ def qq_figure_from_cells(cm: CellMatrix, out_path: str | Path, *, title: str | N
     left, right, bottom, top = 0.65, 0.15, 0.55, 0.45 + (0.2 if title else 0.0)
     width = left + right + n_cols * panel_w + (n_cols - 1) * gap_w
     height = bottom + top + n_rows * panel_h + (n_rows - 1) * gap_h
-    fig, axes = plt.subplots(n_rows, n_cols, figsize=(width, height), sharex=True, sharey=True, squeeze=False,
-                             gridspec_kw={"left": left / width, "right": 1 - right / width,
-                                          "bottom": bottom / height, "top": 1 - top / height,
-                                          "wspace": gap_w / panel_w, "hspace": gap_h / panel_h})
+    fig, axes = plt.subplots(
+        n_rows,
+        n_cols,
+        figsize=(width, height),
+        sharex=True,
+        sharey=True,
+        squeeze=False,
+        gridspec_kw={
+            "left": left / width,
+            "right": 1 - right / width,
+            "bottom": bottom / height,
+            "top": 1 - top / height,
+            "wspace": gap_w / panel_w,
+            "hspace": gap_h / panel_h,
+        },
+    )
     lim = float(np.abs(res).max()) or 1.0
     axes[0, 0].set_ylim(-1.1 * lim, 1.1 * lim)
     axes[0, 0].yaxis.set_major_locator(matplotlib.ticker.MaxNLocator(4, steps=[1, 2, 5, 10], symmetric=True))
@@ -98,13 +126,22 @@ def qq_figure_from_cells(cm: CellMatrix, out_path: str | Path, *, title: str | N
     out = Path(out_path)
     out.parent.mkdir(parents=True, exist_ok=True)
     # the whole figure as laid out above, whatever the caller's rcParams["savefig.bbox"] says
-    fig.savefig(out, dpi=dpi, bbox_inches=fig.bbox_inches,
-                metadata={"Software": None} if out.suffix.lower() == ".png" else None)
+    fig.savefig(
+        out, dpi=dpi, bbox_inches=fig.bbox_inches, metadata={"Software": None} if out.suffix.lower() == ".png" else None
+    )
     plt.close(fig)
     return out
 
 
-def qq_figure(data: pd.DataFrame, dv: str | None, within, subject: str | None, out_path: str | Path, *,
-              title: str | None = None, missing: str = "raise") -> Path:
+def qq_figure(
+    data: pd.DataFrame,
+    dv: str | None,
+    within,
+    subject: str | None,
+    out_path: str | Path,
+    *,
+    title: str | None = None,
+    missing: str = "raise",
+) -> Path:
     """:func:`qq_figure_from_cells` from long or wide data."""
     return qq_figure_from_cells(cell_matrix(data, dv, within, subject, missing=missing), out_path, title=title)

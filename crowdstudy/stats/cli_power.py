@@ -21,24 +21,51 @@ __all__ = ["configure", "run"]
 def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("-n", "--participants", type=int, default=30, help="participants per simulated study")
     size = parser.add_mutually_exclusive_group()
-    size.add_argument("--method-effect", type=float, default=None,
-                      help="Ours - Baseline on QCR at the mid density, Likert points (other composites scale it; "
-                           "default 1.0, or the pilot's)")
-    size.add_argument("--dz", type=float, default=None,
-                      help="the Method effect as a standardised d_z of the participants' Ours - Baseline means")
-    size.add_argument("--eta-p2", type=float, default=None,
-                      help="the Method effect as a partial eta squared (converted to d_z = sqrt(e / (1 - e)))")
-    parser.add_argument("--pilot", default=None,
-                        help="pilot responses.csv: fit the simulation model (effects, noise, participant SDs) to it")
-    parser.add_argument("--density-slope", type=float, default=None,
-                        help="relative change of the Method effect per character/m^2 below the mid density")
+    size.add_argument(
+        "--method-effect",
+        type=float,
+        default=None,
+        help="Ours - Baseline on QCR at the mid density, Likert points (other composites scale it; "
+        "default 1.0, or the pilot's)",
+    )
+    size.add_argument(
+        "--dz",
+        type=float,
+        default=None,
+        help="the Method effect as a standardised d_z of the participants' Ours - Baseline means",
+    )
+    size.add_argument(
+        "--eta-p2",
+        type=float,
+        default=None,
+        help="the Method effect as a partial eta squared (converted to d_z = sqrt(e / (1 - e)))",
+    )
+    parser.add_argument(
+        "--pilot",
+        default=None,
+        help="pilot responses.csv: fit the simulation model (effects, noise, participant SDs) to it",
+    )
+    parser.add_argument(
+        "--density-slope",
+        type=float,
+        default=None,
+        help="relative change of the Method effect per character/m^2 below the mid density",
+    )
     parser.add_argument("--noise-sd", type=float, default=None, help="item-level noise SD (points)")
     parser.add_argument("--participant-sd", type=float, default=None, help="participant offset SD (points)")
-    parser.add_argument("--participant-density-sd", type=float, default=None,
-                        help="SD of the participants' own density slopes, points per character/m^2 (default 0.1; "
-                             "non-zero: sphericity is not true by construction)")
-    parser.add_argument("--participant-viewpoint-sd", type=float, default=None,
-                        help="SD of the participants' own viewpoint offsets, points (default 0.2)")
+    parser.add_argument(
+        "--participant-density-sd",
+        type=float,
+        default=None,
+        help="SD of the participants' own density slopes, points per character/m^2 (default 0.1; "
+        "non-zero: sphericity is not true by construction)",
+    )
+    parser.add_argument(
+        "--participant-viewpoint-sd",
+        type=float,
+        default=None,
+        help="SD of the participants' own viewpoint offsets, points (default 0.2)",
+    )
     parser.add_argument("--sims", type=int, default=200, help="simulated studies (default 200)")
     parser.add_argument("--seed", type=int, default=1, help="base seed (default 1)")
     parser.add_argument("--stage", type=int, default=1, help="stage number analysed (default 1)")
@@ -62,8 +89,11 @@ def _model(args, design):
         model, fitted = fit_pilot(read_csv_file(args.pilot, "pilot responses"), design, source=str(args.pilot))
     else:
         model = ResponseModel.for_design(design, participant_density_sd=0.1, participant_viewpoint_sd=0.2)
-    extra = {k: getattr(args, k) for k in ("density_slope", "noise_sd", "participant_sd", "participant_density_sd",
-                                           "participant_viewpoint_sd") if getattr(args, k) is not None}
+    extra = {
+        k: getattr(args, k)
+        for k in ("density_slope", "noise_sd", "participant_sd", "participant_density_sd", "participant_viewpoint_sd")
+        if getattr(args, k) is not None
+    }
     if args.method_effect is not None:
         extra["method_effect"] = args.method_effect
     model = dataclasses.replace(model, **extra)
@@ -90,19 +120,43 @@ def run(args: argparse.Namespace) -> int:
         print(f"model fitted to the pilot {args.pilot} ({fitted.attrs['participants']} participants):")
         print(format_table(fitted.to_dict("records"), ["parameter", "value", "estimated_from"]))
     correction = {"auto": "auto", "always": True, "never": False}[args.correction]
-    result = power_analysis(design, args.participants, model=model, sims=args.sims, seed=args.seed,
-                            stage=args.stage, composites=args.composite, alpha=args.alpha, correction=correction,
-                            progress=True)
-    print(f"power of a {args.participants}-participant study, stage {args.stage}, method effect "
-          f"{model.method_effect:.3g} points, {args.sims} simulated studies (alpha = {args.alpha}; "
-          f"ci: exact Clopper-Pearson 95 %)")
-    print(format_table(result.table.to_dict("records"),
-                       ["composite", "effect", "power", "ci_low", "ci_high", "n_significant", "sims", "np2_median",
-                        "dz_median"]))
+    result = power_analysis(
+        design,
+        args.participants,
+        model=model,
+        sims=args.sims,
+        seed=args.seed,
+        stage=args.stage,
+        composites=args.composite,
+        alpha=args.alpha,
+        correction=correction,
+        progress=True,
+    )
+    print(
+        f"power of a {args.participants}-participant study, stage {args.stage}, method effect "
+        f"{model.method_effect:.3g} points, {args.sims} simulated studies (alpha = {args.alpha}; "
+        f"ci: exact Clopper-Pearson 95 %)"
+    )
+    print(
+        format_table(
+            result.table.to_dict("records"),
+            ["composite", "effect", "power", "ci_low", "ci_high", "n_significant", "sims", "np2_median", "dz_median"],
+        )
+    )
     if args.out:
         out = Path(args.out)
-        out.write_text(json.dumps({"table": result.table.to_dict("records"), "settings": result.settings,
-                                   "pilot": fitted.to_dict("records") if fitted is not None else None,
-                                   "provenance": provenance(args.seed)}, indent=2, default=str) + "\n")
+        out.write_text(
+            json.dumps(
+                {
+                    "table": result.table.to_dict("records"),
+                    "settings": result.settings,
+                    "pilot": fitted.to_dict("records") if fitted is not None else None,
+                    "provenance": provenance(args.seed),
+                },
+                indent=2,
+                default=str,
+            )
+            + "\n"
+        )
         print(f"wrote {out}")
     return 0

@@ -28,14 +28,26 @@ from crowdstudy.errors import InvalidInputError
 from crowdstudy.stats._data import CellMatrix
 from crowdstudy.stats.anova import effect_contrasts, effect_terms
 
-__all__ = ["simple_effects", "polynomial_contrasts", "poly_coefficients", "wald_f",
-           "SIMPLE_COLUMNS", "TREND_COLUMNS"]
+__all__ = ["simple_effects", "polynomial_contrasts", "poly_coefficients", "wald_f", "SIMPLE_COLUMNS", "TREND_COLUMNS"]
 
 #: Columns of :func:`simple_effects` (plus one column per ``by`` factor, after ``by_level``).
 SIMPLE_COLUMNS = ("term", "by", "by_level", "df1", "df2", "F", "p")
 #: Columns of :func:`polynomial_contrasts` (plus one column per ``by`` factor).
-TREND_COLUMNS = ("factor", "by", "by_level", "contrast", "degree", "coefficients", "estimate", "SE", "df", "t", "p",
-                 "lower_CL", "upper_CL")
+TREND_COLUMNS = (
+    "factor",
+    "by",
+    "by_level",
+    "contrast",
+    "degree",
+    "coefficients",
+    "estimate",
+    "SE",
+    "df",
+    "t",
+    "p",
+    "lower_CL",
+    "upper_CL",
+)
 
 _DEGREE_NAMES = ("linear", "quadratic", "cubic", "quartic", "degree 5", "degree 6")
 
@@ -89,18 +101,27 @@ def simple_effects(cm: CellMatrix, by) -> pd.DataFrame:
     grid = cm.values.reshape(n, *cm.shape)
     bi = [cm.factors.index(b) for b in by]
     ri = [cm.factors.index(f) for f in rest]
-    grid = np.moveaxis(grid, [1 + i for i in bi], list(range(1, len(bi) + 1)))      # (n, *by, *rest)
+    grid = np.moveaxis(grid, [1 + i for i in bi], list(range(1, len(bi) + 1)))  # (n, *by, *rest)
     rest_shape = tuple(cm.shape[i] for i in ri)
     rows = []
     for combo in itertools.product(*[range(cm.shape[i]) for i in bi]):
-        block = grid[(slice(None), *combo)].reshape(n, -1)                          # (n, cells of rest)
+        block = grid[(slice(None), *combo)].reshape(n, -1)  # (n, cells of rest)
         labels = [cm.levels[i][j] for i, j in zip(bi, combo)]
         for term in effect_terms(len(rest)):
             z = block @ effect_contrasts(rest_shape, term).T
             f, df1, df2, p = wald_f(z)
-            rows.append({"term": ":".join(rest[t] for t in term), "by": ",".join(by),
-                         "by_level": ",".join(map(str, labels)), **dict(zip(by, labels)),
-                         "df1": df1, "df2": df2, "F": f, "p": p})
+            rows.append(
+                {
+                    "term": ":".join(rest[t] for t in term),
+                    "by": ",".join(by),
+                    "by_level": ",".join(map(str, labels)),
+                    **dict(zip(by, labels)),
+                    "df1": df1,
+                    "df2": df2,
+                    "F": f,
+                    "p": p,
+                }
+            )
     cols = list(SIMPLE_COLUMNS[:3]) + by + list(SIMPLE_COLUMNS[3:])
     out = pd.DataFrame(rows, columns=cols)
     out.attrs.update(n_subjects=n, model="multivariate")
@@ -116,7 +137,7 @@ def poly_coefficients(k: int) -> np.ndarray:
     q, _ = np.linalg.qr(np.vander(x - x.mean(), min(k, 7), increasing=True))
     out = []
     for j in range(1, q.shape[1]):
-        con = q[:, j] * np.sign(q[-1, j])                 # the last level positive, as R's poly()
+        con = q[:, j] * np.sign(q[-1, j])  # the last level positive, as R's poly()
         con = con / con[con > 0.01].min()
         z = np.abs(con - np.round(con)).max()
         while z > 0.05:
@@ -156,20 +177,33 @@ def polynomial_contrasts(cm: CellMatrix, factor: str, by=None, *, level: float =
     crit = float(_st.t.ppf(0.5 + level / 2.0, df))
     rows = []
     for combo in itertools.product(*[range(cm.shape[i]) for i in bi]):
-        means = marg[(slice(None), *combo)]                              # (n, k)
+        means = marg[(slice(None), *combo)]  # (n, k)
         labels = [cm.levels[i][j] for i, j in zip(bi, combo)]
-        scores = means @ coef.T                                           # (n, degrees)
+        scores = means @ coef.T  # (n, degrees)
         est = scores.mean(axis=0)
         se = scores.std(axis=0, ddof=1) / np.sqrt(n)
         with np.errstate(divide="ignore", invalid="ignore"):
             t = np.where(se > 0, est / se, np.where(est == 0, np.nan, np.sign(est) * np.inf))
         p = 2.0 * _st.t.sf(np.abs(t), df)
         for d in range(coef.shape[0]):
-            rows.append({"factor": factor, "by": ",".join(by), "by_level": ",".join(map(str, labels)),
-                         **dict(zip(by, labels)), "contrast": _DEGREE_NAMES[d], "degree": d + 1,
-                         "coefficients": " ".join(str(int(c)) for c in coef[d]), "estimate": float(est[d]),
-                         "SE": float(se[d]), "df": df, "t": float(t[d]), "p": float(p[d]),
-                         "lower_CL": float(est[d] - crit * se[d]), "upper_CL": float(est[d] + crit * se[d])})
+            rows.append(
+                {
+                    "factor": factor,
+                    "by": ",".join(by),
+                    "by_level": ",".join(map(str, labels)),
+                    **dict(zip(by, labels)),
+                    "contrast": _DEGREE_NAMES[d],
+                    "degree": d + 1,
+                    "coefficients": " ".join(str(int(c)) for c in coef[d]),
+                    "estimate": float(est[d]),
+                    "SE": float(se[d]),
+                    "df": df,
+                    "t": float(t[d]),
+                    "p": float(p[d]),
+                    "lower_CL": float(est[d] - crit * se[d]),
+                    "upper_CL": float(est[d] + crit * se[d]),
+                }
+            )
     cols = list(TREND_COLUMNS[:3]) + by + list(TREND_COLUMNS[3:])
     out = pd.DataFrame(rows, columns=cols)
     out.attrs.update(n_subjects=n, level=float(level))

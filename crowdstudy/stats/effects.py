@@ -44,7 +44,7 @@ def critical_value(adjust: str, *, level: float, df: float, n_means: int, n_cont
     if not 0 < level < 1:
         raise InvalidInputError(f"level must be in (0, 1), got {level!r}")
     alpha = 1.0 - level
-    if adjust == "tukey" and n_means == 2:        # the range of two means: the t quantile (emmeans too)
+    if adjust == "tukey" and n_means == 2:  # the range of two means: the t quantile (emmeans too)
         return float(_st.t.ppf(1.0 - alpha / 2.0, df))
     if adjust == "tukey":
         if df >= 2:
@@ -66,9 +66,10 @@ def hedges_j(df: float) -> float:
 
 def _ncp_for(t: float, df: float, prob: float) -> float:
     """The noncentrality with ``P(T_{df, ncp} <= t) = prob`` (decreasing in ncp)."""
+
     def f(ncp: float) -> float:
         v = float(nctdtr(df, ncp, t))
-        if np.isnan(v):                                  # far tails: use P(T <= t) = 1 - P(T <= -t | -ncp)
+        if np.isnan(v):  # far tails: use P(T <= t) = 1 - P(T <= -t | -ncp)
             v = 1.0 - float(nctdtr(df, -ncp, -t))
         if np.isnan(v):
             v = 1.0 if ncp < t else 0.0

@@ -44,10 +44,18 @@ def stars_caption(adjust: str, n_methods: int, *, rule: str = "always", gate: st
     return text
 
 
-def method_figure(panels: dict[str, tuple[CellMatrix, pd.DataFrame | None]], out_path: str | Path, *,
-                  density_values: dict[str, float] | None = None, error: str = "sd", title: str | None = None,
-                  ylim: tuple[float, float] = (1.0, 6.0), dpi: int = 150, caption: str | None = None,
-                  note: str = "") -> Path:
+def method_figure(
+    panels: dict[str, tuple[CellMatrix, pd.DataFrame | None]],
+    out_path: str | Path,
+    *,
+    density_values: dict[str, float] | None = None,
+    error: str = "sd",
+    title: str | None = None,
+    ylim: tuple[float, float] = (1.0, 6.0),
+    dpi: int = 150,
+    caption: str | None = None,
+    note: str = "",
+) -> Path:
     """Draw composite scores by density, one row per composite and one column per viewpoint.
 
     ``panels``: composite name -> (cell matrix with factors ("Density", "Viewpoint",
@@ -60,6 +68,7 @@ def method_figure(panels: dict[str, tuple[CellMatrix, pd.DataFrame | None]], out
     stars, caption and note go to ``out_path`` with the suffix ``.json``.
     """
     import matplotlib
+
     matplotlib.use("Agg", force=False)
     import matplotlib.pyplot as plt
 
@@ -74,8 +83,15 @@ def method_figure(panels: dict[str, tuple[CellMatrix, pd.DataFrame | None]], out
     dens, methods = first.levels[0], first.levels[-1]
     views = first.levels[1] if with_views else ("",)
     n_rows, n_cols = len(panels), len(views)
-    fig, axes = plt.subplots(n_rows, n_cols, figsize=(max(4.2, 2.6 * n_cols + 0.8), 2.3 * n_rows + 1.1), sharex=True,
-                             sharey=True, squeeze=False, layout="constrained")
+    fig, axes = plt.subplots(
+        n_rows,
+        n_cols,
+        figsize=(max(4.2, 2.6 * n_cols + 0.8), 2.3 * n_rows + 1.1),
+        sharex=True,
+        sharey=True,
+        squeeze=False,
+        layout="constrained",
+    )
     x = np.arange(len(dens))
     width = 0.08 * (len(methods) - 1)
     plotted = {}  # the drawn numbers, written beside the figure (OUT.json)
@@ -94,13 +110,30 @@ def method_figure(panels: dict[str, tuple[CellMatrix, pd.DataFrame | None]], out
             ax = axes[r, c]
             for m, meth in enumerate(methods):
                 off = (m - (len(methods) - 1) / 2) * width * 2 / max(1, len(methods) - 1) if len(methods) > 1 else 0
-                ax.errorbar(x + off, mean[:, c, m], yerr=err[:, c, m], color=_COLORS.get(meth, f"C{m}"),
-                            marker=_MARKERS.get(meth, "o"), ms=4, lw=1.3, capsize=2.5, label=str(meth))
+                ax.errorbar(
+                    x + off,
+                    mean[:, c, m],
+                    yerr=err[:, c, m],
+                    color=_COLORS.get(meth, f"C{m}"),
+                    marker=_MARKERS.get(meth, "o"),
+                    ms=4,
+                    lw=1.3,
+                    capsize=2.5,
+                    label=str(meth),
+                )
             for d, lvl in enumerate(dens):
                 s = stars(pmap.get((str(lvl), str(vp)), np.nan))
                 plotted.setdefault(comp, []).extend(
-                    {"density": str(lvl), "viewpoint": str(vp), "method": str(meth), "mean": float(mean[d, c, m]),
-                     "error": float(err[d, c, m]), "stars": s} for m, meth in enumerate(methods))
+                    {
+                        "density": str(lvl),
+                        "viewpoint": str(vp),
+                        "method": str(meth),
+                        "mean": float(mean[d, c, m]),
+                        "error": float(err[d, c, m]),
+                        "stars": s,
+                    }
+                    for m, meth in enumerate(methods)
+                )
                 if s:
                     top = float(np.max(mean[d, c, :] + err[d, c, :]))
                     ax.text(x[d], min(top + 0.12, ylim[1] - 0.05), s, ha="center", va="bottom", fontsize=9)
@@ -120,17 +153,23 @@ def method_figure(panels: dict[str, tuple[CellMatrix, pd.DataFrame | None]], out
     bars = {"sd": "mean +- SD", "se": "mean +- SE", "ci95": "mean +- 95% CI"}[error]
     caption = caption or "* p<.05, ** p<.01, *** p<.001 (Method)"
     head = (f"{note}\n" if note else "") + (title + "\n" if title else "")
-    fig.suptitle(head + f"{bars}; {caption}", fontsize=8 if len(caption) > 70 else 9,
-                 color="#b03a2e" if note else "black", wrap=True)
+    fig.suptitle(
+        head + f"{bars}; {caption}",
+        fontsize=8 if len(caption) > 70 else 9,
+        color="#b03a2e" if note else "black",
+        wrap=True,
+    )
     out = Path(out_path)
     out.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(out, dpi=dpi, metadata={"Software": None} if out.suffix.lower() == ".png" else None)
     plt.close(fig)
-    out.with_suffix(".json").write_text(json.dumps({"figure": out.name, "error": error, "caption": caption,
-                                                    "note": note, "series": plotted}, indent=1))
+    out.with_suffix(".json").write_text(
+        json.dumps({"figure": out.name, "error": error, "caption": caption, "note": note, "series": plotted}, indent=1)
+    )
     return out
 
 
 def _t975(df: int) -> float:
     from scipy import stats
+
     return float(stats.t.ppf(0.975, df))

@@ -26,8 +26,16 @@ from crowdstudy.errors import InvalidInputError
 from crowdstudy.stats._data import plain, row_label
 from crowdstudy.stats.scoring import check_complete, validate_responses
 
-__all__ = ["read_csv_file", "read_sidecar", "read_participants", "apply_exclusions", "Exclusions",
-           "PARTICIPANT_COLUMNS", "LoadedResponses", "load_responses"]
+__all__ = [
+    "read_csv_file",
+    "read_sidecar",
+    "read_participants",
+    "apply_exclusions",
+    "Exclusions",
+    "PARTICIPANT_COLUMNS",
+    "LoadedResponses",
+    "load_responses",
+]
 
 #: Columns participants.csv must have (others are kept and ignored).
 PARTICIPANT_COLUMNS = ("participant", "excluded", "exclusion_reason")
@@ -76,8 +84,9 @@ def read_participants(participants: str | Path | pd.DataFrame) -> pd.DataFrame:
         src, table = str(participants), read_csv_file(participants, "participants")
     missing = [c for c in PARTICIPANT_COLUMNS if c not in table.columns]
     if missing:
-        raise InvalidInputError(f"{src}: missing column(s) {', '.join(map(repr, missing))}; "
-                                f"have {', '.join(map(str, table.columns))}")
+        raise InvalidInputError(
+            f"{src}: missing column(s) {', '.join(map(repr, missing))}; have {', '.join(map(str, table.columns))}"
+        )
     if table["participant"].isna().any():
         i = int(table["participant"].isna().to_numpy().nonzero()[0][0])
         raise InvalidInputError(f"{src}: column 'participant' {row_label(i)} is empty")
@@ -90,8 +99,10 @@ def read_participants(participants: str | Path | pd.DataFrame) -> pd.DataFrame:
     bad = ~flag.isin([0, 1])
     if bad.any():
         i = int(bad.to_numpy().nonzero()[0][0])
-        raise InvalidInputError(f"{src}: column 'excluded' {row_label(i)} (participant {ids.iloc[i]!r}) holds "
-                                f"{plain(table['excluded'].iloc[i])}; expected 0 or 1")
+        raise InvalidInputError(
+            f"{src}: column 'excluded' {row_label(i)} (participant {ids.iloc[i]!r}) holds "
+            f"{plain(table['excluded'].iloc[i])}; expected 0 or 1"
+        )
     reason = table["exclusion_reason"].map(lambda v: "" if pd.isna(v) else str(v).strip())
     return pd.DataFrame({"participant": ids, "excluded": flag.astype(int).astype(bool), "exclusion_reason": reason})
 
@@ -102,26 +113,35 @@ class Exclusions:
     ``listed`` (participants in it), ``excluded`` (ids, sorted), ``reasons`` (rule name ->
     number of excluded participants it names; a participant with two rules counts for
     both; ``"unspecified"`` when the reason is empty)."""
+
     source: str
     listed: int
     excluded: tuple[str, ...]
     reasons: dict[str, int]
 
     def as_dict(self) -> dict:
-        return {"source": self.source, "listed": self.listed, "n_excluded": len(self.excluded),
-                "excluded": list(self.excluded), "reasons": dict(self.reasons)}
+        return {
+            "source": self.source,
+            "listed": self.listed,
+            "n_excluded": len(self.excluded),
+            "excluded": list(self.excluded),
+            "reasons": dict(self.reasons),
+        }
 
     def text(self) -> str:
         """One line for the summary."""
         if not self.excluded:
             return f"Exclusions ({self.source}): none of {self.listed} participants excluded."
         why = ", ".join(f"{k}: {v}" for k, v in self.reasons.items())
-        return (f"Exclusions ({self.source}): {len(self.excluded)} of {self.listed} participants excluded before "
-                f"the analysis ({why}).")
+        return (
+            f"Exclusions ({self.source}): {len(self.excluded)} of {self.listed} participants excluded before "
+            f"the analysis ({why})."
+        )
 
 
-def apply_exclusions(responses: pd.DataFrame, participants: pd.DataFrame, source: str
-                     ) -> tuple[pd.DataFrame, Exclusions]:
+def apply_exclusions(
+    responses: pd.DataFrame, participants: pd.DataFrame, source: str
+) -> tuple[pd.DataFrame, Exclusions]:
     """Drop the responses of excluded participants. Every participant of ``responses``
     must be listed in ``participants`` (else an error naming the first one missing)."""
     if "participant_id" not in responses.columns:
@@ -130,8 +150,10 @@ def apply_exclusions(responses: pd.DataFrame, participants: pd.DataFrame, source
     known = set(participants["participant"])
     unlisted = sorted(set(ids.dropna()) - known)
     if unlisted:
-        raise InvalidInputError(f"{source}: participant {unlisted[0]!r} of the responses is not listed "
-                                f"({len(unlisted)} unlisted); every participant needs a row")
+        raise InvalidInputError(
+            f"{source}: participant {unlisted[0]!r} of the responses is not listed "
+            f"({len(unlisted)} unlisted); every participant needs a row"
+        )
     out = participants[participants["excluded"]]
     counts: dict[str, int] = {}
     for text in out["exclusion_reason"]:
@@ -143,8 +165,9 @@ def apply_exclusions(responses: pd.DataFrame, participants: pd.DataFrame, source
     kept = responses[~ids.isin(dropped).to_numpy()]
     if len(kept) == 0 and len(responses):
         raise InvalidInputError(f"{source}: every participant of the responses is excluded; nothing to analyse")
-    return kept, Exclusions(source=source, listed=int(len(participants)), excluded=tuple(sorted(dropped)),
-                            reasons=reasons)
+    return kept, Exclusions(
+        source=source, listed=int(len(participants)), excluded=tuple(sorted(dropped)), reasons=reasons
+    )
 
 
 @dataclasses.dataclass(frozen=True)
@@ -153,6 +176,7 @@ class LoadedResponses:
     participants dropped, every stage present complete; ``source``: the file (or
     "responses" for a DataFrame); ``simulated`` and ``note``: from the sidecar (or the
     caller); ``exclusions``: None without a participants table."""
+
     data: pd.DataFrame
     source: str
     simulated: bool
@@ -160,9 +184,13 @@ class LoadedResponses:
     exclusions: Exclusions | None
 
 
-def load_responses(responses: pd.DataFrame | str | Path, design, *,
-                   participants: str | Path | pd.DataFrame | Literal[False] | None = None,
-                   simulated: bool | None = None) -> LoadedResponses:
+def load_responses(
+    responses: pd.DataFrame | str | Path,
+    design,
+    *,
+    participants: str | Path | pd.DataFrame | Literal[False] | None = None,
+    simulated: bool | None = None,
+) -> LoadedResponses:
     """Read and check the responses of one analysis.
 
     ``responses``: a DataFrame in the responses.csv schema (``attrs["simulated"]`` marks
@@ -192,7 +220,7 @@ def load_responses(responses: pd.DataFrame | str | Path, design, *,
     if participants is not None and participants is not False:
         psrc = "participants" if isinstance(participants, pd.DataFrame) else str(participants)
         data, excl = apply_exclusions(data, read_participants(participants), psrc)
-    check_complete(data, design, source=source)      # rows named by their index: the file's data rows
+    check_complete(data, design, source=source)  # rows named by their index: the file's data rows
     is_sim = bool(side.get("simulated", False)) if simulated is None else bool(simulated)
     note = str(side["note"]) if side.get("note") else ""
     return LoadedResponses(data=data, source=source, simulated=is_sim, note=note, exclusions=excl)

@@ -31,8 +31,14 @@ ErrorBars = Literal["sd", "se", "ci95"]
 #: interaction with Method) is significant.
 StarsRule = Literal["always", "omnibus"]
 
-_CHOICES = {"correction": Correction, "adjust": Adjust, "effsize": EffectSize, "missing": Missing,
-            "error_bars": ErrorBars, "stars": StarsRule}
+_CHOICES = {
+    "correction": Correction,
+    "adjust": Adjust,
+    "effsize": EffectSize,
+    "missing": Missing,
+    "error_bars": ErrorBars,
+    "stars": StarsRule,
+}
 
 
 @dataclasses.dataclass(frozen=True)
@@ -52,6 +58,7 @@ class AnalysisOptions:
     - ``figures``: write the figures (tables only when False); ``error_bars``: what the
       figures' error bars show; ``figure_note``: text appended to every figure title.
     """
+
     correction: Correction = "auto"
     alpha: float = 0.05
     effsize: EffectSize = "np2"
@@ -91,5 +98,12 @@ class AnalysisOptions:
 
     def settings(self) -> dict:
         """The settings analysis.json records."""
-        return {"correction": self.anova_correction, "alpha": self.alpha, "effsize": self.effsize,
-                "adjust": self.adjust, "missing": self.missing, "stars": self.stars, "level": self.level}
+        return {
+            "correction": self.anova_correction,
+            "alpha": self.alpha,
+            "effsize": self.effsize,
+            "adjust": self.adjust,
+            "missing": self.missing,
+            "stars": self.stars,
+            "level": self.level,
+        }

@@ -45,8 +45,10 @@ def fit_pilot(responses: pd.DataFrame, design, *, source: str = "pilot") -> tupl
     """
     data = validate_responses(responses, design, source=source)
     if data["participant_id"].nunique() < 3:
-        raise InvalidInputError(f"{source}: a pilot needs at least 3 participants to estimate their spread, "
-                                f"got {data['participant_id'].nunique()}")
+        raise InvalidInputError(
+            f"{source}: a pilot needs at least 3 participants to estimate their spread, "
+            f"got {data['participant_id'].nunique()}"
+        )
     treated = list(design.methods)[-1]
     if set(data["method"].astype(str)) != set(design.methods):
         raise InvalidInputError(f"{source}: the pilot must include every method ({', '.join(design.methods)})")
@@ -111,25 +113,46 @@ def fit_pilot(responses: pd.DataFrame, design, *, source: str = "pilot") -> tupl
     vm = frame.groupby(["participant_id", "viewpoint"])["r"].agg(["mean", "size"])
     centred = vm["mean"] - vm["mean"].groupby("participant_id").transform("mean")
     n_views = vm.groupby("participant_id").size().mean()
-    v_var = (float((centred ** 2).sum() / max(1, len(vm) - vm.index.get_level_values(0).nunique()))
-             - within / float(vm["size"].mean())) if n_views > 1 else 0.0
+    v_var = (
+        (
+            float((centred**2).sum() / max(1, len(vm) - vm.index.get_level_values(0).nunique()))
+            - within / float(vm["size"].mean())
+        )
+        if n_views > 1
+        else 0.0
+    )
     scen_off = {s: float(est.get(f"scenario:{s}", 0.0)) for s in scen_levels}
     view_off = {v: float(est.get(f"viewpoint:{v}", 0.0)) for v in view_levels}
     model = ResponseModel.for_design(
-        design, method_effect=method_effect, composite_effects=comp_eff, density_slope=slope, reference_density=ref,
-        density_penalty=float(est["density"]), base_score=float(est["base"]), noise_sd=float(np.sqrt(noise_var)),
-        participant_sd=float(np.sqrt(max(0.0, p_var))), participant_method_sd=float(np.sqrt(max(0.0, pm_var))),
+        design,
+        method_effect=method_effect,
+        composite_effects=comp_eff,
+        density_slope=slope,
+        reference_density=ref,
+        density_penalty=float(est["density"]),
+        base_score=float(est["base"]),
+        noise_sd=float(np.sqrt(noise_var)),
+        participant_sd=float(np.sqrt(max(0.0, p_var))),
+        participant_method_sd=float(np.sqrt(max(0.0, pm_var))),
         participant_density_sd=float(np.sqrt(max(0.0, d_var))),
         participant_viewpoint_sd=float(np.sqrt(max(0.0, v_var))),
-        scenario_offsets=scen_off, viewpoint_offsets=view_off, treated_method=treated)
-    how = {"method_effect": f"{treated} - baseline on {comps[0]} at {ref:g}/m^2 (least squares)",
-           "density_slope": "relative change of the Method effect per character/m^2", "density_penalty":
-           "drop per character/m^2", "base_score": "untreated score at the reference density",
-           "noise_sd": "item noise: var(item a - item b) / 2 - 1/12", "participant_sd": "participant offset",
-           "participant_method_sd": "participant deviation of the Method effect",
-           "participant_density_sd": "participant density slope", "participant_viewpoint_sd":
-           "participant viewpoint offset"}
-    table = pd.DataFrame([{"parameter": k_, "value": float(getattr(model, k_)), "estimated_from": v}
-                          for k_, v in how.items()])
+        scenario_offsets=scen_off,
+        viewpoint_offsets=view_off,
+        treated_method=treated,
+    )
+    how = {
+        "method_effect": f"{treated} - baseline on {comps[0]} at {ref:g}/m^2 (least squares)",
+        "density_slope": "relative change of the Method effect per character/m^2",
+        "density_penalty": "drop per character/m^2",
+        "base_score": "untreated score at the reference density",
+        "noise_sd": "item noise: var(item a - item b) / 2 - 1/12",
+        "participant_sd": "participant offset",
+        "participant_method_sd": "participant deviation of the Method effect",
+        "participant_density_sd": "participant density slope",
+        "participant_viewpoint_sd": "participant viewpoint offset",
+    }
+    table = pd.DataFrame(
+        [{"parameter": k_, "value": float(getattr(model, k_)), "estimated_from": v} for k_, v in how.items()]
+    )
     table.attrs.update(participants=int(data["participant_id"].nunique()), trials=int(len(data)))
     return model, table

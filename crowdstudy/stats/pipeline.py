@@ -53,6 +53,7 @@ __all__ = ["analyze", "compute", "compute_composite", "AnalysisReport", "posthoc
 class AnalysisReport:
     """What :func:`analyze` returns: the computed ``result``, the ``summary`` text (as
     summary.md holds it) and the ``files`` written (empty without an output folder)."""
+
     result: AnalysisResult
     summary: str
     files: list[Path]
@@ -67,10 +68,16 @@ class AnalysisReport:
         return self.result.reliability
 
 
-def analyze(responses: pd.DataFrame | str | Path, design: StudyDesign | None = None,
-            out_dir: str | Path | None = None, options: AnalysisOptions | None = None, *,
-            participants: str | Path | pd.DataFrame | Literal[False] | None = None,
-            simulated: bool | None = None, progress: bool = False) -> AnalysisReport:
+def analyze(
+    responses: pd.DataFrame | str | Path,
+    design: StudyDesign | None = None,
+    out_dir: str | Path | None = None,
+    options: AnalysisOptions | None = None,
+    *,
+    participants: str | Path | pd.DataFrame | Literal[False] | None = None,
+    simulated: bool | None = None,
+    progress: bool = False,
+) -> AnalysisReport:
     """Run the paper's analysis; write tables, figures and the summary when ``out_dir`` is set.
 
     ``responses``: a DataFrame in the responses.csv schema or a path to the CSV (its
@@ -88,21 +95,30 @@ def analyze(responses: pd.DataFrame | str | Path, design: StudyDesign | None = N
     """
     if design is None:
         from crowdstudy.design import load_design
+
         design = load_design()
     options = AnalysisOptions() if options is None else options
     loaded = load_responses(responses, design, participants=participants, simulated=simulated)
     result = compute(loaded, design, options, progress=progress)
     from crowdstudy.stats.summary import summary_text
+
     summary = summary_text(result)
     files: list[Path] = []
     if out_dir is not None:
         from crowdstudy.stats.writers import write_analysis
+
         files = write_analysis(result, summary, Path(out_dir))
     return AnalysisReport(result=result, summary=summary, files=files)
 
 
-def compute(responses: LoadedResponses, design: StudyDesign, options: AnalysisOptions, *,
-            factors: Sequence[str] = FACTORS, progress: bool = False) -> AnalysisResult:
+def compute(
+    responses: LoadedResponses,
+    design: StudyDesign,
+    options: AnalysisOptions,
+    *,
+    factors: Sequence[str] = FACTORS,
+    progress: bool = False,
+) -> AnalysisResult:
     """Every number of the analysis of ``responses`` (from
     :func:`~crowdstudy.stats.inputs.load_responses`), without file I/O.
 
@@ -118,18 +134,29 @@ def compute(responses: LoadedResponses, design: StudyDesign, options: AnalysisOp
     iterator = work
     if progress:
         from crowdstudy.progress import progress_bar
+
         iterator = progress_bar(work, desc="analysis", unit="anova", leave=False)
     for st, comp in iterator:
-        results[(st.number, comp)] = compute_composite(scored, design, st, comp, factors, options,
-                                                       source=responses.source)
-    return AnalysisResult(design=design, options=options, stages=tuple(chosen), source=responses.source,
-                          simulated=responses.simulated, note=responses.note,
-                          n_participants=int(data["participant_id"].nunique()), exclusions=responses.exclusions,
-                          reliability=reliability, results=results)
+        results[(st.number, comp)] = compute_composite(
+            scored, design, st, comp, factors, options, source=responses.source
+        )
+    return AnalysisResult(
+        design=design,
+        options=options,
+        stages=tuple(chosen),
+        source=responses.source,
+        simulated=responses.simulated,
+        note=responses.note,
+        n_participants=int(data["participant_id"].nunique()),
+        exclusions=responses.exclusions,
+        reliability=reliability,
+        results=results,
+    )
 
 
-def _selection(responses: LoadedResponses, design: StudyDesign, options: AnalysisOptions
-               ) -> tuple[list[Stage], list[str]]:
+def _selection(
+    responses: LoadedResponses, design: StudyDesign, options: AnalysisOptions
+) -> tuple[list[Stage], list[str]]:
     """The stages (present in the responses and chosen) and composites to analyse."""
     comps = list(design.composites) if options.composites is None else list(options.composites)
     for c in comps:
@@ -139,8 +166,9 @@ def _selection(responses: LoadedResponses, design: StudyDesign, options: Analysi
     numbers = [st.number for st in design.stages]
     for number in stages or ():
         if number not in numbers:
-            raise InvalidInputError(f"stage {number!r} is not in the design ({design.source}); "
-                                    f"it defines {', '.join(map(str, numbers))}")
+            raise InvalidInputError(
+                f"stage {number!r} is not in the design ({design.source}); it defines {', '.join(map(str, numbers))}"
+            )
     present = sorted(set(responses.data["stage"]))
     chosen = [st for st in design.stages if st.number in present and (stages is None or st.number in stages)]
     if not chosen:
@@ -148,8 +176,16 @@ def _selection(responses: LoadedResponses, design: StudyDesign, options: Analysi
     return chosen, comps
 
 
-def compute_composite(scored: pd.DataFrame, design: StudyDesign, stage: Stage, comp: str, factors: Sequence[str],
-                      options: AnalysisOptions, *, source: str = "responses") -> CompositeResult:
+def compute_composite(
+    scored: pd.DataFrame,
+    design: StudyDesign,
+    stage: Stage,
+    comp: str,
+    factors: Sequence[str],
+    options: AnalysisOptions,
+    *,
+    source: str = "responses",
+) -> CompositeResult:
     """The analysis of one (stage, composite): ``scored`` from
     :func:`~crowdstudy.stats.scoring.composite_scores`."""
     o = options
@@ -163,25 +199,43 @@ def compute_composite(scored: pd.DataFrame, design: StudyDesign, stage: Stage, c
         raise InvalidInputError(f"{source}: stage {stage.number} ({stage.scenario}), {comp}: {exc}") from None
     table = anova_from_cells(cm, correction=o.anova_correction, effsize=o.effsize, alpha=o.alpha)
     others = [f for f in used if f != "Method"]
-    trends = (pd.concat([polynomial_contrasts(cm, "Density", level=o.level),
-                         polynomial_contrasts(cm, "Density", "Method", level=o.level)], ignore_index=True)
-              if "Density" in used else None)
+    trends = (
+        pd.concat(
+            [
+                polynomial_contrasts(cm, "Density", level=o.level),
+                polynomial_contrasts(cm, "Density", "Method", level=o.level),
+            ],
+            ignore_index=True,
+        )
+        if "Density" in used
+        else None
+    )
     show, gate = _stars_shown(table, o.alpha, o.stars)
     label = f"Stage {stage.number} ({stage.scenario}), {comp}"
     return CompositeResult(
-        stage=stage.number, scenario=stage.scenario, composite=comp, factors=tuple(used), cells=cm, anova=table,
+        stage=stage.number,
+        scenario=stage.scenario,
+        composite=comp,
+        factors=tuple(used),
+        cells=cm,
+        anova=table,
         posthoc=posthoc_for_significant(cm, table, alpha=o.alpha, adjust=o.adjust, level=o.level),
         method_by_cell=pairwise_from_cells(cm, "Method", others, adjust=o.adjust, level=o.level),
         method=pairwise_from_cells(cm, "Method", [], adjust=o.adjust, level=o.level),
-        simple_effects=simple_effects(cm, others) if others else None, trends=trends,
-        descriptives=descriptives_from_cells(cm, comp), shapiro=shapiro_from_cells(cm, alpha=o.alpha),
+        simple_effects=simple_effects(cm, others) if others else None,
+        trends=trends,
+        descriptives=descriptives_from_cells(cm, comp),
+        shapiro=shapiro_from_cells(cm, alpha=o.alpha),
         apa=apa_summary(table, alpha=o.alpha, effsize=o.effsize, label=label),
         robustness=_robustness(long, comp, used, cm, o.alpha) if o.robustness else None,
-        stars_shown=show, stars_gate=gate)
+        stars_shown=show,
+        stars_gate=gate,
+    )
 
 
-def posthoc_for_significant(cm: CellMatrix, anova: pd.DataFrame, *, alpha: float, adjust: str = "tukey",
-                            level: float = 0.95) -> pd.DataFrame:
+def posthoc_for_significant(
+    cm: CellMatrix, anova: pd.DataFrame, *, alpha: float, adjust: str = "tukey", level: float = 0.95
+) -> pd.DataFrame:
     """Pairwise comparisons for every significant effect (``p < alpha`` in ``anova``):
     a main effect -> its levels; an interaction -> each of its factors within the levels
     of the others. Column ``effect`` names the ANOVA effect that triggered the test."""
@@ -213,8 +267,9 @@ def _stars_shown(table: pd.DataFrame, alpha: float, rule: StarsRule) -> tuple[bo
 def _robustness(long: pd.DataFrame, comp: str, factors: list[str], cm: CellMatrix, alpha: float) -> Robustness:
     ordinal = ordinal_method_check(cm, alpha=alpha)
     try:
-        mixed = mixed_model(long, comp, factors, "participant_id",
-                            levels={f: list(lv) for f, lv in zip(cm.factors, cm.levels)})
-    except InvalidInputError as exc:          # degenerate data: said in the summary, not fatal
+        mixed = mixed_model(
+            long, comp, factors, "participant_id", levels={f: list(lv) for f, lv in zip(cm.factors, cm.levels)}
+        )
+    except InvalidInputError as exc:  # degenerate data: said in the summary, not fatal
         return Robustness(ordinal=ordinal, mixed=None, mixed_note=str(exc))
     return Robustness(ordinal=ordinal, mixed=mixed)

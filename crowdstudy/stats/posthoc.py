@@ -32,9 +32,32 @@ from crowdstudy.stats.effects import critical_value, dz_interval, hedges_j
 __all__ = ["pairwise", "pairwise_from_cells", "adjust_pvalues", "tukey_p", "POSTHOC_COLUMNS"]
 
 #: Columns of :func:`pairwise`'s table (plus one column per ``by`` factor, after ``by_level``).
-POSTHOC_COLUMNS = ("factor", "by", "by_level", "A", "B", "contrast", "estimate", "SE", "df", "t",
-                   "p_unc", "p_adj", "adjust", "n_means", "n_contrasts", "lower_CL", "upper_CL", "ci_adjust",
-                   "dz", "dz_low", "dz_high", "g_av", "g_av_low", "g_av_high")
+POSTHOC_COLUMNS = (
+    "factor",
+    "by",
+    "by_level",
+    "A",
+    "B",
+    "contrast",
+    "estimate",
+    "SE",
+    "df",
+    "t",
+    "p_unc",
+    "p_adj",
+    "adjust",
+    "n_means",
+    "n_contrasts",
+    "lower_CL",
+    "upper_CL",
+    "ci_adjust",
+    "dz",
+    "dz_low",
+    "dz_high",
+    "g_av",
+    "g_av_low",
+    "g_av_high",
+)
 
 _ADJUST = ("tukey", "bonferroni", "holm", "none")
 
@@ -45,7 +68,7 @@ def tukey_p(t, n_means: int, df: float) -> np.ndarray:
     t = np.abs(np.asarray(t, dtype=float))
     if n_means < 2:
         raise InvalidInputError(f"n_means must be >= 2 for the studentized range, got {n_means}")
-    if n_means == 2:      # the range of two means is |difference|: exactly the two-sided t test
+    if n_means == 2:  # the range of two means is |difference|: exactly the two-sided t test
         out = 2.0 * _st.t.sf(t, df)
     elif df >= 2:
         out = studentized_range_sf(np.nan_to_num(t.ravel()) * np.sqrt(2.0), n_means, df).reshape(t.shape)
@@ -53,7 +76,7 @@ def tukey_p(t, n_means: int, df: float) -> np.ndarray:
         out = np.empty_like(t)
         for i, val in np.ndenumerate(t):
             out[i] = 1.0 if val == 0 else float(_st.studentized_range.sf(val * np.sqrt(2.0), n_means, df))
-    return np.where(np.isnan(t), np.nan, np.clip(out, 0.0, 1.0))     # an undefined t stays undefined
+    return np.where(np.isnan(t), np.nan, np.clip(out, 0.0, 1.0))  # an undefined t stays undefined
 
 
 def adjust_pvalues(p, method: str, *, t=None, n_means: int | None = None, df: float | None = None) -> np.ndarray:
@@ -87,8 +110,9 @@ def _as_names(value, name: str) -> list[str]:
     return list(value)
 
 
-def pairwise_from_cells(cm: CellMatrix, factor: str, by=None, *, adjust: str = "tukey",
-                        level: float = 0.95) -> pd.DataFrame:
+def pairwise_from_cells(
+    cm: CellMatrix, factor: str, by=None, *, adjust: str = "tukey", level: float = 0.95
+) -> pd.DataFrame:
     """:func:`pairwise` on an already validated cell matrix."""
     by = _as_names(by, "by")
     if adjust not in _ADJUST:
@@ -106,9 +130,10 @@ def pairwise_from_cells(cm: CellMatrix, factor: str, by=None, *, adjust: str = "
     bi = [cm.factors.index(b) for b in by]
     other = [i for i in range(len(cm.factors)) if i != fi and i not in bi]
     marg = grid.mean(axis=tuple(1 + i for i in other)) if other else grid
-    kept = [i for i in range(len(cm.factors)) if i not in other]      # axis order of marg (after subjects)
-    marg = np.moveaxis(marg, [1 + kept.index(i) for i in bi] + [1 + kept.index(fi)],
-                       list(range(1, len(bi) + 2)))                   # (n, *by, factor)
+    kept = [i for i in range(len(cm.factors)) if i not in other]  # axis order of marg (after subjects)
+    marg = np.moveaxis(
+        marg, [1 + kept.index(i) for i in bi] + [1 + kept.index(fi)], list(range(1, len(bi) + 2))
+    )  # (n, *by, factor)
     levels = cm.levels[fi]
     k = len(levels)
     df = float(n - 1)
@@ -116,7 +141,7 @@ def pairwise_from_cells(cm: CellMatrix, factor: str, by=None, *, adjust: str = "
     by_levels = list(itertools.product(*[cm.levels[i] for i in bi])) if bi else [()]
     pairs = list(itertools.combinations(range(k), 2))
     for g, blv in enumerate(by_levels):
-        means = marg[(slice(None), *[cm.levels[i].index(v) for i, v in zip(bi, blv)])]   # (n, k)
+        means = marg[(slice(None), *[cm.levels[i].index(v) for i, v in zip(bi, blv)])]  # (n, k)
         d = np.stack([means[:, i] - means[:, j] for i, j in pairs], axis=1)
         est = d.mean(axis=0)
         se = d.std(axis=0, ddof=1) / np.sqrt(n)
@@ -133,15 +158,33 @@ def pairwise_from_cells(cm: CellMatrix, factor: str, by=None, *, adjust: str = "
             dz, dz_lo, dz_hi = dz_interval(d[:, c], level)
             sd_av = 0.5 * (sds[i] + sds[j])
             scale = j_corr * float(d[:, c].std(ddof=1)) / sd_av if sd_av > 0 else float("nan")
-            row = {"factor": factor, "by": ",".join(by), "by_level": ",".join(map(str, blv)),
-                   **{b: v for b, v in zip(by, blv)},
-                   "A": levels[i], "B": levels[j], "contrast": f"{levels[i]} - {levels[j]}",
-                   "estimate": float(est[c]), "SE": float(se[c]), "df": df, "t": float(t[c]),
-                   "p_unc": float(p_unc[c]), "p_adj": float(p_adj[c]), "adjust": adjust,
-                   "n_means": k, "n_contrasts": len(pairs),
-                   "lower_CL": float(est[c] - crit * se[c]), "upper_CL": float(est[c] + crit * se[c]),
-                   "ci_adjust": ci_adjust, "dz": dz, "dz_low": dz_lo, "dz_high": dz_hi,
-                   "g_av": dz * scale, "g_av_low": dz_lo * scale, "g_av_high": dz_hi * scale}
+            row = {
+                "factor": factor,
+                "by": ",".join(by),
+                "by_level": ",".join(map(str, blv)),
+                **{b: v for b, v in zip(by, blv)},
+                "A": levels[i],
+                "B": levels[j],
+                "contrast": f"{levels[i]} - {levels[j]}",
+                "estimate": float(est[c]),
+                "SE": float(se[c]),
+                "df": df,
+                "t": float(t[c]),
+                "p_unc": float(p_unc[c]),
+                "p_adj": float(p_adj[c]),
+                "adjust": adjust,
+                "n_means": k,
+                "n_contrasts": len(pairs),
+                "lower_CL": float(est[c] - crit * se[c]),
+                "upper_CL": float(est[c] + crit * se[c]),
+                "ci_adjust": ci_adjust,
+                "dz": dz,
+                "dz_low": dz_lo,
+                "dz_high": dz_hi,
+                "g_av": dz * scale,
+                "g_av_low": dz_lo * scale,
+                "g_av_high": dz_hi * scale,
+            }
             rows.append(row)
     cols = list(POSTHOC_COLUMNS[:3]) + by + list(POSTHOC_COLUMNS[3:])
     out = pd.DataFrame(rows, columns=cols)
@@ -149,9 +192,19 @@ def pairwise_from_cells(cm: CellMatrix, factor: str, by=None, *, adjust: str = "
     return out
 
 
-def pairwise(data: pd.DataFrame, dv: str | None, within, subject: str | None, *, factor: str | None = None,
-             by=None, adjust: str = "tukey", missing: str = "raise", duplicates: str = "warn",
-             level: float = 0.95) -> pd.DataFrame:
+def pairwise(
+    data: pd.DataFrame,
+    dv: str | None,
+    within,
+    subject: str | None,
+    *,
+    factor: str | None = None,
+    by=None,
+    adjust: str = "tukey",
+    missing: str = "raise",
+    duplicates: str = "warn",
+    level: float = 0.95,
+) -> pd.DataFrame:
     """Pairwise comparisons of the levels of ``factor`` (within each ``by`` combination).
 
     Parameters

@@ -41,8 +41,9 @@ def clopper_pearson(hits: int, n: int, level: float = 0.95) -> tuple[float, floa
     return lo, hi
 
 
-def method_points(model: ResponseModel, design, stage: int, *, dz: float | None = None,
-                  eta_p2: float | None = None) -> float:
+def method_points(
+    model: ResponseModel, design, stage: int, *, dz: float | None = None, eta_p2: float | None = None
+) -> float:
     """Likert points of ``method_effect`` that give the Method main effect a population d_z
     of ``dz`` (or a partial eta squared ``eta_p2``, via ``d_z = sqrt(eta_p2 / (1 - eta_p2))``,
     the large-sample relation of a 1-df within effect), for the first composite.
@@ -65,9 +66,12 @@ def method_points(model: ResponseModel, design, stage: int, *, dz: float | None 
     comp = next(iter(model.composites))
     k = len(model.composites[comp])
     cells = len(design.densities) * len(st.viewpoints)
-    sd = float(np.sqrt(model.participant_method_sd ** 2 + 2.0 * (model.noise_sd ** 2 + 1.0 / 12.0) / (k * cells)))
-    unit = float(model.composite_effects.get(comp, 1.0)) * float(np.mean(
-        [max(0.0, 1.0 + model.density_slope * (model.reference_density - d)) for d in design.densities.values()]))
+    sd = float(np.sqrt(model.participant_method_sd**2 + 2.0 * (model.noise_sd**2 + 1.0 / 12.0) / (k * cells)))
+    unit = float(model.composite_effects.get(comp, 1.0)) * float(
+        np.mean(
+            [max(0.0, 1.0 + model.density_slope * (model.reference_density - d)) for d in design.densities.values()]
+        )
+    )
     if unit <= 0:
         raise InvalidInputError("the model's density_slope leaves no Method effect at any density")
     return float(dz) * sd / unit
@@ -81,14 +85,26 @@ class PowerResult:
     median d_z of the participants' treated - untreated difference; NaN otherwise).
     ``p_values``: (sims, composites x effects) p of every simulated study, columns
     ``"COMP/effect"``. ``settings``: the inputs."""
+
     table: pd.DataFrame
     p_values: pd.DataFrame
     settings: dict
 
 
-def power_analysis(design, n_participants: int, *, model: ResponseModel | None = None, sims: int = 200,
-                   seed: int = 1, stage: int = 1, composites=None, effects=DEFAULT_EFFECTS, alpha: float = 0.05,
-                   correction="auto", progress: bool = False) -> PowerResult:
+def power_analysis(
+    design,
+    n_participants: int,
+    *,
+    model: ResponseModel | None = None,
+    sims: int = 200,
+    seed: int = 1,
+    stage: int = 1,
+    composites=None,
+    effects=DEFAULT_EFFECTS,
+    alpha: float = 0.05,
+    correction="auto",
+    progress: bool = False,
+) -> PowerResult:
     """Estimate power by simulating ``sims`` studies of ``n_participants`` participants.
 
     ``model``: the generative model (default ``ResponseModel.for_design(design)``); study
@@ -113,6 +129,7 @@ def power_analysis(design, n_participants: int, *, model: ResponseModel | None =
     iterator = range(int(sims))
     if progress:
         from crowdstudy.progress import progress_bar
+
         iterator = progress_bar(iterator, desc="power", unit="study", leave=False)
     pvals = np.full((int(sims), len(comps) * len(effects)), np.nan)
     np2 = np.full_like(pvals, np.nan)
@@ -145,8 +162,27 @@ def power_analysis(design, n_participants: int, *, model: ResponseModel | None =
             warnings.simplefilter("ignore", RuntimeWarning)
             dz_med = float(np.nanmedian(dzs[:, comps.index(comp)])) if eff == "Method" else float("nan")
             np2_med = float(np.nanmedian(np2[:, j]))
-        rows.append({"composite": comp, "effect": eff, "power": pw, "mc_se": se, "ci_low": lo, "ci_high": hi,
-                     "n_significant": hits, "sims": int(sims), "np2_median": np2_med, "dz_median": dz_med})
-    settings = {"n_participants": int(n_participants), "sims": int(sims), "seed": int(seed), "stage": int(stage),
-                "alpha": float(alpha), "correction": correction, "model": dataclasses.asdict(model)}
+        rows.append(
+            {
+                "composite": comp,
+                "effect": eff,
+                "power": pw,
+                "mc_se": se,
+                "ci_low": lo,
+                "ci_high": hi,
+                "n_significant": hits,
+                "sims": int(sims),
+                "np2_median": np2_med,
+                "dz_median": dz_med,
+            }
+        )
+    settings = {
+        "n_participants": int(n_participants),
+        "sims": int(sims),
+        "seed": int(seed),
+        "stage": int(stage),
+        "alpha": float(alpha),
+        "correction": correction,
+        "model": dataclasses.asdict(model),
+    }
     return PowerResult(pd.DataFrame(rows), pd.DataFrame(pvals, columns=columns), settings)

@@ -13,8 +13,17 @@ import pandas as pd
 from crowdstudy.errors import InvalidInputError
 from crowdstudy.stats._data import CellMatrix
 
-__all__ = ["stars", "format_p", "apa_effect", "apa_summary", "contrast_text", "descriptives_from_cells",
-           "to_markdown", "to_latex", "write_table"]
+__all__ = [
+    "stars",
+    "format_p",
+    "apa_effect",
+    "apa_summary",
+    "contrast_text",
+    "descriptives_from_cells",
+    "to_markdown",
+    "to_latex",
+    "write_table",
+]
 
 
 def stars(p: float) -> str:
@@ -51,15 +60,18 @@ def apa_effect(row: pd.Series | dict, effsize: str = "np2") -> str:
     """One effect in APA style: ``F(2.45, 71.05) = 12.30, p < .001, eta_p^2 = .30``
     (dfs under the chosen correction; ``, GG eps = 0.61`` appended when corrected)."""
     es_name = "eta_p^2" if effsize == "np2" else "eta_G^2"
-    text = (f"F({_num(row['ddof1_used'])}, {_num(row['ddof2_used'])}) = {row['F']:.2f}, {format_p(row['p'])}, "
-            f"{es_name} = {_es(row[effsize])}")
+    text = (
+        f"F({_num(row['ddof1_used'])}, {_num(row['ddof2_used'])}) = {row['F']:.2f}, {format_p(row['p'])}, "
+        f"{es_name} = {_es(row[effsize])}"
+    )
     if row.get("correction_applied", False):
         text += f" (Greenhouse-Geisser corrected, eps = {row['eps_GG']:.2f})"
     return text
 
 
-def apa_summary(table: pd.DataFrame, *, alpha: float | None = None, effsize: str | None = None,
-                label: str = "") -> list[str]:
+def apa_summary(
+    table: pd.DataFrame, *, alpha: float | None = None, effsize: str | None = None, label: str = ""
+) -> list[str]:
     """One sentence per significant effect (``p < alpha`` under the table's rule)."""
     alpha = table.attrs.get("alpha", 0.05) if alpha is None else alpha
     effsize = effsize or table.attrs.get("effsize", "np2")
@@ -69,7 +81,9 @@ def apa_summary(table: pd.DataFrame, *, alpha: float | None = None, effsize: str
             kind = "interaction" if ":" in row["Source"] else "main effect of"
             name = row["Source"].replace(":", " x ")
             lead = f"{label}: " if label else ""
-            what = f"a significant {name} interaction" if kind == "interaction" else f"a significant main effect of {name}"
+            what = (
+                f"a significant {name} interaction" if kind == "interaction" else f"a significant main effect of {name}"
+            )
             out.append(f"{lead}{what}, {apa_effect(row, effsize)}.")
     return out
 
@@ -79,11 +93,15 @@ def contrast_text(row: pd.Series | dict, level: float = 0.95) -> str:
     -0.52, 95% CI [-0.83, -0.21] (tukey), t(11) = -3.70, p = .004, d_z = -1.07 [-1.78,
     -0.33], g_av = -0.61 [-1.02, -0.19]`` (estimate and CI in dv units, d_z and g_av unitless)."""
     pct = f"{100 * level:g}%"
-    text = (f"{row['contrast']} = {row['estimate']:.2f}, {pct} CI [{row['lower_CL']:.2f}, {row['upper_CL']:.2f}] "
-            f"({row['ci_adjust']}), t({_num(row['df'])}) = {row['t']:.2f}, {format_p(row['p_adj'])}")
+    text = (
+        f"{row['contrast']} = {row['estimate']:.2f}, {pct} CI [{row['lower_CL']:.2f}, {row['upper_CL']:.2f}] "
+        f"({row['ci_adjust']}), t({_num(row['df'])}) = {row['t']:.2f}, {format_p(row['p_adj'])}"
+    )
     if np.isfinite(row["dz"]):
-        text += (f", d_z = {row['dz']:.2f} [{row['dz_low']:.2f}, {row['dz_high']:.2f}], "
-                 f"g_av = {row['g_av']:.2f} [{row['g_av_low']:.2f}, {row['g_av_high']:.2f}]")
+        text += (
+            f", d_z = {row['dz']:.2f} [{row['dz_low']:.2f}, {row['dz_high']:.2f}], "
+            f"g_av = {row['g_av']:.2f} [{row['g_av_low']:.2f}, {row['g_av_high']:.2f}]"
+        )
     return text
 
 
@@ -122,7 +140,7 @@ def _cell(v, digits: int) -> str:
     if isinstance(v, (float, np.floating)):
         if not np.isfinite(v):
             return "" if np.isnan(v) else ("inf" if v > 0 else "-inf")
-        if v != 0 and (abs(v) < 10 ** -digits or abs(v) >= 1e6):
+        if v != 0 and (abs(v) < 10**-digits or abs(v) >= 1e6):
             return f"{v:.{digits}g}" if abs(v) >= 1e6 else f"{v:.2e}"
         return f"{v:.{digits}f}"
     return str(v)
@@ -132,13 +150,25 @@ def to_markdown(df: pd.DataFrame, digits: int = 3) -> str:
     """A GitHub-flavoured Markdown table (floats with ``digits`` decimals)."""
     head = "| " + " | ".join(map(str, df.columns)) + " |"
     rule = "|" + "|".join("---:" if pd.api.types.is_numeric_dtype(df[c]) else "---" for c in df.columns) + "|"
-    body = ["| " + " | ".join(_cell(v, digits).replace("|", "\\|") for v in row) + " |"
-            for row in df.itertuples(index=False)]
+    body = [
+        "| " + " | ".join(_cell(v, digits).replace("|", "\\|") for v in row) + " |"
+        for row in df.itertuples(index=False)
+    ]
     return "\n".join([head, rule, *body]) + "\n"
 
 
-_LATEX_ESC = {"\\": r"\textbackslash{}", "&": r"\&", "%": r"\%", "$": r"\$", "#": r"\#", "_": r"\_",
-              "{": r"\{", "}": r"\}", "~": r"\textasciitilde{}", "^": r"\^{}"}
+_LATEX_ESC = {
+    "\\": r"\textbackslash{}",
+    "&": r"\&",
+    "%": r"\%",
+    "$": r"\$",
+    "#": r"\#",
+    "_": r"\_",
+    "{": r"\{",
+    "}": r"\}",
+    "~": r"\textasciitilde{}",
+    "^": r"\^{}",
+}
 
 
 def _tex(s: str) -> str:
@@ -153,16 +183,21 @@ def to_latex(df: pd.DataFrame, digits: int = 3, caption: str | None = None, labe
         lines.append(r"\caption{" + _tex(caption) + "}")
     if label:
         lines.append(r"\label{" + label + "}")
-    lines += [r"\begin{tabular}{" + align + "}", r"\toprule",
-              " & ".join(_tex(str(c)) for c in df.columns) + r" \\", r"\midrule"]
+    lines += [
+        r"\begin{tabular}{" + align + "}",
+        r"\toprule",
+        " & ".join(_tex(str(c)) for c in df.columns) + r" \\",
+        r"\midrule",
+    ]
     for row in df.itertuples(index=False):
         lines.append(" & ".join(_tex(_cell(v, digits)) for v in row) + r" \\")
     lines += [r"\bottomrule", r"\end{tabular}", r"\end{table}"]
     return "\n".join(lines) + "\n"
 
 
-def write_table(df: pd.DataFrame, stem: str | Path, *, formats=("csv", "md", "tex"), caption: str | None = None,
-                digits: int = 3) -> list[Path]:
+def write_table(
+    df: pd.DataFrame, stem: str | Path, *, formats=("csv", "md", "tex"), caption: str | None = None, digits: int = 3
+) -> list[Path]:
     """Write ``df`` as STEM.csv (full precision), STEM.md and STEM.tex; returns the paths."""
     stem = Path(stem)
     stem.parent.mkdir(parents=True, exist_ok=True)

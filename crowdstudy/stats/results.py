@@ -25,6 +25,7 @@ class Robustness:
     sign tests per cell and over all cells, :func:`~crowdstudy.stats.robust.ordinal_method_check`)
     and ``mixed`` (the mixed model of every participant, incomplete ones too), or None with
     ``mixed_note`` saying why the model is undefined on these data."""
+
     ordinal: pd.DataFrame
     mixed: MixedModelResult | None
     mixed_note: str = ""
@@ -44,6 +45,7 @@ class CompositeResult:
     not asked for). ``stars_shown``: whether the figure draws the per-cell stars, and
     ``stars_gate`` the ANOVA effect(s) that decide it under the ``"omnibus"`` rule.
     """
+
     stage: int
     scenario: str
     composite: str
@@ -85,6 +87,7 @@ class AnalysisResult:
     ``reliability``: item-pair reliability per scenario; ``results``: (stage number,
     composite) -> :class:`CompositeResult`, stage by stage.
     """
+
     design: StudyDesign
     options: AnalysisOptions
     stages: tuple[Stage, ...]

@@ -42,6 +42,7 @@ class MixedModelResult:
     ``n_participants``, ``n_incomplete`` (participants without every cell, kept);
     ``method``: the Method contrast (``contrast`` "A - B", ``estimate`` = 2 x the Method1
     coefficient for two methods, ``SE``, ``z``, ``p``, ``lower_CL``, ``upper_CL``: Wald 95 %)."""
+
     fixed: pd.DataFrame
     variances: dict
     loglik: float
@@ -104,11 +105,11 @@ class _Reml:
     def solve(self, theta):
         """(criterion, b, s^2, (X' V^-1 X)^-1) at ``theta`` (V relative to s^2)."""
         lam = self.lower(theta)
-        m = np.eye(2)[None] + lam.T @ self.ztz @ lam                                  # I + L'Z'ZL
+        m = np.eye(2)[None] + lam.T @ self.ztz @ lam  # I + L'Z'ZL
         minv = np.linalg.inv(m)
-        a = lam.T @ self.ztx                                                          # L'Z'X per group
-        c = self.zty @ lam                                                            # L'Z'y per group
-        ma = minv @ a                                                                 # (g, 2, p)
+        a = lam.T @ self.ztx  # L'Z'X per group
+        c = self.zty @ lam  # L'Z'y per group
+        ma = minv @ a  # (g, 2, p)
         mc = np.einsum("gij,gj->gi", minv, c)
         xvx = self.xtx - np.tensordot(a, ma, axes=([0, 1], [0, 1]))
         xvy = self.xty - np.einsum("gip,gi->p", a, mc)
@@ -126,13 +127,18 @@ class _Reml:
         from L = I, tolerances 1e-10 in theta and 1e-14 relative in the criterion."""
         from scipy import optimize
 
-        return optimize.minimize(lambda t: self.solve(t)[0], [1.0, 0.0, 1.0], method="Powell",
-                                 options={"xtol": 1e-10, "ftol": 1e-14, "maxiter": 20000},
-                                 bounds=[(0.0, None), (None, None), (0.0, None)])
+        return optimize.minimize(
+            lambda t: self.solve(t)[0],
+            [1.0, 0.0, 1.0],
+            method="Powell",
+            options={"xtol": 1e-10, "ftol": 1e-14, "maxiter": 20000},
+            bounds=[(0.0, None), (None, None), (0.0, None)],
+        )
 
 
-def mixed_model(long: pd.DataFrame, dv: str, factors, subject: str, *, levels: dict | None = None,
-                level: float = 0.95) -> MixedModelResult:
+def mixed_model(
+    long: pd.DataFrame, dv: str, factors, subject: str, *, levels: dict | None = None, level: float = 0.95
+) -> MixedModelResult:
     """Fit the mixed model described in the module docstring to long data (one row per
     observation; incomplete participants allowed). ``levels``: factor -> level order
     (default: categorical order, else sorted)."""
@@ -156,8 +162,10 @@ def mixed_model(long: pd.DataFrame, dv: str, factors, subject: str, *, levels: d
     y = data[dv].to_numpy(float)
     reml = _Reml(y, x, z, data[subject].astype(str).to_numpy())
     if np.linalg.matrix_rank(x) < x.shape[1] or len(data) <= x.shape[1]:
-        raise InvalidInputError(f"the mixed model's {x.shape[1]} fixed effects are not estimable from "
-                                f"{len(data)} scores (some cell has no data)")
+        raise InvalidInputError(
+            f"the mixed model's {x.shape[1]} fixed effects are not estimable from "
+            f"{len(data)} scores (some cell has no data)"
+        )
     resid = y - x @ np.linalg.lstsq(x, y, rcond=None)[0]
     if float(resid @ resid) <= 1e-12 * max(float(y @ y), 1e-300):
         raise InvalidInputError("the mixed model is undefined: the scores do not vary beyond the fixed effects")
@@ -174,16 +182,33 @@ def mixed_model(long: pd.DataFrame, dv: str, factors, subject: str, *, levels: d
     per = data.groupby(subject)[factors].apply(lambda d: len(d.drop_duplicates()))
     mi = names.index("Method1")
     crit_z = float(_st.norm.ppf(0.5 + level / 2.0))
-    scale2 = 2.0 if len(lv["Method"]) == 2 else float("nan")    # Method1 = half the A - B difference
+    scale2 = 2.0 if len(lv["Method"]) == 2 else float("nan")  # Method1 = half the A - B difference
     est, s = scale2 * beta[mi], scale2 * se[mi]
-    method = {"contrast": f"{lv['Method'][0]} - {lv['Method'][-1]}", "estimate": float(est), "SE": float(s),
-              "z": float(zval[mi]), "p": float(p[mi]), "lower_CL": float(est - crit_z * s),
-              "upper_CL": float(est + crit_z * s)}
-    variances = {"participant (Intercept)": float(g[0, 0]), "participant Method1": float(g[1, 1]),
-                 "covariance": float(g[0, 1]), "residual": scale}
-    return MixedModelResult(fixed=fixed, variances=variances, loglik=-0.5 * crit, n_obs=int(len(data)),
-                            n_participants=int(len(per)), n_incomplete=int((per < n_cells).sum()), method=method,
-                            converged=bool(opt.success))
+    method = {
+        "contrast": f"{lv['Method'][0]} - {lv['Method'][-1]}",
+        "estimate": float(est),
+        "SE": float(s),
+        "z": float(zval[mi]),
+        "p": float(p[mi]),
+        "lower_CL": float(est - crit_z * s),
+        "upper_CL": float(est + crit_z * s),
+    }
+    variances = {
+        "participant (Intercept)": float(g[0, 0]),
+        "participant Method1": float(g[1, 1]),
+        "covariance": float(g[0, 1]),
+        "residual": scale,
+    }
+    return MixedModelResult(
+        fixed=fixed,
+        variances=variances,
+        loglik=-0.5 * crit,
+        n_obs=int(len(data)),
+        n_participants=int(len(per)),
+        n_incomplete=int((per < n_cells).sum()),
+        method=method,
+        converged=bool(opt.success),
+    )
 
 
 def _signrank_cdf(n: int) -> np.ndarray:
@@ -192,7 +217,7 @@ def _signrank_cdf(n: int) -> np.ndarray:
     counts[0] = 1.0
     for k in range(1, n + 1):
         counts[k:] = counts[k:] + counts[:-k].copy()
-    return np.cumsum(counts) / 2.0 ** n
+    return np.cumsum(counts) / 2.0**n
 
 
 def signed_rank_test(d) -> dict:
@@ -213,7 +238,7 @@ def signed_rank_test(d) -> dict:
         upper = 1.0 - (cdf[int(round(v)) - 1] if v >= 1 else 0.0)
         return {"n": n, "V": v, "p": float(min(1.0, 2.0 * min(lower, upper))), "method": "exact"}
     z = v - n * (n + 1) / 4.0
-    sigma = np.sqrt(n * (n + 1) * (2 * n + 1) / 24.0 - float((ties ** 3 - ties).sum()) / 48.0)
+    sigma = np.sqrt(n * (n + 1) * (2 * n + 1) / 24.0 - float((ties**3 - ties).sum()) / 48.0)
     z = (z - np.sign(z) * 0.5) / sigma
     return {"n": n, "V": v, "p": float(2.0 * min(_st.norm.cdf(z), _st.norm.sf(z))), "method": "normal"}
 
@@ -242,7 +267,7 @@ def ordinal_method_check(cm: CellMatrix, *, alpha: float = 0.05) -> pd.DataFrame
     n = cm.values.shape[0]
     mi = cm.factors.index("Method")
     grid = np.moveaxis(cm.values.reshape(n, *cm.shape), 1 + mi, -1)
-    diff = grid[..., 0] - grid[..., -1]                          # (n, *others)
+    diff = grid[..., 0] - grid[..., -1]  # (n, *others)
     others = [f for f in cm.factors if f != "Method"]
     other_levels = [cm.levels[cm.factors.index(f)] for f in others]
     flat = diff.reshape(n, -1)
@@ -254,10 +279,20 @@ def ordinal_method_check(cm: CellMatrix, *, alpha: float = 0.05) -> pd.DataFrame
         sd = d.std(ddof=1)
         p_t = float(2.0 * _st.t.sf(abs(d.mean()) / (sd / np.sqrt(n)), n - 1)) if sd > 0 else float("nan")
         row = dict(zip(others, lab)) if lab is not None else {f: "" for f in others}
-        row.update(cell=" ".join(map(str, lab)) if lab is not None else "all", n=n, n_pos=s["n_pos"],
-                   n_neg=s["n_neg"], n_zero=int((d == 0).sum()), median_diff=float(np.median(d)), V=w["V"],
-                   p_wilcoxon=w["p"], wilcoxon_method=w["method"], p_sign=s["p"], p_t=p_t,
-                   agree=bool((w["p"] < alpha) == (p_t < alpha)))
+        row.update(
+            cell=" ".join(map(str, lab)) if lab is not None else "all",
+            n=n,
+            n_pos=s["n_pos"],
+            n_neg=s["n_neg"],
+            n_zero=int((d == 0).sum()),
+            median_diff=float(np.median(d)),
+            V=w["V"],
+            p_wilcoxon=w["p"],
+            wilcoxon_method=w["method"],
+            p_sign=s["p"],
+            p_t=p_t,
+            agree=bool((w["p"] < alpha) == (p_t < alpha)),
+        )
         rows.append(row)
     out = pd.DataFrame(rows)
     out.attrs["contrast"] = f"{cm.levels[mi][0]} - {cm.levels[mi][-1]}"

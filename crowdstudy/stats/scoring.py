@@ -15,8 +15,17 @@ import pandas as pd
 from crowdstudy.errors import InvalidInputError
 from crowdstudy.stats._data import plain, row_label
 
-__all__ = ["validate_responses", "check_complete", "reverse_items", "item_reliability", "composite_scores", "cell_means",
-           "FACTOR_COLUMNS", "FACTORS", "REQUIRED_COLUMNS"]
+__all__ = [
+    "validate_responses",
+    "check_complete",
+    "reverse_items",
+    "item_reliability",
+    "composite_scores",
+    "cell_means",
+    "FACTOR_COLUMNS",
+    "FACTORS",
+    "REQUIRED_COLUMNS",
+]
 
 #: responses.csv column -> factor name used in the analysis tables.
 FACTOR_COLUMNS = {"density_level": "Density", "viewpoint": "Viewpoint", "method": "Method"}
@@ -29,6 +38,7 @@ REQUIRED_COLUMNS = ("participant_id", "stage", "scenario", "density_level", "vie
 def _design(design):
     if design is None:
         from crowdstudy.design import load_design
+
         return load_design()
     return design
 
@@ -71,39 +81,48 @@ def validate_responses(responses: pd.DataFrame, design=None, *, source: str = "r
         bad = num.isna() | (num != np.round(num)) | (num < 1) | (num > top)
         if bad.any():
             i = int(bad.to_numpy().nonzero()[0][0])
-            raise InvalidInputError(f"{source}: column {col!r} {_where(out, i)} holds {plain(raw.iloc[i])}; "
-                                    f"expected an integer 1..{top}")
+            raise InvalidInputError(
+                f"{source}: column {col!r} {_where(out, i)} holds {plain(raw.iloc[i])}; expected an integer 1..{top}"
+            )
         out[col] = num.astype(int)
     stage = pd.to_numeric(out["stage"], errors="coerce")
     bad = stage.isna() | (stage != np.round(stage))
     if bad.any():
         i = int(bad.to_numpy().nonzero()[0][0])
-        raise InvalidInputError(f"{source}: column 'stage' {_where(out, i)} holds {plain(out['stage'].iloc[i])}; "
-                                f"expected a stage number ({', '.join(str(st.number) for st in design.stages)})")
+        raise InvalidInputError(
+            f"{source}: column 'stage' {_where(out, i)} holds {plain(out['stage'].iloc[i])}; "
+            f"expected a stage number ({', '.join(str(st.number) for st in design.stages)})"
+        )
     out["stage"] = stage.astype(int)
     stages = {st.number: st for st in design.stages}
     unknown = ~out["stage"].isin(list(stages))
     if unknown.any():
         i = int(unknown.to_numpy().nonzero()[0][0])
-        raise InvalidInputError(f"{source}: column 'stage' {_where(out, i)} holds stage {int(out['stage'].iloc[i])}, "
-                                f"which the design ({design.source}) does not define; it defines "
-                                f"{', '.join(f'{st.number} ({st.scenario})' for st in design.stages)}")
+        raise InvalidInputError(
+            f"{source}: column 'stage' {_where(out, i)} holds stage {int(out['stage'].iloc[i])}, "
+            f"which the design ({design.source}) does not define; it defines "
+            f"{', '.join(f'{st.number} ({st.scenario})' for st in design.stages)}"
+        )
     for number, st in stages.items():
         rows = (out["stage"] == number).to_numpy()
         if not rows.any():
             continue
         sub = out[rows]
-        for col, known, what in (("scenario", [st.scenario], "scenario"),
-                                 ("density_level", list(design.densities), "density level"),
-                                 ("viewpoint", list(st.viewpoints), "viewpoint"),
-                                 ("method", list(design.methods), "method")):
+        for col, known, what in (
+            ("scenario", [st.scenario], "scenario"),
+            ("density_level", list(design.densities), "density level"),
+            ("viewpoint", list(st.viewpoints), "viewpoint"),
+            ("method", list(design.methods), "method"),
+        ):
             off = ~sub[col].astype(str).isin(known)
             if off.any():
                 j = int(off.to_numpy().nonzero()[0][0])
                 i = int(rows.nonzero()[0][j])
-                raise InvalidInputError(f"{source}: column {col!r} {_where(out, i)} has unknown level "
-                                        f"{plain(sub[col].iloc[j])}: stage {number} ({st.scenario}) of the design "
-                                        f"({design.source}) has the {what}(s) {', '.join(known)}")
+                raise InvalidInputError(
+                    f"{source}: column {col!r} {_where(out, i)} has unknown level "
+                    f"{plain(sub[col].iloc[j])}: stage {number} ({st.scenario}) of the design "
+                    f"({design.source}) has the {what}(s) {', '.join(known)}"
+                )
     return out
 
 
@@ -125,28 +144,33 @@ def check_complete(data: pd.DataFrame, design=None, *, source: str = "responses"
         sub = data[data["stage"] == st.number]
         if not len(sub):
             continue
-        for col, known, what in (("density_level", list(design.densities), "density level"),
-                                 ("viewpoint", list(st.viewpoints), "viewpoint"),
-                                 ("method", list(design.methods), "method")):
+        for col, known, what in (
+            ("density_level", list(design.densities), "density level"),
+            ("viewpoint", list(st.viewpoints), "viewpoint"),
+            ("method", list(design.methods), "method"),
+        ):
             absent = [lv for lv in known if lv not in set(sub[col].astype(str))]
             if absent:
-                raise InvalidInputError(f"{source}: stage {st.number} ({st.scenario}) has no rows for the {what} "
-                                        f"{absent[0]!r} (the design {design.source} lists {', '.join(known)}); "
-                                        f"analyse a design without it or export the missing answers")
+                raise InvalidInputError(
+                    f"{source}: stage {st.number} ({st.scenario}) has no rows for the {what} "
+                    f"{absent[0]!r} (the design {design.source} lists {', '.join(known)}); "
+                    f"analyse a design without it or export the missing answers"
+                )
     keys = ["participant_id", "stage", "density_level", "viewpoint", "method"]
     dup = data.duplicated(keys, keep=False).to_numpy()
     if dup.any():
         first = int(dup.nonzero()[0][0])
         row = data.iloc[first]
         same = (data[keys] == row[keys]).all(axis=1).to_numpy().nonzero()[0]
-        if pd.api.types.is_integer_dtype(data.index):        # a filtered frame keeps the file's row numbers
+        if pd.api.types.is_integer_dtype(data.index):  # a filtered frame keeps the file's row numbers
             same = data.index.to_numpy()[same]
         n_cells = data[dup].groupby(keys).ngroups
         raise InvalidInputError(
             f"{source}: participant {plain(row['participant_id'])} answered stage {int(row['stage'])}, "
             f"density_level {plain(row['density_level'])}, viewpoint {plain(row['viewpoint'])}, "
             f"method {plain(row['method'])} {len(same)} times (rows {', '.join(str(i + 1) for i in same)}); each "
-            f"stimulus is shown once per participant ({n_cells} participant x stimulus combination(s) repeated)")
+            f"stimulus is shown once per participant ({n_cells} participant x stimulus combination(s) repeated)"
+        )
 
 
 def reverse_items(responses: pd.DataFrame, design=None) -> pd.DataFrame:
@@ -196,9 +220,18 @@ def item_reliability(responses: pd.DataFrame, design=None, *, by: str | None = "
                 alpha_p = _alpha(pm) if len(pm) > 2 else float("nan")
             else:
                 r = sb = alpha = alpha_p = float("nan")
-            rows.append({"group": key, "composite": cname, "items": "+".join(items), "n": len(x),
-                         "pearson_r": r, "spearman_brown": sb, "cronbach_alpha": alpha,
-                         "alpha_participant_means": alpha_p})
+            rows.append(
+                {
+                    "group": key,
+                    "composite": cname,
+                    "items": "+".join(items),
+                    "n": len(x),
+                    "pearson_r": r,
+                    "spearman_brown": sb,
+                    "cronbach_alpha": alpha,
+                    "alpha_participant_means": alpha_p,
+                }
+            )
     out = pd.DataFrame(rows)
     if by is not None:
         out = out.rename(columns={"group": by})
@@ -227,10 +260,17 @@ def cell_means(scored: pd.DataFrame, composite: str, design=None, *, stage: int 
     data = scored if stage is None else scored[scored["stage"] == int(stage)]
     if len(data) == 0:
         raise InvalidInputError(f"no responses for stage {stage!r}")
-    order = {"density_level": list(design.densities), "viewpoint": list(design.viewpoints),
-             "method": list(design.methods)}
-    g = (data.groupby(["participant_id", *FACTOR_COLUMNS], observed=True)[composite].mean().reset_index()
-         .rename(columns=FACTOR_COLUMNS))
+    order = {
+        "density_level": list(design.densities),
+        "viewpoint": list(design.viewpoints),
+        "method": list(design.methods),
+    }
+    g = (
+        data.groupby(["participant_id", *FACTOR_COLUMNS], observed=True)[composite]
+        .mean()
+        .reset_index()
+        .rename(columns=FACTOR_COLUMNS)
+    )
     for col, name in FACTOR_COLUMNS.items():
         present = [lv for lv in order[col] if lv in set(g[name])]
         g[name] = pd.Categorical(g[name], categories=present, ordered=True)

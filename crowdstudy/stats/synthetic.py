@@ -32,7 +32,7 @@ from __future__ import annotations
 
 import dataclasses
 import datetime as _dt
-from typing import Mapping
+from collections.abc import Mapping
 
 import numpy as np
 
@@ -46,7 +46,7 @@ ITEM_COLUMNS = ("Q1", "Q2", "Q3", "Q4", "Q5", "Q6")
 
 _PAPER_COMPOSITES = {"QCR": ("Q1", "Q2"), "QCA": ("Q3", "Q4"), "QOR": ("Q5", "Q6")}
 _PAPER_REVERSED = ("Q2", "Q4", "Q6")
-_EPOCH = _dt.datetime(2024, 1, 8, 9, 0, 0, tzinfo=_dt.timezone.utc)
+_EPOCH = _dt.datetime(2024, 1, 8, 9, 0, 0, tzinfo=_dt.UTC)
 
 
 def _default_composite_effects() -> dict[str, float]:
@@ -101,25 +101,41 @@ class ResponseModel:
     viewpoint_ids: tuple[str, ...] = ("V1", "V2", "V3", "V4")
 
     def __post_init__(self):
-        for name in ("method_effect", "density_slope", "reference_density", "density_penalty", "base_score",
-                     "noise_sd", "participant_sd", "participant_method_sd", "participant_density_sd",
-                     "participant_viewpoint_sd"):
+        for name in (
+            "method_effect",
+            "density_slope",
+            "reference_density",
+            "density_penalty",
+            "base_score",
+            "noise_sd",
+            "participant_sd",
+            "participant_method_sd",
+            "participant_density_sd",
+            "participant_viewpoint_sd",
+        ):
             value = getattr(self, name)
             if not isinstance(value, (int, float)) or isinstance(value, bool) or not np.isfinite(value):
                 raise InvalidInputError(f"ResponseModel.{name} must be a finite number, got {value!r}")
-        for name in ("noise_sd", "participant_sd", "participant_method_sd", "participant_density_sd",
-                     "participant_viewpoint_sd"):
+        for name in (
+            "noise_sd",
+            "participant_sd",
+            "participant_method_sd",
+            "participant_density_sd",
+            "participant_viewpoint_sd",
+        ):
             if getattr(self, name) < 0:
                 raise InvalidInputError(f"ResponseModel.{name} must be >= 0, got {getattr(self, name)!r}")
         if not isinstance(self.likert_points, int) or self.likert_points < 2:
             raise InvalidInputError(f"ResponseModel.likert_points must be an integer >= 2, got {self.likert_points!r}")
         for c in self.composite_effects:
             if c not in self.composites:
-                raise InvalidInputError(f"ResponseModel.composite_effects names unknown composite {c!r}; "
-                                        f"known: {', '.join(self.composites)}")
+                raise InvalidInputError(
+                    f"ResponseModel.composite_effects names unknown composite {c!r}; "
+                    f"known: {', '.join(self.composites)}"
+                )
 
     @classmethod
-    def for_design(cls, design, **kwargs) -> "ResponseModel":
+    def for_design(cls, design, **kwargs) -> ResponseModel:
         """A model whose composites, reversed items and scale come from a StudyDesign."""
         kwargs.setdefault("composites", {k: tuple(v) for k, v in design.composites.items()})
         kwargs.setdefault("reversed_items", tuple(it.id for it in design.items if it.reverse))
@@ -150,8 +166,9 @@ class ResponseModel:
         scale = max(0.0, 1.0 + self.density_slope * (self.reference_density - float(density)))
         return self.method_effect * float(self.composite_effects.get(composite, 1.0)) * scale
 
-    def expected_scores(self, stimulus: Mapping, participant_offset: float | Mapping[str, float] = 0.0
-                        ) -> dict[str, float]:
+    def expected_scores(
+        self, stimulus: Mapping, participant_offset: float | Mapping[str, float] = 0.0
+    ) -> dict[str, float]:
         """Latent (unrounded, unclipped) composite scores on the scored scale."""
         for key in ("density", "method"):
             if key not in stimulus:
@@ -161,13 +178,17 @@ class ResponseModel:
         except (TypeError, ValueError):
             raise InvalidInputError(f"stimulus['density'] must be a number, got {stimulus['density']!r}") from None
         treated = stimulus["method"] == self.treated_method
-        common = (self.base_score + float(self.scenario_offsets.get(stimulus.get("scenario"), 0.0))
-                  + float(self.viewpoint_offsets.get(stimulus.get("viewpoint"), 0.0))
-                  - self.density_penalty * (density - self.reference_density))
+        common = (
+            self.base_score
+            + float(self.scenario_offsets.get(stimulus.get("scenario"), 0.0))
+            + float(self.viewpoint_offsets.get(stimulus.get("viewpoint"), 0.0))
+            - self.density_penalty * (density - self.reference_density)
+        )
         if isinstance(participant_offset, Mapping):
             p_method = float(participant_offset.get("method", 0.0))
-            common += (float(participant_offset.get("density_slope", 0.0)) * (density - self.reference_density)
-                       + float(participant_offset.get(f"viewpoint:{stimulus.get('viewpoint')}", 0.0)))
+            common += float(participant_offset.get("density_slope", 0.0)) * (density - self.reference_density) + float(
+                participant_offset.get(f"viewpoint:{stimulus.get('viewpoint')}", 0.0)
+            )
             p_comp = {c: float(participant_offset.get(c, 0.0)) for c in self.composites}
         else:
             p_method = 0.0
@@ -180,8 +201,12 @@ class ResponseModel:
             out[c] = mu
         return out
 
-    def answer(self, stimulus: Mapping, participant_offset: float | Mapping[str, float] = 0.0,
-               rng: np.random.Generator | int | None = None) -> dict[str, int]:
+    def answer(
+        self,
+        stimulus: Mapping,
+        participant_offset: float | Mapping[str, float] = 0.0,
+        rng: np.random.Generator | int | None = None,
+    ) -> dict[str, int]:
         """Raw answers ``{"Q1": int, ...}`` (1..likert_points, negative items NOT reversed).
 
         ``stimulus``: a manifest row / ``Stimulus.as_dict()`` (uses density, method, and
@@ -198,8 +223,12 @@ class ResponseModel:
                 answers[item] = top + 1 - scored if item in self.reversed_items else scored
         return {k: answers[k] for k in sorted(answers, key=_item_order)}
 
-    def answer_many(self, stimuli, participant_offset: float | Mapping[str, float] = 0.0,
-                    rng: np.random.Generator | int | None = None) -> tuple[list[str], np.ndarray]:
+    def answer_many(
+        self,
+        stimuli,
+        participant_offset: float | Mapping[str, float] = 0.0,
+        rng: np.random.Generator | int | None = None,
+    ) -> tuple[list[str], np.ndarray]:
         """Raw answers of one participant to several stimuli at once (same model as
         :meth:`answer`, noise drawn as one (T, items) block).
 
@@ -210,8 +239,10 @@ class ResponseModel:
         comps = list(self.composites)
         items = sorted((it for c in comps for it in self.composites[c]), key=_item_order)
         owner = {it: comps.index(c) for c in comps for it in self.composites[c]}
-        mu = np.array([[sc[c] for c in comps] for sc in (self.expected_scores(s, participant_offset)
-                                                           for s in stimuli)], dtype=float).reshape(-1, len(comps))
+        mu = np.array(
+            [[sc[c] for c in comps] for sc in (self.expected_scores(s, participant_offset) for s in stimuli)],
+            dtype=float,
+        ).reshape(-1, len(comps))
         top = self.likert_points
         noise = rng.normal(0.0, self.noise_sd, size=(mu.shape[0], len(items)))
         scored = np.clip(np.rint(mu[:, [owner[it] for it in items]] + noise), 1, top).astype(np.int64)
@@ -232,8 +263,7 @@ def _as_rng(rng) -> np.random.Generator:
     raise InvalidInputError(f"rng must be a numpy Generator, an int seed or None, got {type(rng).__name__}")
 
 
-def simulate_responses(design, n_participants: int, model: ResponseModel | None = None, seed: int = 0, *,
-                       stages=None):
+def simulate_responses(design, n_participants: int, model: ResponseModel | None = None, seed: int = 0, *, stages=None):
     """Simulate a whole study in-process: ``n_participants`` answering every stimulus.
 
     ``stages``: optional subset of stage numbers to simulate (default: every stage).
@@ -260,13 +290,15 @@ def simulate_responses(design, n_participants: int, model: ResponseModel | None 
     item_ids = [it.id for it in design.items]
     missing = [q for q in ITEM_COLUMNS if q not in item_ids]
     if missing:
-        raise InvalidInputError(f"design {design.source}: responses.csv needs items {', '.join(ITEM_COLUMNS)}; "
-                                f"missing {', '.join(missing)}")
+        raise InvalidInputError(
+            f"design {design.source}: responses.csv needs items {', '.join(ITEM_COLUMNS)}; missing {', '.join(missing)}"
+        )
     modelled = {it for members in model.composites.values() for it in members}
     unmodelled = [q for q in ITEM_COLUMNS if q not in modelled]
     if unmodelled:
-        raise InvalidInputError(f"model.composites must cover every item of responses.csv; "
-                                f"{', '.join(unmodelled)} belong to no composite")
+        raise InvalidInputError(
+            f"model.composites must cover every item of responses.csv; {', '.join(unmodelled)} belong to no composite"
+        )
     stimuli = [s.as_dict() for s in design.stimuli()]
     all_stages = sorted({s["stage"] for s in stimuli})
     if stages is None:
@@ -292,11 +324,16 @@ def simulate_responses(design, n_participants: int, model: ResponseModel | None 
         answered = epoch + np.round(start_ms + rt).astype("timedelta64[ms]")
         frame = {
             "participant_id": [f"sim-{p + 1:03d}"] * len(order),
-            "stage": [int(s_["stage"]) for s_ in order], "scenario": [s_["scenario"] for s_ in order],
-            "trial_index": np.arange(len(order)), "stimulus_id": [s_["stimulus_id"] for s_ in order],
-            "density_level": [s_["density_level"] for s_ in order], "density": [float(s_["density"]) for s_ in order],
-            "viewpoint": [s_["viewpoint"] for s_ in order], "method": [s_["method"] for s_ in order],
-            **{q: answers[:, items.index(q)] for q in ITEM_COLUMNS}, "rt_ms": rt,
+            "stage": [int(s_["stage"]) for s_ in order],
+            "scenario": [s_["scenario"] for s_ in order],
+            "trial_index": np.arange(len(order)),
+            "stimulus_id": [s_["stimulus_id"] for s_ in order],
+            "density_level": [s_["density_level"] for s_ in order],
+            "density": [float(s_["density"]) for s_ in order],
+            "viewpoint": [s_["viewpoint"] for s_ in order],
+            "method": [s_["method"] for s_ in order],
+            **{q: answers[:, items.index(q)] for q in ITEM_COLUMNS},
+            "rt_ms": rt,
             "shown_at": np.datetime_as_string(shown, unit="ms"),
             "answered_at": np.datetime_as_string(answered, unit="ms"),
         }

@@ -38,10 +38,33 @@ from crowdstudy.stats.results import AnalysisResult, CompositeResult
 
 __all__ = ["write_analysis", "write_composite_tables", "analysis_record"]
 
-_REPORTED = ["Source", "ddof1_used", "ddof2_used", "F", "p", "np2", "ng2", "eps_GG", "W_spher", "p_spher",
-             "correction_applied"]
-_POSTHOC_REPORTED = ["effect", "factor", "by_level", "contrast", "estimate", "lower_CL", "upper_CL", "SE", "df", "t",
-                     "p_adj", "dz"]
+_REPORTED = [
+    "Source",
+    "ddof1_used",
+    "ddof2_used",
+    "F",
+    "p",
+    "np2",
+    "ng2",
+    "eps_GG",
+    "W_spher",
+    "p_spher",
+    "correction_applied",
+]
+_POSTHOC_REPORTED = [
+    "effect",
+    "factor",
+    "by_level",
+    "contrast",
+    "estimate",
+    "lower_CL",
+    "upper_CL",
+    "SE",
+    "df",
+    "t",
+    "p_adj",
+    "dz",
+]
 
 
 def write_analysis(result: AnalysisResult, summary: str, out_dir: Path) -> list[Path]:
@@ -73,31 +96,52 @@ def _stage_dir(number: int, scenario: str) -> str:
 def write_composite_tables(res: CompositeResult, d: Path, adjust: str) -> list[Path]:
     """The tables of one (stage, composite) in folder ``d`` (see the module docstring)."""
     comp, label = res.composite, res.label
-    files = write_table(res.anova, d / f"{comp}_anova", formats=("csv",))   # every column
-    files += write_table(res.anova[_REPORTED], d / f"{comp}_anova", formats=("md", "tex"),
-                         caption=f"{label}: repeated-measures ANOVA")
+    files = write_table(res.anova, d / f"{comp}_anova", formats=("csv",))  # every column
+    files += write_table(
+        res.anova[_REPORTED], d / f"{comp}_anova", formats=("md", "tex"), caption=f"{label}: repeated-measures ANOVA"
+    )
     ph = res.posthoc
     files += write_table(ph, d / f"{comp}_posthoc", formats=("csv",))
-    files += write_table(ph[_POSTHOC_REPORTED] if len(ph) else ph, d / f"{comp}_posthoc",
-                         formats=("md", "tex"), caption=f"{label}: post hoc ({adjust}), 95% CI, d_z")
+    files += write_table(
+        ph[_POSTHOC_REPORTED] if len(ph) else ph,
+        d / f"{comp}_posthoc",
+        formats=("md", "tex"),
+        caption=f"{label}: post hoc ({adjust}), 95% CI, d_z",
+    )
     files += write_table(res.method_by_cell, d / f"{comp}_method_by_cell", formats=("csv",))
     if res.simple_effects is not None:
-        files += write_table(res.simple_effects, d / f"{comp}_simple_effects", formats=("csv", "md"),
-                             caption=f"{label}: simple effects (emmeans joint_tests, multivariate model)")
+        files += write_table(
+            res.simple_effects,
+            d / f"{comp}_simple_effects",
+            formats=("csv", "md"),
+            caption=f"{label}: simple effects (emmeans joint_tests, multivariate model)",
+        )
     rob = res.robustness
     if rob is not None and rob.mixed is not None:
         files += write_table(rob.mixed.fixed, d / f"{comp}_mixed_model", formats=("csv",))
     if rob is not None:
-        files += write_table(rob.ordinal, d / f"{comp}_ordinal", formats=("csv", "md"),
-                             caption=f"{label}: Method without interval assumptions (signed-rank, sign test)")
+        files += write_table(
+            rob.ordinal,
+            d / f"{comp}_ordinal",
+            formats=("csv", "md"),
+            caption=f"{label}: Method without interval assumptions (signed-rank, sign test)",
+        )
     if res.trends is not None:
-        files += write_table(res.trends, d / f"{comp}_trends", formats=("csv", "md"),
-                             caption=f"{label}: polynomial contrasts over Density")
+        files += write_table(
+            res.trends,
+            d / f"{comp}_trends",
+            formats=("csv", "md"),
+            caption=f"{label}: polynomial contrasts over Density",
+        )
     factors = list(res.factors)
     cells = res.descriptives[res.descriptives["effect"] == ":".join(factors)]
     files += write_table(res.descriptives, d / f"{comp}_descriptives", formats=("csv",))
-    files += write_table(cells[[*factors, "n", "mean_sd"]], d / f"{comp}_descriptives", formats=("md", "tex"),
-                         caption=f"{label}: mean +- SD per condition")
+    files += write_table(
+        cells[[*factors, "n", "mean_sd"]],
+        d / f"{comp}_descriptives",
+        formats=("md", "tex"),
+        caption=f"{label}: mean +- SD per condition",
+    )
     files += write_table(res.shapiro, d / f"{comp}_shapiro", formats=("csv",))
     return files
 
@@ -108,13 +152,24 @@ def _composite_figures(result: AnalysisResult, res: CompositeResult, d: Path) ->
     from crowdstudy.stats.figures import method_figure, stars_caption
 
     o, design = result.options, result.design
-    files = [qq_figure_from_cells(res.cells, d / f"{res.composite}_qq.png", title=f"{res.label}: residual Q-Q plots",
-                                  shapiro=res.shapiro)]
+    files = [
+        qq_figure_from_cells(
+            res.cells, d / f"{res.composite}_qq.png", title=f"{res.label}: residual Q-Q plots", shapiro=res.shapiro
+        )
+    ]
     if "Density" in res.factors:
         caption = stars_caption(o.adjust, len(design.methods), rule=o.stars, gate=res.stars_gate)
-        files.append(method_figure({res.composite: _panel(res)}, d / f"{res.composite}_by_density.png",
-                                   density_values=design.densities, error=o.error_bars,
-                                   title=res.label + o.figure_note, caption=caption, note=result.simulated_note))
+        files.append(
+            method_figure(
+                {res.composite: _panel(res)},
+                d / f"{res.composite}_by_density.png",
+                density_values=design.densities,
+                error=o.error_bars,
+                title=res.label + o.figure_note,
+                caption=caption,
+                note=result.simulated_note,
+            )
+        )
     return files
 
 
@@ -127,12 +182,17 @@ def _stage_figure(result: AnalysisResult, stage: Stage, d: Path) -> list[Path]:
     if "Density" not in comps[0].factors:
         return []
     gates = sorted({res.stars_gate for res in comps if res.stars_gate})
-    return [method_figure({res.composite: _panel(res) for res in comps}, d / "scores_by_density.png",
-                          density_values=design.densities, error=o.error_bars,
-                          title=f"Stage {stage.number} ({stage.scenario}){o.figure_note}",
-                          caption=stars_caption(o.adjust, len(design.methods), rule=o.stars,
-                                                gate=gates[0] if gates else ""),
-                          note=result.simulated_note)]
+    return [
+        method_figure(
+            {res.composite: _panel(res) for res in comps},
+            d / "scores_by_density.png",
+            density_values=design.densities,
+            error=o.error_bars,
+            title=f"Stage {stage.number} ({stage.scenario}){o.figure_note}",
+            caption=stars_caption(o.adjust, len(design.methods), rule=o.stars, gate=gates[0] if gates else ""),
+            note=result.simulated_note,
+        )
+    ]
 
 
 def _panel(res: CompositeResult) -> tuple[CellMatrix, pd.DataFrame | None]:
@@ -145,12 +205,15 @@ def analysis_record(result: AnalysisResult) -> dict:
     """analysis.json: provenance, settings, participants, exclusions and the key numbers
     of every (stage, composite)."""
     ex = result.exclusions
-    return {"provenance": provenance(None, design=str(result.design.source)),
-            "settings": result.options.settings(),
-            "source": result.source, "simulated": result.simulated,
-            "participants": result.n_participants,
-            "exclusions": ex.as_dict() if ex is not None else None,
-            "results": [_composite_record(r) for r in result.results.values()]}
+    return {
+        "provenance": provenance(None, design=str(result.design.source)),
+        "settings": result.options.settings(),
+        "source": result.source,
+        "simulated": result.simulated,
+        "participants": result.n_participants,
+        "exclusions": ex.as_dict() if ex is not None else None,
+        "results": [_composite_record(r) for r in result.results.values()],
+    }
 
 
 def _composite_record(r: CompositeResult) -> dict:
@@ -159,22 +222,57 @@ def _composite_record(r: CompositeResult) -> dict:
     rob = r.robustness
     if rob is not None and rob.mixed is not None:
         mm = rob.mixed
-        robust["mixed_model"] = {**mm.method, "variances": mm.variances, "loglik": mm.loglik, "n_obs": mm.n_obs,
-                                 "n_participants": mm.n_participants, "n_incomplete": mm.n_incomplete}
+        robust["mixed_model"] = {
+            **mm.method,
+            "variances": mm.variances,
+            "loglik": mm.loglik,
+            "n_obs": mm.n_obs,
+            "n_participants": mm.n_participants,
+            "n_incomplete": mm.n_incomplete,
+        }
     if rob is not None:
         a = rob.ordinal[rob.ordinal["cell"] == "all"].iloc[0]
-        robust["ordinal_all_cells"] = {"V": float(a["V"]), "p_wilcoxon": float(a["p_wilcoxon"]),
-                                       "p_sign": float(a["p_sign"]), "n_pos": int(a["n_pos"]),
-                                       "n_neg": int(a["n_neg"])}
-    return {"stage": r.stage, "scenario": r.scenario, "composite": r.composite,
-            "n_subjects": int(r.anova["n_subjects"].iloc[0]),
-            "dropped_subjects": [str(s) for s in r.anova.attrs.get("dropped_subjects", [])],
-            "undefined_effects": list(r.anova.attrs.get("undefined", [])),
-            "effects": {row.Source: {"F": row.F, "ddof1": row.ddof1_used, "ddof2": row.ddof2_used,
-                                     "p": row.p, "np2": row.np2, "ng2": row.ng2,
-                                     "gg_corrected": bool(row.correction_applied)}
-                        for row in r.anova.itertuples()},
-            "method_contrast": {k: (m[k] if isinstance(m[k], str) else float(m[k]))
-                                for k in ("contrast", "estimate", "lower_CL", "upper_CL", "ci_adjust", "dz",
-                                          "dz_low", "dz_high", "g_av", "g_av_low", "g_av_high")},
-            "robustness": robust}
+        robust["ordinal_all_cells"] = {
+            "V": float(a["V"]),
+            "p_wilcoxon": float(a["p_wilcoxon"]),
+            "p_sign": float(a["p_sign"]),
+            "n_pos": int(a["n_pos"]),
+            "n_neg": int(a["n_neg"]),
+        }
+    return {
+        "stage": r.stage,
+        "scenario": r.scenario,
+        "composite": r.composite,
+        "n_subjects": int(r.anova["n_subjects"].iloc[0]),
+        "dropped_subjects": [str(s) for s in r.anova.attrs.get("dropped_subjects", [])],
+        "undefined_effects": list(r.anova.attrs.get("undefined", [])),
+        "effects": {
+            row.Source: {
+                "F": row.F,
+                "ddof1": row.ddof1_used,
+                "ddof2": row.ddof2_used,
+                "p": row.p,
+                "np2": row.np2,
+                "ng2": row.ng2,
+                "gg_corrected": bool(row.correction_applied),
+            }
+            for row in r.anova.itertuples()
+        },
+        "method_contrast": {
+            k: (m[k] if isinstance(m[k], str) else float(m[k]))
+            for k in (
+                "contrast",
+                "estimate",
+                "lower_CL",
+                "upper_CL",
+                "ci_adjust",
+                "dz",
+                "dz_low",
+                "dz_high",
+                "g_av",
+                "g_av_low",
+                "g_av_high",
+            )
+        },
+        "robustness": robust,
+    }

@@ -18,8 +18,15 @@ from urllib.parse import parse_qs
 
 from crowdstudy.study.webio import ApiError
 
-__all__ = ["COOKIE", "session_value", "admin_authorized", "check_admin", "login_page", "read_login_form",
-           "cookie_header"]
+__all__ = [
+    "COOKIE",
+    "session_value",
+    "admin_authorized",
+    "check_admin",
+    "login_page",
+    "read_login_form",
+    "cookie_header",
+]
 
 COOKIE = "crowdstudy_admin"
 _SESSION_S = 12 * 3600
@@ -44,8 +51,9 @@ def admin_authorized(request, admin_token: str) -> bool:
 def check_admin(request, admin_token: str) -> None:
     """Raise ApiError 401 (nothing sent) / 403 (wrong) unless the request is the admin's."""
     if "token" in request.query_params:
-        raise ApiError(400, "the admin token is never accepted in the URL; send Authorization: Bearer <token> "
-                            "or log in on /admin")
+        raise ApiError(
+            400, "the admin token is never accepted in the URL; send Authorization: Bearer <token> or log in on /admin"
+        )
     has_header = request.headers.get("authorization", "").lower().startswith("bearer ")
     has_cookie = bool(request.cookies.get(COOKIE)) and request.method in ("GET", "HEAD")
     if not has_header and not has_cookie:
@@ -58,8 +66,7 @@ def cookie_header(request, admin_token: str | None) -> str:
     """The Set-Cookie value logging in (token given) or out (None)."""
     secure = request.url.scheme == "https" or request.headers.get("x-forwarded-proto", "") == "https"
     value, age = (session_value(admin_token), _SESSION_S) if admin_token else ("", 0)
-    return (f"{COOKIE}={value}; Max-Age={age}; Path=/admin; HttpOnly; SameSite=Strict" +
-            ("; Secure" if secure else ""))
+    return f"{COOKIE}={value}; Max-Age={age}; Path=/admin; HttpOnly; SameSite=Strict" + ("; Secure" if secure else "")
 
 
 async def read_login_form(request) -> str:

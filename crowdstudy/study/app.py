@@ -64,6 +64,7 @@ class StudyConfig:
     videos under their opaque names (None: served from the stimulus folder by this server);
     media_url: the URL prefix the browser loads videos from (default ``/media``).
     """
+
     design: StudyDesign
     stimuli: StimulusSet
     store: StudyStore
@@ -85,11 +86,13 @@ def _origin(url: str | None) -> str:
 
 async def _api_error(_request, exc):
     from crowdstudy.study.webio import error_response
+
     return error_response(exc.status, exc.message)
 
 
 async def _invalid_input(_request, exc):
     from crowdstudy.study.webio import error_response
+
     return error_response(422, str(exc))
 
 
@@ -101,8 +104,9 @@ def create_app(config: StudyConfig):
         from starlette.middleware import Middleware
         from starlette.routing import Route
     except ModuleNotFoundError as exc:  # pragma: no cover
-        raise MissingDependencyError(f"the study server needs the 'web' extra: pip install 'crowdstudy[web]' "
-                                     f"({exc.name} missing)") from None
+        raise MissingDependencyError(
+            f"the study server needs the 'web' extra: pip install 'crowdstudy[web]' ({exc.name} missing)"
+        ) from None
     from crowdstudy.study import routes_admin, routes_participant, routes_static
     from crowdstudy.study.media import publish_media
     from crowdstudy.study.session import StudySession
@@ -116,10 +120,14 @@ def create_app(config: StudyConfig):
     specs = (*routes_participant.ROUTES, *routes_static.ROUTES, *routes_admin.ROUTES)
     routes = [Route(spec.path, spec.handler, methods=list(spec.methods)) for spec in specs]
     latency = LatencyLog()
-    app = Starlette(routes=[*routes, *routes_static.ui_mounts(ui)],
-                    middleware=[Middleware(SecurityHeaders, media_origin=_origin(config.media_url)),
-                                Middleware(AnswerTimer, log=latency)],
-                    exception_handlers={ApiError: _api_error, InvalidInputError: _invalid_input})
+    app = Starlette(
+        routes=[*routes, *routes_static.ui_mounts(ui)],
+        middleware=[
+            Middleware(SecurityHeaders, media_origin=_origin(config.media_url)),
+            Middleware(AnswerTimer, log=latency),
+        ],
+        exception_handlers={ApiError: _api_error, InvalidInputError: _invalid_input},
+    )
     app.state.study = study
     app.state.config = config
     app.state.ui_dir = ui

@@ -20,7 +20,7 @@ from __future__ import annotations
 import hashlib
 import hmac
 import re
-from typing import Iterable
+from collections.abc import Iterable
 
 from crowdstudy.errors import InvalidInputError
 
@@ -35,8 +35,7 @@ TOKEN_PATTERN = re.compile(rf"[0-9a-f]{{{TOKEN_LENGTH}}}")
 def _key(secret: str | bytes) -> bytes:
     key = secret.encode("utf-8") if isinstance(secret, str) else secret
     if not isinstance(key, bytes) or len(key) < 16:
-        raise InvalidInputError("secret must be a str or bytes of at least 16 characters (the study's blinding "
-                                "secret)")
+        raise InvalidInputError("secret must be a str or bytes of at least 16 characters (the study's blinding secret)")
     return key
 
 
@@ -48,7 +47,7 @@ def stimulus_token(secret: str | bytes, participant_id: str, stimulus_id: str) -
     """
     if not isinstance(participant_id, str) or not isinstance(stimulus_id, str):
         raise InvalidInputError("participant_id and stimulus_id must be strings")
-    msg = f"crowdstudy-trial-token\x00{participant_id}\x00{stimulus_id}".encode("utf-8")
+    msg = f"crowdstudy-trial-token\x00{participant_id}\x00{stimulus_id}".encode()
     return hmac.new(_key(secret), msg, hashlib.sha256).hexdigest()[:TOKEN_LENGTH]
 
 
@@ -61,8 +60,10 @@ def token_table(secret: str | bytes, participant_id: str, stimulus_ids: Iterable
     for sid in stimulus_ids:
         tok = stimulus_token(key, participant_id, sid)
         if tok in seen:
-            raise InvalidInputError(f"participant {participant_id!r}: two stimuli share a trial token; "
-                                    "use a new database (a new blinding secret)")
+            raise InvalidInputError(
+                f"participant {participant_id!r}: two stimuli share a trial token; "
+                "use a new database (a new blinding secret)"
+            )
         seen.add(tok)
         out[sid] = tok
     return out

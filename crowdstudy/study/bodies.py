@@ -22,9 +22,24 @@ from crowdstudy.study.blinding import TOKEN_LENGTH, TOKEN_PATTERN
 from crowdstudy.study.schedule import PARTICIPANT_ID_PATTERN
 from crowdstudy.study.webio import ApiError
 
-__all__ = ["GENDERS", "AGE_RANGE", "PLATFORM_FIELDS", "MAX_RT_MS", "Registration", "Timing", "parse_participant_id",
-           "parse_registration", "parse_viewport", "parse_consent", "parse_demographics", "parse_likert",
-           "parse_timing", "parse_trial_ref", "parse_check", "parse_withdrawal"]
+__all__ = [
+    "GENDERS",
+    "AGE_RANGE",
+    "PLATFORM_FIELDS",
+    "MAX_RT_MS",
+    "Registration",
+    "Timing",
+    "parse_participant_id",
+    "parse_registration",
+    "parse_viewport",
+    "parse_consent",
+    "parse_demographics",
+    "parse_likert",
+    "parse_timing",
+    "parse_trial_ref",
+    "parse_check",
+    "parse_withdrawal",
+]
 
 GENDERS = ("female", "male", "non-binary", "other", "prefer not to say")
 AGE_RANGE = (18, 120)
@@ -41,6 +56,7 @@ _MAX_VIEWPORT = 100000
 class Registration(NamedTuple):
     """The body of ``POST /api/participants``: the id, the secret of a resumed session (or
     None) and the platform ids as {database column: value}."""
+
     participant_id: str
     secret: str | None
     platform: dict[str, str]
@@ -50,6 +66,7 @@ class Timing(NamedTuple):
     """The timing fields of an answer: response time (ms), when the trial appeared (ISO 8601
     UTC or None) and the data-quality measures (``video_plays``, ``hidden_count``,
     ``fullscreen_exits``, ``first_play_ms``, ``hidden_ms``; None where not sent)."""
+
     rt_ms: float
     shown_at: str | None
     quality: dict[str, Any]
@@ -67,8 +84,7 @@ def parse_participant_id(value: Any) -> str:
     """A participant id (from the body or the URL path): 400 unless 1-64 letters, digits,
     '_' or '-' starting with a letter or digit."""
     if not isinstance(value, str) or not PARTICIPANT_ID_PATTERN.fullmatch(value):
-        raise ApiError(400, "participant_id must be 1-64 letters, digits, '_' or '-' starting with a letter "
-                            "or digit")
+        raise ApiError(400, "participant_id must be 1-64 letters, digits, '_' or '-' starting with a letter or digit")
     return value
 
 
@@ -126,7 +142,7 @@ def parse_likert(body: dict, item_ids: tuple[str, ...], points: int) -> dict[str
     """``"answers": {"Q1": 1..points, ...}``: every item of ``item_ids`` rated, no other key."""
     answers = body.get("answers")
     if not isinstance(answers, dict):
-        raise ApiError(422, "answers must be an object {\"Q1\": 1..6, ...}")
+        raise ApiError(422, 'answers must be an object {"Q1": 1..6, ...}')
     for q in item_ids:
         if q not in answers:
             raise ApiError(422, f"answers.{q} is missing (all {len(item_ids)} items are required)")
@@ -149,8 +165,8 @@ def _parse_time(value: Any, name: str) -> str | None:
     except ValueError:
         raise ApiError(422, f"{name} must be an ISO 8601 timestamp, got {value!r}") from None
     if t.tzinfo is None:
-        t = t.replace(tzinfo=_dt.timezone.utc)
-    return t.astimezone(_dt.timezone.utc).isoformat(timespec="milliseconds")
+        t = t.replace(tzinfo=_dt.UTC)
+    return t.astimezone(_dt.UTC).isoformat(timespec="milliseconds")
 
 
 def parse_timing(body: dict) -> Timing:
@@ -184,8 +200,9 @@ def parse_trial_ref(body: dict, n_trials: int) -> tuple[int, str]:
         raise ApiError(422, "send the trial's token, not a stimulus_id (participants never see stimulus ids)")
     token = body.get("token")
     if not isinstance(token, str) or not TOKEN_PATTERN.fullmatch(token):
-        raise ApiError(422, f"token must be the trial's {TOKEN_LENGTH}-digit lowercase hex token from the "
-                            "participant's state")
+        raise ApiError(
+            422, f"token must be the trial's {TOKEN_LENGTH}-digit lowercase hex token from the participant's state"
+        )
     return ti, token
 
 

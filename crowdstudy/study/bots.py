@@ -37,6 +37,7 @@ class SimulationResult:
     latencies_ms: (n_answers,) float64 round-trip time of each answer POST, milliseconds;
     errors: one message per bot that failed; wall_s: seconds for the whole run.
     """
+
     participants: list[str]
     answers: int
     latencies_ms: np.ndarray
@@ -48,10 +49,16 @@ class SimulationResult:
         return float(np.percentile(self.latencies_ms, q)) if self.latencies_ms.size else float("nan")
 
     def summary(self) -> dict:
-        return {"participants": len(self.participants), "answers": self.answers, "errors": len(self.errors),
-                "wall_s": round(self.wall_s, 3), "latency_ms_p50": round(self.percentile(50), 2),
-                "latency_ms_p95": round(self.percentile(95), 2), "latency_ms_p99": round(self.percentile(99), 2),
-                "latency_ms_max": round(float(self.latencies_ms.max()), 2) if self.latencies_ms.size else None}
+        return {
+            "participants": len(self.participants),
+            "answers": self.answers,
+            "errors": len(self.errors),
+            "wall_s": round(self.wall_s, 3),
+            "latency_ms_p50": round(self.percentile(50), 2),
+            "latency_ms_p95": round(self.percentile(95), 2),
+            "latency_ms_p99": round(self.percentile(99), 2),
+            "latency_ms_max": round(float(self.latencies_ms.max()), 2) if self.latencies_ms.size else None,
+        }
 
 
 class _Connection:
@@ -79,11 +86,16 @@ class _Connection:
                 pass
             self.writer = None
 
-    async def request(self, method: str, path: str, payload: dict | None, secret: str | None,
-                      headers: dict | None = None) -> tuple[int, dict]:
+    async def request(
+        self, method: str, path: str, payload: dict | None, secret: str | None, headers: dict | None = None
+    ) -> tuple[int, dict]:
         body = b"" if payload is None else json.dumps(payload).encode()
-        head = [f"{method} {path} HTTP/1.1", f"Host: {self.host}:{self.port}", f"Content-Length: {len(body)}",
-                "Accept: application/json"]
+        head = [
+            f"{method} {path} HTTP/1.1",
+            f"Host: {self.host}:{self.port}",
+            f"Content-Length: {len(body)}",
+            "Accept: application/json",
+        ]
         if payload is not None:
             head.append("Content-Type: application/json")
         if secret:
@@ -123,12 +135,19 @@ def _model(study: dict, method_effect: float, noise_sd: float, **kwargs):
     """The response model of ``study`` (the admin API's scoring metadata: items with their
     reversal, composites, points; the participants' /api/study carries none of it)."""
     from crowdstudy.stats.synthetic import ResponseModel
+
     composites = {k: tuple(v) for k, v in study["composites"].items()}
-    kwargs.setdefault("composite_effects", {c: e for c, e in ResponseModel().composite_effects.items()
-                                            if c in composites})
-    return ResponseModel(method_effect=float(method_effect), noise_sd=float(noise_sd), composites=composites,
-                         reversed_items=tuple(it["id"] for it in study["items"] if it["reverse"]),
-                         likert_points=int(study["points"]), **kwargs)
+    kwargs.setdefault(
+        "composite_effects", {c: e for c, e in ResponseModel().composite_effects.items() if c in composites}
+    )
+    return ResponseModel(
+        method_effect=float(method_effect),
+        noise_sd=float(noise_sd),
+        composites=composites,
+        reversed_items=tuple(it["id"] for it in study["items"] if it["reverse"]),
+        likert_points=int(study["points"]),
+        **kwargs,
+    )
 
 
 async def _post(conn: _Connection, url: str, secret: str | None, payload: dict):
@@ -140,15 +159,24 @@ async def _post(conn: _Connection, url: str, secret: str | None, payload: dict):
 
 async def _admin_schedule(conn: _Connection, pid: str, admin_token: str) -> dict[int, dict]:
     """{trial_index: trial with token, stimulus id and conditions} from the admin API."""
-    status, data = await conn.request("GET", f"/admin/participants/{pid}/schedule", None, None,
-                                      headers={"Authorization": f"Bearer {admin_token}"})
+    status, data = await conn.request(
+        "GET", f"/admin/participants/{pid}/schedule", None, None, headers={"Authorization": f"Bearer {admin_token}"}
+    )
     if status != 200:
         raise RuntimeError(f"GET /admin/participants/{pid}/schedule -> {status} {str(data)[:200]}")
     return {int(t["trial_index"]): t for t in data["trials"]}
 
 
-async def _one_bot(client: _Connection, pid: str, model, rng: np.random.Generator, think_time: float, latencies: list,
-                   admin_token: str, max_answers: int | None = None) -> int:
+async def _one_bot(
+    client: _Connection,
+    pid: str,
+    model,
+    rng: np.random.Generator,
+    think_time: float,
+    latencies: list,
+    admin_token: str,
+    max_answers: int | None = None,
+) -> int:
     reg = await _post(client, "/api/participants", None, {"participant_id": pid})
     secret, state = reg["secret"], reg["state"]
     conditions = await _admin_schedule(client, pid, admin_token)
@@ -156,14 +184,18 @@ async def _one_bot(client: _Connection, pid: str, model, rng: np.random.Generato
     if not state["consented"]:
         await _post(client, base + "/consent", secret, {"consent": True})
     if not state["demographics"]:
-        await _post(client, base + "/demographics", secret,
-                    {"age": int(rng.integers(18, 71)), "gender": str(rng.choice(["female", "male"]))})
+        await _post(
+            client,
+            base + "/demographics",
+            secret,
+            {"age": int(rng.integers(18, 71)), "gender": str(rng.choice(["female", "male"]))},
+        )
     offsets = model.draw_participant(rng)
     if not state["practice_done"]:
         ans = model.answer({"density": 4.44, "method": "practice", "scenario": "concert"}, offsets, rng)
         await _post(client, base + "/practice", secret, {"answers": ans, "rt_ms": 5000.0})
     n = 0
-    todo = state["trials"][state["next_trial_index"]:]
+    todo = state["trials"][state["next_trial_index"] :]
     for trial in todo[:max_answers]:
         if think_time > 0:
             await asyncio.sleep(float(rng.uniform(0.0, 2.0 * think_time)))
@@ -172,8 +204,17 @@ async def _one_bot(client: _Connection, pid: str, model, rng: np.random.Generato
             raise RuntimeError(f"trial {trial['trial_index']}: the admin schedule does not match the participant's")
         answers = model.answer(full, offsets, rng)
         rt = float(np.round(2000.0 + rng.lognormal(np.log(8000.0), 0.4), 1))
-        body = {"trial_index": trial["trial_index"], "token": trial["token"], "answers": answers, "rt_ms": rt,
-                "video_plays": 1, "first_play_ms": 20000.0, "hidden_count": 0, "hidden_ms": 0.0, "fullscreen_exits": 0}
+        body = {
+            "trial_index": trial["trial_index"],
+            "token": trial["token"],
+            "answers": answers,
+            "rt_ms": rt,
+            "video_plays": 1,
+            "first_play_ms": 20000.0,
+            "hidden_count": 0,
+            "hidden_ms": 0.0,
+            "fullscreen_exits": 0,
+        }
         if full.get("check_value") is not None:
             body["check"] = int(full["check_value"])  # an attentive participant follows the instruction
         t0 = time.perf_counter()
@@ -185,10 +226,21 @@ async def _one_bot(client: _Connection, pid: str, model, rng: np.random.Generato
     return n
 
 
-async def simulate_participants(url: str, n: int, *, admin_token: str, method_effect: float = 1.0,
-                                noise_sd: float = 0.9, seed: int = 1, concurrency: int = 10, think_time: float = 0.0,
-                                prefix: str = "bot", timeout: float = 60.0, model_kwargs: dict | None = None,
-                                max_answers: int | None = None) -> SimulationResult:
+async def simulate_participants(
+    url: str,
+    n: int,
+    *,
+    admin_token: str,
+    method_effect: float = 1.0,
+    noise_sd: float = 0.9,
+    seed: int = 1,
+    concurrency: int = 10,
+    think_time: float = 0.0,
+    prefix: str = "bot",
+    timeout: float = 60.0,
+    model_kwargs: dict | None = None,
+    max_answers: int | None = None,
+) -> SimulationResult:
     """Run ``n`` bots against the server at ``url``, at most ``concurrency`` at once.
 
     admin_token: the server's admin token (the bots read their trials' conditions from the
@@ -205,15 +257,17 @@ async def simulate_participants(url: str, n: int, *, admin_token: str, method_ef
         raise InvalidInputError(f"--url must be a plain http://HOST:PORT base URL, got {url!r}")
     host, port = parsed.hostname, parsed.port or 80
     if not isinstance(admin_token, str) or not admin_token or not admin_token.isprintable():
-        raise InvalidInputError("--admin-token (or $CROWDSTUDY_ADMIN_TOKEN) is required: the bots read their trials' "
-                                "conditions from the admin API (participants are blinded)")
+        raise InvalidInputError(
+            "--admin-token (or $CROWDSTUDY_ADMIN_TOKEN) is required: the bots read their trials' "
+            "conditions from the admin API (participants are blinded)"
+        )
     if think_time < 0:
         raise InvalidInputError(f"think_time must be >= 0 seconds, got {think_time!r}")
     t_start = time.perf_counter()
     probe = _Connection(host, port, timeout)
     try:
         status, study = await probe.request("GET", "/api/study", None, None)
-    except (ConnectionError, OSError, asyncio.TimeoutError) as exc:
+    except (TimeoutError, ConnectionError, OSError) as exc:
         raise InvalidInputError(f"--url {url}: no study server answers there ({exc})") from None
     finally:
         await probe.close()
@@ -221,16 +275,19 @@ async def simulate_participants(url: str, n: int, *, admin_token: str, method_ef
         raise InvalidInputError(f"--url {url}: GET /api/study answered {status}")
     probe = _Connection(host, port, timeout)
     try:
-        status, data = await probe.request("GET", "/admin/metrics.json", None, None,
-                                           headers={"Authorization": f"Bearer {admin_token}"})
+        status, data = await probe.request(
+            "GET", "/admin/metrics.json", None, None, headers={"Authorization": f"Bearer {admin_token}"}
+        )
         if status == 200:
-            status, data = await probe.request("GET", "/admin/study.json", None, None,
-                                               headers={"Authorization": f"Bearer {admin_token}"})
+            status, data = await probe.request(
+                "GET", "/admin/study.json", None, None, headers={"Authorization": f"Bearer {admin_token}"}
+            )
     finally:
         await probe.close()
     if status != 200:
-        raise InvalidInputError(f"--admin-token: the server at {url} refused it ({status}: "
-                                f"{str(data.get('error', ''))[:100]})")
+        raise InvalidInputError(
+            f"--admin-token: the server at {url} refused it ({status}: {str(data.get('error', ''))[:100]})"
+        )
     model = _model(data, method_effect, noise_sd, **(model_kwargs or {}))
     gate = asyncio.Semaphore(concurrency)
     latencies: list[float] = []
@@ -243,18 +300,23 @@ async def simulate_participants(url: str, n: int, *, admin_token: str, method_ef
         async with gate:
             conn = _Connection(host, port, timeout)
             try:
-                counts.append(await _one_bot(conn, pid, model, _bot_rng(seed, i), think_time, latencies,
-                                             admin_token, max_answers))
+                counts.append(
+                    await _one_bot(conn, pid, model, _bot_rng(seed, i), think_time, latencies, admin_token, max_answers)
+                )
                 done.append(pid)
-            except (RuntimeError, ConnectionError, OSError, asyncio.TimeoutError, ValueError) as exc:
+            except (TimeoutError, RuntimeError, ConnectionError, OSError, ValueError) as exc:
                 errors.append(f"{pid}: {type(exc).__name__}: {exc}")
             finally:
                 await conn.close()
 
     await asyncio.gather(*(run(i) for i in range(n)))
-    return SimulationResult(participants=sorted(done), answers=int(sum(counts)),
-                            latencies_ms=np.asarray(latencies, dtype=np.float64), errors=errors,
-                            wall_s=time.perf_counter() - t_start)
+    return SimulationResult(
+        participants=sorted(done),
+        answers=int(sum(counts)),
+        latencies_ms=np.asarray(latencies, dtype=np.float64),
+        errors=errors,
+        wall_s=time.perf_counter() - t_start,
+    )
 
 
 def run_simulation(url: str, n: int, **kwargs) -> SimulationResult:

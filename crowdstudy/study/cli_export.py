@@ -11,10 +11,16 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--db", required=True, metavar="URL", help="SQLAlchemy URL of the study database")
     parser.add_argument("--out", required=True, metavar="CSV", help="responses CSV to write")
     parser.add_argument("--demographics", metavar="CSV", help="also write the demographics CSV here")
-    parser.add_argument("--participants", metavar="CSV",
-                        help="participants CSV with the exclusion flags (default: participants.csv beside --out)")
-    parser.add_argument("--online", metavar="TOML",
-                        help="the exclusion rules' file (default: the [online] table of the toolkit's study.toml)")
+    parser.add_argument(
+        "--participants",
+        metavar="CSV",
+        help="participants CSV with the exclusion flags (default: participants.csv beside --out)",
+    )
+    parser.add_argument(
+        "--online",
+        metavar="TOML",
+        help="the exclusion rules' file (default: the [online] table of the toolkit's study.toml)",
+    )
 
 
 def run(args: argparse.Namespace) -> int:
@@ -27,6 +33,8 @@ def run(args: argparse.Namespace) -> int:
     if args.participants:
         check_output_path(args.participants, "--participants")
     summary = export_study(args.db, args.out, args.demographics, participants=args.participants, online=args.online)
-    print(f"crowdstudy export: {summary['responses']} answers of {summary['participants']} participants "
-          f"({summary['excluded']} flagged for exclusion) -> {', '.join(summary['files'])}")
+    print(
+        f"crowdstudy export: {summary['responses']} answers of {summary['participants']} participants "
+        f"({summary['excluded']} flagged for exclusion) -> {', '.join(summary['files'])}"
+    )
     return 0

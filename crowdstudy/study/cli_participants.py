@@ -44,8 +44,10 @@ def run(args: argparse.Namespace) -> int:
         check_participant_id(args.participant, "PARTICIPANT_ID")
     if args.db.startswith("sqlite:///"):
         from pathlib import Path
+
         from crowdstudy.errors import InvalidInputError
-        path = args.db[len("sqlite:///"):]
+
+        path = args.db[len("sqlite:///") :]
         if path not in ("", ":memory:") and not Path(path).is_file():
             raise InvalidInputError(f"--db: database file {path!r} does not exist")
     store = StudyStore(args.db, create=False)
@@ -53,8 +55,11 @@ def run(args: argparse.Namespace) -> int:
         if args.action == "list":
             rows = [r for r in list_participants(store) if args.status is None or r["status"] == args.status]
             cols = ["participant", "status", "answered", "trials", "started_at", "completed_at", "prolific_pid"]
-            print(format_table([{c: ("" if r[c] is None else r[c]) for c in cols} for r in rows], cols)
-                  if rows else "no participants")
+            print(
+                format_table([{c: ("" if r[c] is None else r[c]) for c in cols} for r in rows], cols)
+                if rows
+                else "no participants"
+            )
             if args.json:
                 with open(args.json, "w", encoding="utf-8") as fh:
                     json.dump(rows, fh, indent=2)

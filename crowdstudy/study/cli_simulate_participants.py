@@ -10,14 +10,25 @@ __all__ = ["configure", "run"]
 
 def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--url", default="http://127.0.0.1:8000", help="server base URL")
-    parser.add_argument("--admin-token", metavar="TOKEN",
-                        help="the server's admin token (default: $CROWDSTUDY_ADMIN_TOKEN); the bots read their "
-                             "trials' conditions from the admin API, participants only see opaque tokens")
+    parser.add_argument(
+        "--admin-token",
+        metavar="TOKEN",
+        help="the server's admin token (default: $CROWDSTUDY_ADMIN_TOKEN); the bots read their "
+        "trials' conditions from the admin API, participants only see opaque tokens",
+    )
     parser.add_argument("-n", type=int, default=10, help="number of simulated participants (default 10)")
-    parser.add_argument("--method-effect", type=float, default=1.0,
-                        help="Ours - Baseline on QCR at the reference density, Likert points (default 1.0)")
-    parser.add_argument("--density-slope", type=float, default=0.15,
-                        help="relative growth of the effect per character/m^2 below the reference density")
+    parser.add_argument(
+        "--method-effect",
+        type=float,
+        default=1.0,
+        help="Ours - Baseline on QCR at the reference density, Likert points (default 1.0)",
+    )
+    parser.add_argument(
+        "--density-slope",
+        type=float,
+        default=0.15,
+        help="relative growth of the effect per character/m^2 below the reference density",
+    )
     parser.add_argument("--noise", type=float, default=0.9, help="SD of each item answer's noise, points (default 0.9)")
     parser.add_argument("--seed", type=int, default=1, help="seed of the bots' answers and ids (default 1)")
     parser.add_argument("--concurrency", type=int, default=10, help="bots running at once (default 10)")
@@ -40,18 +51,34 @@ def run(args: argparse.Namespace) -> int:
     if args.json:
         check_output_path(args.json, "--json")
     admin_token = args.admin_token or os.environ.get(ADMIN_TOKEN_ENV)  # checked by the bots
-    result = run_simulation(args.url, args.n, admin_token=admin_token, method_effect=args.method_effect,
-                            noise_sd=args.noise, seed=args.seed,
-                            concurrency=args.concurrency, think_time=args.think_time, prefix=args.prefix,
-                            model_kwargs={"density_slope": args.density_slope})
+    result = run_simulation(
+        args.url,
+        args.n,
+        admin_token=admin_token,
+        method_effect=args.method_effect,
+        noise_sd=args.noise,
+        seed=args.seed,
+        concurrency=args.concurrency,
+        think_time=args.think_time,
+        prefix=args.prefix,
+        model_kwargs={"density_slope": args.density_slope},
+    )
     s = result.summary()
-    print(f"crowdstudy simulate-participants: {s['participants']}/{args.n} completed, {s['answers']} answers in "
-          f"{s['wall_s']:.1f} s; answer latency p50 {s['latency_ms_p50']} ms, p95 {s['latency_ms_p95']} ms, "
-          f"p99 {s['latency_ms_p99']} ms")
+    print(
+        f"crowdstudy simulate-participants: {s['participants']}/{args.n} completed, {s['answers']} answers in "
+        f"{s['wall_s']:.1f} s; answer latency p50 {s['latency_ms_p50']} ms, p95 {s['latency_ms_p95']} ms, "
+        f"p99 {s['latency_ms_p99']} ms"
+    )
     for msg in result.errors[:5]:
         print(f"  error: {msg}")
     if args.json:
         with open(args.json, "w", encoding="utf-8") as fh:
-            json.dump({**s, "provenance": provenance(args.seed, n=args.n, method_effect=args.method_effect,
-                                                     noise=args.noise)}, fh, indent=2)
+            json.dump(
+                {
+                    **s,
+                    "provenance": provenance(args.seed, n=args.n, method_effect=args.method_effect, noise=args.noise),
+                },
+                fh,
+                indent=2,
+            )
     return 0 if not result.errors else 1

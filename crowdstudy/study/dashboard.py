@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import html
-from typing import Mapping, Sequence
+from collections.abc import Mapping, Sequence
 
 __all__ = ["dashboard_html"]
 
@@ -19,12 +19,33 @@ def dashboard_html(progress: Sequence[Mapping], title: str) -> str:
     rows = []
     for p in progress:
         pct = 100.0 * p["answered"] / p["trials"] if p["trials"] else 0.0
-        state = ("withdrawn" if p.get("withdrawn_at") else "screened out" if p.get("screened_out_at") else
-                 "completed" if p["completed_at"] else "in trials" if p["practice_at"] else
-                 "practice" if p["demographics_at"] else "demographics" if p["consented_at"] else "consent")
-        cells = [p["participant_id"], state, f"{p['answered']} / {p['trials']}", p["started_at"], p["completed_at"] or ""]
-        rows.append("<tr>" + "".join(f"<td>{html.escape(str(c))}</td>" for c in cells) +
-                    f'<td><progress max="100" value="{pct:.0f}"></progress></td></tr>')
+        state = (
+            "withdrawn"
+            if p.get("withdrawn_at")
+            else "screened out"
+            if p.get("screened_out_at")
+            else "completed"
+            if p["completed_at"]
+            else "in trials"
+            if p["practice_at"]
+            else "practice"
+            if p["demographics_at"]
+            else "demographics"
+            if p["consented_at"]
+            else "consent"
+        )
+        cells = [
+            p["participant_id"],
+            state,
+            f"{p['answered']} / {p['trials']}",
+            p["started_at"],
+            p["completed_at"] or "",
+        ]
+        rows.append(
+            "<tr>"
+            + "".join(f"<td>{html.escape(str(c))}</td>" for c in cells)
+            + f'<td><progress max="100" value="{pct:.0f}"></progress></td></tr>'
+        )
     return f"""<!doctype html>
 <html lang="en"><head><meta charset="utf-8"><meta http-equiv="refresh" content="15">
 <title>crowdstudy admin</title>

@@ -16,15 +16,21 @@ from __future__ import annotations
 import csv
 import io
 import json
+from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
-from typing import Iterable, Mapping, Sequence
 
 from crowdstudy.errors import InvalidInputError
 from crowdstudy.provenance import provenance
 from crowdstudy.schema import DEMOGRAPHIC_COLUMNS, RESPONSE_COLUMNS, RESPONSE_QUALITY_COLUMNS
 
-__all__ = ["RESPONSE_COLUMNS", "DEMOGRAPHIC_COLUMNS", "RESPONSE_EXPORT_COLUMNS", "rows_to_csv", "export_study",
-           "participants_rows"]
+__all__ = [
+    "RESPONSE_COLUMNS",
+    "DEMOGRAPHIC_COLUMNS",
+    "RESPONSE_EXPORT_COLUMNS",
+    "rows_to_csv",
+    "export_study",
+    "participants_rows",
+]
 
 #: responses.csv as written by the export: the analysis columns, then the data-quality ones.
 RESPONSE_EXPORT_COLUMNS = (*RESPONSE_COLUMNS, *RESPONSE_QUALITY_COLUMNS)
@@ -52,11 +58,18 @@ def participants_rows(store, online, item_ids) -> list[dict]:
     """participants.csv rows of ``store`` flagged with the rules of ``online`` (an OnlineConfig)."""
     from crowdstudy.study.quality import flag_participants
     from crowdstudy.study.roster import list_participants
+
     return flag_participants(list_participants(store), store.response_rows(), online, item_ids)
 
 
-def export_study(db_url: str, out: str | Path, demographics: str | Path | None = None, *,
-                 participants: str | Path | None = None, online: str | Path | None = None) -> dict:
+def export_study(
+    db_url: str,
+    out: str | Path,
+    demographics: str | Path | None = None,
+    *,
+    participants: str | Path | None = None,
+    online: str | Path | None = None,
+) -> dict:
     """Write responses.csv, participants.csv (default: beside ``out``) and, if asked,
     demographics.csv from the database at ``db_url``; online: the TOML file of the exclusion
     rules (default: the [online] table of the toolkit's study.toml).
@@ -68,7 +81,7 @@ def export_study(db_url: str, out: str | Path, demographics: str | Path | None =
     from crowdstudy.study.storage import StudyStore
 
     if db_url.startswith("sqlite:///"):
-        path = Path(db_url[len("sqlite:///"):])
+        path = Path(db_url[len("sqlite:///") :])
         if str(path) not in ("", ":memory:") and not path.is_file():
             raise InvalidInputError(f"--db: database file {str(path)!r} does not exist")
     rules = load_online_config(online)
@@ -91,12 +104,27 @@ def export_study(db_url: str, out: str | Path, demographics: str | Path | None =
         demographics.parent.mkdir(parents=True, exist_ok=True)
         demographics.write_text(rows_to_csv(people, DEMOGRAPHIC_COLUMNS), encoding="utf-8")
         files.append(str(demographics))
-    summary = {"responses": len(responses), "participants": len({r["participant_id"] for r in responses}),
-               "excluded": sum(r["excluded"] for r in flagged), "files": files}
+    summary = {
+        "responses": len(responses),
+        "participants": len({r["participant_id"] for r in responses}),
+        "excluded": sum(r["excluded"] for r in flagged),
+        "files": files,
+    }
     sidecar = out.with_name(out.name + ".provenance.json")
-    sidecar.write_text(json.dumps(provenance(None, command="crowdstudy export", responses=summary["responses"],
-                                             participants=summary["participants"],
-                                             excluded=summary["excluded"], exclusion_rules=rules.source,
-                                             demographics_rows=len(people) if demographics is not None else None),
-                                  indent=2) + "\n", encoding="utf-8")
+    sidecar.write_text(
+        json.dumps(
+            provenance(
+                None,
+                command="crowdstudy export",
+                responses=summary["responses"],
+                participants=summary["participants"],
+                excluded=summary["excluded"],
+                exclusion_rules=rules.source,
+                demographics_rows=len(people) if demographics is not None else None,
+            ),
+            indent=2,
+        )
+        + "\n",
+        encoding="utf-8",
+    )
     return summary

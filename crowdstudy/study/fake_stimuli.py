@@ -24,15 +24,44 @@ _PATTERNS = ("testsrc", "testsrc2", "smptebars", "rgbtestsrc")
 def _encode(path: Path, pattern: str, width: int, height: int, seconds: float, fps: int) -> None:
     from crowdstudy.render.video import BT709_SCALE, BT709_TAGS, find_ffmpeg
 
-    cmd = [find_ffmpeg(), "-loglevel", "error", "-y", "-f", "lavfi",
-           "-i", f"{pattern}=size={width}x{height}:rate={fps}:duration={seconds}", "-vf", BT709_SCALE,
-           "-c:v", "libx264", "-pix_fmt", "yuv420p", *BT709_TAGS, "-preset", "veryfast", "-movflags", "+faststart",
-           "-bitexact", "-map_metadata", "-1", str(path)]
+    cmd = [
+        find_ffmpeg(),
+        "-loglevel",
+        "error",
+        "-y",
+        "-f",
+        "lavfi",
+        "-i",
+        f"{pattern}=size={width}x{height}:rate={fps}:duration={seconds}",
+        "-vf",
+        BT709_SCALE,
+        "-c:v",
+        "libx264",
+        "-pix_fmt",
+        "yuv420p",
+        *BT709_TAGS,
+        "-preset",
+        "veryfast",
+        "-movflags",
+        "+faststart",
+        "-bitexact",
+        "-map_metadata",
+        "-1",
+        str(path),
+    ]
     subprocess.run(cmd, check=True, capture_output=True, timeout=60)
 
 
-def write_fake_stimuli(out_dir: str | Path, design: StudyDesign | str | Path | None = None, *, n_files: int = 3,
-                       seconds: float = 1.0, width: int = 160, height: int = 90, fps: int = 30) -> Path:
+def write_fake_stimuli(
+    out_dir: str | Path,
+    design: StudyDesign | str | Path | None = None,
+    *,
+    n_files: int = 3,
+    seconds: float = 1.0,
+    width: int = 160,
+    height: int = 90,
+    fps: int = 30,
+) -> Path:
     """Write ``out_dir/manifest.json``, ``manifest.csv``, ``videos/clip*.mp4`` and
     ``practice.mp4``; stimuli share the ``n_files`` clips round-robin. Returns ``out_dir``.
 
@@ -60,14 +89,37 @@ def write_fake_stimuli(out_dir: str | Path, design: StudyDesign | str | Path | N
     rows = []
     for i, stim in enumerate(design.stimuli()):
         rel, digest = clips[i % n_files]
-        rows.append({"stimulus_id": stim.stimulus_id, "stage": stim.stage, "scenario": stim.scenario,
-                     "density_level": stim.density_level, "density": stim.density, "viewpoint": stim.viewpoint,
-                     "method": stim.method, "characters": stim.n_characters, "seed": stim.seed, "file": rel,
-                     "sha256": digest, "duration": float(seconds), "fps": fps, "width": width, "height": height,
-                     "overlap_mesh": None, "overlap_capsule": None, "red_pixel_fraction": None,
-                     "software_version": "fake-stimuli", "digest": None})
-    manifest = {"design": str(design.source), "preset": "fake", "provenance": provenance(design.seed, fake=True),
-                "practice": {"file": "practice.mp4"}, "stimuli": rows}
+        rows.append(
+            {
+                "stimulus_id": stim.stimulus_id,
+                "stage": stim.stage,
+                "scenario": stim.scenario,
+                "density_level": stim.density_level,
+                "density": stim.density,
+                "viewpoint": stim.viewpoint,
+                "method": stim.method,
+                "characters": stim.n_characters,
+                "seed": stim.seed,
+                "file": rel,
+                "sha256": digest,
+                "duration": float(seconds),
+                "fps": fps,
+                "width": width,
+                "height": height,
+                "overlap_mesh": None,
+                "overlap_capsule": None,
+                "red_pixel_fraction": None,
+                "software_version": "fake-stimuli",
+                "digest": None,
+            }
+        )
+    manifest = {
+        "design": str(design.source),
+        "preset": "fake",
+        "provenance": provenance(design.seed, fake=True),
+        "practice": {"file": "practice.mp4"},
+        "stimuli": rows,
+    }
     (out / "manifest.json").write_text(json.dumps(manifest, indent=1) + "\n", encoding="utf-8")
     with open(out / "manifest.csv", "w", newline="", encoding="utf-8") as fh:
         writer = csv.DictWriter(fh, fieldnames=MANIFEST_COLUMNS, lineterminator="\n")

@@ -20,14 +20,16 @@ class GroupCommitWriter:
 
     def __init__(self, engine, max_batch: int = 256):
         import queue
+
         self.engine, self.max_batch = engine, max_batch
-        self.queue: "queue.SimpleQueue" = queue.SimpleQueue()
+        self.queue: queue.SimpleQueue = queue.SimpleQueue()
         self.thread = threading.Thread(target=self._loop, name="crowdstudy-db-writer", daemon=True)
         self.thread.start()
 
     def submit(self, job):
         """Run ``job(connection)`` in a committed transaction; return its result (or raise)."""
         import concurrent.futures
+
         if not self.thread.is_alive():
             raise RuntimeError("the database writer is closed")
         fut: concurrent.futures.Future = concurrent.futures.Future()
@@ -67,6 +69,7 @@ class GroupCommitWriter:
 
     def _loop(self) -> None:
         import queue
+
         while True:
             first = self.queue.get()
             if first is self._STOP:

@@ -29,19 +29,25 @@ def free_port() -> int:
         return s.getsockname()[1]
 
 
-def write_small_design(path: str | Path, levels: tuple[str, ...] = ("D1", "D2"), stage1_viewpoints=("V1",),
-                       stage2_viewpoints=("V3",)) -> Path:
+def write_small_design(
+    path: str | Path, levels: tuple[str, ...] = ("D1", "D2"), stage1_viewpoints=("V1",), stage2_viewpoints=("V3",)
+) -> Path:
     """A copy of the paper's design with fewer densities and viewpoints (a short session:
     2 levels x 1 viewpoint x 2 methods = 4 videos per stage by default)."""
     import re
+
     from crowdstudy.design import default_design_path, load_design
+
     text = default_design_path().read_text(encoding="utf-8")
     for level in ("D1", "D2", "D3", "D4", "D5"):
         if level not in levels:
             text = re.sub(rf"^{level} = [0-9.]+\s*$\n", "", text, flags=re.M)
-    text = text.replace('viewpoints = ["V1", "V2", "V3", "V4"]',
-                        "viewpoints = [" + ", ".join(f'"{v}"' for v in stage1_viewpoints) + "]")
-    text = text.replace('viewpoints = ["V3", "V4"]', "viewpoints = [" + ", ".join(f'"{v}"' for v in stage2_viewpoints) + "]")
+    text = text.replace(
+        'viewpoints = ["V1", "V2", "V3", "V4"]', "viewpoints = [" + ", ".join(f'"{v}"' for v in stage1_viewpoints) + "]"
+    )
+    text = text.replace(
+        'viewpoints = ["V3", "V4"]', "viewpoints = [" + ", ".join(f'"{v}"' for v in stage2_viewpoints) + "]"
+    )
     path = Path(path)
     path.write_text(text, encoding="utf-8")
     load_design(path)  # validate
@@ -58,9 +64,16 @@ class LocalServer:
     starts again on the same port.
     """
 
-    def __init__(self, args: list[str], *, admin_token: str = "local-admin-token-0123456789",
-                 port: int | None = None, python: str | None = None, startup_timeout: float = 30.0,
-                 cwd: str | Path | None = None):
+    def __init__(
+        self,
+        args: list[str],
+        *,
+        admin_token: str = "local-admin-token-0123456789",
+        port: int | None = None,
+        python: str | None = None,
+        startup_timeout: float = 30.0,
+        cwd: str | Path | None = None,
+    ):
         if not isinstance(args, (list, tuple)) or not all(isinstance(a, str) for a in args):
             raise InvalidInputError("args must be a list of strings (crowdstudy serve arguments)")
         self.args = list(args)
@@ -76,15 +89,25 @@ class LocalServer:
     def url(self) -> str:
         return f"http://127.0.0.1:{self.port}"
 
-    def start(self) -> "LocalServer":
-        cmd = [self.python, "-m", "crowdstudy", "serve", *self.args, "--host", "127.0.0.1", "--port", str(self.port),
-               "--admin-token", self.admin_token]
+    def start(self) -> LocalServer:
+        cmd = [
+            self.python,
+            "-m",
+            "crowdstudy",
+            "serve",
+            *self.args,
+            "--host",
+            "127.0.0.1",
+            "--port",
+            str(self.port),
+            "--admin-token",
+            self.admin_token,
+        ]
         env = dict(os.environ, PYTHONUNBUFFERED="1")
         if self._log is not None:
             self._log.close()
         self._log = tempfile.TemporaryFile(mode="w+", encoding="utf-8")
-        self.proc = subprocess.Popen(cmd, cwd=self.cwd, env=env, stdout=self._log,
-                                     stderr=subprocess.STDOUT, text=True)
+        self.proc = subprocess.Popen(cmd, cwd=self.cwd, env=env, stdout=self._log, stderr=subprocess.STDOUT, text=True)
         deadline = time.monotonic() + self.startup_timeout
         while time.monotonic() < deadline:
             if self.proc.poll() is not None:
@@ -121,11 +144,11 @@ class LocalServer:
         self._log.seek(0)
         return self._log.read()
 
-    def restart(self) -> "LocalServer":
+    def restart(self) -> LocalServer:
         self.kill()
         return self.start()
 
-    def __enter__(self) -> "LocalServer":
+    def __enter__(self) -> LocalServer:
         return self.start()
 
     def __exit__(self, *exc) -> None:

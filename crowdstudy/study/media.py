@@ -31,13 +31,22 @@ import os
 import re
 import shutil
 import tempfile
+from collections.abc import Mapping
 from pathlib import Path
-from typing import Mapping
 
 from crowdstudy.errors import InvalidInputError
 
-__all__ = ["media_name", "media_table", "publish_media", "padded_size", "MEDIA_NAME_PATTERN", "PUBLISHED_MTIME",
-           "PRACTICE_KEY", "PAD_QUANTUM", "blind_file_response"]
+__all__ = [
+    "media_name",
+    "media_table",
+    "publish_media",
+    "padded_size",
+    "MEDIA_NAME_PATTERN",
+    "PUBLISHED_MTIME",
+    "PRACTICE_KEY",
+    "PAD_QUANTUM",
+    "blind_file_response",
+]
 
 #: A published video's name: 32 lowercase hex digits and ``.mp4``.
 MEDIA_NAME_PATTERN = re.compile(r"[0-9a-f]{32}\.mp4")
@@ -53,7 +62,7 @@ def media_name(secret: str, stimulus_id: str) -> str:
     """The opaque file name of ``stimulus_id``'s video in this deployment (secret: the study's)."""
     if not isinstance(secret, str) or len(secret) < 16:
         raise InvalidInputError("secret must be the study's secret (>= 16 characters)")
-    digest = hmac.new(secret.encode("utf-8"), f"crowdstudy-media\x00{stimulus_id}".encode("utf-8"), hashlib.sha256)
+    digest = hmac.new(secret.encode("utf-8"), f"crowdstudy-media\x00{stimulus_id}".encode(), hashlib.sha256)
     return digest.hexdigest()[:32] + ".mp4"
 
 
@@ -87,7 +96,7 @@ def publish_media(table: Mapping[str, tuple[str, Path]], out_dir: str | Path) ->
     except OSError as exc:
         raise InvalidInputError(f"--media-dir: cannot create {str(out)!r} ({exc.strerror})") from None
     target = padded_size([src.stat().st_size for _, src in table.values()])
-    if target - min(src.stat().st_size for _, src in table.values()) >= 2 ** 32:
+    if target - min(src.stat().st_size for _, src in table.values()) >= 2**32:
         raise InvalidInputError("--media-dir: the videos' sizes differ by 4 GiB or more; cannot pad them alike")
     for name, src in table.values():
         dest = out / name
@@ -129,5 +138,6 @@ def blind_file_response(path: Path, headers: Mapping[str, str]):
 
             def _should_use_range(self, http_if_range: str) -> bool:
                 return False
+
         _BLIND_CLASS.append(BlindFileResponse)
     return _BLIND_CLASS[0](path, media_type="video/mp4", headers=dict(headers))

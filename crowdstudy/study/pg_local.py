@@ -27,9 +27,15 @@ __all__ = ["LocalPostgres", "find_pg_bin"]
 def find_pg_bin() -> Path | None:
     """The folder holding initdb and pg_ctl (highest installed major version), or None."""
     env = os.environ.get("CROWDSTUDY_PG_BIN")
-    candidates = [Path(env)] if env else sorted(Path("/usr/lib/postgresql").glob("*/bin"),
-                                                key=lambda p: int(p.parent.name) if p.parent.name.isdigit() else 0,
-                                                reverse=True)
+    candidates = (
+        [Path(env)]
+        if env
+        else sorted(
+            Path("/usr/lib/postgresql").glob("*/bin"),
+            key=lambda p: int(p.parent.name) if p.parent.name.isdigit() else 0,
+            reverse=True,
+        )
+    )
     for c in candidates:
         if (c / "initdb").is_file() and (c / "pg_ctl").is_file():
             return c
@@ -46,8 +52,10 @@ class LocalPostgres:
     def __init__(self, *, fsync: bool = False, max_connections: int = 200, database: str = "study"):
         self.bin = find_pg_bin()
         if self.bin is None:
-            raise MissingDependencyError("PostgreSQL server binaries (initdb, pg_ctl) not found: install Debian's "
-                                         "`postgresql` package or set CROWDSTUDY_PG_BIN")
+            raise MissingDependencyError(
+                "PostgreSQL server binaries (initdb, pg_ctl) not found: install Debian's "
+                "`postgresql` package or set CROWDSTUDY_PG_BIN"
+            )
         self.fsync, self.max_connections, self.database = fsync, int(max_connections), database
         self.port = free_port()
         self.dir: Path | None = None
@@ -66,16 +74,19 @@ class LocalPostgres:
         if p.returncode != 0:
             raise RuntimeError(f"{args[0]} failed ({p.returncode}): {(p.stderr or p.stdout).strip()[-500:]}")
 
-    def start(self) -> "LocalPostgres":
+    def start(self) -> LocalPostgres:
         self.dir = Path(tempfile.mkdtemp(prefix="crowdstudy-pg-"))
         if os.geteuid() == 0:
             import pwd
+
             nobody = pwd.getpwnam("nobody")
             os.chown(self.dir, nobody.pw_uid, nobody.pw_gid)
         data = self.dir / "data"
         self._run("initdb", "-D", str(data), "-U", self.user, "--auth=trust", "-E", "UTF8", "--no-sync")
-        opts = (f"-k {self.dir} -p {self.port} -c listen_addresses=127.0.0.1 -c max_connections={self.max_connections}"
-                f" -c fsync={'on' if self.fsync else 'off'} -c synchronous_commit={'on' if self.fsync else 'off'}")
+        opts = (
+            f"-k {self.dir} -p {self.port} -c listen_addresses=127.0.0.1 -c max_connections={self.max_connections}"
+            f" -c fsync={'on' if self.fsync else 'off'} -c synchronous_commit={'on' if self.fsync else 'off'}"
+        )
         self._run("pg_ctl", "-D", str(data), "-o", opts, "-l", str(self.dir / "server.log"), "-w", "-t", "60", "start")
         self._run("createdb", "-h", "127.0.0.1", "-p", str(self.port), "-U", self.user, self.database)
         return self
@@ -90,7 +101,7 @@ class LocalPostgres:
         shutil.rmtree(self.dir, ignore_errors=True)
         self.dir = None
 
-    def __enter__(self) -> "LocalPostgres":
+    def __enter__(self) -> LocalPostgres:
         return self.start()
 
     def __exit__(self, *exc) -> None:
@@ -99,4 +110,5 @@ class LocalPostgres:
 
 def _quote(s: str) -> str:
     import shlex
+
     return shlex.quote(s)

@@ -35,27 +35,54 @@ import hashlib
 import hmac
 import random
 import statistics
+from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
-from typing import Iterable, Mapping, Sequence
 
 from crowdstudy.design import read_toml
 from crowdstudy.errors import InvalidInputError
 from crowdstudy.package_data import resource_path
 
-__all__ = ["OnlineConfig", "load_online_config", "online_config", "default_online_path", "draw_checks", "flag_participants",
-           "PARTICIPANT_COLUMNS", "RULES"]
+__all__ = [
+    "OnlineConfig",
+    "load_online_config",
+    "online_config",
+    "default_online_path",
+    "draw_checks",
+    "flag_participants",
+    "PARTICIPANT_COLUMNS",
+    "RULES",
+]
 
 RULES = ("failed_attention_check", "too_fast", "straight_lining", "tab_switching")
-PARTICIPANT_COLUMNS = ("participant", "status", "excluded", "exclusion_reason", "started_at", "completed_at",
-                       "screened_out_at", "withdrawn_at", "completion_code", "prolific_pid", "prolific_study_id",
-                       "prolific_session_id", "answered", "trials", "median_rt_ms", "straightline_trials",
-                       "checks_failed", "checks_total", "hidden_trials", "fullscreen_exits")
+PARTICIPANT_COLUMNS = (
+    "participant",
+    "status",
+    "excluded",
+    "exclusion_reason",
+    "started_at",
+    "completed_at",
+    "screened_out_at",
+    "withdrawn_at",
+    "completion_code",
+    "prolific_pid",
+    "prolific_study_id",
+    "prolific_session_id",
+    "answered",
+    "trials",
+    "median_rt_ms",
+    "straightline_trials",
+    "checks_failed",
+    "checks_total",
+    "hidden_trials",
+    "fullscreen_exits",
+)
 _CODE_KEYS = ("completed", "screened_out", "withdrawn")
 
 
 @dataclasses.dataclass(frozen=True)
 class OnlineConfig:
     """The ``[online]`` table (see the module docstring); sizes in CSS pixels, times in ms."""
+
     min_width: int = 1280
     min_height: int = 720
     fullscreen: bool = True
@@ -85,8 +112,9 @@ def _num(table: dict, key: str, where: str, *, integer: bool, lo: float, hi: flo
     ok = isinstance(v, int) if integer else isinstance(v, (int, float))
     if isinstance(v, bool) or not ok or v < lo or (hi is not None and v > hi):
         kind = "an integer" if integer else "a number"
-        raise InvalidInputError(f"{where}: {key} must be {kind} >= {lo}" + (f" and <= {hi}" if hi is not None else "")
-                                + f", got {v!r}")
+        raise InvalidInputError(
+            f"{where}: {key} must be {kind} >= {lo}" + (f" and <= {hi}" if hi is not None else "") + f", got {v!r}"
+        )
     return v
 
 
@@ -113,10 +141,14 @@ def online_config(top: dict, source: str) -> OnlineConfig:
     if not isinstance(fullscreen, bool):
         raise InvalidInputError(f"{where}: fullscreen must be true or false")
     codes = top.get("codes", {})
-    if not isinstance(codes, dict) or any(k not in _CODE_KEYS for k in codes) or any(
-            not isinstance(v, str) or len(v) > 128 or not v.isprintable() for v in codes.values()):
-        raise InvalidInputError(f"{where}: codes must map {', '.join(_CODE_KEYS)} to codes of <= 128 printable "
-                                "characters")
+    if (
+        not isinstance(codes, dict)
+        or any(k not in _CODE_KEYS for k in codes)
+        or any(not isinstance(v, str) or len(v) > 128 or not v.isprintable() for v in codes.values())
+    ):
+        raise InvalidInputError(
+            f"{where}: codes must map {', '.join(_CODE_KEYS)} to codes of <= 128 printable characters"
+        )
     ex = top.get("exclude", {})
     if not isinstance(ex, dict):
         raise InvalidInputError(f"{where}: exclude must be a table")
@@ -128,13 +160,15 @@ def online_config(top: dict, source: str) -> OnlineConfig:
     return OnlineConfig(
         min_width=_num(top, "min_width", where, integer=True, lo=0) or 0,
         min_height=_num(top, "min_height", where, integer=True, lo=0) or 0,
-        fullscreen=fullscreen, attention_checks=_num(top, "attention_checks", where, integer=True, lo=0) or 0,
+        fullscreen=fullscreen,
+        attention_checks=_num(top, "attention_checks", where, integer=True, lo=0) or 0,
         codes=dict(codes),
         max_failed_checks=_num(ex, "max_failed_checks", w, integer=True, lo=0),
         min_median_rt_ms=_num(ex, "min_median_rt_ms", w, integer=False, lo=0) or None,
         max_straightline_fraction=_num(ex, "max_straightline_fraction", w, integer=False, lo=0, hi=1) or None,
         max_hidden_trials=_num(ex, "max_hidden_trials", w, integer=True, lo=0),
-        source=source)
+        source=source,
+    )
 
 
 def draw_checks(secret: str, participant_id: str, n_trials: int, n_checks: int, points: int) -> dict[int, int]:
@@ -142,15 +176,17 @@ def draw_checks(secret: str, participant_id: str, n_trials: int, n_checks: int, 
     distinct trials (never the first: it teaches the page) and points 1..points, drawn from an HMAC of the study's secret (so the
     same participant always gets the same checks, and nobody without the secret can predict
     them)."""
-    digest = hmac.new(secret.encode("utf-8"), f"crowdstudy-checks\x00{participant_id}".encode(),
-                      hashlib.sha256).digest()
+    digest = hmac.new(
+        secret.encode("utf-8"), f"crowdstudy-checks\x00{participant_id}".encode(), hashlib.sha256
+    ).digest()
     rng = random.Random(int.from_bytes(digest[:16], "big"))
     chosen = sorted(rng.sample(range(1, n_trials), min(int(n_checks), max(n_trials - 1, 0))))
     return {k: rng.randint(1, int(points)) for k in chosen}
 
 
-def flag_participants(people: Sequence[Mapping], responses: Iterable[Mapping], config: OnlineConfig,
-                      item_ids: Sequence[str]) -> list[dict]:
+def flag_participants(
+    people: Sequence[Mapping], responses: Iterable[Mapping], config: OnlineConfig, item_ids: Sequence[str]
+) -> list[dict]:
     """participants.csv rows: each of ``people`` (rows of roster.list_participants) with the
     per-participant quality summary and the exclusion flags of ``config``'s rules.
 
@@ -166,7 +202,9 @@ def flag_participants(people: Sequence[Mapping], responses: Iterable[Mapping], c
         median_rt = statistics.median(rts) if rts else None
         straight = sum(1 for r in rows if len({int(r[q]) for q in item_ids}) == 1)
         checks = [r for r in rows if r.get("check_value") is not None]
-        failed = sum(1 for r in checks if r.get("check_answer") is None or int(r["check_answer"]) != int(r["check_value"]))
+        failed = sum(
+            1 for r in checks if r.get("check_answer") is None or int(r["check_answer"]) != int(r["check_value"])
+        )
         hidden = sum(1 for r in rows if (r.get("hidden_count") or 0) > 0)
         exits = sum(int(r.get("fullscreen_exits") or 0) for r in rows)
         reasons = []
@@ -180,8 +218,17 @@ def flag_participants(people: Sequence[Mapping], responses: Iterable[Mapping], c
             reasons.append("straight_lining")
         if config.max_hidden_trials is not None and hidden > config.max_hidden_trials:
             reasons.append("tab_switching")
-        out.append({**{k: person.get(k) for k in PARTICIPANT_COLUMNS if k in person},
-                    "excluded": int(bool(reasons)), "exclusion_reason": ";".join(reasons),
-                    "median_rt_ms": median_rt, "straightline_trials": straight, "checks_failed": failed,
-                    "checks_total": len(checks), "hidden_trials": hidden, "fullscreen_exits": exits})
+        out.append(
+            {
+                **{k: person.get(k) for k in PARTICIPANT_COLUMNS if k in person},
+                "excluded": int(bool(reasons)),
+                "exclusion_reason": ";".join(reasons),
+                "median_rt_ms": median_rt,
+                "straightline_trials": straight,
+                "checks_failed": failed,
+                "checks_total": len(checks),
+                "hidden_trials": hidden,
+                "fullscreen_exits": exits,
+            }
+        )
     return out

@@ -44,9 +44,23 @@ if TYPE_CHECKING:
     from starlette.requests import Request
     from starlette.responses import Response
 
-__all__ = ["ROUTES", "admin_session", "dashboard", "login", "logout", "progress", "participants", "metrics",
-           "scoring", "export_responses", "export_demographics", "export_participants", "schedule", "resume_link",
-           "withdraw"]
+__all__ = [
+    "ROUTES",
+    "admin_session",
+    "dashboard",
+    "login",
+    "logout",
+    "progress",
+    "participants",
+    "metrics",
+    "scoring",
+    "export_responses",
+    "export_demographics",
+    "export_participants",
+    "schedule",
+    "resume_link",
+    "withdraw",
+]
 
 
 def admin_session(request: Request) -> StudySession:
@@ -78,6 +92,7 @@ async def dashboard(request: Request) -> Response:
 async def login(request: Request) -> Response:
     """The login form's POST: the cookie and a redirect to the dashboard, or the form again."""
     from starlette.responses import RedirectResponse
+
     token = await admin_auth.read_login_form(request)
     admin_token = request.app.state.config.admin_token
     if not hmac.compare_digest(token.encode(), admin_token.encode()):
@@ -90,6 +105,7 @@ async def login(request: Request) -> Response:
 async def logout(request: Request) -> Response:
     """The cookie removed, and a redirect to the login form."""
     from starlette.responses import RedirectResponse
+
     resp = RedirectResponse("/admin", status_code=303, headers=NO_STORE)
     resp.headers["set-cookie"] = admin_auth.cookie_header(request, None)
     return resp

@@ -37,7 +37,8 @@ to :data:`ROUTES` (under "trials") and its method to the session.
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Any, Callable
+from collections.abc import Callable
+from typing import TYPE_CHECKING, Any
 
 from crowdstudy.study.session import StudySession
 from crowdstudy.study.webio import RouteSpec, in_thread, json_response, read_json_body
@@ -46,15 +47,27 @@ if TYPE_CHECKING:
     from starlette.requests import Request
     from starlette.responses import Response
 
-__all__ = ["ROUTES", "participant_call", "study_info", "register", "participant_state", "screen_out", "consent",
-           "demographics", "practice", "answer", "own_responses", "complete", "withdraw"]
+__all__ = [
+    "ROUTES",
+    "participant_call",
+    "study_info",
+    "register",
+    "participant_state",
+    "screen_out",
+    "consent",
+    "demographics",
+    "practice",
+    "answer",
+    "own_responses",
+    "complete",
+    "withdraw",
+]
 
 #: A session method behind a participant's route: (session, pid, row[, body]) -> payload or (status, payload).
 SessionMethod = Callable[..., Any]
 
 
-def _authenticated_call(study: StudySession, method: SessionMethod, pid: str, secret: str | None,
-                        args: list) -> Any:
+def _authenticated_call(study: StudySession, method: SessionMethod, pid: str, secret: str | None, args: list) -> Any:
     # one trip to the thread pool: authenticate (a database read), then the method
     row = study.authenticate(pid, secret)
     return method(study, pid, row, *args)
@@ -66,8 +79,14 @@ async def participant_call(request: Request, method: SessionMethod, *, body: boo
     (200) or ``(status, payload)``; it raises ApiError for a refusal."""
     args = [await read_json_body(request)] if body else []
     study: StudySession = request.app.state.study
-    result = await in_thread(_authenticated_call, study, method, request.path_params["pid"],
-                             request.headers.get("x-participant-secret"), args)
+    result = await in_thread(
+        _authenticated_call,
+        study,
+        method,
+        request.path_params["pid"],
+        request.headers.get("x-participant-secret"),
+        args,
+    )
     status, payload = result if isinstance(result, tuple) else (200, result)
     return json_response(payload, status)
 

@@ -33,8 +33,13 @@ if TYPE_CHECKING:
 __all__ = ["ROUTES", "UI_PLUGINS", "check_ui", "ui_mounts", "index", "media", "health"]
 
 #: npm packages of ui/node_modules served under /lib/<name>/ (their dist folder).
-UI_PLUGINS = ("plugin-call-function", "plugin-html-button-response", "plugin-instructions",
-              "plugin-survey-html-form", "plugin-survey-text")
+UI_PLUGINS = (
+    "plugin-call-function",
+    "plugin-html-button-response",
+    "plugin-instructions",
+    "plugin-survey-html-form",
+    "plugin-survey-text",
+)
 #: Videos may be cached by the browser for an hour (their names change with the deployment).
 _MEDIA_HEADERS = {"Cache-Control": "public, max-age=3600"}
 
@@ -44,12 +49,14 @@ def check_ui(ui_dir: str | Path) -> Path:
     file when the page, its scripts or the npm packages (``make setup``) are not there."""
     ui = Path(ui_dir).resolve()
     modules = ui / "node_modules"
-    needed = [ui / "index.html", ui / "js", ui / "css", modules / "jspsych" / "dist"] + \
-        [modules / "@jspsych" / p / "dist" for p in UI_PLUGINS]
+    needed = [ui / "index.html", ui / "js", ui / "css", modules / "jspsych" / "dist"] + [
+        modules / "@jspsych" / p / "dist" for p in UI_PLUGINS
+    ]
     absent = [str(p) for p in needed if not p.exists()]
     if absent:
-        raise MissingDependencyError(f"the questionnaire front end is incomplete ({absent[0]} missing); run "
-                                     f"`make setup` or `cd {ui} && npm ci`")
+        raise MissingDependencyError(
+            f"the questionnaire front end is incomplete ({absent[0]} missing); run `make setup` or `cd {ui} && npm ci`"
+        )
     return ui
 
 
@@ -57,16 +64,22 @@ def ui_mounts(ui: Path) -> list[Mount]:
     """The static folders of the front end ``ui`` (checked by :func:`check_ui`)."""
     from starlette.routing import Mount
     from starlette.staticfiles import StaticFiles
+
     modules = ui / "node_modules"
-    folders = {"/js": ui / "js", "/css": ui / "css",
-               "/lib/jspsych/dist": modules / "jspsych" / "dist", "/lib/jspsych/css": modules / "jspsych" / "css",
-               **{f"/lib/{p}": modules / "@jspsych" / p / "dist" for p in UI_PLUGINS}}
+    folders = {
+        "/js": ui / "js",
+        "/css": ui / "css",
+        "/lib/jspsych/dist": modules / "jspsych" / "dist",
+        "/lib/jspsych/css": modules / "jspsych" / "css",
+        **{f"/lib/{p}": modules / "@jspsych" / p / "dist" for p in UI_PLUGINS},
+    }
     return [Mount(prefix, StaticFiles(directory=folder)) for prefix, folder in folders.items()]
 
 
 async def index(request: Request) -> Response:
     """The questionnaire page."""
     from starlette.responses import FileResponse
+
     return FileResponse(request.app.state.ui_dir / "index.html", media_type="text/html", headers=NO_STORE)
 
 
@@ -81,6 +94,7 @@ async def media(request: Request) -> Response:
 async def health(_request: Request) -> Response:
     """Liveness: the process answers (no database access)."""
     from starlette.responses import JSONResponse
+
     return JSONResponse({"ok": True})
 
 

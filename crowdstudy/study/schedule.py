@@ -20,12 +20,18 @@ import hashlib
 import hmac
 import random
 import re
-from typing import Mapping, Sequence
+from collections.abc import Mapping, Sequence
 
 from crowdstudy.errors import InvalidInputError
 
-__all__ = ["ScheduledTrial", "make_schedule", "PARTICIPANT_ID_PATTERN", "STIMULUS_ID_PATTERN",
-           "check_participant_id", "check_stimulus_id"]
+__all__ = [
+    "ScheduledTrial",
+    "make_schedule",
+    "PARTICIPANT_ID_PATTERN",
+    "STIMULUS_ID_PATTERN",
+    "check_participant_id",
+    "check_stimulus_id",
+]
 
 #: Participant ids: letters, digits, ``_`` and ``-``, 1..64 characters, starting with a letter
 #: or digit (Prolific, MTurk and SONA ids all fit). Never used in a path or in SQL text.
@@ -38,6 +44,7 @@ STIMULUS_ID_PATTERN = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.-]{0,63}")
 class ScheduledTrial:
     """One trial of a participant: ``trial_index`` counts from 0 over the whole session
     (practice excluded)."""
+
     trial_index: int
     stage: int
     stimulus_id: str
@@ -46,16 +53,19 @@ class ScheduledTrial:
 def check_participant_id(value, name: str = "participant_id") -> str:
     """Return ``value`` if it is a valid participant id, else raise InvalidInputError."""
     if not isinstance(value, str) or not PARTICIPANT_ID_PATTERN.fullmatch(value):
-        raise InvalidInputError(f"{name} must be 1-64 characters of letters, digits, '_' or '-' "
-                                f"starting with a letter or digit, got {value!r:.80}")
+        raise InvalidInputError(
+            f"{name} must be 1-64 characters of letters, digits, '_' or '-' "
+            f"starting with a letter or digit, got {value!r:.80}"
+        )
     return value
 
 
 def check_stimulus_id(value, name: str = "stimulus_id") -> str:
     """Return ``value`` if it is a valid stimulus id, else raise InvalidInputError."""
     if not isinstance(value, str) or not STIMULUS_ID_PATTERN.fullmatch(value):
-        raise InvalidInputError(f"{name} must be 1-64 characters of letters, digits, '_', '.' or '-', "
-                                f"got {value!r:.80}")
+        raise InvalidInputError(
+            f"{name} must be 1-64 characters of letters, digits, '_', '.' or '-', got {value!r:.80}"
+        )
     return value
 
 
@@ -65,8 +75,9 @@ def _stage_rng(seed: int, participant_id: str, stage: int, key: bytes | None) ->
     return random.Random(int.from_bytes(digest[:16], "big"))
 
 
-def make_schedule(stimuli_by_stage: Mapping[int, Sequence[str]], participant_id: str, seed: int, *,
-                  secret: str | bytes | None = None) -> list[ScheduledTrial]:
+def make_schedule(
+    stimuli_by_stage: Mapping[int, Sequence[str]], participant_id: str, seed: int, *, secret: str | bytes | None = None
+) -> list[ScheduledTrial]:
     """The participant's trials: stage by stage (ascending stage number), each stage's
     stimulus ids in a random order drawn from ``seed``, ``participant_id`` and ``secret``.
 

@@ -51,8 +51,10 @@ class StudySession:
         self.labels = list(config.design.likert_labels)
         self.item_ids = tuple(it.id for it in config.design.items)
         if self.item_ids != ITEM_IDS:
-            raise InvalidInputError(f"design {config.design.source}: the server stores items {', '.join(ITEM_IDS)}, "
-                                    f"the design lists {', '.join(self.item_ids)}")
+            raise InvalidInputError(
+                f"design {config.design.source}: the server stores items {', '.join(ITEM_IDS)}, "
+                f"the design lists {', '.join(self.item_ids)}"
+            )
         self.by_stage = config.stimuli.by_stage()
         self.n_trials = sum(map(len, self.by_stage.values()))
         self.seed = int(config.design.seed)
@@ -66,11 +68,20 @@ class StudySession:
         self.study_info = {
             "name": config.design.name,
             "items": [{"id": it.id, "text": it.text} for it in config.design.items],
-            "labels": self.labels, "points": self.points,
+            "labels": self.labels,
+            "points": self.points,
             "consent_html": config.consent_html,
-            "stages": [{"number": st.number, "scenario": st.scenario, "description": st.description,
-                        "n_trials": len(self.by_stage.get(st.number, []))} for st in config.design.stages],
-            "genders": list(bodies.GENDERS), "age_range": list(bodies.AGE_RANGE),
+            "stages": [
+                {
+                    "number": st.number,
+                    "scenario": st.scenario,
+                    "description": st.description,
+                    "n_trials": len(self.by_stage.get(st.number, [])),
+                }
+                for st in config.design.stages
+            ],
+            "genders": list(bodies.GENDERS),
+            "age_range": list(bodies.AGE_RANGE),
             "screen": {"min_width": self.online.min_width, "min_height": self.online.min_height},
             "fullscreen": bool(self.online.fullscreen),
             "practice_video_url": self.video_url[PRACTICE_KEY],
@@ -116,8 +127,10 @@ class StudySession:
         if v is None:
             return None
         # where the statement goes among the items: from the token (opaque, fixed per trial)
-        return {"text": f'To show that you read each statement, please choose ({v}) "{self.labels[v - 1]}" here.',
-                "position": int(trial["token"][:4], 16) % (len(self.item_ids) + 1)}
+        return {
+            "text": f'To show that you read each statement, please choose ({v}) "{self.labels[v - 1]}" here.',
+            "position": int(trial["token"][:4], 16) % (len(self.item_ids) + 1),
+        }
 
     def public_trials(self, pid: str) -> list[dict]:
         """The participant's trials as the browser sees them: trial_index, stage, token,
@@ -139,11 +152,18 @@ class StudySession:
         status = status_of(row)
         finished = status in ("completed", "screened_out")
         return {
-            "participant_id": pid, "status": status, "consented": row["consented_at"] is not None,
-            "demographics": row["demographics_at"] is not None, "practice_done": row["practice_at"] is not None,
-            "completed": row["completed_at"] is not None, "screened_out": row["screened_out_at"] is not None,
-            "n_trials": len(sched), "n_answered": len(done), "next_trial_index": nxt,
-            "trials": sched, "practice": {"video_url": self.video_url[PRACTICE_KEY]},
+            "participant_id": pid,
+            "status": status,
+            "consented": row["consented_at"] is not None,
+            "demographics": row["demographics_at"] is not None,
+            "practice_done": row["practice_at"] is not None,
+            "completed": row["completed_at"] is not None,
+            "screened_out": row["screened_out_at"] is not None,
+            "n_trials": len(sched),
+            "n_answered": len(done),
+            "next_trial_index": nxt,
+            "trials": sched,
+            "practice": {"video_url": self.video_url[PRACTICE_KEY]},
             "completion_code": row["completion_code"] if finished else None,
             "redirect_url": self.cfg.redirect_url if finished else None,
         }
@@ -162,10 +182,14 @@ class StudySession:
         secret = secrets.token_urlsafe(24)
         sched = make_schedule(self.by_stage, pid, self.seed, secret=self._secret)
         checks = draw_checks(self._secret, pid, len(sched), self.online.attention_checks, self.points)
-        if not self.store.register(pid, hash_secret(secret), sched, seed=self.seed, user_agent=user_agent,
-                                   platform=platform, checks=checks):
-            raise ApiError(409, f"participant {pid!r} is already registered; resume from the browser that "
-                                "started the session (it holds the session secret)")
+        if not self.store.register(
+            pid, hash_secret(secret), sched, seed=self.seed, user_agent=user_agent, platform=platform, checks=checks
+        ):
+            raise ApiError(
+                409,
+                f"participant {pid!r} is already registered; resume from the browser that "
+                "started the session (it holds the session secret)",
+            )
         return 201, {"participant_id": pid, "secret": secret, "resumed": False, "state": self.state(pid)}
 
     def screen_out(self, pid: str, row: dict, body: dict) -> dict:
@@ -174,8 +198,9 @@ class StudySession:
         if row["consented_at"] is not None:
             raise ApiError(409, "the screen check comes before consent")
         if w >= self.online.min_width and h >= self.online.min_height:
-            raise ApiError(422, f"a {w}x{h} viewport passes the screen check "
-                                f"({self.online.min_width}x{self.online.min_height})")
+            raise ApiError(
+                422, f"a {w}x{h} viewport passes the screen check ({self.online.min_width}x{self.online.min_height})"
+            )
         reason = f"viewport {w}x{h} below {self.online.min_width}x{self.online.min_height}"
         return self.state(pid, self.store.set_screened_out(pid, reason, self.online.code("screened_out")))
 
@@ -226,22 +251,33 @@ class StudySession:
         answers = bodies.parse_likert(body, self.item_ids, self.points)
         rt, shown, quality = bodies.parse_timing(body)
         quality["check_answer"] = bodies.parse_check(body, ti, trial["check_value"] is not None, self.points)
-        status, stored = self.store.record_answer(pid, ti, trial["stimulus_id"], trial["stage"], answers, rt, shown,
-                                                  quality=quality)
+        status, stored = self.store.record_answer(
+            pid, ti, trial["stimulus_id"], trial["stage"], answers, rt, shown, quality=quality
+        )
         if status == "out_of_order":
             raise ApiError(409, f"trial {stored['expected']} is not answered yet; answers arrive in trial order")
         if status == "conflict":
-            raise ApiError(409, f"trial {ti} already has a different answer (given in another tab or window?); "
-                                "the first one is kept, this one was recorded separately")
-        return (201 if status == "created" else 200), {"stored": True, "trial_index": ti,
-                                                       "answer": _public_answer(stored, trial["token"])}
+            raise ApiError(
+                409,
+                f"trial {ti} already has a different answer (given in another tab or window?); "
+                "the first one is kept, this one was recorded separately",
+            )
+        return (201 if status == "created" else 200), {
+            "stored": True,
+            "trial_index": ti,
+            "answer": _public_answer(stored, trial["token"]),
+        }
 
     def own_responses(self, pid: str, row: dict) -> dict:
         """The participant's stored answers, each naming its trial by token (no conditions)."""
         tokens = {t["trial_index"]: t["token"] for t in self.schedule(pid)}
-        return {"participant_id": pid,
-                "responses": [{"participant_id": pid, "stage": r["stage"], **_public_answer(r, tokens[r["trial_index"]])}
-                              for r in self.store.response_rows(pid)]}
+        return {
+            "participant_id": pid,
+            "responses": [
+                {"participant_id": pid, "stage": r["stage"], **_public_answer(r, tokens[r["trial_index"]])}
+                for r in self.store.response_rows(pid)
+            ],
+        }
 
     def complete(self, pid: str, row: dict) -> dict:
         st = self.state(pid, row)
@@ -257,8 +293,12 @@ class StudySession:
         code = self.online.code("withdrawn")
         withdraw_participant(self.store, pid, by="participant", completion_code=code)
         self.forget_schedule(pid)
-        return {"participant_id": pid, "withdrawn": True, "completion_code": code,
-                "redirect_url": self.cfg.redirect_url}
+        return {
+            "participant_id": pid,
+            "withdrawn": True,
+            "completion_code": code,
+            "redirect_url": self.cfg.redirect_url,
+        }
 
     # -- admin ------------------------------------------------------------------------------
     def admin_schedule(self, pid: str) -> dict:
@@ -274,9 +314,13 @@ class StudySession:
     def scoring(self) -> dict:
         """The scoring metadata (reversed items, composites): admin only, never the browser's."""
         d = self.cfg.design
-        return {"name": d.name, "points": self.points, "labels": self.labels,
-                "items": [{"id": it.id, "text": it.text, "reverse": it.reverse} for it in d.items],
-                "composites": {k: list(v) for k, v in d.composites.items()}}
+        return {
+            "name": d.name,
+            "points": self.points,
+            "labels": self.labels,
+            "items": [{"id": it.id, "text": it.text, "reverse": it.reverse} for it in d.items],
+            "composites": {k: list(v) for k, v in d.composites.items()},
+        }
 
     def resume_link(self, pid: str) -> dict:
         """A new secret for ``pid`` (e.g. to continue on another device); the old one stops working."""
@@ -289,5 +333,8 @@ class StudySession:
 
 def _public_answer(row: dict, token: str) -> dict:
     """A stored answer as its participant may see it: the trial's token, never the stimulus id."""
-    return {"trial_index": row["trial_index"], "token": token,
-            **{k: row[k] for k in (*ITEM_IDS, "rt_ms", "shown_at", "answered_at")}}
+    return {
+        "trial_index": row["trial_index"],
+        "token": token,
+        **{k: row[k] for k in (*ITEM_IDS, "rt_ms", "shown_at", "answered_at")},
+    }

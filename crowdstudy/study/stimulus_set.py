@@ -37,6 +37,7 @@ class StimulusSet:
     practice_file: absolute Path of the practice clip.
     practice_note: non-empty when no dedicated practice clip was found.
     """
+
     root: Path
     rows: dict[str, dict]
     files: dict[str, Path]
@@ -52,8 +53,13 @@ class StimulusSet:
 
 
 def _inside(root: Path, rel, where: str) -> Path:
-    if not isinstance(rel, str) or not rel or rel.startswith(("/", "\\")) or "\\" in rel or \
-            any(part in ("", "..") for part in rel.split("/")):
+    if (
+        not isinstance(rel, str)
+        or not rel
+        or rel.startswith(("/", "\\"))
+        or "\\" in rel
+        or any(part in ("", "..") for part in rel.split("/"))
+    ):
         raise InvalidInputError(f"{where}: 'file' must be a relative path inside the stimulus folder, got {rel!r}")
     path = (root / rel).resolve()
     if root not in path.parents:
@@ -95,17 +101,28 @@ def load_stimulus_set(stimuli_dir: str | Path, design: StudyDesign, *, practice:
             missing.append(stim.stimulus_id)
             continue
         where = f"{manifest_path}: stimulus {stim.stimulus_id}"
-        expected = {"stage": stim.stage, "scenario": stim.scenario, "density_level": stim.density_level,
-                    "viewpoint": stim.viewpoint, "method": stim.method}
+        expected = {
+            "stage": stim.stage,
+            "scenario": stim.scenario,
+            "density_level": stim.density_level,
+            "viewpoint": stim.viewpoint,
+            "method": stim.method,
+        }
         for key, value in expected.items():
             if row.get(key) != value:
                 raise InvalidInputError(f"{where}: {key} is {row.get(key)!r}, the design says {value!r}")
         files[stim.stimulus_id] = _inside(root, row.get("file"), where)
-        rows[stim.stimulus_id] = {**expected, "stimulus_id": stim.stimulus_id, "density": float(stim.density),
-                                  "characters": int(stim.n_characters)}
+        rows[stim.stimulus_id] = {
+            **expected,
+            "stimulus_id": stim.stimulus_id,
+            "density": float(stim.density),
+            "characters": int(stim.n_characters),
+        }
     if missing:
-        raise InvalidInputError(f"{manifest_path}: {len(missing)} stimuli of the design {design.source} have no row "
-                                f"(first: {', '.join(missing[:3])})")
+        raise InvalidInputError(
+            f"{manifest_path}: {len(missing)} stimuli of the design {design.source} have no row "
+            f"(first: {', '.join(missing[:3])})"
+        )
     practice_note = ""
     if practice is not None:
         practice_file = _inside(root, practice, "--practice")

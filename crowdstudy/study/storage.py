@@ -39,7 +39,7 @@ from __future__ import annotations
 
 import datetime as _dt
 import math
-from typing import Iterable, Mapping, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 
 from crowdstudy.errors import InvalidInputError
 from crowdstudy.study.group_commit import GroupCommitWriter
@@ -58,13 +58,15 @@ QUALITY_FIELDS = ("video_plays", "first_play_ms", "hidden_count", "hidden_ms", "
 
 def utc_now() -> str:
     """Now as an ISO 8601 UTC string with milliseconds (``2026-01-08T09:00:00.123+00:00``)."""
-    return _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="milliseconds")
+    return _dt.datetime.now(_dt.UTC).isoformat(timespec="milliseconds")
 
 
 def _tables(metadata):
     import sqlalchemy as sa
+
     stimuli = sa.Table(
-        "stimuli", metadata,
+        "stimuli",
+        metadata,
         sa.Column("stimulus_id", sa.String(64), primary_key=True),
         sa.Column("stage", sa.Integer, nullable=False),
         sa.Column("scenario", sa.String(32), nullable=False),
@@ -75,7 +77,8 @@ def _tables(metadata):
         sa.Column("characters", sa.Integer, nullable=True),
     )
     participants = sa.Table(
-        "participants", metadata,
+        "participants",
+        metadata,
         sa.Column("participant_id", sa.String(64), primary_key=True),
         sa.Column("secret_hash", sa.String(64), nullable=False),
         sa.Column("schedule_seed", sa.BigInteger, nullable=False),
@@ -96,7 +99,8 @@ def _tables(metadata):
         sa.Column("prolific_session_id", sa.String(64), nullable=True),
     )
     schedule = sa.Table(
-        "schedule", metadata,
+        "schedule",
+        metadata,
         sa.Column("participant_id", sa.String(64), sa.ForeignKey("participants.participant_id"), primary_key=True),
         sa.Column("trial_index", sa.Integer, primary_key=True),
         sa.Column("stage", sa.Integer, nullable=False),
@@ -104,7 +108,8 @@ def _tables(metadata):
         sa.Column("check_value", sa.SmallInteger, nullable=True),
     )
     responses = sa.Table(
-        "responses", metadata,
+        "responses",
+        metadata,
         sa.Column("id", sa.Integer, primary_key=True, autoincrement=True),
         sa.Column("participant_id", sa.String(64), sa.ForeignKey("participants.participant_id"), nullable=False),
         sa.Column("trial_index", sa.Integer, nullable=False),
@@ -124,7 +129,8 @@ def _tables(metadata):
         sa.UniqueConstraint("participant_id", "trial_index", name="uq_response_participant_trial"),
     )
     conflicts = sa.Table(
-        "answer_conflicts", metadata,
+        "answer_conflicts",
+        metadata,
         sa.Column("id", sa.Integer, primary_key=True, autoincrement=True),
         sa.Column("participant_id", sa.String(64), nullable=False),
         sa.Column("trial_index", sa.Integer, nullable=False),
@@ -134,7 +140,8 @@ def _tables(metadata):
         sa.Column("received_at", sa.String(40), nullable=False),
     )
     audit = sa.Table(
-        "audit_log", metadata,
+        "audit_log",
+        metadata,
         sa.Column("id", sa.Integer, primary_key=True, autoincrement=True),
         sa.Column("at", sa.String(40), nullable=False),
         sa.Column("action", sa.String(32), nullable=False),
@@ -142,7 +149,8 @@ def _tables(metadata):
         sa.Column("detail", sa.String(512), nullable=False),
     )
     settings = sa.Table(
-        "settings", metadata,
+        "settings",
+        metadata,
         sa.Column("key", sa.String(64), primary_key=True),
         sa.Column("value", sa.String(256), nullable=False),
     )
@@ -154,6 +162,7 @@ def _add_missing_columns(conn, metadata) -> None:
     lacks (the column definitions are this module's constants, never request values)."""
     import sqlalchemy as sa
     from sqlalchemy.schema import CreateColumn
+
     insp = sa.inspect(conn)
     names = set(insp.get_table_names())
     for table in metadata.sorted_tables:
@@ -190,6 +199,7 @@ class StudyStore:
         kwargs: dict = {}
         if self.is_sqlite:
             from sqlalchemy.pool import StaticPool
+
             kwargs["connect_args"] = {"check_same_thread": False, "timeout": 30}
             if parsed.database in (None, "", ":memory:"):
                 kwargs["poolclass"] = StaticPool
@@ -202,6 +212,7 @@ class StudyStore:
         except (ModuleNotFoundError, sa.exc.NoSuchModuleError) as exc:
             raise InvalidInputError(f"--db {url!r}: the database driver is not installed ({exc})") from None
         if self.is_sqlite:
+
             @event.listens_for(self.engine, "connect")
             def _pragmas(dbapi_connection, _record):
                 cur = dbapi_connection.cursor()
@@ -210,16 +221,25 @@ class StudyStore:
                 cur.execute("PRAGMA foreign_keys=ON")
                 cur.execute("PRAGMA busy_timeout=30000")
                 cur.close()
+
         self.metadata = sa.MetaData()
-        (self.stimuli, self.participants, self.schedule_t, self.responses, self.conflicts, self.audit,
-         self.settings) = _tables(self.metadata)
+        (
+            self.stimuli,
+            self.participants,
+            self.schedule_t,
+            self.responses,
+            self.conflicts,
+            self.audit,
+            self.settings,
+        ) = _tables(self.metadata)
         try:
             if not create:
                 names = set(sa.inspect(self.engine).get_table_names())
                 absent = [t for t in ("stimuli", "participants", "schedule", "responses") if t not in names]
                 if absent:
-                    raise InvalidInputError(f"--db {url!r}: not a crowdstudy database "
-                                            f"(missing tables: {', '.join(absent)})")
+                    raise InvalidInputError(
+                        f"--db {url!r}: not a crowdstudy database (missing tables: {', '.join(absent)})"
+                    )
             # new tables and columns of this version (a no-op on an up-to-date database); on
             # PostgreSQL an advisory lock serialises the server processes starting together
             with self.engine.begin() as conn:
@@ -249,8 +269,10 @@ class StudyStore:
         """The study's random blinding secret (64 hex digits), created on first use and stored,
         so every server process on this database derives the same trial tokens."""
         import secrets
+
         import sqlalchemy as sa
         from sqlalchemy.exc import IntegrityError
+
         t = self.settings
         fresh = secrets.token_hex(32)
 
@@ -260,6 +282,7 @@ class StudyStore:
                 return row[0]
             conn.execute(sa.insert(t).values(key="blinding_secret", value=fresh))
             return fresh
+
         try:
             return self._transact(job)
         except IntegrityError:  # created concurrently by another process: read it back
@@ -270,6 +293,7 @@ class StudyStore:
         """Insert the study's stimuli; a stimulus already stored with other metadata is an
         error (a different study in the same database)."""
         import sqlalchemy as sa
+
         cols = ("stage", "scenario", "density_level", "density", "viewpoint", "method")
         rows = list(rows)
 
@@ -278,9 +302,13 @@ class StudyStore:
             for row in rows:
                 old = existing.get(row["stimulus_id"])
                 if old is None:
-                    conn.execute(sa.insert(self.stimuli).values(
-                        stimulus_id=row["stimulus_id"], characters=row.get("characters"),
-                        **{c: row[c] for c in cols}))
+                    conn.execute(
+                        sa.insert(self.stimuli).values(
+                            stimulus_id=row["stimulus_id"],
+                            characters=row.get("characters"),
+                            **{c: row[c] for c in cols},
+                        )
+                    )
                     continue
                 for c in cols:
                     a, b = getattr(old, c), row[c]
@@ -288,17 +316,28 @@ class StudyStore:
                     if not same:
                         raise InvalidInputError(
                             f"--db {self.url}: stimulus {row['stimulus_id']} is stored with {c}={a!r} but the "
-                            f"stimulus set says {b!r}; use a new database for a different study")
+                            f"stimulus set says {b!r}; use a new database for a different study"
+                        )
+
         from sqlalchemy.exc import IntegrityError
+
         try:
             self._transact(job)
         except IntegrityError:  # another server process inserted them at the same moment
             self._transact(job)
 
     # -- participants -----------------------------------------------------------------
-    def register(self, participant_id: str, secret_hash: str, schedule: Sequence, *, seed: int,
-                 user_agent: str | None = None, platform: Mapping[str, str] | None = None,
-                 checks: Mapping[int, int] | None = None) -> bool:
+    def register(
+        self,
+        participant_id: str,
+        secret_hash: str,
+        schedule: Sequence,
+        *,
+        seed: int,
+        user_agent: str | None = None,
+        platform: Mapping[str, str] | None = None,
+        checks: Mapping[int, int] | None = None,
+    ) -> bool:
         """Create a participant with its schedule (ScheduledTrial items). False if the id exists.
 
         platform: {"prolific_pid", "prolific_study_id", "prolific_session_id"} (each optional);
@@ -307,18 +346,37 @@ class StudyStore:
         platform, checks = dict(platform or {}), dict(checks or {})
         import sqlalchemy as sa
         from sqlalchemy.exc import IntegrityError
+
         p = self.participants
 
         def job(conn):
             if conn.execute(sa.select(p.c.participant_id).where(p.c.participant_id == participant_id)).first():
                 return False
-            conn.execute(sa.insert(p).values(participant_id=participant_id, secret_hash=secret_hash,
-                                             schedule_seed=int(seed), started_at=utc_now(),
-                                             user_agent=(user_agent or "")[:512], **platform))
-            conn.execute(sa.insert(self.schedule_t), [
-                {"participant_id": participant_id, "trial_index": t.trial_index, "stage": t.stage,
-                 "stimulus_id": t.stimulus_id, "check_value": checks.get(t.trial_index)} for t in schedule])
+            conn.execute(
+                sa.insert(p).values(
+                    participant_id=participant_id,
+                    secret_hash=secret_hash,
+                    schedule_seed=int(seed),
+                    started_at=utc_now(),
+                    user_agent=(user_agent or "")[:512],
+                    **platform,
+                )
+            )
+            conn.execute(
+                sa.insert(self.schedule_t),
+                [
+                    {
+                        "participant_id": participant_id,
+                        "trial_index": t.trial_index,
+                        "stage": t.stage,
+                        "stimulus_id": t.stimulus_id,
+                        "check_value": checks.get(t.trial_index),
+                    }
+                    for t in schedule
+                ],
+            )
             return True
+
         try:
             return self._transact(job)
         except IntegrityError:  # registered concurrently (non-SQLite databases)
@@ -327,80 +385,134 @@ class StudyStore:
     def replace_secret(self, participant_id: str, secret_hash: str) -> bool:
         """Give a participant a new secret hash (the old secret stops working). False if unknown."""
         import sqlalchemy as sa
+
         p = self.participants
 
         def job(conn):
-            return conn.execute(sa.update(p).where(p.c.participant_id == participant_id)
-                                .values(secret_hash=secret_hash)).rowcount == 1
+            return (
+                conn.execute(
+                    sa.update(p).where(p.c.participant_id == participant_id).values(secret_hash=secret_hash)
+                ).rowcount
+                == 1
+            )
+
         return self._transact(job)
 
     def participant(self, participant_id: str) -> dict | None:
         import sqlalchemy as sa
+
         with self.engine.connect() as conn:
-            row = conn.execute(sa.select(self.participants)
-                               .where(self.participants.c.participant_id == participant_id)).first()
+            row = conn.execute(
+                sa.select(self.participants).where(self.participants.c.participant_id == participant_id)
+            ).first()
         return None if row is None else dict(row._mapping)
 
     def schedule(self, participant_id: str) -> list[dict]:
         """The participant's trials joined with stimulus metadata, by trial_index."""
         import sqlalchemy as sa
+
         s, st = self.schedule_t, self.stimuli
-        q = (sa.select(s.c.trial_index, s.c.stage, s.c.stimulus_id, s.c.check_value, st.c.scenario, st.c.density_level,
-                       st.c.density, st.c.viewpoint, st.c.method, st.c.characters)
-             .join(st, st.c.stimulus_id == s.c.stimulus_id)
-             .where(s.c.participant_id == participant_id).order_by(s.c.trial_index))
+        q = (
+            sa.select(
+                s.c.trial_index,
+                s.c.stage,
+                s.c.stimulus_id,
+                s.c.check_value,
+                st.c.scenario,
+                st.c.density_level,
+                st.c.density,
+                st.c.viewpoint,
+                st.c.method,
+                st.c.characters,
+            )
+            .join(st, st.c.stimulus_id == s.c.stimulus_id)
+            .where(s.c.participant_id == participant_id)
+            .order_by(s.c.trial_index)
+        )
         with self.engine.connect() as conn:
             return [dict(r._mapping) for r in conn.execute(q)]
 
     def answered_indices(self, participant_id: str) -> list[int]:
         """trial_index of every stored study answer (practice excluded), ascending."""
         import sqlalchemy as sa
+
         r = self.responses
         with self.engine.connect() as conn:
-            return [x for (x,) in conn.execute(
-                sa.select(r.c.trial_index).where(r.c.participant_id == participant_id, r.c.practice.is_(False))
-                .order_by(r.c.trial_index))]
+            return [
+                x
+                for (x,) in conn.execute(
+                    sa.select(r.c.trial_index)
+                    .where(r.c.participant_id == participant_id, r.c.practice.is_(False))
+                    .order_by(r.c.trial_index)
+                )
+            ]
 
     def _update_once(self, participant_id: str, column: str, values: dict) -> dict:
         """Set ``values`` unless ``column`` is already set; return the participant row."""
         import sqlalchemy as sa
+
         p = self.participants
 
         def job(conn):
-            conn.execute(sa.update(p).where(p.c.participant_id == participant_id, p.c[column].is_(None))
-                         .values(**values))
+            conn.execute(
+                sa.update(p).where(p.c.participant_id == participant_id, p.c[column].is_(None)).values(**values)
+            )
             return dict(conn.execute(sa.select(p).where(p.c.participant_id == participant_id)).first()._mapping)
+
         return self._transact(job)
 
     def set_consent(self, participant_id: str) -> dict:
         return self._update_once(participant_id, "consented_at", {"consented_at": utc_now()})
 
     def set_demographics(self, participant_id: str, age: int, gender: str) -> dict:
-        return self._update_once(participant_id, "demographics_at",
-                                 {"age": int(age), "gender": gender, "demographics_at": utc_now()})
+        return self._update_once(
+            participant_id, "demographics_at", {"age": int(age), "gender": gender, "demographics_at": utc_now()}
+        )
 
     def set_completed(self, participant_id: str, completion_code: str | None) -> dict:
-        return self._update_once(participant_id, "completed_at",
-                                 {"completed_at": utc_now(), "completion_code": completion_code})
+        return self._update_once(
+            participant_id, "completed_at", {"completed_at": utc_now(), "completion_code": completion_code}
+        )
 
     def set_screened_out(self, participant_id: str, reason: str, completion_code: str | None) -> dict:
         """Mark a participant who failed the screen check before consent (kept: no answers)."""
-        return self._update_once(participant_id, "screened_out_at",
-                                 {"screened_out_at": utc_now(), "screen_reason": str(reason)[:256],
-                                  "completion_code": completion_code})
+        return self._update_once(
+            participant_id,
+            "screened_out_at",
+            {"screened_out_at": utc_now(), "screen_reason": str(reason)[:256], "completion_code": completion_code},
+        )
 
     # -- answers --------------------------------------------------------------------------
-    def _answer_values(self, participant_id, trial_index, stimulus_id, stage, answers, rt_ms, shown_at, practice,
-                       quality) -> dict:
+    def _answer_values(
+        self, participant_id, trial_index, stimulus_id, stage, answers, rt_ms, shown_at, practice, quality
+    ) -> dict:
         answered_at = utc_now()
         q = {k: (None if quality is None else quality.get(k)) for k in QUALITY_FIELDS}
-        return dict(participant_id=participant_id, trial_index=int(trial_index), practice=bool(practice),
-                    stimulus_id=stimulus_id, stage=int(stage), rt_ms=float(rt_ms), answered_at=answered_at,
-                    shown_at=shown_at or _minus_ms(answered_at, rt_ms), **{k: int(answers[k]) for k in ITEM_IDS}, **q)
+        return dict(
+            participant_id=participant_id,
+            trial_index=int(trial_index),
+            practice=bool(practice),
+            stimulus_id=stimulus_id,
+            stage=int(stage),
+            rt_ms=float(rt_ms),
+            answered_at=answered_at,
+            shown_at=shown_at or _minus_ms(answered_at, rt_ms),
+            **{k: int(answers[k]) for k in ITEM_IDS},
+            **q,
+        )
 
-    def record_answer(self, participant_id: str, trial_index: int, stimulus_id: str, stage: int,
-                      answers: Mapping[str, int], rt_ms: float, shown_at: str | None, *,
-                      quality: Mapping | None = None) -> tuple[str, dict]:
+    def record_answer(
+        self,
+        participant_id: str,
+        trial_index: int,
+        stimulus_id: str,
+        stage: int,
+        answers: Mapping[str, int],
+        rt_ms: float,
+        shown_at: str | None,
+        *,
+        quality: Mapping | None = None,
+    ) -> tuple[str, dict]:
         """Store one study answer, committed (and on SQLite fsynced) before returning.
 
         Returns (status, row): "created"; "exists" (the same answer, i.e. the same stimulus,
@@ -413,9 +525,11 @@ class StudyStore:
         """
         import sqlalchemy as sa
         from sqlalchemy.exc import IntegrityError
+
         r = self.responses
-        values = self._answer_values(participant_id, trial_index, stimulus_id, stage, answers, rt_ms, shown_at,
-                                     False, quality)
+        values = self._answer_values(
+            participant_id, trial_index, stimulus_id, stage, answers, rt_ms, shown_at, False, quality
+        )
 
         ti = int(trial_index)
 
@@ -423,21 +537,38 @@ class StudyStore:
             # one indexed read: this trial's stored answer and its predecessor's. Answers are
             # only ever inserted after their predecessor, so "the previous trial is answered"
             # means "every earlier trial is" (and no later one is).
-            near = {row.trial_index: row for row in conn.execute(sa.select(r).where(
-                r.c.participant_id == participant_id, r.c.practice.is_(False),
-                r.c.trial_index.in_([ti - 1, ti]) if ti > 0 else r.c.trial_index == ti))}
+            near = {
+                row.trial_index: row
+                for row in conn.execute(
+                    sa.select(r).where(
+                        r.c.participant_id == participant_id,
+                        r.c.practice.is_(False),
+                        r.c.trial_index.in_([ti - 1, ti]) if ti > 0 else r.c.trial_index == ti,
+                    )
+                )
+            }
             old = near.get(ti)
             if old is not None:
                 old = dict(old._mapping)
                 if _same_answer(old, values):
                     return "exists", old
-                conn.execute(sa.insert(self.conflicts).values(
-                    participant_id=participant_id, trial_index=ti, stimulus_id=stimulus_id,
-                    rt_ms=values["rt_ms"], received_at=values["answered_at"], **{k: values[k] for k in ITEM_IDS}))
+                conn.execute(
+                    sa.insert(self.conflicts).values(
+                        participant_id=participant_id,
+                        trial_index=ti,
+                        stimulus_id=stimulus_id,
+                        rt_ms=values["rt_ms"],
+                        received_at=values["answered_at"],
+                        **{k: values[k] for k in ITEM_IDS},
+                    )
+                )
                 return "conflict", old
             if ti > 0 and (ti - 1) not in near:
-                n = conn.execute(sa.select(sa.func.count()).select_from(r).where(
-                    r.c.participant_id == participant_id, r.c.practice.is_(False))).scalar_one()
+                n = conn.execute(
+                    sa.select(sa.func.count())
+                    .select_from(r)
+                    .where(r.c.participant_id == participant_id, r.c.practice.is_(False))
+                ).scalar_one()
                 return "out_of_order", {"expected": int(n)}
             conn.execute(sa.insert(r).values(**values))
             return "created", values
@@ -447,8 +578,14 @@ class StudyStore:
         except IntegrityError:  # a concurrent insert of the same key (non-SQLite): read it back
             return self._transact(job)
 
-    def record_practice(self, participant_id: str, answers: Mapping[str, int], rt_ms: float,
-                        shown_at: str | None, quality: Mapping | None = None) -> tuple[str, dict]:
+    def record_practice(
+        self,
+        participant_id: str,
+        answers: Mapping[str, int],
+        rt_ms: float,
+        shown_at: str | None,
+        quality: Mapping | None = None,
+    ) -> tuple[str, dict]:
         """Store the practice answer and mark the practice done in ONE transaction.
 
         Returns ("created" | "exists", participant row). "exists": a practice answer was
@@ -458,13 +595,16 @@ class StudyStore:
         """
         import sqlalchemy as sa
         from sqlalchemy.exc import IntegrityError
+
         r, p = self.responses, self.participants
-        values = self._answer_values(participant_id, PRACTICE_TRIAL_INDEX, "practice", 0, answers, rt_ms, shown_at,
-                                     True, quality)
+        values = self._answer_values(
+            participant_id, PRACTICE_TRIAL_INDEX, "practice", 0, answers, rt_ms, shown_at, True, quality
+        )
 
         def job(conn):
-            old = conn.execute(sa.select(r.c.id).where(r.c.participant_id == participant_id,
-                                                       r.c.trial_index == PRACTICE_TRIAL_INDEX)).first()
+            old = conn.execute(
+                sa.select(r.c.id).where(r.c.participant_id == participant_id, r.c.trial_index == PRACTICE_TRIAL_INDEX)
+            ).first()
             if old is None:
                 conn.execute(sa.insert(r).values(**values))
             _mark_practice_done(conn, p, participant_id)
@@ -480,16 +620,32 @@ class StudyStore:
     def progress(self) -> list[dict]:
         """Per participant: timestamps of each step, answers stored, trials scheduled."""
         import sqlalchemy as sa
+
         p, s, r = self.participants, self.schedule_t, self.responses
         n_trials = sa.select(s.c.participant_id, sa.func.count().label("n")).group_by(s.c.participant_id).subquery()
-        n_ans = (sa.select(r.c.participant_id, sa.func.count().label("n")).where(r.c.practice.is_(False))
-                 .group_by(r.c.participant_id).subquery())
-        q = (sa.select(p.c.participant_id, p.c.started_at, p.c.consented_at, p.c.demographics_at, p.c.practice_at,
-                       p.c.completed_at, p.c.screened_out_at, p.c.withdrawn_at, sa.func.coalesce(n_ans.c.n, 0).label("answered"),
-                       sa.func.coalesce(n_trials.c.n, 0).label("trials"))
-             .outerjoin(n_ans, n_ans.c.participant_id == p.c.participant_id)
-             .outerjoin(n_trials, n_trials.c.participant_id == p.c.participant_id)
-             .order_by(p.c.started_at, p.c.participant_id))
+        n_ans = (
+            sa.select(r.c.participant_id, sa.func.count().label("n"))
+            .where(r.c.practice.is_(False))
+            .group_by(r.c.participant_id)
+            .subquery()
+        )
+        q = (
+            sa.select(
+                p.c.participant_id,
+                p.c.started_at,
+                p.c.consented_at,
+                p.c.demographics_at,
+                p.c.practice_at,
+                p.c.completed_at,
+                p.c.screened_out_at,
+                p.c.withdrawn_at,
+                sa.func.coalesce(n_ans.c.n, 0).label("answered"),
+                sa.func.coalesce(n_trials.c.n, 0).label("trials"),
+            )
+            .outerjoin(n_ans, n_ans.c.participant_id == p.c.participant_id)
+            .outerjoin(n_trials, n_trials.c.participant_id == p.c.participant_id)
+            .order_by(p.c.started_at, p.c.participant_id)
+        )
         with self.engine.connect() as conn:
             return [dict(x._mapping) for x in conn.execute(q)]
 
@@ -498,14 +654,31 @@ class StudyStore:
         participant and trial_index, in the responses.csv schema, plus QUALITY_FIELDS and the
         trial's attention-check value ``check_value``."""
         import sqlalchemy as sa
+
         r, st, s = self.responses, self.stimuli, self.schedule_t
-        q = (sa.select(r.c.participant_id, r.c.stage, st.c.scenario, r.c.trial_index, r.c.stimulus_id,
-                       st.c.density_level, st.c.density, st.c.viewpoint, st.c.method,
-                       *[r.c[q] for q in ITEM_IDS], r.c.rt_ms, r.c.shown_at, r.c.answered_at,
-                       *[r.c[q] for q in QUALITY_FIELDS], s.c.check_value)
-             .join(st, st.c.stimulus_id == r.c.stimulus_id)
-             .outerjoin(s, sa.and_(s.c.participant_id == r.c.participant_id, s.c.trial_index == r.c.trial_index))
-             .where(r.c.practice.is_(False)).order_by(r.c.participant_id, r.c.trial_index))
+        q = (
+            sa.select(
+                r.c.participant_id,
+                r.c.stage,
+                st.c.scenario,
+                r.c.trial_index,
+                r.c.stimulus_id,
+                st.c.density_level,
+                st.c.density,
+                st.c.viewpoint,
+                st.c.method,
+                *[r.c[q] for q in ITEM_IDS],
+                r.c.rt_ms,
+                r.c.shown_at,
+                r.c.answered_at,
+                *[r.c[q] for q in QUALITY_FIELDS],
+                s.c.check_value,
+            )
+            .join(st, st.c.stimulus_id == r.c.stimulus_id)
+            .outerjoin(s, sa.and_(s.c.participant_id == r.c.participant_id, s.c.trial_index == r.c.trial_index))
+            .where(r.c.practice.is_(False))
+            .order_by(r.c.participant_id, r.c.trial_index)
+        )
         if participant_id is not None:
             q = q.where(r.c.participant_id == participant_id)
         with self.engine.connect() as conn:
@@ -514,23 +687,32 @@ class StudyStore:
     def demographics_rows(self) -> list[dict]:
         """One row per participant in the demographics.csv schema."""
         import sqlalchemy as sa
+
         p = self.participants
-        q = sa.select(p.c.participant_id, p.c.age, p.c.gender, p.c.started_at, p.c.completed_at,
-                      p.c.completion_code).order_by(p.c.participant_id)
+        q = sa.select(
+            p.c.participant_id, p.c.age, p.c.gender, p.c.started_at, p.c.completed_at, p.c.completion_code
+        ).order_by(p.c.participant_id)
         with self.engine.connect() as conn:
             return [dict(x._mapping) for x in conn.execute(q)]
 
 
 def _mark_practice_done(conn, participants, participant_id: str) -> None:
     import sqlalchemy as sa
+
     p = participants
-    conn.execute(sa.update(p).where(p.c.participant_id == participant_id, p.c.practice_at.is_(None))
-                 .values(practice_at=utc_now()))
+    conn.execute(
+        sa.update(p)
+        .where(p.c.participant_id == participant_id, p.c.practice_at.is_(None))
+        .values(practice_at=utc_now())
+    )
 
 
 def _same_answer(old: Mapping, new: Mapping) -> bool:
-    return (old["stimulus_id"] == new["stimulus_id"] and all(int(old[q]) == int(new[q]) for q in ITEM_IDS)
-            and math.isclose(float(old["rt_ms"]), float(new["rt_ms"]), rel_tol=0, abs_tol=1e-6))
+    return (
+        old["stimulus_id"] == new["stimulus_id"]
+        and all(int(old[q]) == int(new[q]) for q in ITEM_IDS)
+        and math.isclose(float(old["rt_ms"]), float(new["rt_ms"]), rel_tol=0, abs_tol=1e-6)
+    )
 
 
 def _minus_ms(iso: str, ms: float) -> str:

@@ -29,11 +29,26 @@ from __future__ import annotations
 import collections
 import math
 import time
-from typing import Any, Callable, NamedTuple, TypeVar
+from collections.abc import Callable
+from typing import Any, NamedTuple, TypeVar
 
-__all__ = ["ApiError", "RouteSpec", "NO_STORE", "read_json_body", "in_thread", "json_response", "error_response",
-           "html_response", "csv_response", "SecurityHeaders", "LatencyLog", "AnswerTimer", "MAX_BODY_BYTES",
-           "MAX_JSON_DEPTH", "content_security_policy"]
+__all__ = [
+    "ApiError",
+    "RouteSpec",
+    "NO_STORE",
+    "read_json_body",
+    "in_thread",
+    "json_response",
+    "error_response",
+    "html_response",
+    "csv_response",
+    "SecurityHeaders",
+    "LatencyLog",
+    "AnswerTimer",
+    "MAX_BODY_BYTES",
+    "MAX_JSON_DEPTH",
+    "content_security_policy",
+]
 
 MAX_BODY_BYTES = 16 * 1024
 MAX_JSON_DEPTH = 8
@@ -54,6 +69,7 @@ class ApiError(Exception):
 class RouteSpec(NamedTuple):
     """One route: ``path`` (Starlette syntax, ``{pid}`` a path parameter), the async
     ``handler(request)`` and its HTTP ``methods`` (GET also answers HEAD)."""
+
     path: str
     handler: Callable[..., Any]
     methods: tuple[str, ...] = ("GET",)
@@ -87,6 +103,7 @@ def _json_depth(raw: bytes) -> int:
 async def read_json_body(request) -> dict:
     """The request's JSON object body (see the module docstring); raises ApiError 400/413/415."""
     import json
+
     ctype = request.headers.get("content-type", "").split(";", 1)[0].strip().lower()
     if ctype != "application/json":
         raise ApiError(415, "the body must be JSON, sent with Content-Type: application/json")
@@ -114,12 +131,14 @@ async def read_json_body(request) -> dict:
 async def in_thread(fn: Callable[..., _T], *args: Any) -> _T:
     """``fn(*args)`` run in the server's thread pool (blocking work: the database, files)."""
     from starlette.concurrency import run_in_threadpool
+
     return await run_in_threadpool(fn, *args)
 
 
 def json_response(payload: Any, status: int = 200):
     """A JSON answer that is never cached."""
     from starlette.responses import JSONResponse
+
     return JSONResponse(payload, status_code=status, headers=NO_STORE)
 
 
@@ -131,14 +150,17 @@ def error_response(status: int, message: str):
 def html_response(text: str, status: int = 200):
     """An HTML page that is never cached."""
     from starlette.responses import HTMLResponse
+
     return HTMLResponse(text, status_code=status, headers=NO_STORE)
 
 
 def csv_response(text: str, name: str):
     """A CSV download named ``name``, never cached."""
     from starlette.responses import Response
-    return Response(text, media_type="text/csv",
-                    headers={**NO_STORE, "Content-Disposition": f'attachment; filename="{name}"'})
+
+    return Response(
+        text, media_type="text/csv", headers={**NO_STORE, "Content-Disposition": f'attachment; filename="{name}"'}
+    )
 
 
 def content_security_policy(media_origin: str = "") -> str:
@@ -146,9 +168,11 @@ def content_security_policy(media_origin: str = "") -> str:
     e.g. ``https://cdn.example.org``, where the videos live), media also from ``blob:`` (the
     preloaded copies); no plugins, no framing, no foreign form targets."""
     extra = f" {media_origin}" if media_origin else ""
-    return ("default-src 'self'; script-src 'self'; style-src 'self' 'unsafe-inline'; img-src 'self' data:; font-src 'self' data:; "
-            f"media-src 'self' blob:{extra}; connect-src 'self'{extra}; object-src 'none'; base-uri 'none'; "
-            "form-action 'self'; frame-ancestors 'none'")
+    return (
+        "default-src 'self'; script-src 'self'; style-src 'self' 'unsafe-inline'; img-src 'self' data:; font-src 'self' data:; "
+        f"media-src 'self' blob:{extra}; connect-src 'self'{extra}; object-src 'none'; base-uri 'none'; "
+        "form-action 'self'; frame-ancestors 'none'"
+    )
 
 
 class SecurityHeaders:
@@ -156,10 +180,14 @@ class SecurityHeaders:
 
     def __init__(self, app, media_origin: str = ""):
         self.app = app
-        self.extra = ((b"content-security-policy", content_security_policy(media_origin).encode()),
-                      (b"x-frame-options", b"DENY"), (b"x-content-type-options", b"nosniff"),
-                      (b"referrer-policy", b"no-referrer"), (b"cross-origin-opener-policy", b"same-origin"),
-                      (b"permissions-policy", b"camera=(), microphone=(), geolocation=(), fullscreen=(self)"))
+        self.extra = (
+            (b"content-security-policy", content_security_policy(media_origin).encode()),
+            (b"x-frame-options", b"DENY"),
+            (b"x-content-type-options", b"nosniff"),
+            (b"referrer-policy", b"no-referrer"),
+            (b"cross-origin-opener-policy", b"same-origin"),
+            (b"permissions-policy", b"camera=(), microphone=(), geolocation=(), fullscreen=(self)"),
+        )
 
     async def __call__(self, scope, receive, send):
         if scope["type"] != "http":
@@ -181,7 +209,7 @@ class LatencyLog:
     """The last ``maxlen`` answer latencies of this process, milliseconds, and their summary."""
 
     def __init__(self, maxlen: int = 200_000):
-        self.values: "collections.deque[float]" = collections.deque(maxlen=maxlen)
+        self.values: collections.deque[float] = collections.deque(maxlen=maxlen)
 
     def add(self, ms: float) -> None:
         self.values.append(ms)
@@ -194,8 +222,14 @@ class LatencyLog:
 
         def pct(q):
             return round(vals[min(len(vals) - 1, int(math.ceil(q / 100.0 * len(vals))) - 1)], 3)
-        return {"answers_timed": len(vals), "latency_ms_p50": pct(50), "latency_ms_p95": pct(95),
-                "latency_ms_p99": pct(99), "latency_ms_max": round(vals[-1], 3)}
+
+        return {
+            "answers_timed": len(vals),
+            "latency_ms_p50": pct(50),
+            "latency_ms_p95": pct(95),
+            "latency_ms_p99": pct(99),
+            "latency_ms_max": round(vals[-1], 3),
+        }
 
 
 class AnswerTimer:

@@ -7,6 +7,7 @@ expected.json: {"fps", "frame", "bones": {name: [x, y, z] toolkit world}, "verti
 In Blender (Z up) the toolkit's (x, y, z) appear as (-x, -y, z): the glTF file maps them to
 (-x, z, y), Blender's importer maps glTF (x, y, z) to (x, -z, y).
 """
+
 import json
 import sys
 
@@ -17,7 +18,7 @@ import numpy
 if "bool" not in vars(numpy):
     numpy.bool = bool
 
-args = sys.argv[sys.argv.index("--") + 1:]
+args = sys.argv[sys.argv.index("--") + 1 :]
 glb, expected_path, out_path = args
 exp = json.load(open(expected_path))
 scene = bpy.context.scene
@@ -26,9 +27,13 @@ bpy.ops.import_scene.gltf(filepath=glb)
 arms = [o for o in scene.objects if o.type == "ARMATURE"]
 meshes = [o for o in scene.objects if o.type == "MESH"]
 actions = list(bpy.data.actions)
-out = {"armatures": len(arms), "meshes": len(meshes), "actions": len(actions),
-       "frame_ranges": sorted({tuple(a.frame_range) for a in actions}),
-       "bones": sum(len(a.data.bones) for a in arms)}
+out = {
+    "armatures": len(arms),
+    "meshes": len(meshes),
+    "actions": len(actions),
+    "frame_ranges": sorted({tuple(a.frame_range) for a in actions}),
+    "bones": sum(len(a.data.bones) for a in arms),
+}
 # keyframe k lies at frame k + first frame of the action
 first = min(a.frame_range[0] for a in actions)
 scene.frame_set(int(round(first + exp["frame"])))

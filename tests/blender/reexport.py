@@ -3,6 +3,7 @@ layout, bone axes and armature object), to check that crowdstudy imports Blender
 
     blender -b --factory-startup --python tests/blender/reexport.py -- in.glb out.glb
 """
+
 import sys
 
 import bpy
@@ -11,7 +12,7 @@ import numpy
 if "bool" not in vars(numpy):  # Debian's Blender 3.4 glTF add-on still uses np.bool
     numpy.bool = bool
 
-src, dst = sys.argv[sys.argv.index("--") + 1:]
+src, dst = sys.argv[sys.argv.index("--") + 1 :]
 for obj in list(bpy.context.scene.objects):  # the factory scene's cube, camera and light
     bpy.data.objects.remove(obj)
 bpy.ops.import_scene.gltf(filepath=src)

@@ -24,8 +24,14 @@ from crowdstudy.gltf.export import export_gltf
 from crowdstudy.scene import CrowdAnimation
 
 JS = Path(__file__).resolve().parent
-CHROMIUM_ARGS = ["--no-sandbox", "--headless", "--use-angle=swiftshader", "--enable-unsafe-swiftshader",
-                 "--disable-background-networking", "--no-first-run"]
+CHROMIUM_ARGS = [
+    "--no-sandbox",
+    "--headless",
+    "--use-angle=swiftshader",
+    "--enable-unsafe-swiftshader",
+    "--disable-background-networking",
+    "--no-first-run",
+]
 
 
 class _Quiet(http.server.SimpleHTTPRequestHandler):
@@ -58,8 +64,11 @@ def main() -> None:
         if args.eye:
             from crowdstudy.render.camera import Camera
 
-            view = Camera(eye=tuple(float(x) for x in args.eye.split(",")),
-                          target=tuple(float(x) for x in args.target.split(",")), fov=args.fov)
+            view = Camera(
+                eye=tuple(float(x) for x in args.eye.split(",")),
+                target=tuple(float(x) for x in args.target.split(",")),
+                fov=args.fov,
+            )
         cam = r.set_view(view)
         ours = r.render(args.frame)
     Image.fromarray(ours).save(args.out / "crowdstudy.png")
@@ -69,8 +78,7 @@ def main() -> None:
     (args.out / "node_modules").unlink(missing_ok=True)
     (args.out / "node_modules").symlink_to(JS / "node_modules")
     shutil.copy(JS / "gltf_page.html", args.out / "index.html")
-    server = http.server.ThreadingHTTPServer(("127.0.0.1", 0),
-                                             functools.partial(_Quiet, directory=str(args.out)))
+    server = http.server.ThreadingHTTPServer(("127.0.0.1", 0), functools.partial(_Quiet, directory=str(args.out)))
     threading.Thread(target=server.serve_forever, daemon=True).start()
     try:
         with sync_playwright() as pw:
@@ -79,8 +87,10 @@ def main() -> None:
             page.goto(f"http://127.0.0.1:{server.server_address[1]}/index.html")
             page.wait_for_function("window.crowdReady === true", timeout=30000)
             print(page.evaluate("crowd.load('crowd.glb')"))
-            page.evaluate("([t, e, g, f, w, h]) => crowd.render(t, e, g, f, w, h)",
-                          [args.frame / anim.fps, eye.tolist(), target.tolist(), cam.fov, args.width, args.height])
+            page.evaluate(
+                "([t, e, g, f, w, h]) => crowd.render(t, e, g, f, w, h)",
+                [args.frame / anim.fps, eye.tolist(), target.tolist(), cam.fov, args.width, args.height],
+            )
             page.screenshot(path=str(args.out / "threejs.png"))
             browser.close()
     finally:
