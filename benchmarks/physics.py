@@ -432,6 +432,27 @@ def _parser() -> argparse.ArgumentParser:
         help="seconds simulated per stadium size (one value, or one per size)",
     )
     parser.add_argument(
+        "--ablation",
+        action="store_true",
+        help="only the ablation: every study cell (or --cells) corrected with the paper's method "
+        "(PhysicsConfig.paper()), the defaults, and the defaults without each addition (--groups), "
+        "with the bars and ms per step of each; resumable (finished rows are cached under "
+        "build/bench/physics_ablation_cache/)",
+    )
+    parser.add_argument(
+        "--groups",
+        default="all",
+        metavar="NAME,...",
+        help="--ablation: the additions to switch off one at a time (default all; "
+        "crowdstudy.physics.ablation.ADDITIONS)",
+    )
+    parser.add_argument(
+        "--seconds", type=float, default=20.0, help="--ablation: seconds of each cell's clip (default 20, the study's)"
+    )
+    parser.add_argument(
+        "--workers", type=int, default=1, help="--ablation: cells corrected at once, in worker processes (default 1)"
+    )
+    parser.add_argument(
         "--light-bodies",
         action="store_true",
         help="stadium runs hand correct() body proxies without the meshes (needed at 5,000 "
@@ -504,6 +525,50 @@ def _main_bars(args, config, trial: str) -> int:
     return 0
 
 
+def _main_ablation(args) -> int:
+    """``--ablation``: the rows of :func:`crowdstudy.physics.ablation_run.run_ablation`, the
+    summary per variant and the figure (:mod:`crowdstudy.physics.ablation_report`)."""
+    from crowdstudy.design import load_design
+    from crowdstudy.errors import InvalidInputError
+    from crowdstudy.physics.ablation import ADDITIONS, parse_additions
+    from crowdstudy.physics.ablation_report import ablation_figure, noise_bands, summarize
+    from crowdstudy.physics.ablation_run import NOISE_CHANGES, AblationOptions, run_ablation, study_cells
+
+    if args.config:
+        raise InvalidInputError(
+            "--config: --ablation compares the defaults with the paper's method and takes no --config"
+        )
+    groups = parse_additions(args.groups)
+    design = load_design()
+    try:
+        cells = study_cells(design, parse_cells(args.cells, list(design.densities)))
+    except SystemExit as exc:
+        raise InvalidInputError(str(exc)) from None
+    options = AblationOptions(seconds=args.seconds, cache_dir=report_path("physics_ablation_cache").with_suffix(""))
+    figure_path = report_path("physics_ablation").with_suffix(".png")
+    rows = run_ablation(cells, groups, options, workers=args.workers)
+    summary = summarize(rows)
+    print(format_table(summary), flush=True)
+    figure = ablation_figure(rows, path=figure_path, tolerances=TOLERANCES)
+    print(f"figure: {figure}", flush=True)
+    path = write_report(
+        "physics_ablation",
+        rows,
+        seed=None,
+        summary=summary,
+        noise=noise_bands(rows),
+        groups={
+            name: {"description": ADDITIONS[name].description, "changes": ADDITIONS[name].changes} for name in groups
+        },
+        noise_changes=NOISE_CHANGES,
+        seconds=args.seconds,
+        bar_text=BAR_TEXT,
+        figure=str(figure),
+    )
+    print(f"wrote {path}", file=sys.stderr)
+    return 0
+
+
 def _main_curve(args, config, trial: str, sizes: list[int], devices: list[dict], cuda: bool) -> int:
     d5 = _scene("D5", args.steps / 60.0 + 0.5)
     rows = cost_curve(sizes, args.steps, base=d5, config=config)
@@ -557,6 +622,8 @@ def main(argv: list[str]) -> int:
         raise SystemExit(f"--sizes: expected comma-separated character counts, got {args.sizes!r}") from None
     if not sizes or min(sizes) < 1:
         raise SystemExit(f"--sizes: expected positive character counts, got {args.sizes!r}")
+    if args.ablation:
+        return _main_ablation(args)
     if args.stadium:
         return _main_stadium(args, config, trial)
     if args.bars_only:
