@@ -35,6 +35,7 @@ import os
 import statistics
 import sys
 import time
+from pathlib import Path
 
 import numpy as np
 
@@ -453,6 +454,12 @@ def _parser() -> argparse.ArgumentParser:
         "--workers", type=int, default=1, help="--ablation: cells corrected at once, in worker processes (default 1)"
     )
     parser.add_argument(
+        "--design",
+        default=None,
+        metavar="FILE.toml",
+        help="--ablation: the study design whose cells are corrected (default the paper's, stimuli/study.toml)",
+    )
+    parser.add_argument(
         "--light-bodies",
         action="store_true",
         help="stadium runs hand correct() body proxies without the meshes (needed at 5,000 "
@@ -539,12 +546,16 @@ def _main_ablation(args) -> int:
             "--config: --ablation compares the defaults with the paper's method and takes no --config"
         )
     groups = parse_additions(args.groups)
-    design = load_design()
+    design = load_design(args.design)
     try:
         cells = study_cells(design, parse_cells(args.cells, list(design.densities)))
     except SystemExit as exc:
         raise InvalidInputError(str(exc)) from None
-    options = AblationOptions(seconds=args.seconds, cache_dir=report_path("physics_ablation_cache").with_suffix(""))
+    options = AblationOptions(
+        seconds=args.seconds,
+        cache_dir=report_path("physics_ablation_cache").with_suffix(""),
+        design_path=None if args.design is None else str(Path(args.design).resolve()),
+    )
     figure_path = report_path("physics_ablation").with_suffix(".png")
     rows = run_ablation(cells, groups, options, workers=args.workers)
     summary = summarize(rows)

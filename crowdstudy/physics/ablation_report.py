@@ -132,8 +132,7 @@ def ablation_figure(rows: Sequence[dict], path: Path, tolerances: BarTolerances 
                 ratio = ratios.get((variant, cell, bar))
                 if ratio is not None:
                     grid[i, j] = float(np.clip(math.log2(max(ratio, 1e-6)), -3.0, 3.0))
-        cmap = plt.get_cmap("RdBu_r").copy()
-        cmap.set_bad("0.85")
+        cmap = plt.get_cmap("RdBu_r").with_extremes(bad="0.85")
         image = ax.imshow(np.ma.masked_invalid(grid), cmap=cmap, vmin=-2, vmax=2, aspect="auto")
         for i, variant in enumerate(variants):
             for j, cell in enumerate(cells):
