@@ -539,7 +539,7 @@ def _main_ablation(args) -> int:
     from crowdstudy.errors import InvalidInputError
     from crowdstudy.physics.ablation import ADDITIONS, parse_additions
     from crowdstudy.physics.ablation_report import ablation_figure, noise_bands, summarize
-    from crowdstudy.physics.ablation_run import NOISE_CHANGES, AblationOptions, run_ablation, study_cells
+    from crowdstudy.physics.ablation_run import NOISE_VARIANTS, AblationOptions, run_ablation, study_cells
 
     if args.config:
         raise InvalidInputError(
@@ -571,7 +571,7 @@ def _main_ablation(args) -> int:
         groups={
             name: {"description": ADDITIONS[name].description, "changes": ADDITIONS[name].changes} for name in groups
         },
-        noise_changes=NOISE_CHANGES,
+        noise_variants=NOISE_VARIANTS,
         seconds=args.seconds,
         bar_text=BAR_TEXT,
         figure=str(figure),

@@ -159,9 +159,9 @@ def test_the_ablation_rows_have_every_column(ablation_run):
     assert [(r["cell"], r["variant"]) for r in rows] == [
         (cell, variant)
         for cell in ("concert:D1", "corridor:D2")
-        for variant in ("default", "paper", "noise", "feedforward", "foot_lock")
+        for variant in ("default", "paper", "noise_cg", "noise_k", "feedforward", "foot_lock")
     ]
-    assert [r["characters"] for r in rows] == [5] * 5 + [7] * 5
+    assert [r["characters"] for r in rows] == [5] * 6 + [7] * 6
     for row in rows:
         assert list(row) == list(ROW_COLUMNS)
         maybe_none = {"seam_ratio", "ok_seam", "ok_tracking"}  # a short concert does not loop; D2 has no tracking bar
@@ -170,10 +170,10 @@ def test_the_ablation_rows_have_every_column(ablation_run):
         assert all(row[key] is not None for key in ROW_COLUMNS if key not in maybe_none), row
         assert row["ms_per_step"] > 0 and row["default_ms_per_step"] > 0
         assert row["ms_ratio"] == pytest.approx(row["ms_per_step"] / row["default_ms_per_step"])
-    assert rows[0]["ok_tracking"] is not None and rows[5]["ok_tracking"] is None  # D1 has a tracking bar
+    assert rows[0]["ok_tracking"] is not None and rows[6]["ok_tracking"] is None  # D1 has a tracking bar
     paper, default = rows[1], rows[0]
     assert paper["slide_p99_cm_s"] > default["slide_p99_cm_s"]  # no foot anchor, no foot lock: feet slide
-    assert [s["variant"] for s in report["summary"]] == ["default", "paper", "noise", "feedforward", "foot_lock"]
+    assert [s["variant"] for s in report["summary"]] == [r["variant"] for r in rows[:6]]
     assert set(report["groups"]) == {"feedforward", "foot_lock"} and "noise" in report
     assert report["provenance"]["git_sha"] and report["command"].startswith("crowdstudy bench physics --ablation")
     assert (folder / "build" / "bench" / "physics_ablation.png").stat().st_size > 10_000
