@@ -16,6 +16,12 @@ and its MuJoCo peer.
   study's own crowds or on other seeds of the same cells (:mod:`crowdstudy.physics.acceptance`);
   with more than one seed, the spread per cell (:func:`seed_spread`) and its figure
   ``build/bench/physics_bars_seeds.png``;
+* ``--ablation [--groups NAME,...] [--cells ...] [--seconds 20] [--workers N]``: what each
+  addition to the paper's method buys: every study cell corrected with the paper's method
+  alone (``PhysicsConfig.paper()``), the defaults, two noise variants and the defaults
+  without each addition (:mod:`crowdstudy.physics.ablation`), the bars and ms per step of
+  each; resumable (:mod:`crowdstudy.physics.ablation_run`), with a summary per variant and
+  the heat map ``build/bench/physics_ablation.png`` (:mod:`crowdstudy.physics.ablation_report`);
 * the CG implementations on the same assembled 60-character system (fused single-launch
   PCG with the per-character tree preconditioner or 6x6 block Jacobi, scipy CG on a BSR
   matrix, warp.optim.linear.cg on a warp.sparse BSR matrix);
