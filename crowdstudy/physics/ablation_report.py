@@ -20,7 +20,10 @@ from pathlib import Path
 from crowdstudy.metrics.bars import BarTolerances
 from crowdstudy.physics.ablation_run import BAR_VALUES, NOISE_VARIANTS
 
-__all__ = ["effects", "noise_bands", "summarize", "ablation_figure"]
+__all__ = ["NUMERICAL_NOISE", "effects", "noise_bands", "summarize", "ablation_figure"]
+
+#: a relative change this small is round-off, whatever the noise variants gave
+NUMERICAL_NOISE = 1e-9
 
 
 def _by_cell(rows: Sequence[dict]) -> dict[str, dict[str, dict]]:
@@ -82,11 +85,11 @@ def summarize(rows: Sequence[dict]) -> list[dict]:
         for bar in BAR_VALUES:
             values = [r for (v, _, b), r in ratios.items() if v == variant and b == bar]
             summary[f"{bar}_pct"] = 100.0 * (statistics.median(values) - 1.0) if values else None
-            band = bands.get(bar, {}).get("band")
+            band = max(bands.get(bar, {}).get("band", 0.0), NUMERICAL_NOISE)
             beyond += [
                 (abs(math.log(max(r, 1e-6))), bar, cell, r)
                 for (v, cell, b), r in ratios.items()
-                if v == variant and b == bar and band is not None and abs(r - 1.0) > band
+                if v == variant and b == bar and abs(r - 1.0) > band
             ]
         summary["beyond_noise"] = len(beyond)
         largest = max(beyond, default=None)
@@ -99,58 +102,88 @@ def summarize(rows: Sequence[dict]) -> list[dict]:
     return out
 
 
+#: the figure's colour bins, |log2 of a variant's value over the defaults'|: within the noise
+#: band (white), then up to 3 %, 10 %, 25 %, 2x, beyond
+_BINS = (0.0, math.log2(1.03), math.log2(1.1), math.log2(1.25), 1.0, 3.0)
+
+
+def _grid(ratios, bands, variants, cells, bar):
+    """(variants, cells) log2 ratios for one bar: 0 within the bar's noise band, NaN where
+    the bar has no value."""
+    import numpy as np
+
+    band = bands.get(bar, {}).get("band", 0.0)
+    grid = np.full((len(variants), len(cells)), np.nan)
+    for i, variant in enumerate(variants):
+        for j, cell in enumerate(cells):
+            ratio = ratios.get((variant, cell, bar))
+            if ratio is not None:
+                inside = abs(ratio - 1.0) <= max(band, NUMERICAL_NOISE)
+                grid[i, j] = 0.0 if inside else float(np.clip(math.log2(max(ratio, 1e-6)), -_BINS[-1], _BINS[-1]))
+    return grid
+
+
+def _ratio_label(log2_ratio: float) -> str:
+    """A colour bar tick: ``noise`` at 0, a percentage within a factor 2, ``x2``/``/2`` beyond."""
+    if log2_ratio == 0.0:
+        return "noise"
+    ratio = 2.0**log2_ratio
+    if 0.5 < ratio < 2.0:
+        return f"{100.0 * (ratio - 1.0):+.0f} %"
+    return f"x{ratio:.0f}" if ratio > 1 else f"/{1.0 / ratio:.0f}"
+
+
 def ablation_figure(rows: Sequence[dict], path: Path, tolerances: BarTolerances | None = None) -> Path:
     """A heat map per bar (PNG at ``path``): variants as rows, cells as columns, the colour
-    the variant's value over the defaults' in that cell (log scale, red: worse than the
-    defaults, i.e. what the addition switched off buys; blue: better), a cross where the
-    variant fails that bar, grey where the bar has no value (the seam outside the looped
-    concert). ``tolerances`` only names the figure's bars (None: the defaults)."""
+    the variant's value over the defaults' in that cell, binned (:data:`_BINS`; red: worse
+    than the defaults, i.e. what the switched-off addition buys; blue: better; white: within
+    the bar's noise band, :func:`noise_bands`), a cross where the variant fails that bar,
+    grey where the bar has no value (the seam outside the looped concert). ``tolerances``
+    only names the bars (None: the defaults)."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-    import numpy as np
+    from matplotlib.colors import BoundaryNorm
 
     from crowdstudy.metrics.bars import BAR_NAMES
 
     tolerances = BarTolerances() if tolerances is None else tolerances
     text = tolerances.text()
-    ratios = effects(rows)
+    ratios, bands = effects(rows), noise_bands(rows)
     cells = list(dict.fromkeys(row["cell"] for row in rows))
     variants = [v for v in dict.fromkeys(row["variant"] for row in rows) if v != "default"]
     failed = {(r["variant"], r["cell"], bar) for r in rows for bar in BAR_NAMES if r.get(f"ok_{bar}") is False}
     bars = list(BAR_VALUES)
     ncols = 4
     nrows = math.ceil(len(bars) / ncols)
-    fig, axes = plt.subplots(
-        nrows, ncols, figsize=(3.2 * ncols + 1.5, 0.22 * len(variants) * nrows + 2.2 * nrows), dpi=110, squeeze=False
-    )
+    size = (1.1 + 0.34 * len(cells) * ncols, 1.2 + (0.17 * len(variants) + 0.9) * nrows)
+    fig, axes = plt.subplots(nrows, ncols, figsize=size, dpi=110, squeeze=False, sharey=True, layout="constrained")
+    edges = [-b for b in reversed(_BINS[1:])] + [-1e-12, 1e-12] + list(_BINS[1:])
+    norm = BoundaryNorm(edges, ncolors=256)
+    cmap = plt.get_cmap("RdBu_r").with_extremes(bad="0.8")
     image = None
     for ax, bar in zip(axes.flat, bars, strict=False):
-        grid = np.full((len(variants), len(cells)), np.nan)
-        for i, variant in enumerate(variants):
-            for j, cell in enumerate(cells):
-                ratio = ratios.get((variant, cell, bar))
-                if ratio is not None:
-                    grid[i, j] = float(np.clip(math.log2(max(ratio, 1e-6)), -3.0, 3.0))
-        cmap = plt.get_cmap("RdBu_r").with_extremes(bad="0.85")
-        image = ax.imshow(np.ma.masked_invalid(grid), cmap=cmap, vmin=-2, vmax=2, aspect="auto")
+        image = ax.imshow(_grid(ratios, bands, variants, cells, bar), cmap=cmap, norm=norm, aspect="auto")
         for i, variant in enumerate(variants):
             for j, cell in enumerate(cells):
                 if (variant, cell, bar) in failed:
                     ax.text(j, i, "x", ha="center", va="center", fontsize=7, color="k")
-        ax.set_title(f"{bar}: {text[bar]}", fontsize=7)
-        ax.set_xticks(range(len(cells)), [c.replace(":", "\n") for c in cells], fontsize=6)
-        ax.set_yticks(range(len(variants)), variants, fontsize=6)
+        ax.set_title(f"{bar}\n{text[bar]}", fontsize=7)
+        ax.set_xticks(range(len(cells)), [c.replace(":", " ") for c in cells], fontsize=6, rotation=90)
+        ax.set_yticks(range(len(variants)), variants, fontsize=7)
     for ax in list(axes.flat)[len(bars) :]:
         ax.axis("off")
     if image is not None:
-        bar_ax = fig.colorbar(image, ax=axes, shrink=0.6, pad=0.01)
-        bar_ax.set_ticks([-2, -1, 0, 1, 2], labels=["1/4", "1/2", "1", "2", "4+"])
-        bar_ax.set_label("value / the defaults' (red: worse without the addition)", fontsize=7)
+        colorbar = fig.colorbar(image, ax=axes, shrink=0.5, pad=0.01)
+        ticks = [-b for b in reversed(_BINS[1:])] + [0.0] + list(_BINS[1:])
+        colorbar.set_ticks(ticks, labels=[_ratio_label(t) for t in ticks])
+        colorbar.ax.tick_params(labelsize=7)
+        colorbar.set_label("value / the defaults' value (red: worse without the addition)", fontsize=7)
     fig.suptitle(
-        "What each addition buys: each variant's bars over the defaults' in each cell "
-        "(paper = the paper's method alone; noise_* = nothing of the method changed; x = bar failed)",
+        "What each addition buys: each variant's bars over the defaults' in each cell\n"
+        "(paper: the paper's method alone; noise_*: nothing of the method changed; "
+        "other rows: the defaults without that addition; x: bar failed)",
         fontsize=9,
     )
     path = Path(path)
