@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import math
 import statistics
+import textwrap
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -157,7 +158,8 @@ def ablation_figure(rows: Sequence[dict], path: Path, tolerances: BarTolerances 
     bars = list(BAR_VALUES)
     ncols = 4
     nrows = math.ceil(len(bars) / ncols)
-    size = (1.1 + 0.34 * len(cells) * ncols, 1.2 + (0.17 * len(variants) + 0.9) * nrows)
+    panel = max(0.3 * len(cells), 1.8)  # inches: room for the bar's title with few cells
+    size = (2.6 + panel * ncols, 1.4 + (0.17 * len(variants) + 1.1) * nrows)
     fig, axes = plt.subplots(nrows, ncols, figsize=size, dpi=110, squeeze=False, sharey=True, layout="constrained")
     edges = [-b for b in reversed(_BINS[1:])] + [-1e-12, 1e-12] + list(_BINS[1:])
     norm = BoundaryNorm(edges, ncolors=256)
@@ -169,7 +171,7 @@ def ablation_figure(rows: Sequence[dict], path: Path, tolerances: BarTolerances 
             for j, cell in enumerate(cells):
                 if (variant, cell, bar) in failed:
                     ax.text(j, i, "x", ha="center", va="center", fontsize=7, color="k")
-        ax.set_title(f"{bar}\n{text[bar]}", fontsize=7)
+        ax.set_title(f"{bar}\n" + "\n".join(textwrap.wrap(text[bar], int(panel * 14))), fontsize=7)
         ax.set_xticks(range(len(cells)), [c.replace(":", " ") for c in cells], fontsize=6, rotation=90)
         ax.set_yticks(range(len(variants)), variants, fontsize=7)
     for ax in list(axes.flat)[len(bars) :]:
@@ -182,9 +184,9 @@ def ablation_figure(rows: Sequence[dict], path: Path, tolerances: BarTolerances 
         colorbar.set_label("value / the defaults' value (red: worse without the addition)", fontsize=7)
     fig.suptitle(
         "What each addition buys: each variant's bars over the defaults' in each cell\n"
-        "(paper: the paper's method alone; noise_*: nothing of the method changed; "
-        "other rows: the defaults without that addition; x: bar failed)",
-        fontsize=9,
+        "paper: the paper's method alone; noise_*: nothing of the method changed;\n"
+        "other rows: the defaults without that addition; x: bar failed",
+        fontsize=8,
     )
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
