@@ -216,6 +216,8 @@ def report_table(
     unknown = [c for c in columns or [] if c not in present]
     if unknown:
         raise ValueError(f"results {stem} {key}: no column(s) {unknown}")
+    if columns is not None and isinstance(report.get(key), dict):
+        columns = ["", *columns]  # a dict's rows keep their names
     out = [heading_line(report), "", *_table(rows, columns)]
     if link:
         out += ["", f"All the columns and rows: [{stem}]({link})."]

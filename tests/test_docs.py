@@ -232,6 +232,7 @@ def test_a_page_quotes_a_published_table(results, hooks, tmp_path):
         "benchmark": "toy",
         "rows": [{"case": "a", "x": 1.5}],
         "summary": [{"variant": "v", "a_pct": 12.345, "ms_ratio": 0.9}],
+        "groups": {"g": {"description": "d", "changes": {"a.b": 0}}},
         "command": "crowdstudy bench toy",
         "date": "2026-12-07T10:00:00+00:00",
         "machine": {"cpu": "Some CPU", "cores": 2, "gpus": []},
@@ -242,6 +243,8 @@ def test_a_page_quotes_a_published_table(results, hooks, tmp_path):
     assert lines[0].startswith("`crowdstudy bench toy` · Some CPU")
     assert lines[2:5] == ["| ms_ratio | variant |", "| --- | --- |", "| 0.9 | v |"]
     assert "[toy](../t.md)" in text
+    groups = results.report_table("toy", "groups", ["description"], data_dir=tmp_path).splitlines()
+    assert groups[2:5] == ["|  | description |", "| --- | --- |", "| g | d |"]
     for key, columns in (("nothing", None), ("summary", ["b_pct"])):
         with pytest.raises(ValueError, match="toy"):
             results.report_table("toy", key, columns, data_dir=tmp_path)
