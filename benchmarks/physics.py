@@ -20,8 +20,8 @@ and its MuJoCo peer.
   addition to the paper's method buys: every study cell corrected with the paper's method
   alone (``PhysicsConfig.paper()``), the defaults, two noise variants and the defaults
   without each addition (:mod:`crowdstudy.physics.ablation`), the bars and ms per step of
-  each; resumable (:mod:`crowdstudy.physics.ablation_run`), with a summary per variant and
-  the heat map ``build/bench/physics_ablation.png`` (:mod:`crowdstudy.physics.ablation_report`);
+  each; resumable (:mod:`crowdstudy.evaluation.ablation_run`), with a summary per variant and
+  the heat map ``build/bench/physics_ablation.png`` (:mod:`crowdstudy.evaluation.ablation_report`);
 * the CG implementations on the same assembled 60-character system (fused single-launch
   PCG with the per-character tree preconditioner or 6x6 block Jacobi, scipy CG on a BSR
   matrix, warp.optim.linear.cg on a warp.sparse BSR matrix);
@@ -539,13 +539,13 @@ def _main_bars(args, config, trial: str) -> int:
 
 
 def _main_ablation(args) -> int:
-    """``--ablation``: the rows of :func:`crowdstudy.physics.ablation_run.run_ablation`, the
-    summary per variant and the figure (:mod:`crowdstudy.physics.ablation_report`)."""
+    """``--ablation``: the rows of :func:`crowdstudy.evaluation.ablation_run.run_ablation`, the
+    summary per variant and the figure (:mod:`crowdstudy.evaluation.ablation_report`)."""
     from crowdstudy.design import load_design
     from crowdstudy.errors import InvalidInputError
+    from crowdstudy.evaluation.ablation_report import ablation_figure, noise_bands, summarize
+    from crowdstudy.evaluation.ablation_run import NOISE_VARIANTS, AblationOptions, run_ablation, study_cells
     from crowdstudy.physics.ablation import ADDITIONS, parse_additions
-    from crowdstudy.physics.ablation_report import ablation_figure, noise_bands, summarize
-    from crowdstudy.physics.ablation_run import NOISE_VARIANTS, AblationOptions, run_ablation, study_cells
 
     if args.config:
         raise InvalidInputError(

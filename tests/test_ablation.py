@@ -1,6 +1,6 @@
 """What each addition buys (issue #41): the groups of PhysicsConfig fields that switch each
 addition to the paper's method off (crowdstudy.physics.ablation) and ``crowdstudy bench
-physics --ablation`` (crowdstudy.physics.ablation_run, .ablation_report), on small crowds
+physics --ablation`` (crowdstudy.evaluation.ablation_run, .ablation_report), on small crowds
 and short clips."""
 
 from __future__ import annotations
@@ -152,7 +152,7 @@ def ablation_run(small_design, tmp_path_factory):
 
 
 def test_the_ablation_rows_have_every_column(ablation_run):
-    from crowdstudy.physics.ablation_run import ROW_COLUMNS
+    from crowdstudy.evaluation.ablation_run import ROW_COLUMNS
 
     folder, _, report = ablation_run
     rows = report["rows"]
@@ -200,7 +200,7 @@ def test_a_second_run_takes_every_row_from_the_cache(ablation_run, monkeypatch):
 def test_a_changed_configuration_is_corrected_again(ablation_run, small_design, monkeypatch):
     """A cached row is reused only for the configuration it was measured with: the cached
     defaults come back as they are, changed defaults are corrected again."""
-    import crowdstudy.physics.ablation_run as run
+    import crowdstudy.evaluation.ablation_run as run
     import crowdstudy.physics.corrector as corrector
     from crowdstudy.design import load_design
 

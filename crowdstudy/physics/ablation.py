@@ -15,7 +15,7 @@ defaults are the preset but for :data:`INERT_IN_PAPER`: fields that differ and d
 there. ``tests/test_ablation.py`` checks both, so the groups and the preset cannot drift
 apart.
 
-``crowdstudy bench physics --ablation`` (:mod:`crowdstudy.physics.ablation_run`) corrects
+``crowdstudy bench physics --ablation`` (:mod:`crowdstudy.evaluation.ablation_run`) corrects
 the study's cells with the paper's method, the defaults, and the defaults without each
 addition, and measures the bars of each (what each addition buys).
 """

@@ -1,11 +1,11 @@
 """What each addition buys, from the rows of ``crowdstudy bench physics --ablation``
-(:func:`~crowdstudy.physics.ablation_run.run_ablation`): the noise of each bar, a summary
+(:func:`~crowdstudy.evaluation.ablation_run.run_ablation`): the noise of each bar, a summary
 row per variant and the figure.
 
-Every bar's value is positive and larger is worse (:data:`~crowdstudy.physics.ablation_run.BAR_VALUES`),
+Every bar's value is positive and larger is worse (:data:`~crowdstudy.evaluation.ablation_run.BAR_VALUES`),
 so a variant's effect on a bar in a cell is the ratio of its value to the defaults' in the
 same cell: above 1 the variant is worse there, that is, the addition it switches off buys
-that much. The noise variants (:data:`~crowdstudy.physics.ablation_run.NOISE_VARIANTS`:
+that much. The noise variants (:data:`~crowdstudy.evaluation.ablation_run.NOISE_VARIANTS`:
 nothing of the method changed) say how far a ratio strays from 1 by chance:
 :func:`noise_bands`.
 """
@@ -18,8 +18,8 @@ import textwrap
 from collections.abc import Sequence
 from pathlib import Path
 
+from crowdstudy.evaluation.ablation_run import BAR_VALUES, NOISE_VARIANTS
 from crowdstudy.metrics.bars import BarTolerances
-from crowdstudy.physics.ablation_run import BAR_VALUES, NOISE_VARIANTS
 
 __all__ = ["NUMERICAL_NOISE", "effects", "noise_bands", "summarize", "ablation_figure"]
 
