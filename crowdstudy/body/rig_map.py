@@ -183,10 +183,13 @@ def map_rig(
     forward: Sequence[float] | None = None,
     overrides: Mapping[str, str | int] | None = None,
     label: str = "rig",
+    table: tuple[str, Mapping[int, str]] | None = None,
 ) -> RigMap:
     """Map a rig onto the physics skeleton (see the module docstring); ``label`` names the
-    rig in errors. Raises InvalidInputError when the rig is not a humanoid, is too coarse
-    (no knees, elbows...), or an override names an unknown joint."""
+    rig in errors; ``table`` (convention, {rig joint: physics joint}) is a name table the
+    file carries itself (a VRM humanoid), used instead of the name tables. Raises
+    InvalidInputError when the rig is not a humanoid, is too coarse (no knees, elbows...),
+    or an override names an unknown joint."""
     parents = np.asarray(parents, dtype=np.int64)
     rest = np.asarray(rest, dtype=np.float64)
     k = len(parents)
@@ -194,7 +197,8 @@ def map_rig(
         raise InvalidInputError(f"{label}: expected {k} names and ({k}, 3) rest positions, got {rest.shape}")
     labels = tuple(str(n) if n else f"#{i}" for i, n in enumerate(names))
     sides_arr = np.array([side_of_name(str(n)) for n in names] if sides is None else sides, dtype=np.int64)
-    conv, by_name = match_names({i: str(n) for i, n in enumerate(names) if n})
+    conv, by_name = table if table is not None else match_names({i: str(n) for i, n in enumerate(names) if n})
+    by_name = dict(by_name)
     joints: dict[str, MappedJoint] = {}
     if _complete(by_name.values()) and not _hierarchy_errors(by_name, parents):
         joints = {j: MappedJoint(s, "name", conv) for s, j in by_name.items()}
