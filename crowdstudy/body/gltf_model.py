@@ -67,6 +67,8 @@ from crowdstudy.errors import InvalidInputError
 __all__ = [
     "GltfCharacter",
     "read_character",
+    "character_from_gltf",
+    "body_from_character",
     "load_gltf_body",
     "node_local_matrix",
     "RECORD_FIELDS",
@@ -268,6 +270,22 @@ def read_character(
     parent = node_parents(gltf.doc)
     world = node_world_matrices(gltf.doc, parent)
     spec = character_for_record(gltf.doc, parent, path, skin=skin, node=node)
+    return character_from_gltf(gltf, spec, parent, world, height=height, overrides=overrides)
+
+
+def character_from_gltf(
+    gltf: GltfFile,
+    spec: CharacterSpec,
+    parent: np.ndarray,
+    world: np.ndarray,
+    *,
+    height: float | None = None,
+    overrides: dict | None = None,
+    sha256: str | None = None,
+) -> GltfCharacter:
+    """:func:`read_character` on a loaded file: character ``spec`` of ``gltf`` with the
+    document's ``parent`` (nodes,) and default-pose ``world`` (nodes, 4, 4) matrices."""
+    path = gltf.path
     rig = read_rig(gltf, spec, parent, world, path)
     rmap = map_character_rig(gltf.doc, rig, spec, world, path, overrides)
     targets = np.array([JOINT_INDEX[rmap.weight_joint(k)] for k in range(len(rig.nodes))])
@@ -293,7 +311,7 @@ def read_character(
         unmapped={rmap.names[k]: rmap.weight_joint(k) for k in range(len(rig.nodes)) if k not in rmap.source_to_joint},
         synthesized=list(rmap.missing),
         convention="+".join(sorted(hows, key=lambda h: (h != "topology", h))),
-        sha256=hashlib.sha256(path.read_bytes()).hexdigest(),
+        sha256=sha256 or hashlib.sha256(path.read_bytes()).hexdigest(),
         spec=spec,
         rig=rig,
         rig_map=rmap,
@@ -650,14 +668,22 @@ def load_gltf_body(record: dict):
             raise InvalidInputError(f"body record field 'height': expected a number, got {height!r}") from None
         if not 0.3 <= height <= 2.5:
             raise InvalidInputError(f"body record field 'height': expected 0.3 to 2.5 m, got {height}")
-    ch = read_character(path, skin=skin, node=node, height=height, overrides=overrides)
+    return body_from_character(record, read_character(path, skin=skin, node=node, height=height, overrides=overrides))
+
+
+def body_from_character(record: dict, ch: GltfCharacter) -> Body:
+    """The :class:`~crowdstudy.body.model.Body` of a read character. Rest positions are
+    rounded to 0.1 um, so copies of one character placed anywhere in a file get the same
+    bytes (and share their capsule fit); bodies with the same faces and weights share a
+    template."""
     digest = hashlib.sha256(np.ascontiguousarray(ch.faces).tobytes() + ch.weights.tobytes()).hexdigest()
+    verts = np.round(ch.vertices, 7) + 0.0
     return Body(
         record=dict(record),
-        rest_joints=ch.joints,
-        rest_vertices=ch.vertices,
+        rest_joints=np.round(ch.joints, 7) + 0.0,
+        rest_vertices=verts,
         faces=ch.faces,
         weights=ch.weights,
-        pelvis_height=float(-ch.vertices[:, 2].min()),
+        pelvis_height=float(-verts[:, 2].min()),
         template_key=f"gltf-{digest[:16]}",
     )

@@ -29,7 +29,7 @@ import numpy as np
 from crowdstudy.body.gltf_container import GltfFile
 from crowdstudy.errors import InvalidInputError
 
-__all__ = ["CharacterSpec", "Rig", "find_characters", "character_for_record", "read_rig", "animated_nodes"]
+__all__ = ["CharacterSpec", "Rig", "find_characters", "character_for_record", "read_rig", "animated_nodes", "weld"]
 
 #: Skin weight sums further than this from 1 count as "not normalised".
 WEIGHT_SUM_TOLERANCE = 1e-3
@@ -142,12 +142,33 @@ def find_characters(doc: dict, parent: np.ndarray) -> list[CharacterSpec]:
             continue
         hit = next((joint_of[a] for a in [i, *_ancestors(i, parent)] if a in joint_of), None)
         (rigid[hit] if hit is not None else loose).append(i)
+    kids: dict[int, list[int]] = {}
+    for c, p in enumerate(parent):
+        kids.setdefault(int(p), []).append(c)
     out = []
     for g, ss in sorted(members.items(), key=lambda kv: min(kv[1])):
-        joints = sorted({int(j) for s in ss for j in skins[s]["joints"]})
+        skin_joints = {int(j) for s in ss for j in skins[s]["joints"]}
+        joints = sorted(skin_joints | _bone_like_descendants(nodes, kids, skin_joints))
         top = next(j for j in joints if not any(a in joints for a in _ancestors(j, parent)))
         out.append(CharacterSpec(tuple(ss), top, tuple(joints), tuple(skinned[g]), tuple(rigid[g])))
     out += _rigid_characters(doc, parent, loose)
+    return out
+
+
+def _bone_like_descendants(nodes: list, kids: dict[int, list[int]], joints: set[int]) -> set[int]:
+    """Nodes under a skeleton's joints that are neither skinned meshes nor mesh leaves: end
+    bones (``LowerLeg_end``: where a shin ends) and the holders of rigid parts."""
+    out: set[int] = set()
+    stack = [c for j in joints for c in kids.get(j, [])]
+    while stack:
+        k = stack.pop()
+        if k in joints or k in out:
+            continue
+        n = nodes[k]
+        if "skin" in n or ("mesh" in n and not kids.get(k)):
+            continue
+        out.add(k)
+        stack.extend(kids.get(k, []))
     return out
 
 
@@ -229,12 +250,18 @@ def read_rig(gltf: GltfFile, spec: CharacterSpec, parent: np.ndarray, world: np.
     for s in reversed(spec.skins):  # a joint in several skins takes the first one's bind pose
         for j, m in zip(doc["skins"][s]["joints"], ibms[s], strict=True):
             bind[index[int(j)]] = to_world[s] @ np.linalg.inv(m)
+    in_skin = {int(j) for s in spec.skins for j in doc["skins"][s]["joints"]}
+    for n in sorted(joints, key=lambda n: len(_ancestors(n, parent))):  # parents first
+        k = index[n]
+        if spec.skins and n not in in_skin:
+            a = next(a for a in _ancestors(n, parent) if a in index)
+            bind[k] = bind[index[a]] @ np.linalg.inv(world[a]) @ world[n]
     names = [str(doc["nodes"][n].get("name", "")) for n in joints]
-    mesh = _read_meshes(gltf, spec, index, parent, world, to_world, path)
+    mesh = _read_meshes(gltf, spec, index, parent, world, bind, to_world, path)
     return Rig(nodes=np.array(joints), names=names, parents=parents, bind=bind, **mesh)
 
 
-def _read_meshes(gltf, spec, index, parent, world, to_world, path) -> dict:
+def _read_meshes(gltf, spec, index, parent, world, bind, to_world, path) -> dict:
     """The character's triangles in the bind pose (file world) and their weights (V, K)."""
     doc = gltf.doc
     verts, faces, weights, uvs, images, sums = [], [], [], [], [], []
@@ -258,7 +285,9 @@ def _read_meshes(gltf, spec, index, parent, world, to_world, path) -> dict:
                 holder = next(a for a in [m, *_ancestors(m, parent)] if a in index)
                 w = np.zeros((len(p), k_all))
                 w[:, index[holder]] = 1.0
-                p = p @ world[m][:3, :3].T + world[m][:3, 3]
+                # the part rides on its holder joint from the default pose to the bind pose
+                place = bind[index[holder]] @ np.linalg.inv(world[holder]) @ world[m]
+                p = p @ place[:3, :3].T + place[:3, 3]
             verts.append(p)
             weights.append(w)
             idx = gltf.accessor(prim["indices"]).astype(np.int64) if "indices" in prim else np.arange(len(p))
@@ -270,15 +299,42 @@ def _read_meshes(gltf, spec, index, parent, world, to_world, path) -> dict:
         raise InvalidInputError(f"glTF file {path}: no triangle mesh on the character at node {spec.root}")
     total = np.concatenate(sums) if sums else np.ones(1)
     off = np.abs(total - 1.0) > WEIGHT_SUM_TOLERANCE
+    one_image = all(u is not None for u in uvs) and len(set(images)) == 1
+    uv = np.concatenate(uvs) if one_image else None
+    v, f, w, uv = weld(np.concatenate(verts), np.concatenate(faces), np.concatenate(weights), uv)
     return {
-        "vertices": np.concatenate(verts),
-        "faces": np.concatenate(faces).astype(np.int32),
-        "weights": np.concatenate(weights),
-        "uvs": uvs,
-        "images": images,
+        "vertices": v,
+        "faces": f,
+        "weights": w,
+        "uvs": [uv],
+        "images": [images[0] if one_image else None],
         "renormalised": int(off.sum()),
         "weight_sum_range": (float(total.min()), float(total.max())),
     }
+
+
+def weld(vertices: np.ndarray, faces: np.ndarray, weights: np.ndarray, uv: np.ndarray | None):
+    """Merge vertices at the same place (to 1 um) with the same texture coordinate: flat
+    shaded and split meshes become connected surfaces (what the overlap metric, the capsule
+    fit and the renderer's level of detail need). The merged vertex takes the mean weights;
+    faces that collapse are dropped. Returns ``(vertices, faces int32, weights, uv)``."""
+    key = np.round(vertices * 1e6).astype(np.int64)
+    if uv is not None:
+        key = np.concatenate([key, np.round(uv * 1e6).astype(np.int64)], axis=1)
+    _, first, inverse = np.unique(key, axis=0, return_index=True, return_inverse=True)
+    if len(first) == len(vertices):
+        return vertices, faces.astype(np.int32), weights, uv
+    order = np.argsort(first)  # keep the first occurrence's order
+    rank = np.empty_like(order)
+    rank[order] = np.arange(len(order))
+    new = rank[inverse.reshape(-1)]
+    w = np.zeros((len(first), weights.shape[1]))
+    np.add.at(w, new, weights)
+    w /= w.sum(axis=1, keepdims=True)
+    f = new[faces]
+    f = f[(f[:, 0] != f[:, 1]) & (f[:, 1] != f[:, 2]) & (f[:, 0] != f[:, 2])]
+    keep = np.sort(first)
+    return vertices[keep], f.astype(np.int32), w, None if uv is None else uv[keep]
 
 
 def _base_color_image(doc: dict, prim: dict) -> int | None:

@@ -359,8 +359,8 @@ def _find_pelvis(tree: _Tree, label: str) -> tuple[int, list[int], int]:
     h = tree.height
     for k in _breadth_first(tree):
         z = tree.rest[k, 2]
-        down = [c for c in tree.kids[k] if tree.zmin(c) < z - 0.3 * h]
-        up = [c for c in tree.kids[k] if tree.zmax(c) > z + 0.2 * h]
+        down = [c for c in tree.kids[k] if tree.zmin(c) < z - 0.2 * h]
+        up = [c for c in tree.kids[k] if tree.zmax(c) > z + 0.15 * h]
         if len(down) >= 2 and up:
             down = sorted(down, key=lambda c: tree.zmin(c))[:2]
             spine = max(up, key=lambda c: (tree.zmax(c), len(tree.sub[c])))
