@@ -399,8 +399,8 @@ def _leg(tree: _Tree, root: int, label: str) -> dict[str, tuple[int, str]]:
     inner = list(range(hip + 1, ankle))
     if not inner:
         raise InvalidInputError(
-            f"{label}: too coarse for the physics skeleton: the leg from joint {chain[hip]} has no knee "
-            "(no joint between hip and ankle)"
+            f"{label}: too coarse for the physics skeleton: required joints missing: the knees (the leg from "
+            f"joint {chain[hip]} has no joint between hip and ankle)"
         )
     knee = min(inner, key=lambda i: abs(tree.dist(chain[hip], chain[i]) - tree.dist(chain[i], chain[ankle])))
     out = {
@@ -461,16 +461,16 @@ def _arm(tree: _Tree, root: int, label: str) -> dict[str, tuple[int, str]]:
     w = chain[wrist]
     if not inner:
         raise InvalidInputError(
-            f"{label}: too coarse for the physics skeleton: the arm from joint {root} has no elbow "
-            "(no joint between shoulder and wrist)"
+            f"{label}: too coarse for the physics skeleton: required joints missing: the elbows (the arm from "
+            f"joint {root} has no joint between shoulder and wrist)"
         )
     s = before[shoulder]
     elbow = min(inner, key=lambda i: abs(tree.dist(s, before[i]) - tree.dist(before[i], w)))
     upper, fore = tree.dist(s, before[elbow]), tree.dist(before[elbow], w)
     if not 0.4 <= upper / max(fore, 1e-9) <= 2.5:
         raise InvalidInputError(
-            f"{label}: too coarse for the physics skeleton: the arm from joint {root} has no elbow "
-            f"half-way to the wrist (upper arm {upper:.3f}, forearm {fore:.3f})"
+            f"{label}: too coarse for the physics skeleton: required joints missing: the elbows (the arm from "
+            f"joint {root} has no joint half-way to the wrist: upper arm {upper:.3f} m, forearm {fore:.3f} m)"
         )
     out["shoulder"] = (s, "arm chain: start of the upper arm")
     out["elbow"] = (before[elbow], "arm chain: middle joint")
@@ -488,7 +488,8 @@ def _spine(tree: _Tree, chain: list[int], branch: int, label: str) -> dict[str, 
     out: dict[str, tuple[int, str]] = {}
     if not between:
         raise InvalidInputError(
-            f"{label}: too coarse for the physics skeleton: no spine joint between the pelvis and the arms"
+            f"{label}: too coarse for the physics skeleton: required joints missing: spine1, spine2 (no joint "
+            "between the pelvis and the arms)"
         )
     out["spine1"] = (between[0], "spine chain: above the pelvis")
     if len(between) == 1:
@@ -500,7 +501,8 @@ def _spine(tree: _Tree, chain: list[int], branch: int, label: str) -> dict[str, 
         out["spine3"] = (branch, "spine chain: where the arms branch")
     if len(after) < 2:
         raise InvalidInputError(
-            f"{label}: too coarse for the physics skeleton: no neck and head above the arms ({len(after)} joint)"
+            f"{label}: too coarse for the physics skeleton: required joints missing: neck, head ({len(after)} "
+            "joint above the arms)"
         )
     out["neck"] = (after[0], "spine chain: above the arms")
     out["head"] = (after[1], "spine chain: above the neck")
