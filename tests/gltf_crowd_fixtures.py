@@ -79,10 +79,12 @@ def crowd_of(
     weight_scale: float | None = None,
     columns: int | None = None,
     seed: int = 0,
+    last_rate: float | None = None,
 ) -> Path:
     """Write a crowd of ``n`` copies of ``src``'s scene (see the module docstring), copies
     ``spacing`` m apart on a grid of ``columns`` (default: a square), each turned by a
-    random yaw within +-20 deg and its keys rolled by ``shift_keys * i``."""
+    random yaw within +-20 deg and its keys rolled by ``shift_keys * i``; ``last_rate``
+    stretches the last copy's key times by that factor (a character keyed at another rate)."""
     d = _Doc(Path(src))
     doc = d.doc
     anims = doc.get("animations", [])
@@ -135,7 +137,11 @@ def crowd_of(
             if shift:
                 vals = d.src.accessor(out_acc)
                 out_acc = d.add_accessor(np.roll(vals, -shift, axis=0), doc["accessors"][smp["output"]])
-            samplers.append({**smp, "output": out_acc})
+            in_acc = smp["input"]
+            if last_rate is not None and i == n - 1:
+                times = d.src.accessor(in_acc) * last_rate
+                in_acc = d.add_accessor(times, doc["accessors"][smp["input"]])
+            samplers.append({**smp, "input": in_acc, "output": out_acc})
             channels.append(
                 {"sampler": len(samplers) - 1, "target": {**ch["target"], "node": remap[ch["target"]["node"]]}}
             )

@@ -162,7 +162,7 @@ def read_crowd(
     fps = _frame_rate(chars, channels, fps, path)
     t0 = min(float(c.times[0]) for c in channels)
     t1 = max(float(c.times[-1]) for c in channels)
-    n_frames = int(np.floor((t1 - t0) * fps + 1e-6)) + 1
+    n_frames = int(np.floor((t1 - t0) * fps + 1e-3)) + 1  # float32 key times
     times = t0 + np.arange(n_frames) / fps
     nodes = [int(n) for c in chars for n in c.character.rig.nodes]
     wmat, _ = world_at_frames(doc, parent, nodes, channels, times)
