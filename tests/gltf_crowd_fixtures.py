@@ -149,7 +149,7 @@ def crowd_of(
     doc["animations"] = [{"name": anim.get("name", "crowd"), "channels": channels, "samplers": samplers}]
     doc["scenes"] = [{"nodes": new_roots}]
     doc["scene"] = 0
-    if rigid:
+    if rigid or not doc["skins"]:
         _drop_skins(doc)
     if weight_scale is not None:
         _scale_weights(d, weight_scale)

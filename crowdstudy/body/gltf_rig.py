@@ -313,17 +313,25 @@ def _read_meshes(gltf, spec, index, parent, world, bind, to_world, path) -> dict
     }
 
 
-def weld(vertices: np.ndarray, faces: np.ndarray, weights: np.ndarray, uv: np.ndarray | None):
-    """Merge vertices at the same place (to 1 um) with the same texture coordinate: flat
-    shaded and split meshes become connected surfaces (what the overlap metric, the capsule
-    fit and the renderer's level of detail need). The merged vertex takes the mean weights;
-    faces that collapse are dropped. Returns ``(vertices, faces int32, weights, uv)``."""
-    key = np.round(vertices * 1e6).astype(np.int64)
-    if uv is not None:
-        key = np.concatenate([key, np.round(uv * 1e6).astype(np.int64)], axis=1)
-    _, first, inverse = np.unique(key, axis=0, return_index=True, return_inverse=True)
-    if len(first) == len(vertices):
+def weld(vertices: np.ndarray, faces: np.ndarray, weights: np.ndarray, uv: np.ndarray | None, tol: float = 1e-5):
+    """Merge vertices closer than ``tol`` m with the same texture coordinate: flat shaded
+    and split meshes (rigid parts cut along the bones) become closed, connected surfaces,
+    which the overlap metric, the capsule fit and the renderer's level of detail need. The
+    merged vertex takes the mean weights; faces that collapse are dropped. Returns
+    ``(vertices, faces int32, weights, uv)``."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+    from scipy.spatial import cKDTree
+
+    pairs = cKDTree(vertices).query_pairs(tol, output_type="ndarray")
+    if uv is not None and len(pairs):
+        pairs = pairs[np.all(np.abs(uv[pairs[:, 0]] - uv[pairs[:, 1]]) < 1e-6, axis=1)]
+    if not len(pairs):
         return vertices, faces.astype(np.int32), weights, uv
+    n = len(vertices)
+    graph = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(n, n))
+    _, label = connected_components(graph, directed=False)
+    _, first, inverse = np.unique(label, return_index=True, return_inverse=True)
     order = np.argsort(first)  # keep the first occurrence's order
     rank = np.empty_like(order)
     rank[order] = np.arange(len(order))

@@ -30,7 +30,15 @@ from crowdstudy.body.rig_map import RigMap
 from crowdstudy.body.rotations import matrix_to_axis_angle, matrix_to_quaternion
 from crowdstudy.body.skeleton import JOINT_INDEX, JOINT_NAMES, NUM_JOINTS, PARENTS, forward_kinematics
 
-__all__ = ["RetargetFrames", "rotation_part", "to_physics", "rig_targets", "rewrite_rig", "RigMotion"]
+__all__ = [
+    "RetargetFrames",
+    "rotation_part",
+    "to_physics",
+    "rig_targets",
+    "rewrite_rig",
+    "RigMotion",
+    "fold_missing",
+]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -82,6 +90,27 @@ def to_physics(world: np.ndarray, fr: RetargetFrames) -> tuple[np.ndarray, np.nd
     pelvis = fr.rig_map.joints["pelvis"].source
     root = world[:, pelvis, :3, 3] @ fr.conv.T
     return matrix_to_axis_angle(local), root
+
+
+def fold_missing(rotations: np.ndarray, missing) -> np.ndarray:
+    """The 24 joints' rotations (T, 24, 3) with the joints a rig lacks (``missing``, placed
+    from their neighbours) turned back to rest and their turn passed to their children, so
+    every joint the rig has keeps its global rotation: the motion the rig can show (the
+    joints below a missing one move by the missing joint's offset only)."""
+    from crowdstudy.body.rotations import axis_angle_to_matrix
+
+    if not missing:
+        return rotations
+    local = axis_angle_to_matrix(rotations)
+    kids: list[list[int]] = [[] for _ in JOINT_NAMES]
+    for c, p in enumerate(PARENTS):
+        if p >= 0:
+            kids[int(p)].append(c)
+    for j in sorted(JOINT_INDEX[m] for m in missing):
+        for c in kids[j]:
+            local[:, c] = local[:, j] @ local[:, c]
+        local[:, j] = np.eye(3)
+    return matrix_to_axis_angle(local)
 
 
 def rig_targets(rotations: np.ndarray, root: np.ndarray, fr: RetargetFrames) -> dict[int, np.ndarray]:
