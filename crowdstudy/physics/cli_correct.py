@@ -46,7 +46,7 @@ def configure(parser: argparse.ArgumentParser) -> None:
     )
     gltf.add_argument("--map", default=None, metavar="FILE.json", help="{physics joint: source joint} overrides")
     gltf.add_argument(
-        "--overlap-every", type=float, default=0.5, metavar="S", help="measure the overlap every S seconds (0.5)"
+        "--overlap-every", type=float, default=1.0, metavar="S", help="measure the overlap every S seconds (1)"
     )
 
 

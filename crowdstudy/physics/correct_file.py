@@ -73,7 +73,7 @@ def correct_gltf(
     device: str | None = None,
     linear_solver=None,
     progress: bool = False,
-    overlap_every: float = 0.5,
+    overlap_every: float = 1.0,
 ) -> GltfCorrection:
     """Import, correct, measure and rewrite a glTF crowd; returns the output's bytes and
     reports without writing anything (:func:`write_outputs` writes them)."""
