@@ -329,7 +329,10 @@ def test_threejs_loads_and_poses_the_corrected_file(corrected, tmp_path):
 
 
 @pytest.mark.slow
-@pytest.mark.skipif(shutil.which("blender") is None, reason="Blender not installed (optional: apt-get install blender)")
+@pytest.mark.skipif(
+    shutil.which("blender") is None,
+    reason="Blender not installed (optional: apt-get install blender python3-numpy)",
+)
 def test_blender_imports_the_corrected_file(corrected, tmp_path):
     _, dst, _, _ = corrected["numbered"]
     res = subprocess.run(
