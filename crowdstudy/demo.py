@@ -258,8 +258,10 @@ def _print_outputs(outputs: dict[str, Path]) -> None:
         print(f"  {name:<32} {path}")
     print(
         "\nThe full study (1920x1080, 20 s videos, real participants):\n"
-        "  crowdstudy stimuli --out stimuli/videos                                    # 60 videos (+ --design FILE, --scheduler)\n"
-        "  crowdstudy serve --stimuli stimuli/videos --db sqlite:///study.db          # participants open the printed URL\n"
+        "  crowdstudy stimuli --out stimuli/videos                                    "
+        "# 60 videos (+ --design FILE, --scheduler)\n"
+        "  crowdstudy serve --stimuli stimuli/videos --db sqlite:///study.db          "
+        "# participants open the printed URL\n"
         "  crowdstudy export --db sqlite:///study.db --out responses.csv --demographics demographics.csv\n"
         "  crowdstudy analyze responses.csv --out analysis_out"
     )
@@ -274,7 +276,7 @@ def _overlap_image(base, ours, design, path: Path, render_frame, color_positions
 
     frame = base.n_frames // 2
     fig, axes = plt.subplots(1, 2, figsize=(12, 3.6))
-    for ax, anim, label in zip(axes, (base, ours), ("Baseline", "Ours")):
+    for ax, anim, label in zip(axes, (base, ours), ("Baseline", "Ours"), strict=True):
         img = render_frame(
             anim, "V1", frame, width=960, height=540, overlap_view=True, design=design, color_positions=color_positions
         )
@@ -314,7 +316,7 @@ def _capsule_image(anim, design, path: Path, render_frame, color_positions) -> P
         body = load_body(anim.bodies[i])
         start, end = posed_capsules(body, anim.joint_rotations[frame, i], anim.root_translation[frame, i])
         base = np.array(plt.cm.tab20(i % 20)[:3])
-        for a, b, r in zip(start, end, body.capsules.radius):
+        for a, b, r in zip(start, end, body.capsules.radius, strict=True):
             # the outline of a capsule seen along y: the hull of its two end discs in (x, z)
             pts = np.concatenate([a[[0, 2]] + r * circle, b[[0, 2]] + r * circle])
             polys.append(pts[ConvexHull(pts).vertices])  # 2-D hull vertices come in counter-clockwise order

@@ -437,7 +437,7 @@ def capsule_occupancy(
     axes = [origin[i] + step * np.arange(shape[i]) for i in range(3)]
     pts = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
     occ = np.zeros(len(pts), dtype=bool)
-    for a, b, r in zip(start, end, radius):
+    for a, b, r in zip(start, end, radius, strict=True):
         lo = np.minimum(a, b) - r
         hi = np.maximum(a, b) + r
         box = np.all((pts >= lo) & (pts <= hi), axis=1)

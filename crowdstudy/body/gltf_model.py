@@ -27,8 +27,9 @@ Steps (:func:`read_character`):
 5. Rest pose (the toolkit's T-pose convention): upper arms and forearms more than
    ``ARM_ELEVATION_LIMIT`` above or below horizontal (an A-pose) are raised or lowered to
    that limit by a turn about the forward axis (in the coronal plane); thighs and shins
-   more than ``LEG_TILT_LIMIT`` from vertical are brought to it. The mesh follows by linear blend skinning with the 24-joint weights. A file already
-   in the toolkit's convention (a crowdstudy export) passes through unchanged.
+   more than ``LEG_TILT_LIMIT`` from vertical are brought to it. The mesh follows by linear
+   blend skinning with the 24-joint weights. A file already in the toolkit's convention (a
+   crowdstudy export) passes through unchanged.
 
 The steps are public pieces for importers of other files: :func:`map_skin_joints` (step 2's
 mapping and step 3's weight targets), :func:`read_skin_binds` (a skin's bind pose, step 1)

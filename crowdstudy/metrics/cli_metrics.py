@@ -251,7 +251,7 @@ def _per_character_table(summary: dict) -> str:
 def _aligned(header: list[str], lines: list[list[str]]) -> str:
     """The header and rows as right-aligned text columns."""
     widths = [max(len(r[k]) for r in [header] + lines) for k in range(len(header))]
-    return "\n".join("  ".join(cell.rjust(w) for cell, w in zip(r, widths)) for r in [header] + lines)
+    return "\n".join("  ".join(cell.rjust(w) for cell, w in zip(r, widths, strict=True)) for r in [header] + lines)
 
 
 def _tracking_table(summary: dict) -> str:

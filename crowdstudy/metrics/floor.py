@@ -279,7 +279,9 @@ def _project(
     n, n_j = start.shape[:2]
     move = np.zeros((n, n_j, 3))
     deepest = 0.0
-    for it in range(max_iterations):
+    rounds = 0
+    for _ in range(max_iterations):
+        rounds += 1
         acc = np.zeros((n, n_j, 3))
         cnt = np.zeros((n, n_j))
         hit, deepest = _push_pairs(near, start, end, move, tolerance, acc, cnt)
@@ -290,7 +292,7 @@ def _project(
                 break
             continue  # a culled pair met: go on with the renewed set
         move += acc / np.maximum(cnt, 1.0)[..., None]
-    return move, deepest, it + 1
+    return move, deepest, rounds
 
 
 def _push_pairs(

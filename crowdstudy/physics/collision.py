@@ -621,7 +621,7 @@ class CollisionPipeline:
         extra = int(scratch.count.numpy()[0])
         n_copy = min(extra, scratch.capacity, contacts.capacity - base) if base < contacts.capacity else 0
         if n_copy > 0:
-            for dst, src in zip(contacts.buffers(), scratch.buffers()):
+            for dst, src in zip(contacts.buffers(), scratch.buffers(), strict=True):
                 wp.copy(dst, src, dest_offset=base, src_offset=0, count=n_copy)
         contacts.count.fill_(base + extra)
 

@@ -443,9 +443,9 @@ def tree_factor_kernel(
         p = parent[b]
         if p >= 0:
             o = joint_block(k_joint, lever_p[b], lever_c[b], ctrl_c[b])
-            l = o * di
-            lmat[b] = l
-            work[p] = work[p] - l * wp.transpose(o)
+            lb = o * di
+            lmat[b] = lb
+            work[p] = work[p] - lb * wp.transpose(o)
 
 
 @wp.func

@@ -50,7 +50,7 @@ def _map(fn, items, threads: int, bar=None) -> list:
         return [tick(fn(item)) for item in items]
     with ThreadPoolExecutor(min(threads, len(items))) as pool:
         futures = [pool.submit(fn, item) for item in items]
-        for future in as_completed(futures):
+        for _ in as_completed(futures):
             tick(None)
         return [future.result() for future in futures]
 

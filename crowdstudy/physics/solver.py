@@ -415,7 +415,7 @@ class Solver:
         if lists is None or lists[0].shape[0] < max(capacity, 1):
             lists = [self.wp.zeros(max(capacity, 1), dtype=self.wp.int32, device=self.model.device) for _ in range(2)]
         counts = []
-        for lst, mine in zip(lists, masks):
+        for lst, mine in zip(lists, masks, strict=True):
             idx = np.flatnonzero(mine).astype(np.int32)
             lst.numpy()[: len(idx)] = idx
             counts.append(len(idx))
@@ -725,7 +725,7 @@ class Solver:
             return wp.launch(kernel, 1, inputs, device=dev, record_cmd=True)
 
         init, matvec, update = [], [], []
-        for (part, lo, hi), lst in zip(halves, self._split_lists):
+        for (part, lo, hi), lst in zip(halves, self._split_lists, strict=True):
             init.append(
                 record(
                     ks.pcg_split_init_kernel,

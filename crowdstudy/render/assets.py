@@ -299,7 +299,10 @@ class CharacterMeshes:
         """Dress ``bodies`` by their ``codes`` and ``looks`` (from ``height`` px tall images)
         and group them into template groups at each level of detail."""
         dress = height >= DRESS_MIN_HEIGHT
-        drawn = [b if c is None or not dress else _dressed(b, c, look) for b, c, look in zip(bodies, codes, looks)]
+        drawn = [
+            b if c is None or not dress else _dressed(b, c, look)
+            for b, c, look in zip(bodies, codes, looks, strict=True)
+        ]
         scale = float(np.clip(SURFACE_FACE_SCALE * height / 1080, 1.0, SURFACE_FACE_SCALE))
         finest = group_bodies(drawn, max_faces=max_faces, surface_scale=scale)
         faces = _lod_face_counts(max_faces)

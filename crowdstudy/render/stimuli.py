@@ -478,7 +478,7 @@ class _Runner:
                 yield futures[fut], _result(fut.result, futures[fut])
         else:
             for job in jobs:
-                yield job, _result(lambda: fn(job), job)
+                yield job, _result(functools.partial(fn, job), job)
 
     def close(self) -> None:
         if self.pool is not None:

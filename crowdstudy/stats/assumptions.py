@@ -42,7 +42,7 @@ def shapiro_from_cells(cm: CellMatrix, *, alpha: float = 0.05) -> pd.DataFrame:
             w = p = float("nan")
         rows.append(
             {
-                **dict(zip(cm.factors, cell)),
+                **dict(zip(cm.factors, cell, strict=True)),
                 "cell": " ".join(map(str, cell)),
                 "n": len(r),
                 "W": w,

@@ -105,7 +105,7 @@ def method_figure(
         pmap = {}
         if ph is not None and len(ph):
             vcol = ph["Viewpoint"] if with_views else [""] * len(ph)
-            pmap = {(str(a), str(b)): p for a, b, p in zip(ph["Density"], vcol, ph["p_adj"])}
+            pmap = {(str(a), str(b)): p for a, b, p in zip(ph["Density"], vcol, ph["p_adj"], strict=True)}
         for c, vp in enumerate(views):
             ax = axes[r, c]
             for m, meth in enumerate(methods):
