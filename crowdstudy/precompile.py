@@ -26,7 +26,7 @@ KERNEL_MODULES: tuple[tuple[str, str | None], ...] = (
     ("crowdstudy.physics.collision_kernels", None),
     ("crowdstudy.physics.linear", None),
     ("crowdstudy.metrics.kernels", None),
-    ("crowdstudy.body.skinning", "warp_kernels"),
+    ("crowdstudy.body.skinning_kernels", None),
     ("crowdstudy.navigation.orca_kernels", None),
 )
 
