@@ -18,6 +18,9 @@ line is a point ``lp`` (m/s) and a unit direction ``ld``; the permitted velociti
 its left.
 """
 
+# pyright: reportInvalidTypeForm=false
+# (Warp's parameter types, wp.array(dtype=...), are calls that a type checker rejects as types)
+
 from __future__ import annotations
 
 import warp as wp

@@ -15,6 +15,9 @@ This module imports Warp when it is imported; :mod:`crowdstudy.physics.collision
 it inside the functions that launch its kernels.
 """
 
+# pyright: reportInvalidTypeForm=false
+# (Warp's parameter types, wp.array(dtype=...), are calls that a type checker rejects as types)
+
 from __future__ import annotations
 
 import warp as wp

@@ -20,6 +20,9 @@ stays free of Warp. The collision kernels live in
 :mod:`crowdstudy.physics.linear`.
 """
 
+# pyright: reportInvalidTypeForm=false
+# (Warp's parameter types, wp.array(dtype=...), are calls that a type checker rejects as types)
+
 from __future__ import annotations
 
 import warp as wp

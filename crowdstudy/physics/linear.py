@@ -23,6 +23,9 @@ This module imports Warp when it is imported; :mod:`crowdstudy.physics.solver` i
 inside the functions that launch its kernels.
 """
 
+# pyright: reportInvalidTypeForm=false
+# (Warp's parameter types, wp.array(dtype=...), are calls that a type checker rejects as types)
+
 from __future__ import annotations
 
 import numpy as np
