@@ -31,6 +31,7 @@ import numpy as np
 
 from crowdstudy.errors import InvalidInputError, MissingDependencyError
 from crowdstudy.paths import check_output_path
+from crowdstudy.scene_meta import loop_mode
 
 __all__ = [
     "find_ffmpeg",
@@ -266,17 +267,11 @@ class FramePlan:
         return int(np.count_nonzero(self.partner >= 0))
 
 
-def _loop(anim) -> dict:
-    loop = anim.meta.get("loop") if isinstance(anim.meta, dict) else None
-    return loop if isinstance(loop, dict) else {}
-
-
 def video_frame_count(anim) -> int:
     """Frames of the animation its video shows: ``meta["loop"]["video_frames"]`` for a
     "dissolve" loop (the frames after it feed the seam's cross-dissolve), else all."""
-    loop = _loop(anim)
-    if loop.get("mode") == "dissolve":
-        return int(loop["video_frames"])
+    if loop_mode(anim.meta) == "dissolve":
+        return int(anim.meta["loop"]["video_frames"])
     return anim.n_frames
 
 
@@ -295,8 +290,8 @@ def _frame_plan(anim, duration: float | None, fps: float) -> FramePlan:
     source = np.minimum(np.round(np.arange(n) * anim.fps / fps).astype(int), anim.n_frames - 1)
     partner = np.full(n, -1, dtype=int)
     weight = np.ones(n)
-    loop = _loop(anim)
-    if loop.get("mode") == "dissolve" and int(loop.get("frames", 0)) > 0:
+    loop = anim.meta.get("loop", {})
+    if loop_mode(anim.meta) == "dissolve" and int(loop.get("frames", 0)) > 0:
         # the video spans `span` animation frames: its seam continues into frame `span`,
         # and frames span + i dissolve into the video's first frames
         span = int(round(n * anim.fps / fps))
