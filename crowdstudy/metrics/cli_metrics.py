@@ -64,7 +64,7 @@ def configure(parser: argparse.ArgumentParser) -> None:
         action="store_true",
         help="also estimate the tracking floor: the least joint displacement that would take the "
         "capsules of the reference (or of FILE) apart, every 30th frame "
-        "(crowdstudy.metrics.separation_floor; about 3 s a frame for 60 characters)",
+        "(crowdstudy.metrics.separation_floor; seconds a frame, much slower than the overlap)",
     )
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
 

@@ -11,7 +11,8 @@ are, so the same input still gives the same bytes.
 
 Working on blocks keeps the temporaries small. The whole crowd's forward kinematics of a 20 s
 clip of 1,000 characters would need 2.2 GB of global rotations for each of the output and
-the input. Fresh memory is expensive on a virtual machine, about 10 s per GB here.
+the input, and fresh memory is expensive on a virtual machine (each page is zeroed when it
+is first touched).
 """
 
 from __future__ import annotations

@@ -623,8 +623,8 @@ class Solver:
             (coupled & ((a < cut) | (b < cut)), coupled & ((a >= cut) | (b >= cut))),
         )
 
-        # the ten launches, recorded once per set of buffers (packing their arguments cost
-        # about 1 ms a step at 1,000 characters); each step sets the contact counts
+        # the ten launches, recorded once per set of buffers (packing their arguments anew
+        # each step is host time that grows with the crowd); each step sets the contact counts
         key = (
             id(contacts.body_a),
             id(contacts.body_b),

@@ -2,7 +2,7 @@
 
 SQLite (the default, one file) runs in WAL mode with ``synchronous=FULL``, so an answer is
 on disk when :meth:`StudyStore.record_answer` returns. SQLite allows one writer at a time
-and each commit costs an fsync (about 10 ms on a virtual disk), so all writes go through
+and each commit costs an fsync (slow on a virtual disk), so all writes go through
 one writer thread that commits the jobs arriving together in one transaction ("group
 commit"): each caller still returns only after the commit holding its write. Other
 databases (PostgreSQL for multi-site studies) run ordinary concurrent transactions. Every
