@@ -51,9 +51,10 @@ them import those modules, so importing this one does not import Warp.
 
 from __future__ import annotations
 
+import functools
 import threading
 import time
-from typing import Literal, get_args
+from typing import Any, Literal, NamedTuple, get_args
 
 import numpy as np
 
@@ -83,6 +84,19 @@ _MIN_CHARACTERS_SPLIT_ASSEMBLY = 200
 #: core saves (on two host threads the split still loses at a couple of hundred characters
 #: and wins at a thousand)
 _MIN_CHARACTERS_SPLIT_PCG = 500
+
+
+class _Step(NamedTuple):
+    """What one assembly reads besides the solver's buffers: the state and control at the
+    step's start, the contacts, the step ``dt`` (s), whether the PD targets feed forward,
+    and the damping's scale ``dt / damping_reference_dt``."""
+
+    state_in: Any
+    control: Any
+    contacts: Any
+    dt: float
+    ff: bool
+    damp_scale: float
 
 
 class Solver:
@@ -204,180 +218,20 @@ class Solver:
 
     def assemble(self, state_in, control, contacts, dt: float) -> None:
         """Prediction, gradient and diagonal Hessian blocks (bodies, then contacts)."""
-        from crowdstudy.physics import kernels as kb
-        from crowdstudy.physics import linear as ks
-
-        wp, m, cfg = self.wp, self.model, self.config
-        W, dev = m.wp, m.device
+        m, cfg, dev = self.model, self.config, self.model.device
         self._contact_buffers(contacts.capacity)
-        ff = bool(cfg.solver.feedforward)
-        damp_scale = float(dt) / float(cfg.solver.damping_reference_dt)
-
-        def bodies(lo: int, hi: int) -> None:  # prediction and body terms of bodies [lo, hi)
-            if hi <= lo:
-                return
-            wp.launch(
-                kb.predict_kernel,
-                hi - lo,
-                [
-                    state_in.x,
-                    state_in.q,
-                    state_in.v,
-                    state_in.w,
-                    float(dt),
-                    int(ff),
-                    control.t_x,
-                    control.t_x_old,
-                    control.t_x_older,
-                    control.t_glob,
-                    control.t_glob_old,
-                    control.t_glob_older,
-                    self.x_pred,
-                    self.q_pred,
-                    int(lo),
-                ],
-                device=dev,
-            )
-            wp.launch(
-                kb.joint_terms_kernel,
-                hi - lo,
-                [
-                    self.q_pred,
-                    state_in.q,
-                    control.t_rel,
-                    control.t_rel_old,
-                    W["body_parent"],
-                    W["anchor_parent"],
-                    W["anchor_child"],
-                    self.body_k,
-                    self.body_d,
-                    float(dt),
-                    damp_scale,
-                    self.lever_p,
-                    self.lever_c,
-                    self.ctrl_c,
-                    self.ctrl_g,
-                    int(lo),
-                ],
-                device=dev,
-            )
-            wp.launch(
-                kb.assemble_bodies_kernel,
-                hi - lo,
-                [
-                    self.x_pred,
-                    self.q_pred,
-                    state_in.x,
-                    state_in.q,
-                    control.t_rel,
-                    control.t_rel_old,
-                    control.t_x,
-                    control.t_x_old,
-                    W["body_mass"],
-                    W["body_J"],
-                    W["body_parent"],
-                    W["body_children"],
-                    self.body_k,
-                    self.body_d,
-                    self.body_kt,
-                    self.body_dt,
-                    self.body_reach,
-                    self.body_kt_far,
-                    float(dt),
-                    0.0 if ff else float(cfg.body.gravity),
-                    float(cfg.body.joint_stiffness),
-                    damp_scale,
-                    self.grad_t,
-                    self.grad_r,
-                    self.hess_a,
-                    self.hess_b,
-                    self.hess_c,
-                    self.lever_p,
-                    self.lever_c,
-                    self.ctrl_c,
-                    self.ctrl_g,
-                    int(lo),
-                ],
-                device=dev,
-            )
-
+        step = _Step(
+            state_in,
+            control,
+            contacts,
+            float(dt),
+            bool(cfg.solver.feedforward),
+            float(dt) / float(cfg.solver.damping_reference_dt),
+        )
+        bodies = functools.partial(self._assemble_bodies, step)
+        feet = functools.partial(self._assemble_feet, step)
+        contact_terms = functools.partial(self._assemble_contacts, step)
         n_feet = self.feet_index.shape[0] if cfg.feet.anchor_stiffness > 0 else 0
-
-        def feet(f0: int, f1: int) -> None:  # the stance anchors of feet [f0, f1) (feet_index order)
-            if f1 > f0:
-                wp.launch(
-                    kb.foot_anchor_kernel,
-                    f1 - f0,
-                    [
-                        self.feet_index,
-                        self.x_pred,
-                        state_in.x,
-                        control.t_x,
-                        control.t_x_old,
-                        self.foot_offset,
-                        self.foot_weight,
-                        self.foot_stepping,
-                        self.body_kt,
-                        self.body_dt,
-                        float(dt),
-                        damp_scale,
-                        float(cfg.feet.planted_speed),
-                        float(cfg.feet.anchor_stiffness),
-                        float(cfg.feet.anchor_damping),
-                        float(cfg.feet.anchor_max_force),
-                        float(cfg.feet.release_distance),
-                        float(cfg.feet.rejoin_distance),
-                        self.grad_t,
-                        self.hess_a,
-                        int(f0),
-                    ],
-                    device=dev,
-                )
-
-        def contact_terms(n_threads: int, contact_list, use_list: int, lo: int, hi: int) -> None:
-            if n_threads:
-                wp.launch(
-                    ks.contact_assemble_kernel,
-                    n_threads,
-                    [
-                        contacts.count,
-                        contacts.capacity,
-                        contacts.body_a,
-                        contacts.body_b,
-                        contacts.normal,
-                        contacts.depth,
-                        contacts.lever_a,
-                        contacts.lever_b,
-                        contacts.stiffness,
-                        contacts.kind,
-                        float(cfg.contacts.ground_friction),
-                        float(cfg.contacts.activation),
-                        float(cfg.contacts.release_distance),
-                        float(cfg.contacts.release_width),
-                        float(cfg.contacts.stiffening_depth),
-                        m.n_joints,
-                        state_in.x,
-                        control.t_x,
-                        state_in.v,
-                        state_in.w,
-                        float(dt),
-                        self.grad_t,
-                        self.grad_r,
-                        self.hess_a,
-                        self.hess_b,
-                        self.hess_c,
-                        self.u_at,
-                        self.u_ar,
-                        self.u_bt,
-                        self.u_br,
-                        self.k_eff,
-                        contact_list,
-                        int(use_list),
-                        int(lo),
-                        int(hi),
-                    ],
-                    device=dev,
-                )
 
         # on the CPU the host reads the contact count for free: launch only the stored
         # contacts (the kernel skips the rest); on CUDA the whole capacity (no host sync)
@@ -407,6 +261,186 @@ class Solver:
                 contact_terms(counts[1], self._assembly_lists[1], 1, cut, m.n_bodies),
             ),
         )
+
+    def _assemble_bodies(self, step: _Step, lo: int, hi: int) -> None:
+        """Prediction and body terms of bodies ``[lo, hi)``."""
+        from crowdstudy.physics import kernels as kb
+
+        wp, cfg, W, dev = self.wp, self.config, self.model.wp, self.model.device
+        state_in, control, dt, damp_scale = step.state_in, step.control, step.dt, step.damp_scale
+        if hi <= lo:
+            return
+        wp.launch(
+            kb.predict_kernel,
+            hi - lo,
+            [
+                state_in.x,
+                state_in.q,
+                state_in.v,
+                state_in.w,
+                float(dt),
+                int(step.ff),
+                control.t_x,
+                control.t_x_old,
+                control.t_x_older,
+                control.t_glob,
+                control.t_glob_old,
+                control.t_glob_older,
+                self.x_pred,
+                self.q_pred,
+                int(lo),
+            ],
+            device=dev,
+        )
+        wp.launch(
+            kb.joint_terms_kernel,
+            hi - lo,
+            [
+                self.q_pred,
+                state_in.q,
+                control.t_rel,
+                control.t_rel_old,
+                W["body_parent"],
+                W["anchor_parent"],
+                W["anchor_child"],
+                self.body_k,
+                self.body_d,
+                float(dt),
+                damp_scale,
+                self.lever_p,
+                self.lever_c,
+                self.ctrl_c,
+                self.ctrl_g,
+                int(lo),
+            ],
+            device=dev,
+        )
+        wp.launch(
+            kb.assemble_bodies_kernel,
+            hi - lo,
+            [
+                self.x_pred,
+                self.q_pred,
+                state_in.x,
+                state_in.q,
+                control.t_rel,
+                control.t_rel_old,
+                control.t_x,
+                control.t_x_old,
+                W["body_mass"],
+                W["body_J"],
+                W["body_parent"],
+                W["body_children"],
+                self.body_k,
+                self.body_d,
+                self.body_kt,
+                self.body_dt,
+                self.body_reach,
+                self.body_kt_far,
+                float(dt),
+                0.0 if step.ff else float(cfg.body.gravity),
+                float(cfg.body.joint_stiffness),
+                damp_scale,
+                self.grad_t,
+                self.grad_r,
+                self.hess_a,
+                self.hess_b,
+                self.hess_c,
+                self.lever_p,
+                self.lever_c,
+                self.ctrl_c,
+                self.ctrl_g,
+                int(lo),
+            ],
+            device=dev,
+        )
+
+    def _assemble_feet(self, step: _Step, f0: int, f1: int) -> None:
+        """The stance anchors of feet ``[f0, f1)`` (``feet_index`` order)."""
+        from crowdstudy.physics import kernels as kb
+
+        wp, cfg, dev = self.wp, self.config, self.model.device
+        state_in, control, dt, damp_scale = step.state_in, step.control, step.dt, step.damp_scale
+        if f1 > f0:
+            wp.launch(
+                kb.foot_anchor_kernel,
+                f1 - f0,
+                [
+                    self.feet_index,
+                    self.x_pred,
+                    state_in.x,
+                    control.t_x,
+                    control.t_x_old,
+                    self.foot_offset,
+                    self.foot_weight,
+                    self.foot_stepping,
+                    self.body_kt,
+                    self.body_dt,
+                    float(dt),
+                    damp_scale,
+                    float(cfg.feet.planted_speed),
+                    float(cfg.feet.anchor_stiffness),
+                    float(cfg.feet.anchor_damping),
+                    float(cfg.feet.anchor_max_force),
+                    float(cfg.feet.release_distance),
+                    float(cfg.feet.rejoin_distance),
+                    self.grad_t,
+                    self.hess_a,
+                    int(f0),
+                ],
+                device=dev,
+            )
+
+    def _assemble_contacts(self, step: _Step, n_threads: int, contact_list, use_list: int, lo: int, hi: int) -> None:
+        """The terms of the contacts (all, or the ``n_threads`` of ``contact_list`` when
+        ``use_list``) on bodies ``[lo, hi)``."""
+        from crowdstudy.physics import linear as ks
+
+        wp, m, cfg, dev = self.wp, self.model, self.config, self.model.device
+        state_in, control, contacts, dt = step.state_in, step.control, step.contacts, step.dt
+        if n_threads:
+            wp.launch(
+                ks.contact_assemble_kernel,
+                n_threads,
+                [
+                    contacts.count,
+                    contacts.capacity,
+                    contacts.body_a,
+                    contacts.body_b,
+                    contacts.normal,
+                    contacts.depth,
+                    contacts.lever_a,
+                    contacts.lever_b,
+                    contacts.stiffness,
+                    contacts.kind,
+                    float(cfg.contacts.ground_friction),
+                    float(cfg.contacts.activation),
+                    float(cfg.contacts.release_distance),
+                    float(cfg.contacts.release_width),
+                    float(cfg.contacts.stiffening_depth),
+                    m.n_joints,
+                    state_in.x,
+                    control.t_x,
+                    state_in.v,
+                    state_in.w,
+                    float(dt),
+                    self.grad_t,
+                    self.grad_r,
+                    self.hess_a,
+                    self.hess_b,
+                    self.hess_c,
+                    self.u_at,
+                    self.u_ar,
+                    self.u_bt,
+                    self.u_br,
+                    self.k_eff,
+                    contact_list,
+                    int(use_list),
+                    int(lo),
+                    int(hi),
+                ],
+                device=dev,
+            )
 
     def _half_lists(self, lists, capacity: int, masks) -> tuple[list, list[int]]:
         """The contacts selected by each of the two ``masks`` (the two halves of the crowd),
