@@ -54,29 +54,29 @@ def run_demo(
     """Run the demo; returns ``{name: path}`` of everything written.
 
     The steps of the module docstring, one function each; ``study=False`` stops after step 5."""
-    design = load_design(design)
-    _check_arguments(design, density, duration, participants)
+    study_design = load_design(design)
+    _check_arguments(study_design, density, duration, participants)
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     outputs: dict[str, Path] = {}
     step = _Steps(6 if study else 5)
-    stationary, walking = design.stage("stationary"), design.stage("walking")
+    stationary, walking = study_design.stage("stationary"), study_design.stage("walking")
     showcase = (stationary, walking)
 
     step("Crowd layouts (Poisson disk) and corridor trajectories (ORCA)")
-    outputs.update(_layouts(design, density, duration, out, stationary, walking))
+    outputs.update(_layouts(study_design, density, duration, out, stationary, walking))
     step(f"Baseline animations at {density} ({duration:g} s)")
     anims: dict[tuple[str, str], CrowdAnimation] = {}
-    outputs.update(_baselines(design, density, duration, out, showcase, anims))
+    outputs.update(_baselines(study_design, density, duration, out, showcase, anims))
     step("Physics correction (Baseline -> Ours)")
     outputs.update(_correction(density, out, showcase, anims))
     step("Metrics: overlap before / after correction (mesh grid 2 cm, every 10th frame)")
     outputs.update(_metrics(out, showcase, anims))
     step("Rendering: short videos and the overlap image")
-    outputs.update(_renders(design, density, out, showcase, anims, outputs))
+    outputs.update(_renders(study_design, density, out, showcase, anims, outputs))
     if study:
         step(f"The study: quick stimulus set, {participants} simulated participants, analysis")
-        outputs.update(_study(design, out, participants, seed, duration))
+        outputs.update(_study(study_design, out, participants, seed, duration))
     _print_outputs(outputs)
     return outputs
 

@@ -228,10 +228,12 @@ class CrowdSkinner:
             raise InvalidInputError(f"root_translation: expected shape ({self.n}, 3), got {root.shape}")
         self._rotvec.assign(rot)
         self._root.assign(root)
-        self._fk_cmd.launch()
+        # a recorded launch (record_cmd=True) is never None; Warp's stub types the result
+        # of wp.launch as optional either way
+        self._fk_cmd.launch()  # pyright: ignore[reportOptionalMemberAccess]
         if self._pool is None:
             for cmd in self._skin_cmds:
-                cmd.launch()
+                cmd.launch()  # pyright: ignore[reportOptionalMemberAccess]
         else:
             # the workers pull chunks until none is left, so a worker that the OS
             # schedules late does not hold the others up

@@ -499,7 +499,8 @@ def overlap_volume(
         )
     out = np.zeros((len(idx), n))
     dropped = 0
-    faces = body_volume = None
+    faces: list[np.ndarray] = []  # (F_i, 3) per body, mesh geometry only
+    body_volume = None
     if geometry == "mesh":
         faces = [np.asarray(b.faces, dtype=np.int64) for b in body_objs]
         body_volume = np.array([mesh_volume(b.rest_vertices, f) for b, f in zip(body_objs, faces, strict=True)])
@@ -515,7 +516,7 @@ def overlap_volume(
         root = anim.root_translation[chunk]  # (C, N, 3)
         if geometry == "mesh":
             posed = (
-                None
+                []
                 if batch_pose is not None
                 else [np.asarray(b.pose(rot[:, i], root[:, i])[0], dtype=np.float64) for i, b in enumerate(body_objs)]
             )

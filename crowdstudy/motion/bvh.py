@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import dataclasses
 from pathlib import Path
+from typing import NoReturn
 
 import numpy as np
 
@@ -129,7 +130,7 @@ class BvhSkeleton:
         return glob, pos
 
 
-def _fail(path, line: int | None, msg: str):
+def _fail(path, line: int | None, msg: str) -> NoReturn:
     where = f"{path}: line {line}" if line is not None else f"{path}"
     raise InvalidInputError(f"BVH file {where}: {msg}")
 

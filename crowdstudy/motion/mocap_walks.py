@@ -187,7 +187,7 @@ def _middle_events(clip: MotionClip, pos3: np.ndarray, cycles: int) -> dict[str,
     """Events of the loop played 3 times (``pos3``, world joints): every stance, and a check
     that ``cycles`` stances of each foot start in the middle copy."""
     n = clip.n_frames
-    ev = foot_events(pos3, clip.fps, clip.speed)
+    ev = foot_events(pos3, clip.fps, clip.walk_speed)
     for side in _SIDES:
         st = ev[side]["strike"]
         k = int(((st >= n) & (st < 2 * n)).sum())
@@ -433,7 +433,7 @@ def build_walk_loops(mocap_dir: str | Path, files: tuple[str, ...] = WALK_FILES)
     missing = [f for f in files if not (mocap_dir / f).is_file()]
     if missing:
         raise InvalidInputError(f"mocap_dir {str(mocap_dir)!r}: missing walk files {', '.join(missing)}")
-    return sorted((build_walk_loop(mocap_dir / f) for f in files), key=lambda c: c.speed)
+    return sorted((build_walk_loop(mocap_dir / f) for f in files), key=lambda c: c.walk_speed)
 
 
 def loop_foot_skate(clip: MotionClip, repeats: int = 3, height_tol: float = 0.01) -> np.ndarray:

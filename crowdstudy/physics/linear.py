@@ -403,8 +403,9 @@ def joint_block(kj: float, rp: wp.vec3, rc: wp.vec3, cc: float):
     return block66(-kj * eye, kj * sc, -kj * sp, kj * (sp * sc) - cc * eye)
 
 
+# wp.spatial_vector is an overloaded constructor, a Warp type that pyright does not take as one
 @wp.func
-def joint_apply_t(kj: float, rp: wp.vec3, rc: wp.vec3, cc: float, y: wp.spatial_vector):
+def joint_apply_t(kj: float, rp: wp.vec3, rc: wp.vec3, cc: float, y: wp.spatial_vector):  # pyright: ignore[reportGeneralTypeIssues]
     """O^T y for the joint's (parent, child) block O (``joint_block``) without forming
     it: O^T (y_t, y_r) = (k_j z, k_j r_c x z - c y_r) with z = r_p x y_r - y_t (the
     skew blocks are antisymmetric). A few cross products instead of reading and

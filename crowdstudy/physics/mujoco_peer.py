@@ -282,7 +282,7 @@ class MujocoScene:
         hull = (cm.cap_radius + cm.cap_skin).reshape(n, nj)
         jd = float(self.setting.joint_damping)
 
-        def body_xml(i, j):
+        def body_xml(i: int, j: int) -> str:
             p = PARENTS[j]
             pos = self.anim_root[0, i] if p < 0 else self.rests[i, j] - self.rests[i, p]
             joint = "<freejoint/>" if p < 0 else f'<joint type="ball" damping="{jd:g}" armature="0.01"/>'

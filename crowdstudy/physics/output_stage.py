@@ -106,6 +106,7 @@ class _BlockStage:
     rest: np.ndarray  # (N, J, 3) m, float64
     fps: float
     cfg: OutputConfig
+    hold: float  # cfg.hold, resolved for the dense end of the profile
     limit: float | None  # m/s, the joint speed limit (crowd_speed_limit), None when off
     n_frames: int
     warmup: int
@@ -131,7 +132,7 @@ class _BlockStage:
             cfg.smoothing * self.fps,
             periodic=self.looped,
             root_sigma_frames=cfg.smoothing_root * self.fps,
-            hold=cfg.hold,
+            hold=self.hold,
         )
         # the input's kinematics, once for the foot lock and the speed limit
         r_fk = (
@@ -230,6 +231,8 @@ def finish_crowd(
         raise InvalidInputError(f"chunk: expected a positive number of characters, got {chunk!r}")
     threads = host_threads() if threads is None else max(1, int(threads))
     out_cfg = config.for_dense_crowd().output
+    if out_cfg.hold is None:  # for_density sets every field the profile sets
+        raise RuntimeError("output.hold: not resolved for a density")
     limit = None
     if out_cfg.speed_limit:
         limit = crowd_speed_limit(
@@ -252,6 +255,7 @@ def finish_crowd(
         rest,
         fps,
         out_cfg,
+        out_cfg.hold,
         limit,
         n_frames,
         warmup,

@@ -54,7 +54,7 @@ from __future__ import annotations
 import functools
 import threading
 import time
-from typing import Any, Literal, NamedTuple, get_args
+from typing import Any, Literal, NamedTuple, cast, get_args
 
 import numpy as np
 
@@ -155,7 +155,8 @@ class Solver:
         self.stats = wp.zeros(2, dtype=wp.float32, device=dev)
         s6 = lambda: wp.zeros(nb, dtype=wp.spatial_matrix, device=dev)  # noqa: E731
         self.tree_work, self.tree_dinv, self.tree_l = s6(), s6(), s6()
-        self.y6 = wp.zeros(nb, dtype=wp.spatial_vector, device=dev)
+        # wp.spatial_vector is an overloaded constructor, a Warp type pyright does not take as one
+        self.y6 = wp.zeros(nb, dtype=wp.spatial_vector, device=dev)  # pyright: ignore[reportArgumentType]
         groups = model.body_group
         ctl = config.control
         scale = np.select(
@@ -249,16 +250,17 @@ class Solver:
         cut = (m.n_characters // 2) * m.n_joints
         a = contacts.body_a.numpy()[:n_launch]
         b = contacts.body_b.numpy()[:n_launch]
-        self._assembly_lists, counts = self._half_lists(
+        lists, counts = self._half_lists(
             self._assembly_lists, contacts.capacity, ((a < cut) | ((b >= 0) & (b < cut)), (a >= cut) | (b >= cut))
         )
+        self._assembly_lists = lists
         feet_cut = int(np.searchsorted(self._feet_host, cut)) if n_feet else 0
         run_parallel(
-            lambda: (bodies(0, cut), feet(0, feet_cut), contact_terms(counts[0], self._assembly_lists[0], 1, 0, cut)),
+            lambda: (bodies(0, cut), feet(0, feet_cut), contact_terms(counts[0], lists[0], 1, 0, cut)),
             lambda: (
                 bodies(cut, m.n_bodies),
                 feet(feet_cut, n_feet),
-                contact_terms(counts[1], self._assembly_lists[1], 1, cut, m.n_bodies),
+                contact_terms(counts[1], lists[1], 1, cut, m.n_bodies),
             ),
         )
 
@@ -651,11 +653,12 @@ class Solver:
         a = contacts.body_a.numpy()[:n_act]
         b = contacts.body_b.numpy()[:n_act]
         coupled = (b >= 0) & (self.k_eff.numpy()[:n_act] > 0)
-        self._split_lists, counts = self._half_lists(
+        lists, counts = self._half_lists(
             self._split_lists,
             contacts.capacity,
             (coupled & ((a < cut) | (b < cut)), coupled & ((a >= cut) | (b >= cut))),
         )
+        self._split_lists = lists
 
         # the ten launches, recorded once per set of buffers (packing their arguments anew
         # each step is host time that grows with the crowd); each step sets the contact counts
@@ -664,10 +667,10 @@ class Solver:
             id(contacts.body_b),
             id(self.u_at),
             id(self.k_eff),
-            *(id(lst) for lst in self._split_lists),
+            *(id(lst) for lst in lists),
         )
         if self._split_cmds is None or self._split_cmds[0] != key:
-            self._split_cmds = (key, self._record_split(contacts, halves, levers))
+            self._split_cmds = (key, self._record_split(contacts, halves, lists, levers))
         init, matvec, update = self._split_cmds[1]
         for part, n_list in enumerate(counts):
             for cmd in matvec[part]:
@@ -743,9 +746,9 @@ class Solver:
             result.append(iterate(both))
         return result[0]
 
-    def _record_split(self, contacts, halves, levers):
-        """The split PCG's launches (init, matvec and update of each half; the two
-        direction buffers alternate), recorded for ``_solve_split``."""
+    def _record_split(self, contacts, halves, lists, levers):
+        """The split PCG's launches (init, matvec and update of each half, over its contact
+        list of ``lists``; the two direction buffers alternate), recorded for ``_solve_split``."""
         from crowdstudy.physics import linear as ks
 
         wp, m, cfg = self.wp, self.model, self.config
@@ -759,7 +762,7 @@ class Solver:
             return wp.launch(kernel, 1, inputs, device=dev, record_cmd=True)
 
         init, matvec, update = [], [], []
-        for (part, lo, hi), lst in zip(halves, self._split_lists, strict=True):
+        for (part, lo, hi), lst in zip(halves, lists, strict=True):
             init.append(
                 record(
                     ks.pcg_split_init_kernel,
@@ -929,15 +932,19 @@ class Solver:
         else:
             precond = wl.preconditioner(self._bsr, ptype="block_jacobi_sequential")
         self._x6.zero_()
-        it, res, atol = wl.cg(
-            self._bsr,
-            rhs,
-            self._x6,
-            tol=float(cfg.solver.cg_tolerance),
-            maxiter=int(cfg.solver.cg_max_iterations),
-            M=precond,
-            check_every=5,
-            use_cuda_graph=False,
+        # Warp's stub returns the solver or its result; without a callback it is the result
+        it, res, atol = cast(
+            "tuple[int, float, float]",
+            wl.cg(
+                self._bsr,
+                rhs,
+                self._x6,
+                tol=float(cfg.solver.cg_tolerance),
+                maxiter=int(cfg.solver.cg_max_iterations),
+                M=precond,
+                check_every=5,
+                use_cuda_graph=False,
+            ),
         )
         wp.launch(ks.unpack_kernel, nb, [self._x6, self.dx, self.dw], device=m.device)
         # cg returns the absolute residual and atol = tol * |b|: report |r| / |b| like the others
@@ -953,8 +960,11 @@ class Solver:
         r, c, v, b = rows.numpy(), cols.numpy(), vals.numpy().astype(np.float64), rhs.numpy().astype(np.float64)
         A = bsr_from_triplets(r, c, v, nb)
         inv = np.linalg.inv(v[:nb])  # the first nb triplets are the full diagonal blocks
+        # scipy's stub knows only LinearOperator's abstract form (dtype, shape), not this one
         M = spl.LinearOperator(
-            A.shape, matvec=lambda x: np.einsum("bij,bj->bi", inv, x.reshape(nb, 6)).ravel(), dtype=np.float64
+            A.shape,
+            matvec=lambda x: np.einsum("bij,bj->bi", inv, x.reshape(nb, 6)).ravel(),  # pyright: ignore[reportCallIssue]
+            dtype=np.float64,  # pyright: ignore[reportCallIssue]
         )
         counter = [0]
         x, _ = spl.cg(

@@ -25,6 +25,7 @@ from the painted texture; the dressing follows those codes (:meth:`CharacterMesh
 from __future__ import annotations
 
 import dataclasses
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -36,6 +37,9 @@ from crowdstudy.render.camera import look_at
 from crowdstudy.render.garments import dress_body
 from crowdstudy.render.palette import assign_colors
 from crowdstudy.render.scene import Environment, build_environment, split_floor
+
+if TYPE_CHECKING:
+    from crowdstudy.scene import CrowdAnimation
 
 __all__ = [
     "RenderOptions",
@@ -157,7 +161,7 @@ class CrowdAssets:
         looks: N :class:`~crowdstudy.render.appearance.Appearance`.
     """
 
-    anim: object
+    anim: CrowdAnimation
     design: object
     env: Environment
     period: float | None

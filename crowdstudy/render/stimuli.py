@@ -373,6 +373,8 @@ def _job_animation(path, data: bytes | None):
 
     if path is not None:
         return CrowdAnimation.load(path)
+    if data is None:
+        raise InvalidInputError("job: names neither an animation file nor its bytes")
     with tempfile.TemporaryDirectory() as tmp:
         src = Path(tmp) / "anim.npz"
         src.write_bytes(data)

@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from collections.abc import Sequence
 
 import numpy as np
 
@@ -122,7 +123,7 @@ def _tris(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return points.reshape(-1, 3), np.repeat(n, 3, axis=0)
 
 
-def _lathe(rings: list[tuple[float, float, float, float, float]], sides: int, cap: bool = True) -> np.ndarray:
+def _lathe(rings: Sequence[tuple[float, float, float, float, float]], sides: int, cap: bool = True) -> np.ndarray:
     """(T, 3, 3) triangles of a faceted solid through horizontal elliptic rings.
 
     ``rings``: (z, rx, ry, cx, cy) from bottom to top (m); a ring of radius 0 is an apex.

@@ -147,6 +147,9 @@ class VideoWriter:
             str(self.part),
         ]
         self.proc = subprocess.Popen(cmd, stdin=subprocess.PIPE, stderr=subprocess.PIPE)
+        if self.proc.stdin is None or self.proc.stderr is None:  # both are pipes
+            raise RuntimeError("ffmpeg started without its pipes")
+        self._stdin, self._stderr = self.proc.stdin, self.proc.stderr
         self._queue: queue.Queue = queue.Queue(maxsize=2)
         self._error: BaseException | None = None
         self._thread = threading.Thread(target=self._pump, daemon=True)
@@ -158,7 +161,7 @@ class VideoWriter:
             if item is None:
                 return
             try:
-                self.proc.stdin.write(item)
+                self._stdin.write(item)
             except (BrokenPipeError, OSError) as exc:
                 self._error = exc
                 return
@@ -189,8 +192,8 @@ class VideoWriter:
         self._thread.join()
         if self._error is not None:
             self._fail()
-        self.proc.stdin.close()
-        err = self.proc.stderr.read().decode(errors="replace").strip()
+        self._stdin.close()
+        err = self._stderr.read().decode(errors="replace").strip()
         if self.proc.wait() != 0:
             self.part.unlink(missing_ok=True)
             raise RuntimeError(f"ffmpeg failed writing {str(self.path)!r}: {err}")
@@ -278,7 +281,7 @@ def video_frame_count(anim) -> int:
 def _frame_plan(anim, duration: float | None, fps: float) -> FramePlan:
     video_frames = video_frame_count(anim)
     if duration is None:
-        duration = video_frames / anim.fps
+        duration = float(video_frames / anim.fps)
     if not np.isfinite(duration) or duration <= 0:
         raise InvalidInputError(f"duration: expected a positive number of seconds, got {duration!r}")
     if duration > anim.duration + 0.5 / anim.fps:
@@ -308,7 +311,7 @@ def _frame_plan(anim, duration: float | None, fps: float) -> FramePlan:
 _TO_LINEAR = (np.arange(256, dtype=np.float32) / 255.0) ** 2
 
 
-def blend_frames(a, b, weight: float):
+def blend_frames(a, b, weight: float | np.floating | np.ndarray):
     """``weight * a + (1 - weight) * b`` of two RGB frames (uint8 arrays of any shape, or raw
     bytes) in linear light, rounded once to uint8; returns the type of ``a``."""
     as_bytes = not isinstance(a, np.ndarray)
