@@ -18,8 +18,11 @@ Nothing here is written into ``docs/``: the pages are added to the build in memo
   with those meanings; a column without a meaning, or a meaning for a column the code does
   not have, is a warning (an error under ``mkdocs build --strict``). Likewise
   ``<!-- results: index -->`` becomes the table of published reports, and
-  ``<!-- meta-keys: dotted.path.TypedDict -->`` the table of a TypedDict's keys, types and
-  meanings (from its module's docstring: :func:`meta_table`).
+  ``<!-- results: STEM KEY [COLUMN,...] -->`` the table ``KEY`` (``rows``, ``summary`` ...)
+  of the published report ``STEM`` (:func:`results_pages.report_table`), headed by its
+  command, machine and date: a hand-written page quotes measured numbers without typing them.
+  ``<!-- meta-keys: dotted.path.TypedDict -->`` becomes the table of a TypedDict's keys,
+  types and meanings (from its module's docstring: :func:`meta_table`).
 
 Generation functions are importable (``tests/test_docs.py`` uses them without MkDocs).
 """
@@ -33,6 +36,7 @@ import importlib
 import io
 import logging
 import os
+import posixpath
 import re
 import sys
 from pathlib import Path
@@ -306,9 +310,21 @@ def meta_table(dotted: str, where: str = "") -> tuple[str, list[str]]:
     return "\n".join(lines) + "\n", problems
 
 
+_RESULTS_RE = re.compile(r"^<!-- results: ([\w-]+) ([\w-]+)(?: ([\w,]+))? -->$", re.M)
+
+
 def expand_markers(markdown: str, where: str = "") -> tuple[str, list[str]]:
     """``markdown`` with its column and results markers expanded; the problems found."""
     problems: list[str] = []
+
+    def results(match: re.Match) -> str:
+        stem, key, columns = match.group(1), match.group(2), match.group(3)
+        link = posixpath.relpath(results_pages.page_path(stem), posixpath.dirname(where) or ".")
+        try:
+            return results_pages.report_table(stem, key, columns.split(",") if columns else None, link=link)
+        except ValueError as exc:
+            problems.append(f"{where}: {exc}")
+            return match.group(0)
 
     def columns(match: re.Match) -> str:
         table, found = column_table(match.group(1), match.group(2), where)
@@ -322,6 +338,7 @@ def expand_markers(markdown: str, where: str = "") -> tuple[str, list[str]]:
 
     markdown = _COLUMNS_RE.sub(columns, markdown)
     markdown = _META_RE.sub(meta_keys, markdown)
+    markdown = _RESULTS_RE.sub(results, markdown)
     if "<!-- results: index -->" in markdown:
         markdown = markdown.replace("<!-- results: index -->", results_pages.index_table(results_pages.load_reports()))
     return markdown, problems
