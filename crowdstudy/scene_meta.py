@@ -211,6 +211,7 @@ class SceneMeta(TypedDict, total=False):
     tempo: float | None
     loop: Loop
     provenance: dict[str, Any]
+    imported: dict[str, Any]
     physics: PhysicsMeta
     baseline_method: str | None
     baseline_provenance: dict[str, Any] | None
