@@ -171,17 +171,40 @@ def online_config(top: dict, source: str) -> OnlineConfig:
     )
 
 
-def draw_checks(secret: str, participant_id: str, n_trials: int, n_checks: int, points: int) -> dict[int, int]:
-    """{trial_index: asked-for scale point} of a participant's attention checks: ``n_checks``
-    distinct trials (never the first: it teaches the page) and points 1..points, drawn from an HMAC of the study's secret (so the
-    same participant always gets the same checks, and nobody without the secret can predict
-    them)."""
+def draw_checks(
+    secret: str,
+    participant_id: str,
+    n_trials: int,
+    n_checks: int,
+    points: int,
+    tasks: Sequence[str] | None = None,
+) -> dict[int, int]:
+    """{trial_index: what the check asks for} of a participant's attention checks:
+    ``n_checks`` distinct trials (never the first: it teaches the page), drawn from an HMAC of
+    the study's secret (so the same participant always gets the same checks, and nobody
+    without the secret can predict them). What is asked depends on the trial's task
+    (``tasks[trial_index]``, default likert): a Likert point 1..points, a slider end (0 the
+    left, 100 the right), a 2afc side (1 the left video, 2 the right)."""
     digest = hmac.new(
         secret.encode("utf-8"), f"crowdstudy-checks\x00{participant_id}".encode(), hashlib.sha256
     ).digest()
     rng = random.Random(int.from_bytes(digest[:16], "big"))
     chosen = sorted(rng.sample(range(1, n_trials), min(int(n_checks), max(n_trials - 1, 0))))
-    return {k: rng.randint(1, int(points)) for k in chosen}
+    out = {}
+    for k in chosen:
+        task = tasks[k] if tasks is not None else "likert"
+        out[k] = rng.choice((0, 100)) if task == "slider" else rng.randint(1, 2 if task == "2afc" else int(points))
+    return out
+
+
+def check_passed(task: str, asked: int, answer: int | None) -> bool:
+    """Whether an attention check's answer is what it asked for: the same Likert point or 2afc
+    side; a slider within 10 points of the asked end."""
+    if answer is None:
+        return False
+    if task == "slider":
+        return abs(int(answer) - int(asked)) <= 10
+    return int(answer) == int(asked)
 
 
 def flag_participants(
