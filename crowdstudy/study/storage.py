@@ -735,6 +735,14 @@ class StudyStore:
         except IntegrityError:  # sent twice at once (non-SQLite): the other one was stored
             return self._transact(job)
 
+    def has_task(self, task: str) -> bool:
+        """Whether any participant's schedule holds a trial of ``task``."""
+        import sqlalchemy as sa
+
+        s = self.schedule_t
+        with self.engine.connect() as conn:
+            return conn.execute(sa.select(s.c.trial_index).where(s.c.task == task).limit(1)).first() is not None
+
     def practiced_tasks(self, participant_id: str) -> set[str]:
         """The tasks whose practice trial ``participant_id`` has answered."""
         import sqlalchemy as sa
