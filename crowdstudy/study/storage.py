@@ -78,6 +78,51 @@ def utc_now() -> str:
     return _dt.datetime.now(_dt.UTC).isoformat(timespec="milliseconds")
 
 
+def _answer_tables(metadata):
+    """The ``responses`` and ``answer_conflicts`` tables (see the module docstring)."""
+    import sqlalchemy as sa
+
+    responses = sa.Table(
+        "responses",
+        metadata,
+        sa.Column("id", sa.Integer, primary_key=True, autoincrement=True),
+        sa.Column("participant_id", sa.String(64), sa.ForeignKey("participants.participant_id"), nullable=False),
+        sa.Column("trial_index", sa.Integer, nullable=False),
+        sa.Column("practice", sa.Boolean, nullable=False, default=False),
+        sa.Column("stimulus_id", sa.String(64), nullable=False),
+        sa.Column("stage", sa.Integer, nullable=False),
+        *[sa.Column(q, sa.SmallInteger, nullable=True) for q in ITEM_IDS],
+        sa.Column("rt_ms", sa.Float, nullable=False),
+        sa.Column("shown_at", sa.String(40), nullable=False),
+        sa.Column("answered_at", sa.String(40), nullable=False),
+        sa.Column("video_plays", sa.Integer, nullable=True),
+        sa.Column("first_play_ms", sa.Float, nullable=True),
+        sa.Column("hidden_count", sa.Integer, nullable=True),
+        sa.Column("hidden_ms", sa.Float, nullable=True),
+        sa.Column("fullscreen_exits", sa.Integer, nullable=True),
+        sa.Column("check_answer", sa.SmallInteger, nullable=True),
+        sa.Column("task", sa.String(8), nullable=True),
+        sa.Column("stimulus_right", sa.String(64), nullable=True),
+        sa.Column("choice", sa.String(8), nullable=True),
+        sa.Column("answers_json", sa.Text, nullable=True),
+        sa.UniqueConstraint("participant_id", "trial_index", name="uq_response_participant_trial"),
+    )
+    conflicts = sa.Table(
+        "answer_conflicts",
+        metadata,
+        sa.Column("id", sa.Integer, primary_key=True, autoincrement=True),
+        sa.Column("participant_id", sa.String(64), nullable=False),
+        sa.Column("trial_index", sa.Integer, nullable=False),
+        sa.Column("stimulus_id", sa.String(64), nullable=False),
+        *[sa.Column(q, sa.SmallInteger, nullable=True) for q in ITEM_IDS],
+        sa.Column("rt_ms", sa.Float, nullable=False),
+        sa.Column("received_at", sa.String(40), nullable=False),
+        sa.Column("choice", sa.String(8), nullable=True),
+        sa.Column("answers_json", sa.Text, nullable=True),
+    )
+    return responses, conflicts
+
+
 def _tables(metadata):
     import sqlalchemy as sa
 
@@ -126,44 +171,7 @@ def _tables(metadata):
         sa.Column("task", sa.String(8), nullable=True),
         sa.Column("stimulus_right", sa.String(64), nullable=True),
     )
-    responses = sa.Table(
-        "responses",
-        metadata,
-        sa.Column("id", sa.Integer, primary_key=True, autoincrement=True),
-        sa.Column("participant_id", sa.String(64), sa.ForeignKey("participants.participant_id"), nullable=False),
-        sa.Column("trial_index", sa.Integer, nullable=False),
-        sa.Column("practice", sa.Boolean, nullable=False, default=False),
-        sa.Column("stimulus_id", sa.String(64), nullable=False),
-        sa.Column("stage", sa.Integer, nullable=False),
-        *[sa.Column(q, sa.SmallInteger, nullable=True) for q in ITEM_IDS],
-        sa.Column("rt_ms", sa.Float, nullable=False),
-        sa.Column("shown_at", sa.String(40), nullable=False),
-        sa.Column("answered_at", sa.String(40), nullable=False),
-        sa.Column("video_plays", sa.Integer, nullable=True),
-        sa.Column("first_play_ms", sa.Float, nullable=True),
-        sa.Column("hidden_count", sa.Integer, nullable=True),
-        sa.Column("hidden_ms", sa.Float, nullable=True),
-        sa.Column("fullscreen_exits", sa.Integer, nullable=True),
-        sa.Column("check_answer", sa.SmallInteger, nullable=True),
-        sa.Column("task", sa.String(8), nullable=True),
-        sa.Column("stimulus_right", sa.String(64), nullable=True),
-        sa.Column("choice", sa.String(8), nullable=True),
-        sa.Column("answers_json", sa.Text, nullable=True),
-        sa.UniqueConstraint("participant_id", "trial_index", name="uq_response_participant_trial"),
-    )
-    conflicts = sa.Table(
-        "answer_conflicts",
-        metadata,
-        sa.Column("id", sa.Integer, primary_key=True, autoincrement=True),
-        sa.Column("participant_id", sa.String(64), nullable=False),
-        sa.Column("trial_index", sa.Integer, nullable=False),
-        sa.Column("stimulus_id", sa.String(64), nullable=False),
-        *[sa.Column(q, sa.SmallInteger, nullable=True) for q in ITEM_IDS],
-        sa.Column("rt_ms", sa.Float, nullable=False),
-        sa.Column("received_at", sa.String(40), nullable=False),
-        sa.Column("choice", sa.String(8), nullable=True),
-        sa.Column("answers_json", sa.Text, nullable=True),
-    )
+    responses, conflicts = _answer_tables(metadata)
     audit = sa.Table(
         "audit_log",
         metadata,
