@@ -266,3 +266,51 @@ def test_slider_and_2afc_bodies_are_checked_in_one_place():
         bodies.parse_check({"check": 1}, 3, True, 6, "2afc")
     with pytest.raises(ApiError, match="answers.A must be an integer 0..100"):
         bodies.parse_task_answer({"answers": {"A": True}}, "slider", ("A",), 6)
+
+
+def test_resume_keeps_the_position_and_the_practised_tasks(server):
+    api, _cfg, _ = server
+    h, state = _ready(api, "T7", tasks=("likert", "slider"))
+    for t in state["trials"][:14]:
+        assert api.post("/api/participants/T7/responses", json=_body(t), headers=h).status_code == 201
+    again = api.post("/api/participants", json={"participant_id": "T7", "secret": h["X-Participant-Secret"]})
+    assert again.status_code == 200 and again.json()["resumed"]
+    st = again.json()["state"]
+    assert st["next_trial_index"] == 14 and st["practiced"] == ["likert", "slider"]
+    assert st["trials"][14]["task"] == "slider" and st["trials"][18]["task"] == "2afc"
+
+
+def test_slider_straight_lines_and_failed_checks_are_flagged():
+    from crowdstudy.study.quality import OnlineConfig, check_passed, flag_participants
+
+    rows = [
+        {"participant_id": "A", "task": "slider", "R1": 40, "R2": 40, "R3": 40, "rt_ms": 9000.0},
+        {"participant_id": "A", "task": "slider", "R1": 40, "R2": 40, "R3": 40, "rt_ms": 9000.0,
+         "check_value": 100, "check_answer": 95},
+        {"participant_id": "A", "task": "2afc", "choice": "left", "rt_ms": 9000.0, "check_value": 2, "check_answer": 1},
+    ]  # fmt: skip
+    cfg = OnlineConfig(max_failed_checks=0, max_straightline_fraction=0.8, max_same_side_fraction=1.0)
+    (a,) = flag_participants([{"participant": "A", "status": "completed"}], rows, cfg, ("R1", "R2", "R3"))
+    assert a["straightline_trials"] == 2 and a["checks_total"] == 2 and a["checks_failed"] == 1
+    assert a["exclusion_reason"] == "failed_attention_check;straight_lining;same_side"
+    assert check_passed("slider", 0, 10) and not check_passed("slider", 0, 11) and check_passed("2afc", 1, 1)
+
+
+def test_serve_exits_2_with_one_line_naming_the_missing_method(stim_dir, tmp_path):
+    import shutil
+    import subprocess
+    import sys
+
+    folder = tmp_path / "stim"
+    shutil.copytree(stim_dir, folder)
+    manifest = json.loads((folder / "manifest.json").read_text())
+    manifest["stimuli"] = [r for r in manifest["stimuli"] if r["method"] != "Physics"]
+    (folder / "manifest.json").write_text(json.dumps(manifest))
+    p = subprocess.run(
+        [sys.executable, "-m", "crowdstudy", "serve", "--stimuli", str(folder), "--design", str(DESIGN),
+         "--db", f"sqlite:///{tmp_path / 'x.db'}"],
+        capture_output=True, text=True, timeout=120,
+    )  # fmt: skip
+    err = (p.stdout + p.stderr).strip()
+    assert p.returncode == 2 and "Traceback" not in err and len(err.splitlines()) == 1
+    assert "no video of method 'Physics'" in err and not (tmp_path / "x.db").exists()
