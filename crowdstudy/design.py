@@ -523,6 +523,12 @@ def _read_methods(top: _Reader) -> dict[str, Method]:
             if not isinstance(meth.table[name], dict):
                 meth.fail(name, "must be a table ([methods.NAME] with its correction)")
             recipes[name] = _read_method(meth.table_(name), name)
+            if name == "Baseline" and recipes[name].correction != "none":
+                meth.table_(name).fail(
+                    "correction",
+                    "must be 'none': Baseline names the uncorrected animation every method starts "
+                    "from; give this method another name",
+                )
         elif name in DEFAULT_METHODS:
             recipes[name] = DEFAULT_METHODS[name]
         else:

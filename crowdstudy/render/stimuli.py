@@ -236,10 +236,44 @@ def _palette_digest() -> str:
     )
 
 
+def _recipe_of(design, method: str):
+    """The recipe of ``method``; ``"Baseline"`` is the uncorrected animation every method
+    starts from, whether or not the design shows it."""
+    from crowdstudy.design import DEFAULT_METHODS
+
+    if method == "Baseline" and method not in design.method_recipes:
+        return DEFAULT_METHODS["Baseline"]
+    return design.method(method)
+
+
+def _design_dir(design) -> Path | None:
+    return None if design.source in ("", "<memory>") else Path(design.source).parent
+
+
+def _method_inputs(design, recipe, cell: str, physics) -> dict:
+    """What a method's recipe adds to its animation's digest: the resolved physics
+    configuration, the MuJoCo tuning, or the SHA-256 of the user's file."""
+    from crowdstudy.recipes import files_digest, method_physics_config
+
+    if recipe.correction in ("physics", "paper"):
+        return {"physics": method_physics_config(recipe, None if physics is None else _physics_config(physics)).as_dict()}
+    if recipe.correction == "mujoco":
+        from crowdstudy.physics.mujoco_peer import resolve_setting
+
+        return {"mujoco": dataclasses.asdict(resolve_setting(recipe.setting or "weld0.05"))}
+    if recipe.correction == "files":
+        return {"files": files_digest(recipe, cell, _design_dir(design))}
+    return {}
+
+
 def digest_inputs(design, stimulus, settings: dict, *, physics=None, method: str | None = None) -> dict:
     """Everything that determines the animation of ``stimulus``'s cell and method (or
-    ``method``), as a JSON-able dict: the input of :func:`animation_digest`."""
+    ``method``), as a JSON-able dict: the input of :func:`animation_digest`. A method's
+    recipe (:meth:`~crowdstudy.design.Method.recipe`) is part of it, with what the recipe
+    resolves to (a ``physics`` method's whole ``PhysicsConfig``, a ``files`` method's file
+    hash), so a change of one method re-makes that method's animations only."""
     method = method or stimulus.method
+    recipe = _recipe_of(design, method)
     stage = design.stage(stimulus.stage_key)
     cell = {
         "stage": stage.key,
@@ -260,10 +294,11 @@ def digest_inputs(design, stimulus, settings: dict, *, physics=None, method: str
         "fps": settings["fps"],
         "metric_frames": settings["metric_frames"],
         "method": method,
+        "recipe": recipe.recipe(),
         **_shared_inputs(),
     }
     if method != "Baseline":
-        out["physics"] = _physics_config(physics).as_dict()
+        out.update(_method_inputs(design, recipe, f"S{stage.number}-{stimulus.density_level}", physics))
         out["baseline"] = animation_digest(design, stimulus, settings, method="Baseline")
     return out
 
@@ -284,7 +319,9 @@ def video_digest(design, stimulus, settings: dict, *, physics=None, body_loader=
         {
             "stimulus_id": stimulus.stimulus_id,
             "animation": animation_digest(design, stimulus, settings, physics=physics),
-            "colours_from": animation_digest(design, stimulus, settings, method="Baseline"),
+            "colours_from": animation_digest(
+                design, stimulus, settings, physics=physics, method=design.reference_method
+            ),
             "viewpoint": dataclasses.asdict(design.viewpoints[stimulus.viewpoint]),
             "render": render,
             "shadows": True,
@@ -317,32 +354,41 @@ def _limit_threads(workers: int) -> None:
 
 
 def animation_job(job: dict) -> dict:
-    """Build one cell's Baseline and Ours animations and their overlap metrics.
+    """Build one cell's animations of some methods and their overlap metrics.
 
-    ``job``: design, stage (key), level, seed, duration, fps, metric_frames, ``physics``
-    (the PhysicsConfig of "Ours"), ``methods`` (those to build, default both; without
-    "Baseline", the cached Baseline comes as ``baseline`` (a path) or ``baseline_bytes``),
-    and either ``out_dir`` (write the files there) or ``return_bytes`` (return them, for Dask).
-    Returns {"files": {name: path or bytes}, "metrics": {method: {...}}, "timings": {"Ours": {...}}};
-    the files include ``<cell>-Ours.timings.json`` (see :func:`crowdstudy.physics.correct`).
+    ``job``: design, cell (``S{stage}-{level}``), stage (key), level, seed, duration, fps,
+    metric_frames, ``methods`` (the names to build; "Baseline" is the uncorrected
+    animation every method starts from; without it, the cached Baseline comes as
+    ``baseline`` (a path) or ``baseline_bytes``), ``recipes`` ({name:
+    :class:`~crowdstudy.design.Method`}), ``physics`` (the starting ``PhysicsConfig`` of the
+    ``physics`` methods, or None), ``files_bytes`` ({name: bytes of a ``files`` method's
+    animation}, for Dask) and either ``out_dir`` (write the files there) or ``return_bytes``
+    (return them, for Dask).
+    Returns {"files": {name: path or bytes}, "metrics": {method: {...}}, "timings":
+    {method: {...}}}; the files include ``<cell>-<method>.timings.json`` for every method
+    that ran a simulation (see :func:`crowdstudy.physics.correct`).
     """
+    from crowdstudy.design import DEFAULT_METHODS
     from crowdstudy.motion import build_baseline
-    from crowdstudy.physics import correct
+    from crowdstudy.recipes import make_method_animation
 
     design = job["design"]
-    methods = tuple(job.get("methods") or ("Baseline", "Ours"))
+    methods = tuple(job.get("methods") or ("Baseline",))
     if "Baseline" in methods:
         base = build_baseline(
             design, job["stage"], job["level"], duration=job["duration"], fps=job["fps"], seed=job["seed"]
         )
+        base = make_method_animation(DEFAULT_METHODS["Baseline"], base, cell=job["cell"])
     else:
         base = _job_animation(job.get("baseline"), job.get("baseline_bytes"))
     built = [("Baseline", base)] if "Baseline" in methods else []
     timings: dict = {}
-    if "Ours" in methods:
-        ours = correct(base, job.get("physics"), progress=False, timings=timings)
-        built.append(("Ours", ours))
-    out: dict = {"files": {}, "metrics": {}, "timings": {"Ours": timings} if "Ours" in methods else {}}
+    for name in methods:
+        if name == "Baseline":
+            continue
+        timings[name] = {}
+        built.append((name, _method_animation(job, job["recipes"][name], base, timings[name])))
+    out: dict = {"files": {}, "metrics": {}, "timings": {m: t for m, t in timings.items() if t}}
     for method, anim in built:
         out["metrics"][method] = _overlap_metrics(anim, job["metric_frames"])
         name = f"{job['cell']}-{method}.npz"
@@ -351,19 +397,42 @@ def animation_job(job: dict) -> dict:
                 out["files"][name] = Path(anim.save(Path(tmp) / name)).read_bytes()
         else:
             out["files"][name] = str(anim.save(Path(job["out_dir"]) / name))
-    if "Ours" not in methods:
-        return out
-    # the physics timings: a sidecar beside the Ours file (run-dependent, so never inside it)
+    for method, anim in built:
+        if out["timings"].get(method) and "physics" in anim.meta:
+            _timings_sidecar(job, method, anim, out)
+    return out
+
+
+def _method_animation(job: dict, recipe, base, timings: dict):
+    """One method's animation of the job's cell (a ``files`` method's file from the job's
+    bytes on a Dask worker, which may not share the file system)."""
+    import dataclasses as dc
+
+    from crowdstudy.recipes import make_method_animation
+
+    data = (job.get("files_bytes") or {}).get(recipe.name)
+    if data is None:
+        return make_method_animation(
+            recipe, base, cell=job["cell"], design_dir=job.get("design_dir"), timings=timings, physics=job.get("physics")
+        )
+    with tempfile.TemporaryDirectory() as tmp:
+        (Path(tmp) / f"{job['cell']}.npz").write_bytes(data)
+        anim = make_method_animation(dc.replace(recipe, path=tmp), base, cell=job["cell"])
+    return anim.replace(meta={"recipe": recipe.recipe()})
+
+
+def _timings_sidecar(job: dict, method: str, anim, out: dict) -> None:
+    """The physics timings: a sidecar beside the method's file (run-dependent, so never
+    inside it)."""
     from crowdstudy.paths import timings_path
 
-    name = timings_path(f"{job['cell']}-Ours.npz").name
-    text = json.dumps({"device": ours.meta["physics"]["device"], **timings}, indent=2, sort_keys=True) + "\n"
+    name = timings_path(f"{job['cell']}-{method}.npz").name
+    text = json.dumps({"device": anim.meta["physics"]["device"], **out["timings"][method]}, indent=2, sort_keys=True)
     if job.get("return_bytes"):
-        out["files"][name] = text.encode()
+        out["files"][name] = (text + "\n").encode()
     else:
-        (Path(job["out_dir"]) / name).write_text(text)
+        (Path(job["out_dir"]) / name).write_text(text + "\n")
         out["files"][name] = str(Path(job["out_dir"]) / name)
-    return out
 
 
 def _job_animation(path, data: bytes | None):
@@ -518,6 +587,18 @@ def _write_manifest(out_dir: Path, design, preset: str, rows: dict, order: list[
         "design": str(design.source),
         "preset": preset,
         "provenance": provenance(design.seed, design_name=design.name),
+        "methods": {name: design.method(name).recipe() for name in design.methods},
+        "stages": [
+            {
+                "number": st.number,
+                "key": st.key,
+                "scenario": st.scenario,
+                "task": st.task,
+                "methods": list(st.methods),
+                "pairs": [list(p) for p in st.pairs],
+            }
+            for st in design.stages
+        ],
         "stimuli": listed,
     }
     tmp = out_dir / "manifest.json.tmp"
@@ -576,6 +657,7 @@ def build_stimuli(
     progress: bool = True,
     body_loader=None,
     physics=None,
+    methods=None,
 ) -> dict:
     """Build (or finish) the stimulus set of a study design.
 
@@ -591,8 +673,10 @@ def build_stimuli(
             this process).
         body_loader: record -> Body override (tests); default ``crowdstudy.body.load_body``.
         physics: the :class:`~crowdstudy.physics.PhysicsConfig` (or a dict of its fields,
-            :meth:`~crowdstudy.physics.PhysicsConfig.from_overrides`) of "Ours"; None = the
-            defaults.
+            :meth:`~crowdstudy.physics.PhysicsConfig.from_overrides`) every ``physics``
+            method starts from before its own ``config`` overrides; None = the defaults.
+        methods: build only these of the design's methods (``--method``); None = all. The
+            manifest lists the videos built so far, of every method.
     Returns:
         The manifest dict (also written to ``out_dir/manifest.json`` and ``.csv``).
     """
@@ -602,23 +686,31 @@ def build_stimuli(
     if not isinstance(design, StudyDesign):
         design = load_design(design)
     settings = preset_settings(design, preset, duration=duration)
-    physics = _physics_config(physics)
-    out_dir = Path(out_dir)
-    check_output_path(out_dir / "manifest.json", "out")
-    (out_dir / "animations").mkdir(exist_ok=True)
-    (out_dir / "videos").mkdir(exist_ok=True)
+    physics = None if physics is None else _physics_config(physics)
     if workers is None:
         workers = default_workers()
     if not isinstance(workers, int) or workers < 0:
         raise InvalidInputError(f"workers: expected an integer >= 0, got {workers!r}")
+    chosen = _chosen_methods(design, methods)
     stimuli = design.stimuli()
     order = [s.stimulus_id for s in stimuli]
+    _check_inputs(design, [s for s in stimuli if s.method in chosen])
+    out_dir = Path(out_dir)
+    check_output_path(out_dir / "manifest.json", "out")
+    (out_dir / "animations").mkdir(exist_ok=True)
+    (out_dir / "videos").mkdir(exist_ok=True)
     old = load_manifest(out_dir)
     rows = {r["stimulus_id"]: r for r in old["stimuli"]} if old and old.get("preset") == preset else {}
     digests = {
-        s.stimulus_id: video_digest(design, s, settings, physics=physics, body_loader=body_loader) for s in stimuli
+        s.stimulus_id: video_digest(design, s, settings, physics=physics, body_loader=body_loader)
+        for s in stimuli
+        if s.method in chosen
     }
-    todo = [s for s in stimuli if not _video_done(out_dir, rows.get(s.stimulus_id), digests[s.stimulus_id])]
+    todo = [
+        s
+        for s in stimuli
+        if s.method in chosen and not _video_done(out_dir, rows.get(s.stimulus_id), digests[s.stimulus_id])
+    ]
     rows = {sid: r for sid, r in rows.items() if sid in order and sid not in {s.stimulus_id for s in todo}}
     if progress:
         print(
@@ -642,47 +734,116 @@ def _cell_name(stim) -> str:
     return f"S{stim.stage}-{stim.density_level}"
 
 
+def _chosen_methods(design, methods) -> tuple[str, ...]:
+    """The design's methods to build: all, or those ``methods`` names (``--method``)."""
+    if methods is None:
+        return tuple(design.methods)
+    if isinstance(methods, str):
+        methods = (methods,)
+    for m in methods:
+        if m not in design.methods:
+            raise InvalidInputError(
+                f"--method: the design {design.source} has no method {m!r}; its methods are {', '.join(design.methods)}"
+            )
+    return tuple(m for m in design.methods if m in methods)
+
+
+def _check_inputs(design, stimuli) -> None:
+    """What the build needs from outside the package, checked before any work: each
+    method's inputs (:func:`crowdstudy.recipes.check_method_inputs`) for the cells whose
+    videos it builds; the reference method too (every video wears its colours)."""
+    from crowdstudy.recipes import check_method_inputs
+
+    per_method: dict[str, set[str]] = {}
+    for s in stimuli:
+        for m in (s.method, design.reference_method):
+            per_method.setdefault(m, set()).add(_cell_name(s))
+    for m, cells in per_method.items():
+        check_method_inputs(design, [m], sorted(cells))
+
+
 def _build_animations(design, out_dir: Path, settings, todo, runner: _Runner, progress: bool, physics) -> dict:
+    """The cell animations the videos ``todo`` need, made where their cached file is stale:
+    first each cell's Baseline (one job per cell), then one job per (cell, method)."""
     from crowdstudy.progress import progress_bar
 
     folder = out_dir / "animations"
     cells: dict[str, tuple] = {}  # cell -> (a stimulus of it, methods its videos need)
     for s in todo:
         stim, need = cells.setdefault(_cell_name(s), (s, set()))
-        need.update({"Baseline", s.method})  # the Baseline: every video's clothing colours
+        need.update({"Baseline", design.reference_method, s.method})  # colours follow the reference
     keys = {
         (cell, m): animation_digest(design, s, settings, physics=physics, method=m)
         for cell, (s, need) in cells.items()
         for m in need
     }
-    jobs = []
+    stale = {
+        cell: sorted(m for m in need if not _cached_animation(folder, cell, m, keys[(cell, m)]))
+        for cell, (s, need) in cells.items()
+    }
     for cell, (s, need) in cells.items():
-        stale = sorted(m for m in need if not _cached_animation(folder, cell, m, keys[(cell, m)]))
-        if "Baseline" in stale:  # a new Baseline makes a new Ours
-            stale = sorted(need)
-        if not stale:
-            continue
-        job = {
-            "cell": cell,
-            "design": design,
-            "stage": s.stage_key,
-            "level": s.density_level,
-            "seed": s.seed,
-            "duration": settings["duration"],
-            "fps": settings["fps"],
-            "physics": physics,
-            "metric_frames": settings["metric_frames"],
-            "out_dir": str(folder),
-            "methods": stale,
-            "return_bytes": runner.portable,
-        }
-        if "Baseline" not in stale:
-            if runner.portable:
-                job["baseline_bytes"] = (folder / f"{cell}-Baseline.npz").read_bytes()
-            else:
-                job["baseline"] = str(folder / f"{cell}-Baseline.npz")
-        jobs.append(job)
-    bar = progress_bar(total=len(jobs), desc="cell animations", unit="cell", enabled=progress and bool(jobs))
+        if "Baseline" in stale[cell]:  # a new Baseline makes a new everything
+            stale[cell] = sorted(need)
+    first = [
+        _animation_job(design, cells[cell][0], ["Baseline"], settings, physics, folder, runner)
+        for cell, methods in stale.items()
+        if "Baseline" in methods
+    ]
+    total = sum(len(v) for v in stale.values())
+    bar = progress_bar(total=total, desc="cell animations", unit="animation", enabled=progress and bool(total))
+    _run_animation_jobs(first, keys, folder, runner, bar)
+    second = [
+        _animation_job(design, cells[cell][0], [m], settings, physics, folder, runner)
+        for cell, methods in stale.items()
+        for m in methods
+        if m != "Baseline"
+    ]
+    _run_animation_jobs(second, keys, folder, runner, bar)
+    bar.close()
+    return {
+        (cell, m): json.loads((folder / f"{cell}-{m}.metrics.json").read_text())
+        for cell, (s, need) in cells.items()
+        for m in need
+    }
+
+
+def _animation_job(design, s, methods: list[str], settings, physics, folder: Path, runner: _Runner) -> dict:
+    """The job of ``methods``' animations of the cell of stimulus ``s`` (:func:`animation_job`)."""
+    from crowdstudy.recipes import method_file
+
+    cell = _cell_name(s)
+    recipes = {m: design.method(m) for m in methods if m != "Baseline"}
+    job = {
+        "cell": cell,
+        "design": design,
+        "design_dir": _design_dir(design),
+        "stage": s.stage_key,
+        "level": s.density_level,
+        "seed": s.seed,
+        "duration": settings["duration"],
+        "fps": settings["fps"],
+        "physics": physics,
+        "recipes": recipes,
+        "metric_frames": settings["metric_frames"],
+        "out_dir": str(folder),
+        "methods": list(methods),
+        "return_bytes": runner.portable,
+    }
+    if "Baseline" not in methods:
+        if runner.portable:
+            job["baseline_bytes"] = (folder / f"{cell}-Baseline.npz").read_bytes()
+            job["files_bytes"] = {
+                m: method_file(r, cell, _design_dir(design)).read_bytes()
+                for m, r in recipes.items()
+                if r.correction == "files"
+            }
+        else:
+            job["baseline"] = str(folder / f"{cell}-Baseline.npz")
+    return job
+
+
+def _run_animation_jobs(jobs: list[dict], keys: dict, folder: Path, runner: _Runner, bar) -> None:
+    """Run animation jobs; write their files (Dask sends them back as bytes) and records."""
     for job, res in runner.run(animation_job, jobs):
         for name, content in res["files"].items():
             if isinstance(content, (bytes, bytearray)):
@@ -690,13 +851,7 @@ def _build_animations(design, out_dir: Path, settings, todo, runner: _Runner, pr
         for method, values in res["metrics"].items():
             record = animation_record(folder / f"{job['cell']}-{method}.npz", keys[(job["cell"], method)], values)
             (folder / f"{job['cell']}-{method}.metrics.json").write_text(json.dumps(record, indent=2))
-        bar.update(1)
-    bar.close()
-    return {
-        (cell, m): json.loads((folder / f"{cell}-{m}.metrics.json").read_text())
-        for cell, (s, need) in cells.items()
-        for m in need
-    }
+            bar.update(1)
 
 
 def _render_videos(
@@ -722,9 +877,9 @@ def _render_videos(
     colour_refs: dict[str, list] = {}
     for s in todo:
         anim_path = out_dir / "animations" / f"{_cell_name(s)}-{s.method}.npz"
-        if _cell_name(s) not in colour_refs:  # both methods of a cell wear the Baseline's colours
+        if _cell_name(s) not in colour_refs:  # every method of a cell wears the reference's colours
             colour_refs[_cell_name(s)] = baseline_color_positions(
-                out_dir / "animations" / f"{_cell_name(s)}-Baseline.npz"
+                out_dir / "animations" / f"{_cell_name(s)}-{design.reference_method}.npz"
             ).tolist()
         job = {
             "stimulus_id": s.stimulus_id,
