@@ -256,7 +256,9 @@ def _method_inputs(design, recipe, cell: str, physics) -> dict:
     from crowdstudy.recipes import files_digest, method_physics_config
 
     if recipe.correction in ("physics", "paper"):
-        return {"physics": method_physics_config(recipe, None if physics is None else _physics_config(physics)).as_dict()}
+        return {
+            "physics": method_physics_config(recipe, None if physics is None else _physics_config(physics)).as_dict()
+        }
     if recipe.correction == "mujoco":
         from crowdstudy.physics.mujoco_peer import resolve_setting
 
@@ -413,7 +415,12 @@ def _method_animation(job: dict, recipe, base, timings: dict):
     data = (job.get("files_bytes") or {}).get(recipe.name)
     if data is None:
         return make_method_animation(
-            recipe, base, cell=job["cell"], design_dir=job.get("design_dir"), timings=timings, physics=job.get("physics")
+            recipe,
+            base,
+            cell=job["cell"],
+            design_dir=job.get("design_dir"),
+            timings=timings,
+            physics=job.get("physics"),
         )
     with tempfile.TemporaryDirectory() as tmp:
         (Path(tmp) / f"{job['cell']}.npz").write_bytes(data)
@@ -781,7 +788,7 @@ def _build_animations(design, out_dir: Path, settings, todo, runner: _Runner, pr
         cell: sorted(m for m in need if not _cached_animation(folder, cell, m, keys[(cell, m)]))
         for cell, (s, need) in cells.items()
     }
-    for cell, (s, need) in cells.items():
+    for cell, (_, need) in cells.items():
         if "Baseline" in stale[cell]:  # a new Baseline makes a new everything
             stale[cell] = sorted(need)
     first = [
