@@ -403,9 +403,27 @@ class _Reader:
 
 
 def load_design(path: str | Path | None = None) -> StudyDesign:
-    """Load and validate a study design TOML file (default: the paper's design)."""
+    """Load and validate a study design TOML file (default: the paper's design); a ``files``
+    method's folder must exist (its ``path`` is relative to the design file)."""
     path = Path(path) if path is not None else default_design_path()
-    return parse_design(read_toml(path, f"study design file {str(path)!r} does not exist"), str(path))
+    design = parse_design(read_toml(path, f"study design file {str(path)!r} does not exist"), str(path))
+    _check_method_folders(design, path.parent)
+    return design
+
+
+def _check_method_folders(design: StudyDesign, design_dir: Path) -> None:
+    """Every ``files`` method's folder exists (the check of each cell's file in it waits for
+    the commands that read them: ``crowdstudy stimuli``, ``demo``)."""
+    for name in design.methods:
+        method = design.method_recipes[name]
+        if method.correction == "files":
+            folder = Path(method.path or "")
+            folder = folder if folder.is_absolute() else design_dir / folder
+            if not folder.is_dir():
+                raise InvalidInputError(
+                    f"{design.source}: key 'methods.{name}.path': the folder {str(folder)!r} of the method's "
+                    "animations does not exist (a relative path is relative to the design file)"
+                )
 
 
 def read_toml(path: str | Path, missing: str) -> dict:
