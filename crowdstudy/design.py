@@ -277,6 +277,19 @@ class StudyDesign:
             + ", ".join(f"{n} ({sc.kind})" for n, sc in self.scenarios.items())
         )
 
+    def stage_of_kind(self, kind: ScenarioKind) -> Stage:
+        """The first stage whose scenario is of ``kind`` (the paper's ``stationary`` for
+        ``"concert"``, ``walking`` for ``"corridor"``): what ``crowdstudy layout`` and
+        ``navigate`` take their cell seeds and scenario parameters from."""
+        for st in self.stages:
+            if self.scenarios[st.scenario].kind == kind:
+                return st
+        raise InvalidInputError(
+            f"{self.source}: no stage of the design is a {kind} (its stages: "
+            + ", ".join(f"{st.key} ({self.scenarios[st.scenario].kind})" for st in self.stages)
+            + ")"
+        )
+
     def tasks(self) -> tuple[Task, ...]:
         """The tasks of the design's stages, each once, in stage order."""
         return tuple(dict.fromkeys(st.task for st in self.stages))

@@ -124,6 +124,23 @@ def test_method_option_names_a_method_of_the_design(tmp_path):
     assert not (tmp_path / "x").exists()
 
 
+def test_layout_navigate_and_animate_follow_named_scenarios(tmp_path, capsys):
+    """The design's scenario ``gig`` is a concert under another name: layout and animate
+    use it; navigate says the design has no corridor stage, and writes nothing."""
+    assert main(["layout", "--design", str(OTHER), "--density", "packed", "--out", str(tmp_path / "l.npz")]) == 0
+    args = ["--design", str(OTHER), "--stage", "choice", "--density", "sparse", "--duration", "0.5"]
+    assert main(["animate", *args, "--out", str(tmp_path / "a.npz")]) == 0
+    meta = CrowdAnimation.load(tmp_path / "a.npz").meta
+    assert meta["scenario"] == "concert" and meta["scenario_name"] == "gig" and meta["stage"] == "choice"
+    capsys.readouterr()
+    assert (
+        main(["navigate", "--design", str(OTHER), "--density", "sparse", "--out", str(tmp_path / "n" / "n.npz")]) == 2
+    )
+    err = capsys.readouterr().err
+    assert "no stage of the design is a corridor" in err and str(OTHER) in err
+    assert not (tmp_path / "n").exists()
+
+
 # -- whole stimulus sets on the quick preset --------------------------------------------------
 
 
