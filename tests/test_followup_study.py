@@ -18,13 +18,8 @@ from crowdstudy.cli import main  # noqa: E402
 from crowdstudy.design import Method, load_design  # noqa: E402
 from crowdstudy.errors import InvalidInputError, MissingDependencyError  # noqa: E402
 from crowdstudy.recipes import check_method_inputs, make_method_animation  # noqa: E402
-from crowdstudy.render.stimuli import (  # noqa: E402
-    animation_digest,
-    build_stimuli,
-    digest_inputs,
-    preset_settings,
-    video_digest,
-)
+from crowdstudy.render.stimuli import build_stimuli, preset_settings  # noqa: E402
+from crowdstudy.render.stimuli_digests import animation_digest, digest_inputs, video_digest  # noqa: E402
 from crowdstudy.scene import CrowdAnimation  # noqa: E402
 
 ROOT = Path(__file__).resolve().parent.parent

