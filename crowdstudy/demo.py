@@ -23,7 +23,7 @@ import json
 import time
 from pathlib import Path
 
-from crowdstudy.design import Stage, StudyDesign, load_design
+from crowdstudy.design import Stage, StudyDesign, default_design_path, load_design
 from crowdstudy.errors import InvalidInputError
 from crowdstudy.scene import CrowdAnimation
 
@@ -82,7 +82,7 @@ def run_demo(
     if study:
         step(f"The study: quick stimulus set, {participants} simulated participants, analysis")
         outputs.update(_study(design, out, participants, seed, duration))
-    _print_outputs(outputs)
+    _print_outputs(outputs, design)
     return outputs
 
 
@@ -314,17 +314,20 @@ def _renders(
     return written
 
 
-def _print_outputs(outputs: dict[str, Path]) -> None:
-    """The last lines: every output, and how to run the full study."""
+def _print_outputs(outputs: dict[str, Path], design: StudyDesign) -> None:
+    """The last lines: every output, and how to run the full study of the design."""
     print("\nDone. Outputs:")
     for name, path in outputs.items():
         print(f"  {name:<32} {path}")
+    own = design.source not in ("", "<memory>", str(default_design_path()))
+    flag = f" --design {design.source}" if own else ""
     print(
-        "\nThe full study (1920x1080, 20 s videos, real participants):\n"
-        "  crowdstudy stimuli --out stimuli/videos                                    # 60 videos (+ --design FILE, --scheduler)\n"
-        "  crowdstudy serve --stimuli stimuli/videos --db sqlite:///study.db          # participants open the printed URL\n"
+        f"\nThe full study ({design.video_width}x{design.video_height}, {design.duration:g} s videos, "
+        "real participants):\n"
+        f"  crowdstudy stimuli{flag} --out stimuli/videos      # {len(design.stimuli())} videos (+ --scheduler)\n"
+        "  crowdstudy serve --stimuli stimuli/videos --db sqlite:///study.db     # participants open the printed URL\n"
         "  crowdstudy export --db sqlite:///study.db --out responses.csv --demographics demographics.csv\n"
-        "  crowdstudy analyze responses.csv --out analysis_out"
+        f"  crowdstudy analyze responses.csv{flag} --out analysis_out"
     )
 
 
@@ -347,7 +350,7 @@ def _overlap_image(methods, design, view: str, path: Path, render_frame, color_p
         ax.set_title(f"{label}: red pixels {100 * red.mean():.2f} %")
         ax.axis("off")
     fig.suptitle("Overlap view (paper Fig. 5): surfaces inside another character in red")
-    fig.tight_layout()
+    fig.tight_layout(rect=(0, 0, 1, 0.93))  # room for the title above the panels' own
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=110)
     plt.close(fig)
