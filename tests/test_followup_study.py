@@ -74,7 +74,7 @@ def test_mujoco_without_the_package_names_the_method_and_the_extra(monkeypatch):
         make_method_animation(Method("Peer", "mujoco"), _crowd(), cell="S1-D1")
 
 
-def test_check_method_inputs_before_the_work(tmp_path):
+def test_check_method_inputs_before_the_work(tmp_path, capsys):
     text = OTHER.read_text().replace(
         '[methods.Firm]\ncorrection = "physics"\nconfig = { damping = 0.06 }',
         '[methods.Firm]\ncorrection = "files"\npath = "firm"',
@@ -88,9 +88,11 @@ def test_check_method_inputs_before_the_work(tmp_path):
     _crowd(n=5).save(tmp_path / "firm" / "S1-sparse.npz")
     with pytest.raises(InvalidInputError, match=r"S1-sparse\.npz: method 'Firm': 5 characters, but the cell S1-sparse"):
         check_method_inputs(design, ["Firm"], ["S1-sparse"])
-    # stimuli: the check runs before anything is written
+    # stimuli: the check runs before anything is written, through the API and the command line
     with pytest.raises(InvalidInputError, match="methods.Firm.path"):
         build_stimuli(design, tmp_path / "set", preset="quick", workers=0, progress=False)
+    assert not (tmp_path / "set").exists()
+    assert main(["stimuli", "--design", str(design_path), "--out", str(tmp_path / "set"), "--preset", "quick"]) == 2
     assert not (tmp_path / "set").exists()
 
 

@@ -50,12 +50,14 @@ def configure(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from crowdstudy.design import load_design
+    from crowdstudy.paths import check_output_dir
     from crowdstudy.physics.config_file import config_from_cli
-    from crowdstudy.render.stimuli import build_stimuli
+    from crowdstudy.render.stimuli import build_stimuli, check_stimuli_inputs
 
     design = load_design(args.design)
     physics = config_from_cli(args.config)
-    # build_stimuli checks the methods' inputs, then the output folder, before any work
+    check_stimuli_inputs(design, args.methods)  # a files method's files, mujoco: before any output
+    check_output_dir(args.out, "--out")
     manifest = build_stimuli(
         design,
         args.out,

@@ -59,6 +59,7 @@ from crowdstudy.render.stimuli_digests import animation_digest, design_dir, phys
 
 __all__ = [
     "build_stimuli",
+    "check_stimuli_inputs",
     "default_workers",
     "PRESETS",
     "MANIFEST_COLUMNS",
@@ -512,10 +513,9 @@ def build_stimuli(
         workers = default_workers()
     if not isinstance(workers, int) or workers < 0:
         raise InvalidInputError(f"workers: expected an integer >= 0, got {workers!r}")
-    chosen = _chosen_methods(design, methods)
+    chosen = check_stimuli_inputs(design, methods)
     stimuli = design.stimuli()
     order = [s.stimulus_id for s in stimuli]
-    _check_inputs(design, [s for s in stimuli if s.method in chosen])
     out_dir = Path(out_dir)
     check_output_path(out_dir / "manifest.json", "out")
     (out_dir / "animations").mkdir(exist_ok=True)
@@ -569,18 +569,25 @@ def _chosen_methods(design, methods) -> tuple[str, ...]:
     return tuple(m for m in design.methods if m in methods)
 
 
-def _check_inputs(design, stimuli) -> None:
-    """What the build needs from outside the package, checked before any work: each
-    method's inputs (:func:`crowdstudy.recipes.check_method_inputs`) for the cells whose
-    videos it builds; the reference method too (every video wears its colours)."""
+def check_stimuli_inputs(design, methods=None) -> tuple[str, ...]:
+    """What building ``methods`` (None: all) of ``design`` needs from outside the package,
+    checked before any work (:func:`build_stimuli` runs it first; ``crowdstudy stimuli``
+    before it makes the output folder): the method names, and each method's inputs
+    (:func:`crowdstudy.recipes.check_method_inputs`: a ``files`` method's folder and every
+    cell's file, ``mujoco``) for the cells whose videos it builds, the reference method's
+    too (every video wears its colours). Returns the methods to build, in the design's
+    order."""
     from crowdstudy.recipes import check_method_inputs
 
+    chosen = _chosen_methods(design, methods)
     per_method: dict[str, set[str]] = {}
-    for s in stimuli:
-        for m in (s.method, design.reference_method):
-            per_method.setdefault(m, set()).add(_cell_name(s))
+    for s in design.stimuli():
+        if s.method in chosen:
+            for m in (s.method, design.reference_method):
+                per_method.setdefault(m, set()).add(_cell_name(s))
     for m, cells in per_method.items():
         check_method_inputs(design, [m], sorted(cells))
+    return chosen
 
 
 def _build_animations(design, out_dir: Path, settings, todo, runner: _Runner, progress: bool, physics) -> dict:
