@@ -278,7 +278,8 @@ def _renders(
     colours = {}
     ref = design.reference_method
     for stage in stages:
-        view = "V3" if "V3" in stage.viewpoints else stage.viewpoints[0]
+        # the paper's front-side camera where the design has it (the walking stage's first), else the stage's first
+        view = "V3" if "V3" in design.viewpoints else stage.viewpoints[0]
         # every method is dressed like the reference: colours follow its frame-0 positions
         colours[stage.key] = baseline_color_positions(outputs[f"{stage.key} {ref} animation"])
         for method in design.methods:
