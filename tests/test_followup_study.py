@@ -146,6 +146,7 @@ def _meta(folder: Path, name: str) -> dict:
 
 
 @pytest.mark.slow
+@pytest.mark.timeout(1800)  # real motion, physics and rendering: minutes on a busy 2-core machine
 def test_a_design_with_names_of_its_own_builds_and_resumes_per_method(tmp_path):
     """Raw / Soft / Firm, densities sparse and packed, one viewpoint, a slider and a 2AFC
     stage: the manifest lists the design's methods, stages and tasks; each animation says its
@@ -207,6 +208,7 @@ def test_a_design_with_names_of_its_own_builds_and_resumes_per_method(tmp_path):
 
 
 @pytest.mark.slow
+@pytest.mark.timeout(1800)  # real motion, physics and rendering: minutes on a busy 2-core machine
 def test_the_example_follow_up_study_builds_on_the_quick_preset(tmp_path, capsys):
     """stimuli/examples/followup: Baseline, Ours and Paper; a Likert and a 2AFC stage; two
     densities; through the command line. ``--method`` builds one method (and the reference
