@@ -277,6 +277,19 @@ class StudyDesign:
             + ", ".join(f"{n} ({sc.kind})" for n, sc in self.scenarios.items())
         )
 
+    def stage_of_kind(self, kind: ScenarioKind) -> Stage:
+        """The first stage whose scenario is of ``kind`` (the paper's ``stationary`` for
+        ``"concert"``, ``walking`` for ``"corridor"``): what ``crowdstudy layout`` and
+        ``navigate`` take their cell seeds and scenario parameters from."""
+        for st in self.stages:
+            if self.scenarios[st.scenario].kind == kind:
+                return st
+        raise InvalidInputError(
+            f"{self.source}: no stage of the design is a {kind} (its stages: "
+            + ", ".join(f"{st.key} ({self.scenarios[st.scenario].kind})" for st in self.stages)
+            + ")"
+        )
+
     def tasks(self) -> tuple[Task, ...]:
         """The tasks of the design's stages, each once, in stage order."""
         return tuple(dict.fromkeys(st.task for st in self.stages))
@@ -406,9 +419,27 @@ class _Reader:
 
 
 def load_design(path: str | Path | None = None) -> StudyDesign:
-    """Load and validate a study design TOML file (default: the paper's design)."""
+    """Load and validate a study design TOML file (default: the paper's design); a ``files``
+    method's folder must exist (its ``path`` is relative to the design file)."""
     path = Path(path) if path is not None else default_design_path()
-    return parse_design(read_toml(path, f"study design file {str(path)!r} does not exist"), str(path))
+    design = parse_design(read_toml(path, f"study design file {str(path)!r} does not exist"), str(path))
+    _check_method_folders(design, path.parent)
+    return design
+
+
+def _check_method_folders(design: StudyDesign, design_dir: Path) -> None:
+    """Every ``files`` method's folder exists (the check of each cell's file in it waits for
+    the commands that read them: ``crowdstudy stimuli``, ``demo``)."""
+    for name in design.methods:
+        method = design.method_recipes[name]
+        if method.correction == "files":
+            folder = Path(method.path or "")
+            folder = folder if folder.is_absolute() else design_dir / folder
+            if not folder.is_dir():
+                raise InvalidInputError(
+                    f"{design.source}: key 'methods.{name}.path': the folder {str(folder)!r} of the method's "
+                    "animations does not exist (a relative path is relative to the design file)"
+                )
 
 
 def read_toml(path: str | Path, missing: str) -> dict:
@@ -526,6 +557,12 @@ def _read_methods(top: _Reader) -> dict[str, Method]:
             if not isinstance(meth.table[name], dict):
                 meth.fail(name, "must be a table ([methods.NAME] with its correction)")
             recipes[name] = _read_method(meth.table_(name), name)
+            if name == "Baseline" and recipes[name].correction != "none":
+                meth.table_(name).fail(
+                    "correction",
+                    "must be 'none': Baseline names the uncorrected animation every method starts "
+                    "from; give this method another name",
+                )
         elif name in DEFAULT_METHODS:
             recipes[name] = DEFAULT_METHODS[name]
         else:

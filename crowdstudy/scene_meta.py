@@ -54,8 +54,16 @@ The cell (written by :func:`crowdstudy.motion.baseline.build_baseline` and
 The motion (:mod:`crowdstudy.motion.baseline`):
 
 ``method`` (str)
-    ``"Baseline"`` (the animation as generated) or ``"Ours"`` (after the physics); the
+    the method that made the animation: ``"Baseline"`` (the animation as generated) or
+    ``"Ours"`` (after the physics), or the name a study design gives the method
+    (``[methods.NAME]``, :func:`crowdstudy.recipes.make_method_animation`); the
     benchmarks label other peers (``"MuJoCo"``). Read by the metrics' summaries.
+``recipe`` (:class:`Recipe`)
+    how a study design's method made the animation (:meth:`crowdstudy.design.Method.recipe`):
+    ``{"correction": "none" | "physics" | "paper" | "mujoco" | "files"}`` and what that
+    correction takes (``config``: the ``PhysicsConfig`` overrides, e.g. ``{"damping": 0.06}``;
+    ``setting``: the MuJoCo tuning; ``path``: the folder of the user's animations). Written
+    by :func:`crowdstudy.recipes.make_method_animation` (``crowdstudy stimuli``).
 ``tempo`` (float bpm, or None; concert)
     the beat the dancers share (None: each motion-capture clip at its own tempo).
 ``loop`` (:class:`Loop`)
@@ -105,6 +113,7 @@ __all__ = [
     "Loop",
     "PhysicsLoop",
     "PhysicsMeta",
+    "Recipe",
     "SceneMeta",
     "check_meta",
     "loop_mode",
@@ -188,6 +197,15 @@ class PhysicsMeta(TypedDict, total=False):
     speed_limit: dict[str, Any] | None
 
 
+class Recipe(TypedDict, total=False):
+    """``meta["recipe"]``: how a study design's method made the animation."""
+
+    correction: str
+    config: dict[str, Any]
+    setting: str | None
+    path: str
+
+
 class SceneMeta(TypedDict, total=False):
     """A :class:`~crowdstudy.scene.CrowdAnimation`'s ``meta``: every key optional (the
     module's docstring says what each means and who writes it); other keys allowed."""
@@ -208,6 +226,7 @@ class SceneMeta(TypedDict, total=False):
     seed: int | None
     source: str
     method: str
+    recipe: Recipe
     tempo: float | None
     loop: Loop
     provenance: dict[str, Any]
@@ -295,6 +314,19 @@ def _loop(value: object, path: str) -> None:
         _integer(value["video_frames"], f"{path}.video_frames", lo=1)
 
 
+#: The corrections a recipe names (``crowdstudy.design.Correction``; kept here as text so
+#: that the meta schema imports nothing of the design).
+_CORRECTIONS = ("none", "physics", "paper", "mujoco", "files")
+
+
+def _recipe(value: object, path: str) -> None:
+    _mapping(value, path)
+    if value.get("correction") not in _CORRECTIONS:
+        raise _fail(f"{path}.correction", f"one of {', '.join(_CORRECTIONS)}", value.get("correction"))
+    if "config" in value:
+        _mapping(value["config"], f"{path}.config")
+
+
 def _physics(value: object, path: str) -> None:
     value = _mapping(value, path)
     if "config" in value:
@@ -343,6 +375,7 @@ _CHECKS: dict[str, Callable[[object, str], object]] = {
     "periodic": _periodic,
     "loop": _loop,
     "physics": _physics,
+    "recipe": _recipe,
     "provenance": _optional(_mapping),
     "baseline_provenance": _optional(_mapping),
     "imported": _mapping,
