@@ -48,6 +48,7 @@ workers need no shared file system.
 from __future__ import annotations
 
 import csv
+import functools
 import io
 import json
 import os
