@@ -21,6 +21,15 @@ and ``hidden_ms`` (tab switches during the trial and ms hidden), ``fullscreen_ex
 ``check_answer`` / ``check_value`` (the attention check's answer and the point it asked for).
 Readers select the columns they need by name.
 
+``comparisons.csv`` (2AFC trials; ``crowdstudy export`` writes it beside responses.csv
+when the design has a ``2afc`` stage; ``crowdstudy analyze`` reads it from there): one row
+per answered trial, columns :data:`COMPARISON_COLUMNS` then the quality columns:
+``participant_id, stage, scenario, task`` (``2afc``), ``trial_index``, the cell
+(``density_level, density, viewpoint``), the two videos (``stimulus_left,
+stimulus_right``) and their methods (``method_left, method_right``), ``choice`` (``left``
+or ``right``), ``chosen_method`` (the method of the chosen video), ``rt_ms, shown_at,
+answered_at``.
+
 ``participants.csv`` (``crowdstudy export``): one row per participant, ``participant``,
 ``status``, ``excluded`` (0/1), ``exclusion_reason`` (``;``-separated rule names) and more
 (:data:`crowdstudy.study.quality.PARTICIPANT_COLUMNS`).
@@ -33,7 +42,13 @@ Empty cells are missing values; floats are written with ``repr`` (round-trip exa
 
 from __future__ import annotations
 
-__all__ = ["RESPONSE_COLUMNS", "DEMOGRAPHIC_COLUMNS", "ITEM_COLUMNS", "RESPONSE_QUALITY_COLUMNS"]
+__all__ = [
+    "RESPONSE_COLUMNS",
+    "DEMOGRAPHIC_COLUMNS",
+    "ITEM_COLUMNS",
+    "RESPONSE_QUALITY_COLUMNS",
+    "COMPARISON_COLUMNS",
+]
 
 #: The questionnaire items' columns in the responses file.
 ITEM_COLUMNS = ("Q1", "Q2", "Q3", "Q4", "Q5", "Q6")
@@ -60,5 +75,25 @@ RESPONSE_QUALITY_COLUMNS = (
     "fullscreen_exits",
     "check_answer",
     "check_value",
+)
+#: comparisons.csv (2AFC trials), before the quality columns.
+COMPARISON_COLUMNS = (
+    "participant_id",
+    "stage",
+    "scenario",
+    "task",
+    "trial_index",
+    "density_level",
+    "density",
+    "viewpoint",
+    "stimulus_left",
+    "stimulus_right",
+    "method_left",
+    "method_right",
+    "choice",
+    "chosen_method",
+    "rt_ms",
+    "shown_at",
+    "answered_at",
 )
 DEMOGRAPHIC_COLUMNS = ("participant_id", "age", "gender", "started_at", "completed_at", "completion_code")

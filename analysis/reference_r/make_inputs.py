@@ -19,8 +19,9 @@ Datasets (long format: subject, factor columns, y):
   Baseline, the reference, Ours, Stiff): a composite of two 1..6 items (half-integer
   scores), Ours +0.8 and Stiff +0.4 points over Baseline with participant deviations.
 - likert_incomplete_5x2x3.csv: likert_5x2x3 with 30 of its 420 rows removed (seed 22).
-- comparisons_2afc.csv: 20 participants' 2AFC trials in comparisons.csv's schema, three
-  methods, every pair in each Density (5) x Viewpoint (2) cell once, left/right at random;
+- comparisons_2afc.csv: 20 participants' 2AFC trials in comparisons.csv's schema (stage 2,
+  the corridor, as a 2afc stage of the paper's design with a third method Stiff), three
+  methods, every pair in each Density (5) x Viewpoint (V3, V4) cell once, left/right at random;
   P(choose b over a) = logistic(1.2 (effect_b - effect_a + participant deviation)) with
   effects Baseline 0, Ours 0.8, Stiff 0.3 and a 0.1 logit bias to the left.
 """
@@ -153,7 +154,7 @@ def comparisons(seed=15, n=20):
         dev = rng.normal(0, 0.5)  # the participant's deviation of every non-reference method
         trial = 0
         for level, density in densities.items():
-            for view in ("V1", "V2"):
+            for view in ("V3", "V4"):
                 for a, b in pairs:
                     eff_a = effects[a] + (dev if a != "Baseline" else 0.0)
                     eff_b = effects[b] + (dev if b != "Baseline" else 0.0)
@@ -166,7 +167,7 @@ def comparisons(seed=15, n=20):
                         {
                             "participant_id": pid,
                             "stage": 2,
-                            "scenario": "concert",
+                            "scenario": "corridor",
                             "task": "2afc",
                             "trial_index": trial,
                             "density_level": level,
