@@ -219,7 +219,7 @@ def bradley_terry(first, second, first_won, methods: list[str], *, level: float 
     y = np.asarray(first_won, dtype=float)
     unknown = sorted((set(first) | set(second)) - set(methods))
     if unknown:
-        raise InvalidInputError(f"method {unknown[0]!r} is not one of the design's methods {', '.join(methods)}")
+        raise InvalidInputError(f"method {str(unknown[0])!r} is not one of the design's methods {', '.join(methods)}")
     x = np.column_stack([(first == m).astype(float) - (second == m).astype(float) for m in methods[1:]])
     _check_binary(y, x)
     beta, cov = _glm(y, x)
