@@ -177,6 +177,7 @@ def _bt_figure(res: ChoiceResult, out: Path, styles: dict, note: str, dpi: int) 
             capsize=3,
         )
     ax.axvline(0.0, color="0.5", lw=0.8, ls="--")
+    ax.set_ylim(-0.6, len(ab) - 0.4)
     ax.set_yticks(y)
     ax.set_yticklabels(ab["method"])
     ax.set_xlabel("Bradley-Terry ability (logit; reference = 0)", fontsize=8)

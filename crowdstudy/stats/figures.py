@@ -46,11 +46,8 @@ def stars_caption(adjust: str, n_methods: int, *, rule: str = "always", gate: st
         test = "paired t test of the two methods in each density x viewpoint cell"
         adj = "unadjusted: one contrast per cell, no correction across cells"
     else:
-        test = (
-            f"each method against the reference in each density x viewpoint cell, in its colour "
-            f"(pairs of the {n_methods} methods"
-        )
-        adj = f"{adjust}-adjusted within a cell, not across cells)"
+        test = "each method against the reference in each density x viewpoint cell, in the method's colour"
+        adj = f"{adjust}-adjusted over the pairs of the {n_methods} methods within a cell, not across cells"
     text = f"stars: {test} ({adj}); * p<.05, ** p<.01, *** p<.001"
     if rule == "omnibus":
         which = f"an ANOVA effect involving {method}" if " or " in gate else f"the ANOVA's {gate or method} effect"
