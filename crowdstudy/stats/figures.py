@@ -47,7 +47,7 @@ def stars_caption(adjust: str, n_methods: int, *, rule: str = "always", gate: st
         adj = "unadjusted: one contrast per cell, no correction across cells"
     else:
         test = "each method against the reference in each density x viewpoint cell, in the method's colour"
-        adj = f"{adjust}-adjusted over the pairs of the {n_methods} methods within a cell, not across cells"
+        adj = f"{adjust}-adjusted within a cell over the pairs of the {n_methods} methods, not across cells"
     text = f"stars: {test} ({adj}); * p<.05, ** p<.01, *** p<.001"
     if rule == "omnibus":
         which = f"an ANOVA effect involving {method}" if " or " in gate else f"the ANOVA's {gate or method} effect"
