@@ -176,7 +176,10 @@ def _ratings(design, stage, n=8, seed=3, task=None):
     data = simulate_responses(design, n, seed=seed)
     data = data[data.stage == stage].reset_index(drop=True)
     if task is not None:
-        data.insert(3, "task", task)
+        if "task" in data.columns:
+            data["task"] = task
+        else:
+            data.insert(3, "task", task)
     return data
 
 
@@ -240,18 +243,15 @@ def test_other_method_names_and_factor_names_flow_through(tmp_path):
 
 def test_a_slider_stage_is_analysed_on_its_scale(tmp_path):
     design = _design(task1="slider", task2="likert", methods=("Baseline", "Ours"))
-    likert = _ratings(design, 1, n=6, task="slider")
-    slider = likert.copy()
+    plain = _design(task2="likert", methods=("Baseline", "Ours"))
+    likert = _ratings(plain, 1, n=6, task="likert")
     items = [f"Q{i}" for i in range(1, 7)]
+    slider = likert.assign(task="slider")
     slider[items] = ((likert[items] - 1) * 20).astype(int)  # 1..6 -> 0..100
     report = analyze(slider, design, options=AnalysisOptions(composites=["QCR"], figures=False))
     res = report.results[(1, "QCR")]
     assert res.task == "slider" and res.label == "Stage 1 (concert), QCR (slider 0-100)"
-    ref = analyze(
-        likert.assign(task="likert"),
-        _design(task2="likert", methods=("Baseline", "Ours")),
-        options=AnalysisOptions(composites=["QCR"], figures=False, robustness=False),
-    )
+    ref = analyze(likert, plain, options=AnalysisOptions(composites=["QCR"], figures=False, robustness=False))
     # 100 - x reversal and means: the slider scores are (Likert scores - 1) x 20
     np.testing.assert_allclose(res.cells.values, (ref.results[(1, "QCR")].cells.values - 1) * 20)
     assert res.anova["F"].to_numpy() == pytest.approx(ref.results[(1, "QCR")].anova["F"].to_numpy())
@@ -299,3 +299,63 @@ def test_cli_reads_comparisons_from_a_flag(tmp_path, three, capsys):
     )
     assert rc == 0 and (tmp_path / "out" / "stage2_corridor" / "2afc_pairs.csv").is_file()
     assert "Position bias" in capsys.readouterr().out
+
+
+def test_simulated_effects_are_recovered_within_their_intervals(tmp_path, three):
+    """The simulated participants' method effects (stats.synthetic) come back out of the
+    analysis: the Likert contrasts to the reference and each 2AFC pair's logit."""
+    synthetic = pytest.importorskip("crowdstudy.stats.synthetic")
+    if not hasattr(synthetic, "simulate_study"):
+        pytest.skip("simulate_study (simulated 2afc choices) is not in this version of stats.synthetic")
+    model = synthetic.ResponseModel.for_design(
+        three, method_effect=0.8, method_effects={"Stiff": 0.3}, density_slope=0.0
+    )
+    study = synthetic.simulate_study(three, 30, model, seed=7)
+    study.responses.to_csv(tmp_path / "responses.csv", index=False)
+    study.comparisons.to_csv(tmp_path / "comparisons.csv", index=False)
+    report = analyze(tmp_path / "responses.csv", three, options=AnalysisOptions(composites=["QCR"], figures=False))
+    contrasts = report.results[(1, "QCR")].robustness.mixed.contrasts.set_index("contrast")
+    for name, truth in (("Baseline - Ours", -0.8), ("Baseline - Stiff", -0.3)):
+        assert contrasts.at[name, "lower_CL"] < truth < contrasts.at[name, "upper_CL"], name
+    for pm in report.result.choices[2].pairs:
+        truth = model.choice_slope * (model.effect_of(pm.method_b) - model.effect_of(pm.method_a))
+        row = pm.fit.fixed.iloc[0]
+        assert abs(row["estimate"] - truth) < 1.96 * row["SE"], pm.pair
+
+
+def test_power_method_effect_option_takes_names(three):
+    from crowdstudy.stats.cli_power import _method_effects
+
+    assert _method_effects(["0.5", "Stiff=0.3"], three) == {"Ours": 0.5, "Stiff": 0.3}
+    for bad, needle in (
+        (["Mine=1"], "'Mine' is not a method of the design other than its reference 'Baseline'"),
+        (["Baseline=1"], "'Baseline' is not a method"),
+        (["Stiff=x"], "expected POINTS or NAME=POINTS"),
+        (["0.5", "Ours=1"], "'Ours' is given twice"),
+    ):
+        with pytest.raises(InvalidInputError, match=needle):
+            _method_effects(bad, three)
+
+
+def test_power_with_three_methods_tests_each_against_the_reference(three):
+    from crowdstudy.stats.power import power_analysis
+
+    result = power_analysis(three, 6, sims=2, seed=3, stage=1, composites=["QCR"])
+    table = result.table.set_index("effect")
+    assert list(table.index) == ["Method", "Density:Method", "Baseline - Ours", "Baseline - Stiff"]
+    assert table["sims"].eq(2).all() and table.at["Baseline - Ours", "dz_median"] > 0
+    assert result.settings["task"] == "likert"
+
+
+def test_power_of_a_2afc_stage_is_per_pair(three):
+    synthetic = pytest.importorskip("crowdstudy.stats.synthetic")
+    if not hasattr(synthetic, "simulate_study"):
+        pytest.skip("simulate_study (simulated 2afc choices) is not in this version of stats.synthetic")
+    from crowdstudy.stats.power import power_analysis
+
+    model = synthetic.ResponseModel.for_design(three, method_effect=1.0, method_effects={"Stiff": 0.0})
+    result = power_analysis(three, 8, model=model, sims=3, seed=3, stage=2)
+    table = result.table.set_index("effect")
+    assert list(table.index) == ["Baseline vs Ours", "Baseline vs Stiff", "Ours vs Stiff"]
+    assert table.at["Baseline vs Ours", "share_b_median"] > 0.5 > table.at["Ours vs Stiff", "share_b_median"]
+    assert result.settings["task"] == "2afc" and list(result.p_values.columns)[0] == "2afc/Baseline vs Ours"
