@@ -35,7 +35,9 @@ def method_styles(methods) -> dict[str, tuple[str, str]]:
     }
 
 
-def stars_caption(adjust: str, n_methods: int, *, rule: str = "always", gate: str = "", method: str = "Method") -> str:
+def stars_caption(
+    adjust: str, n_methods: int, *, rule: str = "always", gate: str = "", method: str = FACTOR_NAMES.method
+) -> str:
     """What the stars of :func:`method_figure` mean, for its caption.
 
     ``adjust``: the post hoc adjustment of the per-cell comparisons; ``n_methods``: levels

@@ -34,6 +34,7 @@ from scipy import stats as _st
 
 from crowdstudy.errors import InvalidInputError
 from crowdstudy.stats._data import CellMatrix
+from crowdstudy.stats.scoring import FACTOR_NAMES
 
 __all__ = [
     "mixed_model",
@@ -71,7 +72,7 @@ class MixedModelResult:
     method: dict
     converged: bool
     contrasts: pd.DataFrame | None = None
-    factor: str = "Method"
+    factor: str = FACTOR_NAMES.method
 
 
 def _sum_coding(values: pd.Series, levels: list) -> np.ndarray:
@@ -191,7 +192,7 @@ def mixed_model(
     *,
     levels: dict | None = None,
     level: float = 0.95,
-    method: str = "Method",
+    method: str = FACTOR_NAMES.method,
 ) -> MixedModelResult:
     """Fit the mixed model described in the module docstring to long data (one row per
     observation; incomplete participants allowed). ``levels``: factor -> level order
@@ -355,7 +356,7 @@ def _method_grid(cm: CellMatrix, method: str) -> tuple[np.ndarray, list[str], li
     return grid.reshape(n, len(labels), cm.shape[mi]), others, labels
 
 
-def ordinal_method_check(cm: CellMatrix, *, alpha: float = 0.05, method: str = "Method") -> pd.DataFrame:
+def ordinal_method_check(cm: CellMatrix, *, alpha: float = 0.05, method: str = FACTOR_NAMES.method) -> pd.DataFrame:
     """Per-participant differences of the reference method (the first level of ``method``)
     and each other method (e.g. Baseline - Ours) tested without interval assumptions: per
     contrast, one row per cell of the other factors and a last row ``cell = "all"`` on each
@@ -434,7 +435,7 @@ def holm(p) -> np.ndarray:
 FRIEDMAN_COLUMNS = ("cell", "n", "k", "chi2", "df", "p")
 
 
-def friedman_test(cm: CellMatrix, *, method: str = "Method") -> pd.DataFrame:
+def friedman_test(cm: CellMatrix, *, method: str = FACTOR_NAMES.method) -> pd.DataFrame:
     """Friedman's rank test of the k methods (R's ``friedman.test``, ties corrected), per
     cell of the other factors and (``cell = "all"``) on each participant's mean per method
     over the cells. Columns: the other factors, then :data:`FRIEDMAN_COLUMNS`; ``df`` = k - 1."""
