@@ -143,22 +143,7 @@ def method_figure(
                 )
             for d, lvl in enumerate(dens):
                 top = float(np.max(mean[d, c, :] + err[d, c, :]))
-                if len(methods) == 2:
-                    s = stars(pmap.get((str(lvl), str(vp), ""), np.nan))
-                    marks = {str(meth): s for meth in methods}
-                    if s:
-                        ax.text(
-                            x[d], min(top + 0.12 * unit, ylim[1] - 0.05 * unit), s, ha="center", va="bottom", fontsize=9
-                        )
-                else:
-                    marks = {str(methods[0]): ""}
-                    for m, meth in enumerate(methods[1:], start=1):
-                        s = stars(pmap.get((str(lvl), str(vp), str(meth)), np.nan))
-                        marks[str(meth)] = s
-                        if s:
-                            off = (m - (len(methods) - 1) / 2) * width * 2 / max(1, len(methods) - 1)
-                            y = min(top + (0.12 + 0.22 * (m - 1)) * unit, ylim[1] + 0.3 * unit)
-                            ax.text(x[d] + off, y, s, ha="center", va="bottom", fontsize=8, color=styles[str(meth)][0])
+                marks = _cell_stars(ax, x[d], top, methods, pmap, (str(lvl), str(vp)), width, unit, ylim[1])
                 plotted.setdefault(comp, []).extend(
                     {
                         "density": str(lvl),
@@ -176,23 +161,29 @@ def method_figure(
             ax.set_xticklabels(labels, fontsize=7)
             ax.grid(axis="y", lw=0.4, alpha=0.5)
             if r == 0 and with_views:
-                ax.set_title(f"Viewpoint {vp}", fontsize=9)
+                ax.set_title(f"{names.viewpoint} {vp}", fontsize=9)
             if c == 0:
                 ax.set_ylabel(f"{comp} score" + (f" ({scale})" if scale else ""), fontsize=9)
             if r == n_rows - 1:
                 ax.set_xlabel("density (characters/m$^2$)" if density_values else "density", fontsize=8)
-    handles, labels = axes[0, 0].get_legend_handles_labels()
-    fig.legend(handles, labels, loc="outside lower center", ncol=len(methods), fontsize=8, frameon=False)
-    bars = {"sd": "mean +- SD", "se": "mean +- SE", "ci95": "mean +- 95% CI"}[error]
     caption = caption or f"* p<.05, ** p<.01, *** p<.001 ({names.method})"
     head = (f"{note}\n" if note else "") + (title + "\n" if title else "")
+    return _finish(fig, axes, len(methods), head, caption, note, Path(out_path), dpi, error, plotted)
+
+
+def _finish(fig, axes, n_methods: int, head: str, caption: str, note: str, out: Path, dpi: int, error: str, plotted):
+    """Legend, title, the file and its .json of the plotted numbers."""
+    import matplotlib.pyplot as plt
+
+    handles, labels = axes[0, 0].get_legend_handles_labels()
+    fig.legend(handles, labels, loc="outside lower center", ncol=n_methods, fontsize=8, frameon=False)
+    bars = {"sd": "mean +- SD", "se": "mean +- SE", "ci95": "mean +- 95% CI"}[error]
     fig.suptitle(
         head + f"{bars}; {caption}",
         fontsize=8 if len(caption) > 70 else 9,
         color="#b03a2e" if note else "black",
         wrap=True,
     )
-    out = Path(out_path)
     out.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(out, dpi=dpi, metadata={"Software": None} if out.suffix.lower() == ".png" else None)
     plt.close(fig)
@@ -200,6 +191,27 @@ def method_figure(
         json.dumps({"figure": out.name, "error": error, "caption": caption, "note": note, "series": plotted}, indent=1)
     )
     return out
+
+
+def _cell_stars(
+    ax, xd: float, top: float, methods, pmap: dict, cell: tuple[str, str], width: float, unit: float, ymax: float
+) -> dict:
+    """Draw one cell's stars (see :func:`method_figure`); returns method -> its stars."""
+    styles = method_styles(methods)
+    if len(methods) == 2:
+        s = stars(pmap.get((*cell, ""), np.nan))
+        if s:
+            ax.text(xd, min(top + 0.12 * unit, ymax - 0.05 * unit), s, ha="center", va="bottom", fontsize=9)
+        return {str(meth): s for meth in methods}
+    marks = {str(methods[0]): ""}
+    for m, meth in enumerate(methods[1:], start=1):
+        s = stars(pmap.get((*cell, str(meth)), np.nan))
+        marks[str(meth)] = s
+        if s:
+            off = (m - (len(methods) - 1) / 2) * width * 2 / max(1, len(methods) - 1)
+            y = min(top + (0.12 + 0.22 * (m - 1)) * unit, ymax + 0.3 * unit)
+            ax.text(xd + off, y, s, ha="center", va="bottom", fontsize=8, color=styles[str(meth)][0])
+    return marks
 
 
 def _cell_pvalues(ph: pd.DataFrame | None, methods, with_views: bool, names: FactorNames) -> dict:
