@@ -1,4 +1,5 @@
-"""The environment around the crowd: floor, the concert venue, the corridor walls.
+"""The environment around the crowd: floor, the concert venue, the corridor walls (the
+crossing's plaza: :mod:`crowdstudy.render.plaza`).
 
 Geometry is built as world-space triangle lists (positions, normals, linear-RGB colour
 plus a pattern id, see :mod:`crowdstudy.render.venue`). Elements that would stand between
@@ -86,8 +87,14 @@ def _color(rgb) -> np.ndarray:
     return srgb_to_linear(np.asarray(rgb, dtype=np.float64))
 
 
-def build_environment(scenario: str, design) -> Environment:
-    """The environment of ``scenario`` ("concert" or "corridor") for a study design."""
+def build_environment(scenario: str, design, meta=None) -> Environment:
+    """The environment of the scenario kind ``scenario`` ("concert", "corridor" or
+    "crossing") for a study design; ``meta``: the animation's (a crossing's plaza and
+    obstacles, :mod:`crowdstudy.render.plaza`)."""
+    if scenario == "crossing":
+        from crowdstudy.render.plaza import plaza_environment
+
+        return plaza_environment(design, meta)
     if scenario == "corridor":
         params = design.scenario_of("corridor")
         length, width = float(params["length"]), float(params["width"])
@@ -138,7 +145,7 @@ def build_environment(scenario: str, design) -> Environment:
     if scenario != "concert":
         from crowdstudy.errors import InvalidInputError
 
-        raise InvalidInputError(f"scenario: expected 'concert' or 'corridor', got {scenario!r}")
+        raise InvalidInputError(f"scenario: expected 'concert', 'corridor' or 'crossing', got {scenario!r}")
     width, depth = float(design.floor_width), float(design.floor_depth)
     params = (
         dict(design.scenario_of("concert").params)
