@@ -321,6 +321,23 @@ def _obstacle_boxes(s: _Setup) -> np.ndarray:
     return out
 
 
+def _merged_extent(
+    lo: np.ndarray, hi: np.ndarray, first: np.ndarray, near: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """(N,) lateral extent (m) to steer around: obstacle ``first`` (N,)'s ``[lo, hi]`` (M,)
+    merged with every obstacle ``near`` (N, M) it overlaps across the flow, transitively (two
+    planters side by side are passed as one, never through the gap between them)."""
+    lo_c, hi_c = lo[first], hi[first]
+    for _ in range(len(lo)):
+        join = near & (lo[None, :] < hi_c[:, None]) & (hi[None, :] > lo_c[:, None])
+        lo_n = np.minimum(lo_c, np.where(join, lo[None, :], np.inf).min(axis=1))
+        hi_n = np.maximum(hi_c, np.where(join, hi[None, :], -np.inf).max(axis=1))
+        if np.array_equal(lo_n, lo_c) and np.array_equal(hi_n, hi_c):
+            break
+        lo_c, hi_c = lo_n, hi_n
+    return lo_c, hi_c
+
+
 def _preferred_velocities(
     pos: np.ndarray, flow_idx: np.ndarray, speeds: np.ndarray, s: _Setup, boxes: np.ndarray
 ) -> np.ndarray:
@@ -344,7 +361,7 @@ def _preferred_velocities(
             dist = np.where(blocked, ahead, np.inf)
             first = np.argmin(dist, axis=1)
             hit = np.isfinite(dist[np.arange(len(v)), first])
-            lo_f, hi_f = lo[0, first], hi[0, first]
+            lo_f, hi_f = _merged_extent(lo[0], hi[0], first, (ahead < LOOKAHEAD + 1.0) & (along[:, None] < b[:, 1]))
             side = np.where(across - lo_f < hi_f - across, lo_f, hi_f)
             target = np.where(hit, side, target)
             gain = np.where(hit, _STEER_GAIN, gain)

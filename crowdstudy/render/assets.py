@@ -179,7 +179,13 @@ class CrowdAssets:
             raise InvalidInputError(
                 f"anim.joint_names: the renderer needs the {N_BONES}-joint skeleton, got {anim.n_joints}"
             )
-        env = build_environment(scenario_of(anim), design, meta=anim.meta)
+        kind = scenario_of(anim)
+        if kind == "crossing":  # the plaza and its obstacles come from the animation's meta
+            from crowdstudy.render.plaza import plaza_environment
+
+            env = plaza_environment(design, anim.meta)
+        else:
+            env = build_environment(kind, design)
         loader = body_loader or default_body_loader
         bodies = [loader(rec) for rec in anim.bodies]
         n = anim.n_characters

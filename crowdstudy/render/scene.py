@@ -87,14 +87,9 @@ def _color(rgb) -> np.ndarray:
     return srgb_to_linear(np.asarray(rgb, dtype=np.float64))
 
 
-def build_environment(scenario: str, design, meta=None) -> Environment:
-    """The environment of the scenario kind ``scenario`` ("concert", "corridor" or
-    "crossing") for a study design; ``meta``: the animation's (a crossing's plaza and
-    obstacles, :mod:`crowdstudy.render.plaza`)."""
-    if scenario == "crossing":
-        from crowdstudy.render.plaza import plaza_environment
-
-        return plaza_environment(design, meta)
+def build_environment(scenario: str, design) -> Environment:
+    """The environment of ``scenario`` ("concert" or "corridor") for a study design (a
+    crossing's plaza: :func:`crowdstudy.render.plaza.plaza_environment`)."""
     if scenario == "corridor":
         params = design.scenario_of("corridor")
         length, width = float(params["length"]), float(params["width"])
@@ -145,7 +140,7 @@ def build_environment(scenario: str, design, meta=None) -> Environment:
     if scenario != "concert":
         from crowdstudy.errors import InvalidInputError
 
-        raise InvalidInputError(f"scenario: expected 'concert', 'corridor' or 'crossing', got {scenario!r}")
+        raise InvalidInputError(f"scenario: expected 'concert' or 'corridor', got {scenario!r}")
     width, depth = float(design.floor_width), float(design.floor_depth)
     params = (
         dict(design.scenario_of("concert").params)
