@@ -227,3 +227,16 @@ def test_a_plaza_frame_draws_the_obstacles_where_they_stand():
         r.set_view("V5")
         bare = r.render(0)[py - 2 : py + 3, px - 2 : px + 3].reshape(-1, 3)
         assert np.all(np.abs(bare.astype(int)[:, 0] - bare.astype(int)[:, 2]) < 25)  # grey paving there
+
+
+def test_navigate_cli_walks_a_crossing(tmp_path, capsys):
+    from crowdstudy.cli import main as cli_main
+
+    out = tmp_path / "plaza.npz"
+    args = ["navigate", "--design", str(EXAMPLE), "--density", "D1", "--duration", "1", "--fps", "10"]
+    assert cli_main([*args, "--out", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert "crossing plaza D1" in text and "obstacle clearance" in text and out.is_file()
+    assert cli_main([*args, "--bidirectional", "--out", str(tmp_path / "b.npz")]) == 2
+    assert "--bidirectional" in capsys.readouterr().err and not (tmp_path / "b.npz").exists()
+    assert cli_main([*args, "--scenario", "hall", "--out", str(tmp_path / "c.npz")]) == 2
