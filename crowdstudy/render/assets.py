@@ -134,7 +134,7 @@ class RenderOptions:
 def scenario_of(anim) -> str:
     """The scenario of an animation: ``meta["scenario"]``, else corridor when periodic."""
     scen = anim.meta.get("scenario")
-    if scen in ("concert", "corridor"):
+    if scen in ("concert", "corridor", "crossing"):
         return scen
     return "corridor" if anim.periodic_length else "concert"
 
@@ -183,7 +183,13 @@ class CrowdAssets:
             raise InvalidInputError(
                 f"anim.joint_names: the renderer needs the {N_BONES}-joint skeleton, got {anim.n_joints}"
             )
-        env = build_environment(scenario_of(anim), design)
+        kind = scenario_of(anim)
+        if kind == "crossing":  # the plaza and its obstacles come from the animation's meta
+            from crowdstudy.render.plaza import plaza_environment
+
+            env = plaza_environment(design, anim.meta)
+        else:
+            env = build_environment(kind, design)
         loader = body_loader or default_body_loader
         bodies = [loader(rec) for rec in anim.bodies]
         n = anim.n_characters
