@@ -359,6 +359,9 @@ def paint_textures(ctx, bodies: list, looks: list[Appearance], program, *, size:
     tex.build_mipmaps()
     _check_allocated(ctx, tex, n, size)
     tex.filter = (moderngl.LINEAR_MIPMAP_NEAREST, moderngl.LINEAR)
+    # clamp, never wrap: charts touch the texture's edges (the back of the head), and a
+    # wrapped lookup there blends in the opposite edge's colour (the arm's skin)
+    tex.repeat_x = tex.repeat_y = False
     return tex, codes
 
 
