@@ -48,8 +48,8 @@ def _uv_to_position(uv_points, uv, positions, faces):
 @pytest.mark.parametrize("max_faces, tolerance", [(6000, 0.02), (1500, 0.035)])
 def test_decimated_faces_show_the_texture_under_them(max_faces, tolerance):
     body = load_body(RECORD)
-    verts, faces, _, uv, _, weld = _render_arrays(body)
-    dec_faces, cluster, gather, dec_uv = _surface_decimation(verts, faces, weld, uv, max_faces)
+    verts, faces, _, uv, part, weld = _render_arrays(body)
+    dec_faces, cluster, gather, dec_uv = _surface_decimation(verts, faces, weld, uv, max_faces, part)
     pos = _cluster_mean(verts, cluster, int(cluster.max()) + 1)[gather]
     centroid = pos[dec_faces].mean(axis=1)
     shown = _uv_to_position(dec_uv[dec_faces].mean(axis=1), uv, verts, faces)
@@ -59,5 +59,10 @@ def test_decimated_faces_show_the_texture_under_them(max_faces, tolerance):
     assert np.quantile(error, 0.99) < tolerance and error.max() < 0.08
     back = centroid[:, 1] < np.quantile(verts[:, 1], 0.15)
     assert back.sum() > 50 and np.quantile(error[back], 0.99) < tolerance
+    # the eyeballs keep the eyes' texture (not the eyelids' in front of them)
+    eye = _cluster_mean(part.astype(float), cluster, int(cluster.max()) + 1)[gather][dec_faces].mean(axis=1) > 0.5
+    eye_uv = uv[part == 1]
+    nearest_eye = np.min(np.linalg.norm(dec_uv[dec_faces[eye]].mean(axis=1)[:, None] - eye_uv[None], axis=2), axis=1)
+    assert eye.sum() > 10 and nearest_eye.max() < 0.01
     # one render vertex per cluster and side of a seam: hardly more than the clusters
     assert len(gather) < 1.5 * len(np.unique(gather))

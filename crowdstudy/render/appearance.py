@@ -30,7 +30,16 @@ from crowdstudy.body.loading import body_key
 from crowdstudy.body.skeleton import JOINT_INDEX
 from crowdstudy.errors import InvalidInputError
 from crowdstudy.render.garments import surface_codes
-from crowdstudy.render.palette import HAIR, SHIRTS, SHOES, SKIN_TONES, TROUSERS, srgb_to_linear
+from crowdstudy.render.palette import (
+    HAIR,
+    SHIRTS,
+    SHOES,
+    SKIN_TONES,
+    TROUSER_FAMILIES,
+    TROUSERS,
+    family_of,
+    srgb_to_linear,
+)
 
 __all__ = [
     "Appearance",
@@ -118,6 +127,7 @@ class Appearance:
     boots: bool
     hairstyle: tuple  # fringe drop, nape drop, bald crown (0/1), strand contrast
     hair_volume: float  # m the hair stands off the scalp
+    denim: bool = False  # the trousers are denim (a twill weave)
 
 
 def _lin(rgb) -> tuple:
@@ -162,9 +172,9 @@ def assign_appearance(records: list[dict], choice: np.ndarray, seed: int) -> lis
         long_sleeves = rng.random() < 0.45
         legwear = "trousers"
         r = rng.random()
-        if female and r < 0.25:
+        if female and r < 0.15:
             legwear = "skirt"
-        elif r > 0.8:
+        elif r > 0.82:
             legwear = "shorts"
         hem = {
             "trousers": float(0.0 if rng.random() < 0.7 else rng.uniform(0.03, 0.06)),
@@ -199,6 +209,7 @@ def assign_appearance(records: list[dict], choice: np.ndarray, seed: int) -> lis
                 boots=bool(rng.random() < 0.15),
                 hairstyle=style,
                 hair_volume=float(rng.uniform(0.008, 0.02) if female else rng.uniform(0.003, 0.009)),
+                denim=family_of(TROUSER_FAMILIES, int(choice[i, 3])) == "denim",
             )
         )
     return out
@@ -254,6 +265,7 @@ def _uniforms(look: Appearance, marks: dict) -> dict:
         "u_shoe_top": float(shoe_top),
         "u_floor": marks["floor"],
         "u_belt": int(look.belt),
+        "u_denim": int(look.denim),
         "u_hairstyle": look.hairstyle,
         "u_neck": tuple(marks["neck"]),
         "u_eye": tuple(marks["eye"]),

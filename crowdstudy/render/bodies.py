@@ -220,7 +220,7 @@ def group_bodies(
                 cluster, gather, new_uv = mapping, np.arange(int(mapping.max()) + 1), None
             else:
                 dec = _surface_decimation(
-                    verts, faces, weld, uv, None if max_faces is None else int(max_faces * surface_scale)
+                    verts, faces, weld, uv, None if max_faces is None else int(max_faces * surface_scale), part
                 )
                 if dec is None:
                     dec_faces, cluster, gather, new_uv = faces, np.arange(len(verts)), np.arange(len(verts)), uv
@@ -300,7 +300,14 @@ def _render_arrays(body):
     )
 
 
-def _surface_decimation(verts: np.ndarray, faces: np.ndarray, weld: np.ndarray, uv: np.ndarray, max_faces: int | None):
+def _surface_decimation(
+    verts: np.ndarray,
+    faces: np.ndarray,
+    weld: np.ndarray,
+    uv: np.ndarray,
+    max_faces: int | None,
+    part: np.ndarray | None = None,
+):
     """Decimate a UV-split surface without tearing its seams or mixing its charts.
 
     The welded mesh (render vertices merged by ``weld``) is simplified, so the copies of a
@@ -318,7 +325,7 @@ def _surface_decimation(verts: np.ndarray, faces: np.ndarray, weld: np.ndarray, 
     if max_faces is None or len(faces) <= max_faces:
         return None
     key = (
-        "surface-v2",
+        "surface-v4",
         hashlib.sha1(
             np.ascontiguousarray(faces, dtype=np.int64).tobytes() + np.ascontiguousarray(weld, dtype=np.int64).tobytes()
         ).hexdigest(),
@@ -329,7 +336,7 @@ def _surface_decimation(verts: np.ndarray, faces: np.ndarray, weld: np.ndarray, 
     from scipy.sparse import coo_matrix
     from scipy.sparse.csgraph import connected_components
 
-    from crowdstudy.render.uv_transfer import project_face_uvs
+    from crowdstudy.render.uv_transfer import fit_vertex_uvs, project_face_uvs
 
     n_r = len(verts)
     rows = np.repeat(np.arange(len(faces)), 3)
@@ -346,8 +353,19 @@ def _surface_decimation(verts: np.ndarray, faces: np.ndarray, weld: np.ndarray, 
     cluster = w_map[weld].astype(np.int64)
     cluster[cluster < 0] = 0  # render vertices no face uses any more
     centre = _cluster_mean(verts, cluster, int(cluster.max()) + 1)
-    corner_uv, face_chart = project_face_uvs(centre[w_faces], faces, verts, uv, chart[faces[:, 0]])
+    part = np.zeros(n_r, np.int64) if part is None else np.asarray(part, dtype=np.int64)
+    cluster_part = _cluster_mean(part.astype(np.float64), cluster, int(cluster.max()) + 1) > 0.5
+    corner_uv, face_chart = project_face_uvs(
+        centre[w_faces],
+        faces,
+        verts,
+        uv,
+        chart[faces[:, 0]],
+        part=part[faces[:, 0]],
+        corner_part=cluster_part[w_faces[:, 0]].astype(np.int64),
+    )
     gather, uv_new, out = _merge_corners(w_faces, np.repeat(face_chart, 3), corner_uv.reshape(-1, 2))
+    uv_new = fit_vertex_uvs(centre[gather], out, uv_new, verts, faces, uv).astype(np.float32)
     result = (out, cluster, gather, uv_new)
     _DECIMATIONS[key] = result
     return result

@@ -32,35 +32,31 @@ def closest_points_on_triangles(p: np.ndarray, a: np.ndarray, b: np.ndarray, c: 
     All inputs (..., 3) float64, metres; Ericson's region tests (Real-Time Collision
     Detection, 5.1.5), vectorised: the weights are non-negative and sum to 1."""
     ab, ac, ap = b - a, c - a, p - a
+    bp, cp = p - b, p - c
     d1, d2 = np.einsum("...k,...k", ab, ap), np.einsum("...k,...k", ac, ap)
-    bp = p - b
     d3, d4 = np.einsum("...k,...k", ab, bp), np.einsum("...k,...k", ac, bp)
-    cp = p - c
     d5, d6 = np.einsum("...k,...k", ab, cp), np.einsum("...k,...k", ac, cp)
     va, vb, vc = d3 * d6 - d5 * d4, d5 * d2 - d1 * d6, d1 * d4 - d3 * d2
-    denom = va + vb + vc
     with np.errstate(divide="ignore", invalid="ignore"):
-        v = vb / denom
-        w = vc / denom
-        out = np.stack([1.0 - v - w, v, w], axis=-1)  # inside the face
-        edges = (
-            ((d1 <= 0) & (d2 <= 0), np.stack([np.ones_like(d1), 0 * d1, 0 * d1], -1)),  # vertex a
-            ((d3 >= 0) & (d4 <= d3), np.stack([0 * d1, np.ones_like(d1), 0 * d1], -1)),  # vertex b
-            ((d6 >= 0) & (d5 <= d6), np.stack([0 * d1, 0 * d1, np.ones_like(d1)], -1)),  # vertex c
-        )
-        t_ab = d1 / (d1 - d3)
-        t_ac = d2 / (d2 - d6)
-        t_bc = (d4 - d3) / ((d4 - d3) + (d5 - d6))
-        regions = (
-            ((vc <= 0) & (d1 >= 0) & (d3 <= 0), np.stack([1 - t_ab, t_ab, 0 * d1], -1)),
-            ((vb <= 0) & (d2 >= 0) & (d6 <= 0), np.stack([1 - t_ac, 0 * d1, t_ac], -1)),
-            ((va <= 0) & (d4 - d3 >= 0) & (d5 - d6 >= 0), np.stack([0 * d1, 1 - t_bc, t_bc], -1)),
-        )
-    for mask, bary in regions:  # edges first, vertices last: the vertex regions win their corners
-        out = np.where(mask[..., None], bary, out)
-    for mask, bary in edges:
-        out = np.where(mask[..., None], bary, out)
-    return np.nan_to_num(out, nan=1.0 / 3.0)
+        denom = va + vb + vc
+        v, w = vb / denom, vc / denom  # inside the face
+        t = d1 / (d1 - d3)  # on edge ab
+        v, w = np.where((vc <= 0) & (d1 >= 0) & (d3 <= 0), t, v), np.where((vc <= 0) & (d1 >= 0) & (d3 <= 0), 0.0, w)
+        t = d2 / (d2 - d6)  # on edge ac
+        on = (vb <= 0) & (d2 >= 0) & (d6 <= 0)
+        v, w = np.where(on, 0.0, v), np.where(on, t, w)
+        t = (d4 - d3) / ((d4 - d3) + (d5 - d6))  # on edge bc
+        on = (va <= 0) & (d4 - d3 >= 0) & (d5 - d6 >= 0)
+        v, w = np.where(on, 1.0 - t, v), np.where(on, t, w)
+    # the vertex regions last: they win their corners
+    on = (d1 <= 0) & (d2 <= 0)
+    v, w = np.where(on, 0.0, v), np.where(on, 0.0, w)
+    on = (d3 >= 0) & (d4 <= d3)
+    v, w = np.where(on, 1.0, v), np.where(on, 0.0, w)
+    on = (d6 >= 0) & (d5 <= d6)
+    v, w = np.where(on, 0.0, v), np.where(on, 1.0, w)
+    v, w = np.nan_to_num(v, nan=1.0 / 3.0), np.nan_to_num(w, nan=1.0 / 3.0)
+    return np.stack([1.0 - v - w, v, w], axis=-1)
 
 
 def _project(points: np.ndarray, cand: np.ndarray, tri_pos: np.ndarray, tri_uv: np.ndarray):
@@ -74,7 +70,14 @@ def _project(points: np.ndarray, cand: np.ndarray, tri_pos: np.ndarray, tri_uv: 
 
 
 def project_face_uvs(
-    corners: np.ndarray, faces: np.ndarray, positions: np.ndarray, uv: np.ndarray, chart: np.ndarray
+    corners: np.ndarray,
+    faces: np.ndarray,
+    positions: np.ndarray,
+    uv: np.ndarray,
+    chart: np.ndarray,
+    *,
+    part: np.ndarray | None = None,
+    corner_part: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """The texture coordinate and chart of every corner of decimated faces.
 
@@ -84,6 +87,9 @@ def project_face_uvs(
         positions: (R, 3) float64 m and ``uv`` (R, 2) float: the full surface's render vertices.
         chart: (F,) int, the UV chart (connected component of the split surface) of each
             full triangle.
+        part, corner_part: optional (F,) and (F',) int material parts of the full and the
+            decimated triangles (the eyeballs behind the eyelids): a face only takes its
+            texture from triangles of its own part.
 
     Returns:
         ``(uv (F', 3, 2) float64, chart (F',) int)``: each face lies on the chart of the full
@@ -96,11 +102,16 @@ def project_face_uvs(
     tri_pos = np.asarray(positions, dtype=np.float64)[faces]
     tri_uv = np.asarray(uv, dtype=np.float64)[faces]
     centroids = tri_pos.mean(axis=1)
-    k = min(_CANDIDATES, len(faces))
     corners = np.asarray(corners, dtype=np.float64)
     g = corners.mean(axis=1)
-    _, cand = cKDTree(centroids).query(g, k=k)
-    cand = cand.reshape(len(g), k)
+    part = np.zeros(len(faces), np.int64) if part is None else np.asarray(part, dtype=np.int64)
+    corner_part = np.zeros(len(g), np.int64) if corner_part is None else np.asarray(corner_part, dtype=np.int64)
+    k = min(_CANDIDATES, *(int(np.count_nonzero(part == q)) for q in np.unique(corner_part)))
+    cand = np.zeros((len(g), k), dtype=np.int64)
+    for q in np.unique(corner_part):
+        rows, members = np.flatnonzero(corner_part == q), np.flatnonzero(part == q)
+        _, local = cKDTree(centroids[members]).query(g[rows], k=k)
+        cand[rows] = members[local.reshape(len(rows), k)]
     dist, cuv = _project(g, cand, tri_pos, tri_uv)
     best = np.argmin(dist, axis=1)
     rows = np.arange(len(g))
@@ -160,3 +171,65 @@ def _extend(points: np.ndarray, tri: np.ndarray, tri_pos: np.ndarray, tri_uv: np
     s, t = (a22 * b1 - a12 * b2) / det, (a11 * b2 - a12 * b1) / det
     u0 = tri_uv[tri, 0]
     return u0 + s[:, None] * (tri_uv[tri, 1] - u0) + t[:, None] * (tri_uv[tri, 2] - u0)
+
+
+def fit_vertex_uvs(
+    positions: np.ndarray,
+    faces: np.ndarray,
+    uv: np.ndarray,
+    full_positions: np.ndarray,
+    full_faces: np.ndarray,
+    full_uv: np.ndarray,
+    *,
+    smooth: float = 0.05,
+) -> np.ndarray:
+    """Texture coordinates of the decimated vertices fitted to the full surface.
+
+    A decimated face interpolates its corners' texture coordinates linearly; the full
+    surface under it maps the texture non-linearly, so a garment's edge drawn on the
+    texture wobbles across the large faces (by a centimetre at 3,000 faces). This
+    least-squares fit moves each corner's coordinate (starting from ``uv``, its projection)
+    so that the points of the full surface (its vertices and face centroids), placed on
+    the decimated face under them, show their own texture coordinates; ``smooth`` keeps
+    each corner near its start where few points constrain it. Points whose start is far
+    off (across a seam) are left out.
+
+    Args:
+        positions: (R', 3) m, faces (F', 3), uv (R', 2): the decimated surface.
+        full_positions: (R, 3) m, full_faces (F, 3), full_uv (R, 2): the full surface.
+    Returns:
+        (R', 2) float64 texture coordinates.
+    """
+    from scipy.sparse import coo_matrix, identity
+    from scipy.sparse.linalg import spsolve
+    from scipy.spatial import cKDTree
+
+    positions, uv = np.asarray(positions, dtype=np.float64), np.asarray(uv, dtype=np.float64)
+    faces = np.asarray(faces, dtype=np.int64)
+    full_tri = np.asarray(full_positions, dtype=np.float64)[np.asarray(full_faces, dtype=np.int64)]
+    full_tri_uv = np.asarray(full_uv, dtype=np.float64)[np.asarray(full_faces, dtype=np.int64)]
+    pts = np.concatenate([full_tri.reshape(-1, 3), full_tri.mean(axis=1)])
+    target = np.concatenate([full_tri_uv.reshape(-1, 2), full_tri_uv.mean(axis=1)])
+    tri = positions[faces]
+    k = min(6, len(faces))
+    _, cand = cKDTree(tri.mean(axis=1)).query(pts, k=k)
+    cand = cand.reshape(len(pts), k)
+    t = tri[cand]
+    p = np.broadcast_to(pts[:, None, :], t.shape[:2] + (3,))
+    bary = closest_points_on_triangles(p, t[..., 0, :], t[..., 1, :], t[..., 2, :])
+    dist = np.linalg.norm(np.einsum("pkc,pkcx->pkx", bary, t) - p, axis=-1)
+    shown = np.einsum("pkc,pkcx->pkx", bary, uv[faces[cand]])
+    miss = np.linalg.norm(shown - target[:, None, :], axis=-1)
+    # the face under the point: the nearest whose texture already lies near the point's
+    score = np.where(miss < _ACROSS, dist, np.inf)
+    pick = np.argmin(score, axis=1)
+    rows = np.arange(len(pts))
+    keep = np.isfinite(score[rows, pick])
+    f, b = cand[rows, pick][keep], bary[rows, pick][keep]
+    n_eq = int(keep.sum())
+    a = coo_matrix((b.reshape(-1), (np.repeat(np.arange(n_eq), 3), faces[f].reshape(-1))), shape=(n_eq, len(uv)))
+    a = a.tocsr()
+    # the normal equations (A^T A + s^2 I) x = A^T t + s^2 x0, sparse and positive definite
+    normal = (a.T @ a + identity(len(uv), format="csr") * smooth**2).tocsc()
+    rhs = a.T @ target[keep] + smooth**2 * uv
+    return np.column_stack([spsolve(normal, rhs[:, axis]) for axis in range(2)])
