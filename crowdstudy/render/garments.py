@@ -22,6 +22,7 @@ import numpy as np
 
 from crowdstudy.errors import InvalidInputError
 from crowdstudy.render.bodies import vertex_normals
+from crowdstudy.render.hands import relax_hands
 
 __all__ = ["CODES", "CLOTH_LIFT", "SHOE_LIFT", "surface_codes", "vertex_codes", "dress_body", "neighbours"]
 
@@ -133,6 +134,7 @@ def _ramp(mask: np.ndarray, avg, used: np.ndarray, rounds: int = _TAPER) -> np.n
 def dress_body(body, render_codes: np.ndarray, hair_volume: float):
     """A copy of ``body`` (a Body with a surface) whose rest vertices carry its clothes and
     hair (see the module docstring); ``hair_volume`` m, the scalp's lift under the hair.
+    The fingers take a relaxed pose (:func:`crowdstudy.render.hands.relax_hands`).
 
     Under cloth the body is smoothed along its normals only (the surface does not slide
     under its texture), by a weight that ramps smoothly across the garment's edge, so the
@@ -142,7 +144,7 @@ def dress_body(body, render_codes: np.ndarray, hair_volume: float):
     if not 0.0 <= float(hair_volume) <= 0.05:
         raise InvalidInputError(f"hair_volume: expected 0 to 0.05 m, got {hair_volume!r}")
     codes = np.array(vertex_codes(body, render_codes))
-    verts = np.array(body.rest_vertices, dtype=np.float64)
+    verts = relax_hands(body.rest_vertices, np.asarray(body.rest_joints, dtype=np.float64), body.weights)
     faces = np.asarray(body.faces, dtype=np.int64)
     avg = neighbours(faces, len(verts))
     used = np.zeros(len(verts), bool)

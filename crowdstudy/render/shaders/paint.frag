@@ -95,17 +95,21 @@ float hair_cover(vec3 p, vec3 q, float head) {
     return h;
 }
 
-// the shirt's neckline: the base of the neck (where the neck and head joints' skin weight
-// reaches 0.3: lower at the front, as a crew neck sits) and, at the front, a scoop of
-// u_neck_drop m (a V for a V-neck). Returns (coverage of the shirt's top, of its collar band).
+// the shirt's neckline: a smooth surface of the rest position, 4 cm under the neck joint at
+// the back, lower at the front (a scoop of u_neck_drop m; a V for a V-neck). Not the skin
+// weights: those are linear per triangle, and their level sets zig-zag along the mesh.
+// Returns (coverage of the shirt's top, of its collar band).
 vec2 neckline(vec3 p, float head) {
     vec2 d = vec2(p.x, p.y - u_neck.y);
     float front = smoothstep(0.0, 0.9, d.y / max(length(d), 1e-4));
     float ax = abs(p.x);
     float v = u_vneck == 1 ? 0.07 * front * max(0.0, 1.0 - ax / 0.065) : 0.0;
     float z_front = u_neck.z - 0.04 - u_neck_drop * front * front - v;
-    float top = cover(0.3 - head) * cover(z_front - p.z);
-    float band = max(cover(head - 0.2), cover(p.z - z_front + 0.009));
+    // beyond the neck the cut rises, a little past the sides of the neck (the ears, at
+    // |x| < 0.09, stay above it), then out of the way over the shoulders and sleeves
+    float z_line = z_front + 0.06 * smoothstep(0.06, 0.11, ax) + 0.4 * smoothstep(0.12, 0.16, ax);
+    float top = cover(z_line - p.z);
+    float band = cover(p.z - z_line + 0.009);
     return vec2(top, band);
 }
 

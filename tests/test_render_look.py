@@ -1,0 +1,97 @@
+"""How the characters look: relaxed hands, the material channel, clean garment edges
+(render/hands.py, render/appearance.py, render/shaders/paint.frag)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from crowdstudy.body import load_body
+from crowdstudy.body.skeleton import JOINT_INDEX as J
+from crowdstudy.render.appearance import material_alpha
+from crowdstudy.render.hands import relax_hands
+
+pytestmark = pytest.mark.filterwarnings("ignore::DeprecationWarning")
+
+RECORD = {"model": "makehuman", "sex": "female", "height": 1.64, "age": 31, "race": [0.05, 0.05, 0.9]}
+
+
+def _finger_spread(body_verts, body):
+    """(left, right) sideways extent (m) of the vertices beyond the knuckles of each hand."""
+    out = []
+    for side in ("left", "right"):
+        hand, wrist = J[f"{side}_hand"], J[f"{side}_wrist"]
+        along = body.rest_joints[hand] - body.rest_joints[wrist]
+        along /= np.linalg.norm(along)
+        rel = body_verts - body.rest_joints[hand]
+        tips = (np.asarray(body.weights)[:, hand] > 0.9) & (rel @ along > 0.03)
+        out.append(np.ptp(rel[tips, 1]))  # T-pose: the hand along x, palm down: sideways is y
+    return np.array(out)
+
+
+def test_relaxed_hands_draw_the_fingers_together_and_leave_the_rest():
+    body = load_body(RECORD)
+    relaxed = relax_hands(body.rest_vertices, body.rest_joints, body.weights)
+    w = np.asarray(body.weights)
+    hands = w[:, [J["left_hand"], J["right_hand"]]].sum(axis=1)
+    moved = np.linalg.norm(relaxed - body.rest_vertices, axis=1)
+    np.testing.assert_array_equal(moved[hands < 1e-3], 0.0)  # the wrist, arms and body stay
+    assert moved.max() < 0.03  # a gentle pose change, not a new hand
+    before, after = _finger_spread(body.rest_vertices, body), _finger_spread(relaxed, body)
+    assert np.all(after < 0.8 * before), (before, after)
+    # render-only: the body (and the capsule fit the physics reads from it) is untouched
+    assert load_body(RECORD).rest_vertices.tobytes() == body.rest_vertices.tobytes()
+
+
+def test_the_material_channel_names_skin_hair_and_cloth():
+    codes = np.array([10, 9, 8, 7, 6, 5])  # skin, hair, shirt, trousers, shoes, eye
+    alpha = np.rint(codes / 10.0 * 255.0).astype(np.uint8)
+    np.testing.assert_array_equal(material_alpha(alpha), [255, 128, 0, 0, 0, 255])
+
+
+@pytest.fixture(scope="module")
+def painted():
+    """One woman and one man painted at 1024 texels: (bodies, looks, RGBA layers, codes)."""
+    from crowdstudy.render.appearance import assign_appearance, paint_textures
+    from crowdstudy.render.context import get_context
+    from crowdstudy.render.gpu import compile_program
+    from crowdstudy.render.palette import assign_colors
+
+    records = [RECORD, {"model": "makehuman", "sex": "male", "height": 1.80, "age": 35, "race": [0.9, 0.05, 0.05]}]
+    bodies = [load_body(r) for r in records]
+    _, choice = assign_colors(np.array([[0.0, 0.0], [1.0, 0.0]]), 3)
+    looks = assign_appearance(records, choice, 3)
+    ctx = get_context()
+    program = compile_program(ctx, "paint.vert", "paint.frag")
+    tex, codes = paint_textures(ctx, bodies, looks, program, size=1024)
+    layers = np.frombuffer(tex.read(), np.uint8).reshape(2, 1024, 1024, 4)
+    return bodies, looks, layers, codes
+
+
+def test_painted_garment_edges_have_no_isolated_texels(painted):
+    """A hem, cuff or neckline is one smooth curve: no texel differs from all 8 neighbours."""
+    _, _, layers, _ = painted
+    for layer in layers:
+        m = layer[..., 3].astype(int)  # the material: skin, hair, cloth
+        core = m[1:-1, 1:-1]
+        same = np.zeros(core.shape, int)
+        for dy in (-1, 0, 1):
+            for dx in (-1, 0, 1):
+                if dy or dx:
+                    same += m[1 + dy : m.shape[0] - 1 + dy, 1 + dx : m.shape[1] - 1 + dx] == core
+        assert np.count_nonzero(same == 0) == 0
+
+
+def test_the_neckline_leaves_the_neck_and_ears_bare(painted):
+    from crowdstudy.render.garments import vertex_codes
+
+    bodies, _, _, codes = painted
+    for body, c in zip(bodies, codes, strict=True):
+        v, w = body.rest_vertices, np.asarray(body.weights)
+        kind = np.array(vertex_codes(body, c))
+        neck = body.rest_joints[J["neck"]]
+        # the sides of the head: ears, jaw (the neckline rises past the neck's sides, not up to here)
+        sides = (w[:, [J["neck"], J["head"]]].sum(axis=1) > 0.5) & (np.abs(v[:, 0]) > 0.06) & (v[:, 2] > neck[2] + 0.05)
+        assert sides.sum() > 50 and not np.any(kind[sides] == "shirt")
+        throat = np.argmin(np.linalg.norm(v - (body.rest_joints[J["neck"]] + [0, 0.05, 0.03]), axis=1))
+        assert kind[throat] == "skin"
