@@ -95,3 +95,40 @@ def test_the_neckline_leaves_the_neck_and_ears_bare(painted):
         assert sides.sum() > 50 and not np.any(kind[sides] == "shirt")
         throat = np.argmin(np.linalg.norm(v - (body.rest_joints[J["neck"]] + [0, 0.05, 0.03]), axis=1))
         assert kind[throat] == "skin"
+
+
+@pytest.mark.parametrize("style", ["short", "bob", "long", "ponytail", "bun"])
+def test_hair_covers_the_crown_and_moves_with_the_head(style):
+    from crowdstudy.render.hair import add_hair, crown_uv
+
+    body = load_body(RECORD)
+    haired = add_hair(body, style, crown_uv(body))
+    n = len(body.rest_vertices)
+    hair = haired.rest_vertices[n:]
+    assert len(hair) > 500
+    np.testing.assert_array_equal(haired.faces, body.faces)  # the closed body the metrics read
+    assert haired.surface.faces.max() < len(haired.surface.vertex)
+    # closed over the scalp: every crown vertex has hair outside it, along its own direction
+    v, w = body.rest_vertices, np.asarray(body.weights)
+    head = v[(w[:, J["head"]] > 0.5) & (np.arange(len(v)) < 13380)]  # skin (the eyes come last)
+    lo, hi = head.min(axis=0), head.max(axis=0)
+    centre = np.array([(lo[0] + hi[0]) / 2, (lo[1] + hi[1]) / 2, hi[2] - 0.06])
+    rel = head - centre
+    crown = head[rel[:, 2] > np.cos(np.radians(45.0)) * np.linalg.norm(rel, axis=1)]  # within 45 deg of the top
+    d_c = crown - centre
+    hair_faces = haired.surface.faces[len(body.surface.faces) :]
+    tri = haired.rest_vertices[haired.surface.vertex[hair_faces]]
+    d_h = np.concatenate([hair, tri.mean(axis=1)]) - centre
+    cos = (d_c / np.linalg.norm(d_c, axis=1, keepdims=True)) @ (d_h / np.linalg.norm(d_h, axis=1, keepdims=True)).T
+    r_hair = np.where(cos > np.cos(np.radians(10.0)), np.linalg.norm(d_h, axis=1)[None], 0.0).max(axis=1)
+    assert np.all(r_hair > np.linalg.norm(d_c, axis=1) + 0.001)
+    # skinned to the head joint alone: a nod moves the hair rigidly with the head
+    np.testing.assert_array_equal(np.asarray(haired.weights)[n:].argmax(axis=1), J["head"])
+    rot = np.zeros((24, 3))
+    rot[J["head"]] = [0.5, 0.0, 0.2]
+    posed, joints = haired.pose(rot, np.zeros(3))
+    rest, _ = haired.pose(np.zeros((24, 3)), np.zeros(3))
+    moved = posed[n:] - joints[J["head"]]
+    still = rest[n:] - haired.rest_joints[J["head"]]
+    np.testing.assert_allclose(np.linalg.norm(moved, axis=1), np.linalg.norm(still, axis=1), atol=1e-9)
+    assert np.abs(posed[n:] - rest[n:]).max() > 0.02
