@@ -132,3 +132,20 @@ def test_hair_covers_the_crown_and_moves_with_the_head(style):
     still = rest[n:] - haired.rest_joints[J["head"]]
     np.testing.assert_allclose(np.linalg.norm(moved, axis=1), np.linalg.norm(still, axis=1), atol=1e-9)
     assert np.abs(posed[n:] - rest[n:]).max() > 0.02
+
+
+def test_audience_figures_are_people_not_blocks():
+    from crowdstudy.render.figures import FACES, PARTS, figure_template
+
+    for detail in (0, 1):
+        for arms in ("none", "one", "both"):
+            pts, normals, faces, parts = figure_template(arms, detail, "male")
+            assert len(faces) <= FACES[detail] + 10  # cheap: a few hundred triangles
+            assert pts[:, 2].min() == pytest.approx(0.0, abs=1e-9) and pts[:, 2].max() <= 1.2
+            np.testing.assert_allclose(np.linalg.norm(normals, axis=1), 1.0, atol=1e-6)
+            assert set(np.unique(parts)) == set(range(len(PARTS)))  # trousers, shirt, skin, hair, shoes
+            top = pts[:, 2] > 0.93
+            assert np.isin(parts[top], [2, 3]).all() or arms != "none"  # a head of skin and hair on top
+    down, _, _, _ = figure_template("none", 1, "female")
+    up, _, _, _ = figure_template("both", 1, "female")
+    assert down[:, 2].max() == pytest.approx(1.0) and up[:, 2].max() > 1.05  # hands above the head
