@@ -399,12 +399,13 @@ def paint_textures(ctx, bodies: list, looks: list[Appearance], program, *, size:
 
 
 def material_alpha(what: np.ndarray) -> np.ndarray:
-    """The albedo's alpha for the character shader: 255 skin (and eyes), 128 hair, 0 cloth
-    and shoes; ``what``: the painter's alpha (paint.frag's codes, 8 bit)."""
+    """The albedo's alpha for the character shader: 0 cloth and shoes, 128 skin (and eyes),
+    255 hair (so a texel filtered across a hem blends skin and cloth, never hair);
+    ``what``: the painter's alpha (paint.frag's codes, 8 bit)."""
     code = np.rint(np.asarray(what, dtype=np.float64) / 255.0 * 10.0)  # as garments.surface_codes
     out = np.zeros(code.shape, np.uint8)
-    out[(code == 10) | (code == 5)] = 255  # skin, eye
-    out[code == 9] = 128  # hair
+    out[(code == 10) | (code == 5)] = 128  # skin, eye
+    out[code == 9] = 255  # hair
     return out
 
 

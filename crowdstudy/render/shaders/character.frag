@@ -1,7 +1,7 @@
 // Region-coloured bodies: u_colors, RGBA32F, width 6 (colour regions), one row per character
 // (linear RGB albedo), lit per vertex (v_diffuse, v_add), the region chosen per pixel.
 // Textured bodies: u_albedo, one layer per character on the body's UVs (sqrt of linear RGB;
-// alpha: the material, 1 skin, 0.5 hair, 0 cloth), lit per pixel by material
+// alpha: the material, 0 cloth, 0.5 skin, 1 hair), lit per pixel by material
 // (character_terms in lighting.glsl) with the shadow factor interpolated from the vertices
 // (v_shadow); cloth with a procedural fold relief (bump from screen-space derivatives).
 uniform sampler2D u_colors;
@@ -56,15 +56,20 @@ void main() {
     if (IS_TEXTURED) {
         vec4 texel = texture(u_albedo, vec3(v_material.xy, float(v_layer)));
         vec3 albedo = texel.rgb * texel.rgb;   // the layers store sqrt(linear): cheap, close to sRGB
-        // alpha: the material (1 skin, 0.5 hair, 0 cloth). Cloth gets folds: soft ridges
-        // about 3-6 cm apart, a few millimetres deep, faded out with distance (no shimmer)
-        float cloth = 1.0 - smoothstep(0.1, 0.35, texel.a);
+        // alpha: the material (0 cloth, 0.5 skin, 1 hair: a texel blended across a hem or a
+        // hairline stays between its two sides). Cloth gets folds: soft ridges about
+        // 3-6 cm apart, a few millimetres deep, faded out with distance (no shimmer)
+        float cloth = 1.0 - smoothstep(0.1, 0.4, texel.a);
+        float hair = smoothstep(0.6, 0.9, texel.a);
         float near = 1.0 - smoothstep(4.0, 9.0, length(u_eye - v_world));
         vec2 uv = v_material.xy;   // no branch: the derivatives need every pixel of a 2x2 quad
         float folds = cloth_noise(uv * vec2(28.0, 60.0)) + 0.5 * cloth_noise(uv * 110.0 + 7.0);
-        vec3 n = bumped(normalize(v_normal), 0.0035 * cloth * near * folds);
+        // the relief is continuous everywhere (a step in it at a hem would be a ridge of
+        // highlights); the bent normal is blended in on cloth only
+        vec3 n0 = normalize(v_normal);
+        vec3 n = normalize(mix(n0, bumped(n0, 0.0035 * near * folds), cloth));
         vec3 diffuse, add;
-        character_terms(v_world, n, v_shadow, texel.a, diffuse, add);
+        character_terms(v_world, n, v_shadow, max(1.0 - cloth - hair, 0.0), hair, diffuse, add);
         f_color = vec4(to_display(albedo * diffuse + add), 1.0);
         return;
     }

@@ -61,17 +61,15 @@ void floor_terms(vec3 world, out vec3 diffuse, out vec3 add) {
     add = u_fog_color * (1.0 - fog);
 }
 
-// Characters, per pixel, by material (m: 1 skin, 0.5 hair, 0 cloth; blended at edges):
+// Characters, per pixel, by material: the weights of skin and of hair (cloth the rest):
 // skin: wrapped diffuse (the terminator softened over ~40 degrees) with a warm tint where
 //       the wrap reaches past it (light scattered under the skin), a tighter specular;
 // hair: a Kajiya-Kay highlight along strands running down the head (anisotropic);
 // cloth: matte, a faint broad sheen.
-void character_terms(vec3 world, vec3 normal, float sh, float m, out vec3 diffuse, out vec3 add) {
+void character_terms(vec3 world, vec3 normal, float sh, float skin, float hair, out vec3 diffuse, out vec3 add) {
     vec3 n = normalize(normal);
     vec3 v = normalize(u_eye - world);
     if (dot(n, v) < 0.0) n = -n;
-    float skin = smoothstep(0.7, 0.95, m);
-    float hair = clamp(1.0 - abs(m - 0.5) * 4.0, 0.0, 1.0);
     float nl = dot(n, u_light_dir);
     float wrap = 0.3 * skin;
     float lambert = max(nl, 0.0);
