@@ -137,6 +137,17 @@ def test_hair_covers_the_crown_and_moves_with_the_head(style):
     assert np.abs(posed[n:] - rest[n:]).max() > 0.02
 
 
+def test_every_hair_style_shares_one_template_group():
+    """Styles differ in their points only: the characters with hair are drawn as one group."""
+    from crowdstudy.render.bodies import group_bodies
+    from crowdstudy.render.hair import STYLES, add_hair, crown_uv
+
+    body = load_body(RECORD)
+    haired = [add_hair(body, style, crown_uv(body)) for style in STYLES]
+    groups = group_bodies(haired, max_faces=None)
+    assert sorted(len(g.members) for g in groups) == [1, len(STYLES) - 1]  # "none" keeps the bare body
+
+
 def test_audience_figures_are_people_not_blocks():
     from crowdstudy.render.figures import FACES, PARTS, figure_template
 

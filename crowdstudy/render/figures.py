@@ -25,7 +25,7 @@ from crowdstudy.body.skeleton import JOINT_INDEX as J
 __all__ = ["FACES", "PARTS", "figure_template"]
 
 #: triangles of a near (detail 1) and a far (detail 0) figure
-FACES = {1: 700, 0: 240}
+FACES = {1: 450, 0: 160}
 #: part ids of :func:`figure_template`'s vertices, the venue's colour slots
 PARTS = ("trousers", "shirt", "skin", "hair", "shoes")
 _RECORDS = {

@@ -7,7 +7,8 @@ spherical grid about the skull's centre: each grid direction takes the scalp's r
 to nothing at the hairline so the sheet meets the painted hair on the scalp without a step.
 Below the skull's equator the sheet of a bob or of long hair falls straight down (its own
 weight), flaring a little; a ponytail is a tapered tube from the back of the head, a bun a
-flattened ball on the crown. The sheet is two-sided (an outer layer wound outwards, an
+flattened ball on the crown (every style has the same topology: the characters with hair
+share one template group). The sheet is two-sided (an outer layer wound outwards, an
 inner one 3 mm under it wound inwards), as the characters are drawn with back faces culled.
 
 Styles (:data:`STYLES`): ``"none"`` (the painted scalp alone: shaved, cropped and bald
@@ -42,7 +43,7 @@ _SHAPES = {
     "ponytail": ((60.0, 86.0, 104.0), (0.0, 0.0), 0.007),
     "bun": ((60.0, 86.0, 104.0), (0.0, 0.0), 0.007),
 }
-_COLUMNS, _ROWS = 32, 18
+_COLUMNS, _ROWS = 24, 14
 _THICKNESS = 0.003  # m between the sheet's outer and inner layers
 
 
@@ -179,17 +180,19 @@ def hair_mesh(head: np.ndarray, joints: np.ndarray, style: Style) -> tuple[np.nd
     cap = np.stack([np.full(_COLUMNS, 2 * n), np.roll(ring, -1), ring], -1)
     points = [outer, inner, pole]
     all_faces = [faces, faces[:, [0, 2, 1]] + n, cap]
-    extra = None
-    if style == "ponytail":
-        root = centre + np.array([0.0, -1.0, -0.15]) / np.linalg.norm([0.0, -1.0, -0.15]) * (equator_r + 0.01)
-        extra = _tube(root, root + np.array([0.0, -0.05, -0.22]), 0.028, 0.012)
-    elif style == "bun":
-        at = centre + _directions(np.radians(50.0), np.pi) * (equator_r + 0.02)
-        extra = _ball(at, np.array([0.042, 0.035, 0.036]))
-    if extra is not None:
-        offset = 2 * n + 1
-        points.append(extra[0])
+    # every style has the same topology (sheet, ponytail, bun), so the characters with hair
+    # share one template group (one decimation per level of detail, one draw): a style
+    # without a ponytail or a bun has those collapsed to a point on its sheet (no area)
+    root = centre + np.array([0.0, -1.0, -0.15]) / np.linalg.norm([0.0, -1.0, -0.15]) * (equator_r + 0.01)
+    tail = _tube(root, root + np.array([0.0, -0.05, -0.22]), 0.028, 0.012)
+    at = centre + _directions(np.radians(50.0), np.pi) * (equator_r + 0.02)
+    bun = _ball(at, np.array([0.042, 0.035, 0.036]))
+    anchor = outer[np.argmin(np.linalg.norm(outer - root, axis=1))]
+    offset = 2 * n + 1
+    for extra, used in ((tail, style == "ponytail"), (bun, style == "bun")):
+        points.append(extra[0] if used else np.broadcast_to(anchor, extra[0].shape))
         all_faces.append(extra[1] + offset)
+        offset += len(extra[0])
     return np.concatenate(points), np.concatenate(all_faces).astype(np.int64)
 
 
