@@ -9,11 +9,11 @@ and its MuJoCo peer.
   CPU and wall, memory per character) and its log-log figure
   ``build/bench/physics_runtime.png``;
 * ``--stadium 1000,5000``: ``correct()`` on stadium crowds (``--stadium-level``,
-  ``--stadium-seconds``; :mod:`crowdstudy.physics.stadium`): time, peak memory per
+  ``--stadium-seconds``; :mod:`crowdstudy.evaluation.stadium`): time, peak memory per
   character, NaN/stability and the bars;
 * ``--bars-only --bars 20 [--cells ...] [--seeds study,1,2]``: the bars
   (:class:`crowdstudy.metrics.BarTolerances`) of every study cell (or of some), on the
-  study's own crowds or on other seeds of the same cells (:mod:`crowdstudy.physics.acceptance`);
+  study's own crowds or on other seeds of the same cells (:mod:`crowdstudy.evaluation.acceptance`);
   with more than one seed, the spread per cell (:func:`seed_spread`) and its figure
   ``build/bench/physics_bars_seeds.png``;
 * the CG implementations on the same assembled 60-character system (fused single-launch
@@ -23,7 +23,7 @@ and its MuJoCo peer.
   (:mod:`crowdstudy.physics.mujoco_peer`) on concert D5 and corridor D5: ms per step and per
   simulated 1/60 s (CPU and wall), mesh and capsule overlap as a fraction of the Baseline's,
   tracking error and jerk, for each MuJoCo tuning in ``MUJOCO_SETTINGS``
-  (:mod:`crowdstudy.physics.mujoco_compare`).
+  (:mod:`crowdstudy.evaluation.mujoco_compare`).
 
 This script keeps the command line and the tables; what it measures lives in the package.
 """
@@ -39,12 +39,12 @@ import time
 import numpy as np
 
 from crowdstudy.bench import report_path, write_report
+from crowdstudy.evaluation.acceptance import measure_bars
+from crowdstudy.evaluation.mujoco_compare import MUJOCO_COLUMNS, compare_mujoco
+from crowdstudy.evaluation.stadium import stadium_run
 from crowdstudy.metrics.bars import BarTolerances
-from crowdstudy.physics.acceptance import measure_bars
 from crowdstudy.physics.config_file import add_config_option, config_from_cli
-from crowdstudy.physics.mujoco_compare import MUJOCO_COLUMNS, compare_mujoco
 from crowdstudy.physics.mujoco_peer import MUJOCO_SETTINGS
-from crowdstudy.physics.stadium import stadium_run
 from crowdstudy.physics.step_timing import rss_mib, tile_crowd, time_steps, timed_corrector
 from crowdstudy.tables import format_table
 

@@ -33,19 +33,41 @@ __all__ = [
     "default_design_path",
     "read_toml",
     "parse_design",
-    "ScenarioName",
+    "ScenarioKind",
     "MotionSource",
     "CorridorDirection",
+    "Method",
+    "Correction",
+    "Task",
+    "Comparison",
+    "SliderScale",
+    "DEFAULT_METHODS",
 ]
 
-#: The scenarios a stage can show: a stationary concert crowd, people walking a corridor.
-ScenarioName = Literal["concert", "corridor"]
+#: The kinds of scene a scenario builds: a stationary concert crowd, people walking a corridor.
+#: A design names its scenarios freely (``[scenarios.NAME]``); ``kind`` says which builder
+#: makes them (a scenario named like a kind is of that kind).
+ScenarioKind = Literal["concert", "corridor"]
 #: Where a scenario's body motion comes from: motion-capture clips or procedural animation.
 MotionSource = Literal["mocap", "procedural"]
 #: Which way a corridor crowd walks: all one way, or both ways.
 CorridorDirection = Literal["unidirectional", "bidirectional"]
 
-_SCENARIOS: tuple[ScenarioName, ...] = get_args(ScenarioName)
+#: How a method makes its animation from the cell's Baseline: ``none`` the Baseline as
+#: generated; ``physics`` :func:`~crowdstudy.physics.correct` with ``PhysicsConfig()`` and the
+#: method's ``config`` overrides; ``paper`` the same from ``PhysicsConfig.paper()`` (the
+#: paper's method alone); ``mujoco`` the MuJoCo peer (:mod:`crowdstudy.physics.mujoco_peer`,
+#: tuning ``setting``); ``files`` the user's own animations, one ``<cell>.npz`` per cell in
+#: the folder ``path``.
+Correction = Literal["none", "physics", "paper", "mujoco", "files"]
+#: What a stage asks of the participant: six-point (the design's ``points``) Likert answers
+#: to the statements, a 0-100 visual analogue scale per statement, or a two-alternative
+#: forced choice between two videos of the same cell made by two methods.
+Task = Literal["likert", "slider", "2afc"]
+
+_KINDS: tuple[ScenarioKind, ...] = get_args(ScenarioKind)
+_CORRECTIONS: tuple[Correction, ...] = get_args(Correction)
+_TASKS: tuple[Task, ...] = get_args(Task)
 _MOTION_SOURCES: tuple[MotionSource, ...] = get_args(MotionSource)
 _CORRIDOR_DIRECTIONS: tuple[CorridorDirection, ...] = get_args(CorridorDirection)
 
@@ -67,12 +89,71 @@ class Viewpoint:
 
 
 @dataclasses.dataclass(frozen=True)
+class Method:
+    """One method of the design: how its animation of a cell is made (``[methods.NAME]``).
+
+    Attributes:
+        name: the method's name as the design writes it (``"Ours"``).
+        correction: :data:`Correction`.
+        config: ``PhysicsConfig`` overrides (``physics`` and ``paper``), as written: dotted
+            paths, unique field names or section tables (``{"damping": 0.06}``).
+        setting: the MuJoCo peer's tuning (``mujoco``; None: its default).
+        path: the folder of the user's animations (``files``), as written; relative paths
+            are relative to the design file.
+    """
+
+    name: str
+    correction: Correction
+    config: dict = dataclasses.field(default_factory=dict)
+    setting: str | None = None
+    path: str | None = None
+
+    def recipe(self) -> dict[str, Any]:
+        """What makes this method's animations, as plain JSON: recorded in each
+        animation's ``meta["recipe"]`` and in the stimuli's digests."""
+        out: dict[str, Any] = {"correction": self.correction}
+        if self.correction in ("physics", "paper"):
+            out["config"] = dict(self.config)
+        if self.correction == "mujoco":
+            out["setting"] = self.setting
+        if self.correction == "files":
+            out["path"] = self.path
+        return out
+
+    def physics_config(self):
+        """The :class:`~crowdstudy.physics.PhysicsConfig` of a ``physics`` or ``paper``
+        method (its overrides applied), None for the others."""
+        if self.correction not in ("physics", "paper"):
+            return None
+        from crowdstudy.physics.config import PhysicsConfig
+
+        base = PhysicsConfig.paper() if self.correction == "paper" else PhysicsConfig()
+        return PhysicsConfig.from_overrides(self.config, where=f"methods.{self.name}.config", base=base)
+
+
+#: The recipes of the two methods a design may name in ``order`` without a table.
+DEFAULT_METHODS: dict[str, Method] = {
+    "Baseline": Method("Baseline", "none"),
+    "Ours": Method("Ours", "physics"),
+}
+
+
+@dataclasses.dataclass(frozen=True)
 class Stage:
+    """One stage of the study: a scenario seen from some viewpoints, with one task.
+
+    ``methods`` are the methods whose videos the stage shows (every method of the design,
+    or for a ``2afc`` stage those its ``pairs`` name, in the design's order); ``pairs`` the
+    method pairs a ``2afc`` stage compares in every cell (empty for the other tasks)."""
+
     key: str  # "stationary" | "walking"
     number: int  # 1, 2 ...
-    scenario: ScenarioName
+    scenario: str  # a [scenarios.NAME] of the design
     description: str
     viewpoints: tuple[str, ...]
+    task: Task = "likert"
+    methods: tuple[str, ...] = ()
+    pairs: tuple[tuple[str, str], ...] = ()
 
 
 @dataclasses.dataclass(frozen=True)
@@ -80,10 +161,12 @@ class Scenario:
     """Scenario parameters as a read-only mapping (``scenario["width"]``): those of its
     scenario (a concert's ``stage_distance``, ``margin``, ``tempo``; a corridor's ``width``,
     ``length``, ``direction`` (:data:`CorridorDirection`), ``preferred_speed``,
-    ``preferred_speed_sd``) and ``motion`` (:data:`MotionSource`)."""
+    ``preferred_speed_sd``) and ``motion`` (:data:`MotionSource`). ``kind``
+    (:data:`ScenarioKind`) says which builder makes its crowds."""
 
-    name: ScenarioName
+    name: str
     params: dict
+    kind: ScenarioKind = "concert"
 
     def __getitem__(self, key: str) -> Any:
         try:
@@ -97,6 +180,25 @@ class Item:
     id: str
     text: str
     reverse: bool
+
+
+@dataclasses.dataclass(frozen=True)
+class Comparison:
+    """``[questionnaire.comparison]``: the one statement a ``2afc`` trial asks about its two
+    videos (the answer is which video)."""
+
+    text: str
+
+
+@dataclasses.dataclass(frozen=True)
+class SliderScale:
+    """``[questionnaire.slider]``: the labels at the two ends of a ``slider`` stage's 0-100
+    visual analogue scale (default: the Likert scale's first and last labels)."""
+
+    left: str
+    right: str
+    minimum: int = 0
+    maximum: int = 100
 
 
 @dataclasses.dataclass(frozen=True)
@@ -126,7 +228,7 @@ class StudyDesign:
     floor_depth: float
     densities: dict[str, float]
     viewpoints: dict[str, Viewpoint]
-    methods: tuple[str, ...]
+    methods: tuple[str, ...]  # the presentation and analysis order; the first is the reference
     video_width: int
     video_height: int
     duration: float
@@ -138,9 +240,46 @@ class StudyDesign:
     items: tuple[Item, ...]
     composites: dict[str, tuple[str, ...]]
     source: str = "<memory>"
+    #: every method's recipe, by name (``methods`` gives their order)
+    method_recipes: dict[str, Method] = dataclasses.field(default_factory=dict)
+    #: the ``2afc`` statement (required when a stage's task is ``2afc``)
+    comparison: Comparison | None = None
+    #: the ``slider`` scale's end labels
+    slider: SliderScale | None = None
     #: the design's ``[online]`` table as written (the online study's controls, validated by
     #: ``crowdstudy.study.quality.online_config``), or None
     online: dict | None = None
+
+    @property
+    def reference_method(self) -> str:
+        """The method the others are compared with: the first of ``methods``."""
+        return self.methods[0]
+
+    def method(self, name: str) -> Method:
+        """The recipe of method ``name``."""
+        try:
+            return self.method_recipes[name]
+        except KeyError:
+            raise InvalidInputError(
+                f"unknown method {name!r}; the design's methods are {', '.join(self.methods)}"
+            ) from None
+
+    def scenario_of(self, name_or_kind: str) -> Scenario:
+        """The scenario named ``name_or_kind``, else the first of that kind (``"corridor"``:
+        the design's corridor, whatever its name)."""
+        if name_or_kind in self.scenarios:
+            return self.scenarios[name_or_kind]
+        for sc in self.scenarios.values():
+            if sc.kind == name_or_kind:
+                return sc
+        raise InvalidInputError(
+            f"the design has no scenario {name_or_kind!r}; its scenarios are "
+            + ", ".join(f"{n} ({sc.kind})" for n, sc in self.scenarios.items())
+        )
+
+    def tasks(self) -> tuple[Task, ...]:
+        """The tasks of the design's stages, each once, in stage order."""
+        return tuple(dict.fromkeys(st.task for st in self.stages))
 
     @property
     def floor_area(self) -> float:
@@ -168,7 +307,7 @@ class StudyDesign:
         for st in self.stages:
             for level, value in self.densities.items():
                 for vp in st.viewpoints:
-                    for method in self.methods:
+                    for method in st.methods:
                         out.append(
                             Stimulus(
                                 stimulus_id=f"S{st.number}-{level}-{vp}-{method}",
@@ -294,11 +433,12 @@ def parse_design(raw: dict, source: str = "<memory>") -> StudyDesign:
     width, depth = _read_floor(top)
     densities = _read_densities(top, width * depth)
     viewpoints = _read_viewpoints(top)
-    methods = _read_methods(top)
+    recipes = _read_methods(top)
+    methods = tuple(recipes)
     video = _read_video(top)
-    stages = _read_stages(top, viewpoints)
+    stages = _read_stages(top, viewpoints, methods)
     scenarios = _read_scenarios(top, stages, width, depth)
-    points, labels, items = _read_questionnaire(top)
+    points, labels, items, comparison, slider = _read_questionnaire(top, stages)
     composites = _read_composites(top, items)
     top.close(allowed_extra=("online",))  # the online study's controls: crowdstudy.study.quality
 
@@ -321,6 +461,9 @@ def parse_design(raw: dict, source: str = "<memory>") -> StudyDesign:
         items=items,
         composites=composites,
         source=source,
+        method_recipes=recipes,
+        comparison=comparison,
+        slider=slider,
         online=raw.get("online"),
     )
 
@@ -368,12 +511,68 @@ def _read_viewpoints(top: _Reader) -> dict[str, Viewpoint]:
     return viewpoints
 
 
-def _read_methods(top: _Reader) -> tuple[str, ...]:
-    """``[methods]``: ``order``, the methods compared, in the order the analysis reports them."""
+def _read_methods(top: _Reader) -> dict[str, Method]:
+    """``[methods]``: ``order`` (the presentation and analysis order; the first is the
+    reference) and a ``[methods.NAME]`` recipe per method; ``Baseline`` and ``Ours`` may go
+    without one (:data:`DEFAULT_METHODS`)."""
     meth = top.table_("methods")
-    methods = tuple(meth.strings("order"))
+    order = meth.strings("order")
+    recipes: dict[str, Method] = {}
+    for name in order:
+        if name in meth.table:
+            if not isinstance(meth.table[name], dict):
+                meth.fail(name, "must be a table ([methods.NAME] with its correction)")
+            recipes[name] = _read_method(meth.table_(name), name)
+        elif name in DEFAULT_METHODS:
+            recipes[name] = DEFAULT_METHODS[name]
+        else:
+            meth.fail("order", f"names {name!r}, which has no [methods.{name}] table saying how it is made")
+    extra = sorted(set(meth.table) - {"order", *order})
+    if extra:
+        meth.fail(extra[0], "is a method that 'order' does not list")
+    meth.used.update(order)
     meth.close()
-    return methods
+    return recipes
+
+
+def _read_method(r: _Reader, name: str) -> Method:
+    """``[methods.NAME]``: ``correction`` (:data:`Correction`) and what that correction takes:
+    ``config`` (physics, paper), ``setting`` (mujoco), ``path`` (files)."""
+    correction = r.get("correction", str)
+    if correction not in _CORRECTIONS:
+        r.fail("correction", f"must be one of {', '.join(_CORRECTIONS)}, got {correction!r}")
+    allowed = {"physics": "config", "paper": "config", "mujoco": "setting", "files": "path"}.get(correction)
+    for key in ("config", "setting", "path"):
+        if key in r.table and key != allowed:
+            r.fail(key, f"does not apply to correction = {correction!r}")
+    method = Method(name, correction)
+    if allowed == "config":
+        config = dict(r.get("config", dict, {}))
+        try:
+            Method(name, correction, config).physics_config()
+        except InvalidInputError as exc:
+            raise InvalidInputError(f"{r.source}: {exc}") from None
+        method = Method(name, correction, config)
+    elif allowed == "setting":
+        method = Method(name, correction, setting=_mujoco_setting(r))
+    elif allowed == "path":
+        path = r.get("path", str)
+        if not path.strip():
+            r.fail("path", "must name the folder of the method's animations")
+        method = Method(name, correction, path=path)
+    r.close()
+    return method
+
+
+def _mujoco_setting(r: _Reader) -> str | None:
+    """``setting`` of a ``mujoco`` method: one of the MuJoCo peer's tunings, or None."""
+    setting = r.get("setting", str, None)
+    if setting is not None:
+        from crowdstudy.physics.mujoco_peer import MUJOCO_SETTINGS
+
+        if setting not in MUJOCO_SETTINGS:
+            r.fail("setting", f"must be one of {', '.join(MUJOCO_SETTINGS)}, got {setting!r}")
+    return setting
 
 
 class _Video(NamedTuple):
@@ -396,26 +595,34 @@ def _read_video(top: _Reader) -> _Video:
     return _Video(video_w, video_h, duration, fps)
 
 
-def _read_stages(top: _Reader, viewpoints: dict[str, Viewpoint]) -> tuple[Stage, ...]:
-    """``[stages.KEY]``: number, scenario, description and the viewpoints shown; sorted by number."""
+def _read_stages(top: _Reader, viewpoints: dict[str, Viewpoint], methods: tuple[str, ...]) -> tuple[Stage, ...]:
+    """``[stages.KEY]``: number, scenario, description, the viewpoints shown and the task
+    (:data:`Task`; a ``2afc`` stage's ``pairs``); sorted by number."""
     st_t = top.table_("stages")
     stages = []
     for key in st_t.table:
         s = st_t.table_(key)
-        scenario = s.get("scenario", str)
-        if scenario not in _SCENARIOS:
-            s.fail("scenario", f"must be one of {', '.join(_SCENARIOS)}, got {scenario!r}")
         vlist = s.strings("viewpoints")
         for v in vlist:
             if v not in viewpoints:
                 s.fail("viewpoints", f"names unknown viewpoint {v!r}; defined: {', '.join(viewpoints)}")
+        task = s.get("task", str, "likert")
+        if task not in _TASKS:
+            s.fail("task", f"must be one of {', '.join(_TASKS)}, got {task!r}")
+        pairs = _read_pairs(s, methods) if task == "2afc" else ()
+        if task != "2afc" and "pairs" in s.table:
+            s.fail("pairs", f"applies to a 2afc stage only (this stage's task is {task!r})")
+        shown = tuple(m for m in methods if any(m in p for p in pairs)) if pairs else methods
         stages.append(
             Stage(
                 key=key,
                 number=s.integer("number", lo=1),
-                scenario=scenario,
+                scenario=s.get("scenario", str),
                 description=s.get("description", str, ""),
                 viewpoints=tuple(vlist),
+                task=task,
+                methods=shown,
+                pairs=pairs,
             )
         )
         s.close()
@@ -427,24 +634,57 @@ def _read_stages(top: _Reader, viewpoints: dict[str, Viewpoint]) -> tuple[Stage,
     return tuple(sorted(stages, key=lambda s: s.number))
 
 
+def _read_pairs(s: _Reader, methods: tuple[str, ...]) -> tuple[tuple[str, str], ...]:
+    """A ``2afc`` stage's ``pairs``: lists of two different methods of the design, each pair
+    once; by default every pair of the design's methods, in the design's order."""
+    if "pairs" not in s.table:
+        if len(methods) < 2:
+            s.fail("task", "is '2afc', which needs at least two methods in [methods] order")
+        return tuple((a, b) for i, a in enumerate(methods) for b in methods[i + 1 :])
+    raw = s.get("pairs", list)
+    pairs: list[tuple[str, str]] = []
+    for i, pair in enumerate(raw):
+        if not (isinstance(pair, list) and len(pair) == 2 and all(isinstance(m, str) for m in pair)):
+            s.fail(f"pairs[{i}]", f"must be a list of two method names, got {pair!r}")
+        for m in pair:
+            if m not in methods:
+                s.fail(f"pairs[{i}]", f"names unknown method {m!r}; the design's methods are {', '.join(methods)}")
+        if pair[0] == pair[1]:
+            s.fail(f"pairs[{i}]", f"compares {pair[0]!r} with itself")
+        if any({pair[0], pair[1]} == set(p) for p in pairs):
+            s.fail(f"pairs[{i}]", f"repeats the pair {pair!r}")
+        pairs.append((pair[0], pair[1]))
+    if not pairs:
+        s.fail("pairs", "must list at least one pair of methods")
+    return tuple(pairs)
+
+
 def _read_scenarios(top: _Reader, stages: tuple[Stage, ...], width: float, depth: float) -> dict[str, Scenario]:
-    """``[scenarios.NAME]``: the parameters of each scenario (one reader per scenario) and
-    its motion source; every stage's scenario must have a table."""
+    """``[scenarios.NAME]``: each scenario's ``kind`` (:data:`ScenarioKind`; by default its
+    name), the parameters of that kind (one reader per kind) and its motion source; every
+    stage's scenario must have a table."""
     sc_t = top.table_("scenarios")
     scenarios = {}
     for sname in sc_t.table:
-        if sname not in _SCENARIOS:
-            sc_t.fail(sname, f"is not a known scenario ({', '.join(_SCENARIOS)})")
         r = sc_t.table_(sname)
-        params = _SCENARIO_PARAMS[sname](r, width, depth)
+        kind = r.get("kind", str, sname if sname in _KINDS else None)
+        if kind is None:
+            r.fail("kind", f"is missing: a scenario not named after a kind says which it is ({', '.join(_KINDS)})")
+        if kind not in _KINDS:
+            r.fail("kind", f"must be one of {', '.join(_KINDS)}, got {kind!r}")
+        params = _SCENARIO_PARAMS[kind](r, width, depth)
         params["motion"] = r.get("motion", str, "mocap")
         if params["motion"] not in _MOTION_SOURCES:
             r.fail("motion", f"must be 'mocap' (motion capture) or 'procedural', got {params['motion']!r}")
         r.close()
-        scenarios[sname] = Scenario(sname, params)
+        scenarios[sname] = Scenario(sname, params, kind)
     for st in stages:
         if st.scenario not in scenarios:
-            top.fail("scenarios", f"has no [scenarios.{st.scenario}] table, needed by stage '{st.key}'")
+            top.fail(
+                f"stages.{st.key}.scenario",
+                f"names the scenario {st.scenario!r}, which has no [scenarios.{st.scenario}] table; "
+                f"the design's scenarios are {', '.join(scenarios) or 'none'}",
+            )
     sc_t.close()
     return scenarios
 
@@ -475,15 +715,19 @@ def _corridor_params(r: _Reader, width: float, depth: float) -> dict[str, Any]:
     return params
 
 
-#: Each scenario's parameter reader: (its table, floor width, floor depth) -> parameters.
+#: Each scenario kind's parameter reader: (its table, floor width, floor depth) -> parameters.
 _SCENARIO_PARAMS: dict[str, Callable[[_Reader, float, float], dict[str, Any]]] = {
     "concert": _concert_params,
     "corridor": _corridor_params,
 }
 
 
-def _read_questionnaire(top: _Reader) -> tuple[int, tuple[str, ...], tuple[Item, ...]]:
-    """``[questionnaire]``: scale points, one label per point, and the items (id, text, reverse)."""
+def _read_questionnaire(
+    top: _Reader, stages: tuple[Stage, ...]
+) -> tuple[int, tuple[str, ...], tuple[Item, ...], Comparison | None, SliderScale | None]:
+    """``[questionnaire]``: scale points, one label per point, the items (id, text,
+    reverse), the ``2afc`` statement (``[questionnaire.comparison]``, required when a stage
+    is ``2afc``) and the slider's end labels (``[questionnaire.slider]``)."""
     q = top.table_("questionnaire")
     points = q.integer("points", lo=2)
     labels = q.strings("labels")
@@ -499,8 +743,23 @@ def _read_questionnaire(top: _Reader) -> tuple[int, tuple[str, ...], tuple[Item,
         ir.close()
     if not items or len({it.id for it in items}) != len(items):
         q.fail("items", "must be a non-empty list with unique ids")
+    comparison = None
+    if "comparison" in q.table:
+        c = q.table_("comparison")
+        comparison = Comparison(text=c.get("text", str))
+        c.close()
+    elif any(st.task == "2afc" for st in stages):
+        first = next(st for st in stages if st.task == "2afc")
+        q.fail(
+            "comparison", f"is missing: stage '{first.key}' is a 2afc stage, which asks [questionnaire.comparison] text"
+        )
+    slider = SliderScale(labels[0], labels[-1])
+    if "slider" in q.table:
+        sl = q.table_("slider")
+        slider = SliderScale(sl.get("left", str, labels[0]), sl.get("right", str, labels[-1]))
+        sl.close()
     q.close()
-    return points, tuple(labels), tuple(items)
+    return points, tuple(labels), tuple(items), comparison, slider
 
 
 def _read_composites(top: _Reader, items: tuple[Item, ...]) -> dict[str, tuple[str, ...]]:

@@ -1,5 +1,5 @@
 """``crowdstudy bench physics --bars`` options: a subset of cells and PhysicsConfig changes
-(benchmarks/physics.py, measuring with crowdstudy.physics.acceptance, .stadium and
+(benchmarks/physics.py, measuring with crowdstudy.evaluation.acceptance, .stadium and
 .step_timing), so each setting tried in docs/lab-notes/ has its command."""
 
 from __future__ import annotations
@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-import crowdstudy.physics.acceptance as acceptance
+import crowdstudy.evaluation.acceptance as acceptance
 
 LEVELS = ["D1", "D2", "D3", "D4", "D5"]
 
@@ -65,8 +65,8 @@ def test_measure_bars_runs_only_the_asked_cells_with_the_asked_config(monkeypatc
 def test_stadium_runs_take_the_asked_config(bench, monkeypatch):
     """``--stadium N --config K=V`` hands the config to the stadium's ``correct()`` (the crowd
     and the physics are stubbed out: this checks the plumbing)."""
+    import crowdstudy.evaluation.stadium as stadium
     import crowdstudy.physics.corrector as corrector
-    import crowdstudy.physics.stadium as stadium
     from crowdstudy.design import load_design
     from crowdstudy.motion.baseline import build_baseline
 

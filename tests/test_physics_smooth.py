@@ -6,7 +6,7 @@ low-pass and the planted-foot hold."""
 import numpy as np
 import pytest
 
-from crowdstudy.motion.posing import planted_runs
+from crowdstudy.body.posing import planted_runs
 from crowdstudy.physics import CrowdCorrector, PhysicsConfig
 from crowdstudy.physics.finish import close_loop, lock_planted_feet, smooth_deviation
 

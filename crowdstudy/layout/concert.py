@@ -30,11 +30,12 @@ def scaled_floor(design, level: str, n_characters: int) -> tuple[float, float]:
     return float(design.floor_width) * scale, float(design.floor_depth) * scale
 
 
-def concert_layout(design, level: str, seed, n_characters: int | None = None) -> Crowd:
+def concert_layout(design, level: str, seed, n_characters: int | None = None, *, scenario: str = "concert") -> Crowd:
     """The concert crowd of one density level as a one-frame :class:`Crowd`.
 
     ``design.n_characters(level)`` characters on the ``floor_width x floor_depth`` floor
-    centred on the origin, ``design.scenarios["concert"]["margin"]`` metres from its edges,
+    centred on the origin, ``margin`` metres (of the design's scenario ``scenario``, by
+    default its concert) from its edges,
     all facing the stage (+y, heading pi/2).
 
     ``n_characters`` (a stadium crowd, e.g. 1,000 or 5,000) lays out that many characters
@@ -64,10 +65,11 @@ def concert_layout(design, level: str, seed, n_characters: int | None = None) ->
         width, depth = scaled_floor(design, level, n_characters)
         n = int(n_characters)
     density = float(design.densities[level])
-    margin = float(design.scenarios["concert"]["margin"])
+    params = design.scenario_of(scenario)
+    margin = float(params["margin"])
     layout = poisson_disk((width, depth), n, seed=seed, margin=margin)
     seed_value = layout.seed
-    stage_distance = float(design.scenarios["concert"]["stage_distance"])
+    stage_distance = float(params["stage_distance"])
     stage_front = depth / 2 + stage_distance
     return Crowd(
         positions=layout.points[None],

@@ -828,10 +828,11 @@ def build_baseline(
     seed = design.cell_seed(st, level) if seed is None else int(seed)
     duration = float(design.duration if duration is None else duration)
     fps = float(design.fps if fps is None else fps)
+    scenario = design.scenarios[st.scenario]
     meta = {
         "stage": st.key,
         "stage_number": st.number,
-        "scenario": st.scenario,
+        "scenario": scenario.kind,
         "density_level": level,
         "density": design.densities[level],
         "n_characters": design.n_characters(level),
@@ -839,11 +840,13 @@ def build_baseline(
         "method": "Baseline",
         "provenance": provenance(seed, design=design.source),
     }
-    if st.scenario == "concert":
+    if scenario.name != scenario.kind:  # a design's own name for a scenario of a known kind
+        meta["scenario_name"] = scenario.name
+    if scenario.kind == "concert":
         from crowdstudy.layout import concert_layout
 
-        crowd = concert_layout(design, level, seed)
-        sc = design.scenarios[st.scenario].params
+        crowd = concert_layout(design, level, seed, scenario=scenario.name)
+        sc = scenario.params
         names = list_clips("dance", "procedural") if sc.get("motion", "mocap") == "procedural" else None
         bodies = _sampled(crowd.n_agents, seed, body_model)
         return animate_stationary(
@@ -856,7 +859,7 @@ def build_baseline(
             meta=meta,
             bodies=bodies,
         )
-    if st.scenario == "corridor":
+    if scenario.kind == "corridor":
         from crowdstudy.navigation import corridor_crowd
 
         dissolve = LOOP_DISSOLVE_SECONDS if dissolve is None else float(dissolve)
@@ -865,8 +868,10 @@ def build_baseline(
         fps, n_video = _check_timing(duration, fps)
         n_dissolve = min(int(round(dissolve * fps)), n_video // 2)
         # the navigation runs D frames past the video: they are dissolved into its start
-        crowd = corridor_crowd(design, level, seed, duration=(n_video + n_dissolve) / fps, fps=fps)
-        sc = design.scenarios[st.scenario].params
+        crowd = corridor_crowd(
+            design, level, seed, duration=(n_video + n_dissolve) / fps, fps=fps, scenario=scenario.name
+        )
+        sc = scenario.params
         walks = walk_clips("procedural") if sc.get("motion", "mocap") == "procedural" else None
         return animate_walking(
             crowd,
@@ -877,4 +882,4 @@ def build_baseline(
             meta=meta,
             bodies=_sampled(crowd.n_agents, seed, body_model),
         )
-    raise InvalidInputError(f"stage {st.key!r}: scenario {st.scenario!r} has no Baseline animation")
+    raise InvalidInputError(f"stage {st.key!r}: scenario {st.scenario!r} ({scenario.kind}) has no Baseline animation")

@@ -19,10 +19,10 @@ import dataclasses
 
 import numpy as np
 
+from crowdstudy.body.posing import lift_profile, smoothstep5
 from crowdstudy.body.rotations import rot_z, yaw_roll_pitch
 from crowdstudy.errors import InvalidInputError
 from crowdstudy.motion.clip import MotionClip
-from crowdstudy.motion.posing import lift_profile, smoothstep5
 from crowdstudy.motion.rig import ANKLE_HEIGHT, REST, PoseControls, assemble_pose, max_pelvis_height
 
 __all__ = ["DanceSpec", "DANCES", "generate_dance", "ARM_PATTERNS"]

@@ -10,9 +10,9 @@ from __future__ import annotations
 
 import numpy as np
 
+from crowdstudy.body.posing import smoothstep5, two_bone_ik
 from crowdstudy.body.rotations import axis_angle_to_matrix, matrix_to_axis_angle
 from crowdstudy.body.skeleton import JOINT_INDEX
-from crowdstudy.motion.posing import smoothstep5, two_bone_ik
 from crowdstudy.motion.rig import ANKLE_HEIGHT, REST
 
 __all__ = ["plant_legs"]

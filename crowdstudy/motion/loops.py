@@ -20,10 +20,10 @@ import dataclasses
 
 import numpy as np
 
+from crowdstudy.body.posing import smoothstep5
 from crowdstudy.body.rotations import quat_align_signs, quat_blend, quaternion_to_axis_angle
 from crowdstudy.errors import InvalidInputError
 from crowdstudy.motion.clip import MotionClip
-from crowdstudy.motion.posing import smoothstep5
 
 __all__ = ["LoopChoice", "find_loop", "make_loop", "in_place_positions"]
 

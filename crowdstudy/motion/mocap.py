@@ -34,12 +34,12 @@ import dataclasses
 
 import numpy as np
 
+from crowdstudy.body.posing import planted_runs, smoothstep5
 from crowdstudy.body.rotations import axis_angle_to_matrix, matrix_to_axis_angle, rot_z
 from crowdstudy.body.skeleton import DEFAULT_REST_JOINTS, JOINT_INDEX, PARENTS, forward_kinematics
 from crowdstudy.errors import InvalidInputError
 from crowdstudy.motion.clip import MotionClip
 from crowdstudy.motion.legs import plant_legs
-from crowdstudy.motion.posing import planted_runs, smoothstep5
 from crowdstudy.motion.rig import ANKLE_HEIGHT
 
 __all__ = [

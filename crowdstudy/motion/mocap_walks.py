@@ -224,7 +224,7 @@ def _lock_offsets(pos: np.ndarray, ev: dict, fps: float) -> np.ndarray:
     also kept :data:`HOVER` above its stance height (a captured heel often reaches the
     floor while still moving fast), released over the last 0.05 s before it.
     """
-    from crowdstudy.motion.posing import smoothstep5
+    from crowdstudy.body.posing import smoothstep5
 
     t_all = pos.shape[0]
     out = np.zeros((t_all, 2, 3))
@@ -266,9 +266,9 @@ def _hold_foot_yaw(rot: np.ndarray, root: np.ndarray, ev: dict) -> np.ndarray:
     the heading (yaw) they have at the heel rise: a captured foot turning about its planted
     ankle would make the ball of the foot slide. The correction fades in over the last
     40 % of the swing before (quintic smoothstep) and is zero from the heel rise on."""
+    from crowdstudy.body.posing import smoothstep5
     from crowdstudy.body.rotations import matrix_to_axis_angle, rot_z
     from crowdstudy.body.skeleton import PARENTS, forward_kinematics
-    from crowdstudy.motion.posing import smoothstep5
 
     glob, pos = forward_kinematics(DEFAULT_REST_JOINTS, rot, root)
     out = rot.copy()

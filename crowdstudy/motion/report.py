@@ -121,7 +121,7 @@ def _skate(values: np.ndarray) -> dict:
 def motion_report(design, *, level: str = "D5", with_hands: bool = True) -> dict:
     """The tables described in the module docstring for ``design`` (its concert tempo,
     video duration and frame rate) and the density ``level``."""
-    tempo = float(design.scenarios["concert"].params.get("tempo", 120.0))
+    tempo = float(design.scenario_of("concert").params.get("tempo", 120.0))
     out = {
         "tempo": tempo,
         "level": level,

@@ -13,6 +13,7 @@ import dataclasses
 
 import numpy as np
 
+from crowdstudy.body.posing import two_bone_ik
 from crowdstudy.body.rotations import axis_angle_to_matrix, matrix_to_axis_angle, rot_y
 from crowdstudy.body.skeleton import (
     DEFAULT_PELVIS_HEIGHT,
@@ -21,7 +22,6 @@ from crowdstudy.body.skeleton import (
     NUM_JOINTS,
     forward_kinematics,
 )
-from crowdstudy.motion.posing import two_bone_ik
 
 __all__ = [
     "PoseControls",

@@ -24,6 +24,7 @@ from __future__ import annotations
 import numpy as np
 
 from crowdstudy.body.capsules import closest_points_on_segments, posed_capsules, segment_distance, touching_pairs
+from crowdstudy.body.posing import hold_peaks, smoothstep5, two_bone_ik
 from crowdstudy.body.rotations import (
     axis_angle_to_matrix,
     matrix_to_axis_angle,
@@ -32,7 +33,6 @@ from crowdstudy.body.rotations import (
     quaternion_to_matrix,
 )
 from crowdstudy.body.skeleton import JOINT_INDEX, JOINT_NAMES, NUM_JOINTS, forward_kinematics
-from crowdstudy.motion.posing import hold_peaks, smoothstep5, two_bone_ik
 
 __all__ = ["SLACK", "HAND_BONES", "BODY_BONES", "hand_penetration", "self_penetration", "clear_hands"]
 

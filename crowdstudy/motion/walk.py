@@ -24,11 +24,11 @@ import dataclasses
 
 import numpy as np
 
+from crowdstudy.body.posing import lift_profile, smoothstep5
 from crowdstudy.body.rotations import rot_x, rot_z, yaw_roll_pitch
 from crowdstudy.body.skeleton import JOINT_INDEX
 from crowdstudy.errors import InvalidInputError
 from crowdstudy.motion.clip import MotionClip
-from crowdstudy.motion.posing import lift_profile, smoothstep5
 from crowdstudy.motion.rig import ANKLE_HEIGHT, REST, PoseControls, assemble_pose, max_pelvis_height
 
 __all__ = [

@@ -187,6 +187,7 @@ def corridor_crowd(
     params: ORCAParams | None = None,
     device: str | None = "cpu",
     progress: bool = False,
+    scenario: str = "corridor",
 ) -> Crowd:
     """Trajectories of the corridor crowd of one density level.
 
@@ -201,6 +202,7 @@ def corridor_crowd(
         params: ORCA parameters (the time step is replaced by the sub-step).
         device: Warp device for the simulation.
         progress: show a progress bar (stderr).
+        scenario: the design's scenario to walk (its name; default: the design's corridor).
 
     Returns:
         Crowd: positions (T, N, 2) unwrapped metres, velocities (T, N, 2) m/s, headings
@@ -212,7 +214,15 @@ def corridor_crowd(
         walls extended by one period on each side).
     """
     setup = _corridor_setup(
-        design, level, seed, duration=duration, fps=fps, direction=direction, warm_up=warm_up, params=params
+        design,
+        level,
+        seed,
+        duration=duration,
+        fps=fps,
+        direction=direction,
+        warm_up=warm_up,
+        params=params,
+        scenario=scenario,
     )
     n, fps, n_frames, substeps = setup.n, setup.fps, setup.n_frames, setup.substeps
     signs, pos, speeds = _initial_agents(setup)
@@ -303,6 +313,7 @@ def _corridor_setup(
     direction: str | None,
     warm_up: float,
     params: ORCAParams | None,
+    scenario: str = "corridor",
 ) -> _CorridorSetup:
     """The arguments of :func:`corridor_crowd` checked (InvalidInputError naming the
     argument) and resolved against the design's ``[scenarios.corridor]``."""
@@ -310,7 +321,7 @@ def _corridor_setup(
         raise InvalidInputError(
             f"level: unknown density level {level!r}; expected one of {', '.join(design.densities)}"
         )
-    sc = design.scenarios["corridor"]
+    sc = design.scenario_of(scenario)
     width, length = float(sc["width"]), float(sc["length"])
     v0, v_sd = float(sc["preferred_speed"]), float(sc["preferred_speed_sd"])
     direction = sc["direction"] if direction is None else direction

@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from crowdstudy.body.posing import hold_peaks, planted_runs, smoothstep5, two_bone_ik
 from crowdstudy.body.rotations import (
     axis_angle_to_quaternion,
     matrix_to_axis_angle,
@@ -37,7 +38,6 @@ from crowdstudy.body.rotations import (
 )
 from crowdstudy.body.skeleton import JOINT_INDEX, PARENTS, forward_kinematics
 from crowdstudy.errors import InvalidInputError
-from crowdstudy.motion.posing import hold_peaks, planted_runs, smoothstep5, two_bone_ik
 
 __all__ = ["close_loop", "smooth_deviation", "lock_planted_feet", "planted_frames"]
 

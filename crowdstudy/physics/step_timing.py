@@ -2,7 +2,7 @@
 CPU and wall time, CG iterations, contacts and memory, on any crowd.
 
 ``crowdstudy bench physics`` builds its cost tables and curves on these; the MuJoCo
-comparison (:mod:`crowdstudy.physics.mujoco_compare`) times Ours with them. The crowd of a
+comparison (:mod:`crowdstudy.evaluation.mujoco_compare`) times Ours with them. The crowd of a
 given size is the study's scene repeated on a grid of floors (:func:`tile_crowd`).
 """
 

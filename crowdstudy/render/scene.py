@@ -89,7 +89,7 @@ def _color(rgb) -> np.ndarray:
 def build_environment(scenario: str, design) -> Environment:
     """The environment of ``scenario`` ("concert" or "corridor") for a study design."""
     if scenario == "corridor":
-        params = design.scenarios["corridor"]
+        params = design.scenario_of("corridor")
         length, width = float(params["length"]), float(params["width"])
         span = 6.0 * length
         floor = quad_triangles(
@@ -140,7 +140,11 @@ def build_environment(scenario: str, design) -> Environment:
 
         raise InvalidInputError(f"scenario: expected 'concert' or 'corridor', got {scenario!r}")
     width, depth = float(design.floor_width), float(design.floor_depth)
-    params = dict(design.scenarios["concert"].params) if "concert" in design.scenarios else {}
+    params = (
+        dict(design.scenario_of("concert").params)
+        if any(s.kind == "concert" for s in design.scenarios.values())
+        else {}
+    )
     front = depth / 2 + float(params.get("stage_distance", 1.0))
     tempo = float(params.get("tempo", 120.0))  # bpm
     rect = (-11.0, -13.0, 11.0, front + 6.5)  # the hall: the stage (5 m deep) at its +y end

@@ -4,7 +4,7 @@ bars of :class:`~crowdstudy.metrics.BarTolerances` checked.
 
 ``crowdstudy bench physics --bars`` runs :func:`measure_bars` on every cell (or some, on
 other seeds of them) and prints the rows; the stadium crowds are
-:mod:`crowdstudy.physics.stadium`.
+:mod:`crowdstudy.evaluation.stadium`.
 """
 
 from __future__ import annotations

@@ -14,8 +14,8 @@ from collections.abc import Callable
 
 import numpy as np
 
+from crowdstudy.evaluation.acceptance import profile_columns
 from crowdstudy.metrics.bars import BarTolerances, check_bars, failed_bars, loop_mode, smoothness_columns
-from crowdstudy.physics.acceptance import profile_columns
 from crowdstudy.physics.step_timing import rss_mib
 
 __all__ = ["stadium_crowd", "BodyProxy", "central_subset", "select_characters", "stadium_run"]
