@@ -17,15 +17,16 @@ RECORD = {"model": "makehuman", "sex": "female", "height": 1.64, "age": 31, "rac
 
 
 def _finger_spread(body_verts, body):
-    """(left, right) sideways extent (m) of the vertices beyond the knuckles of each hand."""
+    """(left, right) sideways extent (m) of the fingertips (the vertices of the bare body
+    beyond the knuckles) of each hand in ``body_verts``."""
     out = []
     for side in ("left", "right"):
         hand, wrist = J[f"{side}_hand"], J[f"{side}_wrist"]
         along = body.rest_joints[hand] - body.rest_joints[wrist]
         along /= np.linalg.norm(along)
-        rel = body_verts - body.rest_joints[hand]
+        rel = body.rest_vertices - body.rest_joints[hand]
         tips = (np.asarray(body.weights)[:, hand] > 0.9) & (rel @ along > 0.03)
-        out.append(np.ptp(rel[tips, 1]))  # T-pose: the hand along x, palm down: sideways is y
+        out.append(np.ptp(body_verts[tips, 1]))  # T-pose: the hand along x, palm down: sideways is y
     return np.array(out)
 
 
@@ -39,6 +40,9 @@ def test_relaxed_hands_draw_the_fingers_together_and_leave_the_rest():
     assert moved.max() < 0.03  # a gentle pose change, not a new hand
     before, after = _finger_spread(body.rest_vertices, body), _finger_spread(relaxed, body)
     assert np.all(after < 0.8 * before), (before, after)
+    # and opened a little: the fingertips rise away from the palm (the curl points them down)
+    tips = (w[:, J["left_hand"]] > 0.9) & (body.rest_vertices[:, 0] < body.rest_joints[J["left_hand"], 0] - 0.03)
+    assert np.mean(relaxed[tips, 2] - body.rest_vertices[tips, 2]) > 0.005
     # render-only: the body (and the capsule fit the physics reads from it) is untouched
     assert load_body(RECORD).rest_vertices.tobytes() == body.rest_vertices.tobytes()
 

@@ -3,9 +3,10 @@
 The skeleton has no finger joints: the fingers keep the pose of the body's rest mesh,
 MakeHuman's spread hand curled by :func:`crowdstudy.body.makehuman` (which the physics'
 capsule fit reads, so it stays as it is). Spread and curled, the fingers read as claws in
-a close-up. For rendering only, :func:`relax_hands` draws the fingers together towards the
-hand's middle (a relaxed hand's fingers nearly touch) and the thumb towards the index, so
-the hand hangs half closed, as a hand at rest does.
+a close-up. For rendering only, :func:`relax_hands` opens the fingers a little about the
+knuckles, draws them together towards the hand's middle (a relaxed hand's fingers nearly
+touch) and the thumb towards the index, so the hand hangs half closed, as a hand at rest
+does.
 """
 
 from __future__ import annotations
@@ -14,10 +15,12 @@ import numpy as np
 
 from crowdstudy.body.skeleton import JOINT_INDEX
 
-__all__ = ["FINGER_GATHER", "THUMB_GATHER", "relax_hands"]
+__all__ = ["FINGER_GATHER", "FINGER_OPEN_DEG", "THUMB_GATHER", "relax_hands"]
 
 #: share of the fingers' sideways spread taken away at the fingertips (0 at the knuckles)
 FINGER_GATHER = 0.35
+#: degrees the fingers are opened about the knuckles (the body's curl bends them 55 degrees)
+FINGER_OPEN_DEG = 25.0
 #: share of the thumb's sideways distance from the index taken away
 THUMB_GATHER = 0.25
 _TIPS = 0.05  # m beyond the hand joint (at the knuckles) the curled fingertips reach, roughly
@@ -60,5 +63,10 @@ def relax_hands(verts: np.ndarray, joints: np.ndarray, weights: np.ndarray) -> n
         thumb = _smooth(spread, 0.035, 0.05) * (1.0 - _smooth(u, 0.0, _TIPS))
         gather = np.maximum(gather, THUMB_GATHER * thumb)
         shift = -(lat - middle) * gather * w[sel]
-        out[sel] += shift[:, None] * lateral
+        # the fingers opened about the knuckles' line: less of a claw, still flexed
+        h = rel @ palm
+        a = np.radians(FINGER_OPEN_DEG) * _smooth(u, 0.0, 0.6 * _TIPS) * w[sel]
+        du = u * np.cos(a) + h * np.sin(a) - u
+        dh = h * np.cos(a) - u * np.sin(a) - h
+        out[sel] += shift[:, None] * lateral + du[:, None] * along + dh[:, None] * palm
     return out
