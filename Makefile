@@ -7,7 +7,7 @@ export WARP_CACHE_PATH := $(CURDIR)/build/warp-cache
 export MPLBACKEND := Agg
 export PYTHONUNBUFFERED := 1
 
-.PHONY: setup demo test test-fast figures bench docs results constraints clean
+.PHONY: setup demo test test-fast lint figures bench docs results constraints clean
 
 setup:
 	@bash scripts/setup.sh
@@ -23,6 +23,14 @@ test: setup
 test-fast: setup
 	$(PY) -m pytest -q -n auto --dist loadfile --no-loadscope-reorder -m "not slow and not browser"
 
+# ruff's lint and format check on every Python folder, pyright on the package (settings in
+# pyproject.toml); .pre-commit-config.yaml runs the same on each commit
+LINT_DIRS := crowdstudy tests benchmarks paper_figs scripts analysis
+lint: setup
+	$(VENV)/bin/ruff check $(LINT_DIRS)
+	$(VENV)/bin/ruff format --check $(LINT_DIRS)
+	$(VENV)/bin/pyright
+
 figures: setup
 	$(PY) paper_figs/make_all.py
 
@@ -37,13 +45,16 @@ docs: setup
 	@echo "[docs] built build/site/index.html"
 
 # Publish benchmark reports in the docs: copy build/bench/NAME.json (from `crowdstudy bench
-# NAME`) to docs/results/data/ for each NAME in RESULTS (default: the ones published already).
+# NAME`) to docs/results/data/ for each NAME in RESULTS (default: the ones published already),
+# with its figure build/bench/NAME.png where there is one.
 RESULTS ?= $(basename $(notdir $(wildcard docs/results/data/*.json)))
 results:
 	@mkdir -p docs/results/data
 	@for name in $(RESULTS); do \
 	    test -f build/bench/$$name.json || { echo "[results] build/bench/$$name.json missing: run crowdstudy bench first" >&2; exit 1; }; \
 	    cp build/bench/$$name.json docs/results/data/$$name.json && echo "[results] docs/results/data/$$name.json"; \
+	    if test -f build/bench/$$name.png; then \
+	        cp build/bench/$$name.png docs/results/data/$$name.png && echo "[results] docs/results/data/$$name.png"; fi; \
 	done
 
 # Re-resolve the newest allowed versions into constraints.txt (then `make test`, commit it).

@@ -54,29 +54,29 @@ def run_demo(
     """Run the demo; returns ``{name: path}`` of everything written.
 
     The steps of the module docstring, one function each; ``study=False`` stops after step 5."""
-    design = load_design(design)
-    _check_arguments(design, density, duration, participants)
+    study_design = load_design(design)
+    _check_arguments(study_design, density, duration, participants)
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     outputs: dict[str, Path] = {}
     step = _Steps(6 if study else 5)
-    stationary, walking = design.stage("stationary"), design.stage("walking")
+    stationary, walking = study_design.stage("stationary"), study_design.stage("walking")
     showcase = (stationary, walking)
 
     step("Crowd layouts (Poisson disk) and corridor trajectories (ORCA)")
-    outputs.update(_layouts(design, density, duration, out, stationary, walking))
+    outputs.update(_layouts(study_design, density, duration, out, stationary, walking))
     step(f"Baseline animations at {density} ({duration:g} s)")
     anims: dict[tuple[str, str], CrowdAnimation] = {}
-    outputs.update(_baselines(design, density, duration, out, showcase, anims))
+    outputs.update(_baselines(study_design, density, duration, out, showcase, anims))
     step("Physics correction (Baseline -> Ours)")
     outputs.update(_correction(density, out, showcase, anims))
     step("Metrics: overlap before / after correction (mesh grid 2 cm, every 10th frame)")
     outputs.update(_metrics(out, showcase, anims))
     step("Rendering: short videos and the overlap image")
-    outputs.update(_renders(design, density, out, showcase, anims, outputs))
+    outputs.update(_renders(study_design, density, out, showcase, anims, outputs))
     if study:
         step(f"The study: quick stimulus set, {participants} simulated participants, analysis")
-        outputs.update(_study(design, out, participants, seed, duration))
+        outputs.update(_study(study_design, out, participants, seed, duration))
     _print_outputs(outputs)
     return outputs
 
@@ -258,8 +258,10 @@ def _print_outputs(outputs: dict[str, Path]) -> None:
         print(f"  {name:<32} {path}")
     print(
         "\nThe full study (1920x1080, 20 s videos, real participants):\n"
-        "  crowdstudy stimuli --out stimuli/videos                                    # 60 videos (+ --design FILE, --scheduler)\n"
-        "  crowdstudy serve --stimuli stimuli/videos --db sqlite:///study.db          # participants open the printed URL\n"
+        "  crowdstudy stimuli --out stimuli/videos                                    "
+        "# 60 videos (+ --design FILE, --scheduler)\n"
+        "  crowdstudy serve --stimuli stimuli/videos --db sqlite:///study.db          "
+        "# participants open the printed URL\n"
         "  crowdstudy export --db sqlite:///study.db --out responses.csv --demographics demographics.csv\n"
         "  crowdstudy analyze responses.csv --out analysis_out"
     )
@@ -274,7 +276,7 @@ def _overlap_image(base, ours, design, path: Path, render_frame, color_positions
 
     frame = base.n_frames // 2
     fig, axes = plt.subplots(1, 2, figsize=(12, 3.6))
-    for ax, anim, label in zip(axes, (base, ours), ("Baseline", "Ours")):
+    for ax, anim, label in zip(axes, (base, ours), ("Baseline", "Ours"), strict=True):
         img = render_frame(
             anim, "V1", frame, width=960, height=540, overlap_view=True, design=design, color_positions=color_positions
         )
@@ -314,7 +316,7 @@ def _capsule_image(anim, design, path: Path, render_frame, color_positions) -> P
         body = load_body(anim.bodies[i])
         start, end = posed_capsules(body, anim.joint_rotations[frame, i], anim.root_translation[frame, i])
         base = np.array(plt.cm.tab20(i % 20)[:3])
-        for a, b, r in zip(start, end, body.capsules.radius):
+        for a, b, r in zip(start, end, body.capsules.radius, strict=True):
             # the outline of a capsule seen along y: the hull of its two end discs in (x, z)
             pts = np.concatenate([a[[0, 2]] + r * circle, b[[0, 2]] + r * circle])
             polys.append(pts[ConvexHull(pts).vertices])  # 2-D hull vertices come in counter-clockwise order

@@ -17,7 +17,7 @@ import math
 import tomllib
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any, Literal, NamedTuple, NoReturn, get_args
+from typing import Any, Literal, NamedTuple, NoReturn, TypeVar, cast, get_args
 
 from crowdstudy.errors import InvalidInputError
 from crowdstudy.package_data import resource_path
@@ -330,6 +330,9 @@ def default_design_path() -> Path:
     return resource_path("crowdstudy.study", "study.toml")
 
 
+_T = TypeVar("_T")
+
+
 class _Reader:
     """Typed access to a TOML table that reports the full key path on error."""
 
@@ -343,20 +346,20 @@ class _Reader:
     def fail(self, key: str, msg: str) -> NoReturn:
         raise InvalidInputError(f"{self.source}: key '{self._key(key)}' {msg}")
 
-    def get(self, key: str, kind: type | tuple, default: Any = dataclasses.MISSING):
+    def get(self, key: str, kind: type[_T], default: Any = dataclasses.MISSING) -> _T:
+        """The value of ``key``, of type ``kind`` (an integer counts as a float, a bool
+        only as a bool), else ``default``; missing without a default is an error."""
         self.used.add(key)
         if key not in self.table:
             if default is dataclasses.MISSING:
                 self.fail(key, "is missing")
             return default
         value = self.table[key]
-        kinds = kind if isinstance(kind, tuple) else (kind,)
-        if float in kinds and isinstance(value, int) and not isinstance(value, bool):
+        if kind is float and isinstance(value, int) and not isinstance(value, bool):
             value = float(value)
-        if isinstance(value, bool) and bool not in kinds or not isinstance(value, kinds):
-            names = " or ".join(k.__name__ for k in kinds)
-            self.fail(key, f"must be {names}, got {type(value).__name__} {value!r}")
-        return value
+        if isinstance(value, bool) and kind is not bool or not isinstance(value, kind):
+            self.fail(key, f"must be {kind.__name__}, got {type(value).__name__} {value!r}")
+        return cast(_T, value)  # checked above: isinstance(value, kind)
 
     def number(
         self,

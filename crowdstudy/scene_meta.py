@@ -68,6 +68,15 @@ The motion (:mod:`crowdstudy.motion.baseline`):
     :func:`crowdstudy.provenance.provenance` of the stage that wrote the file: seed, git
     SHA, package versions, and (``stage``, ``design``) where known. No timestamps.
 
+An imported crowd (:mod:`crowdstudy.interchange.gltf_crowd`, ``crowdstudy import-crowd``):
+
+``imported`` (dict)
+    where the animation came from, so the corrected motion can be written back: ``format``
+    (``"gltf"``), ``file`` and its ``sha256``, the ``animations`` sampled, ``time_start``
+    (s, the file time of frame 0), ``fps``, the ``overrides`` given with ``--map`` and per
+    character its ``skin`` or ``node``, its ``root`` node and its ``mapping`` ({physics
+    joint: {``joint``, ``name``, ``how``}}). Such a crowd's ``scenario`` is ``"imported"``.
+
 The correction (:func:`crowdstudy.physics.corrector.correct`):
 
 ``physics`` (:class:`PhysicsMeta`)
@@ -212,12 +221,20 @@ def _fail(path: str, what: str, value: object) -> InvalidInputError:
     return InvalidInputError(f"{path}: expected {what}, got {value!r}")
 
 
+def _finite(value: object) -> float | None:
+    """``value`` as a float when it is a finite real number (not a bool), else None."""
+    if not isinstance(value, numbers.Real) or isinstance(value, (bool, np.bool_)):
+        return None
+    x = float(value)
+    return x if math.isfinite(x) else None
+
+
 def _number(value: object, path: str, *, lo: float = -math.inf, positive: bool = False) -> None:
-    ok = isinstance(value, numbers.Real) and not isinstance(value, (bool, np.bool_)) and math.isfinite(value)
+    x = _finite(value)
     if positive:
-        if not (ok and value > 0):
+        if x is None or not x > 0:
             raise _fail(path, "a positive number", value)
-    elif not (ok and value >= lo):
+    elif x is None or not x >= lo:
         raise _fail(path, "a number" if lo == -math.inf else f"a number >= {lo:g}", value)
 
 
@@ -231,17 +248,19 @@ def _text(value: object, path: str) -> None:
         raise _fail(path, "a string", value)
 
 
-def _mapping(value: object, path: str) -> None:
+def _mapping(value: object, path: str) -> Mapping[str, Any]:
+    """``value`` when it is a mapping (the keys of a ``meta`` are strings)."""
     if not isinstance(value, Mapping):
         raise _fail(path, "a dict", value)
+    return value
 
 
-def _optional(check: Callable[[object, str], None]) -> Callable[[object, str], None]:
+def _optional(check: Callable[[object, str], object]) -> Callable[[object, str], object]:
     return lambda value, path: None if value is None else check(value, path)
 
 
 def _floor(value: object, path: str) -> None:
-    _mapping(value, path)
+    value = _mapping(value, path)
     for key in ("width", "depth"):
         if key not in value:
             raise InvalidInputError(f"{path}.{key}: missing (the floor's extent in m)")
@@ -251,7 +270,7 @@ def _floor(value: object, path: str) -> None:
 def _periodic(value: object, path: str) -> None:
     if not value:  # None or {}: not periodic
         return
-    _mapping(value, path)
+    value = _mapping(value, path)
     if "length" not in value:
         raise InvalidInputError(f"{path}.length: missing (the period along x, m)")
     _number(value["length"], f"{path}.length", positive=True)
@@ -263,7 +282,7 @@ def _obstacles(value: object, path: str) -> None:
 
 
 def _loop(value: object, path: str) -> None:
-    _mapping(value, path)
+    value = _mapping(value, path)
     mode = value.get("mode")
     if mode not in LOOP_MODES:
         raise _fail(f"{path}.mode", "one of " + ", ".join(map(repr, LOOP_MODES)), mode)
@@ -276,7 +295,7 @@ def _loop(value: object, path: str) -> None:
 
 
 def _physics(value: object, path: str) -> None:
-    _mapping(value, path)
+    value = _mapping(value, path)
     if "config" in value:
         _mapping(value["config"], f"{path}.config")
     for key in ("crowd_density", "dt", "cg_iterations_mean", "contacts_mean"):
@@ -302,7 +321,7 @@ def _physics(value: object, path: str) -> None:
         _mapping(value["loop"], f"{path}.loop")
 
 
-_CHECKS: dict[str, Callable[[object, str], None]] = {
+_CHECKS: dict[str, Callable[[object, str], object]] = {
     "scenario": _text,
     "stage": _text,
     "density_level": _text,
@@ -325,6 +344,7 @@ _CHECKS: dict[str, Callable[[object, str], None]] = {
     "physics": _physics,
     "provenance": _optional(_mapping),
     "baseline_provenance": _optional(_mapping),
+    "imported": _mapping,
 }
 
 

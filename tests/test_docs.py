@@ -172,6 +172,22 @@ def test_a_column_table_reports_drift(hooks):
     assert any("'shoe_size'" in p for p in problems)
 
 
+def test_the_meta_table_is_generated_from_the_schema(hooks):
+    import typing
+
+    from crowdstudy.scene_meta import SceneMeta
+
+    page = (ROOT / "docs/concepts/crowd-animation.md").read_text(encoding="utf-8")
+    expanded, problems = hooks.expand_markers(page, "concepts/crowd-animation.md")
+    assert problems == [] and "<!-- meta-keys" not in expanded
+    for key in typing.get_type_hints(SceneMeta):
+        assert f"`{key}`" in expanded.split("Keys of `meta`")[1].split("\n\n")[1]
+    assert "| `stage_distance`, `stage_front` | float | (float, m; concert) how far the stage" in expanded
+    # a TypedDict whose keys the module's docstring does not describe: each one reported
+    _, drift = hooks.meta_table("crowdstudy.scene_meta.PhysicsMeta", "x.md")
+    assert any("'crowd_density'" in p and "no entry" in p for p in drift)
+
+
 def test_cli_page_covers_every_command(hooks):
     from crowdstudy.cli import COMMANDS
 
@@ -225,3 +241,32 @@ def test_results_tables_are_headed_by_command_machine_and_date(results, tmp_path
 def test_published_reports_have_their_heading(results):
     for rel, text in results.render_all().items():
         assert "not recorded" not in text, f"{rel}: a published report lacks its command, machine or date"
+
+
+def test_a_page_quotes_a_published_table(results, hooks, tmp_path):
+    report = {
+        "benchmark": "toy",
+        "rows": [{"case": "a", "x": 1.5}],
+        "summary": [{"variant": "v", "a_pct": 12.345, "ms_ratio": 0.9}],
+        "groups": {"g": {"description": "d", "changes": {"a.b": 0}}},
+        "command": "crowdstudy bench toy",
+        "date": "2026-12-07T10:00:00+00:00",
+        "machine": {"cpu": "Some CPU", "cores": 2, "gpus": []},
+    }
+    (tmp_path / "toy.json").write_text(json.dumps(report))
+    text = results.report_table("toy", "summary", ["ms_ratio", "variant"], data_dir=tmp_path, link="../t.md")
+    lines = text.splitlines()
+    assert lines[0].startswith("`crowdstudy bench toy` · Some CPU")
+    assert lines[2:5] == ["| ms_ratio | variant |", "| --- | --- |", "| 0.9 | v |"]
+    assert "[toy](../t.md)" in text
+    groups = results.report_table("toy", "groups", ["description"], data_dir=tmp_path).splitlines()
+    assert groups[2:5] == ["|  | description |", "| --- | --- |", "| g | d |"]
+    for key, columns in (("nothing", None), ("summary", ["b_pct"])):
+        with pytest.raises(ValueError, match="toy"):
+            results.report_table("toy", key, columns, data_dir=tmp_path)
+    with pytest.raises(ValueError, match="make results"):
+        results.report_table("absent", "rows", data_dir=tmp_path)
+    # the hook leaves an unknown report's marker in place and names the page
+    marker = "<!-- results: absent_report summary variant -->"
+    expanded, problems = hooks.expand_markers(f"x\n{marker}\n", "concepts/p.md")
+    assert marker in expanded and problems and problems[0].startswith("concepts/p.md: results absent_report")

@@ -70,7 +70,8 @@ def run(args: argparse.Namespace) -> int:
         m = crowd.meta
         floor = f"{m['floor']['width']:.2f}x{m['floor']['depth']:.2f}"
         print(
-            f"{level:>5} {crowd.n_agents:>5} {floor:>13} {m['min_distance']:>12.3f} {m['target_distance']:>9.3f}  {path}"
+            f"{level:>5} {crowd.n_agents:>5} {floor:>13} "
+            f"{m['min_distance']:>12.3f} {m['target_distance']:>9.3f}  {path}"
         )
     if args.plot:
         from crowdstudy.layout.plot import plot_layouts

@@ -383,6 +383,8 @@ def _job_animation(path, data: bytes | None):
 
     if path is not None:
         return CrowdAnimation.load(path)
+    if data is None:
+        raise InvalidInputError("job: names neither an animation file nor its bytes")
     with tempfile.TemporaryDirectory() as tmp:
         src = Path(tmp) / "anim.npz"
         src.write_bytes(data)
@@ -488,7 +490,7 @@ class _Runner:
                 yield futures[fut], _result(fut.result, futures[fut])
         else:
             for job in jobs:
-                yield job, _result(lambda: fn(job), job)
+                yield job, _result(functools.partial(fn, job), job)
 
     def close(self) -> None:
         if self.pool is not None:

@@ -88,7 +88,7 @@ class Elements:
         first = np.concatenate([[0], np.cumsum(count)[:-1]])
         lo = np.array([v[:, :3].min(axis=0) for v in verts], dtype=np.float64)
         hi = np.array([v[:, :3].max(axis=0) for v in verts], dtype=np.float64)
-        indices = np.concatenate([f + o for f, o in zip(faces, offset)]).astype(np.uint32)
+        indices = np.concatenate([f + o for f, o in zip(faces, offset, strict=True)]).astype(np.uint32)
         return Elements(np.concatenate(verts), indices, first, count, lo, hi)
 
     @staticmethod
@@ -96,7 +96,7 @@ class Elements:
         """The elements of several groups, in order."""
         parts = []
         for g in groups:
-            for a, n in zip(g.first, g.count):
+            for a, n in zip(g.first, g.count, strict=True):
                 idx = g.indices[a : a + n].astype(np.int64)
                 used, local = np.unique(idx, return_inverse=True)
                 parts.append((g.vertices[used], local.reshape(-1, 3)))
@@ -195,7 +195,7 @@ def audience(
     d = np.linalg.norm(pos[:, None] - pos[None], axis=2)
     crowded = np.triu(d < 0.36, k=1)
     drop = np.zeros(len(pos), bool)
-    for i, j in zip(*np.nonzero(crowded)):
+    for i, j in zip(*np.nonzero(crowded), strict=True):
         if not drop[i]:
             drop[j] = True
     pos, detail = pos[~drop], detail[~drop]
@@ -316,7 +316,7 @@ def hall(rect: tuple[float, float, float, float], height: float) -> tuple[np.nda
     wall = lin((108, 108, 124))  # dim outside the pool of light: a dark blue-grey hall
     corners = [(x0, y0), (x1, y0), (x1, y1), (x0, y1)]
     walls = []
-    for (ax, ay), (bx, by) in zip(corners, corners[1:] + corners[:1]):
+    for (ax, ay), (bx, by) in zip(corners, corners[1:] + corners[:1], strict=True):
         q = np.array([[(ax, ay, 0), (bx, by, 0), (bx, by, height), (ax, ay, height)]], dtype=np.float64)
         t = np.concatenate([q[:, [0, 1, 2]], q[:, [0, 2, 3]]])
         p, n = _tris(t)

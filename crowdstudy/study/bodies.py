@@ -16,7 +16,7 @@ from __future__ import annotations
 import datetime as _dt
 import math
 import re
-from typing import Any, NamedTuple
+from typing import Any, NamedTuple, TypeGuard
 
 from crowdstudy.study.blinding import TOKEN_LENGTH, TOKEN_PATTERN
 from crowdstudy.study.schedule import PARTICIPANT_ID_PATTERN
@@ -72,11 +72,11 @@ class Timing(NamedTuple):
     quality: dict[str, Any]
 
 
-def _is_int(v: Any) -> bool:
+def _is_int(v: Any) -> TypeGuard[int]:
     return isinstance(v, int) and not isinstance(v, bool)
 
 
-def _is_ms(v: Any) -> bool:
+def _is_ms(v: Any) -> TypeGuard[float]:
     return not isinstance(v, bool) and isinstance(v, (int, float)) and math.isfinite(v) and 0 <= v <= MAX_RT_MS
 
 

@@ -173,9 +173,9 @@ def online_config(top: dict, source: str) -> OnlineConfig:
 
 def draw_checks(secret: str, participant_id: str, n_trials: int, n_checks: int, points: int) -> dict[int, int]:
     """{trial_index: asked-for scale point} of a participant's attention checks: ``n_checks``
-    distinct trials (never the first: it teaches the page) and points 1..points, drawn from an HMAC of the study's secret (so the
-    same participant always gets the same checks, and nobody without the secret can predict
-    them)."""
+    distinct trials (never the first: it teaches the page) and points 1..points, drawn from
+    an HMAC of the study's secret (so the same participant always gets the same checks, and
+    nobody without the secret can predict them)."""
     digest = hmac.new(
         secret.encode("utf-8"), f"crowdstudy-checks\x00{participant_id}".encode(), hashlib.sha256
     ).digest()

@@ -2,7 +2,7 @@
 
 SQLite (the default, one file) runs in WAL mode with ``synchronous=FULL``, so an answer is
 on disk when :meth:`StudyStore.record_answer` returns. SQLite allows one writer at a time
-and each commit costs an fsync (about 10 ms on a virtual disk), so all writes go through
+and each commit costs an fsync (slow on a virtual disk), so all writes go through
 one writer thread that commits the jobs arriving together in one transaction ("group
 commit"): each caller still returns only after the commit holding its write. Other
 databases (PostgreSQL for multi-site studies) run ordinary concurrent transactions. Every
@@ -186,7 +186,7 @@ class StudyStore:
         import sqlalchemy as sa
         from sqlalchemy import event
         from sqlalchemy.engine import make_url
-        from sqlalchemy.exc import ArgumentError
+        from sqlalchemy.exc import ArgumentError, NoSuchModuleError, OperationalError, ProgrammingError
 
         if not isinstance(url, str) or not url:
             raise InvalidInputError(f"--db must be an SQLAlchemy URL such as sqlite:///study.db, got {url!r}")
@@ -209,7 +209,7 @@ class StudyStore:
             kwargs.update(pool_size=5, max_overflow=15, pool_recycle=1800)
         try:
             self.engine = sa.create_engine(url, **kwargs)
-        except (ModuleNotFoundError, sa.exc.NoSuchModuleError) as exc:
+        except (ModuleNotFoundError, NoSuchModuleError) as exc:
             raise InvalidInputError(f"--db {url!r}: the database driver is not installed ({exc})") from None
         if self.is_sqlite:
 
@@ -247,7 +247,7 @@ class StudyStore:
                     conn.execute(sa.select(sa.func.pg_advisory_xact_lock(_SCHEMA_LOCK)))
                 self.metadata.create_all(conn)
                 _add_missing_columns(conn, self.metadata)
-        except (sa.exc.OperationalError, sa.exc.ProgrammingError) as exc:
+        except (OperationalError, ProgrammingError) as exc:
             raise InvalidInputError(f"--db {url!r}: cannot open the database ({exc.orig})") from None
         self._writer = GroupCommitWriter(self.engine) if self.is_sqlite else None
 
