@@ -105,7 +105,7 @@ def _base(sex: str, detail: int):
     w = _cluster_mean(weights, mapping, n)
     # one colour per face (no colour smeared across a big triangle): the part of the full
     # mesh's face under its centroid; a vertex is copied once per part of its faces
-    from scipy.spatial import cKDTree
+    from scipy.spatial import cKDTree  # pyright: ignore[reportAttributeAccessIssue]  (compiled, not in the stubs)
 
     full = parts[faces]
     full_part = np.where(full[:, 1] == full[:, 2], full[:, 1], full[:, 0])

@@ -47,7 +47,7 @@ _COLUMNS, _ROWS = 24, 14
 _THICKNESS = 0.003  # m between the sheet's outer and inner layers
 
 
-def _directions(polar: np.ndarray, azimuth: np.ndarray) -> np.ndarray:
+def _directions(polar: np.ndarray | float, azimuth: np.ndarray | float) -> np.ndarray:
     """Unit vectors at ``polar`` (from +z) and ``azimuth`` (from +y, the face, towards +x)."""
     s = np.sin(polar)
     return np.stack([s * np.sin(azimuth), s * np.cos(azimuth), np.cos(polar)], axis=-1)
