@@ -35,6 +35,7 @@ from crowdstudy.render.appearance import assign_appearance
 from crowdstudy.render.bodies import SURFACE_FACE_SCALE, BodyGroup, default_body_loader, group_bodies
 from crowdstudy.render.camera import look_at
 from crowdstudy.render.garments import dress_body
+from crowdstudy.render.hair import add_hair, crown_uv
 from crowdstudy.render.palette import assign_colors
 from crowdstudy.render.scene import Environment, build_environment, split_floor
 
@@ -338,7 +339,8 @@ def _dressed(body, codes: np.ndarray, look):
     if key not in _DRESSED:
         if len(_DRESSED) > 256:
             _DRESSED.clear()
-        _DRESSED[key] = dress_body(body, codes, look.hair_volume)
+        dressed = dress_body(body, codes, look.hair_volume)
+        _DRESSED[key] = add_hair(dressed, look.hair_style, crown_uv(body))
     return _DRESSED[key]
 
 
