@@ -37,13 +37,16 @@ docs: setup
 	@echo "[docs] built build/site/index.html"
 
 # Publish benchmark reports in the docs: copy build/bench/NAME.json (from `crowdstudy bench
-# NAME`) to docs/results/data/ for each NAME in RESULTS (default: the ones published already).
+# NAME`) to docs/results/data/ for each NAME in RESULTS (default: the ones published already),
+# with its figure build/bench/NAME.png where there is one.
 RESULTS ?= $(basename $(notdir $(wildcard docs/results/data/*.json)))
 results:
 	@mkdir -p docs/results/data
 	@for name in $(RESULTS); do \
 	    test -f build/bench/$$name.json || { echo "[results] build/bench/$$name.json missing: run crowdstudy bench first" >&2; exit 1; }; \
 	    cp build/bench/$$name.json docs/results/data/$$name.json && echo "[results] docs/results/data/$$name.json"; \
+	    if test -f build/bench/$$name.png; then \
+	        cp build/bench/$$name.png docs/results/data/$$name.png && echo "[results] docs/results/data/$$name.png"; fi; \
 	done
 
 # Re-resolve the newest allowed versions into constraints.txt (then `make test`, commit it).

@@ -16,6 +16,12 @@ and its MuJoCo peer.
   study's own crowds or on other seeds of the same cells (:mod:`crowdstudy.evaluation.acceptance`);
   with more than one seed, the spread per cell (:func:`seed_spread`) and its figure
   ``build/bench/physics_bars_seeds.png``;
+* ``--ablation [--groups NAME,...] [--cells ...] [--seconds 20] [--workers N]``: what each
+  addition to the paper's method buys: every study cell corrected with the paper's method
+  alone (``PhysicsConfig.paper()``), the defaults, two noise variants and the defaults
+  without each addition (:mod:`crowdstudy.physics.ablation`), the bars and ms per step of
+  each; resumable (:mod:`crowdstudy.evaluation.ablation_run`), with a summary per variant and
+  the heat map ``build/bench/physics_ablation.png`` (:mod:`crowdstudy.evaluation.ablation_report`);
 * the CG implementations on the same assembled 60-character system (fused single-launch
   PCG with the per-character tree preconditioner or 6x6 block Jacobi, scipy CG on a BSR
   matrix, warp.optim.linear.cg on a warp.sparse BSR matrix);
@@ -35,6 +41,7 @@ import os
 import statistics
 import sys
 import time
+from pathlib import Path
 
 import numpy as np
 
@@ -432,6 +439,33 @@ def _parser() -> argparse.ArgumentParser:
         help="seconds simulated per stadium size (one value, or one per size)",
     )
     parser.add_argument(
+        "--ablation",
+        action="store_true",
+        help="only the ablation: every study cell (or --cells) corrected with the paper's method "
+        "(PhysicsConfig.paper()), the defaults, and the defaults without each addition (--groups), "
+        "with the bars and ms per step of each; resumable (finished rows are cached under "
+        "build/bench/physics_ablation_cache/)",
+    )
+    parser.add_argument(
+        "--groups",
+        default="all",
+        metavar="NAME,...",
+        help="--ablation: the additions to switch off one at a time (default all; "
+        "crowdstudy.physics.ablation.ADDITIONS)",
+    )
+    parser.add_argument(
+        "--seconds", type=float, default=20.0, help="--ablation: seconds of each cell's clip (default 20, the study's)"
+    )
+    parser.add_argument(
+        "--workers", type=int, default=1, help="--ablation: cells corrected at once, in worker processes (default 1)"
+    )
+    parser.add_argument(
+        "--design",
+        default=None,
+        metavar="FILE.toml",
+        help="--ablation: the study design whose cells are corrected (default the paper's, stimuli/study.toml)",
+    )
+    parser.add_argument(
         "--light-bodies",
         action="store_true",
         help="stadium runs hand correct() body proxies without the meshes (needed at 5,000 "
@@ -504,6 +538,54 @@ def _main_bars(args, config, trial: str) -> int:
     return 0
 
 
+def _main_ablation(args) -> int:
+    """``--ablation``: the rows of :func:`crowdstudy.evaluation.ablation_run.run_ablation`, the
+    summary per variant and the figure (:mod:`crowdstudy.evaluation.ablation_report`)."""
+    from crowdstudy.design import load_design
+    from crowdstudy.errors import InvalidInputError
+    from crowdstudy.evaluation.ablation_report import ablation_figure, noise_bands, summarize
+    from crowdstudy.evaluation.ablation_run import NOISE_VARIANTS, AblationOptions, run_ablation, study_cells
+    from crowdstudy.physics.ablation import ADDITIONS, parse_additions
+
+    if args.config:
+        raise InvalidInputError(
+            "--config: --ablation compares the defaults with the paper's method and takes no --config"
+        )
+    groups = parse_additions(args.groups)
+    design = load_design(args.design)
+    try:
+        cells = study_cells(design, parse_cells(args.cells, list(design.densities)))
+    except SystemExit as exc:
+        raise InvalidInputError(str(exc)) from None
+    options = AblationOptions(
+        seconds=args.seconds,
+        cache_dir=report_path("physics_ablation_cache").with_suffix(""),
+        design_path=None if args.design is None else str(Path(args.design).resolve()),
+    )
+    figure_path = report_path("physics_ablation").with_suffix(".png")
+    rows = run_ablation(cells, groups, options, workers=args.workers)
+    summary = summarize(rows)
+    print(format_table(summary), flush=True)
+    figure = ablation_figure(rows, path=figure_path, tolerances=TOLERANCES)
+    print(f"figure: {figure}", flush=True)
+    path = write_report(
+        "physics_ablation",
+        rows,
+        seed=None,
+        summary=summary,
+        noise=noise_bands(rows),
+        groups={
+            name: {"description": ADDITIONS[name].description, "changes": ADDITIONS[name].changes} for name in groups
+        },
+        noise_variants=NOISE_VARIANTS,
+        seconds=args.seconds,
+        bar_text=BAR_TEXT,
+        figure=str(figure),
+    )
+    print(f"wrote {path}", file=sys.stderr)
+    return 0
+
+
 def _main_curve(args, config, trial: str, sizes: list[int], devices: list[dict], cuda: bool) -> int:
     d5 = _scene("D5", args.steps / 60.0 + 0.5)
     rows = cost_curve(sizes, args.steps, base=d5, config=config)
@@ -557,6 +639,8 @@ def main(argv: list[str]) -> int:
         raise SystemExit(f"--sizes: expected comma-separated character counts, got {args.sizes!r}") from None
     if not sizes or min(sizes) < 1:
         raise SystemExit(f"--sizes: expected positive character counts, got {args.sizes!r}")
+    if args.ablation:
+        return _main_ablation(args)
     if args.stadium:
         return _main_stadium(args, config, trial)
     if args.bars_only:

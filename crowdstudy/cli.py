@@ -78,6 +78,11 @@ COMMANDS: tuple[tuple[str, str, str], ...] = (
         "Import a skinned glTF character (Mixamo, Blender, VRM...) as a body record.",
     ),
     (
+        "import-crowd",
+        "crowdstudy.interchange.cli_import_crowd",
+        "Import a glTF file's skinned, animated characters as a crowd animation (.npz).",
+    ),
+    (
         "stimuli",
         "crowdstudy.render.cli_stimuli",
         "Build the whole stimulus video set and its manifest from a study design.",

@@ -68,6 +68,15 @@ The motion (:mod:`crowdstudy.motion.baseline`):
     :func:`crowdstudy.provenance.provenance` of the stage that wrote the file: seed, git
     SHA, package versions, and (``stage``, ``design``) where known. No timestamps.
 
+An imported crowd (:mod:`crowdstudy.interchange.gltf_crowd`, ``crowdstudy import-crowd``):
+
+``imported`` (dict)
+    where the animation came from, so the corrected motion can be written back: ``format``
+    (``"gltf"``), ``file`` and its ``sha256``, the ``animations`` sampled, ``time_start``
+    (s, the file time of frame 0), ``fps``, the ``overrides`` given with ``--map`` and per
+    character its ``skin`` or ``node``, its ``root`` node and its ``mapping`` ({physics
+    joint: {``joint``, ``name``, ``how``}}). Such a crowd's ``scenario`` is ``"imported"``.
+
 The correction (:func:`crowdstudy.physics.corrector.correct`):
 
 ``physics`` (:class:`PhysicsMeta`)
@@ -325,6 +334,7 @@ _CHECKS: dict[str, Callable[[object, str], None]] = {
     "physics": _physics,
     "provenance": _optional(_mapping),
     "baseline_provenance": _optional(_mapping),
+    "imported": _mapping,
 }
 
 

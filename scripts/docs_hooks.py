@@ -17,7 +17,10 @@ Nothing here is written into ``docs/``: the pages are added to the build in memo
   ``- `column`: meaning`` becomes a table of the constant's columns in the code's order
   with those meanings; a column without a meaning, or a meaning for a column the code does
   not have, is a warning (an error under ``mkdocs build --strict``). Likewise
-  ``<!-- results: index -->`` becomes the table of published reports.
+  ``<!-- results: index -->`` becomes the table of published reports, and
+  ``<!-- results: STEM KEY [COLUMN,...] -->`` the table ``KEY`` (``rows``, ``summary`` ...)
+  of the published report ``STEM`` (:func:`results_pages.report_table`), headed by its
+  command, machine and date: a hand-written page quotes measured numbers without typing them.
 
 Generation functions are importable (``tests/test_docs.py`` uses them without MkDocs).
 """
@@ -31,6 +34,7 @@ import importlib
 import io
 import logging
 import os
+import posixpath
 import re
 import sys
 from pathlib import Path
@@ -231,9 +235,21 @@ def column_table(dotted: str, described: str, where: str = "") -> tuple[str, lis
     return "\n".join(lines) + "\n", problems
 
 
+_RESULTS_RE = re.compile(r"^<!-- results: ([\w-]+) ([\w-]+)(?: ([\w,]+))? -->$", re.M)
+
+
 def expand_markers(markdown: str, where: str = "") -> tuple[str, list[str]]:
     """``markdown`` with its column and results markers expanded; the problems found."""
     problems: list[str] = []
+
+    def results(match: re.Match) -> str:
+        stem, key, columns = match.group(1), match.group(2), match.group(3)
+        link = posixpath.relpath(results_pages.page_path(stem), posixpath.dirname(where) or ".")
+        try:
+            return results_pages.report_table(stem, key, columns.split(",") if columns else None, link=link)
+        except ValueError as exc:
+            problems.append(f"{where}: {exc}")
+            return match.group(0)
 
     def columns(match: re.Match) -> str:
         table, found = column_table(match.group(1), match.group(2), where)
@@ -241,6 +257,7 @@ def expand_markers(markdown: str, where: str = "") -> tuple[str, list[str]]:
         return table
 
     markdown = _COLUMNS_RE.sub(columns, markdown)
+    markdown = _RESULTS_RE.sub(results, markdown)
     if "<!-- results: index -->" in markdown:
         markdown = markdown.replace("<!-- results: index -->", results_pages.index_table(results_pages.load_reports()))
     return markdown, problems

@@ -25,7 +25,15 @@ ROOT = Path(__file__).resolve().parent.parent
 DATA_DIR = ROOT / "docs" / "results" / "data"
 BENCH_DIR = ROOT / "benchmarks"
 
-__all__ = ["load_reports", "render_report", "render_all", "heading_line", "index_table", "page_path"]
+__all__ = [
+    "load_reports",
+    "render_report",
+    "render_all",
+    "heading_line",
+    "index_table",
+    "page_path",
+    "report_table",
+]
 
 
 def load_reports(data_dir: Path = DATA_DIR) -> dict[str, dict]:
@@ -95,12 +103,14 @@ def heading_line(report: dict) -> str:
     return f"`{_cell(command)}` · {_cell(_machine_text(report.get('machine')))} · {date}"
 
 
-def _table(rows: list[dict]) -> list[str]:
+def _table(rows: list[dict], only: list[str] | None = None) -> list[str]:
     columns: list[str] = []
     for row in rows:
         for key in row if isinstance(row, dict) else {}:
             if key not in columns:
                 columns.append(key)
+    if only is not None:
+        columns = [c for c in only if c in columns]
     if not columns:
         return ["(no rows)"]
     lines = ["| " + " | ".join(_cell(c) for c in columns) + " |", "|" + " --- |" * len(columns)]
@@ -142,10 +152,8 @@ def render_report(stem: str, report: dict) -> str:
     for key, value in report.items():
         if key in _SKIP:
             continue
-        if isinstance(value, list) and value and all(isinstance(v, dict) for v in value):
-            out += ["", f"## {key}", "", head, ""] + _table(value)
-        elif isinstance(value, dict) and value and all(isinstance(v, dict) for v in value.values()):
-            rows = [{"": k, **v} for k, v in value.items()]
+        rows = _key_rows(value)
+        if rows is not None:
             out += ["", f"## {key}", "", head, ""] + _table(rows)
         else:
             settings.append((key, value))
@@ -176,6 +184,44 @@ def index_table(reports: dict[str, dict]) -> str:
             f"{str(rep.get('date') or 'not recorded')[:10]} |"
         )
     return "\n".join(lines) + "\n"
+
+
+def _key_rows(value) -> list[dict] | None:
+    """A report key's value as table rows: a list of dicts as it is, a dict of dicts as one
+    row per key (first column empty-named, as on the report's page); None otherwise."""
+    if isinstance(value, list) and value and all(isinstance(v, dict) for v in value):
+        return value
+    if isinstance(value, dict) and value and all(isinstance(v, dict) for v in value.values()):
+        return [{"": k, **v} for k, v in value.items()]
+    return None
+
+
+def report_table(
+    stem: str, key: str, columns: list[str] | None = None, data_dir: Path = DATA_DIR, link: str | None = None
+) -> str:
+    """One table of a published report, for a hand-written page: the heading line (command,
+    machine, date), then the table of the report's ``key`` (``rows`` or any list or dict of
+    rows), restricted to ``columns`` in that order (None: all), then a link to the report's
+    full page (``link``: its path relative to the including page; None: no link). The
+    numbers come from ``docs/results/data/STEM.json`` at build time, so they cannot drift
+    from the published report. A missing report, key or column is a ValueError."""
+    path = Path(data_dir) / f"{stem}.json"
+    if not path.is_file():
+        raise ValueError(f"results {stem}: no report {path.name} in {data_dir} (make results RESULTS={stem})")
+    report = load_reports(data_dir)[stem]
+    rows = _key_rows(report.get(key))
+    if rows is None:
+        raise ValueError(f"results {stem}: the report has no table {key!r}")
+    present = {c for row in rows for c in row}
+    unknown = [c for c in columns or [] if c not in present]
+    if unknown:
+        raise ValueError(f"results {stem} {key}: no column(s) {unknown}")
+    if columns is not None and isinstance(report.get(key), dict):
+        columns = ["", *columns]  # a dict's rows keep their names
+    out = [heading_line(report), "", *_table(rows, columns)]
+    if link:
+        out += ["", f"All the columns and rows: [{stem}]({link})."]
+    return "\n".join(out) + "\n"
 
 
 def render_all(data_dir: Path = DATA_DIR) -> dict[str, str]:

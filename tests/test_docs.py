@@ -225,3 +225,32 @@ def test_results_tables_are_headed_by_command_machine_and_date(results, tmp_path
 def test_published_reports_have_their_heading(results):
     for rel, text in results.render_all().items():
         assert "not recorded" not in text, f"{rel}: a published report lacks its command, machine or date"
+
+
+def test_a_page_quotes_a_published_table(results, hooks, tmp_path):
+    report = {
+        "benchmark": "toy",
+        "rows": [{"case": "a", "x": 1.5}],
+        "summary": [{"variant": "v", "a_pct": 12.345, "ms_ratio": 0.9}],
+        "groups": {"g": {"description": "d", "changes": {"a.b": 0}}},
+        "command": "crowdstudy bench toy",
+        "date": "2026-12-07T10:00:00+00:00",
+        "machine": {"cpu": "Some CPU", "cores": 2, "gpus": []},
+    }
+    (tmp_path / "toy.json").write_text(json.dumps(report))
+    text = results.report_table("toy", "summary", ["ms_ratio", "variant"], data_dir=tmp_path, link="../t.md")
+    lines = text.splitlines()
+    assert lines[0].startswith("`crowdstudy bench toy` · Some CPU")
+    assert lines[2:5] == ["| ms_ratio | variant |", "| --- | --- |", "| 0.9 | v |"]
+    assert "[toy](../t.md)" in text
+    groups = results.report_table("toy", "groups", ["description"], data_dir=tmp_path).splitlines()
+    assert groups[2:5] == ["|  | description |", "| --- | --- |", "| g | d |"]
+    for key, columns in (("nothing", None), ("summary", ["b_pct"])):
+        with pytest.raises(ValueError, match="toy"):
+            results.report_table("toy", key, columns, data_dir=tmp_path)
+    with pytest.raises(ValueError, match="make results"):
+        results.report_table("absent", "rows", data_dir=tmp_path)
+    # the hook leaves an unknown report's marker in place and names the page
+    marker = "<!-- results: absent_report summary variant -->"
+    expanded, problems = hooks.expand_markers(f"x\n{marker}\n", "concepts/p.md")
+    assert marker in expanded and problems and problems[0].startswith("concepts/p.md: results absent_report")

@@ -443,12 +443,13 @@ def test_import_errors_name_the_problem(mixamo, tmp_path):
         load_body({"model": "gltf", "path": str(path), "betas": [0.0]})
     with pytest.raises(InvalidInputError, match="height"):
         load_body({"model": "gltf", "path": str(path), "height": 7})
-    # a rig without hips: the error names the missing joint
+    # a hip joint whose name is in no table: the skeleton's shape finds it, the names the rest
     raw = path.read_bytes().replace(b'"mixamorig:Hips"', b'"mixamorig:Ribs"')
-    bad = tmp_path / "no_hips.glb"
-    bad.write_bytes(raw)
-    with pytest.raises(InvalidInputError, match="pelvis"):
-        read_character(bad)
+    renamed = tmp_path / "ribs.glb"
+    renamed.write_bytes(raw)
+    ch = read_character(renamed)
+    assert ch.joint_map["mixamorig:Ribs"] == "pelvis" and ch.convention == "topology+mixamo"
+    assert ch.rig_map.joints["pelvis"].how == "topology" and ch.rig_map.joints["left_knee"].how == "name"
     (tmp_path / "junk.glb").write_bytes(b"glTF\x02\x00\x00\x00\x20\x00\x00\x00" + b"\x00" * 20)
     with pytest.raises(InvalidInputError, match="junk.glb"):
         read_character(tmp_path / "junk.glb")

@@ -233,7 +233,7 @@ def test_the_paper_preset_switches_off_every_addition():
     no output stage), whatever the defaults say."""
     paper, default = PhysicsConfig.paper(), PhysicsConfig()
     assert paper.control.damping == 0.006 and paper.control.pelvis_scale > 1 and paper.control.feet_scale > 1
-    assert paper.control.arm_scale == paper.control.trunk_scale == 1.0
+    assert paper.control.arm_scale == paper.control.trunk_scale == paper.control.hips_scale == 1.0
     assert not paper.solver.feedforward and paper.body.gravity > 0 and paper.solver.dt == 1.0 / 60.0
     assert paper.control.pose_translation_stiffness == paper.control.feet_translation_stiffness == 0
     assert paper.feet.anchor_stiffness == 0

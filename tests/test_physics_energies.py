@@ -559,9 +559,10 @@ def test_stance_foot_anchor_assembly_matches_reference():
     np.testing.assert_allclose(on.foot_offset.numpy()[feet, :2], shift[feet, :2], atol=1e-6)
 
 
-def test_arm_and_trunk_scales_set_the_pd_gains_of_exactly_their_joints(small_system):
+def test_arm_trunk_and_hips_scales_set_the_pd_gains_of_exactly_their_joints(small_system):
     """``arm_scale`` multiplies k and d of the collars to hands, ``trunk_scale`` of spine2,
-    spine3, neck and head; the pelvis and feet groups keep theirs, the legs the plain k."""
+    spine3, neck and head, ``hips_scale`` of the hips and spine1; the pelvis (the root) and
+    feet groups keep theirs, the legs the plain k."""
     from crowdstudy.body.skeleton import JOINT_INDEX
     from crowdstudy.physics import Solver
 
@@ -583,18 +584,26 @@ def test_arm_and_trunk_scales_set_the_pd_gains_of_exactly_their_joints(small_sys
         )
     ]
     trunk = [JOINT_INDEX[n] for n in ("spine2", "spine3", "neck", "head")]
-    pelvis = [JOINT_INDEX[n] for n in ("pelvis", "left_hip", "right_hip", "spine1")]
+    hips = [JOINT_INDEX[n] for n in ("left_hip", "right_hip", "spine1")]
+    pelvis = [JOINT_INDEX["pelvis"]]
     feet = [JOINT_INDEX[n] for n in ("left_ankle", "right_ankle", "left_foot", "right_foot")]
     expect = np.ones(len(joint))
-    for idx, scale in ((arms, 0.5), (trunk, 4.0), (pelvis, cfg.control.pelvis_scale), (feet, cfg.control.feet_scale)):
+    for idx, scale in (
+        (arms, 0.5),
+        (trunk, 4.0),
+        (hips, 3.0),
+        (pelvis, cfg.control.pelvis_scale),
+        (feet, cfg.control.feet_scale),
+    ):
         expect[np.isin(joint, idx)] = scale
     assert np.isin(joint, [JOINT_INDEX["left_knee"], JOINT_INDEX["right_knee"]]).sum() == 4  # two characters
-    solver = Solver(model, cfg.with_values(arm_scale=0.5, trunk_scale=4.0))
+    solver = Solver(model, cfg.with_values(arm_scale=0.5, trunk_scale=4.0, hips_scale=3.0))
     np.testing.assert_allclose(solver.body_k.numpy(), cfg.control.stiffness * expect, rtol=1e-6)
     np.testing.assert_allclose(solver.body_d.numpy(), cfg.control.damping * expect, rtol=1e-6)
     default = Solver(model, cfg)
     expect[np.isin(joint, arms)] = 0.25  # the defaults: soft arms (held by the pose springs)
     expect[np.isin(joint, trunk)] = 1.0  # and the paper's single body k for the trunk
+    expect[np.isin(joint, hips)] = cfg.control.pelvis_scale  # the hips as stiff as the pelvis
     np.testing.assert_allclose(default.body_k.numpy(), cfg.control.stiffness * expect, rtol=1e-6)
 
 

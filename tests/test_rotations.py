@@ -60,3 +60,21 @@ def test_signs_blends_and_alignment_take_the_short_arc():
     np.testing.assert_allclose(np.abs(np.sum(mid * q, axis=-1)), 1.0, atol=1e-12)
     track = quat_align_signs(q[:, None] * np.where(rng.uniform(size=(200, 1, 1)) < 0.5, -1.0, 1.0), axis=0)
     assert np.all(np.sum(track[1:] * track[:-1], axis=-1) >= 0.0)
+
+
+def test_quat_align_signs_matches_the_frame_by_frame_rule():
+    """Each quaternion takes the sign nearest its aligned predecessor; an exactly orthogonal
+    neighbour (dot 0) keeps its own sign and the run starts again from it."""
+
+    def one_by_one(q, axis):
+        q = np.moveaxis(np.array(q, dtype=np.float64), axis, 0)
+        for i in range(1, len(q)):
+            q[i][np.sum(q[i] * q[i - 1], axis=-1) < 0.0] *= -1.0
+        return np.moveaxis(q, 0, axis)
+
+    rng = np.random.default_rng(5)
+    q = rng.normal(size=(40, 3, 5, 4))
+    q[10, 1, 2], q[11, 1, 2], q[12, 1, 2] = [1, 0, 0, 0], [0, 1, 0, 0], [0, -1, 0, 0]
+    q[20, 0, 0], q[21, 0, 0] = [0, 0, -1, 0], [1, 0, 0, 0]
+    for arr, axis in ((q, 0), (np.moveaxis(q, 0, 2), 2), (q[:1], 0), (q[:, 0, 0], 0)):
+        np.testing.assert_array_equal(quat_align_signs(arr, axis=axis), one_by_one(arr, axis))

@@ -1,39 +1,49 @@
-"""Import a skinned glTF character as a toolkit body (``{"model": "gltf", ...}`` records).
+"""Import a glTF character as a toolkit body (``{"model": "gltf", ...}`` records).
 
 A body record::
 
     {"model": "gltf", "path": "character.glb", "skin": 0, "height": 1.74, "sex": "female"}
 
-``skin`` (default 0) picks the skin in the file (a crowdstudy export holds one per
-character); every skinned mesh bound to that skeleton is merged. ``height`` (optional)
-rescales the character uniformly to that stature in metres; ``sex`` is a label.
+``skin`` (default 0) picks the skinned character that uses that skin (a crowdstudy export
+holds one per character; skins over the same joints are one character, every mesh bound
+to them merged, with the meshes parented rigidly under its joints); ``node`` instead picks a
+rigid-parts character by its root node (meshes parented to animated joints, no skin:
+:mod:`crowdstudy.body.gltf_rig`). ``map`` ({physics joint: joint name or index}) forces
+joints of the mapping. ``height`` (optional) rescales the character uniformly to that
+stature in metres; ``sex`` is a label.
 
 Steps (:func:`read_character`):
 
 1. The mesh and the joints are taken in the bind pose (the inverse bind matrices), carried
-   to the file's world (glTF's Y-up metres) by ``J_r IBM_r`` of the skin's pelvis joint r
-   (armature scale and rotation included; an animated default pose does not deform it).
-2. Joint names are mapped to the 24 joints (:mod:`crowdstudy.body.joint_names`); a VRM file's
-   humanoid table wins over names. Missing optional joints are placed from their
+   to the file's world (glTF's Y-up metres) by ``J_r IBM_r`` of the skeleton's top joint r
+   (armature scale and rotation included; an animated default pose does not deform it);
+   rigid parts and rigid-parts characters in the default pose.
+2. Joints are mapped to the 24 joints by :func:`crowdstudy.body.rig_map.map_rig`: a VRM
+   file's humanoid table, else the naming tables (:mod:`crowdstudy.body.joint_names`), else
+   the skeleton's topology and rest geometry. Missing optional joints are placed from their
    neighbours: ``spine3`` half-way between ``spine2`` and ``neck``; a collar 40 % of the way
    from ``spine3`` to the shoulder; ``*_hand`` 0.3 of the forearm's length beyond the wrist;
    ``*_foot`` 0.35 of the shin's length beyond the ankle, forward and down to the sole.
-3. Weights: every skin joint gives its weights to its nearest mapped ancestor (itself when
-   mapped; fingers to ``*_hand`` or ``*_wrist``, twist bones to their limb joint, an
-   armature root above the hips to ``pelvis``).
+3. Weights: every rig joint gives its weights (and its rigid parts) to the physics joint of
+   :meth:`~crowdstudy.body.rig_map.RigMap.weight_joint` (its nearest mapped ancestor:
+   fingers to ``*_hand`` or ``*_wrist``, twist bones to their limb joint, an armature root
+   above the hips to ``pelvis``; an IK target beside the legs to the nearest mapped joint).
+   Skin weights that do not sum to one are normalised.
 4. Frame: glTF -> toolkit axes (inverse of the export's ``(x, y, z) -> (-x, z, y)``), then
    the up direction (pelvis to head) snapped to the nearest axis is turned to +z and the
    hips' left-right line turned about z so the character faces +y, pelvis at the origin.
 5. Rest pose (the toolkit's T-pose convention): upper arms and forearms more than
    ``ARM_ELEVATION_LIMIT`` above or below horizontal (an A-pose) are raised or lowered to
    that limit by a turn about the forward axis (in the coronal plane); thighs and shins
-   more than ``LEG_TILT_LIMIT`` from vertical are brought to it. The mesh follows by linear blend skinning with the 24-joint weights. A file already
-   in the toolkit's convention (a crowdstudy export) passes through unchanged.
+   more than ``LEG_TILT_LIMIT`` from vertical are brought to it. The mesh follows by linear
+   blend skinning with the 24-joint weights. A file already in the toolkit's convention
+   (a crowdstudy export) passes through unchanged.
 
-The steps are public pieces for importers of other files: :func:`map_skin_joints` (step 2's
-mapping and step 3's weight targets), :func:`read_skin_binds` (a skin's bind pose, step 1)
-and :func:`read_skinned_mesh` (the meshes bound to those skins, merged, step 1), on the
-node tree of :func:`node_parents` and :func:`node_world_matrices`.
+:class:`GltfCharacter` keeps what an importer of the character's animation needs to turn
+the file's joint motion into the 24 joints' and back (``rig``, ``rig_map``, ``frame``,
+``pelvis``, ``rest_fix``: :mod:`crowdstudy.interchange.retarget`). The older name-only
+pieces :func:`map_skin_joints`, :func:`read_skin_binds` and :func:`read_skinned_mesh` read
+one skin on the node tree of :func:`node_parents` and :func:`node_world_matrices`.
 """
 
 from __future__ import annotations
@@ -46,8 +56,10 @@ from pathlib import Path
 import numpy as np
 
 from crowdstudy.body.gltf_container import Z_UP_TO_Y_UP, GltfFile, read_gltf
+from crowdstudy.body.gltf_rig import CharacterSpec, Rig, character_for_record, read_rig
 from crowdstudy.body.joint_names import VRM_BONES, match_names
 from crowdstudy.body.model import Body, check_fields
+from crowdstudy.body.rig_map import OPTIONAL_JOINTS, RigMap, check_hierarchy, map_rig
 from crowdstudy.body.rotations import axis_angle_to_matrix, quaternion_to_matrix, rotation_between
 from crowdstudy.body.skeleton import JOINT_INDEX, JOINT_NAMES, NUM_JOINTS, PARENTS, forward_kinematics
 from crowdstudy.errors import InvalidInputError
@@ -55,12 +67,14 @@ from crowdstudy.errors import InvalidInputError
 __all__ = [
     "GltfCharacter",
     "read_character",
+    "character_from_gltf",
+    "body_from_character",
     "load_gltf_body",
     "node_local_matrix",
     "RECORD_FIELDS",
     "ARM_ELEVATION_LIMIT",
     "LEG_TILT_LIMIT",
-    "OPTIONAL_JOINTS",
+    "map_character_rig",
     "SkinJointMap",
     "map_skin_joints",
     "SkinBind",
@@ -72,13 +86,11 @@ __all__ = [
 ]
 
 #: Fields a ``{"model": "gltf"}`` body record may hold.
-RECORD_FIELDS = ("model", "path", "skin", "height", "sex")
+RECORD_FIELDS = ("model", "path", "skin", "node", "map", "height", "sex")
 #: Largest angle (radians) of an upper arm or forearm above/below horizontal in the rest pose.
 ARM_ELEVATION_LIMIT = math.radians(5.0)
 #: Largest angle (radians) of a thigh or shin from vertical in the rest pose.
 LEG_TILT_LIMIT = math.radians(10.0)
-#: Joints that may be missing from a file (placed from their neighbours).
-OPTIONAL_JOINTS = ("spine3", "left_collar", "right_collar", "left_hand", "right_hand", "left_foot", "right_foot")
 
 
 @dataclasses.dataclass
@@ -92,8 +104,19 @@ class GltfCharacter:
         uv: (V, 2) float32, origin bottom-left, or None; texture: (H, W, 3) uint8 or None.
         joint_map: {file node name: our joint}; unmapped: {file node name: our joint that
             takes its weights}; synthesized: joints placed from their neighbours.
-        convention: the naming convention found ("mixamo", "vrm", ...).
+        convention: how the joints were found: a naming convention ("mixamo", "vrm", ...),
+            "topology", or both ("topology+rigify").
         sha256: of the file's bytes.
+        spec, rig, rig_map: the character in the file (:class:`~crowdstudy.body.gltf_rig.CharacterSpec`),
+            its rig and mesh in the bind pose (:class:`~crowdstudy.body.gltf_rig.Rig`) and the
+            mapping of its joints (:class:`~crowdstudy.body.rig_map.RigMap`).
+        frame: (3, 3) rotation from the toolkit's axes of the file's world (glTF -> Z up) to the
+            rest frame (facing +y); pelvis: (3,) the pelvis at bind time in those Z-up axes, m;
+            rest_fix: (24, 3, 3) global rotation that brought each joint into the rest
+            convention (step 5; identity for most joints); scale: the ``height`` rescale.
+            A vertex at bind-time world position x (glTF axes) rests at
+            ``scale * rest_fix_j (frame (C x - pelvis) - joint_j) + ...`` (LBS over joints j),
+            with ``C = Z_UP_TO_Y_UP.T``.
     """
 
     vertices: np.ndarray
@@ -107,6 +130,13 @@ class GltfCharacter:
     synthesized: list
     convention: str
     sha256: str
+    spec: CharacterSpec | None = None
+    rig: Rig | None = None
+    rig_map: RigMap | None = None
+    frame: np.ndarray | None = None
+    pelvis: np.ndarray | None = None
+    rest_fix: np.ndarray | None = None
+    scale: float = 1.0
 
     @property
     def height(self) -> float:
@@ -219,39 +249,113 @@ def _synthesize(pos: dict[str, np.ndarray], missing: list[str]) -> None:
             pos[name] = pos[f"{side}_ankle"] + shin * np.array([0.0, 0.3, -0.12])
 
 
-def read_character(path: str | Path, *, skin: int = 0, height: float | None = None) -> GltfCharacter:
-    """Read skin ``skin`` of a glTF file as a :class:`GltfCharacter` (see the module docstring).
+def read_character(
+    path: str | Path,
+    *,
+    skin: int | None = 0,
+    node: int | None = None,
+    height: float | None = None,
+    overrides: dict | None = None,
+) -> GltfCharacter:
+    """Read one character of a glTF file as a :class:`GltfCharacter` (see the module
+    docstring): the skinned character with skin ``skin``, or the rigid-parts character whose
+    root is node ``node``; ``overrides`` ({physics joint: joint name or index}) force joints
+    of the mapping (:func:`~crowdstudy.body.rig_map.map_rig`).
 
-    Raises InvalidInputError naming the file and what is missing (no skin, a joint without a
-    counterpart, a hierarchy that does not match the 24-joint tree).
+    Raises InvalidInputError naming the file and what is missing (no skin, required joints
+    without a counterpart, a rig that is not a humanoid's).
     """
     path = Path(path)
     gltf = read_gltf(path)
-    _check_skin(gltf.doc, skin, path)
     parent = node_parents(gltf.doc)
     world = node_world_matrices(gltf.doc, parent)
-    joint_map = map_skin_joints(gltf.doc, skin, parent, path)
-    binds = read_skin_binds(gltf, joint_map, world, path)
-    mesh = read_skinned_mesh(gltf, binds, skin, path)
-    v, joints = _upright(mesh.vertices, binds[skin], joint_map)
-    v, new_joints = _straighten_rest_pose(v, joints, mesh.weights)
+    spec = character_for_record(gltf.doc, parent, path, skin=skin, node=node)
+    return character_from_gltf(gltf, spec, parent, world, height=height, overrides=overrides)
+
+
+def character_from_gltf(
+    gltf: GltfFile,
+    spec: CharacterSpec,
+    parent: np.ndarray,
+    world: np.ndarray,
+    *,
+    height: float | None = None,
+    overrides: dict | None = None,
+    sha256: str | None = None,
+) -> GltfCharacter:
+    """:func:`read_character` on a loaded file: character ``spec`` of ``gltf`` with the
+    document's ``parent`` (nodes,) and default-pose ``world`` (nodes, 4, 4) matrices."""
+    path = gltf.path
+    rig = read_rig(gltf, spec, parent, world, path)
+    rmap = map_character_rig(gltf.doc, rig, spec, world, path, overrides)
+    targets = np.array([JOINT_INDEX[rmap.weight_joint(k)] for k in range(len(rig.nodes))])
+    weights = np.zeros((len(rig.vertices), NUM_JOINTS))
+    for k in range(len(rig.nodes)):
+        weights[:, targets[k]] += rig.weights[:, k]
+    v, joints, frame, pelvis = _upright_rig(rig, rmap)
+    v, new_joints, fix = _straighten_rest_pose(v, joints, weights)
+    scale = 1.0
     if height is not None:
         scale = float(height) / float(v[:, 2].max() - v[:, 2].min())
         v, new_joints = v * scale, new_joints * scale
-    uv, texture = _merge_uv(path, gltf, mesh.uvs, mesh.images)
+    uv, texture = _merge_uv(path, gltf, rig.uvs, rig.images)
+    hows = {m.how if m.how != "name" else m.detail for m in rmap.joints.values()}
     return GltfCharacter(
         vertices=v,
-        faces=mesh.faces,
-        weights=mesh.weights.astype(np.float32),
+        faces=rig.faces,
+        weights=weights.astype(np.float32),
         joints=new_joints,
         uv=uv,
         texture=texture,
-        joint_map={joint_map.names[k]: val for k, val in joint_map.node_map.items()},
-        unmapped=joint_map.unmapped,
-        synthesized=list(joint_map.missing),
-        convention=joint_map.convention,
-        sha256=hashlib.sha256(path.read_bytes()).hexdigest(),
+        joint_map={rmap.names[m.source]: j for j, m in rmap.joints.items()},
+        unmapped={rmap.names[k]: rmap.weight_joint(k) for k in range(len(rig.nodes)) if k not in rmap.source_to_joint},
+        synthesized=list(rmap.missing),
+        convention="+".join(sorted(hows, key=lambda h: (h != "topology", h))),
+        sha256=sha256 or hashlib.sha256(path.read_bytes()).hexdigest(),
+        spec=spec,
+        rig=rig,
+        rig_map=rmap,
+        frame=frame,
+        pelvis=pelvis,
+        rest_fix=fix,
+        scale=scale,
     )
+
+
+def map_character_rig(
+    doc: dict, rig: Rig, spec: CharacterSpec, world: np.ndarray, path: Path, overrides: dict | None = None
+) -> RigMap:
+    """The :class:`~crowdstudy.body.rig_map.RigMap` of a character's rig: a VRM humanoid
+    table when the file has one naming at least 15 joints, else names and topology; the
+    rest positions in Z-up axes, and glTF's front (+Z under the skeleton's parent) as the
+    forward direction when nothing else tells left from right."""
+    conv = Z_UP_TO_Y_UP.T  # glTF -> toolkit axes
+    rest = rig.bind[:, :3, 3] @ conv.T
+    index = {int(n): k for k, n in enumerate(rig.nodes)}
+    vrm = {index[n]: j for n, j in _vrm_map(doc).items() if n in index}
+    top_parent = node_parents(doc)[spec.root]
+    up_frame = world[top_parent][:3, :3] if top_parent >= 0 else np.eye(3)
+    forward = conv @ (up_frame @ np.array([0.0, 0.0, 1.0]))
+    label = f"glTF file {path}: character at node {spec.root}"
+    table = ("vrm-extension", vrm) if len(vrm) >= 15 else None
+    return map_rig(rig.names, rig.parents, rest, forward=forward, overrides=overrides, label=label, table=table)
+
+
+def _upright_rig(rig: Rig, rmap: RigMap) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The bind-pose mesh (file world) -> the toolkit's rest frame (Z up, facing +y, pelvis
+    at the origin): ``(vertices (V, 3), joints (24, 3), frame (3, 3), pelvis (3,))``,
+    missing optional joints placed from their neighbours."""
+    conv = Z_UP_TO_Y_UP.T  # glTF -> toolkit
+    v = rig.vertices @ conv.T
+    pos = {j: conv @ rig.bind[m.source][:3, 3] for j, m in rmap.joints.items()}
+    missing = rmap.missing
+    _synthesize(pos, [j for j in JOINT_NAMES if j in missing and j not in ("left_foot", "right_foot")])
+    frame = _upright_frame(pos)
+    pelvis = pos["pelvis"].copy()
+    v = (v - pelvis) @ frame.T
+    pos = {k: frame @ (p - pelvis) for k, p in pos.items()}
+    _synthesize(pos, [j for j in ("left_foot", "right_foot") if j in missing])
+    return v, np.stack([pos[j] for j in JOINT_NAMES]), frame, pelvis
 
 
 def _check_skin(doc: dict, skin: int, path: Path) -> None:
@@ -327,7 +431,7 @@ def map_skin_joints(doc: dict, skin: int, parent: np.ndarray, path: Path) -> Ski
             f"{convention or 'none'}; joint names seen: {', '.join(list(names.values())[:12])}...)"
         )
     unmapped = {names[j]: _nearest_mapped(j, node_map, parent) for j in skin_joints if j not in node_map}
-    _check_hierarchy(path, node_map, parent, found)
+    check_hierarchy(node_map, parent, f"glTF file {path}")
     return SkinJointMap(
         skin=skin,
         nodes=tuple(skin_joints),
@@ -469,30 +573,12 @@ def _primitive_vertices(
     return p, wsum / total
 
 
-def _upright(vertices: np.ndarray, bind: SkinBind, joint_map: SkinJointMap) -> tuple[np.ndarray, np.ndarray]:
-    """Vertices (V, 3) in the file's world and the skin's bind pose -> the toolkit's rest
-    frame (Z up, facing +y, pelvis at the origin, metres): the vertices and the (24, 3)
-    joints, missing optional joints placed from their neighbours."""
-    conv = Z_UP_TO_Y_UP.T  # glTF -> toolkit
-    v = vertices @ conv.T
-    bind_joints = bind.to_world @ np.linalg.inv(bind.ibm)  # (K, 4, 4) joints at bind time, file world
-    pos = {name: conv @ bind_joints[bind.joints.index(node)][:3, 3] for node, name in joint_map.node_map.items()}
-    missing = joint_map.missing
-    _synthesize(pos, [j for j in JOINT_NAMES if j in missing and j not in ("left_foot", "right_foot")])
-    frame = _upright_frame(pos)
-    pelvis = pos["pelvis"].copy()
-    v = (v - pelvis) @ frame.T
-    pos = {k: frame @ (p - pelvis) for k, p in pos.items()}
-    _synthesize(pos, [j for j in ("left_foot", "right_foot") if j in missing])
-    return v, np.stack([pos[j] for j in JOINT_NAMES])
-
-
 def _straighten_rest_pose(
     vertices: np.ndarray, joints: np.ndarray, weights: np.ndarray
-) -> tuple[np.ndarray, np.ndarray]:
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The rest pose with arms near horizontal and legs near vertical (:func:`_rest_fix`),
     the mesh following by linear blend skinning: vertices (V, 3), joints (24, 3) m and
-    weights (V, 24) -> ``(vertices, joints)``."""
+    weights (V, 24) -> ``(vertices, joints, global rotations (24, 3, 3) of the fix)``."""
     local = np.tile(np.eye(3), (NUM_JOINTS, 1, 1))
     for jname, child, kind in _STRAIGHTEN:
         j, c = JOINT_INDEX[jname], JOINT_INDEX[child]
@@ -506,29 +592,7 @@ def _straighten_rest_pose(
     lbs[:, :, :3] = glob
     lbs[:, :, 3] = new_joints - np.einsum("jab,jb->ja", glob, joints)
     blended = np.einsum("vj,jab->vab", weights, lbs)
-    return np.einsum("vab,vb->va", blended[:, :, :3], vertices) + blended[:, :, 3], new_joints
-
-
-def _check_hierarchy(path: Path, node_map: dict[int, str], parent: np.ndarray, found: set[str]) -> None:
-    """Each mapped joint's nearest mapped ancestor in the file must be its nearest present
-    ancestor in the 24-joint tree."""
-    bad = []
-    for node, ours in node_map.items():
-        j = JOINT_INDEX[ours]
-        expect = int(PARENTS[j])
-        while expect >= 0 and JOINT_NAMES[expect] not in found:
-            expect = int(PARENTS[expect])
-        k = int(parent[node])
-        while k >= 0 and k not in node_map:
-            k = int(parent[k])
-        got = node_map.get(k) if k >= 0 else None
-        want = JOINT_NAMES[expect] if expect >= 0 else None
-        if got != want:
-            bad.append(f"{ours} (under {got}, expected under {want})")
-    if bad:
-        raise InvalidInputError(
-            f"glTF file {path}: joint hierarchy does not match the 24-joint skeleton: " + "; ".join(bad)
-        )
+    return np.einsum("vab,vb->va", blended[:, :, :3], vertices) + blended[:, :, 3], new_joints, glob
 
 
 def _upright_frame(pos: dict[str, np.ndarray]) -> np.ndarray:
@@ -580,14 +644,22 @@ def _merge_uv(path: Path, gltf: GltfFile, uvs: list, images: list):
 
 
 def load_gltf_body(record: dict):
-    """The :class:`~crowdstudy.body.model.Body` of a ``{"model": "gltf"}`` record."""
+    """The :class:`~crowdstudy.body.model.Body` of a ``{"model": "gltf"}`` record: ``skin``
+    (default 0) or ``node`` (a rigid-parts character's root) selects the character,
+    ``map`` ({physics joint: joint name or index}) forces joints of its mapping."""
     check_fields(record, "gltf", RECORD_FIELDS)
     path = record.get("path")
     if not isinstance(path, str) or not path:
         raise InvalidInputError(f"body record field 'path': expected a glTF file path, got {path!r}")
-    skin = record.get("skin", 0)
-    if isinstance(skin, bool) or not isinstance(skin, int):
+    node = record.get("node")
+    if node is not None and (isinstance(node, bool) or not isinstance(node, int)):
+        raise InvalidInputError(f"body record field 'node': expected an integer node index, got {node!r}")
+    skin = record.get("skin", 0 if node is None else None)
+    if node is None and (isinstance(skin, bool) or not isinstance(skin, int)):
         raise InvalidInputError(f"body record field 'skin': expected an integer index, got {skin!r}")
+    overrides = record.get("map")
+    if overrides is not None and not isinstance(overrides, dict):
+        raise InvalidInputError(f"body record field 'map': expected {{physics joint: joint}}, got {overrides!r}")
     height = record.get("height")
     if height is not None:
         try:
@@ -596,13 +668,22 @@ def load_gltf_body(record: dict):
             raise InvalidInputError(f"body record field 'height': expected a number, got {height!r}") from None
         if not 0.3 <= height <= 2.5:
             raise InvalidInputError(f"body record field 'height': expected 0.3 to 2.5 m, got {height}")
-    ch = read_character(path, skin=skin, height=height)
+    return body_from_character(record, read_character(path, skin=skin, node=node, height=height, overrides=overrides))
+
+
+def body_from_character(record: dict, ch: GltfCharacter) -> Body:
+    """The :class:`~crowdstudy.body.model.Body` of a read character. Rest positions are
+    rounded to 0.1 um, so copies of one character placed anywhere in a file get the same
+    bytes (and share their capsule fit); bodies with the same faces and weights share a
+    template."""
+    digest = hashlib.sha256(np.ascontiguousarray(ch.faces).tobytes() + ch.weights.tobytes()).hexdigest()
+    verts = np.round(ch.vertices, 7) + 0.0
     return Body(
         record=dict(record),
-        rest_joints=ch.joints,
-        rest_vertices=ch.vertices,
+        rest_joints=np.round(ch.joints, 7) + 0.0,
+        rest_vertices=verts,
         faces=ch.faces,
         weights=ch.weights,
-        pelvis_height=float(-ch.vertices[:, 2].min()),
-        template_key=f"gltf-{ch.sha256[:16]}-{skin}",
+        pelvis_height=float(-verts[:, 2].min()),
+        template_key=f"gltf-{digest[:16]}",
     )

@@ -312,10 +312,19 @@ def quat_align_signs(q: np.ndarray, axis: int = 0) -> np.ndarray:
     """(..., 4) quaternions with signs flipped along ``axis`` (time) so that neighbours lie
     in the same hemisphere (each takes the sign nearest its already aligned predecessor)."""
     q = np.moveaxis(np.array(q, dtype=np.float64, copy=True), axis, 0)
-    for i in range(1, q.shape[0]):
-        flip = np.sum(q[i] * q[i - 1], axis=-1) < 0.0
-        q[i][flip] *= -1.0
-    return np.moveaxis(q, 0, axis)
+    if q.shape[0] < 2:
+        return np.moveaxis(q, 0, axis)
+    # q[i] flips when its dot with the aligned q[i - 1] is negative: the sign is the running
+    # product of the neighbours' dot signs, started afresh (+1) where a dot is exactly 0
+    dot = np.sum(q[1:] * q[:-1], axis=-1)
+    step = np.concatenate([np.ones((1,) + dot.shape[1:]), np.where(dot < 0.0, -1.0, 1.0)])
+    sign = np.cumprod(step, axis=0)
+    if np.any(dot == 0.0):
+        index = np.arange(q.shape[0]).reshape((-1,) + (1,) * (dot.ndim - 1))
+        fresh = np.concatenate([np.ones((1,) + dot.shape[1:], bool), dot == 0.0])
+        start = np.maximum.accumulate(np.where(fresh, index, 0), axis=0)
+        sign = sign * np.take_along_axis(sign, start, axis=0)
+    return np.moveaxis(q * sign[..., None], 0, axis)
 
 
 def quat_blend(a: np.ndarray, b: np.ndarray, weight: np.ndarray) -> np.ndarray:

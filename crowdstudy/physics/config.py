@@ -82,7 +82,9 @@ _PAPER_METHOD = {
     # the plain implicit-Euler prediction x + h v with gravity applied
     "solver.feedforward": False,
     "solver.settle_time": 0.0,
-    # Eq. 4 on every joint, pelvis and feet stiffer; no translational springs but the root's
+    # Eq. 4 on every joint, the pelvis (the root's rotation) and the feet stiffer; the hips, the
+    # spine and the arms at the body's k; no translational springs but the root's
+    "control.hips_scale": 1.0,
     "control.trunk_scale": 1.0,
     "control.feet_translation_stiffness": 0.0,
     "control.feet_translation_damping_scale": 0.0,
@@ -221,8 +223,9 @@ class PhysicsConfig:
     @classmethod
     def paper(cls, changes: Mapping[str, object] | None = None, /, **fields) -> PhysicsConfig:
         """The paper's method alone: inertia and gravity (the plain prediction ``x + h v``),
-        soft ball joints, the PD control of Eq. 4 with d = 0.006 and stiffer pelvis and feet
-        (the root also held by a linear translation spring, as :meth:`paper_controller`),
+        soft ball joints, the PD control of Eq. 4 with d = 0.006 on every joint, stiffer for
+        the pelvis (the root's rotation) and the feet (ankles and toes) only (the root also
+        held by a linear translation spring, as :meth:`paper_controller`),
         the four penalty contacts ``(k/2) depth^2`` (ground, environment and walls,
         inter-body, intra-body) on the bare capsules, one Newton step per 1/60 s solved by
         CG. Everything this project adds is off: the feed-forward prediction, the settle,

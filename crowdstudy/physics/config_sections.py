@@ -175,9 +175,14 @@ class ControlConfig(_Section):
         damping: d of Eq. 4 for the body joints, J s^2 (the paper's 0.006). The Fig. 4
             study varies it; every group's damping and the translational dampers scale with
             it.
-        pelvis_scale: multiplies k and d for the root's absolute rotation and the hips and
-            lower spine (trunk alignment).
-        feet_scale: multiplies k and d for the ankles and feet (no foot skate).
+        pelvis_scale: multiplies k and d for the root's absolute rotation (the pelvis: trunk
+            alignment; the paper's stiffer pelvis).
+        feet_scale: multiplies k and d for the ankles and feet (no foot skate; the paper's
+            stiffer feet).
+        hips_scale: multiplies k and d for the hips and the lower spine (left_hip,
+            right_hip, spine1: the pelvis' joints to its children), which the paper keeps at
+            the body's k; above 1 the thighs and the lower trunk hold their animation as the
+            pelvis does.
         arm_scale: multiplies k and d for the arms (collars, shoulders, elbows, wrists,
             hands). Below 1 a contact on a hand bends the arm rather than pushing the whole
             character, while the damped world-space pose springs below hold each arm body
@@ -220,6 +225,7 @@ class ControlConfig(_Section):
     damping: float = 0.006
     pelvis_scale: float = 8.0
     feet_scale: float = 4.0
+    hips_scale: float = 8.0
     arm_scale: float = 0.25
     trunk_scale: float = 1.0
     root_translation_stiffness: float = 3.0e5

@@ -321,6 +321,7 @@ def _fill_timings(
             "steps": corr.steps,
             "timed_steps": timed_steps,
             "ms_per_step": 1000.0 * sum(timed) / timed_steps if timed_steps else None,
+            "ms_per_step_median": 1000.0 * float(np.median(timed)) / corr.substeps if timed else None,
         }
     )
 
@@ -381,7 +382,8 @@ def correct(
             (``simulate_seconds`` over the timed steps: the clip's steps only, not the settle
             steps, the projection or the readback; when there is no settle step, the first
             frame, which launches (and may compile) the kernels, is left out; None when no
-            step was timed).
+            step was timed) and ``ms_per_step_median`` (the median over the timed frames of
+            a frame's seconds per step: less swayed by other work on a busy machine).
 
     The crowd's density is measured first
     (:func:`~crowdstudy.physics.crowding.crowd_density`) and the crowd corrected with

@@ -32,12 +32,14 @@ __all__ = [
     "GROUP_FEET",
     "GROUP_ARM",
     "GROUP_TRUNK",
+    "GROUP_HIPS",
     "MAX_CHILDREN",
 ]
 
-GROUP_BODY, GROUP_PELVIS, GROUP_FEET, GROUP_ARM, GROUP_TRUNK = 0, 1, 2, 3, 4
+GROUP_BODY, GROUP_PELVIS, GROUP_FEET, GROUP_ARM, GROUP_TRUNK, GROUP_HIPS = 0, 1, 2, 3, 4, 5
 MAX_CHILDREN = 4
-_PELVIS_GROUP_JOINTS = ("pelvis", "left_hip", "right_hip", "spine1")
+_PELVIS_GROUP_JOINTS = ("pelvis",)
+_HIPS_GROUP_JOINTS = ("left_hip", "right_hip", "spine1")
 _FEET_GROUP_JOINTS = ("left_ankle", "right_ankle", "left_foot", "right_foot")
 _TRUNK_GROUP_JOINTS = ("spine2", "spine3", "neck", "head")
 
@@ -85,7 +87,7 @@ class Model:
         global parent body (-1 for roots); body_children (B, MAX_CHILDREN) (-1 padded);
         anchor_parent (B, 3) m, the joint of body b in its parent's body frame;
         anchor_child (B, 3) m, the same joint in b's own frame (for roots: the pelvis joint);
-        body_group (B,) GROUP_BODY/PELVIS/FEET/ARM/TRUNK; intra_pairs (P, 2) global body pairs that
+        body_group (B,) GROUP_BODY/PELVIS/HIPS/FEET/ARM/TRUNK; intra_pairs (P, 2) global body pairs that
         may self-collide; rest_joints (N, J, 3) m; char_mass (N,) kg.
     """
 
@@ -206,7 +208,12 @@ class ModelBuilder:
         group = np.full(n_j, GROUP_BODY, np.int64)
         for name in _PELVIS_GROUP_JOINTS:
             group[JOINT_INDEX[name]] = GROUP_PELVIS
-        for names, g in ((_FEET_GROUP_JOINTS, GROUP_FEET), (ARM_JOINTS, GROUP_ARM), (_TRUNK_GROUP_JOINTS, GROUP_TRUNK)):
+        for names, g in (
+            (_HIPS_GROUP_JOINTS, GROUP_HIPS),
+            (_FEET_GROUP_JOINTS, GROUP_FEET),
+            (ARM_JOINTS, GROUP_ARM),
+            (_TRUNK_GROUP_JOINTS, GROUP_TRUNK),
+        ):
             for name in names:
                 group[JOINT_INDEX[name]] = g
         body_group = group[body_joint] if n_j == len(group) else np.zeros(n * n_j, np.int64)

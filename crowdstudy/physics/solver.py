@@ -58,7 +58,7 @@ from typing import Literal, get_args
 import numpy as np
 
 from crowdstudy.errors import InvalidInputError
-from crowdstudy.physics.model import GROUP_ARM, GROUP_FEET, GROUP_PELVIS, GROUP_TRUNK
+from crowdstudy.physics.model import GROUP_ARM, GROUP_FEET, GROUP_HIPS, GROUP_PELVIS, GROUP_TRUNK
 from crowdstudy.warp_runtime import device_kind, get_warp, host_threads, run_parallel, run_together
 
 __all__ = ["Solver", "LinearSolver", "LINEAR_SOLVERS", "Preconditioner", "PRECONDITIONERS"]
@@ -145,8 +145,14 @@ class Solver:
         groups = model.body_group
         ctl = config.control
         scale = np.select(
-            [groups == GROUP_PELVIS, groups == GROUP_FEET, groups == GROUP_ARM, groups == GROUP_TRUNK],
-            [ctl.pelvis_scale, ctl.feet_scale, ctl.arm_scale, ctl.trunk_scale],
+            [
+                groups == GROUP_PELVIS,
+                groups == GROUP_HIPS,
+                groups == GROUP_FEET,
+                groups == GROUP_ARM,
+                groups == GROUP_TRUNK,
+            ],
+            [ctl.pelvis_scale, ctl.hips_scale, ctl.feet_scale, ctl.arm_scale, ctl.trunk_scale],
             1.0,
         )
         self.body_k = wp.array((ctl.stiffness * scale).astype(np.float32), dtype=wp.float32, device=dev)

@@ -2,10 +2,12 @@
 of the same frame from the same camera (for looking, not a test).
 
     python tests/js/look.py ANIM.npz OUT_DIR [--frame 150] [--view V3 | --eye X,Y,Z --target X,Y,Z --fov 30]
-                            [--width 1280 --height 720]
+                            [--width 1280 --height 720] [--glb FILE.glb]
 
 Writes OUT_DIR/crowd.glb, OUT_DIR/threejs.png, OUT_DIR/crowdstudy.png and
-OUT_DIR/side_by_side.png (three.js left, crowdstudy right).
+OUT_DIR/side_by_side.png (three.js left, crowdstudy right). With ``--glb`` three.js shows
+that file (a corrected glTF crowd, ``crowdstudy correct IN.glb OUT.glb``) instead of an
+export of ANIM (its import, ``crowdstudy import-crowd``, for crowdstudy's side).
 """
 
 from __future__ import annotations
@@ -50,6 +52,7 @@ def main() -> None:
     ap.add_argument("--eye", help="free camera position x,y,z (toolkit metres) instead of --view")
     ap.add_argument("--target", help="free camera target x,y,z (toolkit metres)")
     ap.add_argument("--fov", type=float, default=30.0, help="free camera vertical field of view (deg)")
+    ap.add_argument("--glb", type=Path, help="show this glTF file in three.js instead of an export of ANIM")
     args = ap.parse_args()
     from PIL import Image
     from playwright.sync_api import sync_playwright
@@ -58,7 +61,10 @@ def main() -> None:
 
     anim = CrowdAnimation.load(args.anim)
     args.out.mkdir(parents=True, exist_ok=True)
-    export_gltf(anim, args.out / "crowd.glb")
+    if args.glb:
+        shutil.copy(args.glb, args.out / "crowd.glb")
+    else:
+        export_gltf(anim, args.out / "crowd.glb")
     with CrowdRenderer(anim, width=args.width, height=args.height) as r:
         view = args.view
         if args.eye:
@@ -89,7 +95,14 @@ def main() -> None:
             print(page.evaluate("crowd.load('crowd.glb')"))
             page.evaluate(
                 "([t, e, g, f, w, h]) => crowd.render(t, e, g, f, w, h)",
-                [args.frame / anim.fps, eye.tolist(), target.tolist(), cam.fov, args.width, args.height],
+                [
+                    args.frame / anim.fps + anim.meta.get("imported", {}).get("time_start", 0.0),
+                    eye.tolist(),
+                    target.tolist(),
+                    cam.fov,
+                    args.width,
+                    args.height,
+                ],
             )
             page.screenshot(path=str(args.out / "threejs.png"))
             browser.close()
