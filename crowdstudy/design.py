@@ -17,7 +17,7 @@ import math
 import tomllib
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any, Literal, NamedTuple, NoReturn, get_args
+from typing import Any, Literal, NamedTuple, NoReturn, TypeVar, cast, get_args
 
 from crowdstudy.errors import InvalidInputError
 from crowdstudy.package_data import resource_path
@@ -44,10 +44,11 @@ __all__ = [
     "DEFAULT_METHODS",
 ]
 
-#: The kinds of scene a scenario builds: a stationary concert crowd, people walking a corridor.
-#: A design names its scenarios freely (``[scenarios.NAME]``); ``kind`` says which builder
-#: makes them (a scenario named like a kind is of that kind).
-ScenarioKind = Literal["concert", "corridor"]
+#: The kinds of scene a scenario builds: a stationary concert crowd, people walking a corridor,
+#: two flows of walkers crossing on a plaza with obstacles. A design names its scenarios
+#: freely (``[scenarios.NAME]``); ``kind`` says which builder makes them (a scenario named
+#: like a kind is of that kind).
+ScenarioKind = Literal["concert", "corridor", "crossing"]
 #: Where a scenario's body motion comes from: motion-capture clips or procedural animation.
 MotionSource = Literal["mocap", "procedural"]
 #: Which way a corridor crowd walks: all one way, or both ways.
@@ -277,6 +278,19 @@ class StudyDesign:
             + ", ".join(f"{n} ({sc.kind})" for n, sc in self.scenarios.items())
         )
 
+    def stage_of_kind(self, kind: ScenarioKind) -> Stage:
+        """The first stage whose scenario is of ``kind`` (the paper's ``stationary`` for
+        ``"concert"``, ``walking`` for ``"corridor"``): what ``crowdstudy layout`` and
+        ``navigate`` take their cell seeds and scenario parameters from."""
+        for st in self.stages:
+            if self.scenarios[st.scenario].kind == kind:
+                return st
+        raise InvalidInputError(
+            f"{self.source}: no stage of the design is a {kind} (its stages: "
+            + ", ".join(f"{st.key} ({self.scenarios[st.scenario].kind})" for st in self.stages)
+            + ")"
+        )
+
     def tasks(self) -> tuple[Task, ...]:
         """The tasks of the design's stages, each once, in stage order."""
         return tuple(dict.fromkeys(st.task for st in self.stages))
@@ -330,6 +344,9 @@ def default_design_path() -> Path:
     return resource_path("crowdstudy.study", "study.toml")
 
 
+_T = TypeVar("_T")
+
+
 class _Reader:
     """Typed access to a TOML table that reports the full key path on error."""
 
@@ -343,20 +360,20 @@ class _Reader:
     def fail(self, key: str, msg: str) -> NoReturn:
         raise InvalidInputError(f"{self.source}: key '{self._key(key)}' {msg}")
 
-    def get(self, key: str, kind: type | tuple, default: Any = dataclasses.MISSING):
+    def get(self, key: str, kind: type[_T], default: Any = dataclasses.MISSING) -> _T:
+        """The value of ``key``, of type ``kind`` (an integer counts as a float, a bool
+        only as a bool), else ``default``; missing without a default is an error."""
         self.used.add(key)
         if key not in self.table:
             if default is dataclasses.MISSING:
                 self.fail(key, "is missing")
             return default
         value = self.table[key]
-        kinds = kind if isinstance(kind, tuple) else (kind,)
-        if float in kinds and isinstance(value, int) and not isinstance(value, bool):
+        if kind is float and isinstance(value, int) and not isinstance(value, bool):
             value = float(value)
-        if isinstance(value, bool) and bool not in kinds or not isinstance(value, kinds):
-            names = " or ".join(k.__name__ for k in kinds)
-            self.fail(key, f"must be {names}, got {type(value).__name__} {value!r}")
-        return value
+        if isinstance(value, bool) and kind is not bool or not isinstance(value, kind):
+            self.fail(key, f"must be {kind.__name__}, got {type(value).__name__} {value!r}")
+        return cast(_T, value)  # checked above: isinstance(value, kind)
 
     def number(
         self,
@@ -403,9 +420,27 @@ class _Reader:
 
 
 def load_design(path: str | Path | None = None) -> StudyDesign:
-    """Load and validate a study design TOML file (default: the paper's design)."""
+    """Load and validate a study design TOML file (default: the paper's design); a ``files``
+    method's folder must exist (its ``path`` is relative to the design file)."""
     path = Path(path) if path is not None else default_design_path()
-    return parse_design(read_toml(path, f"study design file {str(path)!r} does not exist"), str(path))
+    design = parse_design(read_toml(path, f"study design file {str(path)!r} does not exist"), str(path))
+    _check_method_folders(design, path.parent)
+    return design
+
+
+def _check_method_folders(design: StudyDesign, design_dir: Path) -> None:
+    """Every ``files`` method's folder exists (the check of each cell's file in it waits for
+    the commands that read them: ``crowdstudy stimuli``, ``demo``)."""
+    for name in design.methods:
+        method = design.method_recipes[name]
+        if method.correction == "files":
+            folder = Path(method.path or "")
+            folder = folder if folder.is_absolute() else design_dir / folder
+            if not folder.is_dir():
+                raise InvalidInputError(
+                    f"{design.source}: key 'methods.{name}.path': the folder {str(folder)!r} of the method's "
+                    "animations does not exist (a relative path is relative to the design file)"
+                )
 
 
 def read_toml(path: str | Path, missing: str) -> dict:
@@ -523,6 +558,12 @@ def _read_methods(top: _Reader) -> dict[str, Method]:
             if not isinstance(meth.table[name], dict):
                 meth.fail(name, "must be a table ([methods.NAME] with its correction)")
             recipes[name] = _read_method(meth.table_(name), name)
+            if name == "Baseline" and recipes[name].correction != "none":
+                meth.table_(name).fail(
+                    "correction",
+                    "must be 'none': Baseline names the uncorrected animation every method starts "
+                    "from; give this method another name",
+                )
         elif name in DEFAULT_METHODS:
             recipes[name] = DEFAULT_METHODS[name]
         else:
@@ -715,10 +756,101 @@ def _corridor_params(r: _Reader, width: float, depth: float) -> dict[str, Any]:
     return params
 
 
+def _crossing_params(r: _Reader, width: float, depth: float) -> dict[str, Any]:
+    """``kind = "crossing"``: two flows of walkers crossing the floor (the crossing area) on a
+    plaza (``plaza_width`` x ``plaza_depth`` m, default three times the floor's), the second
+    flow at ``angle`` degrees from the first (+x); ``share`` of the walkers in the first flow;
+    preferred speeds (m/s, mean and SD; a number or one per flow); ``obstacles``."""
+    params: dict[str, Any] = {
+        "plaza_width": r.number("plaza_width", lo=width, default=3.0 * width),
+        "plaza_depth": r.number("plaza_depth", lo=depth, default=3.0 * depth),
+        "angle": r.number("angle", lo=20.0, hi=160.0, default=90.0),
+        "share": r.number("share", lo=0.05, hi=0.95, default=0.5),
+        "preferred_speed": _per_flow(r, "preferred_speed", 1.2, lo=0.2, hi=3.0),
+        "preferred_speed_sd": _per_flow(r, "preferred_speed_sd", 0.1, lo=0.0, hi=1.0),
+    }
+    params["obstacles"] = [
+        _read_obstacle(r, i, raw, params["plaza_width"], params["plaza_depth"])
+        for i, raw in enumerate(r.get("obstacles", list, []))
+    ]
+    return params
+
+
+def _per_flow(r: _Reader, key: str, default: float, *, lo: float, hi: float) -> list[float]:
+    """A per-flow number: one for both flows or a list of two, each in [lo, hi]."""
+    value = r.get(key, (float, list), default)
+    values = [value, value] if isinstance(value, float) else value
+    if len(values) != 2 or not all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in values):
+        r.fail(key, f"must be a number or a list of two numbers (one per flow), got {value!r}")
+    if not all(math.isfinite(v) and lo <= v <= hi for v in values):
+        r.fail(key, f"must lie in [{lo}, {hi}], got {value!r}")
+    return [float(v) for v in values]
+
+
+def _read_obstacle(r: _Reader, i: int, raw: Any, plaza_w: float, plaza_d: float) -> dict[str, Any]:
+    """``obstacles[i]`` of a crossing: ``{center = [x, y], radius = r}`` (a bollard, a round
+    planter) or ``{polygon = [[x, y], ...]}`` (convex, at least 3 corners: a planter, a
+    kiosk), with ``height`` (m, default 0.8) and an optional ``label``; inside the plaza.
+    Returned as ``{"shape": "circle", "center", "radius"}`` or ``{"shape": "polygon",
+    "points"}`` (counter-clockwise), with ``height`` and ``label``."""
+    if not isinstance(raw, dict):
+        r.fail(
+            f"obstacles[{i}]", f"must be a table ({{center = [x, y], radius = r}} or {{polygon = ...}}), got {raw!r}"
+        )
+    o = _Reader(raw, r._key(f"obstacles[{i}]"), r.source)
+    label = o.get("label", str, "")
+    height = o.number("height", lo=0.0, lo_open=True, hi=10.0, default=0.8)
+    if ("polygon" in raw) == ("center" in raw):
+        o.fail("polygon", "or 'center' (with 'radius'): give exactly one shape")
+    if "center" in raw:
+        center = _point(o, "center", o.get("center", list))
+        radius = o.number("radius", lo=0.0, lo_open=True, hi=20.0)
+        out = {"shape": "circle", "center": center, "radius": radius}
+        lo_pt, hi_pt = [c - radius for c in center], [c + radius for c in center]
+    else:
+        out = {"shape": "polygon", "points": _convex_polygon(o, o.get("polygon", list))}
+        lo_pt = [min(p[k] for p in out["points"]) for k in (0, 1)]
+        hi_pt = [max(p[k] for p in out["points"]) for k in (0, 1)]
+    if lo_pt[0] < -plaza_w / 2 or hi_pt[0] > plaza_w / 2 or lo_pt[1] < -plaza_d / 2 or hi_pt[1] > plaza_d / 2:
+        o.fail("center" if "center" in raw else "polygon", f"reaches outside the plaza ({plaza_w:g} x {plaza_d:g} m)")
+    o.close()
+    return {**out, "height": height, "label": label}
+
+
+def _point(o: _Reader, key: str, value: Any) -> list[float]:
+    if not (
+        isinstance(value, list)
+        and len(value) == 2
+        and all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in value)
+    ):
+        o.fail(key, f"must be a point [x, y] in metres, got {value!r}")
+    return [float(value[0]), float(value[1])]
+
+
+def _convex_polygon(o: _Reader, value: list) -> list[list[float]]:
+    """A convex polygon's corners [[x, y], ...] (m), counter-clockwise."""
+    if len(value) < 3:
+        o.fail("polygon", f"must list at least 3 corners [[x, y], ...], got {len(value)}")
+    pts = [_point(o, f"polygon[{k}]", v) for k, v in enumerate(value)]
+    n = len(pts)
+    cross = [
+        (pts[(k + 1) % n][0] - pts[k][0]) * (pts[(k + 2) % n][1] - pts[(k + 1) % n][1])
+        - (pts[(k + 1) % n][1] - pts[k][1]) * (pts[(k + 2) % n][0] - pts[(k + 1) % n][0])
+        for k in range(n)
+    ]
+    area = 0.5 * sum(pts[k][0] * pts[(k + 1) % n][1] - pts[(k + 1) % n][0] * pts[k][1] for k in range(n))
+    if abs(area) < 1e-4:
+        o.fail("polygon", "has no area")
+    if not (all(c > 1e-9 for c in cross) or all(c < -1e-9 for c in cross)):
+        o.fail("polygon", "must be convex, its corners in order (split a concave obstacle into convex ones)")
+    return pts if area > 0 else pts[::-1]
+
+
 #: Each scenario kind's parameter reader: (its table, floor width, floor depth) -> parameters.
 _SCENARIO_PARAMS: dict[str, Callable[[_Reader, float, float], dict[str, Any]]] = {
     "concert": _concert_params,
     "corridor": _corridor_params,
+    "crossing": _crossing_params,
 }
 
 

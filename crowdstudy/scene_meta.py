@@ -13,9 +13,10 @@ The scene (written by :mod:`crowdstudy.layout` and :mod:`crowdstudy.navigation` 
 :mod:`crowdstudy.motion.baseline`):
 
 ``scenario`` (str)
-    ``"concert"`` (stationary dancers) or ``"corridor"`` (walkers); other values name a
-    user's own scene. Read by the renderer (:func:`crowdstudy.render.renderer.scenario_of`)
-    and by :func:`static_walls_from_meta` (a concert or corridor must list its walls).
+    ``"concert"`` (stationary dancers), ``"corridor"`` (walkers) or ``"crossing"`` (two
+    flows crossing on a plaza); other values name a user's own scene. Read by the renderer
+    (:func:`crowdstudy.render.assets.scenario_of`) and by :func:`static_walls_from_meta` (a
+    concert, corridor or crossing must list its walls).
 ``floor`` (:class:`Floor`)
     ``{"width": m, "depth": m}``, the floor the crowd stands on (x by y), centred on the
     origin.
@@ -23,9 +24,16 @@ The scene (written by :mod:`crowdstudy.layout` and :mod:`crowdstudy.navigation` 
     how far the stage lies in front of the floor's front edge, and the stage front's y.
 ``corridor_width``, ``corridor_length`` (float, m; corridor)
     the corridor's width (y) and the length of its periodic section (x).
+``plaza`` (:class:`Plaza`; crossing)
+    ``{"width": m, "depth": m, "angle": deg, "obstacles": [...]}``: the paved plaza around
+    the crossing area, the second flow's direction and the obstacles as the design gave them
+    (``{"shape": "circle", "center": [x, y], "radius": m}`` or ``{"shape": "polygon",
+    "points": [[x, y], ...]}``, counter-clockwise, each with ``height`` m and ``label``).
+    Read by the renderer (:mod:`crowdstudy.render.plaza`), which draws them as solids.
 ``obstacles`` (list of ``[[x0, y0], [x1, y1]]``, m)
     the scene's walls as floor segments (the concert's stage front, the corridor's walls as
-    its navigation saw them); ``[]`` for none. Read by the physics (one-sided wall
+    its navigation saw them, the edges of a crossing's obstacles, a circle as the 16-gon
+    around it); ``[]`` for none. Read by the physics (one-sided wall
     contacts), :mod:`crowdstudy.metrics.walls` and :mod:`crowdstudy.metrics.floor`, through
     :func:`static_walls_from_meta`.
 ``periodic`` (:class:`Periodic` or absent)
@@ -54,8 +62,16 @@ The cell (written by :func:`crowdstudy.motion.baseline.build_baseline` and
 The motion (:mod:`crowdstudy.motion.baseline`):
 
 ``method`` (str)
-    ``"Baseline"`` (the animation as generated) or ``"Ours"`` (after the physics); the
+    the method that made the animation: ``"Baseline"`` (the animation as generated) or
+    ``"Ours"`` (after the physics), or the name a study design gives the method
+    (``[methods.NAME]``, :func:`crowdstudy.recipes.make_method_animation`); the
     benchmarks label other peers (``"MuJoCo"``). Read by the metrics' summaries.
+``recipe`` (:class:`Recipe`)
+    how a study design's method made the animation (:meth:`crowdstudy.design.Method.recipe`):
+    ``{"correction": "none" | "physics" | "paper" | "mujoco" | "files"}`` and what that
+    correction takes (``config``: the ``PhysicsConfig`` overrides, e.g. ``{"damping": 0.06}``;
+    ``setting``: the MuJoCo tuning; ``path``: the folder of the user's animations). Written
+    by :func:`crowdstudy.recipes.make_method_animation` (``crowdstudy stimuli``).
 ``tempo`` (float bpm, or None; concert)
     the beat the dancers share (None: each motion-capture clip at its own tempo).
 ``loop`` (:class:`Loop`)
@@ -102,9 +118,11 @@ __all__ = [
     "LOOP_MODES",
     "Floor",
     "Periodic",
+    "Plaza",
     "Loop",
     "PhysicsLoop",
     "PhysicsMeta",
+    "Recipe",
     "SceneMeta",
     "check_meta",
     "loop_mode",
@@ -123,6 +141,15 @@ class Floor(TypedDict):
 
     width: float
     depth: float
+
+
+class Plaza(TypedDict):
+    """``meta["plaza"]``: a crossing's plaza (m), flow angle (deg) and obstacle shapes."""
+
+    width: float
+    depth: float
+    angle: float
+    obstacles: list[dict[str, Any]]
 
 
 class Periodic(TypedDict):
@@ -188,6 +215,15 @@ class PhysicsMeta(TypedDict, total=False):
     speed_limit: dict[str, Any] | None
 
 
+class Recipe(TypedDict, total=False):
+    """``meta["recipe"]``: how a study design's method made the animation."""
+
+    correction: str
+    config: dict[str, Any]
+    setting: str | None
+    path: str
+
+
 class SceneMeta(TypedDict, total=False):
     """A :class:`~crowdstudy.scene.CrowdAnimation`'s ``meta``: every key optional (the
     module's docstring says what each means and who writes it); other keys allowed."""
@@ -199,6 +235,7 @@ class SceneMeta(TypedDict, total=False):
     corridor_width: float
     corridor_length: float
     obstacles: list[list[list[float]]]
+    plaza: Plaza
     periodic: Periodic
     stage: str
     stage_number: int
@@ -208,9 +245,11 @@ class SceneMeta(TypedDict, total=False):
     seed: int | None
     source: str
     method: str
+    recipe: Recipe
     tempo: float | None
     loop: Loop
     provenance: dict[str, Any]
+    imported: dict[str, Any]
     physics: PhysicsMeta
     baseline_method: str | None
     baseline_provenance: dict[str, Any] | None
@@ -221,12 +260,20 @@ def _fail(path: str, what: str, value: object) -> InvalidInputError:
     return InvalidInputError(f"{path}: expected {what}, got {value!r}")
 
 
+def _finite(value: object) -> float | None:
+    """``value`` as a float when it is a finite real number (not a bool), else None."""
+    if not isinstance(value, numbers.Real) or isinstance(value, (bool, np.bool_)):
+        return None
+    x = float(value)
+    return x if math.isfinite(x) else None
+
+
 def _number(value: object, path: str, *, lo: float = -math.inf, positive: bool = False) -> None:
-    ok = isinstance(value, numbers.Real) and not isinstance(value, (bool, np.bool_)) and math.isfinite(value)
+    x = _finite(value)
     if positive:
-        if not (ok and value > 0):
+        if x is None or not x > 0:
             raise _fail(path, "a positive number", value)
-    elif not (ok and value >= lo):
+    elif x is None or not x >= lo:
         raise _fail(path, "a number" if lo == -math.inf else f"a number >= {lo:g}", value)
 
 
@@ -240,17 +287,19 @@ def _text(value: object, path: str) -> None:
         raise _fail(path, "a string", value)
 
 
-def _mapping(value: object, path: str) -> None:
+def _mapping(value: object, path: str) -> Mapping[str, Any]:
+    """``value`` when it is a mapping (the keys of a ``meta`` are strings)."""
     if not isinstance(value, Mapping):
         raise _fail(path, "a dict", value)
+    return value
 
 
-def _optional(check: Callable[[object, str], None]) -> Callable[[object, str], None]:
+def _optional(check: Callable[[object, str], object]) -> Callable[[object, str], object]:
     return lambda value, path: None if value is None else check(value, path)
 
 
 def _floor(value: object, path: str) -> None:
-    _mapping(value, path)
+    value = _mapping(value, path)
     for key in ("width", "depth"):
         if key not in value:
             raise InvalidInputError(f"{path}.{key}: missing (the floor's extent in m)")
@@ -260,7 +309,7 @@ def _floor(value: object, path: str) -> None:
 def _periodic(value: object, path: str) -> None:
     if not value:  # None or {}: not periodic
         return
-    _mapping(value, path)
+    value = _mapping(value, path)
     if "length" not in value:
         raise InvalidInputError(f"{path}.length: missing (the period along x, m)")
     _number(value["length"], f"{path}.length", positive=True)
@@ -271,8 +320,18 @@ def _obstacles(value: object, path: str) -> None:
     wall_segments(value, path)
 
 
-def _loop(value: object, path: str) -> None:
+def _plaza(value: object, path: str) -> None:
     _mapping(value, path)
+    for key in ("width", "depth"):
+        if key not in value:
+            raise InvalidInputError(f"{path}.{key}: missing (the plaza's extent in m)")
+        _number(value[key], f"{path}.{key}", positive=True)
+    if not isinstance(value.get("obstacles", []), list):
+        raise InvalidInputError(f"{path}.obstacles: expected a list of obstacle shapes")
+
+
+def _loop(value: object, path: str) -> None:
+    value = _mapping(value, path)
     mode = value.get("mode")
     if mode not in LOOP_MODES:
         raise _fail(f"{path}.mode", "one of " + ", ".join(map(repr, LOOP_MODES)), mode)
@@ -284,8 +343,21 @@ def _loop(value: object, path: str) -> None:
         _integer(value["video_frames"], f"{path}.video_frames", lo=1)
 
 
-def _physics(value: object, path: str) -> None:
+#: The corrections a recipe names (``crowdstudy.design.Correction``; kept here as text so
+#: that the meta schema imports nothing of the design).
+_CORRECTIONS = ("none", "physics", "paper", "mujoco", "files")
+
+
+def _recipe(value: object, path: str) -> None:
     _mapping(value, path)
+    if value.get("correction") not in _CORRECTIONS:
+        raise _fail(f"{path}.correction", f"one of {', '.join(_CORRECTIONS)}", value.get("correction"))
+    if "config" in value:
+        _mapping(value["config"], f"{path}.config")
+
+
+def _physics(value: object, path: str) -> None:
+    value = _mapping(value, path)
     if "config" in value:
         _mapping(value["config"], f"{path}.config")
     for key in ("crowd_density", "dt", "cg_iterations_mean", "contacts_mean"):
@@ -311,7 +383,7 @@ def _physics(value: object, path: str) -> None:
         _mapping(value["loop"], f"{path}.loop")
 
 
-_CHECKS: dict[str, Callable[[object, str], None]] = {
+_CHECKS: dict[str, Callable[[object, str], object]] = {
     "scenario": _text,
     "stage": _text,
     "density_level": _text,
@@ -329,9 +401,11 @@ _CHECKS: dict[str, Callable[[object, str], None]] = {
     "corridor_length": lambda v, p: _number(v, p, positive=True),
     "floor": _floor,
     "obstacles": lambda v, p: _obstacles(v, p),
+    "plaza": _plaza,
     "periodic": _periodic,
     "loop": _loop,
     "physics": _physics,
+    "recipe": _recipe,
     "provenance": _optional(_mapping),
     "baseline_provenance": _optional(_mapping),
     "imported": _mapping,
@@ -372,7 +446,7 @@ def static_walls_from_meta(meta: Mapping[str, Any]) -> np.ndarray:
     exactly as its navigation saw them); an empty list means no walls. Nothing is taken
     from a study design.
 
-    A concert or corridor animation without ``meta["obstacles"]`` (a file written by an
+    A concert, corridor or crossing animation without ``meta["obstacles"]`` (a file written by an
     older version) is an error: its walls are unknown. A scene of any other scenario (or
     none) without the key has no walls.
     """
@@ -380,7 +454,7 @@ def static_walls_from_meta(meta: Mapping[str, Any]) -> np.ndarray:
         raise InvalidInputError(f"meta: expected a dict, got {type(meta).__name__}")
     if "obstacles" not in meta:
         scenario = meta.get("scenario")
-        if scenario in ("concert", "corridor"):
+        if scenario in ("concert", "corridor", "crossing"):
             raise InvalidInputError(
                 f"meta['obstacles']: missing from this {scenario} animation, so its walls are unknown "
                 "(written by an older crowdstudy?); regenerate it (crowdstudy layout/navigate, then "
