@@ -44,7 +44,9 @@ def main(argv: list[str]) -> int:
     from crowdstudy.motion.walker import WalkerPath, live_scene
     from crowdstudy.tables import format_table
 
-    parser = argparse.ArgumentParser(prog="crowdstudy bench live", description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(
+        prog="crowdstudy bench live", description="the live walker against the 1/30 s frame budget"
+    )
     parser.add_argument("--repeat", type=int, default=5, help="live runs per variant (default 5)")
     parser.add_argument("--distance", type=float, default=4.8, help="m the walker walks (default 4.8)")
     parser.add_argument("--variants", default=",".join(LIVE_VARIANTS), help="comma-separated LIVE_VARIANTS")

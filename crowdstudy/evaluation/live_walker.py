@@ -38,10 +38,14 @@ def time_live(base, variant: str, repeat: int, *, profile: bool = True) -> dict:
     and their medians over the runs; ``last`` is the last run's :class:`~crowdstudy.physics.live.LiveRun`."""
     from crowdstudy.physics.live import frame_stats, run_live
 
+    if repeat < 1:
+        raise InvalidInputError(f"repeat: expected at least one run, got {repeat!r}")
     config = live_config(variant)
-    runs, last = [], None
-    for _ in range(repeat):
-        last = run_live(base, config)
+    last = run_live(base, config)
+    runs = []
+    for i in range(repeat):
+        if i:
+            last = run_live(base, config)
         runs.append(
             {
                 "wall": frame_stats(last.wall_seconds, base.fps),
