@@ -19,7 +19,8 @@ What is read (:func:`read_usd`), with Pixar's ``usd-core`` (``pip install 'crowd
   translation, rotation and scale channel keyed at the animation's time samples (time
   codes / ``timeCodesPerSecond``, s), linear; unanimated joints keep their rest transform;
 * the stage's axes and units become glTF's: a root node turns ``upAxis`` Z to Y and scales
-  by ``metersPerUnit``. A stage without authored ``metersPerUnit`` whose characters are
+  by ``metersPerUnit`` (a Z-up stage's x, y, z are the toolkit's; a Y-up stage's are
+  glTF's, (x, y, z) -> toolkit (-x, z, y)). A stage without authored ``metersPerUnit`` whose characters are
   taller than :data:`CENTIMETRE_STATURE` units (a crowd in centimetres) is an error naming it.
 
 :class:`UsdCrowdFile` keeps, per glTF node and skin, the USD prims it came from (what the
@@ -91,11 +92,12 @@ def _np(m) -> np.ndarray:
 
 
 def _stage_root(up: str, mpu: float) -> dict:
-    """The glTF root node: Z up -> Y up (a turn of -90 degrees about x) and the unit scale."""
+    """The glTF root node: Z up -> Y up and the unit scale. A Z-up stage's axes become the
+    toolkit's unchanged (the turn is ``Z_UP_TO_Y_UP``, half a turn about (0, 1, 1))."""
     node: dict = {"name": "usd_stage", "scale": [mpu, mpu, mpu], "children": []}
     if up == "Z":
         s = float(np.sqrt(0.5))
-        node["rotation"] = [-s, 0.0, 0.0, s]
+        node["rotation"] = [0.0, s, s, 0.0]
     return node
 
 
@@ -217,7 +219,11 @@ def _trs(m: np.ndarray) -> dict:
     if np.linalg.det(m[:3, :3]) < 0:
         s[0] = -s[0]
     q = matrix_to_quaternion(m[:3, :3] / s)
-    return {"translation": [float(x) for x in m[:3, 3]], "rotation": [float(x) for x in q], "scale": [float(x) for x in s]}
+    return {
+        "translation": [float(x) for x in m[:3, 3]],
+        "rotation": [float(x) for x in q],
+        "scale": [float(x) for x in s],
+    }
 
 
 def _add_mesh(builder, query, joints: list[str], skin: int, path: Path, skel_world, tallest: list) -> int | None:
@@ -297,8 +303,15 @@ def _add_animation(builder, stage, cache, anim_path: str, users: list, skins: li
             xs = [query.ComputeJointLocalTransforms(t) for t in times]
             comps = [usd_skel.DecomposeTransforms(vt.Matrix4dArray(x)) for x in xs]
             tr = np.stack([np.asarray(c[0], dtype=np.float32) for c in comps], axis=1)  # (K, T, 3)
-            ro = np.stack([np.asarray([[q.imaginary[0], q.imaginary[1], q.imaginary[2], q.real] for q in c[1]],
-                                      dtype=np.float32).reshape(-1, 4) for c in comps], axis=1)
+            ro = np.stack(
+                [
+                    np.asarray(
+                        [[q.imaginary[0], q.imaginary[1], q.imaginary[2], q.real] for q in c[1]], dtype=np.float32
+                    ).reshape(-1, 4)
+                    for c in comps
+                ],
+                axis=1,
+            )
             sc = np.stack([np.asarray(c[2], dtype=np.float32) for c in comps], axis=1)
             sampled[key] = (tr, ro, sc)
         tr, ro, sc = sampled[key]

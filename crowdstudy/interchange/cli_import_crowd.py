@@ -12,10 +12,18 @@ __all__ = ["configure", "run"]
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("input", help="glTF file (.glb, .gltf) with skinned or rigid-parts animated characters, or a USD file "
-        "(.usd, .usda, .usdc) with UsdSkel characters")
+    parser.add_argument(
+        "input",
+        help="glTF file (.glb, .gltf) with skinned or rigid-parts animated characters, or a USD file "
+        "(.usd, .usda, .usdc) with UsdSkel characters",
+    )
     parser.add_argument("--out", required=True, help="CrowdAnimation .npz to write")
-    parser.add_argument("--fps", type=float, default=None, help="resample to FPS (default: the file's key rate; USD: its time samples' rate)")
+    parser.add_argument(
+        "--fps",
+        type=float,
+        default=None,
+        help="resample to FPS (default: the file's key rate; USD: its time samples' rate)",
+    )
     parser.add_argument(
         "--animation",
         action="append",

@@ -40,8 +40,11 @@ def _axes(up: str, mpu: float) -> np.ndarray:
     """(4, 4) glTF world (Y up, metres) -> stage (``up``, units of ``mpu`` metres)."""
     k = np.eye(4) / mpu
     k[3, 3] = 1.0
-    if up == "Z":  # (x, y, z) -> (x, -z, y): Y up becomes Z up
-        r = np.array([[1.0, 0, 0, 0], [0, 0, -1.0, 0], [0, 1.0, 0, 0], [0, 0, 0, 1.0]])
+    if up == "Z":  # glTF -> toolkit axes (Z_UP_TO_Y_UP is its own inverse)
+        from crowdstudy.body.gltf_container import Z_UP_TO_Y_UP
+
+        r = np.eye(4)
+        r[:3, :3] = Z_UP_TO_Y_UP
         k = r @ k
     return k
 
@@ -206,7 +209,9 @@ def _write_mesh(stage, gltf, node: dict, path, sj: np.ndarray, skel) -> None:
         dc.Set(vt.Vec3fArray.FromNumpy(np.concatenate(cols).astype(np.float32)))
     binding = usd_skel.BindingAPI.Apply(mesh.GetPrim())
     binding.CreateSkeletonRel().SetTargets([skel.GetPath()])
-    binding.CreateJointIndicesPrimvar(False, 4).Set(vt.IntArray.FromNumpy(np.concatenate(ji).astype(np.int32).reshape(-1)))
+    binding.CreateJointIndicesPrimvar(False, 4).Set(
+        vt.IntArray.FromNumpy(np.concatenate(ji).astype(np.int32).reshape(-1))
+    )
     binding.CreateJointWeightsPrimvar(False, 4).Set(vt.FloatArray.FromNumpy(np.concatenate(jw).reshape(-1)))
     binding.CreateGeomBindTransformAttr(gf.Matrix4d(1.0))
 

@@ -42,7 +42,7 @@ def corrected_usd_bytes(crowd, corrected, out_path: str | Path, provenance: dict
     stage = usd.Stage.Open(edit)
     codes = crowd.times[: corrected.n_frames] * src.time_codes_per_second
     users: dict[str, int] = {}
-    for i, c in enumerate(crowd.characters):
+    for c in crowd.characters:
         users[src.skins[c.spec.skins[0]].animation] = users.get(src.skins[c.spec.skins[0]].animation, 0) + 1
     for i, c in enumerate(crowd.characters):
         skin = src.skins[c.spec.skins[0]]

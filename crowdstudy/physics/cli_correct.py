@@ -22,7 +22,9 @@ def configure(parser: argparse.ArgumentParser) -> None:
     from crowdstudy.physics.config_file import add_config_option
     from crowdstudy.physics.solver import LINEAR_SOLVERS
 
-    parser.add_argument("input", help="CrowdAnimation .npz (the Baseline), or a glTF (.glb, .gltf) or USD (.usd, .usda, .usdc) crowd")
+    parser.add_argument(
+        "input", help="CrowdAnimation .npz (the Baseline), or a glTF (.glb, .gltf) or USD (.usd, .usda, .usdc) crowd"
+    )
     parser.add_argument(
         "output",
         help="corrected file to write, in the input's format (Ours); the run's timings go to "

@@ -5,7 +5,8 @@ Import (:func:`crowdstudy.interchange.gltf_crowd.read_crowd`), correct
 (:func:`~crowdstudy.physics.corrector.correct`, with the characters' own bodies), measure
 the mesh overlap before and after (:func:`crowdstudy.metrics.overlap_volume`, every
 ``overlap_every`` seconds), write the corrected motion into the same scene
-(:mod:`crowdstudy.interchange.gltf_write`, :mod:`crowdstudy.interchange.usd_write`). Nothing is written until everything has
+(:mod:`crowdstudy.interchange.gltf_write`, or
+:mod:`crowdstudy.interchange.usd_write`). Nothing is written until everything has
 worked: the output, its overlap report (``OUT_STEM.overlap.json``) and the timings
 sidecar go to temporary files renamed at the end.
 """
@@ -21,7 +22,14 @@ import numpy as np
 
 from crowdstudy.errors import InvalidInputError
 
-__all__ = ["GLTF_SUFFIXES", "SCENE_SUFFIXES", "GltfCorrection", "correct_gltf", "overlap_report_path", "check_gltf_paths"]
+__all__ = [
+    "GLTF_SUFFIXES",
+    "SCENE_SUFFIXES",
+    "GltfCorrection",
+    "correct_gltf",
+    "overlap_report_path",
+    "check_gltf_paths",
+]
 
 GLTF_SUFFIXES = (".glb", ".gltf")
 #: Scene formats corrected file to file: glTF and USD (:mod:`crowdstudy.interchange.usd_write`).
