@@ -288,35 +288,46 @@ def _triangulate(counts: np.ndarray, index: np.ndarray) -> np.ndarray:
 
 
 def _add_animation(builder, stage, cache, anim_path: str, users: list, skins: list[UsdSkin], tcps: float) -> None:
-    """One SkelAnimation as a glTF animation with channels on every joint of its skeletons."""
-    _, _, usd_skel, _, vt, _ = import_pxr()
-    prim = stage.GetPrimAtPath(anim_path)
-    aq = cache.GetAnimQuery(prim)
+    """One SkelAnimation as a glTF animation: translation and rotation channels (and scale
+    where it is not one) on every joint it drives, for each skeleton bound to it; joints it
+    does not drive keep their rest transform (the node's default)."""
+    usd, _, _, _, _, _ = import_pxr()
+    aq = cache.GetAnimQuery(stage.GetPrimAtPath(anim_path))
     times = sorted(float(t) for t in aq.GetJointTransformTimeSamples()) or [0.0]
-    sampled: dict[tuple, tuple] = {}
+    order = [str(j) for j in aq.GetJointOrder()]
+    tr = np.empty((len(order), len(times), 3), dtype=np.float32)
+    ro = np.empty((len(order), len(times), 4), dtype=np.float32)
+    sc = np.empty((len(order), len(times), 3), dtype=np.float32)
+    for t, code in enumerate(times):
+        comps = aq.ComputeJointLocalTransformComponents(usd.TimeCode(code))
+        if not comps or len(comps[0]) != len(order):
+            raise InvalidInputError(
+                f"USD file {stage.GetRootLayer().realPath}: SkelAnimation {anim_path}: "
+                f"its translations, rotations and scales do not cover its {len(order)} joints"
+            )
+        tr[:, t], ro[:, t], sc[:, t] = np.array(comps[0]), np.array(comps[1]), np.array(comps[2])
+    ro = _continuous(ro)
+    scaled = ~np.all(np.abs(sc - 1.0) < 1e-6, axis=(1, 2))
     channels, samplers = [], []
     time_acc = builder.accessor(np.asarray(times, dtype=np.float32) / np.float32(tcps), bounds=True)
+    outputs: dict[tuple[int, str], int] = {}
     for s, nodes in users:
-        query = cache.GetSkelQuery(usd_skel.Skeleton(stage.GetPrimAtPath(skins[s].skeleton)))
-        key = skins[s].skeleton
-        if key not in sampled:
-            xs = [query.ComputeJointLocalTransforms(t) for t in times]
-            comps = [usd_skel.DecomposeTransforms(vt.Matrix4dArray(x)) for x in xs]
-            tr = np.stack([np.asarray(c[0], dtype=np.float32) for c in comps], axis=1)  # (K, T, 3)
-            ro = np.stack(
-                [
-                    np.asarray(
-                        [[q.imaginary[0], q.imaginary[1], q.imaginary[2], q.real] for q in c[1]], dtype=np.float32
-                    ).reshape(-1, 4)
-                    for c in comps
-                ],
-                axis=1,
-            )
-            sc = np.stack([np.asarray(c[2], dtype=np.float32) for c in comps], axis=1)
-            sampled[key] = (tr, ro, sc)
-        tr, ro, sc = sampled[key]
-        for k, node in enumerate(nodes):
-            for what, values in (("translation", tr[k]), ("rotation", ro[k]), ("scale", sc[k])):
-                samplers.append({"input": time_acc, "output": builder.accessor(values), "interpolation": "LINEAR"})
-                channels.append({"sampler": len(samplers) - 1, "target": {"node": node, "path": what}})
+        slot = {j: k for k, j in enumerate(skins[s].joints)}
+        for a, joint in enumerate(order):
+            if joint not in slot:
+                continue
+            for what, values in (("translation", tr), ("rotation", ro), ("scale", sc)):
+                if what == "scale" and not scaled[a]:
+                    continue
+                if (a, what) not in outputs:  # skeletons bound to one animation share its data
+                    outputs[(a, what)] = builder.accessor(np.ascontiguousarray(values[a]))
+                samplers.append({"input": time_acc, "output": outputs[(a, what)], "interpolation": "LINEAR"})
+                channels.append({"sampler": len(samplers) - 1, "target": {"node": nodes[slot[joint]], "path": what}})
     builder.add("animations", {"name": anim_path, "channels": channels, "samplers": samplers})
+
+
+def _continuous(q: np.ndarray) -> np.ndarray:
+    """(K, T, 4) quaternions with signs continuous in time (linear interpolation takes the short arc)."""
+    from crowdstudy.body.rotations import quat_align_signs
+
+    return quat_align_signs(q.astype(np.float64), axis=1).astype(np.float32)

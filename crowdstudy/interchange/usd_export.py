@@ -158,7 +158,7 @@ def _write_character(stage, gltf, s, joints: list[int], meshes: list[int], paren
     for t in range(n_t):
         tc = usd.TimeCode(float(t))
         tr_a.Set(vt.Vec3fArray.FromNumpy(mats[t, :, :3, 3].astype(np.float32)), tc)
-        ro_a.Set(vt.QuatfArray([gf.Quatf(float(q[3]), float(q[0]), float(q[1]), float(q[2])) for q in quat[t]]), tc)
+        ro_a.Set(vt.QuatfArray.FromNumpy(quat[t].astype(np.float32)), tc)
         sc_a.Set(vt.Vec3hArray.FromNumpy(sc[t].astype(np.float16)), tc)
     usd_skel.BindingAPI.Apply(skel.GetPrim()).CreateAnimationSourceRel().SetTargets([anim.GetPath()])
     usd_skel.BindingAPI.Apply(root.GetPrim())

@@ -92,7 +92,7 @@ def _animation_to_edit(stage, skin, shared: bool, usd_skel):
 
 def _write_motion(stage, anim_prim, skin, motion, joint_of: dict, codes: np.ndarray, crowd, c) -> None:
     """Replace the animation's samples by the input's motion at ``codes`` with the corrected joints."""
-    usd, _, usd_skel, gf, vt, _ = import_pxr()
+    usd, _, usd_skel, _, vt, _ = import_pxr()
     anim = usd_skel.Animation(anim_prim)
     joints = [str(j) for j in anim.GetJointsAttr().Get() or []]
     changed = {joint_of[k] for k in (*motion.rotation, *motion.translation) if k in joint_of}
@@ -107,10 +107,8 @@ def _write_motion(stage, anim_prim, skin, motion, joint_of: dict, codes: np.ndar
     sc = np.ones((len(codes), len(order), 3), dtype=np.float32)
     for t, code in enumerate(codes):
         if joints:
-            tt, rr, ss = aq.ComputeJointLocalTransformComponents(usd.TimeCode(float(code)))
-            tr[t, : len(joints)] = np.asarray(tt, dtype=np.float32).reshape(-1, 3)
-            ro[t, : len(joints)] = [(q.imaginary[0], q.imaginary[1], q.imaginary[2], q.real) for q in rr]
-            sc[t, : len(joints)] = np.asarray(ss, dtype=np.float32).reshape(-1, 3)
+            comps = aq.ComputeJointLocalTransformComponents(usd.TimeCode(float(code)))
+            tr[t, : len(joints)], ro[t, : len(joints)], sc[t, : len(joints)] = (np.array(c) for c in comps)
         for n, j in enumerate(extra):
             tr[t, len(joints) + n], ro[t, len(joints) + n], sc[t, len(joints) + n] = rest[j]
     for k, q in motion.rotation.items():
@@ -130,7 +128,7 @@ def _write_motion(stage, anim_prim, skin, motion, joint_of: dict, codes: np.ndar
     for t, code in enumerate(codes):
         tc = usd.TimeCode(float(code))
         tr_a.Set(vt.Vec3fArray.FromNumpy(tr[t]), tc)
-        ro_a.Set(vt.QuatfArray([gf.Quatf(float(q[3]), float(q[0]), float(q[1]), float(q[2])) for q in ro[t]]), tc)
+        ro_a.Set(vt.QuatfArray.FromNumpy(np.ascontiguousarray(ro[t])), tc)
         sc_a.Set(vt.Vec3hArray.FromNumpy(sc[t].astype(np.float16)), tc)
 
 
