@@ -183,8 +183,8 @@ def _add_binding(builder, cache, binding, root_prim, scene: list, path: Path, ta
     builder.doc["nodes"][0]["children"].append(skel_node)
     first = len(builder.doc["nodes"])
     nodes = list(range(first, first + len(joints)))
-    for k, name in enumerate(joints):
-        builder.add("nodes", {"name": name.rsplit("/", 1)[-1], **_trs(local[k])})
+    for name, trs in zip(joints, _trs(np.asarray(local).reshape(-1, 4, 4)), strict=True):
+        builder.add("nodes", {"name": name.rsplit("/", 1)[-1], **trs})
     for k in range(len(joints)):
         holder = skel_node if parents[k] < 0 else nodes[parents[k]]
         builder.doc["nodes"][holder].setdefault("children", []).append(nodes[k])
@@ -211,19 +211,24 @@ def _add_binding(builder, cache, binding, root_prim, scene: list, path: Path, ta
     )
 
 
-def _trs(m: np.ndarray) -> dict:
-    """glTF translation/rotation/scale of a (4, 4) local matrix."""
+def _trs(m: np.ndarray) -> list[dict]:
+    """glTF translation/rotation/scale of (K, 4, 4) local matrices (a mirroring matrix
+    takes a negative x scale)."""
     from crowdstudy.body.rotations import matrix_to_quaternion
 
-    s = np.linalg.norm(m[:3, :3], axis=0)
-    if np.linalg.det(m[:3, :3]) < 0:
-        s[0] = -s[0]
-    q = matrix_to_quaternion(m[:3, :3] / s)
-    return {
-        "translation": [float(x) for x in m[:3, 3]],
-        "rotation": [float(x) for x in q],
-        "scale": [float(x) for x in s],
-    }
+    if not len(m):
+        return []
+    s = np.linalg.norm(m[:, :3, :3], axis=1)
+    s[:, 0] *= np.where(np.linalg.det(m[:, :3, :3]) < 0, -1.0, 1.0)
+    q = matrix_to_quaternion(m[:, :3, :3] / s[:, None, :])
+    return [
+        {
+            "translation": [float(x) for x in m[k, :3, 3]],
+            "rotation": [float(x) for x in q[k]],
+            "scale": [float(x) for x in s[k]],
+        }
+        for k in range(len(m))
+    ]
 
 
 def _add_mesh(builder, query, joints: list[str], skin: int, path: Path, skel_world, tallest: list) -> int | None:
