@@ -91,8 +91,7 @@ class ImportedCrowd:
 
     def report(self) -> str:
         """The import as text: per character its mapping table, rate and notes."""
-        doc = self.gltf.doc
-        names = [str(doc["animations"][a].get("name", a)) for a in self.animations]
+        names = [str(self.gltf.doc["animations"][a].get("name", a)) for a in self.animations]
         lines = [
             f"{self.gltf.path}: {len(self.characters)} characters, animations {', '.join(names)}, "
             f"{len(self.times)} frames at {self.anim.fps:g} fps from t = {self.times[0]:g} s"
@@ -101,8 +100,11 @@ class ImportedCrowd:
             rig = c.character.rig
             where = f"skin {', '.join(map(str, c.spec.skins))}" if c.spec.skins else "rigid parts"
             rate = "unkeyed" if c.rate is None else f"keys at {c.rate:g}/s"
+            if self.usd is not None:  # the character's SkelRoot and Skeleton, not the glTF stand-ins
+                skin = self.usd.skins[c.spec.skins[0]]
+                where = f"skeleton {skin.skeleton}, {len(skin.meshes)} meshes"
             lines.append(
-                f"character {i} (node {c.spec.root} {doc['nodes'][c.spec.root].get('name', '')!r}, {where}, "
+                f"character {i} ({_where(self, c)}, {where}, "
                 f"{len(rig.vertices)} vertices, {len(c.spec.rigid)} rigid parts, {rate}, "
                 f"stature {c.character.height:.2f} m)"
             )
@@ -117,6 +119,12 @@ class ImportedCrowd:
             else:
                 lines.append("  mapping: as the character above")
         return "\n".join(lines)
+
+
+def _where(crowd: ImportedCrowd, c: ImportedCharacter) -> str:
+    if crowd.usd is not None:
+        return f"SkelRoot {crowd.usd.skins[c.spec.skins[0]].skel_root}"
+    return f"node {c.spec.root} {crowd.gltf.doc['nodes'][c.spec.root].get('name', '')!r}"
 
 
 def _indent(text: str) -> str:
