@@ -60,7 +60,7 @@ def _crowd(folder: Path, n: int, duration: float, density: str, fmt: str = "gltf
             clips=tuple(anim.clips[k] for k in keep),
         )
     if fmt == "usd":
-        from crowdstudy.interchange.usd_export import export_usd
+        from crowdstudy.gltf.export_usd import export_usd
 
         return export_usd(anim, folder / "baseline.usdc", meters_per_unit=0.01), anim
     return export_gltf(anim, folder / "baseline.glb"), anim

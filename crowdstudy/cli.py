@@ -74,7 +74,7 @@ COMMANDS: tuple[tuple[str, str, str], ...] = (
     ),
     (
         "export-usd",
-        "crowdstudy.interchange.cli_export_usd",
+        "crowdstudy.gltf.cli_export_usd",
         "Export an animation and its bodies as a UsdSkel crowd (.usda, .usdc).",
     ),
     (

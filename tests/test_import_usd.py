@@ -25,8 +25,9 @@ from crowdstudy.body import load_body  # noqa: E402
 from crowdstudy.body.gltf_container import read_gltf  # noqa: E402
 from crowdstudy.cli import main  # noqa: E402
 from crowdstudy.errors import InvalidInputError  # noqa: E402
+from crowdstudy.gltf.export_usd import export_usd  # noqa: E402
 from crowdstudy.interchange.gltf_crowd import read_crowd  # noqa: E402
-from crowdstudy.interchange.usd_export import export_usd, gltf_to_usd, usd_layer_bytes  # noqa: E402
+from crowdstudy.interchange.usd_export import gltf_to_usd, usd_layer_bytes  # noqa: E402
 from crowdstudy.motion import load_clip  # noqa: E402
 from crowdstudy.physics.correct_file import correct_gltf  # noqa: E402
 

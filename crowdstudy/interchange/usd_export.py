@@ -1,8 +1,7 @@
-"""A crowd as a UsdSkel stage (``crowdstudy export-usd anim.npz crowd.usda|usdc``).
+"""Skinned glTF characters as a UsdSkel stage (what ``crowdstudy export-usd`` writes, through
+:func:`crowdstudy.gltf.export_usd.export_usd`, and what the USD tests are made from).
 
-The animation is first laid out as glTF (:func:`crowdstudy.gltf.export.build_gltf`: the
-bodies' skins on the 24-joint physics skeleton), then every glTF skin is written as one
-UsdSkel character (:func:`gltf_to_usd`):
+Every glTF skin is written as one UsdSkel character (:func:`gltf_to_usd`):
 
 ``/Crowd`` (an ``Xform`` carrying glTF's Y-up metres to the stage's ``upAxis`` and
 ``metersPerUnit``) / ``<character>`` (a ``SkelRoot``) with
@@ -30,7 +29,7 @@ from crowdstudy.body.gltf_container import GltfFile
 from crowdstudy.body.usd_stage import import_pxr
 from crowdstudy.errors import InvalidInputError
 
-__all__ = ["export_usd", "gltf_to_usd", "usd_layer_bytes", "UP_AXES"]
+__all__ = ["gltf_to_usd", "usd_layer_bytes", "UP_AXES"]
 
 #: The stage up axes export-usd writes.
 UP_AXES = ("Y", "Z")
@@ -234,23 +233,3 @@ def usd_layer_bytes(stage, out_path: str | Path) -> bytes:
         return Path(tmp).read_bytes()
     finally:
         Path(tmp).unlink(missing_ok=True)
-
-
-def export_usd(anim, path: str | Path, *, bodies=None, up_axis: str = "Z", meters_per_unit: float = 1.0) -> Path:
-    """Write ``anim`` (on the 24-joint skeleton, with its bodies) as a UsdSkel crowd."""
-    from crowdstudy.gltf.export import build_gltf
-
-    path = Path(path)
-    if path.suffix.lower() not in (".usd", ".usda", ".usdc"):
-        raise InvalidInputError(f"output: expected a .usda, .usdc or .usd file, got {str(path)!r}")
-    b = build_gltf(anim, bodies=bodies)
-    doc = dict(b.doc)
-    doc["buffers"] = [{"byteLength": len(b._bin)}]
-    gltf = GltfFile(doc, [bytes(b._bin)], path)
-    custom = doc["asset"].get("extras", {}).get("crowdstudy", {})
-    stage = gltf_to_usd(gltf, up_axis=up_axis, meters_per_unit=meters_per_unit, custom=custom)
-    data = usd_layer_bytes(stage, path)
-    tmp = path.with_name(path.name + ".tmp")
-    tmp.write_bytes(data)
-    tmp.replace(path)
-    return path

@@ -1,5 +1,5 @@
 """``crowdstudy export-usd ANIM.npz OUT.usda|usdc``: a CrowdAnimation and its bodies as a
-UsdSkel crowd (:mod:`crowdstudy.interchange.usd_export`), which ``import-crowd`` reads back."""
+UsdSkel crowd (:mod:`crowdstudy.gltf.export_usd`), which ``import-crowd`` reads back."""
 
 from __future__ import annotations
 
@@ -23,7 +23,7 @@ def configure(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from crowdstudy.interchange.usd_export import export_usd
+    from crowdstudy.gltf.export_usd import export_usd
     from crowdstudy.paths import check_output_path
     from crowdstudy.scene import CrowdAnimation
 
