@@ -10,6 +10,8 @@ metres/Y-up: each USD import must give the glTF import's motion.
 from __future__ import annotations
 
 import json
+import os
+import subprocess
 from pathlib import Path
 
 import numpy as np
@@ -32,6 +34,7 @@ from crowdstudy.motion import load_clip  # noqa: E402
 from crowdstudy.physics.correct_file import correct_gltf  # noqa: E402
 
 FRAMES = 24
+ROOT = Path(__file__).resolve().parent.parent
 
 
 @pytest.fixture(scope="module")
@@ -195,3 +198,71 @@ def test_usd_errors_are_named(glb_crowds, tmp_path, capsys):
     assert not out.exists()
     assert main(["import-crowd", str(nounit), "--out", str(tmp_path / "a.npz")]) == 2
     assert not (tmp_path / "a.npz").exists()
+
+
+# ---------------------------------------------------------------------- Blender-written USD
+
+BPY_PYTHON = os.environ.get("CROWDSTUDY_BPY_PYTHON") or str(ROOT / "build" / "bpy-venv" / "bin" / "python")
+needs_bpy = pytest.mark.skipif(
+    not Path(BPY_PYTHON).is_file(),
+    reason="no Python with Blender's bpy module (scripts/setup_bpy.sh, or CROWDSTUDY_BPY_PYTHON)",
+)
+
+
+def _bpy(*args: str) -> str:
+    res = subprocess.run([BPY_PYTHON, *args], capture_output=True, text=True, timeout=600)
+    assert res.returncode == 0 and "OK" in res.stdout, (res.stdout + res.stderr)[-2000:]
+    return res.stdout
+
+
+@pytest.fixture(scope="module")
+def blender_usd(glb_crowds, tmp_path_factory):
+    """The Blender-named crowd written by Blender's own USD exporter, in metres and in a
+    centimetre scene (armatures scaled by 100, metersPerUnit 0.01)."""
+    if not Path(BPY_PYTHON).is_file():
+        pytest.skip("no Python with bpy")
+    folder = tmp_path_factory.mktemp("blender_usd")
+    out = {}
+    for unit, scale in (("m", "1"), ("cm", "0.01")):
+        out[unit] = folder / f"crowd_{unit}.usda"
+        _bpy(str(ROOT / "tests/blender/usd_from_gltf.py"), str(glb_crowds["blender"]), str(out[unit]), scale)
+    return out
+
+
+@pytest.mark.slow
+@needs_bpy
+@pytest.mark.parametrize("unit", ["m", "cm"])
+def test_blender_usd_moves_as_the_gltf(glb_crowds, blender_usd, unit):
+    """Blender's USD (its bone axes, names, unit scale, 24 fps) gives the glTF file's joint
+    positions, turned half a turn about z (Blender's Z-up world is glTF's turned so)."""
+    from crowdstudy.body.skeleton import forward_kinematics
+
+    assert Usd.Stage.Open(str(blender_usd[unit])).GetMetadata("metersPerUnit") == pytest.approx(
+        1.0 if unit == "m" else 0.01
+    )
+    a, b = read_crowd(glb_crowds["blender"], fps=24.0), read_crowd(blender_usd[unit], fps=24.0)
+    assert b.anim.n_characters == a.anim.n_characters == 3
+    n = min(a.anim.n_frames, b.anim.n_frames)
+    for i in range(3):
+        _, pa = forward_kinematics(
+            a.bodies[i].rest_joints, a.anim.joint_rotations[:n, i], a.anim.root_translation[:n, i]
+        )
+        _, pb = forward_kinematics(
+            b.bodies[i].rest_joints, b.anim.joint_rotations[:n, i], b.anim.root_translation[:n, i]
+        )
+        np.testing.assert_allclose(pb * np.array([-1.0, -1.0, 1.0]), pa, atol=3e-3)
+
+
+@pytest.mark.slow
+@needs_bpy
+def test_blender_usd_corrected_file_to_file(blender_usd, tmp_path):
+    src = blender_usd["cm"]
+    out = tmp_path / "ours.usda"
+    assert main(["correct", str(src), str(out), "--no-progress"]) == 0
+    report = json.loads((tmp_path / "ours.overlap.json").read_text())
+    assert report["overall"]["after_litres"] < 0.5 * report["overall"]["before_litres"]
+    assert _validate(out) == []
+    _same_prims_but_animation(src, out)
+    assert read_crowd(out).anim.n_characters == 3
+    text = _bpy(str(ROOT / "tests/blender/usd_import_check.py"), str(out), "x")
+    assert "armatures 3" in text

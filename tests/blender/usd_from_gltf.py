@@ -8,6 +8,7 @@ scaled by 100 in a centimetre scene (``metersPerUnit`` 0.01 where Blender writes
 Prints ``OK`` and the exporter's options on success.
 """
 
+import os
 import sys
 
 import bpy
@@ -34,3 +35,7 @@ if "export_materials" in props:
     kwargs["export_materials"] = True
 res = bpy.ops.wm.usd_export(**kwargs)
 print("OK" if res == {"FINISHED"} else f"FAILED {res}", sorted(kwargs))
+
+# bpy can crash while tearing down at exit; the work is done and printed
+sys.stdout.flush()
+os._exit(0)
