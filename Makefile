@@ -7,7 +7,7 @@ export WARP_CACHE_PATH := $(CURDIR)/build/warp-cache
 export MPLBACKEND := Agg
 export PYTHONUNBUFFERED := 1
 
-.PHONY: setup demo test test-fast figures bench docs results constraints clean
+.PHONY: setup demo test test-fast lint figures bench docs results constraints clean
 
 setup:
 	@bash scripts/setup.sh
@@ -22,6 +22,14 @@ test: setup
 
 test-fast: setup
 	$(PY) -m pytest -q -n auto --dist loadfile --no-loadscope-reorder -m "not slow and not browser"
+
+# ruff's lint and format check on every Python folder, pyright on the package (settings in
+# pyproject.toml); .pre-commit-config.yaml runs the same on each commit
+LINT_DIRS := crowdstudy tests benchmarks paper_figs scripts analysis
+lint: setup
+	$(VENV)/bin/ruff check $(LINT_DIRS)
+	$(VENV)/bin/ruff format --check $(LINT_DIRS)
+	$(VENV)/bin/pyright
 
 figures: setup
 	$(PY) paper_figs/make_all.py

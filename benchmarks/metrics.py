@@ -109,7 +109,7 @@ def _warp_peer(anim, frame: int, h: float) -> tuple[float, np.ndarray]:
             indices=wp.array(np.asarray(b.faces, np.int32).ravel(), dtype=wp.int32),
             support_winding_number=True,
         )
-        for v, b in zip(verts, bodies)
+        for v, b in zip(verts, bodies, strict=True)
     ]
     lo = np.array([v.min(0) for v in verts])
     hi = np.array([v.max(0) for v in verts])
@@ -124,7 +124,10 @@ def _warp_peer(anim, frame: int, h: float) -> tuple[float, np.ndarray]:
             continue
         b_lo = np.maximum(lo[i], lo[js]).min(0)
         b_hi = np.minimum(hi[i], hi[js]).max(0)
-        axes = [(np.arange(np.ceil(a / h - 0.5), np.floor(b / h - 0.5) + 1) + 0.5) * h for a, b in zip(b_lo, b_hi)]
+        axes = [
+            (np.arange(np.ceil(a / h - 0.5), np.floor(b / h - 0.5) + 1) + 0.5) * h
+            for a, b in zip(b_lo, b_hi, strict=True)
+        ]
         grid = np.stack(np.meshgrid(*axes, indexing="ij"), -1).reshape(-1, 3)
         points.append(grid)
         owner.append(np.full(len(grid), i, np.int32))

@@ -331,7 +331,7 @@ def seed_figure(rows: list[dict], path=None, tolerances: BarTolerances | None = 
             ys = np.array([r[key] * scale for r in sel])
             xs = i + np.linspace(-0.15, 0.15, len(ys)) if len(ys) > 1 else np.full(1, float(i))
             ax.plot(xs, ys, "o", color="tab:blue", ms=5, alpha=0.8)
-            for x, r, y in zip(xs, sel, ys):
+            for x, r, y in zip(xs, sel, ys, strict=True):
                 if r.get("study_seed"):
                     ax.plot([x], [y], "o", mfc="none", mec="k", ms=10, mew=1.5)
             ax.plot([i - 0.25, i + 0.25], [ys.mean()] * 2, "-", color="tab:blue", lw=2)
@@ -495,7 +495,7 @@ def _main_stadium(args, config, trial: str) -> int:
             tolerances=TOLERANCES,
             report=_print_row,
         )
-        for n, s in zip(counts, secs)
+        for n, s in zip(counts, secs, strict=True)
     ]
     print("bars: " + "; ".join(BAR_TEXT.values()), flush=True)
     path = write_report(

@@ -2,8 +2,8 @@
 
 The solver's PCG (``crowdstudy.physics.solver``) preconditions with one exact block per
 character (its bodies and joints, a tree). Contacts that stiffen with their depth couple the
-characters, which that block does not see, and the iterations grew 13 -> 39 at 1,000 tiled D5
-characters. This benchmark takes the very systems the solver assembles (``Solver.triplets``
+characters, which that block does not see, so the iterations grow with the depth of a dense tiled D5
+crowd. This benchmark takes the very systems the solver assembles (``Solver.triplets``
 after ``--warmup`` steps of the tiled D5 concert) and solves each with numpy PCG to the
 solver's relative tolerance under:
 

@@ -164,6 +164,8 @@ def load_benchmark(name: str):
     if not path.is_file():
         raise InvalidInputError(f"unknown benchmark {name!r}; available: {', '.join(available()) or 'none'}")
     spec = importlib.util.spec_from_file_location(f"crowdstudy_benchmarks.{name}", path)
+    if spec is None or spec.loader is None:
+        raise InvalidInputError(f"benchmark {name!r}: {path} cannot be imported")
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
     return module

@@ -12,7 +12,9 @@ __all__ = ["configure", "run"]
 def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--out", type=Path, default=Path("demo_out"), help="output folder (default demo_out/)")
     parser.add_argument("--design", type=Path, default=None, help="study design TOML (default stimuli/study.toml)")
-    parser.add_argument("--density", default="D5", help="density level of the two showcase crowds (default D5)")
+    parser.add_argument(
+        "--density", default=None, help="density level of the showcase crowds (default: the design's densest, D5)"
+    )
     parser.add_argument(
         "--duration",
         type=float,
@@ -29,12 +31,14 @@ def configure(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from crowdstudy.demo import run_demo
+    from crowdstudy.design import load_design
     from crowdstudy.paths import check_output_dir
 
+    design = load_design(args.design)  # a bad design fails before anything is written
     check_output_dir(args.out, "--out")
     run_demo(
         out=args.out,
-        design=args.design,
+        design=design,
         density=args.density,
         duration=args.duration,
         participants=args.participants,

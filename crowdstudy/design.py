@@ -17,7 +17,7 @@ import math
 import tomllib
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any, Literal, NamedTuple, NoReturn, get_args
+from typing import Any, Literal, NamedTuple, NoReturn, TypeVar, cast, get_args
 
 from crowdstudy.errors import InvalidInputError
 from crowdstudy.package_data import resource_path
@@ -277,6 +277,19 @@ class StudyDesign:
             + ", ".join(f"{n} ({sc.kind})" for n, sc in self.scenarios.items())
         )
 
+    def stage_of_kind(self, kind: ScenarioKind) -> Stage:
+        """The first stage whose scenario is of ``kind`` (the paper's ``stationary`` for
+        ``"concert"``, ``walking`` for ``"corridor"``): what ``crowdstudy layout`` and
+        ``navigate`` take their cell seeds and scenario parameters from."""
+        for st in self.stages:
+            if self.scenarios[st.scenario].kind == kind:
+                return st
+        raise InvalidInputError(
+            f"{self.source}: no stage of the design is a {kind} (its stages: "
+            + ", ".join(f"{st.key} ({self.scenarios[st.scenario].kind})" for st in self.stages)
+            + ")"
+        )
+
     def tasks(self) -> tuple[Task, ...]:
         """The tasks of the design's stages, each once, in stage order."""
         return tuple(dict.fromkeys(st.task for st in self.stages))
@@ -330,6 +343,9 @@ def default_design_path() -> Path:
     return resource_path("crowdstudy.study", "study.toml")
 
 
+_T = TypeVar("_T")
+
+
 class _Reader:
     """Typed access to a TOML table that reports the full key path on error."""
 
@@ -343,20 +359,20 @@ class _Reader:
     def fail(self, key: str, msg: str) -> NoReturn:
         raise InvalidInputError(f"{self.source}: key '{self._key(key)}' {msg}")
 
-    def get(self, key: str, kind: type | tuple, default: Any = dataclasses.MISSING):
+    def get(self, key: str, kind: type[_T], default: Any = dataclasses.MISSING) -> _T:
+        """The value of ``key``, of type ``kind`` (an integer counts as a float, a bool
+        only as a bool), else ``default``; missing without a default is an error."""
         self.used.add(key)
         if key not in self.table:
             if default is dataclasses.MISSING:
                 self.fail(key, "is missing")
             return default
         value = self.table[key]
-        kinds = kind if isinstance(kind, tuple) else (kind,)
-        if float in kinds and isinstance(value, int) and not isinstance(value, bool):
+        if kind is float and isinstance(value, int) and not isinstance(value, bool):
             value = float(value)
-        if isinstance(value, bool) and bool not in kinds or not isinstance(value, kinds):
-            names = " or ".join(k.__name__ for k in kinds)
-            self.fail(key, f"must be {names}, got {type(value).__name__} {value!r}")
-        return value
+        if isinstance(value, bool) and kind is not bool or not isinstance(value, kind):
+            self.fail(key, f"must be {kind.__name__}, got {type(value).__name__} {value!r}")
+        return cast(_T, value)  # checked above: isinstance(value, kind)
 
     def number(
         self,
@@ -403,9 +419,27 @@ class _Reader:
 
 
 def load_design(path: str | Path | None = None) -> StudyDesign:
-    """Load and validate a study design TOML file (default: the paper's design)."""
+    """Load and validate a study design TOML file (default: the paper's design); a ``files``
+    method's folder must exist (its ``path`` is relative to the design file)."""
     path = Path(path) if path is not None else default_design_path()
-    return parse_design(read_toml(path, f"study design file {str(path)!r} does not exist"), str(path))
+    design = parse_design(read_toml(path, f"study design file {str(path)!r} does not exist"), str(path))
+    _check_method_folders(design, path.parent)
+    return design
+
+
+def _check_method_folders(design: StudyDesign, design_dir: Path) -> None:
+    """Every ``files`` method's folder exists (the check of each cell's file in it waits for
+    the commands that read them: ``crowdstudy stimuli``, ``demo``)."""
+    for name in design.methods:
+        method = design.method_recipes[name]
+        if method.correction == "files":
+            folder = Path(method.path or "")
+            folder = folder if folder.is_absolute() else design_dir / folder
+            if not folder.is_dir():
+                raise InvalidInputError(
+                    f"{design.source}: key 'methods.{name}.path': the folder {str(folder)!r} of the method's "
+                    "animations does not exist (a relative path is relative to the design file)"
+                )
 
 
 def read_toml(path: str | Path, missing: str) -> dict:
@@ -523,6 +557,12 @@ def _read_methods(top: _Reader) -> dict[str, Method]:
             if not isinstance(meth.table[name], dict):
                 meth.fail(name, "must be a table ([methods.NAME] with its correction)")
             recipes[name] = _read_method(meth.table_(name), name)
+            if name == "Baseline" and recipes[name].correction != "none":
+                meth.table_(name).fail(
+                    "correction",
+                    "must be 'none': Baseline names the uncorrected animation every method starts "
+                    "from; give this method another name",
+                )
         elif name in DEFAULT_METHODS:
             recipes[name] = DEFAULT_METHODS[name]
         else:

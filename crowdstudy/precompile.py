@@ -1,7 +1,7 @@
 """``crowdstudy precompile``: compile every Warp kernel module of the toolkit once, ahead of use.
 
-Warp compiles a module the first time one of its kernels is launched (on this 2-core CPU
-about 10 s for the physics, a few seconds for each other module) and keeps the binary in its
+Warp compiles a module the first time one of its kernels is launched (seconds per module
+on a CPU, the physics the longest) and keeps the binary in its
 kernel cache (``WARP_CACHE_PATH``, else the per-user cache folder). A fresh installation pays
 that inside its first ``crowdstudy correct`` or first test; ``make`` set-up runs this command
 in the background while it installs the npm packages, compiling the modules on two threads,
@@ -26,7 +26,7 @@ KERNEL_MODULES: tuple[tuple[str, str | None], ...] = (
     ("crowdstudy.physics.collision_kernels", None),
     ("crowdstudy.physics.linear", None),
     ("crowdstudy.metrics.kernels", None),
-    ("crowdstudy.body.skinning", "warp_kernels"),
+    ("crowdstudy.body.skinning_kernels", None),
     ("crowdstudy.navigation.orca_kernels", None),
 )
 

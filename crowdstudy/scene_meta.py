@@ -54,8 +54,16 @@ The cell (written by :func:`crowdstudy.motion.baseline.build_baseline` and
 The motion (:mod:`crowdstudy.motion.baseline`):
 
 ``method`` (str)
-    ``"Baseline"`` (the animation as generated) or ``"Ours"`` (after the physics); the
+    the method that made the animation: ``"Baseline"`` (the animation as generated) or
+    ``"Ours"`` (after the physics), or the name a study design gives the method
+    (``[methods.NAME]``, :func:`crowdstudy.recipes.make_method_animation`); the
     benchmarks label other peers (``"MuJoCo"``). Read by the metrics' summaries.
+``recipe`` (:class:`Recipe`)
+    how a study design's method made the animation (:meth:`crowdstudy.design.Method.recipe`):
+    ``{"correction": "none" | "physics" | "paper" | "mujoco" | "files"}`` and what that
+    correction takes (``config``: the ``PhysicsConfig`` overrides, e.g. ``{"damping": 0.06}``;
+    ``setting``: the MuJoCo tuning; ``path``: the folder of the user's animations). Written
+    by :func:`crowdstudy.recipes.make_method_animation` (``crowdstudy stimuli``).
 ``tempo`` (float bpm, or None; concert)
     the beat the dancers share (None: each motion-capture clip at its own tempo).
 ``loop`` (:class:`Loop`)
@@ -105,6 +113,7 @@ __all__ = [
     "Loop",
     "PhysicsLoop",
     "PhysicsMeta",
+    "Recipe",
     "SceneMeta",
     "check_meta",
     "loop_mode",
@@ -188,6 +197,15 @@ class PhysicsMeta(TypedDict, total=False):
     speed_limit: dict[str, Any] | None
 
 
+class Recipe(TypedDict, total=False):
+    """``meta["recipe"]``: how a study design's method made the animation."""
+
+    correction: str
+    config: dict[str, Any]
+    setting: str | None
+    path: str
+
+
 class SceneMeta(TypedDict, total=False):
     """A :class:`~crowdstudy.scene.CrowdAnimation`'s ``meta``: every key optional (the
     module's docstring says what each means and who writes it); other keys allowed."""
@@ -208,9 +226,11 @@ class SceneMeta(TypedDict, total=False):
     seed: int | None
     source: str
     method: str
+    recipe: Recipe
     tempo: float | None
     loop: Loop
     provenance: dict[str, Any]
+    imported: dict[str, Any]
     physics: PhysicsMeta
     baseline_method: str | None
     baseline_provenance: dict[str, Any] | None
@@ -221,12 +241,20 @@ def _fail(path: str, what: str, value: object) -> InvalidInputError:
     return InvalidInputError(f"{path}: expected {what}, got {value!r}")
 
 
+def _finite(value: object) -> float | None:
+    """``value`` as a float when it is a finite real number (not a bool), else None."""
+    if not isinstance(value, numbers.Real) or isinstance(value, (bool, np.bool_)):
+        return None
+    x = float(value)
+    return x if math.isfinite(x) else None
+
+
 def _number(value: object, path: str, *, lo: float = -math.inf, positive: bool = False) -> None:
-    ok = isinstance(value, numbers.Real) and not isinstance(value, (bool, np.bool_)) and math.isfinite(value)
+    x = _finite(value)
     if positive:
-        if not (ok and value > 0):
+        if x is None or not x > 0:
             raise _fail(path, "a positive number", value)
-    elif not (ok and value >= lo):
+    elif x is None or not x >= lo:
         raise _fail(path, "a number" if lo == -math.inf else f"a number >= {lo:g}", value)
 
 
@@ -240,17 +268,19 @@ def _text(value: object, path: str) -> None:
         raise _fail(path, "a string", value)
 
 
-def _mapping(value: object, path: str) -> None:
+def _mapping(value: object, path: str) -> Mapping[str, Any]:
+    """``value`` when it is a mapping (the keys of a ``meta`` are strings)."""
     if not isinstance(value, Mapping):
         raise _fail(path, "a dict", value)
+    return value
 
 
-def _optional(check: Callable[[object, str], None]) -> Callable[[object, str], None]:
+def _optional(check: Callable[[object, str], object]) -> Callable[[object, str], object]:
     return lambda value, path: None if value is None else check(value, path)
 
 
 def _floor(value: object, path: str) -> None:
-    _mapping(value, path)
+    value = _mapping(value, path)
     for key in ("width", "depth"):
         if key not in value:
             raise InvalidInputError(f"{path}.{key}: missing (the floor's extent in m)")
@@ -260,7 +290,7 @@ def _floor(value: object, path: str) -> None:
 def _periodic(value: object, path: str) -> None:
     if not value:  # None or {}: not periodic
         return
-    _mapping(value, path)
+    value = _mapping(value, path)
     if "length" not in value:
         raise InvalidInputError(f"{path}.length: missing (the period along x, m)")
     _number(value["length"], f"{path}.length", positive=True)
@@ -272,7 +302,7 @@ def _obstacles(value: object, path: str) -> None:
 
 
 def _loop(value: object, path: str) -> None:
-    _mapping(value, path)
+    value = _mapping(value, path)
     mode = value.get("mode")
     if mode not in LOOP_MODES:
         raise _fail(f"{path}.mode", "one of " + ", ".join(map(repr, LOOP_MODES)), mode)
@@ -284,8 +314,21 @@ def _loop(value: object, path: str) -> None:
         _integer(value["video_frames"], f"{path}.video_frames", lo=1)
 
 
-def _physics(value: object, path: str) -> None:
+#: The corrections a recipe names (``crowdstudy.design.Correction``; kept here as text so
+#: that the meta schema imports nothing of the design).
+_CORRECTIONS = ("none", "physics", "paper", "mujoco", "files")
+
+
+def _recipe(value: object, path: str) -> None:
     _mapping(value, path)
+    if value.get("correction") not in _CORRECTIONS:
+        raise _fail(f"{path}.correction", f"one of {', '.join(_CORRECTIONS)}", value.get("correction"))
+    if "config" in value:
+        _mapping(value["config"], f"{path}.config")
+
+
+def _physics(value: object, path: str) -> None:
+    value = _mapping(value, path)
     if "config" in value:
         _mapping(value["config"], f"{path}.config")
     for key in ("crowd_density", "dt", "cg_iterations_mean", "contacts_mean"):
@@ -311,7 +354,7 @@ def _physics(value: object, path: str) -> None:
         _mapping(value["loop"], f"{path}.loop")
 
 
-_CHECKS: dict[str, Callable[[object, str], None]] = {
+_CHECKS: dict[str, Callable[[object, str], object]] = {
     "scenario": _text,
     "stage": _text,
     "density_level": _text,
@@ -332,6 +375,7 @@ _CHECKS: dict[str, Callable[[object, str], None]] = {
     "periodic": _periodic,
     "loop": _loop,
     "physics": _physics,
+    "recipe": _recipe,
     "provenance": _optional(_mapping),
     "baseline_provenance": _optional(_mapping),
     "imported": _mapping,

@@ -12,7 +12,8 @@ import os
 import re
 import threading
 import time
-from typing import Literal
+from collections.abc import Callable
+from typing import Any, Literal
 
 from crowdstudy.paths import cache_dir
 
@@ -35,7 +36,7 @@ def get_warp():
     if hasattr(wp, "LOG_WARNING"):
         wp.config.log_level = wp.LOG_WARNING
     else:  # pragma: no cover - older Warp
-        wp.config.quiet = True
+        wp.config.quiet = True  # pyright: ignore[reportAttributeAccessIssue]  (older Warp only)
     wp.config.kernel_cache_dir = cache
     wp.init()
     return wp
@@ -101,8 +102,8 @@ class _Worker:
 
     def __init__(self):
         self._go, self._done = threading.Event(), threading.Event()
-        self._fn = None
-        self._result = None
+        self._fn: Callable[[], Any] | None = None
+        self._result: tuple[bool, Any] | None = None
         self._thread = threading.Thread(target=self._loop, name="crowdstudy-warp-cpu", daemon=True)
         self._thread.start()
 
@@ -110,8 +111,11 @@ class _Worker:
         while True:
             self._go.wait()
             self._go.clear()
+            fn = self._fn
             try:
-                self._result = (True, self._fn())
+                if fn is None:
+                    raise RuntimeError("the helper thread was woken without a call")
+                self._result = (True, fn())
             except BaseException as exc:  # handed back to the caller
                 self._result = (False, exc)
             self._done.set()
@@ -121,10 +125,12 @@ class _Worker:
         self._fn = fn
         self._go.set()
 
-    def result(self):
+    def result(self) -> Any:
         self._done.wait()
-        ok, value = self._result
-        self._fn = self._result = None
+        result, self._fn, self._result = self._result, None, None
+        if result is None:
+            raise RuntimeError("the helper thread finished without a result")
+        ok, value = result
         if not ok:
             raise value
         return value

@@ -137,7 +137,7 @@ def plot(rows: list[dict], path: Path, config: dict) -> None:
     fig, axes = plt.subplots(1, 2, figsize=(7.2, 2.9), sharey=False)
     titles = {"stationary": "Stationary (concert)", "walking": "Walking (corridor)"}
     series = []  # the plotted numbers, for the JSON sidecar
-    for ax, stage in zip(axes, STAGES):
+    for ax, stage in zip(axes, STAGES, strict=True):
         for method in ("Baseline", "Ours"):
             sel = sorted(
                 (r for r in rows if r["stage"] == stage and r["method"] == method), key=lambda r: float(r["density"])

@@ -49,7 +49,7 @@ def main(argv=None) -> int:
     fig, ax = plt.subplots(figsize=(6.4, 3.4))
     ax.plot(t, target, color="black", ls="--", lw=1.2, label="target (animation)")
     colours = plt.cm.viridis(np.linspace(0.1, 0.85, len(data["position"])))
-    for colour, (d, pos) in zip(colours, data["position"].items()):
+    for colour, (d, pos) in zip(colours, data["position"].items(), strict=True):
         m = data["metrics"][d]
         ret = "never" if not np.isfinite(m["return_time"]) else f"{m['return_time']:.2f} s"
         ax.plot(

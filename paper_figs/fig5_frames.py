@@ -59,7 +59,7 @@ def main(argv=None) -> int:
     for row, level in enumerate(levels):
         anims = cell_animations(design, level, duration, args.refresh)
         colours = anims[0].root_translation[0, :, :2]  # both methods wear the Baseline's colours
-        for col, (method, anim) in enumerate(zip(("Baseline", "Ours"), anims)):
+        for col, (method, anim) in enumerate(zip(("Baseline", "Ours"), anims, strict=True)):
             frame = anim.n_frames - 1
             with CrowdRenderer(anim, design=design, width=width, height=height, color_positions=colours) as r:
                 r.set_view(args.view)

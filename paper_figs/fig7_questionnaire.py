@@ -55,15 +55,25 @@ def screenshot(url: str, out: Path, *, width: int, height: int, video_timeout_ms
             page.wait_for_selector(".cs-trial .cs-next")
             for q, v in (("Q1", 5), ("Q2", 2), ("Q3", 4), ("Q4", 3)):
                 page.check(f'input[name="{q}"][value="{v}"]')
-            page.wait_for_function(
-                "() => document.querySelector('.cs-video').currentTime > 0.3", timeout=video_timeout_ms
-            )
+            # the furthest the looping video has played, from its timeupdate events: a single
+            # sample of currentTime can land just after the loop's wrap on a loaded machine
+            page.evaluate(VIDEO_WATCH)
+            page.wait_for_function("() => window.csVideoPlayed > 0.3", timeout=video_timeout_ms)
             out.parent.mkdir(parents=True, exist_ok=True)
             page.screenshot(path=str(out), full_page=False)
             return page.evaluate(PAGE_STATE)
         finally:
             browser.close()
 
+
+#: Records in ``window.csVideoPlayed`` the furthest time (s) the trial's video has reached.
+VIDEO_WATCH = """() => {
+  const video = document.querySelector('.cs-video');
+  window.csVideoPlayed = video.currentTime;
+  video.addEventListener('timeupdate', () => {
+    window.csVideoPlayed = Math.max(window.csVideoPlayed, video.currentTime);
+  });
+}"""
 
 #: What the screenshot shows, read from the page (written to the figure's JSON sidecar):
 #: boxes [left, top, width, height] in CSS pixels, the checked answer of each item.
@@ -77,7 +87,8 @@ PAGE_STATE = """() => {
   }
   return {video: box(video), questions: box(document.querySelector('.cs-questions')),
           statements: [...document.querySelectorAll('.cs-statement')].map((e) => e.textContent.trim()),
-          answers, video_time: video.currentTime, video_paused: video.paused, video_loop: video.loop,
+          answers, video_time: video.currentTime, video_played: window.csVideoPlayed,
+          video_paused: video.paused, video_loop: video.loop,
           video_size: [video.videoWidth, video.videoHeight],
           next_disabled: document.querySelector('.cs-next').disabled,
           progress: (document.querySelector('.cs-progress') || {}).textContent || '',

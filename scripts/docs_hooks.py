@@ -21,6 +21,8 @@ Nothing here is written into ``docs/``: the pages are added to the build in memo
   ``<!-- results: STEM KEY [COLUMN,...] -->`` the table ``KEY`` (``rows``, ``summary`` ...)
   of the published report ``STEM`` (:func:`results_pages.report_table`), headed by its
   command, machine and date: a hand-written page quotes measured numbers without typing them.
+  ``<!-- meta-keys: dotted.path.TypedDict -->`` becomes the table of a TypedDict's keys,
+  types and meanings (from its module's docstring: :func:`meta_table`).
 
 Generation functions are importable (``tests/test_docs.py`` uses them without MkDocs).
 """
@@ -235,6 +237,79 @@ def column_table(dotted: str, described: str, where: str = "") -> tuple[str, lis
     return "\n".join(lines) + "\n", problems
 
 
+# ------------------------------------------------------------------ the keys of meta
+
+_META_RE = re.compile(r"^<!-- meta-keys: ([\w.]+) -->\n", re.M)
+#: a key's entry in a module docstring: a line naming the keys, ````a```` (type), then
+#: indented lines saying what they mean
+_ENTRY_RE = re.compile(r"^(``\w+``.*)\n((?:    .*\n?)+)", re.M)
+_ROLE_TEXT_RE = re.compile(r":\w+:`([^`<]+?) <[^`>]+>`")
+
+
+def _type_name(hint) -> str:
+    """A type hint as the page shows it: ``int or None``, ``list[float]``, a TypedDict as a
+    link to its API entry."""
+    import types
+    import typing
+
+    args = typing.get_args(hint)
+    if typing.get_origin(hint) in (typing.Union, types.UnionType):
+        return " or ".join(_type_name(a) for a in args)
+    if args:
+        return f"{typing.get_origin(hint).__name__}[{', '.join(_type_name(a) for a in args)}]"
+    if typing.is_typeddict(hint):
+        return f":class:`~{hint.__module__}.{hint.__name__}`"
+    return "None" if hint is type(None) else getattr(hint, "__name__", str(hint))
+
+
+def _markdown(rst: str) -> str:
+    """Docstring text as Markdown in one table cell: ````x```` -> `x`, roles with a title
+    shown by their title (the page's role filter links the rest), ``|`` escaped."""
+    text = _ROLE_TEXT_RE.sub(r"`\1`", " ".join(rst.split()))
+    return text.replace("``", "`").replace("|", "\\|")
+
+
+def _plain_type(note: str) -> bool:
+    """Whether a docstring's ``(type)`` note says no more than the annotation (no unit)."""
+    words = re.sub(r":class:`[^`]+`", "T", note).split()
+    return all(w in {"str", "int", "float", "dict", "None", "or", "T"} for w in words)
+
+
+def meta_table(dotted: str, where: str = "") -> tuple[str, list[str]]:
+    """The table of the TypedDict ``dotted``'s keys (in the code's order, keys that share an
+    entry in one row), their types (from its annotations) and meanings (from its module's
+    docstring, where each key has an entry: a line ````key```` (type, unit), then indented
+    text); and the problems found (a key without an entry, an entry for a key the TypedDict
+    does not have)."""
+    import typing
+
+    typed = _constant(dotted)
+    hints = typing.get_type_hints(typed)
+    doc = importlib.import_module(typed.__module__).__doc__ or ""
+    entries = [(re.findall(r"``(\w+)``", m.group(1)), m.group(1), m.group(2)) for m in _ENTRY_RE.finditer(doc)]
+    entry_of = {key: i for i, (keys, _, _) in enumerate(entries) for key in keys}
+    problems = [
+        f"{where}: key {k!r} of {dotted} has no entry in {typed.__module__}" for k in hints if k not in entry_of
+    ]
+    problems += [
+        f"{where}: {typed.__module__} describes {k!r}, not a key of {dotted}" for k in entry_of if k not in hints
+    ]
+    rows: dict[object, list[str]] = {}
+    for key in hints:
+        rows.setdefault(entry_of.get(key, key), []).append(key)
+    lines = [f"Keys of `meta` (`{dotted}`):", "", "| key | type | meaning |", "| --- | --- | --- |"]
+    for entry, keys in rows.items():
+        types = dict.fromkeys(_type_name(hints[k]) for k in keys)
+        meaning = ""
+        if isinstance(entry, int):
+            head, text = entries[entry][1], entries[entry][2]
+            note = ", ".join(n for n in re.findall(r"\((.*?)\)(?:,|$)", head) if not _plain_type(n))
+            meaning = _markdown(f"({note}) {text}" if note else text)
+        cells = (", ".join(f"`{k}`" for k in keys), ", ".join(types), meaning)
+        lines.append("| " + " | ".join(cells) + " |")
+    return "\n".join(lines) + "\n", problems
+
+
 _RESULTS_RE = re.compile(r"^<!-- results: ([\w-]+) ([\w-]+)(?: ([\w,]+))? -->$", re.M)
 
 
@@ -256,7 +331,13 @@ def expand_markers(markdown: str, where: str = "") -> tuple[str, list[str]]:
         problems.extend(found)
         return table
 
+    def meta_keys(match: re.Match) -> str:
+        table, found = meta_table(match.group(1), where)
+        problems.extend(found)
+        return table
+
     markdown = _COLUMNS_RE.sub(columns, markdown)
+    markdown = _META_RE.sub(meta_keys, markdown)
     markdown = _RESULTS_RE.sub(results, markdown)
     if "<!-- results: index -->" in markdown:
         markdown = markdown.replace("<!-- results: index -->", results_pages.index_table(results_pages.load_reports()))

@@ -17,6 +17,7 @@ SHARED = ROOT.parent / "shared"
 #: tests first, started the demo last and left one worker idle at the end)
 SLOWEST_FIRST = (
     "test_demo.py",
+    "test_followup_study.py",
     "test_paper_figs.py",
     "test_study_browser_quality.py",
     "test_study_browser.py",

@@ -20,3 +20,11 @@ def plotted_discs(ax):
             centres.append((lo + hi) / 2)
             radii.append(float((hi - lo).mean() / 2))
     return np.array(centres).reshape(-1, 2), np.array(radii)
+
+
+def xy_order(points):
+    """Indices (K,) that sort points (K, 2) by x, then y: plotted and placed discs compared
+    in one order."""
+    import numpy as np
+
+    return np.lexsort((points[:, 1], points[:, 0]))

@@ -139,7 +139,7 @@ def write_mixamo_character(
         m[:3, :3] = turn @ glob[j] @ roll
         m[:3, 3] = cm * (turn @ pos[j])
         frames[MIXAMO[name]] = m
-    for name, (parent, near, offset) in EXTRA.items():
+    for name, (_parent, near, offset) in EXTRA.items():
         j = JOINT_INDEX[near]
         m = np.eye(4)
         m[:3, :3] = turn @ glob[j] @ roll
@@ -151,7 +151,7 @@ def write_mixamo_character(
     parents.update({n: p for n, (p, _, _) in EXTRA.items()})
 
     # re-key by the file's names, re-parent children of omitted joints
-    rename = dict(zip(mix_names, names))
+    rename = dict(zip(mix_names, names, strict=True))
     omitted = {mix_names[JOINT_INDEX[o]] for o in omit}
 
     old_parents = parents

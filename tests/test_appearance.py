@@ -30,7 +30,10 @@ def test_no_clothing_colour_is_close_to_any_skin_tone():
 
 def test_skin_tone_follows_the_ancestry_blend():
     rng = np.random.default_rng(0)
-    lum = lambda rec: float(skin_tone(rec, np.random.default_rng(0), 0) @ [0.2126, 0.7152, 0.0722])
+
+    def lum(rec):
+        return float(skin_tone(rec, np.random.default_rng(0), 0) @ [0.2126, 0.7152, 0.0722])
+
     dark = lum({"model": "makehuman", "race": [1, 0, 0]})
     light = lum({"model": "makehuman", "race": [0, 0, 1]})
     mixed = lum({"model": "makehuman", "race": [1, 0, 1]})
@@ -71,7 +74,7 @@ def renderer():
 
 
 def test_painted_textures_put_hair_shirt_trousers_shoes_and_eyes_where_they_belong(renderer):
-    for body, look in zip(renderer.bodies, renderer.looks):
+    for body, look in zip(renderer.bodies, renderer.looks, strict=True):
         codes = np.array(vertex_codes(body, _codes(renderer, body)))
         v, j = body.rest_vertices, body.rest_joints
         top = np.argmax(v[:13380, 2])
@@ -110,7 +113,7 @@ def test_rendered_characters_show_their_shirt_colours(renderer):
     cam = renderer.set_view(Camera(eye=(0.0, 3.0, 1.1), target=(0.0, 0.0, 1.0), fov=40.0))
     img = renderer.render(0).astype(np.float64)
     vp = cam.view_projection(320 / 240)
-    for look, body, x in zip(renderer.looks, renderer.bodies, (-0.5, 0.5)):
+    for look, body, x in zip(renderer.looks, renderer.bodies, (-0.5, 0.5), strict=True):
         chest = np.array([x, 0.1, body.pelvis_height + body.rest_joints[J["spine3"], 2] - 0.05, 1.0])
         clip = vp @ chest
         col, row = (clip[:2] / clip[3] * 0.5 + 0.5) * (320, 240)
@@ -123,7 +126,7 @@ def test_rendered_characters_show_their_shirt_colours(renderer):
 def test_appearance_is_seeded_and_varied():
     recs = [
         {"model": "makehuman", "sex": s, "age": a, "race": [0.3, 0.3, 0.4]}
-        for s, a in zip(["female", "male"] * 20, np.linspace(18, 70, 40))
+        for s, a in zip(["female", "male"] * 20, np.linspace(18, 70, 40), strict=True)
     ]
     pos = np.stack([np.arange(40) % 8, np.arange(40) // 8], axis=1) * 0.6
     looks = assign_appearance(recs, assign_colors(pos, 3)[1], 3)

@@ -115,7 +115,7 @@ def test_walking_follows_the_trajectories(walkers):
     forward = axis_angle_to_matrix(anim.joint_rotations[:, :, 0])[..., :2, 1]
     vel = crowd.velocities / np.linalg.norm(crowd.velocities, axis=-1, keepdims=True)
     assert np.sum(forward / np.linalg.norm(forward, axis=-1, keepdims=True) * vel, -1).min() > 0.9
-    for rec, v in zip(anim.clips, np.linalg.norm(crowd.velocities, axis=-1).T):
+    for rec, v in zip(anim.clips, np.linalg.norm(crowd.velocities, axis=-1).T, strict=True):
         assert rec["kind"] == "walk" and rec["clips"] == list_clips("walk")
         assert sum(rec["weights"]) == pytest.approx(1.0) and 0 <= rec["phase"] < 1
         assert rec["mean_speed"] == pytest.approx(v.mean(), rel=0.05)

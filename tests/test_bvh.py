@@ -110,7 +110,7 @@ def test_bad_bvh_files_name_the_file_and_line(tmp_path, small_bvh):
     lines = _lines(small_bvh)
     # unknown joint names
     renamed = tmp_path / "renamed.bvh"
-    renamed.write_text("\n".join(l.replace("mixamorig:LeftUpLeg", "Thigh_L") for l in lines))
+    renamed.write_text("\n".join(line.replace("mixamorig:LeftUpLeg", "Thigh_L") for line in lines))
     with pytest.raises(InvalidInputError, match=r"renamed\.bvh.*joint names.*left_hip"):
         load_bvh(renamed)
     # truncated motion
@@ -133,13 +133,13 @@ def test_bad_bvh_files_name_the_file_and_line(tmp_path, small_bvh):
         load_bvh(short)
     # a broken OFFSET
     off = tmp_path / "offset.bvh"
-    bad = [l.replace("OFFSET", "OFFSET x", 1) if "OFFSET" in l else l for l in lines]
+    bad = [line.replace("OFFSET", "OFFSET x", 1) if "OFFSET" in line else line for line in lines]
     off.write_text("\n".join(bad))
     with pytest.raises(InvalidInputError, match=r"offset\.bvh: line \d+: field 'OFFSET'"):
         load_bvh(off)
     # a joint line without its block: no offset, named
     orphan = tmp_path / "orphan.bvh"
-    joint = next(k for k, l in enumerate(lines) if l.strip().startswith("JOINT"))
+    joint = next(k for k, line in enumerate(lines) if line.strip().startswith("JOINT"))
     orphan.write_text("\n".join(lines[:joint] + ["  JOINT Stray"] + lines[joint:]))
     with pytest.raises(InvalidInputError, match=r"orphan\.bvh: line \d+: field 'OFFSET': missing for joint 'Stray'"):
         parse_bvh(orphan)

@@ -172,6 +172,22 @@ def test_a_column_table_reports_drift(hooks):
     assert any("'shoe_size'" in p for p in problems)
 
 
+def test_the_meta_table_is_generated_from_the_schema(hooks):
+    import typing
+
+    from crowdstudy.scene_meta import SceneMeta
+
+    page = (ROOT / "docs/concepts/crowd-animation.md").read_text(encoding="utf-8")
+    expanded, problems = hooks.expand_markers(page, "concepts/crowd-animation.md")
+    assert problems == [] and "<!-- meta-keys" not in expanded
+    for key in typing.get_type_hints(SceneMeta):
+        assert f"`{key}`" in expanded.split("Keys of `meta`")[1].split("\n\n")[1]
+    assert "| `stage_distance`, `stage_front` | float | (float, m; concert) how far the stage" in expanded
+    # a TypedDict whose keys the module's docstring does not describe: each one reported
+    _, drift = hooks.meta_table("crowdstudy.scene_meta.PhysicsMeta", "x.md")
+    assert any("'crowd_density'" in p and "no entry" in p for p in drift)
+
+
 def test_cli_page_covers_every_command(hooks):
     from crowdstudy.cli import COMMANDS
 

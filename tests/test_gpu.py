@@ -9,8 +9,8 @@ context). Tolerances, stated per test:
   with ``warp.optim.linear.cg`` instead of the fused CPU PCG, both to the same relative
   residual (1e-4 here, tighter than the default 1e-3, so that the two runs differ by the
   order of their sums rather than by where two solvers stop): mean joint distance between
-  the two results <= 0.5 cm, largest <= 3 cm; with the same (fused) PCG on CUDA <= 0.2 cm mean; the tracking error of each
-  against the Baseline within 0.3 cm of the other;
+  the two results <= 0.5 cm, largest <= 3 cm; with the same (fused) PCG on CUDA <= 0.2 cm
+  mean; the tracking error of each against the Baseline within 0.3 cm of the other;
 * metrics (mesh overlap, Warp on CUDA vs Warp on the CPU, float64 kernels): relative
   1e-6 per character and frame (absolute 1e-12 m^3);
 * renderer (the same frame through NVIDIA's EGL and Mesa's llvmpipe, 320x180, 4x MSAA,

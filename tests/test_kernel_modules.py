@@ -71,6 +71,7 @@ def test_no_module_but_the_kernel_modules_imports_warp():
     """)
     res = json.loads(out)
     assert {
+        "crowdstudy.body.skinning",
         "crowdstudy.physics",
         "crowdstudy.physics.solver",
         "crowdstudy.physics.collision",

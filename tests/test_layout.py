@@ -15,7 +15,7 @@ from crowdstudy.layout import concert_layout, disc_radius, poisson_disk
 from crowdstudy.scene import Crowd
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from figure_fixtures import plotted_discs  # noqa: E402
+from figure_fixtures import plotted_discs, xy_order  # noqa: E402
 
 
 @pytest.fixture(scope="module")
@@ -159,13 +159,12 @@ def test_layout_cli(tmp_path, capsys, saved_figures):
     panels = [ax for ax in saved_figures[0].axes if plotted_discs(ax)[0].size]
     assert len(panels) == 5
     counts = []
-    for ax, (level, crowd) in zip(panels, crowds.items()):
+    for ax, (level, crowd) in zip(panels, crowds.items(), strict=True):
         centres, radii = plotted_discs(ax)
         pos = crowd.positions[0]
         counts.append(len(centres))
         assert len(centres) == crowd.n_agents and ax.get_title().startswith(f"{level}: {crowd.n_agents} chars")
-        order = lambda p: np.lexsort((p[:, 1], p[:, 0]))
-        np.testing.assert_allclose(centres[order(centres)], pos[order(pos)], atol=1e-6)
+        np.testing.assert_allclose(centres[xy_order(centres)], pos[xy_order(pos)], atol=1e-6)
         np.testing.assert_allclose(radii, crowd.radius[0], rtol=1e-3)
         x0, x1 = ax.get_xlim()
         y0, y1 = ax.get_ylim()

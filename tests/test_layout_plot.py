@@ -24,7 +24,7 @@ def test_plot_layouts_draws_every_character(tmp_path, saved_figures):
     (fig,) = saved_figures
     panels = [ax for ax in fig.axes if plotted_discs(ax)[0].size]
     assert len(panels) == 2
-    for ax, crowd in zip(panels, crowds):
+    for ax, crowd in zip(panels, crowds, strict=True):
         centres, radii = plotted_discs(ax)
         want = crowd.positions[0]
         assert len(centres) == len(want)

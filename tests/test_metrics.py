@@ -469,7 +469,7 @@ def _x_line_crossings(tri, y, z):
     ok = d != 0
     a, b, c, d = a[ok], b[ok], c[ok], d[ok]
     out = []
-    for y0, z0 in zip(y, z):
+    for y0, z0 in zip(y, z, strict=True):
         u = ((b[:, 1] - y0) * (c[:, 2] - z0) - (c[:, 1] - y0) * (b[:, 2] - z0)) / d
         v = ((c[:, 1] - y0) * (a[:, 2] - z0) - (a[:, 1] - y0) * (c[:, 2] - z0)) / d
         hit = (u >= 0) & (v >= 0) & (u + v <= 1)
@@ -483,7 +483,7 @@ def _brute_mesh_intersection(tri_a, tri_b, lo, hi, h):
     ys, zs = np.arange(lo[1] + 0.37 * h, hi[1], h), np.arange(lo[2] + 0.61 * h, hi[2], h)
     y, z = (m.ravel() for m in np.meshgrid(ys, zs, indexing="ij"))
     total = 0.0
-    for xa, xb in zip(_x_line_crossings(tri_a, y, z), _x_line_crossings(tri_b, y, z)):
+    for xa, xb in zip(_x_line_crossings(tri_a, y, z), _x_line_crossings(tri_b, y, z), strict=True):
         assert len(xa) % 2 == 0 and len(xb) % 2 == 0
         for a0, a1 in xa.reshape(-1, 2):
             for b0, b1 in xb.reshape(-1, 2):
@@ -500,7 +500,7 @@ def _brute_capsule_intersection(caps_a, caps_b, h):
 
     (la, ha), (lb, hb) = blocks(caps_a), blocks(caps_b)
     lo, hi = np.maximum(la.min(0), lb.min(0)), np.minimum(ha.max(0), hb.max(0))
-    axes = [np.arange(l + 0.43 * h, u, h) for l, u in zip(lo, hi)]
+    axes = [np.arange(a + 0.43 * h, b, h) for a, b in zip(lo, hi, strict=True)]
     shape = tuple(len(ax) for ax in axes)
     inside = []
     for s, e, r in (caps_a, caps_b):
@@ -512,7 +512,7 @@ def _brute_capsule_intersection(caps_a, caps_b, h):
                 )
                 for k, ax in enumerate(axes)
             )
-            p = np.stack(np.meshgrid(*(ax[q] for ax, q in zip(axes, sl)), indexing="ij"), -1)
+            p = np.stack(np.meshgrid(*(ax[q] for ax, q in zip(axes, sl, strict=True)), indexing="ij"), -1)
             ab = e[j] - s[j]
             t = np.clip(((p - s[j]) @ ab) / max(ab @ ab, 1e-18), 0.0, 1.0)
             mask[sl] |= np.linalg.norm(p - (s[j] + t[..., None] * ab), axis=-1) < r[j]
@@ -537,7 +537,7 @@ def test_real_bodies_mesh_and_capsule_overlap_match_a_brute_force_reference():
         np.asarray(b.pose(anim.joint_rotations[0, i], anim.root_translation[0, i])[0], float)
         for i, b in enumerate(bodies)
     ]
-    tris = [v[np.asarray(b.faces)] for v, b in zip(verts, bodies)]
+    tris = [v[np.asarray(b.faces)] for v, b in zip(verts, bodies, strict=True)]
     lo = np.maximum(verts[0].min(0), verts[1].min(0))
     hi = np.minimum(verts[0].max(0), verts[1].max(0))
     ref_mesh = _brute_mesh_intersection(tris[0], tris[1], lo, hi, 0.01)

@@ -169,7 +169,7 @@ def test_bounce_phase_tells_a_shared_beat_from_drifting_dancers():
     drifting = np.stack(
         [
             0.9 - 0.02 * np.cos(2 * np.pi * f * t + p)
-            for f, p in zip(rng.uniform(1.4, 2.6, 12), rng.uniform(0, 6.3, 12))
+            for f, p in zip(rng.uniform(1.4, 2.6, 12), rng.uniform(0, 6.3, 12), strict=True)
         ],
         1,
     )

@@ -94,7 +94,7 @@ def test_same_geometry_and_self_pairs(mujoco, kind):
     from crowdstudy.scene_meta import static_walls_from_meta
 
     roots = anim.root_translation[0, :, :2]
-    for gid, ((x0, y0), (x1, y1)) in zip(walls, static_walls_from_meta(anim.meta)):
+    for gid, ((x0, y0), (x1, y1)) in zip(walls, static_walls_from_meta(anim.meta), strict=True):
         centre = scene.model.geom_pos[gid, :2]
         half_depth = scene.model.geom_size[gid, 1]
         direction = np.array([x1 - x0, y1 - y0]) / np.hypot(x1 - x0, y1 - y0)

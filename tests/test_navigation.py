@@ -22,7 +22,7 @@ from crowdstudy.navigation import (
 from crowdstudy.scene import Crowd
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from figure_fixtures import plotted_discs  # noqa: E402
+from figure_fixtures import plotted_discs, xy_order  # noqa: E402
 
 
 @pytest.fixture(scope="module")
@@ -210,10 +210,10 @@ def test_plot_layouts_and_trajectories(corridor_d5, design, tmp_path, saved_figu
     axes = saved_figures[0].axes
     assert len(axes) == len(layouts) + 1
     # top row: each layout's discs where its characters stand
-    for ax, crowd in zip(axes, layouts):
+    for ax, crowd in zip(axes[: len(layouts)], layouts, strict=True):
         centres, radii = plotted_discs(ax)
-        order = lambda p: np.lexsort((p[:, 1], p[:, 0]))
-        np.testing.assert_allclose(centres[order(centres)], crowd.positions[0][order(crowd.positions[0])], atol=1e-6)
+        pos = crowd.positions[0]
+        np.testing.assert_allclose(centres[xy_order(centres)], pos[xy_order(pos)], atol=1e-6)
         np.testing.assert_allclose(radii, crowd.radius, rtol=1e-3)
     # bottom: every agent's path, wrapped into the periodic section [x0, x0 + L), walls in black
     ax = axes[-1]
@@ -224,7 +224,7 @@ def test_plot_layouts_and_trajectories(corridor_d5, design, tmp_path, saved_figu
     walls = [ln for ln in ax.lines if to_rgba(ln.get_color()) == to_rgba("k")]
     paths = [ln for ln in ax.lines if ln not in walls]
     assert len(walls) == len(walk.obstacles)
-    for ln, seg in zip(walls, walk.obstacles):
+    for ln, seg in zip(walls, walk.obstacles, strict=True):
         np.testing.assert_allclose(np.c_[ln.get_xdata(), ln.get_ydata()], seg)
     points = np.concatenate([np.c_[ln.get_xdata(), ln.get_ydata()] for ln in paths])
     assert len(paths) >= walk.n_agents

@@ -129,7 +129,7 @@ def test_the_sweep_finds_the_broadphase_kernels_pairs_in_its_order():
     assert len(i) == m
     np.testing.assert_array_equal(i, pi.numpy()[:m])
     np.testing.assert_array_equal(j, pj.numpy()[:m])
-    assert {(10, 11), (12, 13)} <= set(zip(i.tolist(), j.tolist()))
+    assert {(10, 11), (12, 13)} <= set(zip(i.tolist(), j.tolist(), strict=True))
 
 
 def test_periodic_minimum_image():
@@ -264,7 +264,7 @@ def test_a_dense_crowd_finds_every_touching_capsule_pair_of_different_characters
     assert corr.model.n_characters >= 200 and pipe.period == 0.0
     pipe.collide(corr.states[0], corr.contacts, corr.control)
     c = corr.contacts.to_numpy()
-    found = {(a, b) for a, b, kind in zip(c["body_a"], c["body_b"], c["kind"]) if kind == KIND_INTER}
+    found = {(a, b) for a, b, kind in zip(c["body_a"], c["body_b"], c["kind"], strict=True) if kind == KIND_INTER}
     p0, p1 = pipe.p0w.numpy().astype(float), pipe.p1w.numpy().astype(float)
     reach = corr.model.wp["cap_radius"].numpy() + corr.model.wp["cap_skin"].numpy()
     limit = float(corr.config.contacts.margin) + pipe.speculative
@@ -278,6 +278,6 @@ def test_a_dense_crowd_finds_every_touching_capsule_pair_of_different_characters
     ib = (cj[:, None] * nj + jb.ravel()).ravel()
     _, _, dist = closest_points_on_segments(p0[ia], p1[ia], p0[ib], p1[ib])
     touching = reach[ia] + reach[ib] + limit - dist > 1e-4  # clear of float32 rounding
-    want = set(zip(ia[touching].tolist(), ib[touching].tolist()))
+    want = set(zip(ia[touching].tolist(), ib[touching].tolist(), strict=True))
     assert len(want) > 2000
     assert want <= found

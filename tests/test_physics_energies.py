@@ -145,16 +145,12 @@ def test_contact_gradient_and_gauss_newton_hessian():
     # Gauss-Newton Hessian k (1 + 2 d / d0) u u^T
     es, gs, Hs, _ = E.contact_energy(xa, Ra, seg_a, 0.08, xb, Rb, seg_b, 0.07, 2e4, 0.01)
     assert es == pytest.approx(2e4 * (depth**2 / 2 + depth**3 / 0.03))
-    fs = lambda d: E.contact_energy(
-        *perturb(xa, Ra, d[:6]),
-        seg_a,
-        0.08,
-        *perturb(xb, Rb, d[6:]),
-        seg_b,  # noqa: E731
-        0.07,
-        2e4,
-        0.01,
-    )[0]
+
+    def fs(d):
+        return E.contact_energy(*perturb(xa, Ra, d[:6]), seg_a, 0.08, *perturb(xb, Rb, d[6:]), seg_b, 0.07, 2e4, 0.01)[
+            0
+        ]
+
     np.testing.assert_allclose(gs, fd_grad(fs, 12), rtol=1e-4, atol=1e-3)
     np.testing.assert_allclose(Hs, 2e4 * (1 + 2 * depth / 0.01) * np.outer(u, u), rtol=1e-4, atol=1e-2)
 

@@ -141,7 +141,7 @@ def test_the_physics_uses_the_scene_walls(scene, request):
     frames = range(clip.n_frames)
     before = _environment_contacts(clip, walls, frames)
     after = _environment_contacts(ours, walls, frames)
-    assert all(a <= b for a, b in zip(after, before)), (before, after)
+    assert all(a <= b for a, b in zip(after, before, strict=True)), (before, after)
     assert sum(after) == 0
     if scene == "wide_floor":
         y0 = clip.root_translation[0, :, 1]

@@ -22,7 +22,7 @@ def bodies(records):
 
 
 def standing_root(bodies, xy):
-    return np.array([[x, y, b.pelvis_height] for b, (x, y) in zip(bodies, xy)])
+    return np.array([[x, y, b.pelvis_height] for b, (x, y) in zip(bodies, xy, strict=True)])
 
 
 def inter_depth(corr):
@@ -175,7 +175,10 @@ def test_correct_removes_the_overlap_of_the_same_scene_and_keeps_the_layout(reco
     assert drift.max() < 0.10
     assert drift[..., 2].max() < 0.03  # horizontal separation, not lifting
     assert tracking_error(out, anim) < 8.0
-    pelvis = lambda a: np.linalg.norm(a.root_translation[:, :, None, :2] - a.root_translation[:, None, :, :2], axis=-1)
+
+    def pelvis(a):  # (T, N, N) horizontal distances between the pelvises
+        return np.linalg.norm(a.root_translation[:, :, None, :2] - a.root_translation[:, None, :, :2], axis=-1)
+
     iu = np.triu_indices(anim.n_characters, 1)
     assert np.all(pelvis(out)[:, iu[0], iu[1]].min(axis=1) > pelvis(anim)[:, iu[0], iu[1]].min(axis=1))
 

@@ -157,9 +157,12 @@ def test_known_scene_silhouettes_sit_where_the_bodies_project(design):
     top = np.median(empty[: h // 8].reshape(-1, 3), axis=0)  # ... below the dark stage (upright)
     assert grey.mean() > top.mean() + 60
     # 4. left/right: the tall character (x > 0) is right of the short one, its hand left of its head
-    cols = lambda who: np.concatenate(
-        [_pinhole(np.array([a, b]), eye, target, fov, w, h)[0][:, 0] for i, a, b, _ in caps if i == who]
-    )
+
+    def cols(who):  # image columns of the capsule ends of character ``who``
+        return np.concatenate(
+            [_pinhole(np.array([a, b]), eye, target, fov, w, h)[0][:, 0] for i, a, b, _ in caps if i == who]
+        )
+
     assert cols(0).mean() > w / 2 > cols(1).mean()
     assert silhouette[:, int(cols(0).mean()) :].sum() > silhouette[:, : int(cols(1).mean())].sum()
 

@@ -111,7 +111,9 @@ def test_levels_of_detail_halve_the_faces_and_keep_undressed_bodies(design, no_g
     anim = crowd_animation(grid_positions(3, margin=0.45), n_frames=1)
     assets = CrowdAssets.build(anim, design, body_loader=mannequin_loader)
     meshes = CharacterMeshes.build(assets.bodies, assets.looks, [None] * 3, height=1080, max_faces=2400)
-    assert all(d is b for d, b in zip(meshes.drawn_bodies, assets.bodies))  # region-coloured: nothing to dress
+    assert all(
+        d is b for d, b in zip(meshes.drawn_bodies, assets.bodies, strict=True)
+    )  # region-coloured: nothing to dress
     faces = [lod.groups[0].faces.shape[0] for lod in meshes.lods]
     assert len(faces) == 3 and faces[0] > faces[1] > faces[2]
     assert [(lod.max_pixels, lod.min_pixels) for lod in meshes.lods] == [(np.inf, 600.0), (600.0, 300.0), (300.0, 0.0)]

@@ -172,21 +172,21 @@ def test_overlap_bisection_marks_the_pixels_of_the_full_scan(design, monkeypatch
     import crowdstudy.render.gpu as gpu_module
 
     anim = crowd_animation(grid_positions(16, extent=(1.6, 1.6), margin=0.2, seed=3), n_frames=2)
+    compile_program = gpu_module.compile_program
+
+    def with_define(ctx, vert, frag, **kw):
+        if frag == "overlap.frag":
+            kw["defines"] = (*kw.get("defines", ()), "OVERLAP_SCAN_ALL")
+        return compile_program(ctx, vert, frag, **kw)
+
     masks = []
     for scan_all in (False, True):
         if scan_all:
-            compile_program = gpu_module.compile_program
-
-            def with_define(ctx, vert, frag, **kw):
-                if frag == "overlap.frag":
-                    kw["defines"] = (*kw.get("defines", ()), "OVERLAP_SCAN_ALL")
-                return compile_program(ctx, vert, frag, **kw)
-
             monkeypatch.setattr(gpu_module, "compile_program", with_define)
         with mannequin_renderer(anim, design, width=384, height=216) as r:
             r.set_view("V3")
             masks.append([r.overlap(f, image=False).mask for f in (0, 1)])
-    for fast, full in zip(*masks):
+    for fast, full in zip(*masks, strict=True):
         assert full.mean() > 0.005, "the crowd should interpenetrate"
         assert np.array_equal(fast, full)
 

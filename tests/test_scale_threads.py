@@ -69,7 +69,7 @@ def _same(a, b):
     (state_a, contacts_a), (state_b, contacts_b) = a, b
     for key in ("x", "q", "v", "w"):
         np.testing.assert_array_equal(state_a[key], state_b[key])
-    for (na, ca), (nb, cb) in zip(contacts_a, contacts_b):
+    for (na, ca), (nb, cb) in zip(contacts_a, contacts_b, strict=True):
         assert na == nb
         for key in ca:
             np.testing.assert_array_equal(ca[key], cb[key])

@@ -253,7 +253,7 @@ def test_shapiro_per_cell_and_qq_figure(tmp_path, saved_figures):
     panels = [ax for ax in fig.axes if ax.lines]
     assert len(panels) == 10  # 5 densities x 2 methods
     shp_v1 = shapiro_by_cell(v1, "y", ["Density", "Method"], "subject")
-    for ax, (_, r) in zip(panels, shp_v1.iterrows()):
+    for ax, (_, r) in zip(panels, shp_v1.iterrows(), strict=True):
         assert ax.get_title() == f"{r['cell']}\np={r['p']:.3f}"
         d, m = r["cell"].split()
         y = v1[(v1.Density == d) & (v1.Method == m)].groupby("subject")["y"].mean()

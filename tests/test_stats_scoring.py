@@ -28,7 +28,7 @@ def test_schema_and_determinism(design, sim):
     pd.testing.assert_frame_equal(sim, again)
     assert not sim.equals(simulate_responses(design, 6, seed=5))
     assert sim[["Q1", "Q2", "Q3", "Q4", "Q5", "Q6"]].isin(range(1, 7)).all().all()
-    for pid, g in sim.groupby("participant_id"):
+    for _, g in sim.groupby("participant_id"):
         assert list(g["trial_index"]) == list(range(60))
         assert list(g["stage"]) == [1] * 40 + [2] * 20  # stage 1 then stage 2
         assert g["stimulus_id"].is_unique

@@ -19,14 +19,13 @@ from render_fixtures import crowd_animation, grid_positions, mannequin_loader  #
 from crowdstudy.design import default_design_path, load_design  # noqa: E402
 from crowdstudy.errors import InvalidInputError  # noqa: E402
 from crowdstudy.render import stimuli as stimuli_module  # noqa: E402
-from crowdstudy.render.stimuli import (
+from crowdstudy.render.stimuli import (  # noqa: E402
     MANIFEST_COLUMNS,
-    animation_digest,
     animation_record,
-    build_stimuli,  # noqa: E402
+    build_stimuli,
     preset_settings,
-    video_digest,
 )
+from crowdstudy.render.stimuli_digests import animation_digest, video_digest  # noqa: E402
 
 
 @pytest.fixture(scope="module")

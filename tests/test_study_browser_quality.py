@@ -1,6 +1,7 @@
 """The front end's data-quality controls and failure handling in headless Chromium (videos
-from the published, size-padded copies): the screen check before consent, a save error that stays under the video, a second tab told of its
-refused answer, tab switches recorded with the answer, withdrawal, and no CSP violation."""
+from the published, size-padded copies): the screen check before consent, a save error that
+stays under the video, a second tab told of its refused answer, tab switches recorded with
+the answer, withdrawal, and no CSP violation."""
 
 import re
 import sqlite3

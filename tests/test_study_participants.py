@@ -185,7 +185,7 @@ def test_quality_record_attention_checks_and_exclusions(served, tmp_path):
         == 422
     )  # check missing, or not expected
     varied = [{f"Q{i}": (k + i) % 6 + 1 for i in range(1, 7)} for k in range(60)]
-    for pid, (h, state, idx) in checks.items():
+    for pid, (h, state, _idx) in checks.items():
         for k, t in enumerate(state["trials"]):
             kw = {
                 "answers": varied[k],

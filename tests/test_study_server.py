@@ -306,7 +306,7 @@ def test_participant_facing_responses_never_reveal_the_condition(api):
     reg = call("POST", "/api/participants", json={"participant_id": pid})
     h = {"X-Participant-Secret": reg.json()["secret"]}
     state = reg.json()["state"]
-    assert all(set(t) - {"check"} == {"trial_index", "stage", "token", "video_url"} for t in state["trials"])
+    assert all(set(t) - {"check"} == {"trial_index", "stage", "task", "token", "video_url"} for t in state["trials"])
     assert len({t["token"] for t in state["trials"]}) == 60
     call("GET", "/api/study")
     call("POST", f"/api/participants/{pid}/consent", json={"consent": True}, headers=h)

@@ -42,7 +42,7 @@ def spherical(seed=11, n=20):
             "Method": ["Baseline", "Ours"],
         },
     )
-    subj = dict(zip(df.subject.unique(), rng.normal(0, 1.0, n)))
+    subj = dict(zip(df.subject.unique(), rng.normal(0, 1.0, n), strict=True))
     d = df.Density.str[1].astype(int).to_numpy()
     v = df.Viewpoint.str[1].astype(int).to_numpy()
     m = (df.Method == "Ours").to_numpy()
@@ -62,9 +62,9 @@ def violated(seed=12, n=20):
         },
     )
     subjects = df.subject.unique()
-    slope = dict(zip(subjects, rng.normal(0, 0.8, n)))
-    vslope = dict(zip(subjects, rng.normal(0, 0.6, n)))
-    inter = dict(zip(subjects, rng.normal(0, 1.0, n)))
+    slope = dict(zip(subjects, rng.normal(0, 0.8, n), strict=True))
+    vslope = dict(zip(subjects, rng.normal(0, 0.6, n), strict=True))
+    inter = dict(zip(subjects, rng.normal(0, 1.0, n), strict=True))
     d = df.Density.str[1].astype(int).to_numpy()
     v = df.Viewpoint.str[1].astype(int).to_numpy()
     m = (df.Method == "Ours").to_numpy()

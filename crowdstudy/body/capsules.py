@@ -130,7 +130,7 @@ def fit_capsules(body, *, resolution: float = 0.02) -> Capsules:
     samples' distances to the axis) and end insets, the one with the best IoU against the
     bone's own samples wins.
     """
-    from scipy.spatial import cKDTree
+    from scipy.spatial import cKDTree  # pyright: ignore[reportAttributeAccessIssue]  (compiled, not in the stubs)
 
     verts = np.asarray(body.rest_vertices, dtype=np.float64)
     joints = np.asarray(body.rest_joints, dtype=np.float64)
@@ -201,8 +201,8 @@ def _grid_for(
         half = np.ceil(max(-lo[0], hi[0]) / step)
         origin[0] = -(half + 0.5) * step
         hi[0] = (half + 0.5) * step
-    shape = tuple(int(np.ceil((hi[i] - origin[i]) / step)) + 1 for i in range(3))
-    return origin, shape
+    nx, ny, nz = (int(np.ceil((hi[i] - origin[i]) / step)) + 1 for i in range(3))
+    return origin, (nx, ny, nz)
 
 
 def closest_points_on_segments(
@@ -437,7 +437,7 @@ def capsule_occupancy(
     axes = [origin[i] + step * np.arange(shape[i]) for i in range(3)]
     pts = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
     occ = np.zeros(len(pts), dtype=bool)
-    for a, b, r in zip(start, end, radius):
+    for a, b, r in zip(start, end, radius, strict=True):
         lo = np.minimum(a, b) - r
         hi = np.maximum(a, b) + r
         box = np.all((pts >= lo) & (pts <= hi), axis=1)
@@ -469,7 +469,8 @@ def capsule_mesh_iou(body, *, resolution: float = 0.01, capsules: Capsules | Non
     hi = np.maximum(verts.max(axis=0), (np.maximum(caps.start, caps.end) + caps.radius[:, None]).max(axis=0))
     # an irrational offset keeps rays off mesh edges and vertices
     origin = lo - resolution + resolution * np.array([0.5 / np.sqrt(2), 0.5 / np.sqrt(3), 0.5])
-    shape = tuple(int(np.ceil((hi[i] - origin[i]) / resolution)) + 2 for i in range(3))
+    nx, ny, nz = (int(np.ceil((hi[i] - origin[i]) / resolution)) + 2 for i in range(3))
+    shape = (nx, ny, nz)
     mesh_occ = mesh_occupancy(verts, body.faces, origin, resolution, shape)
     cap_occ = capsule_occupancy(caps.start, caps.end, caps.radius, origin, resolution, shape)
     cell = resolution**3

@@ -177,7 +177,8 @@ def node_world_matrices(doc: dict, parent: np.ndarray) -> np.ndarray:
         while i >= 0 and world[i] is None:
             chain.append(i)
             i = int(parent[i])
-        m = np.eye(4) if i < 0 else world[i]
+        known = world[i] if i >= 0 else None  # not None once the walk up stopped at i >= 0
+        m = np.eye(4) if known is None else known
         for k in reversed(chain):
             m = m @ local[k]
             world[k] = m

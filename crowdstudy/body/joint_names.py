@@ -1,7 +1,8 @@
 """Joint-name maps from common rigs to the toolkit's 24-joint skeleton (the glTF character
-import, :mod:`crowdstudy.body.gltf_model`).
+import, :mod:`crowdstudy.body.gltf_model`). VRoid: the node names of VRoid's VRM 0.x files;
+Rigify: Blender's Rigify metarig.
 
-| joint | crowdstudy export | Mixamo / Ready Player Me | VRM humanoid | VRoid (VRM 0.x nodes) | Blender Rigify metarig | CMU BVH |
+| joint | crowdstudy export | Mixamo / Ready Player Me | VRM humanoid | VRoid | Rigify | CMU BVH |
 | --- | --- | --- | --- | --- | --- | --- |
 | pelvis | ``cNN_pelvis`` | Hips | hips | J_Bip_C_Hips | spine | Hips |
 | spine1 | ``cNN_spine1`` | Spine | spine | J_Bip_C_Spine | spine.001 | LowerBack |
@@ -60,7 +61,7 @@ def _tables() -> dict[str, dict[str, str]]:
     for ours, (a, b, c) in _MID_TABLE.items():
         vrm[a], vroid[b], rigify[c] = ours, ours, ours
     for suffix, (a, b, c) in _SIDE_TABLE.items():
-        for side, s, letter in (("left", "Left", "L"), ("right", "Right", "R")):
+        for side, letter in (("left", "L"), ("right", "R")):
             vrm[f"{side}{a}"] = f"{side}_{suffix}"
             vroid[f"J_Bip_{letter}_{b}"] = f"{side}_{suffix}"
             rigify[f"{c}.{letter}"] = f"{side}_{suffix}"

@@ -84,6 +84,8 @@ def _load_cached(key: str) -> Body:
 
 def _float_field(record: dict, name: str, lo: float, hi: float) -> float:
     val = record.get(name)
+    if val is None:
+        raise InvalidInputError(f"body record field {name!r}: expected a number, got None")
     try:
         out = float(val)
     except (TypeError, ValueError):

@@ -88,14 +88,14 @@ def macro_weights(
         ages = {"child": 0.0, "young": 1.0 - old, "old": old}
     r = np.asarray(race, dtype=np.float64)
     r = r / r.sum()
-    m3, w3 = dict(zip(MUSCLES, _three(muscle))), dict(zip(WEIGHTS, _three(weight)))
+    m3, w3 = dict(zip(MUSCLES, _three(muscle), strict=True)), dict(zip(WEIGHTS, _three(weight), strict=True))
     h_lo, h_hi = max(0.0, 1.0 - 2.0 * height), max(0.0, 2.0 * height - 1.0)
     p_lo, p_hi = max(0.0, 1.0 - 2.0 * proportions), max(0.0, 2.0 * proportions - 1.0)
     out: dict[str, float] = {}
     for age, wa in ages.items():
         if wa <= 0.0:
             continue
-        for race_name, wr in zip(RACES, r):
+        for race_name, wr in zip(RACES, r, strict=True):
             out[f"{race_name}-{sex}-{age}"] = wa * wr
         for mname, wm in m3.items():
             for wname, ww in w3.items():

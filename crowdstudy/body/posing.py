@@ -107,7 +107,7 @@ def planted_runs(mask: np.ndarray, *, periodic: bool = False) -> list[tuple[int,
     m = np.roll(mask, -shift)
     edges = np.diff(np.concatenate([[0], m.astype(np.int8), [0]]))
     starts, stops = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)
-    return [(int(a + shift), int(b + shift)) for a, b in zip(starts, stops)]
+    return [(int(a + shift), int(b + shift)) for a, b in zip(starts, stops, strict=True)]
 
 
 def hold_peaks(x: np.ndarray, half_width: int, mode: str) -> np.ndarray:

@@ -231,7 +231,7 @@ def rotation_between(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 # -- elementary rotations -------------------------------------------------------------
 
 
-def _rot(axis: int, angle: np.ndarray) -> np.ndarray:
+def _rot(axis: int, angle: np.ndarray | float) -> np.ndarray:
     """(...,) radians -> (..., 3, 3) rotation about coordinate axis ``axis`` (0 x, 1 y, 2 z)."""
     a = np.asarray(angle, dtype=np.float64)
     c, s = np.cos(a), np.sin(a)
@@ -255,7 +255,7 @@ def rot_y(angle: np.ndarray) -> np.ndarray:
     return _rot(1, angle)
 
 
-def rot_z(angle: np.ndarray) -> np.ndarray:
+def rot_z(angle: np.ndarray | float) -> np.ndarray:
     """(...,) radians -> (..., 3, 3) rotation about +z."""
     return _rot(2, angle)
 
@@ -327,7 +327,7 @@ def quat_align_signs(q: np.ndarray, axis: int = 0) -> np.ndarray:
     return np.moveaxis(q * sign[..., None], 0, axis)
 
 
-def quat_blend(a: np.ndarray, b: np.ndarray, weight: np.ndarray) -> np.ndarray:
+def quat_blend(a: np.ndarray, b: np.ndarray, weight: np.ndarray | float) -> np.ndarray:
     """Normalised linear blend (nlerp) ``(1 - w) a + w b`` on the shortest arc.
 
     a, b: (..., 4); weight: broadcastable to (..., 1) or (...,), in [0, 1] (a weight with

@@ -32,7 +32,7 @@ import numpy as np
 from crowdstudy.body.skeleton import NUM_JOINTS, PARENTS
 from crowdstudy.errors import InvalidInputError
 
-__all__ = ["CrowdSkinner", "warp_kernels"]
+__all__ = ["CrowdSkinner"]
 
 #: The segment table, int32 rows: body, first vertex in the sorted rest buffer,
 #: first weight row, vertex count, number of joints nk, the body's output offset,
@@ -42,129 +42,6 @@ _SEG_COUNT = 3
 _MAX_INFLUENCES = 4
 #: CPU launches per thread: the workers pull these from a shared queue.
 _CHUNKS_PER_THREAD = 4
-
-_KERNELS = None
-
-
-def warp_kernels():
-    """Build (once) ``(wp, forward kinematics, segment skinning, vertex skinning)`` kernels."""
-    global _KERNELS
-    if _KERNELS is not None:
-        return _KERNELS
-    from crowdstudy.warp_runtime import get_warp
-
-    wp = get_warp()
-
-    @wp.kernel(enable_backward=False)
-    def forward_kinematics_kernel(
-        rotvec: wp.array2d(dtype=wp.vec3),
-        root: wp.array(dtype=wp.vec3),
-        rest: wp.array2d(dtype=wp.vec3),
-        parents: wp.array(dtype=wp.int32),
-        glob: wp.array2d(dtype=wp.mat33),
-        pos: wp.array2d(dtype=wp.vec3),
-        skin_trans: wp.array2d(dtype=wp.vec3),
-    ):
-        n = wp.tid()
-        for j in range(parents.shape[0]):
-            rv = rotvec[n, j]
-            angle = wp.length(rv)
-            local = wp.identity(n=3, dtype=wp.float32)
-            if angle > 1.0e-8:
-                local = wp.quat_to_matrix(wp.quat_from_axis_angle(rv / angle, angle))
-            p = parents[j]
-            g = local
-            x = root[n]
-            if p >= 0:
-                g = glob[n, p] * local
-                x = pos[n, p] + glob[n, p] * (rest[n, j] - rest[n, p])
-            glob[n, j] = g
-            pos[n, j] = x
-            skin_trans[n, j] = x - g * rest[n, j]
-
-    @wp.kernel(enable_backward=False)
-    def skin_segments_kernel(
-        seg: wp.array2d(dtype=wp.int32),
-        rest: wp.array(dtype=wp.vec3),
-        weights: wp.array2d(dtype=wp.float32),
-        perm: wp.array(dtype=wp.int32),
-        rot: wp.array2d(dtype=wp.mat33),
-        trans: wp.array2d(dtype=wp.vec3),
-        out: wp.array(dtype=wp.vec3),
-    ):
-        # one thread per segment: a run of one body's vertices sharing one set of joints
-        s = wp.tid()
-        b = seg[s, 0]
-        v0 = seg[s, 1]
-        w0 = seg[s, 2]
-        count = seg[s, 3]
-        nk = seg[s, 4]
-        base = seg[s, 5]
-        r0 = rot[b, seg[s, 6]]
-        t0 = trans[b, seg[s, 6]]
-        if nk == 1:
-            for i in range(count):
-                out[base + perm[w0 + i]] = r0 * rest[v0 + i] + t0
-        elif nk == 2:
-            r1 = rot[b, seg[s, 7]]
-            t1 = trans[b, seg[s, 7]]
-            for i in range(count):
-                p = rest[v0 + i]
-                q = w0 + i
-                out[base + perm[q]] = weights[q, 0] * (r0 * p + t0) + weights[q, 1] * (r1 * p + t1)
-        elif nk == 3:
-            r1 = rot[b, seg[s, 7]]
-            t1 = trans[b, seg[s, 7]]
-            r2 = rot[b, seg[s, 8]]
-            t2 = trans[b, seg[s, 8]]
-            for i in range(count):
-                p = rest[v0 + i]
-                q = w0 + i
-                out[base + perm[q]] = (
-                    weights[q, 0] * (r0 * p + t0) + weights[q, 1] * (r1 * p + t1) + weights[q, 2] * (r2 * p + t2)
-                )
-        else:
-            r1 = rot[b, seg[s, 7]]
-            t1 = trans[b, seg[s, 7]]
-            r2 = rot[b, seg[s, 8]]
-            t2 = trans[b, seg[s, 8]]
-            r3 = rot[b, seg[s, 9]]
-            t3 = trans[b, seg[s, 9]]
-            for i in range(count):
-                p = rest[v0 + i]
-                q = w0 + i
-                out[base + perm[q]] = (
-                    weights[q, 0] * (r0 * p + t0)
-                    + weights[q, 1] * (r1 * p + t1)
-                    + weights[q, 2] * (r2 * p + t2)
-                    + weights[q, 3] * (r3 * p + t3)
-                )
-
-    @wp.kernel(enable_backward=False)
-    def skin_vertices_kernel(
-        seg: wp.array2d(dtype=wp.int32),
-        seg_of: wp.array(dtype=wp.int32),
-        rest: wp.array(dtype=wp.vec3),
-        weights: wp.array2d(dtype=wp.float32),
-        perm: wp.array(dtype=wp.int32),
-        rot: wp.array2d(dtype=wp.mat33),
-        trans: wp.array2d(dtype=wp.vec3),
-        out: wp.array(dtype=wp.vec3),
-    ):
-        # one thread per (sorted) vertex, for GPUs
-        v = wp.tid()
-        s = seg_of[v]
-        b = seg[s, 0]
-        q = seg[s, 2] + (v - seg[s, 1])
-        p = rest[v]
-        acc = wp.vec3(0.0, 0.0, 0.0)
-        for k in range(seg[s, 4]):
-            j = seg[s, 6 + k]
-            acc += weights[q, k] * (rot[b, j] * p + trans[b, j])
-        out[seg[s, 5] + perm[q]] = acc
-
-    _KERNELS = (wp, forward_kinematics_kernel, skin_segments_kernel, skin_vertices_kernel)
-    return _KERNELS
 
 
 def _drain(launches) -> None:
@@ -181,7 +58,7 @@ def _template_groups(bodies) -> tuple[list[int], list]:
     keys: list[str] = []
     of = []
     for b in bodies:
-        for t, (key, rep) in enumerate(zip(keys, reps)):
+        for t, (key, rep) in enumerate(zip(keys, reps, strict=True)):
             if key == b.template_key and (rep.weights is b.weights or np.array_equal(rep.weights, b.weights)):
                 of.append(t)
                 break
@@ -215,7 +92,7 @@ def _sorted_template(body) -> tuple[np.ndarray, np.ndarray, list[tuple[int, int,
     ends = np.r_[starts[1:], len(perm)]
     runs = [
         (int(s), int(e - s), int(nk[s]), tuple(int(j) if j < NUM_JOINTS else 0 for j in joints[s]))
-        for s, e in zip(starts, ends)
+        for s, e in zip(starts, ends, strict=True)
     ]
     return perm.astype(np.int32), np.ascontiguousarray(weights), runs
 
@@ -238,12 +115,12 @@ class CrowdSkinner:
     """
 
     def __init__(self, bodies, device: str | None = None, *, threads: int = 1, schedule: str | None = None):
-        from crowdstudy.warp_runtime import resolve_device
+        from crowdstudy.body import skinning_kernels as kernels
+        from crowdstudy.warp_runtime import get_warp, resolve_device
 
         if len(bodies) == 0:
             raise InvalidInputError("bodies: expected at least one Body")
-        wp, self._fk, self._skin_segments, self._skin_vertices = warp_kernels()
-        self._wp = wp
+        wp = get_warp()
         self.device = resolve_device(device)
         is_cuda = wp.get_device(self.device).is_cuda
         if schedule is None:
@@ -257,7 +134,7 @@ class CrowdSkinner:
         counts = np.array([b.n_vertices for b in bodies], dtype=np.int64)
         self.offsets = np.r_[0, np.cumsum(counts)]
         self.faces = np.concatenate(
-            [np.asarray(b.faces, dtype=np.int64) + o for b, o in zip(bodies, self.offsets[:-1])]
+            [np.asarray(b.faces, dtype=np.int64) + o for b, o in zip(bodies, self.offsets[:-1], strict=True)]
         ).astype(np.int32)
 
         # per template: sorted order, weights, runs; per body: segments over its rest copy
@@ -295,7 +172,7 @@ class CrowdSkinner:
 
         # recorded launches (no per-frame argument packing)
         self._fk_cmd = wp.launch(
-            self._fk,
+            kernels.forward_kinematics,
             dim=self.n,
             device=dev,
             record_cmd=True,
@@ -307,7 +184,7 @@ class CrowdSkinner:
             self._seg_of = wp.array(seg_of, dtype=wp.int32, device=dev)
             self._skin_cmds = [
                 wp.launch(
-                    self._skin_vertices,
+                    kernels.skin_vertices,
                     dim=self.n_vertices,
                     device=dev,
                     record_cmd=True,
@@ -319,7 +196,7 @@ class CrowdSkinner:
             parts = self._split(seg[:, _SEG_COUNT], n_parts)
             self._seg_parts = [self._seg[lo:hi] for lo, hi in parts]
             self._skin_cmds = [
-                wp.launch(self._skin_segments, dim=len(part), device=dev, record_cmd=True, inputs=[part, *skin_args])
+                wp.launch(kernels.skin_segments, dim=len(part), device=dev, record_cmd=True, inputs=[part, *skin_args])
                 for part in self._seg_parts
             ]
         self.threads = 1 if len(self._skin_cmds) == 1 else int(threads)
@@ -331,7 +208,7 @@ class CrowdSkinner:
         cum = np.cumsum(seg_counts)
         cuts = [0] + [int(np.searchsorted(cum, cum[-1] * k / parts)) + 1 for k in range(1, parts)] + [len(cum)]
         cuts = sorted(set(min(max(c, 0), len(cum)) for c in cuts))
-        return [(lo, hi) for lo, hi in zip(cuts[:-1], cuts[1:]) if hi > lo]
+        return [(lo, hi) for lo, hi in zip(cuts[:-1], cuts[1:], strict=True) if hi > lo]
 
     @property
     def n_vertices(self) -> int:
@@ -351,10 +228,12 @@ class CrowdSkinner:
             raise InvalidInputError(f"root_translation: expected shape ({self.n}, 3), got {root.shape}")
         self._rotvec.assign(rot)
         self._root.assign(root)
-        self._fk_cmd.launch()
+        # a recorded launch (record_cmd=True) is never None; Warp's stub types the result
+        # of wp.launch as optional either way
+        self._fk_cmd.launch()  # pyright: ignore[reportOptionalMemberAccess]
         if self._pool is None:
             for cmd in self._skin_cmds:
-                cmd.launch()
+                cmd.launch()  # pyright: ignore[reportOptionalMemberAccess]
         else:
             # the workers pull chunks until none is left, so a worker that the OS
             # schedules late does not hold the others up

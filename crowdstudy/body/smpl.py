@@ -31,6 +31,7 @@ import io
 import pickle
 import zipfile
 from pathlib import Path
+from typing import ClassVar
 
 import numpy as np
 
@@ -62,6 +63,8 @@ class _ChumpyArray:
 
 class _SparseStub:
     """Stand-in for pickled scipy.sparse matrices (old scipy module paths)."""
+
+    kind: ClassVar[str] = ""  # the scipy class it stands for (set by _stub_for)
 
     def __init__(self, *args, **kwargs):
         self.__dict__["_args"] = args
@@ -101,7 +104,7 @@ class _RestrictedUnpickler(pickle.Unpickler):
 
     def find_class(self, module: str, name: str):
         if module in ("copy_reg", "copyreg") and name == "_reconstructor":
-            return copyreg._reconstructor
+            return copyreg._reconstructor  # pyright: ignore[reportAttributeAccessIssue]  (private, untyped)
         if module == "_codecs" and name == "encode":  # bytes in protocol-2 pickles
             import codecs
 

@@ -24,7 +24,15 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 
 from crowdstudy.errors import InvalidInputError
-from crowdstudy.metrics.bars import BAR_NAMES, BarTolerances, check_bars, failed_bars, loop_mode, smoothness_columns
+from crowdstudy.metrics.bars import (
+    BAR_NAMES,
+    BarName,
+    BarTolerances,
+    check_bars,
+    failed_bars,
+    loop_mode,
+    smoothness_columns,
+)
 from crowdstudy.physics.ablation import ADDITIONS, without
 from crowdstudy.physics.config import PhysicsConfig
 
@@ -48,7 +56,7 @@ NOISE_VARIANTS: dict[str, dict[str, object]] = {
 }
 
 #: each bar's measured value in a row, {bar: column}; every one positive, larger is worse
-BAR_VALUES: dict[str, str] = {
+BAR_VALUES: dict[BarName, str] = {
     "overlap": "overlap_pct",
     "tracking": "tracking_cm",
     "jerk": "jerk_ratio",
@@ -256,7 +264,7 @@ def cell_rows(
         raise InvalidInputError("configs: the defaults ('default') are the timing reference of the others")
     rows = {v: _cached(options, cell, v, c) for v, c in configs.items()}
     if all(row is not None for row in rows.values()):
-        return list(rows.values())
+        return [row for row in rows.values() if row is not None]
     design = load_design(options.design_path)
     base = build_baseline(design, cell.stage, cell.level, duration=options.seconds)
     frames = list(range(0, base.n_frames, options.frame_stride))
@@ -279,7 +287,7 @@ def cell_rows(
         rows[variant] = row
         if report is not None:
             report(row)
-    return list(rows.values())
+    return [row for row in rows.values() if row is not None]  # every variant has its row now
 
 
 def _cell_job(args) -> list[dict]:

@@ -143,19 +143,19 @@ def stadium_run(
     }
     sub = central_subset(base, min(overlap_characters, n))
     frames = np.arange(0, base.n_frames, frame_stride)
+    per_character: dict[str, tuple[np.ndarray, np.ndarray]] = {}  # (Baseline, Ours) per character
     for geom in ("mesh", "capsule"):
         rb = overlap_volume(select_characters(base, sub), geometry=geom, frames=frames)
         ro = overlap_volume(select_characters(ours, sub), geometry=geom, frames=frames)
         ob, oo = rb.mean, ro.mean
         row[f"{geom}_baseline_m3"], row[f"{geom}_ours_m3"], row[f"{geom}_ratio"] = ob, oo, oo / max(ob, 1e-12)
-        if geom == "mesh":  # per character, for the neighbourhoods below
-            mesh_per_character = (rb.per_character.mean(axis=0), ro.per_character.mean(axis=0))
+        per_character[geom] = (rb.per_character.mean(axis=0), ro.per_character.mean(axis=0))
     row["overlap_subset"] = f"{len(sub)} central characters, every {frame_stride}th frame"
     # the same overlap neighbourhood by neighbourhood: study-cell-sized tiles of the floor
     tile = (float(design.floor_width), float(design.floor_depth))
     ratios = tile_ratios(
         base.root_translation[0, sub, :2],
-        *mesh_per_character,
+        *per_character["mesh"],
         tile,
         min_characters=max(1, design.n_characters(level) // 2),
     )

@@ -52,7 +52,7 @@ def run(args: argparse.Namespace) -> int:
         raise InvalidInputError(f"--characters: expected a positive number of characters, got {args.characters}")
     if args.seed is not None and args.seed < 0:
         raise InvalidInputError(f"--seed: expected a non-negative integer, got {args.seed}")
-    stage = design.stage("stationary")
+    stage = design.stage_of_kind("concert")
     out = Path(args.out)
     paths = {level: out.with_name(f"{out.stem}-{level}{out.suffix or '.npz'}") if args.all else out for level in levels}
     for path in paths.values():
@@ -63,14 +63,15 @@ def run(args: argparse.Namespace) -> int:
     print(f"{'level':>5} {'chars':>5} {'floor (m)':>13} {'min dist (m)':>12} {'bound (m)':>9}  file")
     for level in levels:
         seed = design.cell_seed(stage, level) if args.seed is None else args.seed
-        crowd = concert_layout(design, level, seed, n_characters=args.characters)
+        crowd = concert_layout(design, level, seed, n_characters=args.characters, scenario=stage.scenario)
         path = paths[level]
         crowd.save(path)
         crowds.append(crowd)
         m = crowd.meta
         floor = f"{m['floor']['width']:.2f}x{m['floor']['depth']:.2f}"
         print(
-            f"{level:>5} {crowd.n_agents:>5} {floor:>13} {m['min_distance']:>12.3f} {m['target_distance']:>9.3f}  {path}"
+            f"{level:>5} {crowd.n_agents:>5} {floor:>13} "
+            f"{m['min_distance']:>12.3f} {m['target_distance']:>9.3f}  {path}"
         )
     if args.plot:
         from crowdstudy.layout.plot import plot_layouts

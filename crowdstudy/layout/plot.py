@@ -41,7 +41,7 @@ def draw_layout(ax, crowd: Crowd, frame: int = 0, title: str | None = None) -> N
         pos[:, 0] = x0 + np.mod(pos[:, 0] - x0, length)
     if len(crowd.region):
         ax.add_patch(Polygon(crowd.region, closed=True, fill=False, ls="--", lw=0.8, color="0.4"))
-    discs = [Circle(p, r) for p, r in zip(pos, crowd.radius)]
+    discs = [Circle(p, r) for p, r in zip(pos, crowd.radius, strict=True)]
     ax.add_collection(PatchCollection(discs, facecolor="tab:blue", edgecolor="navy", alpha=0.55, lw=0.6))
     if crowd.headings is not None:
         h = crowd.headings[frame]

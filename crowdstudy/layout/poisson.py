@@ -189,7 +189,7 @@ def _check_n(n) -> int:
         if isinstance(n, numbers.Real) and not math.isfinite(float(n)):
             raise InvalidInputError(f"n: expected a positive integer, got {n!r}")
         if isinstance(n, numbers.Real) and float(n).is_integer():
-            n = int(n)
+            n = int(float(n))
         else:
             raise InvalidInputError(f"n: expected a positive integer, got {n!r}")
     n = int(n)
@@ -266,7 +266,7 @@ def poisson_disk(region, n: int, *, seed, margin: float = 0.0, min_distance: flo
 def _min_pair_distance(points: np.ndarray) -> float:
     if len(points) < 2:
         return math.inf
-    from scipy.spatial import cKDTree
+    from scipy.spatial import cKDTree  # pyright: ignore[reportAttributeAccessIssue]  (compiled, not in the stubs)
 
     dist, _ = cKDTree(points).query(points, k=2)
     return float(dist[:, 1].min())
@@ -289,7 +289,7 @@ def _dart_throw(shape: _Region, n: int, d_min: float, rng: np.random.Generator) 
     flat_all = (cy_all + pad) * width + (cx_all + pad)
     count = 0
     final_rounds = 0
-    k_prev, phase_cells, offsets = -1, [], None
+    k_prev, phase_cells, offsets = -1, [], np.zeros(0, dtype=np.int64)  # set in the first round
     while count < n:
         k = int(math.ceil(r / cell - 1e-12))
         if k != k_prev:

@@ -145,7 +145,7 @@ def check_bars(
     return checks
 
 
-def failed_bars(checks: Mapping[str, bool]) -> str:
+def failed_bars(checks: Mapping[BarName, bool]) -> str:
     """The failed bars of :func:`check_bars`, comma-separated, or ``"-"`` when every bar is met."""
     return ",".join(k for k, ok in checks.items() if not ok) or "-"
 

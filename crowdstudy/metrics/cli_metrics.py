@@ -64,7 +64,7 @@ def configure(parser: argparse.ArgumentParser) -> None:
         action="store_true",
         help="also estimate the tracking floor: the least joint displacement that would take the "
         "capsules of the reference (or of FILE) apart, every 30th frame "
-        "(crowdstudy.metrics.separation_floor; about 3 s a frame for 60 characters)",
+        "(crowdstudy.metrics.separation_floor; seconds a frame, much slower than the overlap)",
     )
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
 
@@ -251,7 +251,7 @@ def _per_character_table(summary: dict) -> str:
 def _aligned(header: list[str], lines: list[list[str]]) -> str:
     """The header and rows as right-aligned text columns."""
     widths = [max(len(r[k]) for r in [header] + lines) for k in range(len(header))]
-    return "\n".join("  ".join(cell.rjust(w) for cell, w in zip(r, widths)) for r in [header] + lines)
+    return "\n".join("  ".join(cell.rjust(w) for cell, w in zip(r, widths, strict=True)) for r in [header] + lines)
 
 
 def _tracking_table(summary: dict) -> str:

@@ -87,9 +87,9 @@ class SeparationFloor:
         share of the measured frames it touches anyone, ``partner`` (N,) the character it
         is most often deepest into (-1: none), ``partner_fraction`` (N,) share of the frames
         that partner is the deepest, ``deepest_cm`` (N,) its deepest reach over the frames."""
-        depth = self.contact_depth
+        depth, partners = self.contact_depth, self.partner
         n = self.per_joint.shape[1]
-        if depth is None or not len(depth):
+        if depth is None or partners is None or not len(depth):
             return {
                 "contact_fraction": np.zeros(n),
                 "partner": np.full(n, -1),
@@ -100,7 +100,7 @@ class SeparationFloor:
         partner = np.full(n, -1)
         share = np.zeros(n)
         for c in range(n):
-            found = self.partner[touching[:, c], c]
+            found = partners[touching[:, c], c]
             if found.size:
                 ids, counts = np.unique(found, return_counts=True)
                 partner[c] = int(ids[counts.argmax()])  # ties: the lowest index
@@ -279,7 +279,9 @@ def _project(
     n, n_j = start.shape[:2]
     move = np.zeros((n, n_j, 3))
     deepest = 0.0
-    for it in range(max_iterations):
+    rounds = 0
+    for _ in range(max_iterations):
+        rounds += 1
         acc = np.zeros((n, n_j, 3))
         cnt = np.zeros((n, n_j))
         hit, deepest = _push_pairs(near, start, end, move, tolerance, acc, cnt)
@@ -290,7 +292,7 @@ def _project(
                 break
             continue  # a culled pair met: go on with the renewed set
         move += acc / np.maximum(cnt, 1.0)[..., None]
-    return move, deepest, it + 1
+    return move, deepest, rounds
 
 
 def _push_pairs(
@@ -353,7 +355,7 @@ def _push_walls(
     return wall_hit, deepest
 
 
-def _near_pairs(pairs, start, end, move):
+def _near_pairs(pairs: _Pairs, start, end, move) -> tuple[_Pairs, float, np.ndarray]:
     """The capsule pairs within ``_CULL`` of touching with the capsules moved by ``move``,
     the deepest overlap (m) over all ``pairs`` (char_a, char_b, joint_a, joint_b, x offset
     of b, reach), and every pair's depth (m, negative: apart)."""
@@ -366,7 +368,8 @@ def _near_pairs(pairs, start, end, move):
     )
     depth = reach - dist
     near = depth > -_CULL
-    return tuple(a[near] for a in pairs), float(depth.max(initial=0.0)), depth
+    kept: _Pairs = (ac[near], bc[near], aj[near], bj[near], off[near], reach[near])
+    return kept, float(depth.max(initial=0.0)), depth
 
 
 def _deepest_partner(char_a: np.ndarray, char_b: np.ndarray, depth: np.ndarray, n: int):

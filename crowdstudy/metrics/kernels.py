@@ -13,6 +13,9 @@ This module imports Warp when it is imported; :mod:`crowdstudy.metrics.overlap` 
 inside the functions that use it.
 """
 
+# pyright: reportInvalidTypeForm=false
+# (Warp's parameter types, wp.array(dtype=...), are calls that a type checker rejects as types)
+
 from __future__ import annotations
 
 import numpy as np

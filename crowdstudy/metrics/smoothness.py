@@ -365,7 +365,7 @@ class SeamJump:
     max_character: float
 
 
-def _ratio(num: np.ndarray, den: np.ndarray) -> np.ndarray:
+def _ratio(num: np.ndarray | float, den: np.ndarray | float) -> np.ndarray:
     num, den = np.asarray(num, dtype=np.float64), np.asarray(den, dtype=np.float64)
     with np.errstate(divide="ignore", invalid="ignore"):
         out = num / den
@@ -557,17 +557,19 @@ class SmoothnessResult:
             "seam_ratio_max_character": _num(self.seam_ratio_max_character),
         }
         if per_character:
-            arrays = (
-                self.jerk_per_character,
-                self.hf_share_per_character,
-                self.max_joint_speed_per_character,
-                self.pelvis_accel_p99_per_character,
-                self.foot_slide_p99_per_character,
+            columns = (  # (N,) values and their JSON form, in the order of PER_CHARACTER_KEYS
+                (self.jerk_per_character, _num),
+                (self.hf_share_per_character, _num),
+                (self.max_joint_speed_per_character, _num),
+                (self.pelvis_accel_p99_per_character, _num),
+                (self.foot_slide_p99_per_character, _num),
+                (self.foot_planted_samples_per_character, int),
+                (self.seam_ratio_per_character, _num),
             )
-            per = {key: [_num(v) for v in arr] for key, arr in zip(self.PER_CHARACTER_KEYS, arrays)}
-            per["foot_planted_samples"] = [int(v) for v in self.foot_planted_samples_per_character]
-            per["seam_ratio"] = [_num(v) for v in self.seam_ratio_per_character]
-            out["per_character"] = per
+            out["per_character"] = {
+                key: [convert(v) for v in values]
+                for key, (values, convert) in zip(self.PER_CHARACTER_KEYS, columns, strict=True)
+            }
         return out
 
 

@@ -139,7 +139,7 @@ class TrackingParts:
     def as_dict(self, per_character: bool = False) -> dict:
         """Totals as ``tracking_*_cm`` (the parts' ``tracking_legs_cm`` ... are means over
         characters); ``per_character``: also ``tracking_per_character`` (lists)."""
-        out = {
+        out: dict[str, Any] = {
             "tracking_error_cm": self.total_cm,
             "tracking_placement_cm": self.placement_cm,
             "tracking_motion_cm": self.motion_cm,

@@ -458,7 +458,7 @@ def _dance_records(names: list[str], dancers: _Dancers, scale: np.ndarray) -> tu
             "beat_offset": int(bo),
         }
         for c, ph, y, s, tp, lf, mi, am, bo in zip(
-            d.choice, d.phase, d.yaw, scale, d.tempo_ratio, d.loop_frames, d.mirrored, d.amp, d.beat_offset
+            d.choice, d.phase, d.yaw, scale, d.tempo_ratio, d.loop_frames, d.mirrored, d.amp, d.beat_offset, strict=True
         )
     )
 

@@ -106,7 +106,7 @@ def beat_curve(height: np.ndarray, fps: float, *, period: float | None = None) -
     return BeatCurve(bounces=bounces, period=found, method=method, strength=strength)
 
 
-def beats_per_bounce(period: float, bpm: float, choices=(0.5, 1.0, 2.0, 4.0)) -> float:
+def beats_per_bounce(period: float, bpm: float, choices: tuple[float, ...] = (0.5, 1.0, 2.0, 4.0)) -> float:
     """Beats per bounce (from ``choices``) that bring a bounce of ``period`` s closest to ``bpm``
     (smallest tempo change in log ratio)."""
     natural = 60.0 / float(period)

@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import dataclasses
 from pathlib import Path
+from typing import NoReturn
 
 import numpy as np
 
@@ -129,7 +130,7 @@ class BvhSkeleton:
         return glob, pos
 
 
-def _fail(path, line: int | None, msg: str):
+def _fail(path, line: int | None, msg: str) -> NoReturn:
     where = f"{path}: line {line}" if line is not None else f"{path}"
     raise InvalidInputError(f"BVH file {where}: {msg}")
 
@@ -283,7 +284,8 @@ def _parse_hierarchy(lines: list[str], path: Path) -> tuple[_Hierarchy, int]:
         _fail(path, i + 1 if i < len(lines) else None, "field 'HIERARCHY': expected the file to start with it")
     hierarchy = _Hierarchy(path)
     motion_line = None
-    for i in range(i + 1, len(lines)):
+    start = i + 1
+    for i in range(start, len(lines)):
         toks = lines[i].split()
         if not toks:
             continue
@@ -301,7 +303,7 @@ def _parse_hierarchy(lines: list[str], path: Path) -> tuple[_Hierarchy, int]:
         )
     if not hierarchy.names:
         _fail(path, motion_line, "the hierarchy has no joints")
-    for name, offset in zip(hierarchy.names, hierarchy.offsets):
+    for name, offset in zip(hierarchy.names, hierarchy.offsets, strict=True):
         if offset is None:  # a joint line without its block
             _fail(path, motion_line, f"field 'OFFSET': missing for joint {name!r}")
     return hierarchy, motion_line

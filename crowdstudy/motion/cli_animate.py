@@ -52,6 +52,7 @@ def _summary(anim, path: Path) -> str:
 def run(args: argparse.Namespace) -> int:
     from crowdstudy.design import load_design
 
+    design = load_design(args.design)  # a bad design fails before anything is written
     out = Path(args.out)
     if out.suffix == ".npz":
         check_output_path(out, "--out")
@@ -62,7 +63,6 @@ def run(args: argparse.Namespace) -> int:
         from crowdstudy.scene import Crowd
 
         crowd = Crowd.load(args.crowd)
-        design = load_design(args.design)
         seed = int(args.seed if args.seed is not None else crowd.meta.get("seed", design.seed))
         meta = {k: crowd.meta[k] for k in ("density_level", "density", "n_characters") if k in crowd.meta}
         meta["seed"] = seed
@@ -85,8 +85,9 @@ def run(args: argparse.Namespace) -> int:
         return 0
 
     if args.stage is None:
-        raise InvalidInputError("--stage: required without a crowd file (stationary, walking or all)")
-    design = load_design(args.design)
+        raise InvalidInputError(
+            f"--stage: required without a crowd file ({', '.join(st.key for st in design.stages)} or all)"
+        )
     stages = list(design.stages) if args.stage == "all" else [design.stage(args.stage)]
     levels = list(design.densities) if args.density == "all" else [args.density]
     for level in levels:

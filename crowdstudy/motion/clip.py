@@ -121,6 +121,13 @@ class MotionClip:
         """Seconds: the period ``T / fps`` for loops, ``(T - 1) / fps`` otherwise."""
         return self.n_frames / self.fps if self.loop else (self.n_frames - 1) / self.fps
 
+    @property
+    def walk_speed(self) -> float:
+        """``speed`` (m/s) of a walking clip; asking a clip without one is an error."""
+        if self.speed is None:
+            raise InvalidInputError(f"MotionClip {self.name!r}: not a walk (no field 'speed')")
+        return self.speed
+
     @functools.cached_property
     def quaternions(self) -> np.ndarray:
         """(T, 24, 4) unit quaternions, signs aligned frame to frame."""

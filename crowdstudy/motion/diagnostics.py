@@ -62,5 +62,5 @@ def foot_skate(
             edges = np.diff(np.concatenate([[0], c.astype(np.int8), [0]]))
             starts, stops = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)
             sums = np.add.reduceat(np.where(c, step[:, i], 0.0), starts) if len(starts) else []
-            out.extend(float(v) for v, a, b in zip(sums, starts, stops) if b > a)
+            out.extend(float(v) for v, a, b in zip(sums, starts, stops, strict=True) if b > a)
     return np.asarray(out)

@@ -32,7 +32,11 @@ def _segment_starts(mask: np.ndarray, wrapped: np.ndarray) -> np.ndarray:
 
 
 def _lock_offsets(
-    ankle: np.ndarray, ball: np.ndarray, foot_phase: np.ndarray, flat_end: float, stance_end: float
+    ankle: np.ndarray,
+    ball: np.ndarray,
+    foot_phase: np.ndarray,
+    flat_end: float | np.ndarray,
+    stance_end: float | np.ndarray,
 ) -> np.ndarray:
     """(T, N, 3) horizontal corrections of an ankle target that pin the foot on the floor.
 

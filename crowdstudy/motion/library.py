@@ -15,10 +15,15 @@ from __future__ import annotations
 import functools
 import hashlib
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from crowdstudy.errors import InvalidInputError
 from crowdstudy.motion.clip import MotionClip
 from crowdstudy.motion.mocap_library import load_mocap, mocap_names
+
+if TYPE_CHECKING:  # the procedural generators load with the first clip they make
+    from crowdstudy.motion.dance import DanceSpec
+    from crowdstudy.motion.walk import WalkSpec
 
 __all__ = ["SOURCES", "library_digest", "list_clips", "load_clip", "walk_clips"]
 
@@ -27,11 +32,11 @@ _KINDS = ("dance", "idle", "walk")
 SOURCES = ("mocap", "procedural")
 
 
-def _specs() -> dict[str, tuple[str, object]]:
+def _specs() -> dict[str, tuple[str, DanceSpec | WalkSpec]]:
     from crowdstudy.motion.dance import DANCES
     from crowdstudy.motion.walk import WALKS
 
-    out: dict[str, tuple[str, object]] = {d.name: ("dance", d) for d in DANCES}
+    out: dict[str, tuple[str, DanceSpec | WalkSpec]] = {d.name: ("dance", d) for d in DANCES}
     out.update({w.name: ("walk", w) for w in WALKS})
     return out
 
@@ -58,14 +63,11 @@ def load_clip(name: str) -> MotionClip:
     """The shipped clip called ``name`` (see :func:`list_clips`, either source)."""
     specs = _specs()
     if name in specs:
-        kind, spec = specs[name]
-        if kind == "dance":
-            from crowdstudy.motion.dance import generate_dance
-
-            return generate_dance(spec)
+        from crowdstudy.motion.dance import DanceSpec, generate_dance
         from crowdstudy.motion.walk import generate_walk
 
-        return generate_walk(spec)
+        spec = specs[name][1]  # a dance's spec is a DanceSpec, a walk's a WalkSpec
+        return generate_dance(spec) if isinstance(spec, DanceSpec) else generate_walk(spec)
     if name in mocap_names():
         return load_mocap(name)
     raise InvalidInputError(
@@ -77,7 +79,7 @@ def walk_clips(source: str = "mocap") -> list[MotionClip]:
     """The walking clips of ``source``, slowest first (6 motion-captured loops or 4 procedural)."""
     _check_source(source)
     clips = [load_clip(n) for n in list_clips("walk", source)]
-    return sorted(clips, key=lambda c: c.speed)
+    return sorted(clips, key=lambda c: c.walk_speed)
 
 
 @functools.lru_cache(maxsize=1)

@@ -150,7 +150,7 @@ def _step_lift(offset: np.ndarray, contacts: np.ndarray) -> np.ndarray:
     step, not a slide (a take whose foot shuffles along the floor)."""
     lift = np.zeros(len(offset))
     runs = planted_runs(contacts)
-    for r, (a, b) in enumerate(runs):
+    for r, (_, b) in enumerate(runs):
         nxt = runs[r + 1][0] if r + 1 < len(runs) else len(offset)
         span = np.flatnonzero(np.linalg.norm(offset[b:nxt], axis=1) > 1e-9)
         if b == 0 or not span.size:

@@ -100,6 +100,7 @@ def build_library(
         arrays.update(a)
         library[t.name] = info
     out.mkdir(parents=True, exist_ok=True)
-    np.savez_compressed(out / "takes.npz", **arrays)
+    # numpy's stub reads a ** of arrays as possibly its allow_pickle flag
+    np.savez_compressed(out / "takes.npz", **arrays)  # pyright: ignore[reportArgumentType]
     (out / "library.json").write_text(json.dumps({"credit": CREDIT, "takes": library}, indent=1, sort_keys=True) + "\n")
     return out

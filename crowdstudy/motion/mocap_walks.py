@@ -26,10 +26,11 @@ form as the procedural ones (:mod:`crowdstudy.motion.walk`), so that
 Each clip has ``kind = "walk"``, ``speed`` (m/s, distance per loop over its duration) and
 meta ``stride_length`` (m per gait cycle), ``cadence`` (steps/min), ``cycle`` (s per gait
 cycle), ``cycles`` (gait cycles in the loop), ``contacts`` (gait phases in [0, 1) of each
-foot's ``strike``, ``flat_end`` and ``toe_off``), ``lock_lead`` = :data:`LOCK_LEAD` and ``lock_lag`` =
-:data:`LOCK_LAG` (cycles before the strike / after the toe-off that
-:func:`~crowdstudy.motion.baseline.animate_walking` also holds the foot), ``source`` (file name) and ``trial`` (CMU trial id). The result
-depends only on the files (no randomness): the same input gives the same bytes.
+foot's ``strike``, ``flat_end`` and ``toe_off``), ``lock_lead`` = :data:`LOCK_LEAD` and
+``lock_lag`` = :data:`LOCK_LAG` (cycles before the strike / after the toe-off that
+:func:`~crowdstudy.motion.baseline.animate_walking` also holds the foot), ``source`` (file
+name) and ``trial`` (CMU trial id). The result depends only on the files (no randomness):
+the same input gives the same bytes.
 """
 
 from __future__ import annotations
@@ -99,9 +100,10 @@ def foot_events(pos: np.ndarray, fps: float, speed: float) -> dict[str, dict[str
 
     The captured floor is not level (stance heights drift by centimetres over a take), so
     contacts come from horizontal speeds (smoothed over about 0.04 s) with hysteresis: a
-    foot enters its stance when its ankle slows below ``0.1 + 0.45 * speed`` and leaves it when the ball of the foot moves faster than ``0.15 + 0.8 * speed``;
-    the toe-off is then moved on to where the ball rises 1.2 cm above its lowest height in
-    that stance (by at most 0.15 s). The flat foot ends (heel rise) at the last stance frame with the
+    foot enters its stance when its ankle slows below ``0.1 + 0.45 * speed`` and leaves it
+    when the ball of the foot moves faster than ``0.15 + 0.8 * speed``; the toe-off is then
+    moved on to where the ball rises 1.2 cm above its lowest height in that stance (by at
+    most 0.15 s). The flat foot ends (heel rise) at the last stance frame with the
     ankle within 1 cm of its lowest height in that stance. Stances shorter than 0.1 s are
     dropped, swings shorter than 0.15 s (a planted foot slipping) merged into one stance;
     a stance cut by the start or end of the take is not reported.
@@ -154,7 +156,7 @@ def _level_floor(clip: MotionClip, events: dict) -> MotionClip:
     pos = clip.joint_positions()
     t, z = [], []
     for side in _SIDES:
-        for a, b in zip(events[side]["strike"], events[side]["flat_end"]):
+        for a, b in zip(events[side]["strike"], events[side]["flat_end"], strict=True):
             t.append(np.arange(a, b + 1))
             z.append(pos[a : b + 1, JOINT_INDEX[f"{side}_ankle"], 2])
     t, z = np.concatenate(t), np.concatenate(z)
@@ -185,7 +187,7 @@ def _middle_events(clip: MotionClip, pos3: np.ndarray, cycles: int) -> dict[str,
     """Events of the loop played 3 times (``pos3``, world joints): every stance, and a check
     that ``cycles`` stances of each foot start in the middle copy."""
     n = clip.n_frames
-    ev = foot_events(pos3, clip.fps, clip.speed)
+    ev = foot_events(pos3, clip.fps, clip.walk_speed)
     for side in _SIDES:
         st = ev[side]["strike"]
         k = int(((st >= n) & (st < 2 * n)).sum())
@@ -236,7 +238,7 @@ def _lock_offsets(pos: np.ndarray, ev: dict, fps: float) -> np.ndarray:
         swings = st[1:] - to[:-1]
         default = int(np.median(swings)) if len(swings) else int(0.4 * (to[0] - st[0]) + 1)
         off = np.zeros((t_all, 2))
-        for i, (a, f, e) in enumerate(zip(st, fl, to)):
+        for i, (a, f, e) in enumerate(zip(st, fl, to, strict=True)):
             held = np.median(ankle[a : f + 1], axis=0)
             stance = np.zeros((e + 1 - a, 2))
             stance[: f + 1 - a] = held - ankle[a : f + 1]
@@ -278,7 +280,7 @@ def _hold_foot_yaw(rot: np.ndarray, root: np.ndarray, ev: dict) -> np.ndarray:
         yaw = np.arctan2(v[:, 1], v[:, 0])
         delta = np.zeros(len(yaw))
         st, fl, to = (ev[side][x] for x in ("strike", "flat_end", "toe_off"))
-        for i, (a, f) in enumerate(zip(st, fl)):
+        for i, (a, f) in enumerate(zip(st, fl, strict=True)):
             d = np.angle(np.exp(1j * (yaw[f] - yaw[a : f + 1])))
             delta[a : f + 1] = d
             before = a - to[i - 1] if i else int(0.5 * (f - a)) + 1
@@ -431,7 +433,7 @@ def build_walk_loops(mocap_dir: str | Path, files: tuple[str, ...] = WALK_FILES)
     missing = [f for f in files if not (mocap_dir / f).is_file()]
     if missing:
         raise InvalidInputError(f"mocap_dir {str(mocap_dir)!r}: missing walk files {', '.join(missing)}")
-    return sorted((build_walk_loop(mocap_dir / f) for f in files), key=lambda c: c.speed)
+    return sorted((build_walk_loop(mocap_dir / f) for f in files), key=lambda c: c.walk_speed)
 
 
 def loop_foot_skate(clip: MotionClip, repeats: int = 3, height_tol: float = 0.01) -> np.ndarray:

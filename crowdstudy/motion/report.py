@@ -17,6 +17,8 @@
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 
 from crowdstudy.body import load_body, sample_bodies
@@ -61,11 +63,12 @@ def _beat(design, level: str, tempo: float) -> list[dict]:
     seed = design.cell_seed(st, level)
     crowd = concert_layout(design, level, seed)
     rows = []
-    for label, kwargs in (
+    runs: list[tuple[str, dict[str, Any]]] = [
         ("procedural clips", {"clip_names": list_clips("dance", "procedural")}),
         ("motion capture, own tempo", {"tempo": None}),
         (f"motion capture on {tempo:g} bpm", {"tempo": tempo}),
-    ):
+    ]
+    for label, kwargs in runs:
         anim = animate_stationary(
             crowd, duration=design.duration, fps=design.fps, seed=seed, clear_self_contact=False, **kwargs
         )
@@ -139,13 +142,13 @@ def motion_report(design, *, level: str = "D5", with_hands: bool = True) -> dict
     for clip in walk_clips():
         n = 3 * clip.n_frames
         t = np.arange(n) / clip.fps
-        pos = np.stack([np.zeros(n), clip.speed * t], axis=-1)[:, None]
-        crowd = Crowd(positions=pos, radius=0.2, fps=clip.fps, meta={"scenario": "corridor"})
+        pos = np.stack([np.zeros(n), clip.walk_speed * t], axis=-1)[:, None]
+        crowd = Crowd(positions=pos, radius=np.full(1, 0.2), fps=clip.fps, meta={"scenario": "corridor"})
         anim = animate_walking(crowd, seed=0, walks=[clip, *[c for c in walk_clips() if c is not clip][:1]])
         walks.append(
             {
                 "walk": clip.name,
-                "speed_m_s": round(clip.speed, 2),
+                "speed_m_s": round(clip.walk_speed, 2),
                 "cadence": round(clip.meta["cadence"], 1),
                 "stride_m": round(clip.meta["stride_length"], 2),
                 **_skate(foot_skate(anim)),

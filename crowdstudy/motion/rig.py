@@ -128,7 +128,7 @@ def assemble_pose(c: PoseControls) -> tuple[np.ndarray, np.ndarray]:
     t = c.root_pos.shape[0]
     local = np.broadcast_to(np.eye(3), (t, NUM_JOINTS, 3, 3)).copy()
     local[:, 0] = c.root_rot
-    for name, rot in zip(("spine1", "spine2", "spine3"), c.spine):
+    for name, rot in zip(("spine1", "spine2", "spine3"), c.spine, strict=True):
         local[:, _J[name]] = rot
     local[:, _J["neck"]] = c.neck
     local[:, _J["head"]] = c.head

@@ -92,7 +92,7 @@ def self_penetration(
     caps = body.capsules
     i, j = np.triu_indices(NUM_JOINTS, k=1)
     skip = {tuple(p) for p in touching_pairs(caps, margin=tolerance)}
-    keep = np.array([(a, b) not in skip for a, b in zip(i, j)])
+    keep = np.array([(a, b) not in skip for a, b in zip(i, j, strict=True)])
     i, j = i[keep], j[keep]
     start, end = posed_capsules(body, joint_rotations, root_translation)
     dist = segment_distance(start[:, i], end[:, i], start[:, j], end[:, j])

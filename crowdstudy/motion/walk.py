@@ -67,7 +67,7 @@ def procedural_contacts() -> dict:
     and ``lock_lag`` (it only lifts for :data:`LIFT_OFF` of the swing after toe-off)."""
     contacts = {
         side: {"strike": off, "flat_end": (off + FLAT_STANCE_END) % 1.0, "toe_off": (off + DUTY_FACTOR) % 1.0}
-        for side, off in zip(("left", "right"), FOOT_PHASE_OFFSET)
+        for side, off in zip(("left", "right"), FOOT_PHASE_OFFSET, strict=True)
     }
     return {
         "contacts": contacts,
@@ -110,6 +110,18 @@ _TOE_OUT = 0.10
 _ANKLE_TO_BALL = REST[JOINT_INDEX["left_foot"]] - REST[JOINT_INDEX["left_ankle"]]
 
 
+def _flat_ankle(p, x: float, y_strike: float, stride: float) -> np.ndarray:
+    """(..., 3) ankle of a flat foot at stance phase ``p`` (the shape of ``p``): at ``x`` across,
+    ``y_strike`` ahead of the hip at the heel strike, moving back ``stride`` (m) per cycle."""
+    p = np.asarray(p, dtype=np.float64)
+    return np.stack([np.full(p.shape, x), y_strike - stride * p, np.full(p.shape, ANKLE_HEIGHT)], axis=-1)
+
+
+def _pitched(yaw_m: np.ndarray, p) -> np.ndarray:
+    """(..., 3, 3) foot rotation at pitch ``p`` (rad, the shape of ``p``) after the toe-out ``yaw_m``."""
+    return yaw_m @ rot_x(np.asarray(p, dtype=np.float64))
+
+
 def _foot_trajectories(phase: np.ndarray, v: float, stride: float, beta: float, lead: float = 0.6):
     """Ankle targets (T, 2, 3), global foot rotations (T, 2, 3, 3) and toe bends (T, 2).
 
@@ -138,27 +150,19 @@ def _foot_trajectories(phase: np.ndarray, v: float, stride: float, beta: float, 
         ph = np.mod(phase - offset, 1.0)
         u = np.clip((ph - beta) / (1.0 - beta), 0.0, 1.0)
         in_swing = ph >= beta
-
-        def flat_ankle(p):
-            p = np.asarray(p, dtype=np.float64)
-            return np.stack(
-                [np.full(p.shape, sign * width), y_strike - stride * p, np.full(p.shape, ANKLE_HEIGHT)], axis=-1
-            )
-
-        def pitched(p):  # (..., 3, 3) foot rotation at pitch p
-            return yaw_m @ rot_x(np.asarray(p, dtype=np.float64))
+        x = sign * width  # the foot's distance across from the hip line (m)
 
         flatten = strike * (1.0 - smoothstep5(ph / 0.1))
         rolling = -roll_max * smoothstep5((ph - heel_off) / (beta - heel_off))
         swing_pitch = -roll_max + (roll_max + strike) * smoothstep5(u / 0.7)
         pitch = np.where(in_swing, swing_pitch, np.where(ph < heel_off, flatten, rolling))
-        foot_rot[:, side] = pitched(pitch)
+        foot_rot[:, side] = _pitched(yaw_m, pitch)
 
-        stance = flat_ankle(ph)
-        rolled = flat_ankle(ph) + flat_ball - np.einsum("tab,b->ta", pitched(rolling), ball)
-        stance = np.where((ph >= heel_off)[:, None], rolled, stance)
-        toe_off = flat_ankle(beta) + flat_ball - pitched(-roll_max) @ ball
-        land = flat_ankle(0.0) + np.array([0.0, stride * (1.0 - beta), 0.0])
+        flat = _flat_ankle(ph, x, y_strike, stride)
+        rolled = flat + flat_ball - np.einsum("tab,b->ta", _pitched(yaw_m, rolling), ball)
+        stance = np.where((ph >= heel_off)[:, None], rolled, flat)
+        toe_off = _flat_ankle(beta, x, y_strike, stride) + flat_ball - _pitched(yaw_m, -roll_max) @ ball
+        land = _flat_ankle(0.0, x, y_strike, stride) + np.array([0.0, stride * (1.0 - beta), 0.0])
         # The foot first lifts (the ball clears the floor), travels between 6 % and 84 % of
         # the swing, and the heel comes straight down at the end.
         swing = toe_off + (land - toe_off) * smoothstep5((u - LIFT_OFF) / (1.0 - LIFT_OFF - LANDING_HOVER))[:, None]

@@ -35,14 +35,16 @@ def run(args: argparse.Namespace) -> int:
         )
     if args.seed is not None and args.seed < 0:
         raise InvalidInputError(f"--seed: expected a non-negative integer, got {args.seed}")
+    stage = design.stage_of_kind("corridor")
     check_output_path(args.out, "--out")
     if args.plot:
         check_output_path(args.plot, "--plot")
-    seed = design.cell_seed(design.stage("walking"), args.density) if args.seed is None else args.seed
+    seed = design.cell_seed(stage, args.density) if args.seed is None else args.seed
     crowd = corridor_crowd(
         design,
         args.density,
         seed,
+        scenario=stage.scenario,
         duration=args.duration,
         fps=args.fps,
         direction="bidirectional" if args.bidirectional else None,

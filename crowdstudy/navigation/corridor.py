@@ -143,7 +143,7 @@ def _separate(
     and ``|y| <= y_lim``; with ``lanes`` (N,) = +-1, agent i also keeps to its own half
     (``lanes * y <= -min_dist / 2``: +1 below the centre line, -1 above it).
     ``points``: (N, 2) metres."""
-    from scipy.spatial import cKDTree
+    from scipy.spatial import cKDTree  # pyright: ignore[reportAttributeAccessIssue]  (compiled, not in the stubs)
 
     lo = np.full(len(points), -y_lim)
     hi = np.full(len(points), y_lim)

@@ -365,7 +365,7 @@ class ORCASimulator:
                     cmd.set_param_by_name("nx", nx)
                     cmd.set_param_by_name("ny", ny)
                 self._recorded_grid = (origin_v, inv_v, nx, ny)
-            self._cmd_keys.launch()
+            self._cmd_keys.launch()  # pyright: ignore[reportOptionalMemberAccess]  (recorded: never None)
             if self.device == "cpu" and self.n <= _HOST_SORT_MAX:  # cheaper than a launch for small crowds
                 keys = self._keys.numpy()[: self.n]
                 order = np.argsort(keys, kind="stable")

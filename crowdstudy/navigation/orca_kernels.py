@@ -18,6 +18,12 @@ line is a point ``lp`` (m/s) and a unit direction ``ld``; the permitted velociti
 its left.
 """
 
+# pyright: reportInvalidTypeForm=false
+# (Warp's parameter types, wp.array(dtype=...), are calls that a type checker rejects as types)
+# pyright: reportOperatorIssue=false, reportArgumentType=false, reportCallIssue=false
+# (inside a kernel, Warp's stubs type wp.tid() as int or a tuple, and overload wp.length, wp.dot
+# and wp.normalize for quaternions only; Warp's code generator checks these bodies when it compiles)
+
 from __future__ import annotations
 
 import warp as wp

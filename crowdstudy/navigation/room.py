@@ -97,7 +97,7 @@ class RoomRun:
 def count_overlaps(points: np.ndarray, radius: float, tolerance: float = 0.01) -> tuple[int, float]:
     """Pairs of discs of ``radius`` overlapping by more than ``tolerance * radius`` and the
     largest overlap depth in units of the radius. ``points``: (N, 2) metres."""
-    from scipy.spatial import cKDTree
+    from scipy.spatial import cKDTree  # pyright: ignore[reportAttributeAccessIssue]  (compiled, not in the stubs)
 
     pairs = cKDTree(points).query_pairs(2 * radius, output_type="ndarray")
     if len(pairs) == 0:

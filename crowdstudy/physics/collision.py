@@ -37,11 +37,15 @@ ground and intra-body contacts the bare radius. The Warp kernels are in
 from __future__ import annotations
 
 import dataclasses
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from crowdstudy.scene_meta import wall_segments
 from crowdstudy.warp_runtime import get_warp, host_threads, run_parallel
+
+if TYPE_CHECKING:  # for annotations only: Warp loads with the first pipeline
+    import warp as wp
 
 __all__ = [
     "Contacts",
@@ -163,15 +167,15 @@ class Contacts:
     """
 
     capacity: int
-    count: object
-    body_a: object
-    body_b: object
-    normal: object
-    depth: object
-    lever_a: object
-    lever_b: object
-    stiffness: object
-    kind: object
+    count: wp.array
+    body_a: wp.array
+    body_b: wp.array
+    normal: wp.array
+    depth: wp.array
+    lever_a: wp.array
+    lever_b: wp.array
+    stiffness: wp.array
+    kind: wp.array
 
     @classmethod
     def allocate(cls, capacity: int, device: str) -> Contacts:
@@ -621,7 +625,7 @@ class CollisionPipeline:
         extra = int(scratch.count.numpy()[0])
         n_copy = min(extra, scratch.capacity, contacts.capacity - base) if base < contacts.capacity else 0
         if n_copy > 0:
-            for dst, src in zip(contacts.buffers(), scratch.buffers()):
+            for dst, src in zip(contacts.buffers(), scratch.buffers(), strict=True):
                 wp.copy(dst, src, dest_offset=base, src_offset=0, count=n_copy)
         contacts.count.fill_(base + extra)
 

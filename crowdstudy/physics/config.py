@@ -310,4 +310,6 @@ class PhysicsConfig:
         at ``skin.percentile``, ``skin.max``, ``skin.hand_scale``; where those follow the
         profile, its dense end, as :meth:`for_dense_crowd`)."""
         skin = self.for_dense_crowd().skin
+        if skin.max is None or skin.hand_scale is None:  # for_density sets every field the profile sets
+            raise RuntimeError("skin.max, skin.hand_scale: not resolved for a density")
         return capsule_skin(body, skin.percentile, max_skin=skin.max, hand_scale=skin.hand_scale)

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import dataclasses
 import time
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -23,6 +24,11 @@ from crowdstudy.physics.output_stage import finish_crowd
 from crowdstudy.physics.solver import LinearSolver, Solver
 from crowdstudy.physics.state import Control, State
 from crowdstudy.scene_meta import loop_mode, static_walls_from_meta
+
+if TYPE_CHECKING:  # for annotations only: Warp loads when a correction starts
+    import warp as wp
+
+    from crowdstudy.scene import CrowdAnimation
 
 __all__ = ["CrowdCorrector", "correct", "load_bodies"]
 
@@ -214,7 +220,7 @@ class CrowdCorrector:
 class _Run:
     """One offline correction being set up and run (:func:`correct`)."""
 
-    anim: object  # the input CrowdAnimation
+    anim: CrowdAnimation  # the input
     config: PhysicsConfig  # resolved for the crowd
     density: float  # the crowd's measured density, characters per m^2
     weight: float | None  # its profile weight
@@ -269,21 +275,30 @@ def _set_up(anim, config: PhysicsConfig | None, bodies, device: str | None, line
     return _Run(anim, config, density, weight, bodies, corr, looped, warmup, blend)
 
 
-def _simulate(run: _Run, progress: bool) -> tuple[object, object, dict[str, object]]:
+@dataclasses.dataclass
+class _Clock:
+    """The clock readings of a correction: ``start`` and ``settled`` (perf_counter s) and
+    ``frame_seconds`` (s, one per frame step)."""
+
+    start: float
+    settled: float = 0.0
+    frame_seconds: list[float] = dataclasses.field(default_factory=list)
+
+
+def _simulate(run: _Run, progress: bool) -> tuple[wp.array, wp.array, _Clock]:
     """Settle on the first frame, then step through the schedule, projecting every frame:
-    ``(rotations (F, B) vec3, roots (F, N) vec3 device arrays, clock)``, the clock holding
-    ``start`` and ``settled`` (perf_counter s) and ``frame_seconds`` (one per frame step)."""
+    ``(rotations (F, B) vec3, roots (F, N) vec3 device arrays, clock)``."""
     corr = run.corr
     wp, m = corr.solver.wp, corr.model
     t_frames = run.warmup + run.anim.n_frames + run.blend
     out_rot = wp.zeros((t_frames, m.n_bodies), dtype=wp.vec3, device=m.device)
     out_root = wp.zeros((t_frames, m.n_characters), dtype=wp.vec3, device=m.device)
-    clock: dict[str, object] = {"start": time.perf_counter()}
+    clock = _Clock(start=time.perf_counter())
     corr.reset_to_frame(0)
     corr.settle(frame=0)
     wp.synchronize_device(m.device)
-    clock["settled"] = time.perf_counter()
-    frame_seconds = clock["frame_seconds"] = []
+    clock.settled = time.perf_counter()
+    frame_seconds = clock.frame_seconds
     corr.project(out_rot, out_root, 0)
     bar = None
     if progress:
@@ -303,21 +318,19 @@ def _simulate(run: _Run, progress: bool) -> tuple[object, object, dict[str, obje
     return out_rot, out_root, clock
 
 
-def _fill_timings(
-    timings: dict, run: _Run, clock: dict[str, object], t_setup: float, t_output: float, t_end: float
-) -> None:
+def _fill_timings(timings: dict, run: _Run, clock: _Clock, t_setup: float, t_output: float, t_end: float) -> None:
     """``timings`` (see :func:`correct`) from the clock readings."""
     corr = run.corr
-    frame_seconds = clock["frame_seconds"]
+    frame_seconds = clock.frame_seconds
     timed = frame_seconds if round(run.config.solver.settle_time / corr.dt) > 0 else frame_seconds[1:]
     timed_steps = len(timed) * corr.substeps
     timings.update(
         {
-            "setup_seconds": clock["start"] - t_setup,
-            "settle_seconds": clock["settled"] - clock["start"],
+            "setup_seconds": clock.start - t_setup,
+            "settle_seconds": clock.settled - clock.start,
             "simulate_seconds": float(sum(frame_seconds)),
             "output_seconds": t_end - t_output,
-            "wall_seconds": t_end - clock["start"],
+            "wall_seconds": t_end - clock.start,
             "steps": corr.steps,
             "timed_steps": timed_steps,
             "ms_per_step": 1000.0 * sum(timed) / timed_steps if timed_steps else None,

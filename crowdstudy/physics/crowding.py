@@ -33,7 +33,7 @@ def local_density(root_xy: np.ndarray, *, k: int = NEIGHBOURS, period: float | N
 
     A crowd of one has no neighbour: its density is 0.
     """
-    from scipy.spatial import cKDTree
+    from scipy.spatial import cKDTree  # pyright: ignore[reportAttributeAccessIssue]  (compiled, not in the stubs)
 
     xy = np.asarray(root_xy, np.float64)
     if xy.ndim != 3 or xy.shape[2] != 2 or xy.shape[0] < 1:

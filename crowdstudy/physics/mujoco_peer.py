@@ -282,7 +282,7 @@ class MujocoScene:
         hull = (cm.cap_radius + cm.cap_skin).reshape(n, nj)
         jd = float(self.setting.joint_damping)
 
-        def body_xml(i, j):
+        def body_xml(i: int, j: int) -> str:
             p = PARENTS[j]
             pos = self.anim_root[0, i] if p < 0 else self.rests[i, j] - self.rests[i, p]
             joint = "<freejoint/>" if p < 0 else f'<joint type="ball" damping="{jd:g}" armature="0.01"/>'
@@ -407,7 +407,7 @@ class MujocoScene:
         m, nj = self.model, self.nj
         body_index = {int(b): k for k, b in enumerate(self.body_id.ravel())}
         pairs = set()
-        for g1, g2 in zip(m.pair_geom1, m.pair_geom2):
+        for g1, g2 in zip(m.pair_geom1, m.pair_geom2, strict=True):
             a, b = body_index[int(m.geom_bodyid[g1])], body_index[int(m.geom_bodyid[g2])]
             if a // nj == b // nj:
                 pairs.add((min(a, b), max(a, b)))

@@ -11,11 +11,13 @@ are, so the same input still gives the same bytes.
 
 Working on blocks keeps the temporaries small. The whole crowd's forward kinematics of a 20 s
 clip of 1,000 characters would need 2.2 GB of global rotations for each of the output and
-the input. Fresh memory is expensive on a virtual machine, about 10 s per GB here.
+the input, and fresh memory is expensive on a virtual machine (each page is zeroed when it
+is first touched).
 """
 
 from __future__ import annotations
 
+import dataclasses
 from concurrent.futures import ThreadPoolExecutor, as_completed
 
 import numpy as np
@@ -23,6 +25,7 @@ import numpy as np
 from crowdstudy.body.skeleton import PARENTS, forward_kinematics
 from crowdstudy.errors import InvalidInputError
 from crowdstudy.physics.config import PhysicsConfig
+from crowdstudy.physics.config_sections import OutputConfig
 from crowdstudy.physics.finish import close_loop, lock_planted_feet, smooth_deviation
 from crowdstudy.physics.speed_limit import SpeedLimitReport, fastest_reference_joint, limit_joint_speed
 from crowdstudy.warp_runtime import host_threads
@@ -50,7 +53,7 @@ def _map(fn, items, threads: int, bar=None) -> list:
         return [tick(fn(item)) for item in items]
     with ThreadPoolExecutor(min(threads, len(items))) as pool:
         futures = [pool.submit(fn, item) for item in items]
-        for future in as_completed(futures):
+        for _ in as_completed(futures):
             tick(None)
         return [future.result() for future in futures]
 
@@ -88,6 +91,84 @@ def _merge(reports: list[tuple[int, SpeedLimitReport]], limit: float) -> SpeedLi
         max_speed_after_m_s=max(r.max_speed_after_m_s for _, r in reports),
         unresolved=sum(r.unresolved for _, r in reports),
     )
+
+
+@dataclasses.dataclass(frozen=True)
+class _BlockStage:
+    """The output stage of one block of characters ``(c0, c1)``, as :func:`finish_crowd`
+    calls it on each block (any thread): reads the simulated and input poses, writes the
+    block's rows of ``out_rot`` and ``out_root``, returns ``(c0, speed report or None)``."""
+
+    sim_rot: np.ndarray  # (warmup + T + blend, N, J, 3) rad
+    sim_root: np.ndarray  # (warmup + T + blend, N, 3) m
+    ref_rot: np.ndarray  # (T, N, J, 3) rad, float64
+    ref_root: np.ndarray  # (T, N, 3) m, float64
+    rest: np.ndarray  # (N, J, 3) m, float64
+    fps: float
+    cfg: OutputConfig
+    hold: float  # cfg.hold, resolved for the dense end of the profile
+    limit: float | None  # m/s, the joint speed limit (crowd_speed_limit), None when off
+    n_frames: int
+    warmup: int
+    blend: int
+    looped: bool
+    periodic_length: float | None
+    out_rot: np.ndarray  # (T, N, J, 3), written
+    out_root: np.ndarray  # (T, N, 3), written
+
+    def __call__(self, bounds: tuple[int, int]) -> tuple[int, SpeedLimitReport | None]:
+        cfg = self.cfg
+        c0, c1 = bounds
+        rot = np.asarray(self.sim_rot[:, c0:c1], np.float64)
+        root = np.asarray(self.sim_root[:, c0:c1], np.float64)
+        r_rot, r_root, r_rest = self.ref_rot[:, c0:c1], self.ref_root[:, c0:c1], self.rest[c0:c1]
+        if self.looped:
+            rot, root = close_loop(rot, root, self.n_frames, self.warmup, self.blend)
+        rot, root = smooth_deviation(
+            rot,
+            root,
+            r_rot,
+            r_root,
+            cfg.smoothing * self.fps,
+            periodic=self.looped,
+            root_sigma_frames=cfg.smoothing_root * self.fps,
+            hold=self.hold,
+        )
+        # the input's kinematics, once for the foot lock and the speed limit
+        r_fk = (
+            forward_kinematics(r_rest[None], r_rot, r_root, parents=PARENTS)
+            if cfg.foot_lock or self.limit is not None
+            else None
+        )
+        if cfg.foot_lock:
+            rot = lock_planted_feet(
+                rot,
+                root,
+                r_rot,
+                r_root,
+                r_rest,
+                self.fps,
+                planted_speed=cfg.foot_lock_speed,
+                periodic=self.looped,
+                ref_kinematics=r_fk,
+            )
+        report = None
+        if self.limit is not None:
+            rot, report = limit_joint_speed(
+                rot,
+                root,
+                r_rot,
+                r_root,
+                r_rest,
+                self.fps,
+                limit=self.limit,
+                periodic=self.looped,
+                periodic_length=self.periodic_length,
+                ref_kinematics=r_fk,
+            )
+        self.out_rot[:, c0:c1] = rot
+        self.out_root[:, c0:c1] = root
+        return c0, report
 
 
 def finish_crowd(
@@ -150,6 +231,8 @@ def finish_crowd(
         raise InvalidInputError(f"chunk: expected a positive number of characters, got {chunk!r}")
     threads = host_threads() if threads is None else max(1, int(threads))
     out_cfg = config.for_dense_crowd().output
+    if out_cfg.hold is None:  # for_density sets every field the profile sets
+        raise RuntimeError("output.hold: not resolved for a density")
     limit = None
     if out_cfg.speed_limit:
         limit = crowd_speed_limit(
@@ -164,59 +247,24 @@ def finish_crowd(
         )
     out_rot = np.empty(ref_rot.shape)
     out_root = np.empty(ref_root.shape)
-
-    def block(bounds):
-        c0, c1 = bounds
-        rot = np.asarray(sim_rot[:, c0:c1], np.float64)
-        root = np.asarray(sim_root[:, c0:c1], np.float64)
-        r_rot, r_root, r_rest = ref_rot[:, c0:c1], ref_root[:, c0:c1], rest[c0:c1]
-        if looped:
-            rot, root = close_loop(rot, root, n_frames, warmup, blend)
-        rot, root = smooth_deviation(
-            rot,
-            root,
-            r_rot,
-            r_root,
-            out_cfg.smoothing * fps,
-            periodic=looped,
-            root_sigma_frames=out_cfg.smoothing_root * fps,
-            hold=out_cfg.hold,
-        )
-        # the input's kinematics, once for the foot lock and the speed limit
-        r_fk = (
-            forward_kinematics(r_rest[None], r_rot, r_root, parents=PARENTS)
-            if out_cfg.foot_lock or limit is not None
-            else None
-        )
-        if out_cfg.foot_lock:
-            rot = lock_planted_feet(
-                rot,
-                root,
-                r_rot,
-                r_root,
-                r_rest,
-                fps,
-                planted_speed=out_cfg.foot_lock_speed,
-                periodic=looped,
-                ref_kinematics=r_fk,
-            )
-        report = None
-        if limit is not None:
-            rot, report = limit_joint_speed(
-                rot,
-                root,
-                r_rot,
-                r_root,
-                r_rest,
-                fps,
-                limit=limit,
-                periodic=looped,
-                periodic_length=periodic_length,
-                ref_kinematics=r_fk,
-            )
-        out_rot[:, c0:c1] = rot
-        out_root[:, c0:c1] = root
-        return c0, report
+    block = _BlockStage(
+        sim_rot,
+        sim_root,
+        ref_rot,
+        ref_root,
+        rest,
+        fps,
+        out_cfg,
+        out_cfg.hold,
+        limit,
+        n_frames,
+        warmup,
+        blend,
+        looped,
+        periodic_length,
+        out_rot,
+        out_root,
+    )
 
     blocks = _blocks(n_chars, chunk)
     bar = None

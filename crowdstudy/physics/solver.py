@@ -51,9 +51,10 @@ them import those modules, so importing this one does not import Warp.
 
 from __future__ import annotations
 
+import functools
 import threading
 import time
-from typing import Literal, get_args
+from typing import Any, Literal, NamedTuple, cast, get_args
 
 import numpy as np
 
@@ -83,6 +84,19 @@ _MIN_CHARACTERS_SPLIT_ASSEMBLY = 200
 #: core saves (on two host threads the split still loses at a couple of hundred characters
 #: and wins at a thousand)
 _MIN_CHARACTERS_SPLIT_PCG = 500
+
+
+class _Step(NamedTuple):
+    """What one assembly reads besides the solver's buffers: the state and control at the
+    step's start, the contacts, the step ``dt`` (s), whether the PD targets feed forward,
+    and the damping's scale ``dt / damping_reference_dt``."""
+
+    state_in: Any
+    control: Any
+    contacts: Any
+    dt: float
+    ff: bool
+    damp_scale: float
 
 
 class Solver:
@@ -141,7 +155,8 @@ class Solver:
         self.stats = wp.zeros(2, dtype=wp.float32, device=dev)
         s6 = lambda: wp.zeros(nb, dtype=wp.spatial_matrix, device=dev)  # noqa: E731
         self.tree_work, self.tree_dinv, self.tree_l = s6(), s6(), s6()
-        self.y6 = wp.zeros(nb, dtype=wp.spatial_vector, device=dev)
+        # wp.spatial_vector is an overloaded constructor, a Warp type pyright does not take as one
+        self.y6 = wp.zeros(nb, dtype=wp.spatial_vector, device=dev)  # pyright: ignore[reportArgumentType]
         groups = model.body_group
         ctl = config.control
         scale = np.select(
@@ -210,180 +225,20 @@ class Solver:
 
     def assemble(self, state_in, control, contacts, dt: float) -> None:
         """Prediction, gradient and diagonal Hessian blocks (bodies, then contacts)."""
-        from crowdstudy.physics import kernels as kb
-        from crowdstudy.physics import linear as ks
-
-        wp, m, cfg = self.wp, self.model, self.config
-        W, dev = m.wp, m.device
+        m, cfg, dev = self.model, self.config, self.model.device
         self._contact_buffers(contacts.capacity)
-        ff = bool(cfg.solver.feedforward)
-        damp_scale = float(dt) / float(cfg.solver.damping_reference_dt)
-
-        def bodies(lo: int, hi: int) -> None:  # prediction and body terms of bodies [lo, hi)
-            if hi <= lo:
-                return
-            wp.launch(
-                kb.predict_kernel,
-                hi - lo,
-                [
-                    state_in.x,
-                    state_in.q,
-                    state_in.v,
-                    state_in.w,
-                    float(dt),
-                    int(ff),
-                    control.t_x,
-                    control.t_x_old,
-                    control.t_x_older,
-                    control.t_glob,
-                    control.t_glob_old,
-                    control.t_glob_older,
-                    self.x_pred,
-                    self.q_pred,
-                    int(lo),
-                ],
-                device=dev,
-            )
-            wp.launch(
-                kb.joint_terms_kernel,
-                hi - lo,
-                [
-                    self.q_pred,
-                    state_in.q,
-                    control.t_rel,
-                    control.t_rel_old,
-                    W["body_parent"],
-                    W["anchor_parent"],
-                    W["anchor_child"],
-                    self.body_k,
-                    self.body_d,
-                    float(dt),
-                    damp_scale,
-                    self.lever_p,
-                    self.lever_c,
-                    self.ctrl_c,
-                    self.ctrl_g,
-                    int(lo),
-                ],
-                device=dev,
-            )
-            wp.launch(
-                kb.assemble_bodies_kernel,
-                hi - lo,
-                [
-                    self.x_pred,
-                    self.q_pred,
-                    state_in.x,
-                    state_in.q,
-                    control.t_rel,
-                    control.t_rel_old,
-                    control.t_x,
-                    control.t_x_old,
-                    W["body_mass"],
-                    W["body_J"],
-                    W["body_parent"],
-                    W["body_children"],
-                    self.body_k,
-                    self.body_d,
-                    self.body_kt,
-                    self.body_dt,
-                    self.body_reach,
-                    self.body_kt_far,
-                    float(dt),
-                    0.0 if ff else float(cfg.body.gravity),
-                    float(cfg.body.joint_stiffness),
-                    damp_scale,
-                    self.grad_t,
-                    self.grad_r,
-                    self.hess_a,
-                    self.hess_b,
-                    self.hess_c,
-                    self.lever_p,
-                    self.lever_c,
-                    self.ctrl_c,
-                    self.ctrl_g,
-                    int(lo),
-                ],
-                device=dev,
-            )
-
+        step = _Step(
+            state_in,
+            control,
+            contacts,
+            float(dt),
+            bool(cfg.solver.feedforward),
+            float(dt) / float(cfg.solver.damping_reference_dt),
+        )
+        bodies = functools.partial(self._assemble_bodies, step)
+        feet = functools.partial(self._assemble_feet, step)
+        contact_terms = functools.partial(self._assemble_contacts, step)
         n_feet = self.feet_index.shape[0] if cfg.feet.anchor_stiffness > 0 else 0
-
-        def feet(f0: int, f1: int) -> None:  # the stance anchors of feet [f0, f1) (feet_index order)
-            if f1 > f0:
-                wp.launch(
-                    kb.foot_anchor_kernel,
-                    f1 - f0,
-                    [
-                        self.feet_index,
-                        self.x_pred,
-                        state_in.x,
-                        control.t_x,
-                        control.t_x_old,
-                        self.foot_offset,
-                        self.foot_weight,
-                        self.foot_stepping,
-                        self.body_kt,
-                        self.body_dt,
-                        float(dt),
-                        damp_scale,
-                        float(cfg.feet.planted_speed),
-                        float(cfg.feet.anchor_stiffness),
-                        float(cfg.feet.anchor_damping),
-                        float(cfg.feet.anchor_max_force),
-                        float(cfg.feet.release_distance),
-                        float(cfg.feet.rejoin_distance),
-                        self.grad_t,
-                        self.hess_a,
-                        int(f0),
-                    ],
-                    device=dev,
-                )
-
-        def contact_terms(n_threads: int, contact_list, use_list: int, lo: int, hi: int) -> None:
-            if n_threads:
-                wp.launch(
-                    ks.contact_assemble_kernel,
-                    n_threads,
-                    [
-                        contacts.count,
-                        contacts.capacity,
-                        contacts.body_a,
-                        contacts.body_b,
-                        contacts.normal,
-                        contacts.depth,
-                        contacts.lever_a,
-                        contacts.lever_b,
-                        contacts.stiffness,
-                        contacts.kind,
-                        float(cfg.contacts.ground_friction),
-                        float(cfg.contacts.activation),
-                        float(cfg.contacts.release_distance),
-                        float(cfg.contacts.release_width),
-                        float(cfg.contacts.stiffening_depth),
-                        m.n_joints,
-                        state_in.x,
-                        control.t_x,
-                        state_in.v,
-                        state_in.w,
-                        float(dt),
-                        self.grad_t,
-                        self.grad_r,
-                        self.hess_a,
-                        self.hess_b,
-                        self.hess_c,
-                        self.u_at,
-                        self.u_ar,
-                        self.u_bt,
-                        self.u_br,
-                        self.k_eff,
-                        contact_list,
-                        int(use_list),
-                        int(lo),
-                        int(hi),
-                    ],
-                    device=dev,
-                )
 
         # on the CPU the host reads the contact count for free: launch only the stored
         # contacts (the kernel skips the rest); on CUDA the whole capacity (no host sync)
@@ -401,18 +256,199 @@ class Solver:
         cut = (m.n_characters // 2) * m.n_joints
         a = contacts.body_a.numpy()[:n_launch]
         b = contacts.body_b.numpy()[:n_launch]
-        self._assembly_lists, counts = self._half_lists(
+        lists, counts = self._half_lists(
             self._assembly_lists, contacts.capacity, ((a < cut) | ((b >= 0) & (b < cut)), (a >= cut) | (b >= cut))
         )
+        self._assembly_lists = lists
         feet_cut = int(np.searchsorted(self._feet_host, cut)) if n_feet else 0
         run_parallel(
-            lambda: (bodies(0, cut), feet(0, feet_cut), contact_terms(counts[0], self._assembly_lists[0], 1, 0, cut)),
+            lambda: (bodies(0, cut), feet(0, feet_cut), contact_terms(counts[0], lists[0], 1, 0, cut)),
             lambda: (
                 bodies(cut, m.n_bodies),
                 feet(feet_cut, n_feet),
-                contact_terms(counts[1], self._assembly_lists[1], 1, cut, m.n_bodies),
+                contact_terms(counts[1], lists[1], 1, cut, m.n_bodies),
             ),
         )
+
+    def _assemble_bodies(self, step: _Step, lo: int, hi: int) -> None:
+        """Prediction and body terms of bodies ``[lo, hi)``."""
+        from crowdstudy.physics import kernels as kb
+
+        wp, cfg, W, dev = self.wp, self.config, self.model.wp, self.model.device
+        state_in, control, dt, damp_scale = step.state_in, step.control, step.dt, step.damp_scale
+        if hi <= lo:
+            return
+        wp.launch(
+            kb.predict_kernel,
+            hi - lo,
+            [
+                state_in.x,
+                state_in.q,
+                state_in.v,
+                state_in.w,
+                float(dt),
+                int(step.ff),
+                control.t_x,
+                control.t_x_old,
+                control.t_x_older,
+                control.t_glob,
+                control.t_glob_old,
+                control.t_glob_older,
+                self.x_pred,
+                self.q_pred,
+                int(lo),
+            ],
+            device=dev,
+        )
+        wp.launch(
+            kb.joint_terms_kernel,
+            hi - lo,
+            [
+                self.q_pred,
+                state_in.q,
+                control.t_rel,
+                control.t_rel_old,
+                W["body_parent"],
+                W["anchor_parent"],
+                W["anchor_child"],
+                self.body_k,
+                self.body_d,
+                float(dt),
+                damp_scale,
+                self.lever_p,
+                self.lever_c,
+                self.ctrl_c,
+                self.ctrl_g,
+                int(lo),
+            ],
+            device=dev,
+        )
+        wp.launch(
+            kb.assemble_bodies_kernel,
+            hi - lo,
+            [
+                self.x_pred,
+                self.q_pred,
+                state_in.x,
+                state_in.q,
+                control.t_rel,
+                control.t_rel_old,
+                control.t_x,
+                control.t_x_old,
+                W["body_mass"],
+                W["body_J"],
+                W["body_parent"],
+                W["body_children"],
+                self.body_k,
+                self.body_d,
+                self.body_kt,
+                self.body_dt,
+                self.body_reach,
+                self.body_kt_far,
+                float(dt),
+                0.0 if step.ff else float(cfg.body.gravity),
+                float(cfg.body.joint_stiffness),
+                damp_scale,
+                self.grad_t,
+                self.grad_r,
+                self.hess_a,
+                self.hess_b,
+                self.hess_c,
+                self.lever_p,
+                self.lever_c,
+                self.ctrl_c,
+                self.ctrl_g,
+                int(lo),
+            ],
+            device=dev,
+        )
+
+    def _assemble_feet(self, step: _Step, f0: int, f1: int) -> None:
+        """The stance anchors of feet ``[f0, f1)`` (``feet_index`` order)."""
+        from crowdstudy.physics import kernels as kb
+
+        wp, cfg, dev = self.wp, self.config, self.model.device
+        state_in, control, dt, damp_scale = step.state_in, step.control, step.dt, step.damp_scale
+        if f1 > f0:
+            wp.launch(
+                kb.foot_anchor_kernel,
+                f1 - f0,
+                [
+                    self.feet_index,
+                    self.x_pred,
+                    state_in.x,
+                    control.t_x,
+                    control.t_x_old,
+                    self.foot_offset,
+                    self.foot_weight,
+                    self.foot_stepping,
+                    self.body_kt,
+                    self.body_dt,
+                    float(dt),
+                    damp_scale,
+                    float(cfg.feet.planted_speed),
+                    float(cfg.feet.anchor_stiffness),
+                    float(cfg.feet.anchor_damping),
+                    float(cfg.feet.anchor_max_force),
+                    float(cfg.feet.release_distance),
+                    float(cfg.feet.rejoin_distance),
+                    self.grad_t,
+                    self.hess_a,
+                    int(f0),
+                ],
+                device=dev,
+            )
+
+    def _assemble_contacts(self, step: _Step, n_threads: int, contact_list, use_list: int, lo: int, hi: int) -> None:
+        """The terms of the contacts (all, or the ``n_threads`` of ``contact_list`` when
+        ``use_list``) on bodies ``[lo, hi)``."""
+        from crowdstudy.physics import linear as ks
+
+        wp, m, cfg, dev = self.wp, self.model, self.config, self.model.device
+        state_in, control, contacts, dt = step.state_in, step.control, step.contacts, step.dt
+        if n_threads:
+            wp.launch(
+                ks.contact_assemble_kernel,
+                n_threads,
+                [
+                    contacts.count,
+                    contacts.capacity,
+                    contacts.body_a,
+                    contacts.body_b,
+                    contacts.normal,
+                    contacts.depth,
+                    contacts.lever_a,
+                    contacts.lever_b,
+                    contacts.stiffness,
+                    contacts.kind,
+                    float(cfg.contacts.ground_friction),
+                    float(cfg.contacts.activation),
+                    float(cfg.contacts.release_distance),
+                    float(cfg.contacts.release_width),
+                    float(cfg.contacts.stiffening_depth),
+                    m.n_joints,
+                    state_in.x,
+                    control.t_x,
+                    state_in.v,
+                    state_in.w,
+                    float(dt),
+                    self.grad_t,
+                    self.grad_r,
+                    self.hess_a,
+                    self.hess_b,
+                    self.hess_c,
+                    self.u_at,
+                    self.u_ar,
+                    self.u_bt,
+                    self.u_br,
+                    self.k_eff,
+                    contact_list,
+                    int(use_list),
+                    int(lo),
+                    int(hi),
+                ],
+                device=dev,
+            )
 
     def _half_lists(self, lists, capacity: int, masks) -> tuple[list, list[int]]:
         """The contacts selected by each of the two ``masks`` (the two halves of the crowd),
@@ -421,7 +457,7 @@ class Solver:
         if lists is None or lists[0].shape[0] < max(capacity, 1):
             lists = [self.wp.zeros(max(capacity, 1), dtype=self.wp.int32, device=self.model.device) for _ in range(2)]
         counts = []
-        for lst, mine in zip(lists, masks):
+        for lst, mine in zip(lists, masks, strict=True):
             idx = np.flatnonzero(mine).astype(np.int32)
             lst.numpy()[: len(idx)] = idx
             counts.append(len(idx))
@@ -623,23 +659,24 @@ class Solver:
         a = contacts.body_a.numpy()[:n_act]
         b = contacts.body_b.numpy()[:n_act]
         coupled = (b >= 0) & (self.k_eff.numpy()[:n_act] > 0)
-        self._split_lists, counts = self._half_lists(
+        lists, counts = self._half_lists(
             self._split_lists,
             contacts.capacity,
             (coupled & ((a < cut) | (b < cut)), coupled & ((a >= cut) | (b >= cut))),
         )
+        self._split_lists = lists
 
-        # the ten launches, recorded once per set of buffers (packing their arguments cost
-        # about 1 ms a step at 1,000 characters); each step sets the contact counts
+        # the ten launches, recorded once per set of buffers (packing their arguments anew
+        # each step is host time that grows with the crowd); each step sets the contact counts
         key = (
             id(contacts.body_a),
             id(contacts.body_b),
             id(self.u_at),
             id(self.k_eff),
-            *(id(lst) for lst in self._split_lists),
+            *(id(lst) for lst in lists),
         )
         if self._split_cmds is None or self._split_cmds[0] != key:
-            self._split_cmds = (key, self._record_split(contacts, halves, levers))
+            self._split_cmds = (key, self._record_split(contacts, halves, lists, levers))
         init, matvec, update = self._split_cmds[1]
         for part, n_list in enumerate(counts):
             for cmd in matvec[part]:
@@ -715,9 +752,9 @@ class Solver:
             result.append(iterate(both))
         return result[0]
 
-    def _record_split(self, contacts, halves, levers):
-        """The split PCG's launches (init, matvec and update of each half; the two
-        direction buffers alternate), recorded for ``_solve_split``."""
+    def _record_split(self, contacts, halves, lists, levers):
+        """The split PCG's launches (init, matvec and update of each half, over its contact
+        list of ``lists``; the two direction buffers alternate), recorded for ``_solve_split``."""
         from crowdstudy.physics import linear as ks
 
         wp, m, cfg = self.wp, self.model, self.config
@@ -731,7 +768,7 @@ class Solver:
             return wp.launch(kernel, 1, inputs, device=dev, record_cmd=True)
 
         init, matvec, update = [], [], []
-        for (part, lo, hi), lst in zip(halves, self._split_lists):
+        for (part, lo, hi), lst in zip(halves, lists, strict=True):
             init.append(
                 record(
                     ks.pcg_split_init_kernel,
@@ -901,15 +938,19 @@ class Solver:
         else:
             precond = wl.preconditioner(self._bsr, ptype="block_jacobi_sequential")
         self._x6.zero_()
-        it, res, atol = wl.cg(
-            self._bsr,
-            rhs,
-            self._x6,
-            tol=float(cfg.solver.cg_tolerance),
-            maxiter=int(cfg.solver.cg_max_iterations),
-            M=precond,
-            check_every=5,
-            use_cuda_graph=False,
+        # Warp's stub returns the solver or its result; without a callback it is the result
+        it, res, atol = cast(
+            "tuple[int, float, float]",
+            wl.cg(
+                self._bsr,
+                rhs,
+                self._x6,
+                tol=float(cfg.solver.cg_tolerance),
+                maxiter=int(cfg.solver.cg_max_iterations),
+                M=precond,
+                check_every=5,
+                use_cuda_graph=False,
+            ),
         )
         wp.launch(ks.unpack_kernel, nb, [self._x6, self.dx, self.dw], device=m.device)
         # cg returns the absolute residual and atol = tol * |b|: report |r| / |b| like the others
@@ -925,8 +966,11 @@ class Solver:
         r, c, v, b = rows.numpy(), cols.numpy(), vals.numpy().astype(np.float64), rhs.numpy().astype(np.float64)
         A = bsr_from_triplets(r, c, v, nb)
         inv = np.linalg.inv(v[:nb])  # the first nb triplets are the full diagonal blocks
+        # scipy's stub knows only LinearOperator's abstract form (dtype, shape), not this one
         M = spl.LinearOperator(
-            A.shape, matvec=lambda x: np.einsum("bij,bj->bi", inv, x.reshape(nb, 6)).ravel(), dtype=np.float64
+            A.shape,
+            matvec=lambda x: np.einsum("bij,bj->bi", inv, x.reshape(nb, 6)).ravel(),  # pyright: ignore[reportCallIssue]
+            dtype=np.float64,  # pyright: ignore[reportCallIssue]
         )
         counter = [0]
         x, _ = spl.cg(

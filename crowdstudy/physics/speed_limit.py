@@ -318,10 +318,10 @@ def _retime_chains(
     mode = "wrap" if periodic else "nearest"
     moved = False
     for side, chain in groups.items():
-        idx = sorted(chain)
+        idx = np.array(sorted(chain), dtype=np.int64)
         wk = w if side < 0 else w * free[side]
         frames = np.nonzero(wk > 0)[0]
-        if not idx or not frames.size:
+        if not idx.size or not frames.size:
             continue
         moved = True
         low = gaussian_filter1d(delta[:, idx], sigma, axis=0, mode=mode)[frames]
@@ -329,5 +329,5 @@ def _retime_chains(
         delta[np.ix_(frames, idx)] = (1.0 - blend) * delta[np.ix_(frames, idx)] + blend * low
         # only what was re-timed is written back (elsewhere the input, bit for bit)
         q_new = quat_multiply(q_ref[np.ix_(frames, idx)], axis_angle_to_quaternion(delta[np.ix_(frames, idx)]))
-        out[frames[:, None], c, np.asarray(idx)[None, :]] = quaternion_to_axis_angle(q_new)
+        out[frames[:, None], c, idx[None, :]] = quaternion_to_axis_angle(q_new)
     return moved

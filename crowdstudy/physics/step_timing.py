@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import statistics
 import time
-from typing import Literal
+from typing import Any, Literal
 
 import numpy as np
 
@@ -102,7 +102,7 @@ def time_steps(anim, steps: int, device: str = "cpu", config=None) -> dict:
             cg.append(corr.solver.last_cg[0])
             contacts.append(corr.contacts.n_active())
         s += 1
-    out = {"device": device}
+    out: dict[str, Any] = {"device": device}
     out.update({f"{k}_cpu_ms": statistics.median(v) for k, v in cpu.items()})
     out.update({f"{k}_wall_ms": statistics.median(v) for k, v in wall.items() if k != "total"})
     out["total_wall_ms"] = statistics.median(wall["total"])

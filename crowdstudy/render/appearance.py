@@ -369,7 +369,8 @@ def nearest_painted(painted: np.ndarray) -> np.ndarray:
 
     if not painted.any():
         raise InvalidInputError("paint_textures: the body's UV layout painted no texel")
-    iy, ix = distance_transform_edt(~painted, return_distances=False, return_indices=True)
+    # scipy's stub does not tie the result to return_indices (here: the indices alone)
+    iy, ix = distance_transform_edt(~painted, return_distances=False, return_indices=True)  # pyright: ignore[reportGeneralTypeIssues]
     return (iy * painted.shape[1] + ix).reshape(-1)
 
 

@@ -25,6 +25,7 @@ from the painted texture; the dressing follows those codes (:meth:`CharacterMesh
 from __future__ import annotations
 
 import dataclasses
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -36,6 +37,9 @@ from crowdstudy.render.camera import look_at
 from crowdstudy.render.garments import dress_body
 from crowdstudy.render.palette import assign_colors
 from crowdstudy.render.scene import Environment, build_environment, split_floor
+
+if TYPE_CHECKING:
+    from crowdstudy.scene import CrowdAnimation
 
 __all__ = [
     "RenderOptions",
@@ -157,7 +161,7 @@ class CrowdAssets:
         looks: N :class:`~crowdstudy.render.appearance.Appearance`.
     """
 
-    anim: object
+    anim: CrowdAnimation
     design: object
     env: Environment
     period: float | None
@@ -299,7 +303,10 @@ class CharacterMeshes:
         """Dress ``bodies`` by their ``codes`` and ``looks`` (from ``height`` px tall images)
         and group them into template groups at each level of detail."""
         dress = height >= DRESS_MIN_HEIGHT
-        drawn = [b if c is None or not dress else _dressed(b, c, look) for b, c, look in zip(bodies, codes, looks)]
+        drawn = [
+            b if c is None or not dress else _dressed(b, c, look)
+            for b, c, look in zip(bodies, codes, looks, strict=True)
+        ]
         scale = float(np.clip(SURFACE_FACE_SCALE * height / 1080, 1.0, SURFACE_FACE_SCALE))
         finest = group_bodies(drawn, max_faces=max_faces, surface_scale=scale)
         faces = _lod_face_counts(max_faces)

@@ -327,7 +327,7 @@ def _surface_decimation(verts: np.ndarray, faces: np.ndarray, weld: np.ndarray, 
         return _DECIMATIONS[key]
     from scipy.sparse import coo_matrix
     from scipy.sparse.csgraph import connected_components
-    from scipy.spatial import cKDTree
+    from scipy.spatial import cKDTree  # pyright: ignore[reportAttributeAccessIssue]  (compiled, not in the stubs)
 
     n_r = len(verts)
     rows = np.repeat(np.arange(len(faces)), 3)

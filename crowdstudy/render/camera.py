@@ -21,7 +21,9 @@ __all__ = ["Camera", "look_at", "perspective", "frame_viewpoint", "free_camera",
 DEFAULT_BODY_HEIGHT = 1.95
 
 
-def look_at(eye: np.ndarray, target: np.ndarray, up=(0.0, 0.0, 1.0)) -> np.ndarray:
+def look_at(
+    eye: np.ndarray | tuple[float, ...], target: np.ndarray | tuple[float, ...], up=(0.0, 0.0, 1.0)
+) -> np.ndarray:
     """(4, 4) world-to-camera matrix (OpenGL convention: the camera looks down -z)."""
     eye, target, up = (np.asarray(v, dtype=np.float64) for v in (eye, target, up))
     f = target - eye
@@ -138,8 +140,8 @@ def frame_viewpoint(
     dist = solve(target)
     eye = target + dist * direction
     return Camera(
-        eye=tuple(float(v) for v in eye),
-        target=tuple(float(v) for v in target),
+        eye=(float(eye[0]), float(eye[1]), float(eye[2])),
+        target=(float(target[0]), float(target[1]), float(target[2])),
         fov=float(viewpoint.fov),
         near=max(0.05, dist * 0.02),
         far=dist + 60.0,
@@ -158,8 +160,8 @@ def free_camera(eye, target, fov: float = 45.0) -> Camera:
         raise InvalidInputError(f"free camera: fov must be in [1, 170] degrees, got {fov!r}")
     dist = float(np.linalg.norm(e - t))
     return Camera(
-        eye=tuple(map(float, e)),
-        target=tuple(map(float, t)),
+        eye=(float(e[0]), float(e[1]), float(e[2])),
+        target=(float(t[0]), float(t[1]), float(t[2])),
         fov=float(fov),
         near=max(0.02, dist * 0.01),
         far=dist + 80.0,

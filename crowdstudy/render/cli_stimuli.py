@@ -3,6 +3,7 @@
 crowdstudy stimuli --design stimuli/study.toml --out stimuli/videos
 crowdstudy stimuli --out build/quick --preset quick --workers 2
 crowdstudy stimuli --out /shared/stimuli --scheduler tcp://10.0.0.5:8786
+crowdstudy stimuli --design my_study.toml --out build/mine --method Stiff   # one method only
 """
 
 from __future__ import annotations
@@ -33,8 +34,16 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--workers", type=int, help="local worker processes (default one per 4 CPUs; 0 = in process)")
     add_config_option(
         parser,
-        "the physics of Ours, as for `crowdstudy correct --config`; a change re-makes the "
-        "Ours animations and videos on resume",
+        "the physics every `physics` method of the design starts from (then its own config "
+        "overrides), as for `crowdstudy correct --config`; a change re-makes those methods' "
+        "animations and videos on resume",
+    )
+    parser.add_argument(
+        "--method",
+        action="append",
+        metavar="NAME",
+        dest="methods",
+        help="build only this method's animations and videos (repeatable; default every method of the design)",
     )
     parser.add_argument("--quiet", action="store_true", help="no progress bars")
 
@@ -43,11 +52,12 @@ def run(args: argparse.Namespace) -> int:
     from crowdstudy.design import load_design
     from crowdstudy.paths import check_output_dir
     from crowdstudy.physics.config_file import config_from_cli
-    from crowdstudy.render.stimuli import build_stimuli
+    from crowdstudy.render.stimuli import build_stimuli, check_stimuli_inputs
 
-    check_output_dir(args.out, "--out")
     design = load_design(args.design)
     physics = config_from_cli(args.config)
+    check_stimuli_inputs(design, args.methods)  # a files method's files, mujoco: before any output
+    check_output_dir(args.out, "--out")
     manifest = build_stimuli(
         design,
         args.out,
@@ -57,6 +67,7 @@ def run(args: argparse.Namespace) -> int:
         workers=args.workers,
         progress=not args.quiet,
         physics=physics,
+        methods=args.methods,
     )
     print(f"stimuli: {len(manifest['stimuli'])} videos listed in {args.out}/manifest.json and manifest.csv")
     return 0

@@ -46,7 +46,8 @@ def get_context():
     except ImportError as exc:
         raise MissingDependencyError(f"the renderer needs moderngl ({exc}); {_install_hint()}") from None
     try:
-        ctx = moderngl.create_standalone_context(backend="egl", require=REQUIRED_GL_VERSION)
+        # moderngl's stub types the keyword settings as one dict; backend is a string
+        ctx = moderngl.create_standalone_context(backend="egl", require=REQUIRED_GL_VERSION)  # pyright: ignore[reportArgumentType]
     except Exception as exc:  # glcontext raises plain Exceptions for a missing libEGL or display
         raise MissingDependencyError(
             f"cannot create a headless OpenGL {REQUIRED_GL_VERSION // 100}.{REQUIRED_GL_VERSION % 100 // 10} "

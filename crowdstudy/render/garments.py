@@ -96,7 +96,7 @@ def _fuse(points: np.ndarray, mask: np.ndarray, radius: float, rounds: int) -> n
     one rounded shoe tip. The neighbour lists are memoised per mask (bodies of one
     template share their toes' layout)."""
     from scipy.sparse import coo_matrix, diags
-    from scipy.spatial import cKDTree
+    from scipy.spatial import cKDTree  # pyright: ignore[reportAttributeAccessIssue]  (compiled, not in the stubs)
 
     idx = np.flatnonzero(mask)
     if len(idx) == 0:

@@ -20,6 +20,7 @@ from __future__ import annotations
 import dataclasses
 import functools
 from importlib import resources
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -28,6 +29,9 @@ from crowdstudy.render.assets import COPIES, N_BONES, CharacterMeshes, Environme
 from crowdstudy.render.bodies import BodyGroup
 from crowdstudy.render.scene import Environment
 from crowdstudy.render.venue import BOB_AMPLITUDE
+
+if TYPE_CHECKING:  # for annotations only: moderngl loads with the first GL context
+    import moderngl
 
 __all__ = [
     "GpuObjects",
@@ -129,15 +133,15 @@ class Programs:
     without the shadow lookup), ``venue`` (the cut-away elements, lit per vertex, no
     shadows)."""
 
-    character: object
+    character: moderngl.Program
     variants: dict
-    depth: object
-    static: object
-    floor: object
-    floor_plain: object
-    venue: object
-    id: object
-    overlap: object
+    depth: moderngl.Program
+    static: moderngl.Program
+    floor: moderngl.Program
+    floor_plain: moderngl.Program
+    venue: moderngl.Program
+    id: moderngl.Program
+    overlap: moderngl.Program
 
     @classmethod
     def compile(cls, objects: GpuObjects) -> Programs:
@@ -253,11 +257,11 @@ class GroupBuffers:
     group: BodyGroup
     level: int
     coarse: bool
-    vbo: object
-    ibo: object
-    rest: object
+    vbo: moderngl.Buffer
+    ibo: moderngl.Buffer
+    rest: moderngl.Texture
     rest_width: int
-    inst: object
+    inst: moderngl.Buffer
     vaos: dict
     count: int = 0
 

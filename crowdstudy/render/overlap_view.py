@@ -47,7 +47,7 @@ class OverlapFrame:
         crowd_fraction: mask pixels / pixels covered by characters (0 when none).
     """
 
-    image: np.ndarray
+    image: np.ndarray | None
     mask: np.ndarray
     red_fraction: float
     crowd_fraction: float
@@ -122,9 +122,10 @@ class OverlapPass:
         for tex in (self.tex_ids, self.tex_mask, self.tex_caps, self.tex_cand):
             tex.filter = (moderngl.NEAREST, moderngl.NEAREST)
         prog = characters.programs.overlap
+        # moderngl's stub types prog[name] as any member (attribute, varying, block): these are uniforms
         for name, unit in (("u_ids", 4), ("u_capsules", 5), ("u_candidates", 6)):
-            prog[name].value = unit
-        prog["u_period"].value = float(characters.period or 0.0)
+            prog[name].value = unit  # pyright: ignore[reportAttributeAccessIssue]
+        prog["u_period"].value = float(characters.period or 0.0)  # pyright: ignore[reportAttributeAccessIssue]
 
     def run(
         self, vp: np.ndarray, capsules: tuple[np.ndarray, np.ndarray, np.ndarray], *, tolerance: float = 0.005
@@ -158,7 +159,7 @@ class OverlapPass:
         self.tex_ids.use(4)
         self.tex_caps.use(5)
         self.tex_cand.use(6)
-        self.characters.programs.overlap["u_tolerance"].value = float(tolerance)
+        self.characters.programs.overlap["u_tolerance"].value = float(tolerance)  # pyright: ignore[reportAttributeAccessIssue]
         self.characters.draw(self.characters.programs.overlap, vp)
         ctx.enable(moderngl.DEPTH_TEST)
         mask = np.frombuffer(self.fbo_mask.read(components=1, alignment=1), np.uint8)

@@ -72,7 +72,8 @@ def display_color(linear) -> tuple[float, float, float]:
     the square root), for clearing to the fog colour."""
     c = np.asarray(linear, dtype=np.float64)
     c = (c * (2.51 * c + 0.03)) / (c * (2.43 * c + 0.59) + 0.14)
-    return tuple(float(v) for v in np.sqrt(np.clip(c, 0, 1)))
+    r, g, b = (float(v) for v in np.sqrt(np.clip(c, 0, 1)))
+    return r, g, b
 
 
 def _frustum_planes(vp: np.ndarray) -> np.ndarray:
@@ -291,7 +292,8 @@ class StaticLayers:
 
     def phases(self) -> int:
         """How many layers a view has (one per beat phase when the figures are in them)."""
-        return int(self.environment.beat_frames) if "cut_figures" in self.parts else 1
+        beat_frames = self.environment.beat_frames  # set whenever the figures are in the layers
+        return int(beat_frames) if "cut_figures" in self.parts and beat_frames is not None else 1
 
     def invalidate(self) -> None:
         """Draw every layer anew on its next use."""

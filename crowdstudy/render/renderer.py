@@ -303,7 +303,7 @@ class CrowdRenderer:
             picture = None
             self.prepare(frame)  # the camera's instances, as render leaves them
         capsules = capsules_from_skinning(self.bodies, self.skinning(frame))
-        vp = self.camera.view_projection(self.width / self.height)
+        vp = self._require_camera().view_projection(self.width / self.height)
         mask, crowd_pixels = self._overlap.run(vp, capsules, tolerance=tolerance)
         return overlap_frame(picture, mask, crowd_pixels)
 
@@ -387,5 +387,8 @@ def render_frame(
     ) as r:
         r.set_view(viewpoint)
         if overlap_view:
-            return r.overlap(frame).image
+            image = r.overlap(frame).image
+            if image is None:  # overlap() draws the picture unless asked for the mask alone
+                raise RuntimeError("the overlap view drew no picture")
+            return image
         return r.render(frame)

@@ -178,6 +178,16 @@ def build_environment(scenario: str, design) -> Environment:
     )
 
 
+def _floor_cell(quad: np.ndarray, a0: float, b0: float, a1: float, b1: float) -> np.ndarray | None:
+    """(6, 10) rows of the rectangle [a0, a1] x [b0, b1] (m) in the plane and with the look of
+    ``quad`` ((6, 10) rows of a horizontal quad); None where the rectangle is empty."""
+    if not (a1 - a0 > 1e-9 and b1 - b0 > 1e-9):
+        return None
+    z, normal, color, pattern = quad[0, 2], quad[0, 3:6], quad[0, 6:9], quad[0, 9]
+    corners = np.array([(a0, b0, z), (a1, b0, z), (a1, b1, z), (a0, b1, z)], dtype=np.float64)
+    return _rows(corners[[0, 1, 2, 0, 2, 3]], normal, color, pattern)
+
+
 def split_floor(triangles: np.ndarray, rect: tuple[float, float, float, float]) -> tuple[np.ndarray, np.ndarray]:
     """Split horizontal axis-aligned floor quads at a rectangle.
 
@@ -195,14 +205,6 @@ def split_floor(triangles: np.ndarray, rect: tuple[float, float, float, float]) 
     for quad in np.asarray(triangles).reshape(-1, 6, 10):
         x0, y0 = quad[:, 0].min(), quad[:, 1].min()
         x1, y1 = quad[:, 0].max(), quad[:, 1].max()
-        z, normal, color, pattern = quad[0, 2], quad[0, 3:6], quad[0, 6:9], quad[0, 9]
-
-        def emit(dest, a0, b0, a1, b1):
-            if a1 - a0 > 1e-9 and b1 - b0 > 1e-9:
-                corners = np.array([(a0, b0, z), (a1, b0, z), (a1, b1, z), (a0, b1, z)], dtype=np.float64)
-                rows = _rows(corners[[0, 1, 2, 0, 2, 3]], normal, color, pattern)
-                dest.append(rows)
-
         ix0, iy0, ix1, iy1 = max(x0, rx0), max(y0, ry0), min(x1, rx1), min(y1, ry1)
         if ix0 >= ix1 or iy0 >= iy1:
             outside.append(quad)
@@ -212,7 +214,9 @@ def split_floor(triangles: np.ndarray, rect: tuple[float, float, float, float]) 
         xs, ys = (x0, ix0, ix1, x1), (y0, iy0, iy1, y1)
         for i in range(3):
             for j in range(3):
-                emit(inside if (i, j) == (1, 1) else outside, xs[i], ys[j], xs[i + 1], ys[j + 1])
+                cell = _floor_cell(quad, xs[i], ys[j], xs[i + 1], ys[j + 1])
+                if cell is not None:
+                    (inside if (i, j) == (1, 1) else outside).append(cell)
     empty = np.zeros((0, 10), dtype=np.float32)
     return (
         np.concatenate(inside).astype(np.float32) if inside else empty,

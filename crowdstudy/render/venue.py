@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from collections.abc import Sequence
 
 import numpy as np
 
@@ -87,7 +88,7 @@ class Elements:
         first = np.concatenate([[0], np.cumsum(count)[:-1]])
         lo = np.array([v[:, :3].min(axis=0) for v in verts], dtype=np.float64)
         hi = np.array([v[:, :3].max(axis=0) for v in verts], dtype=np.float64)
-        indices = np.concatenate([f + o for f, o in zip(faces, offset)]).astype(np.uint32)
+        indices = np.concatenate([f + o for f, o in zip(faces, offset, strict=True)]).astype(np.uint32)
         return Elements(np.concatenate(verts), indices, first, count, lo, hi)
 
     @staticmethod
@@ -95,7 +96,7 @@ class Elements:
         """The elements of several groups, in order."""
         parts = []
         for g in groups:
-            for a, n in zip(g.first, g.count):
+            for a, n in zip(g.first, g.count, strict=True):
                 idx = g.indices[a : a + n].astype(np.int64)
                 used, local = np.unique(idx, return_inverse=True)
                 parts.append((g.vertices[used], local.reshape(-1, 3)))
@@ -122,7 +123,7 @@ def _tris(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return points.reshape(-1, 3), np.repeat(n, 3, axis=0)
 
 
-def _lathe(rings: list[tuple[float, float, float, float, float]], sides: int, cap: bool = True) -> np.ndarray:
+def _lathe(rings: Sequence[tuple[float, float, float, float, float]], sides: int, cap: bool = True) -> np.ndarray:
     """(T, 3, 3) triangles of a faceted solid through horizontal elliptic rings.
 
     ``rings``: (z, rx, ry, cx, cy) from bottom to top (m); a ring of radius 0 is an apex.
@@ -132,7 +133,7 @@ def _lathe(rings: list[tuple[float, float, float, float, float]], sides: int, ca
     ring = [np.c_[cx + rx * np.cos(a), cy + ry * np.sin(a), np.full(sides, z)] for z, rx, ry, cx, cy in rings]
     tris = []
     j = (np.arange(sides) + 1) % sides
-    for lo, hi in zip(ring[:-1], ring[1:]):
+    for lo, hi in zip(ring[:-1], ring[1:], strict=True):
         tris.append(np.stack([lo, lo[j], hi[j]], axis=1))
         tris.append(np.stack([lo, hi[j], hi], axis=1))
     if cap:
@@ -284,7 +285,7 @@ def audience(
     d = np.linalg.norm(pos[:, None] - pos[None], axis=2)
     crowded = np.triu(d < 0.36, k=1)
     drop = np.zeros(len(pos), bool)
-    for i, j in zip(*np.nonzero(crowded)):
+    for i, j in zip(*np.nonzero(crowded), strict=True):
         if not drop[i]:
             drop[j] = True
     pos, detail = pos[~drop], detail[~drop]
@@ -404,7 +405,7 @@ def hall(rect: tuple[float, float, float, float], height: float) -> tuple[np.nda
     wall = lin((108, 108, 124))  # dim outside the pool of light: a dark blue-grey hall
     corners = [(x0, y0), (x1, y0), (x1, y1), (x0, y1)]
     walls = []
-    for (ax, ay), (bx, by) in zip(corners, corners[1:] + corners[:1]):
+    for (ax, ay), (bx, by) in zip(corners, corners[1:] + corners[:1], strict=True):
         q = np.array([[(ax, ay, 0), (bx, by, 0), (bx, by, height), (ax, ay, height)]], dtype=np.float64)
         t = np.concatenate([q[:, [0, 1, 2]], q[:, [0, 2, 3]]])
         p, n = _tris(t)

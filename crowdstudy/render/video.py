@@ -31,6 +31,7 @@ import numpy as np
 
 from crowdstudy.errors import InvalidInputError, MissingDependencyError
 from crowdstudy.paths import check_output_path
+from crowdstudy.scene_meta import loop_mode
 
 __all__ = [
     "find_ffmpeg",
@@ -146,6 +147,9 @@ class VideoWriter:
             str(self.part),
         ]
         self.proc = subprocess.Popen(cmd, stdin=subprocess.PIPE, stderr=subprocess.PIPE)
+        if self.proc.stdin is None or self.proc.stderr is None:  # both are pipes
+            raise RuntimeError("ffmpeg started without its pipes")
+        self._stdin, self._stderr = self.proc.stdin, self.proc.stderr
         self._queue: queue.Queue = queue.Queue(maxsize=2)
         self._error: BaseException | None = None
         self._thread = threading.Thread(target=self._pump, daemon=True)
@@ -157,7 +161,7 @@ class VideoWriter:
             if item is None:
                 return
             try:
-                self.proc.stdin.write(item)
+                self._stdin.write(item)
             except (BrokenPipeError, OSError) as exc:
                 self._error = exc
                 return
@@ -188,8 +192,8 @@ class VideoWriter:
         self._thread.join()
         if self._error is not None:
             self._fail()
-        self.proc.stdin.close()
-        err = self.proc.stderr.read().decode(errors="replace").strip()
+        self._stdin.close()
+        err = self._stderr.read().decode(errors="replace").strip()
         if self.proc.wait() != 0:
             self.part.unlink(missing_ok=True)
             raise RuntimeError(f"ffmpeg failed writing {str(self.path)!r}: {err}")
@@ -266,24 +270,18 @@ class FramePlan:
         return int(np.count_nonzero(self.partner >= 0))
 
 
-def _loop(anim) -> dict:
-    loop = anim.meta.get("loop") if isinstance(anim.meta, dict) else None
-    return loop if isinstance(loop, dict) else {}
-
-
 def video_frame_count(anim) -> int:
     """Frames of the animation its video shows: ``meta["loop"]["video_frames"]`` for a
     "dissolve" loop (the frames after it feed the seam's cross-dissolve), else all."""
-    loop = _loop(anim)
-    if loop.get("mode") == "dissolve":
-        return int(loop["video_frames"])
+    if loop_mode(anim.meta) == "dissolve":
+        return int(anim.meta["loop"]["video_frames"])
     return anim.n_frames
 
 
 def _frame_plan(anim, duration: float | None, fps: float) -> FramePlan:
     video_frames = video_frame_count(anim)
     if duration is None:
-        duration = video_frames / anim.fps
+        duration = float(video_frames / anim.fps)
     if not np.isfinite(duration) or duration <= 0:
         raise InvalidInputError(f"duration: expected a positive number of seconds, got {duration!r}")
     if duration > anim.duration + 0.5 / anim.fps:
@@ -295,8 +293,8 @@ def _frame_plan(anim, duration: float | None, fps: float) -> FramePlan:
     source = np.minimum(np.round(np.arange(n) * anim.fps / fps).astype(int), anim.n_frames - 1)
     partner = np.full(n, -1, dtype=int)
     weight = np.ones(n)
-    loop = _loop(anim)
-    if loop.get("mode") == "dissolve" and int(loop.get("frames", 0)) > 0:
+    loop = anim.meta.get("loop", {})
+    if loop_mode(anim.meta) == "dissolve" and int(loop.get("frames", 0)) > 0:
         # the video spans `span` animation frames: its seam continues into frame `span`,
         # and frames span + i dissolve into the video's first frames
         span = int(round(n * anim.fps / fps))
@@ -313,7 +311,7 @@ def _frame_plan(anim, duration: float | None, fps: float) -> FramePlan:
 _TO_LINEAR = (np.arange(256, dtype=np.float32) / 255.0) ** 2
 
 
-def blend_frames(a, b, weight: float):
+def blend_frames(a, b, weight: float | np.floating | np.ndarray):
     """``weight * a + (1 - weight) * b`` of two RGB frames (uint8 arrays of any shape, or raw
     bytes) in linear light, rounded once to uint8; returns the type of ``a``."""
     as_bytes = not isinstance(a, np.ndarray)

@@ -149,7 +149,7 @@ def cell_matrix(
             pos = int(np.flatnonzero(data[col].isna().to_numpy())[0])
             raise InvalidInputError(f"column {col!r} has a missing value ({row_label(pos)})")
     levels = [factor_levels(data[w]) for w in within]
-    for w, lv in zip(within, levels):
+    for w, lv in zip(within, levels, strict=True):
         if len(lv) < 2:
             raise InvalidInputError(
                 f"within factor {w!r} has a single level {plain(lv[0])}; a factor needs >= 2 levels"
@@ -164,7 +164,7 @@ def cell_matrix(
     if aggregated and duplicates != "mean":
         many = counts[counts > 1]
         key = many.index[0]
-        where = ", ".join(f"{w}={plain(c)}" for w, c in zip(within, key[1:]))
+        where = ", ".join(f"{w}={plain(c)}" for w, c in zip(within, key[1:], strict=True))
         text = (
             f"subject {plain(key[0])} has {int(many.iloc[0])} {dv!r} values for the cell {where} "
             f"({len(many)} subject x cell combination(s) with more than one row)"
@@ -184,15 +184,16 @@ def cell_matrix(
         if missing == "raise":
             s = bad_rows[0]
             cell = cells[int(np.flatnonzero(holes[s])[0])]
-            where = ", ".join(f"{w}={plain(c)}" for w, c in zip(within, cell))
+            where = ", ".join(f"{w}={plain(c)}" for w, c in zip(within, cell, strict=True))
             raise InvalidInputError(
                 f"subject {plain(subjects[s])} has no {dv!r} value for the cell {where} "
-                f"({len(bad_rows)} subject(s) lack some cell); pass missing='drop' (CLI: --missing drop) for listwise deletion"
+                f"({len(bad_rows)} subject(s) lack some cell); "
+                "pass missing='drop' (CLI: --missing drop) for listwise deletion"
             )
         dropped = tuple(subjects[i] for i in bad_rows)
         keep = ~holes.any(axis=1)
         values = values[keep]
-        subjects = tuple(s for s, k in zip(subjects, keep) if k)
+        subjects = tuple(s for s, k in zip(subjects, keep, strict=True) if k)
     if len(subjects) < 2:
         raise InvalidInputError(
             f"need at least 2 subjects with every cell, got {len(subjects)}"

@@ -301,7 +301,7 @@ def anova_from_cells(
     note = "; ".join(notes)
     table.attrs.update(
         factors=list(cm.factors),
-        levels={f: list(lv) for f, lv in zip(cm.factors, cm.levels)},
+        levels={f: list(lv) for f, lv in zip(cm.factors, cm.levels, strict=True)},
         correction={"auto": "auto", "always": True, "never": False}[mode],
         alpha=float(alpha),
         effsize=effsize,

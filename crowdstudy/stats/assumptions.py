@@ -42,7 +42,7 @@ def shapiro_from_cells(cm: CellMatrix, *, alpha: float = 0.05) -> pd.DataFrame:
             w = p = float("nan")
         rows.append(
             {
-                **dict(zip(cm.factors, cell)),
+                **dict(zip(cm.factors, cell, strict=True)),
                 "cell": " ".join(map(str, cell)),
                 "n": len(r),
                 "W": w,
@@ -115,8 +115,8 @@ def qq_figure_from_cells(
         ax.plot(xs, icpt + slope * xs, "-", lw=0.8, color="#c0392b")
         p = shp["p"].iloc[j]
         # y given: matplotlib then skips placing each title above its axes' tick labels (none
-        # are on top), which measured the ticks of the 40 panels again (2.9 -> 2.5 s a figure,
-        # the same pixels)
+        # are on top), which would measure the ticks of the 40 panels a second time (the
+        # same pixels)
         ax.set_title(" ".join(map(str, cell)) + (f"\np={p:.3f}" if np.isfinite(p) else "\np=n/a"), fontsize=6, y=1.0)
         ax.tick_params(labelsize=5)
     fig.supxlabel("theoretical quantiles (standard normal)", fontsize=8, y=0.12 / height)

@@ -112,9 +112,9 @@ def run(args: argparse.Namespace) -> int:
 
     if args.seed < 0:
         raise InvalidInputError(f"--seed must be >= 0, got {args.seed}")
+    design = load_design(args.design)  # a bad design fails before anything is written
     if args.out:
         check_output_path(args.out, "--out")
-    design = load_design(args.design)
     model, fitted = _model(args, design)
     if fitted is not None:
         print(f"model fitted to the pilot {args.pilot} ({fitted.attrs['participants']} participants):")

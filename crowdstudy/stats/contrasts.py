@@ -106,7 +106,7 @@ def simple_effects(cm: CellMatrix, by) -> pd.DataFrame:
     rows = []
     for combo in itertools.product(*[range(cm.shape[i]) for i in bi]):
         block = grid[(slice(None), *combo)].reshape(n, -1)  # (n, cells of rest)
-        labels = [cm.levels[i][j] for i, j in zip(bi, combo)]
+        labels = [cm.levels[i][j] for i, j in zip(bi, combo, strict=True)]
         for term in effect_terms(len(rest)):
             z = block @ effect_contrasts(rest_shape, term).T
             f, df1, df2, p = wald_f(z)
@@ -115,7 +115,7 @@ def simple_effects(cm: CellMatrix, by) -> pd.DataFrame:
                     "term": ":".join(rest[t] for t in term),
                     "by": ",".join(by),
                     "by_level": ",".join(map(str, labels)),
-                    **dict(zip(by, labels)),
+                    **dict(zip(by, labels, strict=True)),
                     "df1": df1,
                     "df2": df2,
                     "F": f,
@@ -178,7 +178,7 @@ def polynomial_contrasts(cm: CellMatrix, factor: str, by=None, *, level: float =
     rows = []
     for combo in itertools.product(*[range(cm.shape[i]) for i in bi]):
         means = marg[(slice(None), *combo)]  # (n, k)
-        labels = [cm.levels[i][j] for i, j in zip(bi, combo)]
+        labels = [cm.levels[i][j] for i, j in zip(bi, combo, strict=True)]
         scores = means @ coef.T  # (n, degrees)
         est = scores.mean(axis=0)
         se = scores.std(axis=0, ddof=1) / np.sqrt(n)
@@ -191,7 +191,7 @@ def polynomial_contrasts(cm: CellMatrix, factor: str, by=None, *, level: float =
                     "factor": factor,
                     "by": ",".join(by),
                     "by_level": ",".join(map(str, labels)),
-                    **dict(zip(by, labels)),
+                    **dict(zip(by, labels, strict=True)),
                     "contrast": _DEGREE_NAMES[d],
                     "degree": d + 1,
                     "coefficients": " ".join(str(int(c)) for c in coef[d]),

@@ -81,7 +81,8 @@ def _ncp_for(t: float, df: float, prob: float) -> float:
         lo -= width
     while f(hi) > 0:
         hi += width
-    return float(_opt.brentq(f, lo, hi, xtol=1e-13, rtol=4 * np.finfo(float).eps, maxiter=500))
+    # scipy's stub does not tie the result to full_output (here off: the root alone)
+    return float(_opt.brentq(f, lo, hi, xtol=1e-13, rtol=4 * np.finfo(float).eps, maxiter=500))  # pyright: ignore[reportArgumentType]
 
 
 def ncp_interval(t: float, df: float, level: float = 0.95) -> tuple[float, float]:

@@ -105,7 +105,7 @@ def method_figure(
         pmap = {}
         if ph is not None and len(ph):
             vcol = ph["Viewpoint"] if with_views else [""] * len(ph)
-            pmap = {(str(a), str(b)): p for a, b, p in zip(ph["Density"], vcol, ph["p_adj"])}
+            pmap = {(str(a), str(b)): p for a, b, p in zip(ph["Density"], vcol, ph["p_adj"], strict=True)}
         for c, vp in enumerate(views):
             ax = axes[r, c]
             for m, meth in enumerate(methods):
@@ -137,17 +137,14 @@ def method_figure(
                 if s:
                     top = float(np.max(mean[d, c, :] + err[d, c, :]))
                     ax.text(x[d], min(top + 0.12, ylim[1] - 0.05), s, ha="center", va="bottom", fontsize=9)
-            ax.set_ylim(ylim[0] - 0.2, ylim[1] + 0.5)
-            ax.set_xticks(x)
-            labels = [f"{density_values[d]:.2f}" if density_values and d in density_values else str(d) for d in dens]
-            ax.set_xticklabels(labels, fontsize=7)
-            ax.grid(axis="y", lw=0.4, alpha=0.5)
-            if r == 0 and with_views:
-                ax.set_title(f"Viewpoint {vp}", fontsize=9)
-            if c == 0:
-                ax.set_ylabel(f"{comp} score", fontsize=9)
-            if r == n_rows - 1:
-                ax.set_xlabel("density (characters/m$^2$)" if density_values else "density", fontsize=8)
+            _style_panel(
+                ax,
+                ylim,
+                [f"{density_values[d]:.2f}" if density_values and d in density_values else str(d) for d in dens],
+                title=f"Viewpoint {vp}" if r == 0 and with_views else None,
+                ylabel=f"{comp} score" if c == 0 else None,
+                xlabel=("density (characters/m$^2$)" if density_values else "density") if r == n_rows - 1 else None,
+            )
     handles, labels = axes[0, 0].get_legend_handles_labels()
     fig.legend(handles, labels, loc="outside lower center", ncol=len(methods), fontsize=8, frameon=False)
     bars = {"sd": "mean +- SD", "se": "mean +- SE", "ci95": "mean +- 95% CI"}[error]
@@ -167,6 +164,23 @@ def method_figure(
         json.dumps({"figure": out.name, "error": error, "caption": caption, "note": note, "series": plotted}, indent=1)
     )
     return out
+
+
+def _style_panel(
+    ax, ylim: tuple[float, float], labels: list[str], *, title: str | None, ylabel: str | None, xlabel: str | None
+) -> None:
+    """One panel's axes: the y range around ``ylim`` (room for the stars), one x tick per
+    density level with its label, a light grid, and the titles it carries (None: none)."""
+    ax.set_ylim(ylim[0] - 0.2, ylim[1] + 0.5)
+    ax.set_xticks(np.arange(len(labels)))
+    ax.set_xticklabels(labels, fontsize=7)
+    ax.grid(axis="y", lw=0.4, alpha=0.5)
+    if title is not None:
+        ax.set_title(title, fontsize=9)
+    if ylabel is not None:
+        ax.set_ylabel(ylabel, fontsize=9)
+    if xlabel is not None:
+        ax.set_xlabel(xlabel, fontsize=8)
 
 
 def _t975(df: int) -> float:

@@ -75,7 +75,7 @@ def fit_pilot(responses: pd.DataFrame, design, *, source: str = "pilot") -> tupl
     x = pd.concat(rows, ignore_index=True)
     y = np.concatenate(ys)
     coef, *_ = np.linalg.lstsq(x.to_numpy(), y, rcond=None)
-    est = dict(zip(x.columns, coef))
+    est = dict(zip(x.columns, coef, strict=True))
     resid = y - x.to_numpy() @ coef
     frame = pd.concat(keys, ignore_index=True).assign(r=resid)
     a = np.array([est[f"a:{c}"] for c in comps])
@@ -85,7 +85,7 @@ def fit_pilot(responses: pd.DataFrame, design, *, source: str = "pilot") -> tupl
     slope = float((a * b).sum() / (a * a).sum()) if (a * a).sum() > 1e-12 else 0.0
     # item noise from the two items of each composite within a trial
     pairs = []
-    for c, items in design.composites.items():
+    for items in design.composites.values():
         if len(items) >= 2:
             rev = {it.id for it in design.items if it.reverse}
             q = [design.likert_points + 1 - data[i] if i in rev else data[i] for i in items[:2]]

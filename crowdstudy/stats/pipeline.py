@@ -268,7 +268,11 @@ def _robustness(long: pd.DataFrame, comp: str, factors: list[str], cm: CellMatri
     ordinal = ordinal_method_check(cm, alpha=alpha)
     try:
         mixed = mixed_model(
-            long, comp, factors, "participant_id", levels={f: list(lv) for f, lv in zip(cm.factors, cm.levels)}
+            long,
+            comp,
+            factors,
+            "participant_id",
+            levels={f: list(lv) for f, lv in zip(cm.factors, cm.levels, strict=True)},
         )
     except InvalidInputError as exc:  # degenerate data: said in the summary, not fatal
         return Robustness(ordinal=ordinal, mixed=None, mixed_note=str(exc))

@@ -140,8 +140,8 @@ def pairwise_from_cells(
     rows = []
     by_levels = list(itertools.product(*[cm.levels[i] for i in bi])) if bi else [()]
     pairs = list(itertools.combinations(range(k), 2))
-    for g, blv in enumerate(by_levels):
-        means = marg[(slice(None), *[cm.levels[i].index(v) for i, v in zip(bi, blv)])]  # (n, k)
+    for blv in by_levels:
+        means = marg[(slice(None), *[cm.levels[i].index(v) for i, v in zip(bi, blv, strict=True)])]  # (n, k)
         d = np.stack([means[:, i] - means[:, j] for i, j in pairs], axis=1)
         est = d.mean(axis=0)
         se = d.std(axis=0, ddof=1) / np.sqrt(n)
@@ -162,7 +162,7 @@ def pairwise_from_cells(
                 "factor": factor,
                 "by": ",".join(by),
                 "by_level": ",".join(map(str, blv)),
-                **{b: v for b, v in zip(by, blv)},
+                **{b: v for b, v in zip(by, blv, strict=True)},
                 "A": levels[i],
                 "B": levels[j],
                 "contrast": f"{levels[i]} - {levels[j]}",

@@ -6,6 +6,7 @@ from __future__ import annotations
 import itertools
 import math
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pandas as pd
@@ -124,7 +125,7 @@ def descriptives_from_cells(cm: CellMatrix, value_name: str = "score") -> pd.Dat
             for combo in itertools.product(*[range(len(cm.levels[i])) for i in term]):
                 v = marg[(slice(None), *combo)]
                 mean, sd = float(v.mean()), float(v.std(ddof=1)) if n > 1 else float("nan")
-                row = {"effect": ":".join(cm.factors[i] for i in term)}
+                row: dict[str, Any] = {"effect": ":".join(cm.factors[i] for i in term)}
                 for i in range(k):
                     row[cm.factors[i]] = str(cm.levels[i][combo[term.index(i)]]) if i in term else ""
                 row.update(n=n, mean=mean, sd=sd, se=sd / math.sqrt(n), mean_sd=f"{mean:.2f} +- {sd:.2f}")

@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import dataclasses
 import itertools
+from typing import Any
 
 import numpy as np
 import pandas as pd
@@ -73,10 +74,10 @@ def _design_matrix(long: pd.DataFrame, factors: list[str], levels: dict) -> tupl
         for term in itertools.combinations(factors, order):
             for combo in itertools.product(*[range(len(levels[f]) - 1) for f in term]):
                 col = np.ones(len(long))
-                for f, j in zip(term, combo):
+                for f, j in zip(term, combo, strict=True):
                     col = col * coded[f][:, j]
                 cols.append(col)
-                names.append(":".join(f"{f}{j + 1}" for f, j in zip(term, combo)))
+                names.append(":".join(f"{f}{j + 1}" for f, j in zip(term, combo, strict=True)))
     return np.column_stack(cols), names
 
 
@@ -278,7 +279,7 @@ def ordinal_method_check(cm: CellMatrix, *, alpha: float = 0.05) -> pd.DataFrame
         w, s = signed_rank_test(d), sign_test(d)
         sd = d.std(ddof=1)
         p_t = float(2.0 * _st.t.sf(abs(d.mean()) / (sd / np.sqrt(n)), n - 1)) if sd > 0 else float("nan")
-        row = dict(zip(others, lab)) if lab is not None else {f: "" for f in others}
+        row: dict[str, Any] = dict(zip(others, lab, strict=True)) if lab is not None else {f: "" for f in others}
         row.update(
             cell=" ".join(map(str, lab)) if lab is not None else "all",
             n=n,

@@ -12,7 +12,8 @@ prints the participant URL (``/?PROLIFIC_PID=...&STUDY_ID=...&SESSION_ID=...`` o
 ``CROWDSTUDY_ADMIN_TOKEN`` to keep it fixed and out of the process list). ``/admin`` shows
 progress after a login with that token (a cookie; scripts send ``Authorization: Bearer``);
 ``crowdstudy export --db sqlite:///study.db --out responses.csv --demographics demographics.csv``
-writes the analysis input and ``participants.csv`` (status, exclusion flags);
+writes the analysis input (``comparisons.csv`` too for 2afc stages) and
+``participants.csv`` (status, exclusion flags);
 ``crowdstudy participants list|withdraw|audit`` manages participants. The server binds
 127.0.0.1; for an online study run it behind an HTTPS reverse proxy. ``--workers N`` runs N
 processes; several servers may share one PostgreSQL database (``--db postgresql+psycopg://...``),
@@ -31,7 +32,8 @@ dates (:mod:`crowdstudy.study.media`); the trial order is shuffled with the same
 (:mod:`crowdstudy.study.schedule`), and the scoring metadata (reversed items, composites) is
 admin-only. An answer carries ``trial_index`` and ``token``; the server checks the token
 against that participant's schedule and stores the real stimulus id, so ``responses.csv``
-keeps its schema. The token -> stimulus mapping is admin-only
+keeps its schema. A 2afc trial is one token for its two videos. Each stage shows the trial of its task
+(likert, slider or 2afc: :mod:`crowdstudy.study.session`). The token -> stimulus mapping is admin-only
 (``GET /admin/participants/<id>/schedule``, what the simulated participants answer from, and
 the exports).
 

@@ -7,8 +7,9 @@ request, 422 a value out of range). :mod:`crowdstudy.study.session` calls them a
 of each request where the value matters, after the checks of the participant's progress that
 come first (so a request out of order is a 409 whatever its body).
 
-A new trial type adds its own ``parse_<type>`` beside :func:`parse_likert` and reuses
-:func:`parse_trial_ref` and :func:`parse_timing`.
+Each trial type has its own ``parse_<type>`` (:func:`parse_likert`, :func:`parse_slider`,
+:func:`parse_choice`), chosen by the trial's task in :func:`parse_task_answer`, and reuses
+:func:`parse_trial_ref`, :func:`parse_timing` and :func:`parse_check`.
 """
 
 from __future__ import annotations
@@ -16,8 +17,9 @@ from __future__ import annotations
 import datetime as _dt
 import math
 import re
-from typing import Any, NamedTuple
+from typing import Any, NamedTuple, TypeGuard
 
+from crowdstudy.schema import CHOICES
 from crowdstudy.study.blinding import TOKEN_LENGTH, TOKEN_PATTERN
 from crowdstudy.study.schedule import PARTICIPANT_ID_PATTERN
 from crowdstudy.study.webio import ApiError
@@ -35,6 +37,11 @@ __all__ = [
     "parse_consent",
     "parse_demographics",
     "parse_likert",
+    "parse_slider",
+    "parse_choice",
+    "parse_task_answer",
+    "parse_practice_task",
+    "SLIDER_RANGE",
     "parse_timing",
     "parse_trial_ref",
     "parse_check",
@@ -45,6 +52,8 @@ GENDERS = ("female", "male", "non-binary", "other", "prefer not to say")
 AGE_RANGE = (18, 120)
 #: Crowdsourcing-platform ids accepted at registration: {request key: database column}.
 PLATFORM_FIELDS = {"PROLIFIC_PID": "prolific_pid", "STUDY_ID": "prolific_study_id", "SESSION_ID": "prolific_session_id"}
+#: The slider's answers: integers from its left end to its right end.
+SLIDER_RANGE = (0, 100)
 #: The longest response time accepted (milliseconds): one day.
 MAX_RT_MS = 24 * 3600 * 1000.0
 _PLATFORM_ID = re.compile(r"[A-Za-z0-9_-]{1,64}")
@@ -72,11 +81,11 @@ class Timing(NamedTuple):
     quality: dict[str, Any]
 
 
-def _is_int(v: Any) -> bool:
+def _is_int(v: Any) -> TypeGuard[int]:
     return isinstance(v, int) and not isinstance(v, bool)
 
 
-def _is_ms(v: Any) -> bool:
+def _is_ms(v: Any) -> TypeGuard[float]:
     return not isinstance(v, bool) and isinstance(v, (int, float)) and math.isfinite(v) and 0 <= v <= MAX_RT_MS
 
 
@@ -155,6 +164,59 @@ def parse_likert(body: dict, item_ids: tuple[str, ...], points: int) -> dict[str
     return answers
 
 
+def parse_slider(body: dict, item_ids: tuple[str, ...]) -> dict[str, int]:
+    """``"answers": {"Q1": 0..100, ...}``: every item of ``item_ids`` placed on the slider
+    (an integer 0..100, left end 0), no other key."""
+    lo, hi = SLIDER_RANGE
+    answers = body.get("answers")
+    if not isinstance(answers, dict):
+        raise ApiError(422, f'answers must be an object {{"{item_ids[0]}": {lo}..{hi}, ...}}')
+    for q in item_ids:
+        if q not in answers:
+            raise ApiError(422, f"answers.{q} is missing (all {len(item_ids)} sliders are required)")
+        v = answers[q]
+        if not _is_int(v) or not lo <= v <= hi:
+            raise ApiError(422, f"answers.{q} must be an integer {lo}..{hi}, got {v!r:.40}")
+    extra = sorted(set(answers) - set(item_ids))
+    if extra:
+        raise ApiError(422, f"answers has unknown item {extra[0]!r:.40}")
+    return answers
+
+
+def parse_choice(body: dict) -> str:
+    """``"choice": "left" | "right"``: the video a 2afc answer picks; a 2afc answer carries no
+    ``answers``."""
+    choice = body.get("choice")
+    if choice not in CHOICES:
+        raise ApiError(422, f"choice must be 'left' or 'right' (the video chosen), got {choice!r:.40}")
+    if body.get("answers") is not None:
+        raise ApiError(422, "a 2afc trial's answer is its 'choice'; send no 'answers'")
+    return choice
+
+
+def parse_task_answer(
+    body: dict, task: str, item_ids: tuple[str, ...], points: int
+) -> tuple[dict[str, int], str | None]:
+    """The answer of a ``task`` trial: ({item id: value}, None) for likert and slider,
+    ({}, choice) for 2afc."""
+    if task == "2afc":
+        return {}, parse_choice(body)
+    if body.get("choice") is not None:
+        raise ApiError(422, f"choice applies to 2afc trials only (this trial's task is {task})")
+    if task == "slider":
+        return parse_slider(body, item_ids), None
+    return parse_likert(body, item_ids, points), None
+
+
+def parse_practice_task(body: dict, tasks: tuple[str, ...]) -> str:
+    """``"task"`` of a practice answer: one of the design's ``tasks`` (default: the first,
+    the task of stage 1)."""
+    task = body.get("task", tasks[0])
+    if task not in tasks:
+        raise ApiError(422, f"task must be one of the study's tasks {', '.join(tasks)}, got {task!r:.40}")
+    return task
+
+
 def _parse_time(value: Any, name: str) -> str | None:
     if value is None:
         return None
@@ -206,15 +268,22 @@ def parse_trial_ref(body: dict, n_trials: int) -> tuple[int, str]:
     return ti, token
 
 
-def parse_check(body: dict, trial_index: int, has_check: bool, points: int) -> int | None:
-    """``"check"``: the answer 1..points to the trial's attention check where it has one;
-    absent (None) where it has none."""
+def parse_check(body: dict, trial_index: int, has_check: bool, points: int, task: str = "likert") -> int | None:
+    """``"check"``: the answer to the trial's attention check where it has one (Likert: a
+    point 1..points; slider: 0..100; 2afc: ``"left"`` / ``"right"``, returned as 1 / 2, the
+    stored code); absent (None) where it has none."""
     check = body.get("check")
     if not has_check:
         if check is not None:
             raise ApiError(422, f"trial {trial_index} has no attention check; send no 'check'")
-    elif not _is_int(check) or not 1 <= check <= points:
-        raise ApiError(422, f"check must be the answer 1..{points} to trial {trial_index}'s extra statement")
+        return None
+    if task == "2afc":
+        if check not in CHOICES:
+            raise ApiError(422, f"check must be 'left' or 'right', the answer to trial {trial_index}'s extra question")
+        return CHOICES.index(check) + 1
+    lo, hi = SLIDER_RANGE if task == "slider" else (1, points)
+    if not _is_int(check) or not lo <= check <= hi:
+        raise ApiError(422, f"check must be the answer {lo}..{hi} to trial {trial_index}'s extra statement")
     return check
 
 

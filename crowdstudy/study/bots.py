@@ -2,7 +2,9 @@
 
 Each bot registers, consents, gives demographics, answers the practice trial, then every
 trial of its schedule in order with answers drawn from
-:class:`crowdstudy.stats.synthetic.ResponseModel`, and completes. Bots run concurrently
+:class:`crowdstudy.stats.synthetic.ResponseModel` (each trial by its task: Likert points,
+slider positions 0..100, or a 2afc choice of the left or right video; before the first trial
+of a task it answers that task's practice trial), and completes. Bots run concurrently
 (asyncio, one keep-alive connection each); every answer's round-trip latency is recorded, so the same code serves
 the demo, load tests and end-to-end checks of the server.
 
@@ -26,7 +28,7 @@ import numpy as np
 
 from crowdstudy.errors import InvalidInputError
 
-__all__ = ["SimulationResult", "simulate_participants", "run_simulation"]
+__all__ = ["SimulationResult", "simulate_participants", "run_simulation", "resolve_method_effects"]
 
 
 @dataclasses.dataclass
@@ -65,17 +67,18 @@ class _Connection:
     """A minimal HTTP/1.1 keep-alive JSON client over one asyncio stream (plain http:// only).
 
     A load generator must cost far less CPU than the server it measures; a general client
-    (httpx) costs about 2 ms of CPU per request, this one a tenth of that. It sends JSON,
-    reads responses with a Content-Length (what the study server sends) and reconnects
-    once when the server closed an idle connection.
+    (httpx) spends far more CPU per request than this one, which does no more than it needs.
+    It sends JSON, reads responses with a Content-Length (what the study server sends) and
+    reconnects once when the server closed an idle connection.
     """
 
     def __init__(self, host: str, port: int, timeout: float):
         self.host, self.port, self.timeout = host, port, timeout
         self.reader = self.writer = None
 
-    async def _connect(self):
+    async def _connect(self) -> asyncio.StreamWriter:
         self.reader, self.writer = await asyncio.wait_for(asyncio.open_connection(self.host, self.port), self.timeout)
+        return self.writer
 
     async def close(self):
         if self.writer is not None:
@@ -104,9 +107,8 @@ class _Connection:
         data = ("\r\n".join(head) + "\r\n\r\n").encode() + body
         for attempt in range(2):
             try:
-                if self.writer is None:
-                    await self._connect()
-                self.writer.write(data)
+                writer = self.writer if self.writer is not None else await self._connect()
+                writer.write(data)
                 return await asyncio.wait_for(self._read(), self.timeout)
             except (ConnectionError, asyncio.IncompleteReadError, OSError):
                 await self.close()
@@ -115,13 +117,16 @@ class _Connection:
         raise ConnectionError("unreachable")  # pragma: no cover
 
     async def _read(self) -> tuple[int, dict]:
-        head = await self.reader.readuntil(b"\r\n\r\n")
+        reader = self.reader
+        if reader is None:
+            raise ConnectionError("not connected")
+        head = await reader.readuntil(b"\r\n\r\n")
         lines = head.decode("latin-1").split("\r\n")
         status = int(lines[0].split(" ", 2)[1])
         headers = {k.strip().lower(): v.strip() for k, _, v in (ln.partition(":") for ln in lines[1:] if ln)}
         if "content-length" not in headers:
             raise ConnectionError(f"response without Content-Length (status {status})")
-        raw = await self.reader.readexactly(int(headers["content-length"]))
+        raw = await reader.readexactly(int(headers["content-length"]))
         if headers.get("connection", "").lower() == "close":
             await self.close()
         return status, (json.loads(raw) if raw else {})
@@ -131,17 +136,35 @@ def _bot_rng(seed: int, index: int) -> np.random.Generator:
     return np.random.default_rng([int(seed), int(index)])
 
 
-def _model(study: dict, method_effect: float, noise_sd: float, **kwargs):
+def resolve_method_effects(methods: list[str], effects: dict[str, float] | None) -> dict[str, float]:
+    """{method: points relative to the reference} the bots answer with: ``effects`` checked
+    against the study's ``methods`` (the first is the reference), or by default 1 point for
+    "Ours" when the study has it (the paper's bots), else none."""
+    reference = methods[0]
+    if effects is None:
+        return {"Ours": 1.0} if "Ours" in methods[1:] else {}
+    for name, value in effects.items():
+        if name not in methods or name == reference:
+            raise InvalidInputError(
+                f"--method-effect {name}={value:g}: {name!r} is not a method of the study other than its "
+                f"reference {reference!r} (methods: {', '.join(methods)})"
+            )
+    return {k: float(v) for k, v in effects.items()}
+
+
+def _model(study: dict, method_effects: dict[str, float], noise_sd: float, **kwargs):
     """The response model of ``study`` (the admin API's scoring metadata: items with their
-    reversal, composites, points; the participants' /api/study carries none of it)."""
+    reversal, composites, points, methods; the participants' /api/study carries none of it)."""
     from crowdstudy.stats.synthetic import ResponseModel
 
     composites = {k: tuple(v) for k, v in study["composites"].items()}
     kwargs.setdefault(
         "composite_effects", {c: e for c, e in ResponseModel().composite_effects.items() if c in composites}
     )
+    others = {m: v for m, v in method_effects.items() if m != "Ours"}
     return ResponseModel(
-        method_effect=float(method_effect),
+        method_effect=float(method_effects.get("Ours", 0.0)),
+        method_effects=others,
         noise_sd=float(noise_sd),
         composites=composites,
         reversed_items=tuple(it["id"] for it in study["items"] if it["reverse"]),
@@ -165,6 +188,22 @@ async def _admin_schedule(conn: _Connection, pid: str, admin_token: str) -> dict
     if status != 200:
         raise RuntimeError(f"GET /admin/participants/{pid}/schedule -> {status} {str(data)[:200]}")
     return {int(t["trial_index"]): t for t in data["trials"]}
+
+
+def _answer(model, trial: dict, offsets: dict, rng: np.random.Generator) -> dict:
+    """The answer fields of one trial by its task: ``answers`` (Likert, slider) or ``choice``."""
+    if trial["task"] == "2afc":
+        return {"choice": model.choose(trial["method"], trial["method_right"], offsets, rng)}
+    return {"answers": model.answer(trial, offsets, rng, task=trial["task"])}
+
+
+async def _practice(client, base: str, secret: str, model, offsets: dict, rng, task: str) -> None:
+    """Answer the practice trial of ``task`` (the practice clip: no condition)."""
+    stim = {"density": 4.44, "method": "practice", "method_right": "practice", "scenario": "concert", "task": task}
+    body = {"task": task, **_answer(model, stim, offsets, rng), "rt_ms": 5000.0}
+    if task == "likert":
+        body.pop("task")  # the body of earlier versions (a server of the paper's design accepts both)
+    await _post(client, base + "/practice", secret, body)
 
 
 async def _one_bot(
@@ -191,32 +230,37 @@ async def _one_bot(
             {"age": int(rng.integers(18, 71)), "gender": str(rng.choice(["female", "male"]))},
         )
     offsets = model.draw_participant(rng)
-    if not state["practice_done"]:
-        ans = model.answer({"density": 4.44, "method": "practice", "scenario": "concert"}, offsets, rng)
-        await _post(client, base + "/practice", secret, {"answers": ans, "rt_ms": 5000.0})
-    n = 0
     todo = state["trials"][state["next_trial_index"] :]
+    practiced = set(state.get("practiced", []))
+    first = state["trials"][0]["task"] if state["trials"] else "likert"
+    if not state["practice_done"]:
+        await _practice(client, base, secret, model, offsets, rng, first)
+        practiced.add(first)
+    n = 0
     for trial in todo[:max_answers]:
         if think_time > 0:
             await asyncio.sleep(float(rng.uniform(0.0, 2.0 * think_time)))
         full = conditions.get(trial["trial_index"])
         if full is None or full["token"] != trial["token"]:
             raise RuntimeError(f"trial {trial['trial_index']}: the admin schedule does not match the participant's")
-        answers = model.answer(full, offsets, rng)
-        rt = float(np.round(2000.0 + rng.lognormal(np.log(8000.0), 0.4), 1))
-        body = {
-            "trial_index": trial["trial_index"],
-            "token": trial["token"],
-            "answers": answers,
-            "rt_ms": rt,
-            "video_plays": 1,
-            "first_play_ms": 20000.0,
-            "hidden_count": 0,
-            "hidden_ms": 0.0,
-            "fullscreen_exits": 0,
-        }
-        if full.get("check_value") is not None:
-            body["check"] = int(full["check_value"])  # an attentive participant follows the instruction
+        task = full["task"]
+        if task not in practiced:
+            await _practice(client, base, secret, model, offsets, rng, task)
+            practiced.add(task)
+        body = {"trial_index": trial["trial_index"], "token": trial["token"], **_answer(model, full, offsets, rng)}
+        body.update(
+            {
+                "rt_ms": float(np.round(2000.0 + rng.lognormal(np.log(8000.0), 0.4), 1)),
+                "video_plays": 1,
+                "first_play_ms": 20000.0,
+                "hidden_count": 0,
+                "hidden_ms": 0.0,
+                "fullscreen_exits": 0,
+            }
+        )
+        if full.get("check_value") is not None:  # an attentive participant follows the instruction
+            v = int(full["check_value"])
+            body["check"] = ("left", "right")[v - 1] if task == "2afc" else v
         t0 = time.perf_counter()
         await _post(client, base + "/responses", secret, body)
         latencies.append((time.perf_counter() - t0) * 1000.0)
@@ -231,7 +275,8 @@ async def simulate_participants(
     n: int,
     *,
     admin_token: str,
-    method_effect: float = 1.0,
+    method_effects: dict[str, float] | None = None,
+    method_effect: float | None = None,
     noise_sd: float = 0.9,
     seed: int = 1,
     concurrency: int = 10,
@@ -244,7 +289,10 @@ async def simulate_participants(
     """Run ``n`` bots against the server at ``url``, at most ``concurrency`` at once.
 
     admin_token: the server's admin token (the bots read their trials' conditions from the
-    admin API; participants are blinded). think_time: mean pause before each answer (s;
+    admin API; participants are blinded). method_effects: {method: points relative to the
+    study's reference method} (default: Ours 1 point when the study has it; methods not named
+    have 0); method_effect: the earlier scalar, Ours' effect (merged into method_effects).
+    think_time: mean pause before each answer (s;
     uniform 0..2x), 0 = as fast as possible. max_answers: stop each bot after that many answers
     (without completing; benchmarks), None = the whole session. Participant ids are
     ``{prefix}-{seed}-{index:05d}``; the answers depend only on ``seed``.
@@ -288,7 +336,10 @@ async def simulate_participants(
         raise InvalidInputError(
             f"--admin-token: the server at {url} refused it ({status}: {str(data.get('error', ''))[:100]})"
         )
-    model = _model(data, method_effect, noise_sd, **(model_kwargs or {}))
+    methods = data.get("methods") or ["Baseline", "Ours"]
+    if method_effect is not None:
+        method_effects = {"Ours": float(method_effect), **(method_effects or {})}
+    model = _model(data, resolve_method_effects(methods, method_effects), noise_sd, **(model_kwargs or {}))
     gate = asyncio.Semaphore(concurrency)
     latencies: list[float] = []
     done: list[str] = []

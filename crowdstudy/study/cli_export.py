@@ -34,7 +34,9 @@ def run(args: argparse.Namespace) -> int:
         check_output_path(args.participants, "--participants")
     summary = export_study(args.db, args.out, args.demographics, participants=args.participants, online=args.online)
     print(
-        f"crowdstudy export: {summary['responses']} answers of {summary['participants']} participants "
+        f"crowdstudy export: {summary['responses']} answers"
+        + (f" and {summary['comparisons']} comparisons" if summary["comparisons"] else "")
+        + f" of {summary['participants']} participants "
         f"({summary['excluded']} flagged for exclusion) -> {', '.join(summary['files'])}"
     )
     return 0

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import json
 
-__all__ = ["configure", "run"]
+__all__ = ["configure", "run", "parse_method_effects"]
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
@@ -19,9 +19,11 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("-n", type=int, default=10, help="number of simulated participants (default 10)")
     parser.add_argument(
         "--method-effect",
-        type=float,
-        default=1.0,
-        help="Ours - Baseline on QCR at the reference density, Likert points (default 1.0)",
+        action="append",
+        metavar="NAME=POINTS",
+        help="a method's effect relative to the study's reference method (its first), Likert points on the "
+        "first composite at the reference density; repeatable, methods not named have 0; a bare POINTS means "
+        "Ours (default: Ours=1.0 when the study has Ours)",
     )
     parser.add_argument(
         "--density-slope",
@@ -35,6 +37,31 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--think-time", type=float, default=0.0, help="mean pause before each answer, seconds")
     parser.add_argument("--prefix", default="bot", help="participant id prefix (default 'bot')")
     parser.add_argument("--json", metavar="FILE", help="also write the summary as JSON")
+
+
+def parse_method_effects(values: list[str] | None) -> dict[str, float] | None:
+    """``--method-effect`` values (``NAME=POINTS``, or a bare ``POINTS`` for Ours) as
+    {method: points}; None when none was given."""
+    import math
+
+    from crowdstudy.errors import InvalidInputError
+
+    if not values:
+        return None
+    out: dict[str, float] = {}
+    for raw in values:
+        name, sep, number = raw.rpartition("=")
+        name = name.strip() if sep else "Ours"
+        try:
+            points = float(number)
+        except ValueError:
+            raise InvalidInputError(f"--method-effect must be NAME=POINTS or POINTS, got {raw!r}") from None
+        if not name or not math.isfinite(points):
+            raise InvalidInputError(f"--method-effect must be NAME=POINTS with a finite number, got {raw!r}")
+        if name in out:
+            raise InvalidInputError(f"--method-effect gives {name} twice")
+        out[name] = points
+    return out
 
 
 def run(args: argparse.Namespace) -> int:
@@ -51,11 +78,12 @@ def run(args: argparse.Namespace) -> int:
     if args.json:
         check_output_path(args.json, "--json")
     admin_token = args.admin_token or os.environ.get(ADMIN_TOKEN_ENV)  # checked by the bots
+    effects = parse_method_effects(args.method_effect)
     result = run_simulation(
         args.url,
         args.n,
         admin_token=admin_token,
-        method_effect=args.method_effect,
+        method_effects=effects,
         noise_sd=args.noise,
         seed=args.seed,
         concurrency=args.concurrency,
@@ -76,7 +104,7 @@ def run(args: argparse.Namespace) -> int:
             json.dump(
                 {
                     **s,
-                    "provenance": provenance(args.seed, n=args.n, method_effect=args.method_effect, noise=args.noise),
+                    "provenance": provenance(args.seed, n=args.n, method_effects=effects, noise=args.noise),
                 },
                 fh,
                 indent=2,

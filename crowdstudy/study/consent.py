@@ -62,7 +62,9 @@ def markdown_to_html(text: str) -> str:
                 close_list()
                 out.append(f"<{tag}>")
                 list_tag = tag
-            out.append(f"<li>{_inline((bullet or number).group(1))}</li>")
+            item = bullet or number  # one of them matched (the branch's condition)
+            if item is not None:
+                out.append(f"<li>{_inline(item.group(1))}</li>")
         elif list_tag and raw.startswith((" ", "\t")) and out:
             out[-1] = out[-1][:-5] + " " + _inline(line) + "</li>"
         else:

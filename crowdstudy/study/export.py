@@ -1,9 +1,12 @@
 """Export the study database to the CSV files the analysis reads (formats: :mod:`crowdstudy.schema`).
 
-``responses.csv``: one row per answered study trial (practice excluded), columns
-:data:`RESPONSE_EXPORT_COLUMNS` (:data:`RESPONSE_COLUMNS` then the per-trial data-quality
-columns), sorted by participant then trial_index; Q1..Q6 are the raw answers (negative items
-NOT reversed). ``participants.csv`` (beside it unless told otherwise): one row per
+``responses.csv``: one row per answered Likert or slider trial (practice excluded), columns
+:func:`response_export_columns` of the study's item ids (:data:`RESPONSE_EXPORT_COLUMNS` for
+the paper's Q1..Q6: :data:`RESPONSE_COLUMNS` then the per-trial data-quality columns), sorted
+by participant then trial_index; the item columns hold the raw answers (negative items NOT
+reversed). ``comparisons.csv`` (beside it, when the study has 2afc answers or a 2afc stage):
+one row per answered 2afc trial, columns :data:`COMPARISON_EXPORT_COLUMNS`; its attention
+check columns say ``left`` / ``right``. ``participants.csv`` (beside it unless told otherwise): one row per
 participant with status, platform ids and the exclusion flags of the online config's rules
 (:mod:`crowdstudy.study.quality`, columns :data:`crowdstudy.study.quality.PARTICIPANT_COLUMNS`).
 ``demographics.csv``: one row per participant, columns :data:`DEMOGRAPHIC_COLUMNS`
@@ -21,12 +24,22 @@ from pathlib import Path
 
 from crowdstudy.errors import InvalidInputError
 from crowdstudy.provenance import provenance
-from crowdstudy.schema import DEMOGRAPHIC_COLUMNS, RESPONSE_COLUMNS, RESPONSE_QUALITY_COLUMNS
+from crowdstudy.schema import (
+    CHOICES,
+    COMPARISON_COLUMNS,
+    DEMOGRAPHIC_COLUMNS,
+    RESPONSE_COLUMNS,
+    RESPONSE_QUALITY_COLUMNS,
+    response_columns,
+)
 
 __all__ = [
     "RESPONSE_COLUMNS",
     "DEMOGRAPHIC_COLUMNS",
     "RESPONSE_EXPORT_COLUMNS",
+    "COMPARISON_EXPORT_COLUMNS",
+    "response_export_columns",
+    "split_rows",
     "rows_to_csv",
     "export_study",
     "participants_rows",
@@ -34,6 +47,34 @@ __all__ = [
 
 #: responses.csv as written by the export: the analysis columns, then the data-quality ones.
 RESPONSE_EXPORT_COLUMNS = (*RESPONSE_COLUMNS, *RESPONSE_QUALITY_COLUMNS)
+#: comparisons.csv as written by the export.
+COMPARISON_EXPORT_COLUMNS = (*COMPARISON_COLUMNS, *RESPONSE_QUALITY_COLUMNS)
+
+
+def response_export_columns(item_ids: Sequence[str]) -> tuple[str, ...]:
+    """responses.csv's columns for a study whose items are ``item_ids``."""
+    return (*response_columns(item_ids), *RESPONSE_QUALITY_COLUMNS)
+
+
+def split_rows(rows: Iterable[Mapping]) -> tuple[list[dict], list[dict]]:
+    """StudyStore.response_rows split into (responses.csv rows, comparisons.csv rows): the
+    2afc rows get their left/right columns, ``chosen_method`` and the check as a side."""
+    ratings, comparisons = [], []
+    for row in rows:
+        if row["task"] != "2afc":
+            ratings.append(dict(row))
+            continue
+        side = {k: (None if row[k] is None else CHOICES[int(row[k]) - 1]) for k in ("check_answer", "check_value")}
+        comparisons.append(
+            {
+                **row,
+                **side,
+                "stimulus_left": row["stimulus_id"],
+                "method_left": row["method"],
+                "chosen_method": row["method"] if row["choice"] == "left" else row["method_right"],
+            }
+        )
+    return ratings, comparisons
 
 
 def _cell(value) -> str:
@@ -62,6 +103,11 @@ def participants_rows(store, online, item_ids) -> list[dict]:
     return flag_participants(list_participants(store), store.response_rows(), online, item_ids)
 
 
+def _write(path: Path, text: str) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(text, encoding="utf-8")
+
+
 def export_study(
     db_url: str,
     out: str | Path,
@@ -74,9 +120,10 @@ def export_study(
     demographics.csv from the database at ``db_url``; online: the TOML file of the exclusion
     rules (default: the [online] table of the toolkit's study.toml).
 
-    Returns {"responses": rows written, "participants": ..., "excluded": ..., "files": [paths]}.
+    comparisons.csv (beside ``out``) is written when the database holds 2afc answers or a
+    2afc schedule. Returns {"responses": rows written, "comparisons": ..., "participants":
+    ..., "excluded": ..., "files": [paths]}.
     """
-    from crowdstudy.schema import ITEM_COLUMNS
     from crowdstudy.study.quality import PARTICIPANT_COLUMNS, load_online_config
     from crowdstudy.study.storage import StudyStore
 
@@ -87,26 +134,29 @@ def export_study(
     rules = load_online_config(online)
     store = StudyStore(db_url, create=False)
     try:
-        responses = store.response_rows()
+        item_ids = store.item_ids()
+        responses, comparisons = split_rows(store.response_rows())
+        has_2afc = bool(comparisons) or store.has_task("2afc")
         people = store.demographics_rows() if demographics is not None else []
-        flagged = participants_rows(store, rules, ITEM_COLUMNS)
+        flagged = participants_rows(store, rules, item_ids)
     finally:
         store.close()
     out = Path(out)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(rows_to_csv(responses, RESPONSE_EXPORT_COLUMNS), encoding="utf-8")
     part_path = Path(participants) if participants is not None else out.with_name("participants.csv")
-    part_path.parent.mkdir(parents=True, exist_ok=True)
-    part_path.write_text(rows_to_csv(flagged, PARTICIPANT_COLUMNS), encoding="utf-8")
-    files = [str(out), str(part_path)]
+    # every file's text first, then the writes: an error leaves nothing half-written
+    texts = {out: rows_to_csv(responses, response_export_columns(item_ids))}
+    if has_2afc:
+        texts[out.with_name("comparisons.csv")] = rows_to_csv(comparisons, COMPARISON_EXPORT_COLUMNS)
+    texts[part_path] = rows_to_csv(flagged, PARTICIPANT_COLUMNS)
     if demographics is not None:
-        demographics = Path(demographics)
-        demographics.parent.mkdir(parents=True, exist_ok=True)
-        demographics.write_text(rows_to_csv(people, DEMOGRAPHIC_COLUMNS), encoding="utf-8")
-        files.append(str(demographics))
+        texts[Path(demographics)] = rows_to_csv(people, DEMOGRAPHIC_COLUMNS)
+    for path, text in texts.items():
+        _write(path, text)
+    files = [str(path) for path in texts]
     summary = {
         "responses": len(responses),
-        "participants": len({r["participant_id"] for r in responses}),
+        "comparisons": len(comparisons),
+        "participants": len({r["participant_id"] for r in (*responses, *comparisons)}),
         "excluded": sum(r["excluded"] for r in flagged),
         "files": files,
     }
@@ -117,6 +167,7 @@ def export_study(
                 None,
                 command="crowdstudy export",
                 responses=summary["responses"],
+                comparisons=summary["comparisons"] if has_2afc else None,
                 participants=summary["participants"],
                 excluded=summary["excluded"],
                 exclusion_rules=rules.source,

@@ -64,7 +64,7 @@ class GroupCommitWriter:
             for item in batch:
                 self._run_one(item)
             return
-        for (_job, fut), res in zip(batch, results):
+        for (_job, fut), res in zip(batch, results, strict=True):
             fut.set_result(res)
 
     def _loop(self) -> None:

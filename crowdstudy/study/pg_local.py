@@ -50,12 +50,13 @@ class LocalPostgres:
     """
 
     def __init__(self, *, fsync: bool = False, max_connections: int = 200, database: str = "study"):
-        self.bin = find_pg_bin()
-        if self.bin is None:
+        found = find_pg_bin()
+        if found is None:
             raise MissingDependencyError(
                 "PostgreSQL server binaries (initdb, pg_ctl) not found: install Debian's "
                 "`postgresql` package or set CROWDSTUDY_PG_BIN"
             )
+        self.bin = found
         self.fsync, self.max_connections, self.database = fsync, int(max_connections), database
         self.port = free_port()
         self.dir: Path | None = None

@@ -7,9 +7,12 @@ serve --online FILE`` and ``crowdstudy export --online FILE`` for another), tabl
   in; a smaller one sees a message before the consent page and, if it cannot enlarge the
   window, is screened out (its platform code: ``codes.screened_out``).
 * ``fullscreen``: request fullscreen when the trials start; exits are counted per trial.
-* ``attention_checks``: how many trials carry an instructed-response statement ("please
-  choose (k) ..."), placed on trials drawn at random per participant (keyed with the study's
-  secret, so a participant cannot predict them), the asked-for point drawn at random too.
+* ``attention_checks``: how many trials carry an instructed-response statement, placed on
+  trials drawn at random per participant (keyed with the study's secret, so a participant
+  cannot predict them), what it asks drawn at random too: on a Likert trial "please choose
+  (k) ..." (a point), on a slider trial "move this slider all the way to the left / right
+  end" (passed within 10 points of that end), on a 2afc trial "please choose the left / right
+  video here" (an extra question beside the comparison).
 * ``codes``: the crowdsourcing platform's completion codes for ``completed``,
   ``screened_out`` and ``withdrawn`` participants (empty: none shown).
 
@@ -18,9 +21,11 @@ off). A participant is flagged when:
 
 * ``failed_attention_check``: more than ``max_failed_checks`` checks answered wrongly;
 * ``too_fast``: the median answer time is below ``min_median_rt_ms`` milliseconds;
-* ``straight_lining``: at least ``max_straightline_fraction`` of their trials have the same
-  raw answer on all six statements (three of which are reversed: a straight line there is
-  contradictory);
+* ``straight_lining``: at least ``max_straightline_fraction`` of their Likert and slider
+  trials have the same raw answer on every statement (some of which are reversed: a straight
+  line there is contradictory; a slider counts when every handle is at the same value);
+* ``same_side``: at least ``max_same_side_fraction`` of their 2afc answers chose the same
+  side (1.0: always the left, or always the right, video);
 * ``tab_switching``: the page was hidden on more than ``max_hidden_trials`` trials;
 * ``withdrawn`` / ``screened_out``: always (they have no analysable answers).
 
@@ -53,7 +58,7 @@ __all__ = [
     "RULES",
 ]
 
-RULES = ("failed_attention_check", "too_fast", "straight_lining", "tab_switching")
+RULES = ("failed_attention_check", "too_fast", "straight_lining", "same_side", "tab_switching")
 PARTICIPANT_COLUMNS = (
     "participant",
     "status",
@@ -71,6 +76,8 @@ PARTICIPANT_COLUMNS = (
     "trials",
     "median_rt_ms",
     "straightline_trials",
+    "comparison_trials",
+    "same_side_fraction",
     "checks_failed",
     "checks_total",
     "hidden_trials",
@@ -91,6 +98,7 @@ class OnlineConfig:
     max_failed_checks: int | None = 0
     min_median_rt_ms: float | None = None
     max_straightline_fraction: float | None = None
+    max_same_side_fraction: float | None = None
     max_hidden_trials: int | None = None
     source: str = "<defaults>"
 
@@ -152,7 +160,13 @@ def online_config(top: dict, source: str) -> OnlineConfig:
     ex = top.get("exclude", {})
     if not isinstance(ex, dict):
         raise InvalidInputError(f"{where}: exclude must be a table")
-    ex_known = {"max_failed_checks", "min_median_rt_ms", "max_straightline_fraction", "max_hidden_trials"}
+    ex_known = {
+        "max_failed_checks",
+        "min_median_rt_ms",
+        "max_straightline_fraction",
+        "max_same_side_fraction",
+        "max_hidden_trials",
+    }
     for key in ex:
         if key not in ex_known:
             raise InvalidInputError(f"{where}.exclude: unknown key {key!r}")
@@ -166,22 +180,91 @@ def online_config(top: dict, source: str) -> OnlineConfig:
         max_failed_checks=_num(ex, "max_failed_checks", w, integer=True, lo=0),
         min_median_rt_ms=_num(ex, "min_median_rt_ms", w, integer=False, lo=0) or None,
         max_straightline_fraction=_num(ex, "max_straightline_fraction", w, integer=False, lo=0, hi=1) or None,
+        max_same_side_fraction=_num(ex, "max_same_side_fraction", w, integer=False, lo=0, hi=1) or None,
         max_hidden_trials=_num(ex, "max_hidden_trials", w, integer=True, lo=0),
         source=source,
     )
 
 
-def draw_checks(secret: str, participant_id: str, n_trials: int, n_checks: int, points: int) -> dict[int, int]:
-    """{trial_index: asked-for scale point} of a participant's attention checks: ``n_checks``
-    distinct trials (never the first: it teaches the page) and points 1..points, drawn from an HMAC of the study's secret (so the
-    same participant always gets the same checks, and nobody without the secret can predict
-    them)."""
+def draw_checks(
+    secret: str,
+    participant_id: str,
+    n_trials: int,
+    n_checks: int,
+    points: int,
+    tasks: Sequence[str] | None = None,
+) -> dict[int, int]:
+    """{trial_index: what the check asks for} of a participant's attention checks:
+    ``n_checks`` distinct trials (never the first: it teaches the page), drawn from an HMAC of
+    the study's secret (so the same participant always gets the same checks, and nobody
+    without the secret can predict them). What is asked depends on the trial's task
+    (``tasks[trial_index]``, default likert): a Likert point 1..points, a slider end (0 the
+    left, 100 the right), a 2afc side (1 the left video, 2 the right)."""
     digest = hmac.new(
         secret.encode("utf-8"), f"crowdstudy-checks\x00{participant_id}".encode(), hashlib.sha256
     ).digest()
     rng = random.Random(int.from_bytes(digest[:16], "big"))
     chosen = sorted(rng.sample(range(1, n_trials), min(int(n_checks), max(n_trials - 1, 0))))
-    return {k: rng.randint(1, int(points)) for k in chosen}
+    out = {}
+    for k in chosen:
+        task = tasks[k] if tasks is not None else "likert"
+        out[k] = rng.choice((0, 100)) if task == "slider" else rng.randint(1, 2 if task == "2afc" else int(points))
+    return out
+
+
+def check_passed(task: str, asked: int, answer: int | None) -> bool:
+    """Whether an attention check's answer is what it asked for: the same Likert point or 2afc
+    side; a slider within 10 points of the asked end."""
+    if answer is None:
+        return False
+    if task == "slider":
+        return abs(int(answer) - int(asked)) <= 10
+    return int(answer) == int(asked)
+
+
+def _summary(rows: Sequence[Mapping], item_ids: Sequence[str]) -> dict:
+    """One participant's quality measures over their answer rows (any task)."""
+    ratings = [r for r in rows if (r.get("task") or "likert") != "2afc"]
+    choices = [r["choice"] for r in rows if (r.get("task") or "likert") == "2afc"]
+    rts = [float(r["rt_ms"]) for r in rows]
+    checks = [r for r in rows if r.get("check_value") is not None]
+    sides = max(choices.count("left"), choices.count("right")) / len(choices) if choices else None
+    return {
+        "median_rt_ms": statistics.median(rts) if rts else None,
+        "straightline_trials": sum(1 for r in ratings if len({r.get(q) for q in item_ids}) == 1),
+        "rating_trials": len(ratings),
+        "comparison_trials": len(choices),
+        "same_side_fraction": sides,
+        "checks_failed": sum(
+            1
+            for r in checks
+            if not check_passed(r.get("task") or "likert", int(r["check_value"]), r.get("check_answer"))
+        ),
+        "checks_total": len(checks),
+        "hidden_trials": sum(1 for r in rows if (r.get("hidden_count") or 0) > 0),
+        "fullscreen_exits": sum(int(r.get("fullscreen_exits") or 0) for r in rows),
+    }
+
+
+def _reasons(status: str, m: Mapping, config: OnlineConfig) -> list[str]:
+    """The exclusion rules that flag a participant with ``status`` and quality measures ``m``."""
+    reasons = [status] if status in ("withdrawn", "screened_out") else []
+    if config.max_failed_checks is not None and m["checks_total"] and m["checks_failed"] > config.max_failed_checks:
+        reasons.append("failed_attention_check")
+    if config.min_median_rt_ms and m["median_rt_ms"] is not None and m["median_rt_ms"] < config.min_median_rt_ms:
+        reasons.append("too_fast")
+    if (
+        config.max_straightline_fraction
+        and m["rating_trials"]
+        and m["straightline_trials"] / m["rating_trials"] >= config.max_straightline_fraction
+    ):
+        reasons.append("straight_lining")
+    if config.max_same_side_fraction and m["same_side_fraction"] is not None:
+        if m["same_side_fraction"] >= config.max_same_side_fraction:
+            reasons.append("same_side")
+    if config.max_hidden_trials is not None and m["hidden_trials"] > config.max_hidden_trials:
+        reasons.append("tab_switching")
+    return reasons
 
 
 def flag_participants(
@@ -190,45 +273,23 @@ def flag_participants(
     """participants.csv rows: each of ``people`` (rows of roster.list_participants) with the
     per-participant quality summary and the exclusion flags of ``config``'s rules.
 
-    responses: rows of StudyStore.response_rows (with QUALITY_FIELDS and check_value).
+    responses: rows of StudyStore.response_rows (every task, with QUALITY_FIELDS and
+    check_value); item_ids: the study's items (a straight line is one value on all of them).
     """
     by_pid: dict[str, list[Mapping]] = {}
     for r in responses:
         by_pid.setdefault(r["participant_id"], []).append(r)
     out = []
     for person in people:
-        rows = by_pid.get(person["participant"], [])
-        rts = [float(r["rt_ms"]) for r in rows]
-        median_rt = statistics.median(rts) if rts else None
-        straight = sum(1 for r in rows if len({int(r[q]) for q in item_ids}) == 1)
-        checks = [r for r in rows if r.get("check_value") is not None]
-        failed = sum(
-            1 for r in checks if r.get("check_answer") is None or int(r["check_answer"]) != int(r["check_value"])
-        )
-        hidden = sum(1 for r in rows if (r.get("hidden_count") or 0) > 0)
-        exits = sum(int(r.get("fullscreen_exits") or 0) for r in rows)
-        reasons = []
-        if person["status"] in ("withdrawn", "screened_out"):
-            reasons.append(person["status"])
-        if config.max_failed_checks is not None and checks and failed > config.max_failed_checks:
-            reasons.append("failed_attention_check")
-        if config.min_median_rt_ms and median_rt is not None and median_rt < config.min_median_rt_ms:
-            reasons.append("too_fast")
-        if config.max_straightline_fraction and rows and straight / len(rows) >= config.max_straightline_fraction:
-            reasons.append("straight_lining")
-        if config.max_hidden_trials is not None and hidden > config.max_hidden_trials:
-            reasons.append("tab_switching")
+        m = _summary(by_pid.get(person["participant"], []), item_ids)
+        reasons = _reasons(person["status"], m, config)
+        m.pop("rating_trials")
         out.append(
             {
                 **{k: person.get(k) for k in PARTICIPANT_COLUMNS if k in person},
                 "excluded": int(bool(reasons)),
                 "exclusion_reason": ";".join(reasons),
-                "median_rt_ms": median_rt,
-                "straightline_trials": straight,
-                "checks_failed": failed,
-                "checks_total": len(checks),
-                "hidden_trials": hidden,
-                "fullscreen_exits": exits,
+                **m,
             }
         )
     return out

@@ -12,8 +12,9 @@ the cookie of a login on ``/admin``; an action that changes data needs the heade
 ``GET /admin/metrics.json``
     this process's answer latency percentiles
 ``GET /admin/study.json``
-    the scoring metadata (reversed items, composites)
-``GET /admin/export/responses.csv``, ``/admin/export/demographics.csv``, ``/admin/export/participants.csv``
+    the scoring metadata (reversed items, composites, methods, each stage's task and pairs)
+``GET /admin/export/responses.csv``, ``/admin/export/comparisons.csv`` (2afc trials),
+``/admin/export/demographics.csv``, ``/admin/export/participants.csv``
     the analysis input
 ``GET /admin/participants/<id>/schedule``
     the participant's trials with token, stimulus id and conditions
@@ -34,7 +35,14 @@ from typing import TYPE_CHECKING
 from crowdstudy.study import admin as admin_auth
 from crowdstudy.study.bodies import parse_participant_id
 from crowdstudy.study.dashboard import dashboard_html
-from crowdstudy.study.export import DEMOGRAPHIC_COLUMNS, RESPONSE_EXPORT_COLUMNS, participants_rows, rows_to_csv
+from crowdstudy.study.export import (
+    COMPARISON_EXPORT_COLUMNS,
+    DEMOGRAPHIC_COLUMNS,
+    participants_rows,
+    response_export_columns,
+    rows_to_csv,
+    split_rows,
+)
 from crowdstudy.study.quality import PARTICIPANT_COLUMNS
 from crowdstudy.study.roster import list_participants, withdraw_participant
 from crowdstudy.study.session import StudySession
@@ -55,6 +63,7 @@ __all__ = [
     "metrics",
     "scoring",
     "export_responses",
+    "export_comparisons",
     "export_demographics",
     "export_participants",
     "schedule",
@@ -139,7 +148,11 @@ async def scoring(request: Request) -> Response:
 
 
 def _responses_csv(study: StudySession) -> str:
-    return rows_to_csv(study.store.response_rows(), RESPONSE_EXPORT_COLUMNS)
+    return rows_to_csv(split_rows(study.store.response_rows())[0], response_export_columns(study.item_ids))
+
+
+def _comparisons_csv(study: StudySession) -> str:
+    return rows_to_csv(split_rows(study.store.response_rows())[1], COMPARISON_EXPORT_COLUMNS)
 
 
 def _demographics_csv(study: StudySession) -> str:
@@ -152,6 +165,10 @@ def _participants_csv(study: StudySession) -> str:
 
 async def export_responses(request: Request) -> Response:
     return csv_response(await in_thread(_responses_csv, admin_session(request)), "responses.csv")
+
+
+async def export_comparisons(request: Request) -> Response:
+    return csv_response(await in_thread(_comparisons_csv, admin_session(request)), "comparisons.csv")
 
 
 async def export_demographics(request: Request) -> Response:
@@ -202,6 +219,7 @@ ROUTES: tuple[RouteSpec, ...] = (
     RouteSpec(_ONE + "/withdraw", withdraw, ("POST",)),
     RouteSpec(_ONE + "/schedule", schedule),
     RouteSpec("/admin/export/responses.csv", export_responses),
+    RouteSpec("/admin/export/comparisons.csv", export_comparisons),
     RouteSpec("/admin/export/demographics.csv", export_demographics),
     RouteSpec("/admin/export/participants.csv", export_participants),
 )

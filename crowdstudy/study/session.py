@@ -9,10 +9,15 @@ are pure functions of the database's immutable data: a participant's schedule wi
 tokens and video URLs (written once at registration), the media names and the study's
 secret.
 
-What the browser receives names a trial by ``trial_index``, ``stage``, an opaque
-per-participant ``token`` (:mod:`crowdstudy.study.blinding`) and the video's opaque
-per-deployment URL (:mod:`crowdstudy.study.media`); never a stimulus id, a condition, an item's
-reversal or the composites' pairing (that scoring metadata is admin-only).
+What the browser receives names a trial by ``trial_index``, ``stage``, its ``task``, an
+opaque per-participant ``token`` (:mod:`crowdstudy.study.blinding`) and the opaque
+per-deployment URL of its video (:mod:`crowdstudy.study.media`; a 2afc trial: its left and
+right videos); never a stimulus id, a method, a condition, an item's reversal or the
+composites' pairing (that scoring metadata is admin-only).
+
+Tasks: each stage of the design has one (``likert``, ``slider`` or ``2afc``); a trial's answer
+is checked by its task (:func:`crowdstudy.study.bodies.parse_task_answer`), and the trials of a
+task need that task's practice answer first (``POST .../practice`` with ``"task"``).
 """
 
 from __future__ import annotations
@@ -21,14 +26,13 @@ import hashlib
 import hmac
 import secrets
 
-from crowdstudy.errors import InvalidInputError
 from crowdstudy.study import bodies
 from crowdstudy.study.blinding import token_table
 from crowdstudy.study.media import PRACTICE_KEY, media_table
 from crowdstudy.study.quality import draw_checks
 from crowdstudy.study.roster import status_of, withdraw_participant
 from crowdstudy.study.schedule import make_schedule
-from crowdstudy.study.storage import ITEM_IDS
+from crowdstudy.study.storage import answer_items
 from crowdstudy.study.webio import ApiError
 
 __all__ = ["StudySession", "hash_secret"]
@@ -49,17 +53,18 @@ class StudySession:
         self.online = config.online
         self.points = int(config.design.likert_points)
         self.labels = list(config.design.likert_labels)
-        self.item_ids = tuple(it.id for it in config.design.items)
-        if self.item_ids != ITEM_IDS:
-            raise InvalidInputError(
-                f"design {config.design.source}: the server stores items {', '.join(ITEM_IDS)}, "
-                f"the design lists {', '.join(self.item_ids)}"
-            )
-        self.by_stage = config.stimuli.by_stage()
-        self.n_trials = sum(map(len, self.by_stage.values()))
-        self.seed = int(config.design.seed)
+        design = config.design
+        self.item_ids = tuple(it.id for it in design.items)
+        self.tasks = design.tasks()
+        self.stage_task = {st.number: st.task for st in design.stages}
+        self.by_stage, self.comparisons = _stage_units(design, config.stimuli.rows)
+        self.n_trials = sum(map(len, self.by_stage.values())) + sum(
+            len(cells) for pairs in self.comparisons.values() for cells in pairs.values()
+        )
+        self.seed = int(design.seed)
         self._secret = config.store.blinding_secret()
         self._schedules: dict[str, list[dict]] = {}
+        self.store.sync_items(self.item_ids, self.tasks)
         self.store.sync_stimuli(config.stimuli.rows.values())
         self.media = media_table(self._secret, config.stimuli.files, config.stimuli.practice_file)
         self.media_files = {name: path for name, path in self.media.values()}
@@ -76,10 +81,15 @@ class StudySession:
                     "number": st.number,
                     "scenario": st.scenario,
                     "description": st.description,
-                    "n_trials": len(self.by_stage.get(st.number, [])),
+                    "task": st.task,
+                    "n_trials": len(self.by_stage.get(st.number, []))
+                    + sum(len(c) for c in self.comparisons.get(st.number, {}).values()),
                 }
-                for st in config.design.stages
+                for st in design.stages
             ],
+            "tasks": list(self.tasks),
+            "comparison": design.comparison.text if design.comparison is not None else None,
+            "slider": None if design.slider is None else {"left": design.slider.left, "right": design.slider.right},
             "genders": list(bodies.GENDERS),
             "age_range": list(bodies.AGE_RANGE),
             "screen": {"min_width": self.online.min_width, "min_height": self.online.min_height},
@@ -109,10 +119,12 @@ class StudySession:
         sched = self._schedules.get(pid)
         if sched is None:
             sched = self.store.schedule(pid)
-            tokens = token_table(self._secret, pid, [row["stimulus_id"] for row in sched])
+            tokens = token_table(self._secret, pid, [_trial_key(row) for row in sched])
             for row in sched:
-                row["token"] = tokens[row["stimulus_id"]]
+                row["token"] = tokens[_trial_key(row)]
                 row["video_url"] = self.video_url[row["stimulus_id"]]
+                if row["stimulus_right"] is not None:
+                    row["video_url_right"] = self.video_url[row["stimulus_right"]]
             if sched:
                 self._schedules[pid] = sched
         return sched
@@ -127,17 +139,35 @@ class StudySession:
         if v is None:
             return None
         # where the statement goes among the items: from the token (opaque, fixed per trial)
+        position = int(trial["token"][:4], 16) % (len(self.item_ids) + 1)
+        if trial["task"] == "2afc":
+            side = ("left", "right")[v - 1]
+            return {
+                "text": f"To show that you read the instructions, please choose the {side} video here.",
+                "position": 0,
+            }
+        if trial["task"] == "slider":
+            sl = self.cfg.design.slider
+            end, label = ("left", sl.left) if v == 0 else ("right", sl.right)
+            return {
+                "text": "To show that you read each statement, please move this slider all the way to the "
+                f'{end} end ("{label}").',
+                "position": position,
+            }
         return {
             "text": f'To show that you read each statement, please choose ({v}) "{self.labels[v - 1]}" here.',
-            "position": int(trial["token"][:4], 16) % (len(self.item_ids) + 1),
+            "position": position,
         }
 
     def public_trials(self, pid: str) -> list[dict]:
-        """The participant's trials as the browser sees them: trial_index, stage, token,
-        video_url and, on attention-check trials, check {text, position}."""
+        """The participant's trials as the browser sees them: trial_index, stage, task, token,
+        video_url (a 2afc trial: also video_url_right) and, on attention-check trials, check
+        {text, position}."""
         out = []
         for t in self.schedule(pid):
-            row = {k: t[k] for k in ("trial_index", "stage", "token", "video_url")}
+            row = {k: t[k] for k in ("trial_index", "stage", "task", "token", "video_url")}
+            if "video_url_right" in t:
+                row["video_url_right"] = t["video_url_right"]
             check = self._check_of(t)
             if check is not None:
                 row["check"] = check
@@ -157,6 +187,9 @@ class StudySession:
             "consented": row["consented_at"] is not None,
             "demographics": row["demographics_at"] is not None,
             "practice_done": row["practice_at"] is not None,
+            "practiced": sorted(self.store.practiced_tasks(pid))
+            if len(self.tasks) > 1
+            else (list(self.tasks) if row["practice_at"] is not None else []),
             "completed": row["completed_at"] is not None,
             "screened_out": row["screened_out_at"] is not None,
             "n_trials": len(sched),
@@ -180,10 +213,18 @@ class StudySession:
             row = self.authenticate(pid, secret)
             return 200, {"participant_id": pid, "secret": secret, "resumed": True, "state": self.state(pid, row)}
         secret = secrets.token_urlsafe(24)
-        sched = make_schedule(self.by_stage, pid, self.seed, secret=self._secret)
-        checks = draw_checks(self._secret, pid, len(sched), self.online.attention_checks, self.points)
+        sched = make_schedule(self.by_stage, pid, self.seed, secret=self._secret, comparisons=self.comparisons)
+        tasks = [self.stage_task[t.stage] for t in sched]
+        checks = draw_checks(self._secret, pid, len(sched), self.online.attention_checks, self.points, tasks)
         if not self.store.register(
-            pid, hash_secret(secret), sched, seed=self.seed, user_agent=user_agent, platform=platform, checks=checks
+            pid,
+            hash_secret(secret),
+            sched,
+            seed=self.seed,
+            user_agent=user_agent,
+            platform=platform,
+            checks=checks,
+            tasks=self.stage_task,
         ):
             raise ApiError(
                 409,
@@ -225,10 +266,11 @@ class StudySession:
     def practice(self, pid: str, row: dict, body: dict) -> tuple[int, dict]:
         if row["demographics_at"] is None:
             raise ApiError(409, "give consent and the demographics before the practice trial")
-        answers = bodies.parse_likert(body, self.item_ids, self.points)
+        task = bodies.parse_practice_task(body, self.tasks)
+        answers, choice = bodies.parse_task_answer(body, task, self.item_ids, self.points)
         rt, shown, quality = bodies.parse_timing(body)
-        status, _ = self.store.record_practice(pid, answers, rt, shown, quality)
-        return (201 if status == "created" else 200), {"stored": status == "created", "practice": True}
+        status, _ = self.store.record_practice(pid, answers, rt, shown, quality, task=task, choice=choice)
+        return (201 if status == "created" else 200), {"stored": status == "created", "practice": True, "task": task}
 
     def _trial(self, pid: str, body: dict) -> tuple[int, dict]:
         """(trial_index, scheduled trial) an answer names by ``trial_index`` and ``token`` (422
@@ -248,11 +290,24 @@ class StudySession:
         if row["practice_at"] is None or row["demographics_at"] is None:
             raise ApiError(409, "complete consent, demographics and the practice trial first")
         ti, trial = self._trial(pid, body)
-        answers = bodies.parse_likert(body, self.item_ids, self.points)
+        task = trial["task"]
+        if len(self.tasks) > 1 and task not in self.store.practiced_tasks(pid):
+            raise ApiError(409, f"answer the practice trial of the {task} task first (POST .../practice with its task)")
+        answers, choice = bodies.parse_task_answer(body, task, self.item_ids, self.points)
         rt, shown, quality = bodies.parse_timing(body)
-        quality["check_answer"] = bodies.parse_check(body, ti, trial["check_value"] is not None, self.points)
+        quality["check_answer"] = bodies.parse_check(body, ti, trial["check_value"] is not None, self.points, task)
         status, stored = self.store.record_answer(
-            pid, ti, trial["stimulus_id"], trial["stage"], answers, rt, shown, quality=quality
+            pid,
+            ti,
+            trial["stimulus_id"],
+            trial["stage"],
+            answers,
+            rt,
+            shown,
+            quality=quality,
+            task=task,
+            choice=choice,
+            stimulus_right=trial["stimulus_right"],
         )
         if status == "out_of_order":
             raise ApiError(409, f"trial {stored['expected']} is not answered yet; answers arrive in trial order")
@@ -265,7 +320,7 @@ class StudySession:
         return (201 if status == "created" else 200), {
             "stored": True,
             "trial_index": ti,
-            "answer": _public_answer(stored, trial["token"]),
+            "answer": _public_answer(stored, trial["token"], self.item_ids),
         }
 
     def own_responses(self, pid: str, row: dict) -> dict:
@@ -274,7 +329,11 @@ class StudySession:
         return {
             "participant_id": pid,
             "responses": [
-                {"participant_id": pid, "stage": r["stage"], **_public_answer(r, tokens[r["trial_index"]])}
+                {
+                    "participant_id": pid,
+                    "stage": r["stage"],
+                    **_public_answer(r, tokens[r["trial_index"]], self.item_ids),
+                }
                 for r in self.store.response_rows(pid)
             ],
         }
@@ -320,6 +379,16 @@ class StudySession:
             "labels": self.labels,
             "items": [{"id": it.id, "text": it.text, "reverse": it.reverse} for it in d.items],
             "composites": {k: list(v) for k, v in d.composites.items()},
+            "methods": list(d.methods),
+            "stages": [
+                {
+                    "number": st.number,
+                    "task": st.task,
+                    "methods": list(st.methods),
+                    "pairs": [list(p) for p in st.pairs],
+                }
+                for st in d.stages
+            ],
         }
 
     def resume_link(self, pid: str) -> dict:
@@ -331,10 +400,40 @@ class StudySession:
         return {"participant_id": pid, "url": f"/?participant={pid}&resume={secret}"}
 
 
-def _public_answer(row: dict, token: str) -> dict:
+def _trial_key(row: dict) -> str:
+    """The key of a scheduled trial's token: its stimulus id, a 2afc trial's ``LEFT~RIGHT``."""
+    right = row.get("stimulus_right")
+    return row["stimulus_id"] if right is None else f"{row['stimulus_id']}~{right}"
+
+
+def _stage_units(design, rows: dict) -> tuple[dict[int, list[str]], dict[int, dict[str, list[tuple[str, str]]]]]:
+    """The trials' material per stage: {stage: stimulus ids} of the Likert and slider stages,
+    {stage: {"A~B": [(video of A, video of B), one per cell]}} of the 2afc stages
+    (:func:`crowdstudy.study.schedule.make_schedule`'s two mappings)."""
+    cell = {(r["stage"], r["density_level"], r["viewpoint"], r["method"]): sid for sid, r in rows.items()}
+    by_stage: dict[int, list[str]] = {}
+    comparisons: dict[int, dict[str, list[tuple[str, str]]]] = {}
+    for st in design.stages:
+        if st.task != "2afc":
+            by_stage[st.number] = [sid for sid, r in rows.items() if r["stage"] == st.number]
+            continue
+        comparisons[st.number] = {
+            f"{a}~{b}": [
+                (cell[(st.number, lv, vp, a)], cell[(st.number, lv, vp, b)])
+                for lv in design.densities
+                for vp in st.viewpoints
+            ]
+            for a, b in st.pairs
+        }
+    return by_stage, comparisons
+
+
+def _public_answer(row: dict, token: str, item_ids: tuple[str, ...]) -> dict:
     """A stored answer as its participant may see it: the trial's token, never the stimulus id."""
-    return {
-        "trial_index": row["trial_index"],
-        "token": token,
-        **{k: row[k] for k in (*ITEM_IDS, "rt_ms", "shown_at", "answered_at")},
-    }
+    items = answer_items(row)
+    out = {"trial_index": row["trial_index"], "token": token}
+    if row.get("choice") is not None:
+        out["choice"] = row["choice"]
+    else:
+        out.update({k: items.get(k) for k in item_ids})
+    return {**out, **{k: row[k] for k in ("rt_ms", "shown_at", "answered_at")}}

@@ -69,6 +69,27 @@ def _inside(root: Path, rel, where: str) -> Path:
     return path
 
 
+def _missing_message(manifest_path: Path, design: StudyDesign, missing: list, by_id: dict) -> str:
+    """One line naming what the stimulus folder lacks: a method of the design (and the stages,
+    with their tasks, that show it), else the first missing videos."""
+    have = {row.get("method") for row in by_id.values()}
+    lacking = [m for m in design.methods if m not in have and any(m in st.methods for st in design.stages)]
+    if lacking:
+        m = lacking[0]
+        stages = [st for st in design.stages if m in st.methods]
+        return (
+            f"{manifest_path}: the folder has no video of method {m!r}, which the design {design.source} shows "
+            f"in stages {', '.join(str(st.number) for st in stages)} "
+            f"({', '.join(sorted({st.task for st in stages}))}); render it with `crowdstudy stimuli`"
+        )
+    by_stage = {int(sid.split("-")[0][1:]) for sid in missing if sid[1:].split("-")[0].isdigit()}
+    tasks = sorted({st.task for st in design.stages if st.number in by_stage})
+    return (
+        f"{manifest_path}: {len(missing)} stimuli of the design {design.source} have no row "
+        f"(first: {', '.join(missing[:3])}; {', '.join(tasks) or 'likert'} videos)"
+    )
+
+
 def load_stimulus_set(stimuli_dir: str | Path, design: StudyDesign, *, practice: str | None = None) -> StimulusSet:
     """Read ``stimuli_dir/manifest.json`` and match it to ``design.stimuli()``."""
     root = Path(stimuli_dir).resolve()
@@ -119,10 +140,7 @@ def load_stimulus_set(stimuli_dir: str | Path, design: StudyDesign, *, practice:
             "characters": int(stim.n_characters),
         }
     if missing:
-        raise InvalidInputError(
-            f"{manifest_path}: {len(missing)} stimuli of the design {design.source} have no row "
-            f"(first: {', '.join(missing[:3])})"
-        )
+        raise InvalidInputError(_missing_message(manifest_path, design, missing, by_id))
     practice_note = ""
     if practice is not None:
         practice_file = _inside(root, practice, "--practice")

@@ -2,7 +2,7 @@
 
 SQLite (the default, one file) runs in WAL mode with ``synchronous=FULL``, so an answer is
 on disk when :meth:`StudyStore.record_answer` returns. SQLite allows one writer at a time
-and each commit costs an fsync (about 10 ms on a virtual disk), so all writes go through
+and each commit costs an fsync (slow on a virtual disk), so all writes go through
 one writer thread that commits the jobs arriving together in one transaction ("group
 commit"): each caller still returns only after the commit holding its write. Other
 databases (PostgreSQL for multi-site studies) run ordinary concurrent transactions. Every
@@ -15,14 +15,20 @@ Tables
 - ``participants``: one row per participant: secret hash, consent / demographics /
   practice / completion / screen-out / withdrawal timestamps, age, gender, completion code,
   the crowdsourcing platform's ids (Prolific ``PROLIFIC_PID``, ``STUDY_ID``, ``SESSION_ID``).
-- ``schedule``: the participant's trial order, key (participant_id, trial_index);
-  ``check_value`` is set on the trials that carry an instructed-response attention check
-  (the scale point the check asks for).
-- ``responses``: one row per answer, UNIQUE (participant_id, trial_index); the practice
-  answer is stored with ``practice = true`` and ``trial_index = -1``. Answers store the
-  real stimulus id (the participant only ever sees its token, :mod:`crowdstudy.study.blinding`)
-  and the trial's data-quality record (video plays, time to the first complete play, tab
-  switches and hidden time, fullscreen exits, the attention check's answer).
+- ``schedule``: the participant's trial order, key (participant_id, trial_index), with the
+  trial's ``task`` (``likert``, ``slider`` or ``2afc``; NULL in databases of earlier
+  versions: ``likert``) and, for a 2afc trial, its right video ``stimulus_right``
+  (``stimulus_id`` is the left one); ``check_value`` is set on the trials that carry an
+  instructed-response attention check (what the check asks for: a Likert point, a slider
+  end 0 or 100, a 2afc side 1 = left or 2 = right).
+- ``responses``: one row per answer of any task, UNIQUE (participant_id, trial_index); the
+  practice answers are stored with ``practice = true`` and ``trial_index`` -1 (Likert), -2
+  (slider) or -3 (2afc) (:data:`PRACTICE_INDEX`). Answers store the real stimulus id(s) (the
+  participant only ever sees the trial's token, :mod:`crowdstudy.study.blinding`), the
+  ``task``, the ratings as JSON ``answers_json`` ({item id: value}; the paper's items are
+  also kept in the columns ``Q1`` .. ``Q6``), a 2afc trial's ``choice`` (``left`` /
+  ``right``) and the trial's data-quality record (video plays, time to the first complete
+  play, tab switches and hidden time, fullscreen exits, the attention check's answer).
 - ``answer_conflicts``: answers refused because their trial already had a different one
   (a second tab): kept for the record, never in the analysis.
 - ``audit_log``: one line per administrative action (withdrawal), with no answer data.
@@ -44,10 +50,21 @@ from collections.abc import Iterable, Mapping, Sequence
 from crowdstudy.errors import InvalidInputError
 from crowdstudy.study.group_commit import GroupCommitWriter
 
-__all__ = ["StudyStore", "ITEM_IDS", "PRACTICE_TRIAL_INDEX", "QUALITY_FIELDS", "utc_now"]
+__all__ = [
+    "StudyStore",
+    "answer_items",
+    "ITEM_IDS",
+    "PRACTICE_TRIAL_INDEX",
+    "PRACTICE_INDEX",
+    "QUALITY_FIELDS",
+    "utc_now",
+]
 
+#: The paper's items, which also have columns of their own in ``responses``.
 ITEM_IDS = ("Q1", "Q2", "Q3", "Q4", "Q5", "Q6")
 PRACTICE_TRIAL_INDEX = -1
+#: The ``trial_index`` of each task's practice answer.
+PRACTICE_INDEX = {"likert": -1, "slider": -2, "2afc": -3}
 #: Per-answer data-quality fields (nullable): complete plays of the video before the answer;
 #: ms from the trial's display to the first complete play; times the page was hidden (tab
 #: switch, minimised window) during the trial and ms hidden; exits from fullscreen during the
@@ -59,6 +76,51 @@ QUALITY_FIELDS = ("video_plays", "first_play_ms", "hidden_count", "hidden_ms", "
 def utc_now() -> str:
     """Now as an ISO 8601 UTC string with milliseconds (``2026-01-08T09:00:00.123+00:00``)."""
     return _dt.datetime.now(_dt.UTC).isoformat(timespec="milliseconds")
+
+
+def _answer_tables(metadata):
+    """The ``responses`` and ``answer_conflicts`` tables (see the module docstring)."""
+    import sqlalchemy as sa
+
+    responses = sa.Table(
+        "responses",
+        metadata,
+        sa.Column("id", sa.Integer, primary_key=True, autoincrement=True),
+        sa.Column("participant_id", sa.String(64), sa.ForeignKey("participants.participant_id"), nullable=False),
+        sa.Column("trial_index", sa.Integer, nullable=False),
+        sa.Column("practice", sa.Boolean, nullable=False, default=False),
+        sa.Column("stimulus_id", sa.String(64), nullable=False),
+        sa.Column("stage", sa.Integer, nullable=False),
+        *[sa.Column(q, sa.SmallInteger, nullable=True) for q in ITEM_IDS],
+        sa.Column("rt_ms", sa.Float, nullable=False),
+        sa.Column("shown_at", sa.String(40), nullable=False),
+        sa.Column("answered_at", sa.String(40), nullable=False),
+        sa.Column("video_plays", sa.Integer, nullable=True),
+        sa.Column("first_play_ms", sa.Float, nullable=True),
+        sa.Column("hidden_count", sa.Integer, nullable=True),
+        sa.Column("hidden_ms", sa.Float, nullable=True),
+        sa.Column("fullscreen_exits", sa.Integer, nullable=True),
+        sa.Column("check_answer", sa.SmallInteger, nullable=True),
+        sa.Column("task", sa.String(8), nullable=True),
+        sa.Column("stimulus_right", sa.String(64), nullable=True),
+        sa.Column("choice", sa.String(8), nullable=True),
+        sa.Column("answers_json", sa.Text, nullable=True),
+        sa.UniqueConstraint("participant_id", "trial_index", name="uq_response_participant_trial"),
+    )
+    conflicts = sa.Table(
+        "answer_conflicts",
+        metadata,
+        sa.Column("id", sa.Integer, primary_key=True, autoincrement=True),
+        sa.Column("participant_id", sa.String(64), nullable=False),
+        sa.Column("trial_index", sa.Integer, nullable=False),
+        sa.Column("stimulus_id", sa.String(64), nullable=False),
+        *[sa.Column(q, sa.SmallInteger, nullable=True) for q in ITEM_IDS],
+        sa.Column("rt_ms", sa.Float, nullable=False),
+        sa.Column("received_at", sa.String(40), nullable=False),
+        sa.Column("choice", sa.String(8), nullable=True),
+        sa.Column("answers_json", sa.Text, nullable=True),
+    )
+    return responses, conflicts
 
 
 def _tables(metadata):
@@ -106,39 +168,10 @@ def _tables(metadata):
         sa.Column("stage", sa.Integer, nullable=False),
         sa.Column("stimulus_id", sa.String(64), sa.ForeignKey("stimuli.stimulus_id"), nullable=False),
         sa.Column("check_value", sa.SmallInteger, nullable=True),
+        sa.Column("task", sa.String(8), nullable=True),
+        sa.Column("stimulus_right", sa.String(64), nullable=True),
     )
-    responses = sa.Table(
-        "responses",
-        metadata,
-        sa.Column("id", sa.Integer, primary_key=True, autoincrement=True),
-        sa.Column("participant_id", sa.String(64), sa.ForeignKey("participants.participant_id"), nullable=False),
-        sa.Column("trial_index", sa.Integer, nullable=False),
-        sa.Column("practice", sa.Boolean, nullable=False, default=False),
-        sa.Column("stimulus_id", sa.String(64), nullable=False),
-        sa.Column("stage", sa.Integer, nullable=False),
-        *[sa.Column(q, sa.SmallInteger, nullable=False) for q in ITEM_IDS],
-        sa.Column("rt_ms", sa.Float, nullable=False),
-        sa.Column("shown_at", sa.String(40), nullable=False),
-        sa.Column("answered_at", sa.String(40), nullable=False),
-        sa.Column("video_plays", sa.Integer, nullable=True),
-        sa.Column("first_play_ms", sa.Float, nullable=True),
-        sa.Column("hidden_count", sa.Integer, nullable=True),
-        sa.Column("hidden_ms", sa.Float, nullable=True),
-        sa.Column("fullscreen_exits", sa.Integer, nullable=True),
-        sa.Column("check_answer", sa.SmallInteger, nullable=True),
-        sa.UniqueConstraint("participant_id", "trial_index", name="uq_response_participant_trial"),
-    )
-    conflicts = sa.Table(
-        "answer_conflicts",
-        metadata,
-        sa.Column("id", sa.Integer, primary_key=True, autoincrement=True),
-        sa.Column("participant_id", sa.String(64), nullable=False),
-        sa.Column("trial_index", sa.Integer, nullable=False),
-        sa.Column("stimulus_id", sa.String(64), nullable=False),
-        *[sa.Column(q, sa.SmallInteger, nullable=False) for q in ITEM_IDS],
-        sa.Column("rt_ms", sa.Float, nullable=False),
-        sa.Column("received_at", sa.String(40), nullable=False),
-    )
+    responses, conflicts = _answer_tables(metadata)
     audit = sa.Table(
         "audit_log",
         metadata,
@@ -186,7 +219,7 @@ class StudyStore:
         import sqlalchemy as sa
         from sqlalchemy import event
         from sqlalchemy.engine import make_url
-        from sqlalchemy.exc import ArgumentError
+        from sqlalchemy.exc import ArgumentError, NoSuchModuleError, OperationalError, ProgrammingError
 
         if not isinstance(url, str) or not url:
             raise InvalidInputError(f"--db must be an SQLAlchemy URL such as sqlite:///study.db, got {url!r}")
@@ -209,7 +242,7 @@ class StudyStore:
             kwargs.update(pool_size=5, max_overflow=15, pool_recycle=1800)
         try:
             self.engine = sa.create_engine(url, **kwargs)
-        except (ModuleNotFoundError, sa.exc.NoSuchModuleError) as exc:
+        except (ModuleNotFoundError, NoSuchModuleError) as exc:
             raise InvalidInputError(f"--db {url!r}: the database driver is not installed ({exc})") from None
         if self.is_sqlite:
 
@@ -247,7 +280,7 @@ class StudyStore:
                     conn.execute(sa.select(sa.func.pg_advisory_xact_lock(_SCHEMA_LOCK)))
                 self.metadata.create_all(conn)
                 _add_missing_columns(conn, self.metadata)
-        except (sa.exc.OperationalError, sa.exc.ProgrammingError) as exc:
+        except (OperationalError, ProgrammingError) as exc:
             raise InvalidInputError(f"--db {url!r}: cannot open the database ({exc.orig})") from None
         self._writer = GroupCommitWriter(self.engine) if self.is_sqlite else None
 
@@ -287,6 +320,58 @@ class StudyStore:
             return self._transact(job)
         except IntegrityError:  # created concurrently by another process: read it back
             return self._transact(job)
+
+    def sync_items(self, item_ids: Sequence[str], tasks: Sequence[str]) -> None:
+        """Record the design's item ids (the export's columns) and check that this database
+        can store the design's answers: a database of an earlier version has NOT NULL
+        columns ``Q1`` .. ``Q6`` and so holds only the paper's items and no 2afc answer.
+        A database already holding other item ids belongs to another study: an error."""
+        import json
+
+        import sqlalchemy as sa
+
+        item_ids = tuple(item_ids)
+        cols = {c["name"]: c for c in sa.inspect(self.engine).get_columns("responses")}
+        strict = "Q1" in cols and not cols["Q1"]["nullable"]
+        if strict and (item_ids != ITEM_IDS or "2afc" in tasks):
+            what = "a 2afc stage" if "2afc" in tasks else f"the items {', '.join(item_ids)}"
+            raise InvalidInputError(
+                f"--db {self.url}: this database was made by an earlier crowdstudy, whose answers table holds "
+                f"only the Likert items Q1..Q6; use a new database for a design with {what}"
+            )
+        t = self.settings
+        value = json.dumps(list(item_ids))
+
+        def job(conn):
+            row = conn.execute(sa.select(t.c.value).where(t.c.key == "item_ids")).first()
+            if row is None:
+                conn.execute(sa.insert(t).values(key="item_ids", value=value))
+                return value
+            return row[0]
+
+        from sqlalchemy.exc import IntegrityError
+
+        try:
+            stored = self._transact(job)
+        except IntegrityError:  # written at the same moment by another process
+            stored = self._transact(job)
+        if stored != value:
+            raise InvalidInputError(
+                f"--db {self.url}: the database holds answers to the items {', '.join(json.loads(stored))}, "
+                f"the design lists {', '.join(item_ids)}; use a new database for a different study"
+            )
+
+    def item_ids(self) -> tuple[str, ...]:
+        """The study's item ids in the design's order (``Q1`` .. ``Q6`` for a database of an
+        earlier version)."""
+        import json
+
+        import sqlalchemy as sa
+
+        t = self.settings
+        with self.engine.connect() as conn:
+            row = conn.execute(sa.select(t.c.value).where(t.c.key == "item_ids")).first()
+        return ITEM_IDS if row is None else tuple(json.loads(row[0]))
 
     # -- stimuli --------------------------------------------------------------------
     def sync_stimuli(self, rows: Iterable[Mapping]) -> None:
@@ -337,13 +422,15 @@ class StudyStore:
         user_agent: str | None = None,
         platform: Mapping[str, str] | None = None,
         checks: Mapping[int, int] | None = None,
+        tasks: Mapping[int, str] | None = None,
     ) -> bool:
         """Create a participant with its schedule (ScheduledTrial items). False if the id exists.
 
         platform: {"prolific_pid", "prolific_study_id", "prolific_session_id"} (each optional);
-        checks: {trial_index: the scale point its attention check asks for}.
+        checks: {trial_index: what its attention check asks for}; tasks: {stage number: task}
+        (default likert).
         """
-        platform, checks = dict(platform or {}), dict(checks or {})
+        platform, checks, tasks = dict(platform or {}), dict(checks or {}), dict(tasks or {})
         import sqlalchemy as sa
         from sqlalchemy.exc import IntegrityError
 
@@ -371,6 +458,8 @@ class StudyStore:
                         "stage": t.stage,
                         "stimulus_id": t.stimulus_id,
                         "check_value": checks.get(t.trial_index),
+                        "task": tasks.get(t.stage, "likert"),
+                        "stimulus_right": t.stimulus_right,
                     }
                     for t in schedule
                 ],
@@ -412,20 +501,25 @@ class StudyStore:
         import sqlalchemy as sa
 
         s, st = self.schedule_t, self.stimuli
+        right = st.alias("right_stimulus")
         q = (
             sa.select(
                 s.c.trial_index,
                 s.c.stage,
+                sa.func.coalesce(s.c.task, "likert").label("task"),
                 s.c.stimulus_id,
+                s.c.stimulus_right,
                 s.c.check_value,
                 st.c.scenario,
                 st.c.density_level,
                 st.c.density,
                 st.c.viewpoint,
                 st.c.method,
+                right.c.method.label("method_right"),
                 st.c.characters,
             )
             .join(st, st.c.stimulus_id == s.c.stimulus_id)
+            .outerjoin(right, right.c.stimulus_id == s.c.stimulus_right)
             .where(s.c.participant_id == participant_id)
             .order_by(s.c.trial_index)
         )
@@ -484,11 +578,20 @@ class StudyStore:
 
     # -- answers --------------------------------------------------------------------------
     def _answer_values(
-        self, participant_id, trial_index, stimulus_id, stage, answers, rt_ms, shown_at, practice, quality
+        self, participant_id, trial_index, stimulus_id, stage, answers, rt_ms, shown_at, practice, quality, extra
     ) -> dict:
+        """The row of one answer; extra: {"task", "choice", "stimulus_right"} (task default likert)."""
+        import json
+
         answered_at = utc_now()
         q = {k: (None if quality is None else quality.get(k)) for k in QUALITY_FIELDS}
+        task = extra.get("task") or "likert"
+        items = {str(k): int(v) for k, v in (answers or {}).items()}
         return dict(
+            task=task,
+            choice=extra.get("choice"),
+            stimulus_right=extra.get("stimulus_right"),
+            answers_json=None if task == "2afc" else json.dumps(items, separators=(",", ":")),
             participant_id=participant_id,
             trial_index=int(trial_index),
             practice=bool(practice),
@@ -497,7 +600,7 @@ class StudyStore:
             rt_ms=float(rt_ms),
             answered_at=answered_at,
             shown_at=shown_at or _minus_ms(answered_at, rt_ms),
-            **{k: int(answers[k]) for k in ITEM_IDS},
+            **{k: items.get(k) for k in ITEM_IDS},
             **q,
         )
 
@@ -512,11 +615,18 @@ class StudyStore:
         shown_at: str | None,
         *,
         quality: Mapping | None = None,
+        task: str = "likert",
+        choice: str | None = None,
+        stimulus_right: str | None = None,
     ) -> tuple[str, dict]:
         """Store one study answer, committed (and on SQLite fsynced) before returning.
 
+        answers: {item id: value} of a Likert or slider trial (empty for 2afc); task: the
+        trial's task; choice: a 2afc trial's ``left`` / ``right``; stimulus_right: its right
+        video (``stimulus_id`` is the left one).
+
         Returns (status, row): "created"; "exists" (the same answer, i.e. the same stimulus,
-        six values and rt_ms, was already stored: a resend); "conflict" (a different answer
+        values (or choice) and rt_ms, was already stored: a resend); "conflict" (a different answer
         is stored for this trial; the stored one is kept and returned, the refused one goes to
         ``answer_conflicts`` in the same transaction); "out_of_order" (an earlier trial is
         unanswered; row = {"expected": index}). Study answers must arrive in trial order.
@@ -527,8 +637,9 @@ class StudyStore:
         from sqlalchemy.exc import IntegrityError
 
         r = self.responses
+        extra = {"task": task, "choice": choice, "stimulus_right": stimulus_right}
         values = self._answer_values(
-            participant_id, trial_index, stimulus_id, stage, answers, rt_ms, shown_at, False, quality
+            participant_id, trial_index, stimulus_id, stage, answers, rt_ms, shown_at, False, quality, extra
         )
 
         ti = int(trial_index)
@@ -559,6 +670,8 @@ class StudyStore:
                         stimulus_id=stimulus_id,
                         rt_ms=values["rt_ms"],
                         received_at=values["answered_at"],
+                        choice=values["choice"],
+                        answers_json=values["answers_json"],
                         **{k: values[k] for k in ITEM_IDS},
                     )
                 )
@@ -585,8 +698,12 @@ class StudyStore:
         rt_ms: float,
         shown_at: str | None,
         quality: Mapping | None = None,
+        *,
+        task: str = "likert",
+        choice: str | None = None,
     ) -> tuple[str, dict]:
-        """Store the practice answer and mark the practice done in ONE transaction.
+        """Store a practice answer (one per task, at its PRACTICE_INDEX) and mark the practice
+        done (``practice_at``: the first practice of any task) in ONE transaction.
 
         Returns ("created" | "exists", participant row). "exists": a practice answer was
         already stored (this one is dropped: practice answers are not analysed); the practice
@@ -597,13 +714,23 @@ class StudyStore:
         from sqlalchemy.exc import IntegrityError
 
         r, p = self.responses, self.participants
+        index = PRACTICE_INDEX[task]
         values = self._answer_values(
-            participant_id, PRACTICE_TRIAL_INDEX, "practice", 0, answers, rt_ms, shown_at, True, quality
+            participant_id,
+            index,
+            "practice",
+            0,
+            answers,
+            rt_ms,
+            shown_at,
+            True,
+            quality,
+            {"task": task, "choice": choice},
         )
 
         def job(conn):
             old = conn.execute(
-                sa.select(r.c.id).where(r.c.participant_id == participant_id, r.c.trial_index == PRACTICE_TRIAL_INDEX)
+                sa.select(r.c.id).where(r.c.participant_id == participant_id, r.c.trial_index == index)
             ).first()
             if old is None:
                 conn.execute(sa.insert(r).values(**values))
@@ -615,6 +742,28 @@ class StudyStore:
             return self._transact(job)
         except IntegrityError:  # sent twice at once (non-SQLite): the other one was stored
             return self._transact(job)
+
+    def has_task(self, task: str) -> bool:
+        """Whether any participant's schedule holds a trial of ``task``."""
+        import sqlalchemy as sa
+
+        s = self.schedule_t
+        with self.engine.connect() as conn:
+            return conn.execute(sa.select(s.c.trial_index).where(s.c.task == task).limit(1)).first() is not None
+
+    def practiced_tasks(self, participant_id: str) -> set[str]:
+        """The tasks whose practice trial ``participant_id`` has answered."""
+        import sqlalchemy as sa
+
+        r = self.responses
+        with self.engine.connect() as conn:
+            idx = {
+                x
+                for (x,) in conn.execute(
+                    sa.select(r.c.trial_index).where(r.c.participant_id == participant_id, r.c.practice.is_(True))
+                )
+            }
+        return {task for task, k in PRACTICE_INDEX.items() if k in idx}
 
     # -- admin and export ------------------------------------------------------------------
     def progress(self) -> list[dict]:
@@ -652,21 +801,29 @@ class StudyStore:
     def response_rows(self, participant_id: str | None = None) -> list[dict]:
         """Answered study trials (practice excluded) joined with stimulus metadata, sorted by
         participant and trial_index, in the responses.csv schema, plus QUALITY_FIELDS and the
-        trial's attention-check value ``check_value``."""
+        trial's attention-check value ``check_value``; every task: ``task``, the items' values
+        by item id (from ``answers_json``, or the ``Q`` columns of an earlier version's rows),
+        a 2afc trial's ``choice``, ``stimulus_right`` and ``method_right``."""
         import sqlalchemy as sa
 
         r, st, s = self.responses, self.stimuli, self.schedule_t
+        right = st.alias("right_stimulus")
         q = (
             sa.select(
                 r.c.participant_id,
                 r.c.stage,
                 st.c.scenario,
+                sa.func.coalesce(r.c.task, "likert").label("task"),
                 r.c.trial_index,
                 r.c.stimulus_id,
                 st.c.density_level,
                 st.c.density,
                 st.c.viewpoint,
                 st.c.method,
+                r.c.stimulus_right,
+                right.c.method.label("method_right"),
+                r.c.choice,
+                r.c.answers_json,
                 *[r.c[q] for q in ITEM_IDS],
                 r.c.rt_ms,
                 r.c.shown_at,
@@ -675,6 +832,7 @@ class StudyStore:
                 s.c.check_value,
             )
             .join(st, st.c.stimulus_id == r.c.stimulus_id)
+            .outerjoin(right, right.c.stimulus_id == r.c.stimulus_right)
             .outerjoin(s, sa.and_(s.c.participant_id == r.c.participant_id, s.c.trial_index == r.c.trial_index))
             .where(r.c.practice.is_(False))
             .order_by(r.c.participant_id, r.c.trial_index)
@@ -682,7 +840,10 @@ class StudyStore:
         if participant_id is not None:
             q = q.where(r.c.participant_id == participant_id)
         with self.engine.connect() as conn:
-            return [dict(x._mapping) for x in conn.execute(q)]
+            rows = [dict(x._mapping) for x in conn.execute(q)]
+        for row in rows:
+            row.update(answer_items(row))
+        return rows
 
     def demographics_rows(self) -> list[dict]:
         """One row per participant in the demographics.csv schema."""
@@ -707,10 +868,23 @@ def _mark_practice_done(conn, participants, participant_id: str) -> None:
     )
 
 
+def answer_items(row: Mapping) -> dict[str, int]:
+    """{item id: value} of a stored answer row: its ``answers_json``, else (a row of an earlier
+    version) its ``Q1`` .. ``Q6`` columns; empty for a 2afc answer."""
+    import json
+
+    if row.get("answers_json"):
+        return {k: int(v) for k, v in json.loads(row["answers_json"]).items()}
+    if (row.get("task") or "likert") == "2afc":
+        return {}
+    return {q: int(row[q]) for q in ITEM_IDS if row.get(q) is not None}
+
+
 def _same_answer(old: Mapping, new: Mapping) -> bool:
     return (
         old["stimulus_id"] == new["stimulus_id"]
-        and all(int(old[q]) == int(new[q]) for q in ITEM_IDS)
+        and answer_items(old) == answer_items(new)
+        and old.get("choice") == new.get("choice")
         and math.isclose(float(old["rt_ms"]), float(new["rt_ms"]), rel_tol=0, abs_tol=1e-6)
     )
 

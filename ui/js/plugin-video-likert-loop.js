@@ -14,8 +14,8 @@
  * first complete play, how often and how long the page was hidden (tab switches) and how
  * often fullscreen was left.
  *
- * Loaded as a classic script after jsPsych's browser build: defines the global
- * `jsPsychVideoLikertLoop`.
+ * Loaded as a classic script after jsPsych's browser build and `video-trial-kit.js` (the
+ * download-ahead cache shared by the trial types): defines the global `jsPsychVideoLikertLoop`.
  */
 var jsPsychVideoLikertLoop = (function (jspsych) {
   "use strict";
@@ -75,26 +75,9 @@ var jsPsychVideoLikertLoop = (function (jspsych) {
     },
   };
 
-  /** url -> {promise, objectUrl}: videos downloaded ahead of the trial that needs them. */
-  const cache = new Map();
-
-  function prefetch(url) {
-    if (!url || cache.has(url)) return;
-    const entry = { objectUrl: null, promise: null };
-    entry.promise = fetch(url, { credentials: "same-origin" })
-      .then((r) => { if (!r.ok) throw new Error("HTTP " + r.status); return r.blob(); })
-      .then((blob) => { entry.objectUrl = URL.createObjectURL(blob); return entry.objectUrl; })
-      .catch(() => { cache.delete(url); return null; });
-    cache.set(url, entry);
-  }
-
-  function release(url) {
-    const entry = cache.get(url);
-    if (entry) {
-      if (entry.objectUrl) URL.revokeObjectURL(entry.objectUrl);
-      cache.delete(url);
-    }
-  }
+  // the download-ahead cache is shared with the other trial types (video-trial-kit.js)
+  const prefetch = CrowdstudyVideoKit.prefetch;
+  const release = CrowdstudyVideoKit.release;
 
   function escapeHtml(s) {
     return String(s).replace(/[&<>"']/g, (c) => ({ "&": "&amp;", "<": "&lt;", ">": "&gt;", '"': "&quot;", "'": "&#39;" }[c]));
@@ -108,8 +91,7 @@ var jsPsychVideoLikertLoop = (function (jspsych) {
       const shownAt = new Date().toISOString();
       const items = trial.items || [];
       const labels = trial.labels;
-      const cached = cache.get(trial.stimulus);
-      const src = cached && cached.objectUrl ? cached.objectUrl : trial.stimulus;
+      const src = CrowdstudyVideoKit.source(trial.stimulus);
 
       const head = labels.map((l, k) => `<th scope="col">(${k + 1})<br>${escapeHtml(l)}</th>`).join("");
       const CHECK = "cs-check";

@@ -2,6 +2,9 @@
  * crowdstudy session flow (jsPsych 8):
  * participant id -> screen check -> consent -> demographics -> instructions + one practice
  * trial -> (fullscreen) stage 1 (randomised per participant) -> break -> stage 2 -> debriefing.
+ * Each stage has a task (the design's): Likert statements, 0-100 sliders, or a choice between
+ * two videos (2afc); before the first stage of each task come its instructions and one
+ * practice trial of that kind (shown once).
  * A "Withdraw" button is always there after consent: it deletes the answers on the server.
  * Prolific's PROLIFIC_PID, STUDY_ID and SESSION_ID URL parameters are sent at registration.
  *
@@ -20,7 +23,7 @@
   const ID_PARAMS = ["PROLIFIC_PID", "participant", "participant_id", "workerId", "PID", "pid", "SONA_ID", "id"];
   const ID_RE = /^[A-Za-z0-9][A-Za-z0-9_-]{0,63}$/;
   const S = { pid: null, secret: null, study: null, state: null, declined: false, demo: null,
-              breakShown: {}, completion: null, screenFailed: false };
+              breakShown: {}, completion: null, screenFailed: false, practiced: [] };
 
   const storage = {
     get(k) { try { return window.localStorage.getItem(k); } catch (e) { return null; } },
@@ -107,6 +110,8 @@
 
   const cur = () => S.state.trials[S.state.next_trial_index];
   const nextTrial = () => S.state.trials[S.state.next_trial_index + 1];
+  const taskOf = (t) => (t && t.task) || "likert";
+  const videosOf = (t) => (t ? [t.video_url, t.video_url_right].filter(Boolean) : []);
   const stageInfo = (n) => S.study.stages.find((s) => s.number === n) || { number: n, description: "" };
 
   async function refreshState() {
@@ -165,6 +170,7 @@
       storage.set(secretKey(S.pid), reg.secret);
       storage.set("crowdstudy:last", S.pid);
       S.state = reg.state;
+      S.practiced = (reg.state.practiced || []).slice();
     }));
 
     // Screen check (before consent): the browser window must be large enough for the videos.
@@ -283,41 +289,83 @@
       }],
     });
 
-    // Instructions and one practice trial (stored flagged as practice).
+    // Instructions and one practice trial of each task (stored flagged as practice): the first
+    // stage's before the study starts, a later stage's task before that stage.
     const likertParams = () => ({ items: S.study.items.map((it) => ({ id: it.id, text: it.text })), labels: S.study.labels });
+    const firstTask = () => (S.study.stages[0] && S.study.stages[0].task) || "likert";
+    const nItems = () => S.study.items.length;
+    const taskInstructions = (task) => {
+      const L = S.study.labels, sl = S.study.slider || { left: L[0], right: L[L.length - 1] };
+      if (task === "2afc") {
+        return `<p>You will see two short silent videos of animated crowds side by side; both repeat in a loop.
+          Below them is one statement:</p><p class="cs-quote">${esc(S.study.comparison || "")}</p>
+          <p>Choose the video that fits it better: click that video (or the button under it), or use the Left and
+          Right arrow keys, then click "Next" (or press Enter). The button becomes available once both videos have
+          played through at least once.</p>`;
+      }
+      if (task === "slider") {
+        return `<p>You will watch short silent videos of animated crowds. Each video repeats in a loop. Beside it,
+          ${nItems()} statements describe the crowd. Under each statement is a line from "${esc(sl.left)}" to
+          "${esc(sl.right)}": click on the line where your opinion lies. A marker appears where you click; drag
+          it, or use the arrow keys, to adjust it. There are no numbers: any point on the line is an answer.</p>
+          <p>Answer every statement. The button to go on becomes available once every line has a marker and the
+          video has played through at least once.</p>`;
+      }
+      return `<p>You will watch short silent videos of animated crowds. Each video repeats in a loop. Beside it,
+        ${nItems()} statements describe the crowd: for each one, choose how much you agree, from (1)
+        "${esc(L[0])}" to (${L.length}) "${esc(L[L.length - 1])}".</p>
+        <p>Answer every statement. The button to go on becomes available once all statements are answered and
+        the video has played through at least once.</p>`;
+    };
+    const savePractice = (task) => async (data) => {
+      const body = { task, rt_ms: data.rt, shown_at: data.shown_at, video_plays: data.video_plays,
+                     first_play_ms: data.first_play_ms };
+      if (task === "2afc") body.choice = data.choice; else body.answers = data.responses;
+      await api("POST", `/api/participants/${encodeURIComponent(S.pid)}/practice`, body);
+      if (!S.practiced.includes(task)) S.practiced.push(task);
+    };
+    /** One trial node per task, shown when `task()` is its task (the practice or a study trial)
+     * and `guard()` holds. */
+    const taskTrials = (task, make, guard = () => true) => ["likert", "slider", "2afc"].map((kind) => ({
+      conditional_function: () => guard() && task() === kind, timeline: [make(kind)],
+    }));
+    const trialOf = (kind, p) => {
+      const common = { progress_text: p.progress_text, preload: p.preload, save: p.save, data: p.data || {} };
+      if (kind === "2afc") {
+        return { type: jsPsychVideo2afcLoop, ...common, stimulus_left: p.videos(0), stimulus_right: p.videos(1),
+                 statement: () => esc(S.study.comparison || ""), check: p.check || null };
+      }
+      if (kind === "slider") {
+        const sl = () => S.study.slider || { left: S.study.labels[0], right: S.study.labels[S.study.labels.length - 1] };
+        return { type: jsPsychVideoSliderLoop, ...common, stimulus: p.videos(0), items: () => likertParams().items,
+                 left_label: () => sl().left, right_label: () => sl().right, check: p.check || null };
+      }
+      return { type: jsPsychVideoLikertLoop, ...common, stimulus: p.videos(0), items: () => likertParams().items,
+               labels: () => likertParams().labels, check: p.check || null };
+    };
+    const practiceOf = (task) => taskTrials(task, (kind) => trialOf(kind, {
+      videos: () => () => S.state.practice.video_url,
+      progress_text: "Practice video",
+      preload: () => videosOf(cur()),
+      save: savePractice(kind),
+    }));
     timeline.push({
       conditional_function: () => !S.state.practice_done,
       timeline: [{
         type: jsPsychInstructions,
         pages: () => [
-          `<div class="cs-page"><h2>Instructions</h2><p>You will watch short silent videos of animated crowds.
-           Each video repeats in a loop. Beside it, six statements describe the crowd: for each one, choose how much
-           you agree, from (1) "${esc(S.study.labels[0])}" to (${S.study.labels.length})
-           "${esc(S.study.labels[S.study.labels.length - 1])}".</p>
-           <p>Answer every statement. The button to go on becomes available once all statements are answered and
-           the video has played through at least once.</p></div>`,
+          `<div class="cs-page"><h2>Instructions</h2>${taskInstructions(firstTask())}</div>`,
           `<div class="cs-page"><h2>Practice</h2><p>There are ${S.study.stages.length} parts, with a short break in
            between. We start with one practice video so you can get used to the page; its answers are not part of
            the study.</p></div>`,
         ],
         show_clickable_nav: true, button_label_next: "Continue", button_label_previous: "Back",
-      }, {
-        type: jsPsychVideoLikertLoop,
-        stimulus: () => S.state.practice.video_url,
-        items: () => likertParams().items,
-        labels: () => likertParams().labels,
-        progress_text: "Practice video",
-        preload: () => (cur() ? [cur().video_url] : []),
-        save: (data) => api("POST", `/api/participants/${encodeURIComponent(S.pid)}/practice`,
-                            { answers: data.responses, rt_ms: data.rt, shown_at: data.shown_at,
-                              video_plays: data.video_plays, first_play_ms: data.first_play_ms }),
-        on_finish: () => { S.state.practice_done = true; },
-      }, {
+      }, ...practiceOf(firstTask), {
         type: jsPsychHtmlButtonResponse,
         stimulus: `<div class="cs-page"><h2>The study begins</h2><p>The practice is over. The videos of the
           study now follow.</p></div>`,
         choices: ["Start"],
-        on_finish: () => enterFullscreen(),  // a click: browsers grant fullscreen only on one
+        on_finish: () => { S.state.practice_done = true; enterFullscreen(); },  // a click: browsers grant fullscreen only on one
       }],
     });
     // Stage trials with a break screen between stages.
@@ -331,14 +379,16 @@
       const same = S.state.trials.filter((x) => x.stage === t.stage);
       const k = same.findIndex((x) => x.trial_index === t.trial_index) + 1;
       const stages = S.study.stages.map((s) => s.number);
-      return `Part ${stages.indexOf(t.stage) + 1} of ${stages.length} &middot; video ${k} of ${same.length}`;
+      const unit = taskOf(t) === "2afc" ? "pair" : "video";
+      return `Part ${stages.indexOf(t.stage) + 1} of ${stages.length} &middot; ${unit} ${k} of ${same.length}`;
     };
     async function saveAnswer(data) {
       const t = cur();
-      const body = { trial_index: t.trial_index, token: t.token, answers: data.responses,
+      const body = { trial_index: t.trial_index, token: t.token,
                      rt_ms: data.rt, shown_at: data.shown_at, video_plays: data.video_plays,
                      first_play_ms: data.first_play_ms, hidden_count: data.hidden_count, hidden_ms: data.hidden_ms,
                      fullscreen_exits: data.fullscreen_exits };
+      if (taskOf(t) === "2afc") body.choice = data.choice; else body.answers = data.responses;
       if (t.check) body.check = data.check;
       try {
         await api("POST", `/api/participants/${encodeURIComponent(S.pid)}/responses`, body);
@@ -357,30 +407,46 @@
       conditional_function: () => S.state.next_trial_index < S.state.n_trials,
       timeline: [{
         timeline: [{
-          conditional_function: needsBreak,
+          // each pass of the loop shows ONE study trial: the trial nodes run only while the
+          // trial this pass started with is unanswered (see taskTrials' guard below)
+          conditional_function: () => { S.passIndex = S.state.next_trial_index; return needsBreak(); },
           timeline: [{
             type: jsPsychHtmlButtonResponse,
             stimulus: () => {
               const st = stageInfo(cur().stage);
               const k = S.study.stages.findIndex((s) => s.number === st.number) + 1;
+              const prev = S.state.trials[S.state.next_trial_index - 1];
+              const same = taskOf(prev) === taskOf(cur());
               return `<div class="cs-page"><h2>Break</h2><p>Part ${k - 1} is complete, thank you! Take a short
                 break if you like.</p><p>Part ${k} of ${S.study.stages.length}: ${esc(st.description || "")}.
-                The questions stay the same.</p></div>`;
+                ${same ? "The questions stay the same." : "This part asks something different: its instructions follow."}</p></div>`;
             },
             choices: ["Continue"],
             on_finish: () => { S.breakShown[cur().stage] = true; },
           }],
         }, {
-          type: jsPsychVideoLikertLoop,
-          stimulus: () => cur().video_url,
-          items: () => likertParams().items,
-          labels: () => likertParams().labels,
+          // the first stage of a task other than the practised ones: its instructions and practice
+          conditional_function: () => !S.practiced.includes(taskOf(cur())),
+          timeline: [{
+            type: jsPsychInstructions,
+            pages: () => [`<div class="cs-page"><h2>Instructions</h2>${taskInstructions(taskOf(cur()))}
+              <p>One practice trial comes first; its answer is not part of the study.</p></div>`],
+            show_clickable_nav: true, button_label_next: "Continue",
+          }, ...practiceOf(() => taskOf(cur())), {
+            type: jsPsychHtmlButtonResponse,
+            stimulus: `<div class="cs-page"><h2>The part begins</h2><p>The practice is over. The videos of this
+              part now follow.</p></div>`,
+            choices: ["Start"],
+            on_finish: () => enterFullscreen(),
+          }],
+        }, ...taskTrials(() => taskOf(cur()), (kind) => trialOf(kind, {
+          videos: (k) => () => videosOf(cur())[k],
           progress_text: stagePosition,
-          preload: () => (nextTrial() ? [nextTrial().video_url] : []),
+          preload: () => videosOf(nextTrial()),
           check: () => cur().check || null,
           save: saveAnswer,
           data: { phase: "trial" },
-        }],
+        }), () => S.state.next_trial_index === S.passIndex)],
         loop_function: () => S.state.next_trial_index < S.state.n_trials,
       }],
     });
