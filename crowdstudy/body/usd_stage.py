@@ -233,10 +233,9 @@ def _trs(m: np.ndarray) -> list[dict]:
 
 def _add_mesh(builder, query, joints: list[str], skin: int, path: Path, skel_world, tallest: list) -> int | None:
     """A skinned mesh prim as a glTF mesh node bound to ``skin``; None without triangles."""
-    from pxr import UsdGeom
-
+    _, usd_geom, _, _, _, _ = import_pxr()
     prim = query.GetPrim()
-    mesh = UsdGeom.Mesh(prim)
+    mesh = usd_geom.Mesh(prim)
     points = np.asarray(mesh.GetPointsAttr().Get(), dtype=np.float64).reshape(-1, 3)
     counts = np.asarray(mesh.GetFaceVertexCountsAttr().Get() or [], dtype=np.int64)
     index = np.asarray(mesh.GetFaceVertexIndicesAttr().Get() or [], dtype=np.int64)

@@ -59,8 +59,7 @@ def corrected_usd_bytes(crowd, corrected, out_path: str | Path, provenance: dict
 
 def _animation_to_edit(stage, skin, shared: bool, usd_skel):
     """The SkelAnimation prim to write character ``skin``'s motion to (see the module docstring)."""
-    from pxr import Sdf
-
+    sdf = import_pxr()[5]
     anim = stage.GetPrimAtPath(skin.animation)
     root = stage.GetPrimAtPath(skin.skel_root)
     if not shared and not anim.IsInstanceProxy():
@@ -82,7 +81,7 @@ def _animation_to_edit(stage, skin, shared: bool, usd_skel):
             b.Set(a.Get(t), t)
         if a.HasAuthoredValue() and a.Get() is not None and not a.GetTimeSamples():
             b.Set(a.Get())
-    target = Sdf.Path(str(new.GetPath()))
+    target = sdf.Path(str(new.GetPath()))
     usd_skel.BindingAPI.Apply(root).CreateAnimationSourceRel().SetTargets([target])
     skel = stage.GetPrimAtPath(skin.skeleton)
     if str(skel.GetPath()).startswith(str(root.GetPath()) + "/"):
