@@ -1,10 +1,13 @@
-"""A glTF crowd corrected file to file against the same crowd corrected as a CrowdAnimation.
+"""A glTF or USD crowd corrected file to file against the same crowd corrected as a CrowdAnimation.
 
     crowdstudy bench import_crowd [--characters 60] [--duration 20] [--density D5] [--repeat 1]
+                                  [--format gltf|usd]
 
 The crowd: the study's Baseline concert at ``--density`` (60 dancers at D5) for
 ``--duration`` seconds, exported by ``crowdstudy export-gltf`` (one skinned MakeHuman mesh
-per character, crowdstudy joint names, every frame keyed).
+per character, crowdstudy joint names, every frame keyed), or with ``--format usd`` by
+``crowdstudy export-usd`` (a UsdSkel ``.usdc`` crate, centimetres, Z up); the rows below
+then name ``.usdc`` where they say ``.glb``.
 
 Rows (medians over ``--repeat`` rounds, the two timed runs alternating in each round):
 
@@ -41,7 +44,7 @@ BAR_RATIO = 1.5
 BAR_OVERLAP = 0.20
 
 
-def _crowd(folder: Path, n: int, duration: float, density: str) -> tuple[Path, object]:
+def _crowd(folder: Path, n: int, duration: float, density: str, fmt: str = "gltf") -> tuple[Path, object]:
     from crowdstudy.design import load_design
     from crowdstudy.gltf.export import export_gltf
     from crowdstudy.motion.baseline import build_baseline
@@ -56,6 +59,10 @@ def _crowd(folder: Path, n: int, duration: float, density: str) -> tuple[Path, o
             bodies=tuple(anim.bodies[k] for k in keep),
             clips=tuple(anim.clips[k] for k in keep),
         )
+    if fmt == "usd":
+        from crowdstudy.gltf.export_usd import export_usd
+
+        return export_usd(anim, folder / "baseline.usdc", meters_per_unit=0.01), anim
     return export_gltf(anim, folder / "baseline.glb"), anim
 
 
@@ -73,6 +80,7 @@ def main(argv: list[str]) -> int:
     ap.add_argument("--density", default="D5")
     ap.add_argument("--repeat", type=int, default=1)
     ap.add_argument("--device", default="cpu")
+    ap.add_argument("--format", choices=("gltf", "usd"), default="gltf", help="the exported crowd's format")
     args = ap.parse_args(argv)
     from crowdstudy.interchange.gltf_crowd import read_crowd
     from crowdstudy.physics.correct_file import correct_gltf, write_outputs
@@ -81,7 +89,8 @@ def main(argv: list[str]) -> int:
 
     with tempfile.TemporaryDirectory() as tmp:
         folder = Path(tmp)
-        glb, _ = _crowd(folder, args.characters, args.duration, args.density)
+        glb, _ = _crowd(folder, args.characters, args.duration, args.density, args.format)
+        ext = glb.suffix
         crowd = read_crowd(glb)  # untimed: fits and caches the capsules
         for b in {id(b): b for b in crowd.bodies}.values():
             _ = b.capsules
@@ -95,12 +104,12 @@ def main(argv: list[str]) -> int:
                     anim = CrowdAnimation.load(npz)
                     correct(anim, device=args.device, progress=False, bodies=crowd.bodies).save(folder / "ours.npz")
                 else:
-                    result = correct_gltf(glb, folder / "ours.glb", device=args.device)
-                    write_outputs({folder / "ours.glb": result.data})
+                    result = correct_gltf(glb, folder / f"ours{ext}", device=args.device)
+                    write_outputs({folder / f"ours{ext}": result.data})
                 times[kind].append(time.perf_counter() - t0)
                 if kind == "glb":
                     times["glb_no_overlap"].append(times["glb"][-1] - result.timings["overlap_seconds"])
-        back = read_crowd(folder / "ours.glb")
+        back = read_crowd(folder / f"ours{ext}")
         before = _overlap(crowd.anim, crowd.bodies)
         after = _overlap(back.anim, back.bodies)
     t_npz, t_glb = statistics.median(times["npz"]), statistics.median(times["glb"])
@@ -109,7 +118,7 @@ def main(argv: list[str]) -> int:
     rows = [
         {"row": "correct .npz", "seconds": t_npz, "runs": times["npz"]},
         {
-            "row": "import, correct, write .glb",
+            "row": f"import, correct, write {ext}",
             "seconds": t_bare,
             "runs": times["glb_no_overlap"],
             "ratio_to_npz": ratio,
@@ -117,7 +126,7 @@ def main(argv: list[str]) -> int:
             "passes": ratio <= BAR_RATIO,
         },
         {
-            "row": "correct .glb file to file (with the overlap report)",
+            "row": f"correct {ext} file to file (with the overlap report)",
             "seconds": t_glb,
             "runs": times["glb"],
             "ratio_to_npz": full,
@@ -136,7 +145,7 @@ def main(argv: list[str]) -> int:
         format_table(
             [
                 {"row": "correct .npz", "value": f"{t_npz:.1f} s"},
-                {"row": "import, correct, write .glb", "value": f"{t_bare:.1f} s", "ratio": ratio, "bar": BAR_RATIO},
+                {"row": f"import, correct, write {ext}", "value": f"{t_bare:.1f} s", "ratio": ratio, "bar": BAR_RATIO},
                 {"row": "  + overlap before and after", "value": f"{t_glb:.1f} s", "ratio": full, "bar": ""},
                 {
                     "row": "overlap kept",
@@ -149,7 +158,7 @@ def main(argv: list[str]) -> int:
         )
     )
     path = write_report(
-        "import_crowd",
+        "import_crowd" if args.format == "gltf" else "import_crowd_usd",
         rows,
         characters=args.characters,
         duration_s=args.duration,

@@ -73,6 +73,11 @@ COMMANDS: tuple[tuple[str, str, str], ...] = (
         "Export an animation and its bodies to one binary glTF 2.0 (.glb) file.",
     ),
     (
+        "export-usd",
+        "crowdstudy.gltf.cli_export_usd",
+        "Export an animation and its bodies as a UsdSkel crowd (.usda, .usdc).",
+    ),
+    (
         "import-gltf",
         "crowdstudy.gltf.cli_import_gltf",
         "Import a skinned glTF character (Mixamo, Blender, VRM...) as a body record.",
@@ -80,7 +85,7 @@ COMMANDS: tuple[tuple[str, str, str], ...] = (
     (
         "import-crowd",
         "crowdstudy.interchange.cli_import_crowd",
-        "Import a glTF file's skinned, animated characters as a crowd animation (.npz).",
+        "Import a glTF or USD file's skinned, animated characters as a crowd animation (.npz).",
     ),
     (
         "stimuli",

@@ -70,6 +70,7 @@ __all__ = [
     "character_from_gltf",
     "body_from_character",
     "load_gltf_body",
+    "open_scene",
     "node_local_matrix",
     "RECORD_FIELDS",
     "ARM_ELEVATION_LIMIT",
@@ -267,11 +268,20 @@ def read_character(
     without a counterpart, a rig that is not a humanoid's).
     """
     path = Path(path)
-    gltf = read_gltf(path)
+    gltf = open_scene(path)
     parent = node_parents(gltf.doc)
     world = node_world_matrices(gltf.doc, parent)
     spec = character_for_record(gltf.doc, parent, path, skin=skin, node=node)
     return character_from_gltf(gltf, spec, parent, world, height=height, overrides=overrides)
+
+
+def open_scene(path: Path) -> GltfFile:
+    """A glTF file, or a USD file's UsdSkel characters as glTF (:mod:`crowdstudy.body.usd_stage`)."""
+    from crowdstudy.body.usd_stage import USD_SUFFIXES, read_usd
+
+    if Path(path).suffix.lower() in USD_SUFFIXES:
+        return read_usd(path).gltf
+    return read_gltf(path)
 
 
 def character_from_gltf(
@@ -648,7 +658,7 @@ def load_gltf_body(record: dict):
     """The :class:`~crowdstudy.body.model.Body` of a ``{"model": "gltf"}`` record: ``skin``
     (default 0) or ``node`` (a rigid-parts character's root) selects the character,
     ``map`` ({physics joint: joint name or index}) forces joints of its mapping."""
-    check_fields(record, "gltf", RECORD_FIELDS)
+    check_fields(record, str(record.get("model", "gltf")), RECORD_FIELDS)
     path = record.get("path")
     if not isinstance(path, str) or not path:
         raise InvalidInputError(f"body record field 'path': expected a glTF file path, got {path!r}")

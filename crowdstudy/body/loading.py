@@ -14,7 +14,8 @@ A body record is a plain dict (``CrowdAnimation.bodies`` stores them):
   user-supplied SMPL file (``crowdstudy.body.smpl``); ``shape`` is accepted for ``betas``.
   ``height`` is informative only (SMPL's stature follows from the betas).
 * ``{"model": "gltf", "path": "character.glb", "skin": 0, ...}`` a user's skinned glTF
-  character (``crowdstudy.body.gltf_model``).
+  character (``crowdstudy.body.gltf_model``); ``{"model": "usd", ...}`` the same fields for a
+  UsdSkel character of a USD file (``crowdstudy.body.usd_stage``).
 
 Any model also accepts the label fields :data:`~crowdstudy.body.model.META_FIELDS`.
 """
@@ -74,9 +75,11 @@ def _load_cached(key: str) -> Body:
         return _load_open(record)
     if model == "smpl":
         return load_smpl_body(record)
-    if model == "gltf":
+    if model in ("gltf", "usd"):
         return load_gltf_body(record)
-    raise InvalidInputError(f"body record field 'model': expected 'makehuman', 'open', 'smpl' or 'gltf', got {model!r}")
+    raise InvalidInputError(
+        f"body record field 'model': expected 'makehuman', 'open', 'smpl', 'gltf' or 'usd', got {model!r}"
+    )
 
 
 def _float_field(record: dict, name: str, lo: float, hi: float) -> float:

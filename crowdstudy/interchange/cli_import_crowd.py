@@ -1,5 +1,6 @@
-"""``crowdstudy import-crowd FILE.glb --out anim.npz``: every skinned, animated character of
-a glTF file as one CrowdAnimation (:mod:`crowdstudy.interchange.gltf_crowd`). Prints what
+"""``crowdstudy import-crowd FILE.glb|FILE.usda --out anim.npz``: every skinned, animated
+character of a glTF or USD (UsdSkel) file as one CrowdAnimation
+(:mod:`crowdstudy.interchange.gltf_crowd`, :mod:`crowdstudy.body.usd_stage`). Prints what
 was found and, per character, the mapping table: each physics joint's source joint and how
 it was found (name table, topology, ``--map``), then the joints that map to none."""
 
@@ -11,9 +12,18 @@ __all__ = ["configure", "run"]
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("input", help="glTF file (.glb or .gltf) with skinned or rigid-parts animated characters")
+    parser.add_argument(
+        "input",
+        help="glTF file (.glb, .gltf) with skinned or rigid-parts animated characters, or a USD file "
+        "(.usd, .usda, .usdc) with UsdSkel characters",
+    )
     parser.add_argument("--out", required=True, help="CrowdAnimation .npz to write")
-    parser.add_argument("--fps", type=float, default=None, help="resample to FPS (default: the file's key rate)")
+    parser.add_argument(
+        "--fps",
+        type=float,
+        default=None,
+        help="resample to FPS (default: the file's key rate; USD: its time samples' rate)",
+    )
     parser.add_argument(
         "--animation",
         action="append",

@@ -87,11 +87,11 @@ class ImportedCrowd:
     characters: list[ImportedCharacter]
     anim: object
     bodies: list
+    usd: object = None
 
     def report(self) -> str:
         """The import as text: per character its mapping table, rate and notes."""
-        doc = self.gltf.doc
-        names = [str(doc["animations"][a].get("name", a)) for a in self.animations]
+        names = [str(self.gltf.doc["animations"][a].get("name", a)) for a in self.animations]
         lines = [
             f"{self.gltf.path}: {len(self.characters)} characters, animations {', '.join(names)}, "
             f"{len(self.times)} frames at {self.anim.fps:g} fps from t = {self.times[0]:g} s"
@@ -100,8 +100,11 @@ class ImportedCrowd:
             rig = c.character.rig
             where = f"skin {', '.join(map(str, c.spec.skins))}" if c.spec.skins else "rigid parts"
             rate = "unkeyed" if c.rate is None else f"keys at {c.rate:g}/s"
+            if self.usd is not None:  # the character's SkelRoot and Skeleton, not the glTF stand-ins
+                skin = self.usd.skins[c.spec.skins[0]]
+                where = f"skeleton {skin.skeleton}, {len(skin.meshes)} meshes"
             lines.append(
-                f"character {i} (node {c.spec.root} {doc['nodes'][c.spec.root].get('name', '')!r}, {where}, "
+                f"character {i} ({_where(self, c)}, {where}, "
                 f"{len(rig.vertices)} vertices, {len(c.spec.rigid)} rigid parts, {rate}, "
                 f"stature {c.character.height:.2f} m)"
             )
@@ -118,6 +121,12 @@ class ImportedCrowd:
         return "\n".join(lines)
 
 
+def _where(crowd: ImportedCrowd, c: ImportedCharacter) -> str:
+    if crowd.usd is not None:
+        return f"SkelRoot {crowd.usd.skins[c.spec.skins[0]].skel_root}"
+    return f"node {c.spec.root} {crowd.gltf.doc['nodes'][c.spec.root].get('name', '')!r}"
+
+
 def _indent(text: str) -> str:
     return "\n".join("  " + line for line in text.splitlines())
 
@@ -132,7 +141,9 @@ def read_crowd(
     """Read every character of a glTF file as one crowd (see the module docstring).
 
     Args:
-        path: a .glb or .gltf file.
+        path: a .glb or .gltf file, or a USD file (.usd, .usda, .usdc: its UsdSkel
+            characters, read as glTF by :func:`crowdstudy.body.usd_stage.read_usd`;
+            ``usd`` then holds the :class:`~crowdstudy.body.usd_stage.UsdCrowdFile`).
         fps: frames per second to resample to (default: the file's own rate).
         animations: names (or indices) of the animations to import (default: all).
         overrides: {physics joint: joint name or index} applied to every character (``--map``).
@@ -142,7 +153,8 @@ def read_crowd(
     characters keyed at different rates without ``fps``.
     """
     path = Path(path)
-    gltf = read_gltf(path)
+    usd = _read_usd_if_usd(path)
+    gltf = read_gltf(path) if usd is None else usd.gltf
     doc = gltf.doc
     parent = node_parents(doc)
     specs = find_characters(doc, parent)
@@ -154,10 +166,11 @@ def read_crowd(
     chosen = select_animations(doc, animations, path)
     channels = channels_of(gltf, chosen, path)
     if not channels:
-        raise InvalidInputError(f"glTF file {path}: the chosen animations move no node")
+        raise InvalidInputError(f"{_label(path)} {path}: the chosen animations move no node")
     world = node_world_matrices(doc, parent)
     sha = hashlib.sha256(path.read_bytes()).hexdigest()
-    chars = [_character(gltf, s, parent, world, overrides, channels, sha) for s in specs]
+    model = "gltf" if usd is None else "usd"
+    chars = [_character(gltf, s, parent, world, overrides, channels, sha, model) for s in specs]
     _share_bodies(chars)
     fps = _frame_rate(chars, channels, fps, path)
     t0 = min(float(c.times[0]) for c in channels)
@@ -171,13 +184,34 @@ def read_crowd(
     for i, c in enumerate(chars):
         w = np.stack([wmat[int(n)] for n in c.character.rig.nodes], axis=1)
         rot[:, i], root[:, i] = to_physics(w, c.frames)
-    anim = _animation(path, sha, doc, chars, chosen, times, fps, rot, root, overrides)
-    return ImportedCrowd(gltf, parent, chosen, channels, times, chars, anim, [c.body for c in chars])
+    anim = _animation(path, sha, doc, chars, chosen, times, fps, rot, root, overrides, model)
+    return ImportedCrowd(gltf, parent, chosen, channels, times, chars, anim, [c.body for c in chars], usd)
 
 
-def _character(gltf, spec, parent, world, overrides, channels, sha) -> ImportedCharacter:
+def _label(path: Path) -> str:
+    from crowdstudy.body.usd_stage import USD_SUFFIXES
+
+    return "USD file" if path.suffix.lower() in USD_SUFFIXES else "glTF file"
+
+
+def _read_usd_if_usd(path: Path):
+    """The :class:`~crowdstudy.body.usd_stage.UsdCrowdFile` of a USD path (checked: a
+    SkelAnimation drives a character), None for a glTF path."""
+    from crowdstudy.body.usd_stage import USD_SUFFIXES, read_usd
+
+    if path.suffix.lower() not in USD_SUFFIXES:
+        return None
+    usd = read_usd(path)
+    if not usd.animations:
+        raise InvalidInputError(
+            f"USD file {path}: no SkelAnimation drives a character (skel:animationSource): nothing to import"
+        )
+    return usd
+
+
+def _character(gltf, spec, parent, world, overrides, channels, sha, model="gltf") -> ImportedCharacter:
     ch = character_from_gltf(gltf, spec, parent, world, overrides=overrides, sha256=sha)
-    record = {"model": "gltf", "path": str(Path(gltf.path).resolve()), **spec.key}
+    record = {"model": model, "path": str(Path(gltf.path).resolve()), **spec.key}
     if overrides:
         record["map"] = dict(overrides)
     own = set(spec.joints) | set(spec.rigid)
@@ -228,17 +262,17 @@ def _frame_rate(chars: list[ImportedCharacter], channels: list[Channel], fps: fl
     if not rates:
         rate = keyframe_rate(channels)
         if rate is None:
-            raise InvalidInputError(f"glTF file {path}: its keys give no frame rate (one key each): give --fps")
+            raise InvalidInputError(f"{_label(path)} {path}: its keys give no frame rate (one key each): give --fps")
         return rate
     if rates[-1] > rates[0] * (1.0 + RATE_TOLERANCE):
         per = ", ".join(f"{i}: {c.rate:g}/s" for i, c in enumerate(chars) if c.rate is not None)
         raise InvalidInputError(
-            f"glTF file {path}: characters are keyed at different rates ({per}): give --fps to resample them all"
+            f"{_label(path)} {path}: characters are keyed at different rates ({per}): give --fps to resample them all"
         )
     return rates[0]
 
 
-def _animation(path, sha, doc, chars, chosen, times, fps, rot, root, overrides):
+def _animation(path, sha, doc, chars, chosen, times, fps, rot, root, overrides, model="gltf"):
     from crowdstudy.provenance import provenance
     from crowdstudy.scene import CrowdAnimation
 
@@ -255,7 +289,7 @@ def _animation(path, sha, doc, chars, chosen, times, fps, rot, root, overrides):
         for c in chars
     ]
     imported = {
-        "format": "gltf",
+        "format": model,
         "file": str(path.resolve()),
         "sha256": sha,
         "animations": names,
@@ -271,7 +305,7 @@ def _animation(path, sha, doc, chars, chosen, times, fps, rot, root, overrides):
         joint_rotations=rot,
         fps=fps,
         bodies=tuple(c.record for c in chars),
-        clips=tuple({"source": "gltf", "node": c.spec.root, "animations": names} for c in chars),
+        clips=tuple({"source": model, "node": c.spec.root, "animations": names} for c in chars),
         meta={
             "scenario": "imported",
             "method": "Baseline",

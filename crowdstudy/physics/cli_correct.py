@@ -1,5 +1,6 @@
 """``crowdstudy correct IN.npz OUT.npz``: Baseline -> Ours with the physics layer;
-``crowdstudy correct IN.glb OUT.glb`` (or ``.gltf``) corrects a glTF crowd file to a file
+``crowdstudy correct IN.glb OUT.glb`` (or ``.gltf``, ``.usd``, ``.usda``, ``.usdc``) corrects a
+glTF or USD (UsdSkel) crowd file to a file
 of the same format (:mod:`crowdstudy.physics.correct_file`).
 
 The output path and the arguments are checked before the simulation starts; the run's
@@ -21,7 +22,9 @@ def configure(parser: argparse.ArgumentParser) -> None:
     from crowdstudy.physics.config_file import add_config_option
     from crowdstudy.physics.solver import LINEAR_SOLVERS
 
-    parser.add_argument("input", help="CrowdAnimation .npz (the Baseline), or a glTF crowd (.glb, .gltf)")
+    parser.add_argument(
+        "input", help="CrowdAnimation .npz (the Baseline), or a glTF (.glb, .gltf) or USD (.usd, .usda, .usdc) crowd"
+    )
     parser.add_argument(
         "output",
         help="corrected file to write, in the input's format (Ours); the run's timings go to "
@@ -39,7 +42,7 @@ def configure(parser: argparse.ArgumentParser) -> None:
         help="CG implementation (default: fused on CPU, warp on CUDA)",
     )
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
-    gltf = parser.add_argument_group("glTF input (see crowdstudy import-crowd)")
+    gltf = parser.add_argument_group("glTF or USD input (see crowdstudy import-crowd)")
     gltf.add_argument("--fps", type=float, default=None, help="resample to FPS (default: the file's key rate)")
     gltf.add_argument(
         "--animation", action="append", default=None, metavar="NAME", help="animation to correct (repeatable)"
@@ -54,7 +57,7 @@ def run(args: argparse.Namespace) -> int:
     from crowdstudy.errors import InvalidInputError
     from crowdstudy.paths import check_output_path, timings_path
     from crowdstudy.physics.config_file import config_from_cli
-    from crowdstudy.physics.correct_file import GLTF_SUFFIXES, check_gltf_paths
+    from crowdstudy.physics.correct_file import SCENE_SUFFIXES, check_gltf_paths
     from crowdstudy.physics.corrector import correct
     from crowdstudy.scene import CrowdAnimation
 
@@ -63,7 +66,7 @@ def run(args: argparse.Namespace) -> int:
     output = check_output_path(args.output, "output")
     sidecar = check_output_path(timings_path(output), "output (timings sidecar)")
     config = config_from_cli(args.config)
-    if output.suffix.lower() in GLTF_SUFFIXES:
+    if output.suffix.lower() in SCENE_SUFFIXES:
         return _run_gltf(args, output, sidecar, config)
     anim = CrowdAnimation.load(args.input)
     if args.frames is not None:

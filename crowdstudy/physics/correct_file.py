@@ -1,10 +1,12 @@
-"""Correct a glTF crowd file to a glTF file (``crowdstudy correct IN.glb OUT.glb``).
+"""Correct a glTF or USD crowd file to a file of its format (``crowdstudy correct IN.glb
+OUT.glb``, ``IN.usda OUT.usda``).
 
 Import (:func:`crowdstudy.interchange.gltf_crowd.read_crowd`), correct
 (:func:`~crowdstudy.physics.corrector.correct`, with the characters' own bodies), measure
 the mesh overlap before and after (:func:`crowdstudy.metrics.overlap_volume`, every
 ``overlap_every`` seconds), write the corrected motion into the same scene
-(:mod:`crowdstudy.interchange.gltf_write`). Nothing is written until everything has
+(:mod:`crowdstudy.interchange.gltf_write`, or
+:mod:`crowdstudy.interchange.usd_write`). Nothing is written until everything has
 worked: the output, its overlap report (``OUT_STEM.overlap.json``) and the timings
 sidecar go to temporary files renamed at the end.
 """
@@ -20,9 +22,18 @@ import numpy as np
 
 from crowdstudy.errors import InvalidInputError
 
-__all__ = ["GLTF_SUFFIXES", "GltfCorrection", "correct_gltf", "overlap_report_path", "check_gltf_paths"]
+__all__ = [
+    "GLTF_SUFFIXES",
+    "SCENE_SUFFIXES",
+    "GltfCorrection",
+    "correct_gltf",
+    "overlap_report_path",
+    "check_gltf_paths",
+]
 
 GLTF_SUFFIXES = (".glb", ".gltf")
+#: Scene formats corrected file to file: glTF and USD (:mod:`crowdstudy.interchange.usd_write`).
+SCENE_SUFFIXES = (*GLTF_SUFFIXES, ".usd", ".usda", ".usdc")
 
 
 def overlap_report_path(output: str | Path) -> Path:
@@ -32,12 +43,15 @@ def overlap_report_path(output: str | Path) -> Path:
 
 
 def check_gltf_paths(inp: str | Path, out: str | Path) -> None:
-    """The output must be in the input's format (.glb -> .glb, .gltf -> .gltf)."""
+    """The output must be in the input's format (.glb -> .glb, .gltf -> .gltf, .usda -> .usda...)."""
     a, b = Path(inp).suffix.lower(), Path(out).suffix.lower()
-    if a in GLTF_SUFFIXES and b != a:
+    if a in SCENE_SUFFIXES and b != a:
         raise InvalidInputError(f"output: {str(out)!r} must be a {a} file like the input {str(inp)!r}")
-    if a not in GLTF_SUFFIXES and b in GLTF_SUFFIXES:
-        raise InvalidInputError(f"output: {str(out)!r} is glTF but the input {str(inp)!r} is not (use export-gltf)")
+    if a not in SCENE_SUFFIXES and b in SCENE_SUFFIXES:
+        what = "glTF" if b in GLTF_SUFFIXES else "USD"
+        raise InvalidInputError(
+            f"output: {str(out)!r} is {what} but the input {str(inp)!r} is not (use export-{what.lower()})"
+        )
 
 
 @dataclasses.dataclass
@@ -107,7 +121,12 @@ def correct_gltf(
     _, after = _overlap(ours, crowd.bodies, overlap_every, device)
     t3 = time.perf_counter()
     prov = provenance(stage="correct", source=str(inp), sha256=anim.meta["imported"]["sha256"])
-    data = corrected_gltf_bytes(crowd, ours, out, prov)
+    if crowd.usd is not None:
+        from crowdstudy.interchange.usd_write import corrected_usd_bytes
+
+        data = corrected_usd_bytes(crowd, ours, out, prov)
+    else:
+        data = corrected_gltf_bytes(crowd, ours, out, prov)
     t4 = time.perf_counter()
     report = _overlap_report(crowd, ours, measured, before, after, prov)
     timings.update(import_seconds=t1 - t0, correct_seconds=t2 - t1, overlap_seconds=t3 - t2, write_seconds=t4 - t3)
@@ -135,7 +154,9 @@ def _overlap_report(crowd, ours, measured, before, after, prov) -> dict:
             {
                 "character": i,
                 "node": c.spec.root,
-                "name": doc["nodes"][c.spec.root].get("name", ""),
+                "name": doc["nodes"][c.spec.root].get("name", "")
+                if crowd.usd is None
+                else crowd.usd.skins[c.spec.skins[0]].skel_root,
                 "before_litres": 1000.0 * b,
                 "after_litres": 1000.0 * a,
                 "ratio": None if b <= 0 else a / b,
