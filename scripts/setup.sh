@@ -123,6 +123,19 @@ if [ -f tests/js/package-lock.json ]; then
     fi
 fi
 
+# --- Blender as a Python module (bpy, PyPI), for the USD interchange tests ----------
+# Blender's own USD exporter writes real UsdSkel files for tests/test_import_usd.py, and
+# Blender imports the corrected ones (Debian's blender is built without USD). Best effort:
+# without it those tests skip and say why.
+if [ -z "${CROWDSTUDY_BPY_PYTHON:-}" ] && [ ! -f "$STAMP_DIR/bpy" ]; then
+    echo "[setup] installing Blender's bpy module (PyPI wheel, about 520 MB) into build/bpy-venv"
+    if bash scripts/setup_bpy.sh > build/bpy-setup.log 2>&1; then
+        touch "$STAMP_DIR/bpy"
+    else
+        echo "[setup] note: bpy not installed (build/bpy-setup.log); the Blender USD tests will skip" >&2
+    fi
+fi
+
 wait "$bytecode_pid" || true
 if wait "$precompile_pid"; then
     echo "[setup] $(tail -n 1 build/precompile.log)"
