@@ -87,21 +87,30 @@ def test_bcn_maps_by_topology_without_names(bcn, tmp_path, capsys):
 
 @pytest.mark.slow
 def test_bcn_crowd_corrected_file_to_file(bcn, tmp_path):
-    crowd = crowd_of(bcn, tmp_path / "crowd.glb", n=4, spacing=0.35, shift_keys=17, seed=2)
+    # BCN's origin is its pelvis (its feet 0.99 m below): the copies stand on the floor
+    crowd = crowd_of(bcn, tmp_path / "crowd.glb", n=4, spacing=0.35, shift_keys=17, seed=2, lift=0.99)
     dst = tmp_path / "ours.glb"
     res = correct_gltf(crowd, dst, device="cpu", overlap_every=0.2)
     write_outputs({dst: res.data})
     o = res.overlap["overall"]
     print(json.dumps(o))
-    assert o["before_litres"] > 0.5 and o["after_litres"] < 0.6 * o["before_litres"], o
+    assert o["before_litres"] > 2.0 and o["after_litres"] < 0.25 * o["before_litres"], o  # 5.7 -> 0.14 litres
     a, b = read_gltf(crowd), read_gltf(dst)
     assert a.doc["meshes"] == b.doc["meshes"] and a.doc["skins"] == b.doc["skins"]
     back = read_crowd(dst)
     assert len(back.characters) == 4
     np.testing.assert_allclose(back.anim.root_translation, res.corrected.root_translation, atol=1e-5)
     if shutil.which("node") and (JS / "node_modules" / "gltf-validator").is_dir():
-        rep = subprocess.run(["node", str(JS / "validate.mjs"), str(dst)], capture_output=True, text=True, timeout=120)
-        assert json.loads(rep.stdout.splitlines()[0])["numErrors"] == 0, rep.stdout[:2000]
+        # assimp's writer leaves skin weights that do not sum to one (the validator's
+        # ACCESSOR_WEIGHTS_NON_NORMALIZED errors, in the input already): the output adds none
+        cmd = ["node", str(JS / "validate.mjs"), str(crowd), str(dst)]
+        reps = [
+            json.loads(line)
+            for line in subprocess.run(cmd, capture_output=True, text=True, timeout=120).stdout.splitlines()
+        ]
+        errors = [sorted((m["code"], m["pointer"]) for m in r["messages"] if m["severity"] == 0) for r in reps]
+        assert {c for c, _ in errors[0]} <= {"ACCESSOR_WEIGHTS_NON_NORMALIZED"}, errors[0][:5]
+        assert errors[1] == errors[0], errors[1][:5]
 
 
 def test_minetest_player_is_too_coarse(tmp_path, capsys):
