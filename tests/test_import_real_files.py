@@ -23,6 +23,7 @@ import pytest
 from gltf_crowd_fixtures import crowd_of
 
 from crowdstudy.body.gltf_container import read_gltf
+from crowdstudy.body.skeleton import forward_kinematics
 from crowdstudy.cli import main
 from crowdstudy.interchange.gltf_crowd import read_crowd
 from crowdstudy.physics.correct_file import correct_gltf, write_outputs
@@ -122,3 +123,27 @@ def test_minetest_player_is_too_coarse(tmp_path, capsys):
     assert "required joints missing: the knees, the elbows" in err and "Traceback" not in err, err
     assert "Arm_Left" in err and "Leg_Right" in err
     assert not any(out.iterdir())
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(shutil.which("blender") is None, reason="Blender not installed (optional: apt-get install blender)")
+def test_bcn_written_by_blender_moves_as_assimps(bcn, tmp_path):
+    """A second real writer: Blender's glTF exporter (its own node order, bone axes and
+    per-frame keys at 24 fps) re-writes the assimp file; the import finds the same mapping
+    and the same motion."""
+    out = tmp_path / "blender.glb"
+    cmd = ["blender", "-b", "--factory-startup", "--python", str(ROOT / "tests/blender/reexport.py")]
+    res = subprocess.run([*cmd, "--", str(bcn), str(out), "animations"], capture_output=True, text=True, timeout=300)
+    assert res.returncode == 0, res.stderr[-2000:]
+    ours, theirs = read_crowd(bcn, fps=30.0), read_crowd(out, fps=30.0)
+    print(theirs.report())
+    names = lambda c: {j: c.character.rig_map.names[m.source] for j, m in c.character.rig_map.joints.items()}  # noqa: E731
+    assert names(theirs.characters[0]) == names(ours.characters[0])
+    a, b = ours.anim, theirs.anim
+    n = min(a.n_frames, b.n_frames)
+    assert n >= a.n_frames - 4
+    pa = forward_kinematics(ours.bodies[0].rest_joints, a.joint_rotations[:n], a.root_translation[:n])[1]
+    pb = forward_kinematics(theirs.bodies[0].rest_joints, b.joint_rotations[:n], b.root_translation[:n])[1]
+    err = np.linalg.norm(pa - pb, axis=-1)
+    print(f"joint positions, Blender's file vs assimp's: median {np.median(err):.4f} m, max {err.max():.4f} m")
+    assert np.median(err) < 0.005 and err.max() < 0.02  # 0.2 mm and 4.4 mm
