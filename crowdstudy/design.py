@@ -44,10 +44,11 @@ __all__ = [
     "DEFAULT_METHODS",
 ]
 
-#: The kinds of scene a scenario builds: a stationary concert crowd, people walking a corridor.
-#: A design names its scenarios freely (``[scenarios.NAME]``); ``kind`` says which builder
-#: makes them (a scenario named like a kind is of that kind).
-ScenarioKind = Literal["concert", "corridor"]
+#: The kinds of scene a scenario builds: a stationary concert crowd, people walking a corridor,
+#: two flows of walkers crossing on a plaza with obstacles. A design names its scenarios
+#: freely (``[scenarios.NAME]``); ``kind`` says which builder makes them (a scenario named
+#: like a kind is of that kind).
+ScenarioKind = Literal["concert", "corridor", "crossing"]
 #: Where a scenario's body motion comes from: motion-capture clips or procedural animation.
 MotionSource = Literal["mocap", "procedural"]
 #: Which way a corridor crowd walks: all one way, or both ways.
@@ -755,10 +756,101 @@ def _corridor_params(r: _Reader, width: float, depth: float) -> dict[str, Any]:
     return params
 
 
+def _crossing_params(r: _Reader, width: float, depth: float) -> dict[str, Any]:
+    """``kind = "crossing"``: two flows of walkers crossing the floor (the crossing area) on a
+    plaza (``plaza_width`` x ``plaza_depth`` m, default three times the floor's), the second
+    flow at ``angle`` degrees from the first (+x); ``share`` of the walkers in the first flow;
+    preferred speeds (m/s, mean and SD; a number or one per flow); ``obstacles``."""
+    params: dict[str, Any] = {
+        "plaza_width": r.number("plaza_width", lo=width, default=3.0 * width),
+        "plaza_depth": r.number("plaza_depth", lo=depth, default=3.0 * depth),
+        "angle": r.number("angle", lo=20.0, hi=160.0, default=90.0),
+        "share": r.number("share", lo=0.05, hi=0.95, default=0.5),
+        "preferred_speed": _per_flow(r, "preferred_speed", 1.2, lo=0.2, hi=3.0),
+        "preferred_speed_sd": _per_flow(r, "preferred_speed_sd", 0.1, lo=0.0, hi=1.0),
+    }
+    params["obstacles"] = [
+        _read_obstacle(r, i, raw, params["plaza_width"], params["plaza_depth"])
+        for i, raw in enumerate(r.get("obstacles", list, []))
+    ]
+    return params
+
+
+def _per_flow(r: _Reader, key: str, default: float, *, lo: float, hi: float) -> list[float]:
+    """A per-flow number: one for both flows or a list of two, each in [lo, hi]."""
+    value = r.get(key, (float, list), default)
+    values = [value, value] if isinstance(value, float) else value
+    if len(values) != 2 or not all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in values):
+        r.fail(key, f"must be a number or a list of two numbers (one per flow), got {value!r}")
+    if not all(math.isfinite(v) and lo <= v <= hi for v in values):
+        r.fail(key, f"must lie in [{lo}, {hi}], got {value!r}")
+    return [float(v) for v in values]
+
+
+def _read_obstacle(r: _Reader, i: int, raw: Any, plaza_w: float, plaza_d: float) -> dict[str, Any]:
+    """``obstacles[i]`` of a crossing: ``{center = [x, y], radius = r}`` (a bollard, a round
+    planter) or ``{polygon = [[x, y], ...]}`` (convex, at least 3 corners: a planter, a
+    kiosk), with ``height`` (m, default 0.8) and an optional ``label``; inside the plaza.
+    Returned as ``{"shape": "circle", "center", "radius"}`` or ``{"shape": "polygon",
+    "points"}`` (counter-clockwise), with ``height`` and ``label``."""
+    if not isinstance(raw, dict):
+        r.fail(
+            f"obstacles[{i}]", f"must be a table ({{center = [x, y], radius = r}} or {{polygon = ...}}), got {raw!r}"
+        )
+    o = _Reader(raw, r._key(f"obstacles[{i}]"), r.source)
+    label = o.get("label", str, "")
+    height = o.number("height", lo=0.0, lo_open=True, hi=10.0, default=0.8)
+    if ("polygon" in raw) == ("center" in raw):
+        o.fail("polygon", "or 'center' (with 'radius'): give exactly one shape")
+    if "center" in raw:
+        center = _point(o, "center", o.get("center", list))
+        radius = o.number("radius", lo=0.0, lo_open=True, hi=20.0)
+        out = {"shape": "circle", "center": center, "radius": radius}
+        lo_pt, hi_pt = [c - radius for c in center], [c + radius for c in center]
+    else:
+        out = {"shape": "polygon", "points": _convex_polygon(o, o.get("polygon", list))}
+        lo_pt = [min(p[k] for p in out["points"]) for k in (0, 1)]
+        hi_pt = [max(p[k] for p in out["points"]) for k in (0, 1)]
+    if lo_pt[0] < -plaza_w / 2 or hi_pt[0] > plaza_w / 2 or lo_pt[1] < -plaza_d / 2 or hi_pt[1] > plaza_d / 2:
+        o.fail("center" if "center" in raw else "polygon", f"reaches outside the plaza ({plaza_w:g} x {plaza_d:g} m)")
+    o.close()
+    return {**out, "height": height, "label": label}
+
+
+def _point(o: _Reader, key: str, value: Any) -> list[float]:
+    if not (
+        isinstance(value, list)
+        and len(value) == 2
+        and all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in value)
+    ):
+        o.fail(key, f"must be a point [x, y] in metres, got {value!r}")
+    return [float(value[0]), float(value[1])]
+
+
+def _convex_polygon(o: _Reader, value: list) -> list[list[float]]:
+    """A convex polygon's corners [[x, y], ...] (m), counter-clockwise."""
+    if len(value) < 3:
+        o.fail("polygon", f"must list at least 3 corners [[x, y], ...], got {len(value)}")
+    pts = [_point(o, f"polygon[{k}]", v) for k, v in enumerate(value)]
+    n = len(pts)
+    cross = [
+        (pts[(k + 1) % n][0] - pts[k][0]) * (pts[(k + 2) % n][1] - pts[(k + 1) % n][1])
+        - (pts[(k + 1) % n][1] - pts[k][1]) * (pts[(k + 2) % n][0] - pts[(k + 1) % n][0])
+        for k in range(n)
+    ]
+    area = 0.5 * sum(pts[k][0] * pts[(k + 1) % n][1] - pts[(k + 1) % n][0] * pts[k][1] for k in range(n))
+    if abs(area) < 1e-4:
+        o.fail("polygon", "has no area")
+    if not (all(c > 1e-9 for c in cross) or all(c < -1e-9 for c in cross)):
+        o.fail("polygon", "must be convex, its corners in order (split a concave obstacle into convex ones)")
+    return pts if area > 0 else pts[::-1]
+
+
 #: Each scenario kind's parameter reader: (its table, floor width, floor depth) -> parameters.
 _SCENARIO_PARAMS: dict[str, Callable[[_Reader, float, float], dict[str, Any]]] = {
     "concert": _concert_params,
     "corridor": _corridor_params,
+    "crossing": _crossing_params,
 }
 
 

@@ -13,9 +13,10 @@ The scene (written by :mod:`crowdstudy.layout` and :mod:`crowdstudy.navigation` 
 :mod:`crowdstudy.motion.baseline`):
 
 ``scenario`` (str)
-    ``"concert"`` (stationary dancers) or ``"corridor"`` (walkers); other values name a
-    user's own scene. Read by the renderer (:func:`crowdstudy.render.renderer.scenario_of`)
-    and by :func:`static_walls_from_meta` (a concert or corridor must list its walls).
+    ``"concert"`` (stationary dancers), ``"corridor"`` (walkers) or ``"crossing"`` (two
+    flows crossing on a plaza); other values name a user's own scene. Read by the renderer
+    (:func:`crowdstudy.render.assets.scenario_of`) and by :func:`static_walls_from_meta` (a
+    concert, corridor or crossing must list its walls).
 ``floor`` (:class:`Floor`)
     ``{"width": m, "depth": m}``, the floor the crowd stands on (x by y), centred on the
     origin.
@@ -23,9 +24,16 @@ The scene (written by :mod:`crowdstudy.layout` and :mod:`crowdstudy.navigation` 
     how far the stage lies in front of the floor's front edge, and the stage front's y.
 ``corridor_width``, ``corridor_length`` (float, m; corridor)
     the corridor's width (y) and the length of its periodic section (x).
+``plaza`` (:class:`Plaza`; crossing)
+    ``{"width": m, "depth": m, "angle": deg, "obstacles": [...]}``: the paved plaza around
+    the crossing area, the second flow's direction and the obstacles as the design gave them
+    (``{"shape": "circle", "center": [x, y], "radius": m}`` or ``{"shape": "polygon",
+    "points": [[x, y], ...]}``, counter-clockwise, each with ``height`` m and ``label``).
+    Read by the renderer (:mod:`crowdstudy.render.plaza`), which draws them as solids.
 ``obstacles`` (list of ``[[x0, y0], [x1, y1]]``, m)
     the scene's walls as floor segments (the concert's stage front, the corridor's walls as
-    its navigation saw them); ``[]`` for none. Read by the physics (one-sided wall
+    its navigation saw them, the edges of a crossing's obstacles, a circle as the 16-gon
+    around it); ``[]`` for none. Read by the physics (one-sided wall
     contacts), :mod:`crowdstudy.metrics.walls` and :mod:`crowdstudy.metrics.floor`, through
     :func:`static_walls_from_meta`.
 ``periodic`` (:class:`Periodic` or absent)
@@ -110,6 +118,7 @@ __all__ = [
     "LOOP_MODES",
     "Floor",
     "Periodic",
+    "Plaza",
     "Loop",
     "PhysicsLoop",
     "PhysicsMeta",
@@ -132,6 +141,15 @@ class Floor(TypedDict):
 
     width: float
     depth: float
+
+
+class Plaza(TypedDict):
+    """``meta["plaza"]``: a crossing's plaza (m), flow angle (deg) and obstacle shapes."""
+
+    width: float
+    depth: float
+    angle: float
+    obstacles: list[dict[str, Any]]
 
 
 class Periodic(TypedDict):
@@ -217,6 +235,7 @@ class SceneMeta(TypedDict, total=False):
     corridor_width: float
     corridor_length: float
     obstacles: list[list[list[float]]]
+    plaza: Plaza
     periodic: Periodic
     stage: str
     stage_number: int
@@ -301,6 +320,16 @@ def _obstacles(value: object, path: str) -> None:
     wall_segments(value, path)
 
 
+def _plaza(value: object, path: str) -> None:
+    _mapping(value, path)
+    for key in ("width", "depth"):
+        if key not in value:
+            raise InvalidInputError(f"{path}.{key}: missing (the plaza's extent in m)")
+        _number(value[key], f"{path}.{key}", positive=True)
+    if not isinstance(value.get("obstacles", []), list):
+        raise InvalidInputError(f"{path}.obstacles: expected a list of obstacle shapes")
+
+
 def _loop(value: object, path: str) -> None:
     value = _mapping(value, path)
     mode = value.get("mode")
@@ -372,6 +401,7 @@ _CHECKS: dict[str, Callable[[object, str], object]] = {
     "corridor_length": lambda v, p: _number(v, p, positive=True),
     "floor": _floor,
     "obstacles": lambda v, p: _obstacles(v, p),
+    "plaza": _plaza,
     "periodic": _periodic,
     "loop": _loop,
     "physics": _physics,
@@ -416,7 +446,7 @@ def static_walls_from_meta(meta: Mapping[str, Any]) -> np.ndarray:
     exactly as its navigation saw them); an empty list means no walls. Nothing is taken
     from a study design.
 
-    A concert or corridor animation without ``meta["obstacles"]`` (a file written by an
+    A concert, corridor or crossing animation without ``meta["obstacles"]`` (a file written by an
     older version) is an error: its walls are unknown. A scene of any other scenario (or
     none) without the key has no walls.
     """
@@ -424,7 +454,7 @@ def static_walls_from_meta(meta: Mapping[str, Any]) -> np.ndarray:
         raise InvalidInputError(f"meta: expected a dict, got {type(meta).__name__}")
     if "obstacles" not in meta:
         scenario = meta.get("scenario")
-        if scenario in ("concert", "corridor"):
+        if scenario in ("concert", "corridor", "crossing"):
             raise InvalidInputError(
                 f"meta['obstacles']: missing from this {scenario} animation, so its walls are unknown "
                 "(written by an older crowdstudy?); regenerate it (crowdstudy layout/navigate, then "

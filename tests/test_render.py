@@ -108,7 +108,7 @@ def test_known_scene_silhouettes_sit_where_the_bodies_project(design):
             r.set_view(Camera(eye=eye, target=target, fov=fov))
             images.append(r.render(0).astype(int))
     img, empty = images
-    silhouette = np.abs(img - empty).sum(axis=2) > 12  # some clothes are nearly the stage's colour
+    silhouette = np.abs(img - empty).sum(axis=2) > 3  # dark clothes are nearly the stage's colour
     caps = _posed_capsules(anim, 0)
     # 1. every character covers the pixels of its projected bone axes
     for who in (0, 1):

@@ -12,7 +12,7 @@ from crowdstudy.errors import InvalidInputError
 from crowdstudy.stats.anova import ANOVA_COLUMNS, effect_contrasts, helmert, rm_anova
 
 REF = Path(__file__).resolve().parent.parent / "analysis" / "reference_r"
-DATASETS = ["spherical_5x4x2", "violated_5x4x2", "likert_5x2x2"]
+DATASETS = ["spherical_5x4x2", "violated_5x4x2", "likert_5x2x2", "likert_5x2x3"]
 W = ["Density", "Viewpoint", "Method"]
 
 

@@ -15,7 +15,7 @@ W = ["Density", "Viewpoint", "Method"]
 
 
 def _cases():
-    for name in ["spherical_5x4x2", "violated_5x4x2", "likert_5x2x2"]:
+    for name in ["spherical_5x4x2", "violated_5x4x2", "likert_5x2x2", "likert_5x2x3"]:
         ref = pd.read_csv(REF / f"ref_{name}_posthoc.csv", keep_default_na=False)
         for (factor, by, adjust), _ in ref.groupby(["factor", "by", "adjust"], sort=True):
             yield name, factor, by, adjust

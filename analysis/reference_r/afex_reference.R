@@ -70,5 +70,5 @@ reference <- function(name) {
   cat(name, "done\n")
 }
 
-for (name in complete_datasets) reference(name)
+for (name in c(complete_datasets, k_method_datasets)) reference(name)
 write_versions("versions", c("R", "afex", "car", "emmeans"))

@@ -33,3 +33,7 @@ write_versions <- function(stem, packages) {
   write.csv(data.frame(package = packages, version = unname(v)), file.path(here, paste0("ref_", stem, ".csv")),
             row.names = FALSE)
 }
+
+# The complete datasets with more than two methods (make_inputs.py): afex_reference.R
+# covers them too.
+k_method_datasets <- c("likert_5x2x3")

@@ -659,7 +659,11 @@ def animate_walking(
     if crowd.meta.get("periodic"):
         out_meta["periodic"] = dict(crowd.meta["periodic"])
     out_meta.update(
-        {k: crowd.meta[k] for k in ("floor", "corridor_width", "corridor_length", "obstacles") if k in crowd.meta}
+        {
+            k: crowd.meta[k]
+            for k in ("floor", "corridor_width", "corridor_length", "plaza", "obstacles")
+            if k in crowd.meta
+        }
     )  # the scene's static geometry, for the later stages
     out_meta.update(meta or {})
     loop = (
@@ -803,13 +807,13 @@ def build_baseline(
         level: density level, e.g. "D3".
         duration, fps: default the design's video duration and frame rate.
         seed: default the design's seed of the cell (``design.cell_seed``).
-        dissolve: corridor only, seconds of animation generated past ``duration`` for the
+        dissolve: walking scenarios (corridor, crossing) only, seconds of animation generated past ``duration`` for the
             video's loop cross-dissolve (default :data:`LOOP_DISSOLVE_SECONDS`; 0 = none).
         body_model: the bodies' model for ``sample_bodies`` ("makehuman", or "open" for the
             generated mannequins).
 
     The concert is exactly periodic over ``duration`` (``meta["loop"]["mode"] ==
-    "periodic"``); the corridor has T + D frames (T = duration * fps, D = dissolve * fps,
+    "periodic"``); the corridor and the crossing have T + D frames (T = duration * fps, D = dissolve * fps,
     at most T / 2) and ``meta["loop"] = {"mode": "dissolve", "frames": D, "video_frames": T}``.
 
     Returns:
@@ -859,27 +863,34 @@ def build_baseline(
             meta=meta,
             bodies=bodies,
         )
-    if scenario.kind == "corridor":
-        from crowdstudy.navigation import corridor_crowd
-
-        dissolve = LOOP_DISSOLVE_SECONDS if dissolve is None else float(dissolve)
-        if not np.isfinite(dissolve) or dissolve < 0:
-            raise InvalidInputError(f"dissolve: expected a non-negative number of seconds, got {dissolve!r}")
-        fps, n_video = _check_timing(duration, fps)
-        n_dissolve = min(int(round(dissolve * fps)), n_video // 2)
-        # the navigation runs D frames past the video: they are dissolved into its start
-        crowd = corridor_crowd(
-            design, level, seed, duration=(n_video + n_dissolve) / fps, fps=fps, scenario=scenario.name
-        )
-        sc = scenario.params
-        walks = walk_clips("procedural") if sc.get("motion", "mocap") == "procedural" else None
-        return animate_walking(
-            crowd,
-            fps=fps,
-            seed=seed,
-            dissolve_frames=n_dissolve,
-            walks=walks,
-            meta=meta,
-            bodies=_sampled(crowd.n_agents, seed, body_model),
-        )
+    if scenario.kind in ("corridor", "crossing"):
+        return _walking_cell(design, scenario, level, seed, duration, fps, dissolve, body_model, meta)
     raise InvalidInputError(f"stage {st.key!r}: scenario {st.scenario!r} ({scenario.kind}) has no Baseline animation")
+
+
+def _walking_cell(
+    design, scenario, level: str, seed: int, duration: float, fps: float, dissolve, body_model: str, meta: dict
+) -> CrowdAnimation:
+    """The Baseline of a walking cell (a corridor or a crossing scenario): its navigation
+    run ``dissolve`` s (default :data:`LOOP_DISSOLVE_SECONDS`) past ``duration``, then
+    :func:`animate_walking` with those frames dissolved into the video's start."""
+    from crowdstudy.navigation import corridor_crowd, crossing_crowd
+
+    dissolve = LOOP_DISSOLVE_SECONDS if dissolve is None else float(dissolve)
+    if not np.isfinite(dissolve) or dissolve < 0:
+        raise InvalidInputError(f"dissolve: expected a non-negative number of seconds, got {dissolve!r}")
+    fps, n_video = _check_timing(duration, fps)
+    n_dissolve = min(int(round(dissolve * fps)), n_video // 2)
+    # the navigation runs D frames past the video: they are dissolved into its start
+    navigate = corridor_crowd if scenario.kind == "corridor" else crossing_crowd
+    crowd = navigate(design, level, seed, duration=(n_video + n_dissolve) / fps, fps=fps, scenario=scenario.name)
+    walks = walk_clips("procedural") if scenario.params.get("motion", "mocap") == "procedural" else None
+    return animate_walking(
+        crowd,
+        fps=fps,
+        seed=seed,
+        dissolve_frames=n_dissolve,
+        walks=walks,
+        meta=meta,
+        bodies=_sampled(crowd.n_agents, seed, body_model),
+    )

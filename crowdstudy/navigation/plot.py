@@ -67,8 +67,10 @@ def plot_layouts_and_trajectories(layouts: list[Crowd], corridor: Crowd | None, 
         ax = fig.add_subplot(grid[rows - 1, :])
         m = corridor.meta
         speed = float(np.linalg.norm(corridor.velocities, axis=2).mean()) if corridor.velocities is not None else None
+        kind = m.get("scenario", "corridor")
+        how = m.get("direction", "") if kind == "corridor" else f"{m.get('plaza', {}).get('angle', 90):g} deg"
         title = (
-            f"corridor {m.get('density_level', '')} ({m.get('direction', '')}): {corridor.n_agents} agents, "
+            f"{kind} {m.get('density_level', '')} ({how}): {corridor.n_agents} agents, "
             f"{corridor.n_frames / corridor.fps:.1f} s"
         )
         if speed is not None:

@@ -30,7 +30,16 @@ from crowdstudy.body.loading import body_key
 from crowdstudy.body.skeleton import JOINT_INDEX
 from crowdstudy.errors import InvalidInputError
 from crowdstudy.render.garments import surface_codes
-from crowdstudy.render.palette import HAIR, SHIRTS, SHOES, SKIN_TONES, TROUSERS, srgb_to_linear
+from crowdstudy.render.palette import (
+    HAIR,
+    SHIRTS,
+    SHOES,
+    SKIN_TONES,
+    TROUSER_FAMILIES,
+    TROUSERS,
+    family_of,
+    srgb_to_linear,
+)
 
 __all__ = [
     "Appearance",
@@ -40,6 +49,8 @@ __all__ = [
     "TEXTURE_SIZE",
     "TEXTURE_ARRAY_BUDGET",
     "skin_tone",
+    "HAIR_STYLE_SHARES",
+    "material_alpha",
     "nearest_painted",
     "fill_from_nearest",
     "texture_size",
@@ -118,6 +129,8 @@ class Appearance:
     boots: bool
     hairstyle: tuple  # fringe drop, nape drop, bald crown (0/1), strand contrast
     hair_volume: float  # m the hair stands off the scalp
+    denim: bool = False  # the trousers are denim (a twill weave)
+    hair_style: str = "none"  # the hair's geometry (crowdstudy.render.hair.STYLES)
 
 
 def _lin(rgb) -> tuple:
@@ -162,9 +175,9 @@ def assign_appearance(records: list[dict], choice: np.ndarray, seed: int) -> lis
         long_sleeves = rng.random() < 0.45
         legwear = "trousers"
         r = rng.random()
-        if female and r < 0.25:
+        if female and r < 0.15:
             legwear = "skirt"
-        elif r > 0.8:
+        elif r > 0.82:
             legwear = "shorts"
         hem = {
             "trousers": float(0.0 if rng.random() < 0.7 else rng.uniform(0.03, 0.06)),
@@ -199,9 +212,28 @@ def assign_appearance(records: list[dict], choice: np.ndarray, seed: int) -> lis
                 boots=bool(rng.random() < 0.15),
                 hairstyle=style,
                 hair_volume=float(rng.uniform(0.008, 0.02) if female else rng.uniform(0.003, 0.009)),
+                denim=family_of(TROUSER_FAMILIES, int(choice[i, 3])) == "denim",
+                hair_style="none" if bald else _hair_style(rng, female),
             )
         )
     return out
+
+
+#: hair styles (crowdstudy.render.hair.STYLES) and their shares among women and men;
+#: "none": the painted scalp alone (cropped or shaved hair)
+HAIR_STYLE_SHARES = {
+    "female": {"long": 0.35, "bob": 0.2, "ponytail": 0.15, "bun": 0.1, "short": 0.15, "none": 0.05},
+    "male": {"short": 0.5, "none": 0.38, "long": 0.04, "ponytail": 0.04, "bob": 0.04},
+}
+
+
+def _hair_style(rng: np.random.Generator, female: bool) -> str:
+    """A hair style drawn with :data:`HAIR_STYLE_SHARES` (the character's last draw: the
+    draws before it are those of earlier versions)."""
+    shares = HAIR_STYLE_SHARES["female" if female else "male"]
+    names = list(shares)
+    p = np.array([shares[k] for k in names])
+    return names[int(rng.choice(len(names), p=p / p.sum()))]
 
 
 def _landmarks(body) -> dict:
@@ -254,6 +286,7 @@ def _uniforms(look: Appearance, marks: dict) -> dict:
         "u_shoe_top": float(shoe_top),
         "u_floor": marks["floor"],
         "u_belt": int(look.belt),
+        "u_denim": int(look.denim),
         "u_hairstyle": look.hairstyle,
         "u_neck": tuple(marks["neck"]),
         "u_eye": tuple(marks["eye"]),
@@ -280,8 +313,8 @@ def paint_textures(ctx, bodies: list, looks: list[Appearance], program, *, size:
     """Paint every textured character.
 
     Returns ``(texture, codes)``: a ``moderngl`` RGBA8 texture array, layer i = character
-    i's albedo (sqrt of linear RGB; alpha: what the texel shows, see
-    :mod:`crowdstudy.render.garments`), mipmapped, and per character the (R,) code of each
+    i's albedo (sqrt of linear RGB; alpha: the material the character shader lights, see
+    :func:`material_alpha`), mipmapped, and per character the (R,) code of each
     render vertex (None for characters without a :class:`~crowdstudy.body.model.Surface`,
     whose layer stays empty). ``program``: the compiled paint program (paint.vert /
     paint.frag)."""
@@ -339,7 +372,7 @@ def paint_textures(ctx, bodies: list, looks: list[Appearance], program, *, size:
                 _NEAREST[layout] = nearest_painted(image[..., 3] > 0)
             filled = fill_from_nearest(image, _NEAREST[layout])
             codes[i] = surface_codes(filled, surf.uv)
-            filled[..., 3] = 255
+            filled[..., 3] = material_alpha(filled[..., 3])
             data = filled.tobytes()
             _PAINTED[memo] = (data, codes[i])
             while sum(len(v[0]) for v in _PAINTED.values()) > _PAINT_CACHE_BYTES:
@@ -359,7 +392,21 @@ def paint_textures(ctx, bodies: list, looks: list[Appearance], program, *, size:
     tex.build_mipmaps()
     _check_allocated(ctx, tex, n, size)
     tex.filter = (moderngl.LINEAR_MIPMAP_NEAREST, moderngl.LINEAR)
+    # clamp, never wrap: charts touch the texture's edges (the back of the head), and a
+    # wrapped lookup there blends in the opposite edge's colour (the arm's skin)
+    tex.repeat_x = tex.repeat_y = False
     return tex, codes
+
+
+def material_alpha(what: np.ndarray) -> np.ndarray:
+    """The albedo's alpha for the character shader: 0 cloth and shoes, 128 skin (and eyes),
+    255 hair (so a texel filtered across a hem blends skin and cloth, never hair);
+    ``what``: the painter's alpha (paint.frag's codes, 8 bit)."""
+    code = np.rint(np.asarray(what, dtype=np.float64) / 255.0 * 10.0)  # as garments.surface_codes
+    out = np.zeros(code.shape, np.uint8)
+    out[(code == 10) | (code == 5)] = 128  # skin, eye
+    out[code == 9] = 255  # hair
+    return out
 
 
 def nearest_painted(painted: np.ndarray) -> np.ndarray:

@@ -35,6 +35,7 @@ from crowdstudy.render.appearance import assign_appearance
 from crowdstudy.render.bodies import SURFACE_FACE_SCALE, BodyGroup, default_body_loader, group_bodies
 from crowdstudy.render.camera import look_at
 from crowdstudy.render.garments import dress_body
+from crowdstudy.render.hair import add_hair, crown_uv
 from crowdstudy.render.palette import assign_colors
 from crowdstudy.render.scene import Environment, build_environment, split_floor
 
@@ -134,7 +135,7 @@ class RenderOptions:
 def scenario_of(anim) -> str:
     """The scenario of an animation: ``meta["scenario"]``, else corridor when periodic."""
     scen = anim.meta.get("scenario")
-    if scen in ("concert", "corridor"):
+    if scen in ("concert", "corridor", "crossing"):
         return scen
     return "corridor" if anim.periodic_length else "concert"
 
@@ -183,7 +184,13 @@ class CrowdAssets:
             raise InvalidInputError(
                 f"anim.joint_names: the renderer needs the {N_BONES}-joint skeleton, got {anim.n_joints}"
             )
-        env = build_environment(scenario_of(anim), design)
+        kind = scenario_of(anim)
+        if kind == "crossing":  # the plaza and its obstacles come from the animation's meta
+            from crowdstudy.render.plaza import plaza_environment
+
+            env = plaza_environment(design, anim.meta)
+        else:
+            env = build_environment(kind, design)
         loader = body_loader or default_body_loader
         bodies = [loader(rec) for rec in anim.bodies]
         n = anim.n_characters
@@ -332,7 +339,8 @@ def _dressed(body, codes: np.ndarray, look):
     if key not in _DRESSED:
         if len(_DRESSED) > 256:
             _DRESSED.clear()
-        _DRESSED[key] = dress_body(body, codes, look.hair_volume)
+        dressed = dress_body(body, codes, look.hair_volume)
+        _DRESSED[key] = add_hair(dressed, look.hair_style, crown_uv(body))
     return _DRESSED[key]
 
 

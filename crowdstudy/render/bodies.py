@@ -220,7 +220,7 @@ def group_bodies(
                 cluster, gather, new_uv = mapping, np.arange(int(mapping.max()) + 1), None
             else:
                 dec = _surface_decimation(
-                    verts, faces, weld, uv, None if max_faces is None else int(max_faces * surface_scale)
+                    verts, faces, weld, uv, None if max_faces is None else int(max_faces * surface_scale), part
                 )
                 if dec is None:
                     dec_faces, cluster, gather, new_uv = faces, np.arange(len(verts)), np.arange(len(verts)), uv
@@ -300,24 +300,32 @@ def _render_arrays(body):
     )
 
 
-def _surface_decimation(verts: np.ndarray, faces: np.ndarray, weld: np.ndarray, uv: np.ndarray, max_faces: int | None):
+def _surface_decimation(
+    verts: np.ndarray,
+    faces: np.ndarray,
+    weld: np.ndarray,
+    uv: np.ndarray,
+    max_faces: int | None,
+    part: np.ndarray | None = None,
+):
     """Decimate a UV-split surface without tearing its seams or mixing its charts.
 
-    The welded mesh (render vertices merged by ``weld``) is simplified; a new vertex is a
-    (welded cluster, UV chart) pair, charts being the connected components of the split
-    surface, with the mean texture coordinate of the cluster's members in that chart. A
-    face whose corners share no chart (it spans a seam after the collapses) takes the chart
-    of most of its corners; a corner without a vertex in that chart gets the texture
-    coordinate of the chart's nearest render vertex.
+    The welded mesh (render vertices merged by ``weld``) is simplified, so the copies of a
+    cluster on both sides of a seam coincide: no cracks. Each decimated face lies on one
+    UV chart (charts: the connected components of the split surface) and each of its
+    corners takes the texture coordinate of the closest point of the full surface in that
+    chart, on the face's side of any cut through the chart
+    (:func:`~crowdstudy.render.uv_transfer.project_face_uvs`); a new render vertex is a
+    (welded cluster, texture coordinate) pair.
 
     Returns ``(faces (F', 3), cluster (R,) render vertex -> welded cluster, gather (R',)
     new vertex -> cluster, uv (R', 2))`` or None when no decimation is needed. Positions,
-    weights and normals are per cluster (``values[cluster]`` means, then ``[gather]``), so
-    the copies of a cluster on both sides of a seam coincide: no cracks. Cached."""
+    weights and normals are per cluster (``values[cluster]`` means, then ``[gather]``).
+    Cached per topology and face count."""
     if max_faces is None or len(faces) <= max_faces:
         return None
     key = (
-        "surface",
+        "surface-v4",
         hashlib.sha1(
             np.ascontiguousarray(faces, dtype=np.int64).tobytes() + np.ascontiguousarray(weld, dtype=np.int64).tobytes()
         ).hexdigest(),
@@ -327,7 +335,8 @@ def _surface_decimation(verts: np.ndarray, faces: np.ndarray, weld: np.ndarray, 
         return _DECIMATIONS[key]
     from scipy.sparse import coo_matrix
     from scipy.sparse.csgraph import connected_components
-    from scipy.spatial import cKDTree  # pyright: ignore[reportAttributeAccessIssue]  (compiled, not in the stubs)
+
+    from crowdstudy.render.uv_transfer import fit_vertex_uvs, project_face_uvs
 
     n_r = len(verts)
     rows = np.repeat(np.arange(len(faces)), 3)
@@ -340,45 +349,59 @@ def _surface_decimation(verts: np.ndarray, faces: np.ndarray, weld: np.ndarray, 
     if dec is None:
         return None
     w_faces, w_map = dec
+    w_faces = np.asarray(w_faces, dtype=np.int64)
     cluster = w_map[weld].astype(np.int64)
     cluster[cluster < 0] = 0  # render vertices no face uses any more
-    n_charts = int(chart.max()) + 1
-    pair = cluster * n_charts + chart
-    keys, inverse = np.unique(pair, return_inverse=True)
-    uv_sum = np.zeros((len(keys), 2))
-    np.add.at(uv_sum, inverse, uv)
-    uv_new = list(uv_sum / np.bincount(inverse, minlength=len(keys))[:, None])
-    gather = list(keys // n_charts)
-    lookup = {int(k): i for i, k in enumerate(keys)}
-    charts_of: dict[int, set[int]] = {}
-    for k in keys:
-        charts_of.setdefault(int(k // n_charts), set()).add(int(k % n_charts))
     centre = _cluster_mean(verts, cluster, int(cluster.max()) + 1)
-    trees: dict[int, tuple] = {}
-    out = np.empty((len(w_faces), 3), dtype=np.int64)
-    for f, corners in enumerate(np.asarray(w_faces, dtype=np.int64)):
-        sets = [charts_of[int(v)] for v in corners]
-        common = sets[0] & sets[1] & sets[2]
-        if common:
-            k = min(common)
-        else:
-            counts: dict[int, int] = {}
-            for st in sets:
-                for c in st:
-                    counts[c] = counts.get(c, 0) + 1
-            k = max(sorted(counts), key=lambda c: counts[c])
-        for j, v in enumerate(int(x) for x in corners):
-            code = v * n_charts + k
-            if code not in lookup:
-                if k not in trees:
-                    members = np.flatnonzero(chart == k)
-                    trees[k] = (cKDTree(verts[members]), members)
-                tree, members = trees[k]
-                nearest = members[tree.query(centre[v])[1]]
-                lookup[code] = len(gather)
-                gather.append(v)
-                uv_new.append(uv[nearest])
-            out[f, j] = lookup[code]
-    result = (out, cluster, np.asarray(gather, dtype=np.int64), np.asarray(uv_new, dtype=np.float32))
+    part = np.zeros(n_r, np.int64) if part is None else np.asarray(part, dtype=np.int64)
+    cluster_part = _cluster_mean(part.astype(np.float64), cluster, int(cluster.max()) + 1) > 0.5
+    corner_uv, face_chart = project_face_uvs(
+        centre[w_faces],
+        faces,
+        verts,
+        uv,
+        chart[faces[:, 0]],
+        part=part[faces[:, 0]],
+        corner_part=cluster_part[w_faces[:, 0]].astype(np.int64),
+    )
+    gather, uv_new, out = _merge_corners(w_faces, np.repeat(face_chart, 3), corner_uv.reshape(-1, 2))
+    uv_new = fit_vertex_uvs(centre[gather], out, uv_new, verts, faces, uv).astype(np.float32)
+    result = (out, cluster, gather, uv_new)
     _DECIMATIONS[key] = result
     return result
+
+
+#: texture-coordinate distance within which the corners of one cluster on one chart are
+#: one vertex (the two sides of a cut through a chart lie much farther apart)
+_SAME_SIDE = 0.02
+
+
+def _merge_corners(faces: np.ndarray, chart: np.ndarray, corner_uv: np.ndarray):
+    """One render vertex per (cluster, chart, side of a cut): the corners of ``faces``
+    (F', 3) clusters with their ``chart`` (3F',) and texture coordinate (3F', 2) grouped,
+    each group at the texture coordinate of its first corner. Returns ``(gather (R',)
+    cluster of each new vertex, uv (R', 2) float32, faces (F', 3) on the new vertices)``."""
+    flat = faces.reshape(-1)
+    order = np.lexsort((chart, flat))
+    vertex = np.empty(len(flat), dtype=np.int64)
+    gather, uv_new = [], []
+    start = 0
+    while start < len(order):
+        stop = start + 1
+        while (
+            stop < len(order) and flat[order[stop]] == flat[order[start]] and chart[order[stop]] == chart[order[start]]
+        ):
+            stop += 1
+        reps: list[int] = []
+        for corner in order[start:stop]:
+            for r in reps:
+                if np.abs(uv_new[r] - corner_uv[corner]).max() < _SAME_SIDE:
+                    vertex[corner] = r
+                    break
+            else:
+                reps.append(len(gather))
+                vertex[corner] = len(gather)
+                gather.append(int(flat[corner]))
+                uv_new.append(corner_uv[corner])
+        start = stop
+    return np.asarray(gather, dtype=np.int64), np.asarray(uv_new, dtype=np.float32), vertex.reshape(-1, 3)

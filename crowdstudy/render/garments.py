@@ -5,8 +5,9 @@ hair, shirt, trousers, shoes, eye: :data:`CODES`). :func:`surface_codes` reads t
 every vertex of the body, and :func:`dress_body` moves the rest surface to match, for
 rendering only (the physics keeps the bare body's capsules; cloth adds a few millimetres):
 
-* under a shirt or trousers the body is smoothed (Taubin, volume-preserving), so no
-  anatomy shows through the fabric, and lifted :data:`CLOTH_LIFT` m along its normal;
+* under a shirt or trousers the body is smoothed (Taubin, volume-preserving; the moves
+  along the normal only, so the texture does not slide), so no anatomy shows through the
+  fabric, and lifted :data:`CLOTH_LIFT` m along its normal;
 * shoes: the toes are smoothed into one shoe shape and lifted :data:`SHOE_LIFT` m;
 * hair: the scalp is lifted by the style's volume, the lift tapering to zero across the
   hairline over a few vertex rings, so hair reads as a mass, not as paint.
@@ -21,6 +22,7 @@ import numpy as np
 
 from crowdstudy.errors import InvalidInputError
 from crowdstudy.render.bodies import vertex_normals
+from crowdstudy.render.hands import relax_hands
 
 __all__ = ["CODES", "CLOTH_LIFT", "SHOE_LIFT", "surface_codes", "vertex_codes", "dress_body", "neighbours"]
 
@@ -32,7 +34,7 @@ SHOE_LIFT = 0.006  # m
 _SMOOTH_CLOTH = 12  # Taubin rounds under clothes
 _SMOOTH_SHOES = 6  # rounds of spatial averaging that fuse the toes into a shoe tip
 _TOE_RADIUS = 0.015  # m
-_TAPER = 3  # rings over which a lift fades
+_TAPER = 3  # rings over which the dressing fades in across a garment's edge
 
 
 def surface_codes(image: np.ndarray, uv: np.ndarray) -> np.ndarray:
@@ -119,31 +121,47 @@ def _fuse(points: np.ndarray, mask: np.ndarray, radius: float, rounds: int) -> n
     return out
 
 
+def _ramp(mask: np.ndarray, avg, used: np.ndarray, rounds: int = _TAPER) -> np.ndarray:
+    """A 0/1 vertex ``mask`` as a smooth 0..1 weight: averaged over the mesh ``rounds``
+    times (about one vertex ring each), so a garment's edge is a gentle ramp across a few
+    rings rather than a step along the mesh's edges (a jagged hem in the geometry)."""
+    w = mask.astype(np.float64)
+    for _ in range(rounds):
+        w = np.where(used, avg @ w, w)
+    return np.clip(w, 0.0, 1.0)
+
+
 def dress_body(body, render_codes: np.ndarray, hair_volume: float):
     """A copy of ``body`` (a Body with a surface) whose rest vertices carry its clothes and
-    hair (see the module docstring); ``hair_volume`` m, the scalp's lift under the hair."""
+    hair (see the module docstring); ``hair_volume`` m, the scalp's lift under the hair.
+    The fingers take a relaxed pose (:func:`crowdstudy.render.hands.relax_hands`).
+
+    Under cloth the body is smoothed along its normals only (the surface does not slide
+    under its texture), by a weight that ramps smoothly across the garment's edge, so the
+    dressed surface has no step along the mesh's edges at a hem, a cuff or a neckline."""
     if body.surface is None:
         raise InvalidInputError("dress_body: the body has no textured surface")
     if not 0.0 <= float(hair_volume) <= 0.05:
         raise InvalidInputError(f"hair_volume: expected 0 to 0.05 m, got {hair_volume!r}")
     codes = np.array(vertex_codes(body, render_codes))
-    verts = np.array(body.rest_vertices, dtype=np.float64)
+    verts = relax_hands(body.rest_vertices, np.asarray(body.rest_joints, dtype=np.float64), body.weights)
     faces = np.asarray(body.faces, dtype=np.int64)
     avg = neighbours(faces, len(verts))
-    cloth = np.isin(codes, ("shirt", "trousers"))
-    shoes = codes == "shoes"
-    hair = codes == "hair"
     used = np.zeros(len(verts), bool)
     used[np.unique(faces)] = True
-    cloth &= used
-    shoes &= used
-    hair &= used
-    out = _taubin(verts, avg, cloth, _SMOOTH_CLOTH)
+    cloth = np.isin(codes, ("shirt", "trousers")) & used
+    shoes = (codes == "shoes") & used
+    hair = (codes == "hair") & used
+    normals = vertex_normals(verts, faces)
+    # cloth: the smoothed body's offset along the normal, faded in across the garment's edge
+    smooth = _taubin(verts, avg, used, _SMOOTH_CLOTH)
+    w_cloth = _ramp(cloth, avg, used)
+    out = verts + normals * (w_cloth * np.einsum("vk,vk->v", smooth - verts, normals))[:, None]
+    # shoes: the toes fused into one shoe tip, then smoothed (these moves are tangential too)
     toes = shoes & (np.asarray(body.weights)[:, [10, 11]].sum(axis=1) > 0.3)
-    out = _fuse(out, toes, _TOE_RADIUS, _SMOOTH_SHOES)
-    out = _taubin(out, avg, shoes, 4)
-    lift = np.where(cloth, CLOTH_LIFT, 0.0) + np.where(shoes, SHOE_LIFT, 0.0) + np.where(hair, float(hair_volume), 0.0)
-    for _ in range(_TAPER):  # fade every lift out over a few rings (the hairline, hems, collar)
-        lift = np.where(used, 0.5 * lift + 0.5 * np.minimum(lift, avg @ lift), lift)
+    shod = _taubin(_fuse(out, toes, _TOE_RADIUS, _SMOOTH_SHOES), avg, shoes, 4)
+    w_shoes = _ramp(shoes, avg, used)
+    out = out + w_shoes[:, None] * (shod - out)
+    lift = CLOTH_LIFT * w_cloth + SHOE_LIFT * w_shoes + float(hair_volume) * _ramp(hair, avg, used)
     out = out + vertex_normals(out, faces) * lift[:, None]
     return dataclasses.replace(body, rest_vertices=out, _cache={})

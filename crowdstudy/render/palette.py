@@ -1,8 +1,33 @@
-"""Diverse skin tones and clothing colours, assigned so no two neighbours look identical.
+"""Skin tones and clothing colours, assigned so no two neighbours look identical.
 
 Colours are given in sRGB (0..255) and converted to linear RGB for shading. Each character
 gets six colours, one per body region of :data:`REGIONS`: skin, hair, shirt, sleeve
 (forearm: skin for short sleeves, the shirt for long ones), trousers, shoes.
+
+The clothes follow what a concert crowd wears: mostly dark and muted, with some colour.
+Each palette is a set of colour *families*, each with its share of the crowd, split evenly
+between the family's shades (:data:`SHIRT_FAMILIES`, :data:`TROUSER_FAMILIES`,
+:data:`SHOE_FAMILIES`; a character draws its colours from these weights):
+
+=========  ======  ==========  ======  ======  ======
+shirts     share   trousers    share   shoes   share
+=========  ======  ==========  ======  ======  ======
+black      22 %    denim       45 %    black   40 %
+charcoal   12 %    black       25 %    white   35 %
+white      12 %    grey        10 %    brown   12 %
+navy       10 %    khaki       10 %    grey     8 %
+grey        8 %    olive        5 %    colour   5 %
+olive       8 %    navy         5 %
+brown       7 %
+burgundy    5 %
+denim       4 %
+colour     12 %
+=========  ======  ==========  ======  ======  ======
+
+"colour" is a muted red, mustard, teal, purple, royal blue, green and a dusty pink. No
+clothing colour lies within :data:`MIN_SKIN_DELTA_E` of a skin tone, and the shades of
+one family differ by a visible step (CIE76 at least 5), so two neighbours in black still
+read as two people.
 """
 
 from __future__ import annotations
@@ -17,9 +42,14 @@ __all__ = [
     "srgb_to_lab",
     "SKIN_TONES",
     "HAIR",
+    "SHIRT_FAMILIES",
+    "TROUSER_FAMILIES",
+    "SHOE_FAMILIES",
     "SHIRTS",
     "TROUSERS",
     "SHOES",
+    "family_of",
+    "palette_weights",
     "assign_colors",
     "srgb_to_linear",
 ]
@@ -56,37 +86,63 @@ HAIR = (
     (150, 150, 150),
     (60, 45, 38),
 )
-SHIRTS = (
-    (200, 40, 45),
-    (40, 90, 170),
-    (245, 245, 240),
-    (30, 30, 35),
-    (60, 140, 80),
-    (240, 190, 40),
-    (130, 60, 140),
-    (240, 120, 40),
-    (90, 170, 200),
-    (170, 170, 175),
-    (120, 25, 45),
-    (235, 150, 170),
-    (25, 60, 100),
-    (110, 120, 60),
-    (200, 90, 110),
-    (80, 180, 160),
-    (70, 70, 80),
-    (190, 210, 90),
-)
-TROUSERS = (
-    (45, 60, 95),
-    (60, 85, 130),
-    (25, 25, 30),
-    (90, 90, 95),
-    (150, 150, 120),
-    (70, 80, 50),
-    (110, 125, 150),
-    (200, 195, 185),
-)
-SHOES = ((235, 235, 230), (20, 20, 22), (120, 120, 125), (150, 40, 35), (40, 60, 110))
+#: family -> (share of the crowd, sRGB shades)
+SHIRT_FAMILIES = {
+    "black": (0.22, ((16, 16, 18), (30, 29, 32), (44, 42, 46))),
+    "charcoal": (0.12, ((60, 61, 65), (76, 76, 80))),
+    "white": (0.12, ((238, 238, 234), (212, 214, 212))),
+    "navy": (0.10, ((26, 34, 60), (40, 50, 84))),
+    "grey": (0.08, ((118, 119, 123), (152, 152, 155))),
+    "olive": (0.08, ((70, 76, 46), (96, 102, 66), (56, 70, 56))),
+    "brown": (0.07, ((96, 88, 76), (124, 108, 92), (40, 34, 32))),
+    "burgundy": (0.05, ((90, 26, 36), (112, 38, 52))),
+    "denim": (0.04, ((76, 100, 138), (112, 136, 170))),
+    "colour": (
+        0.12,
+        ((170, 46, 44), (190, 150, 40), (34, 108, 112), (96, 62, 130), (38, 92, 160), (56, 128, 76), (200, 96, 130)),
+    ),
+}
+TROUSER_FAMILIES = {
+    "denim": (0.45, ((28, 38, 64), (46, 64, 98), (72, 96, 134), (108, 132, 166))),
+    "black": (0.25, ((18, 18, 21), (36, 36, 40))),
+    "grey": (0.10, ((66, 66, 70), (108, 108, 112))),
+    "khaki": (0.10, ((134, 128, 96), (120, 112, 80))),
+    "olive": (0.05, ((72, 78, 52),)),
+    "navy": (0.05, ((34, 34, 58),)),
+}
+SHOE_FAMILIES = {
+    "black": (0.40, ((20, 20, 22), (44, 42, 42))),
+    "white": (0.35, ((232, 232, 228), (200, 202, 200))),
+    "brown": (0.12, ((40, 34, 32), (124, 108, 92))),
+    "grey": (0.08, ((118, 118, 124),)),
+    "colour": (0.05, ((150, 40, 35), (40, 60, 110))),
+}
+
+
+def _flat(families: dict) -> tuple:
+    return tuple(c for _, shades in families.values() for c in shades)
+
+
+#: every shade of each palette, family by family (the palette indices of :func:`assign_colors`)
+SHIRTS = _flat(SHIRT_FAMILIES)
+TROUSERS = _flat(TROUSER_FAMILIES)
+SHOES = _flat(SHOE_FAMILIES)
+
+
+def palette_weights(families: dict) -> np.ndarray:
+    """(K,) probability of each shade of a palette: its family's share split evenly."""
+    w = [share / len(shades) for share, shades in families.values() for _ in shades]
+    return np.asarray(w, dtype=np.float64) / float(sum(w))
+
+
+def family_of(families: dict, index: int) -> str:
+    """The family of shade ``index`` of a palette (e.g. ``family_of(TROUSER_FAMILIES, i)``)."""
+    k = int(index)
+    for name, (_, shades) in families.items():
+        if k < len(shades):
+            return name
+        k -= len(shades)
+    raise InvalidInputError(f"index: expected a shade of the palette (< {len(_flat(families))}), got {index}")
 
 
 def srgb_to_lab(rgb) -> np.ndarray:
@@ -121,10 +177,11 @@ def assign_colors(
     """Colours of N characters; characters closer than ``radius`` never share a shirt or
     trouser colour.
 
-    Each character's colours are drawn from its own generator (``seed``, index); positions
+    Each character's colours are drawn from its own generator (``seed``, index), clothes
+    with the families' shares (see the module docstring); positions
     only decide which draws must be repaired: a character whose shirt (or trousers)
-    matches a neighbour of lower index redraws among the colours its neighbours do not
-    use. To give a corrected crowd the colours of its Baseline, pass the Baseline's
+    matches a neighbour of lower index redraws (with the same weights) among the colours
+    its neighbours do not use. To give a corrected crowd the colours of its Baseline, pass the Baseline's
     positions (the renderer's ``color_positions``).
 
     Args:
@@ -140,16 +197,25 @@ def assign_colors(
         raise InvalidInputError(f"positions: expected shape (N, 2) with N >= 1, got {pos.shape}")
     n = len(pos)
     palettes = (SKIN_TONES, HAIR, SHIRTS, TROUSERS, SHOES)
+    weights = (
+        np.full(len(SKIN_TONES), 1.0 / len(SKIN_TONES)),
+        np.full(len(HAIR), 1.0 / len(HAIR)),
+        palette_weights(SHIRT_FAMILIES),
+        palette_weights(TROUSER_FAMILIES),
+        palette_weights(SHOE_FAMILIES),
+    )
     rngs = [np.random.default_rng([int(seed) & 0xFFFFFFFF, i]) for i in range(n)]
-    choice = np.array([[int(rng.integers(len(p))) for p in palettes] for rng in rngs], dtype=np.int64)
+    choice = np.array([[int(rng.choice(len(w), p=w)) for w in weights] for rng in rngs], dtype=np.int64)
     long_sleeves = np.array([rng.random() < 0.4 for rng in rngs])
     neigh = _neighbour_pairs(pos, radius, period)
     for i in range(n):
         for slot in (2, 3):  # shirt, trousers
             taken = {int(choice[j, slot]) for j in neigh[i] if j < i}
             if int(choice[i, slot]) in taken:
-                free = [c for c in range(len(palettes[slot])) if c not in taken]
-                choice[i, slot] = int(rngs[i].choice(free)) if free else choice[i, slot]
+                free = np.array([c for c in range(len(palettes[slot])) if c not in taken])
+                if len(free):
+                    w = weights[slot][free]
+                    choice[i, slot] = int(free[rngs[i].choice(len(free), p=w / w.sum())])
     srgb = np.zeros((n, 6, 3))
     for i in range(n):
         skin, hair, shirt = SKIN_TONES[choice[i, 0]], HAIR[choice[i, 1]], SHIRTS[choice[i, 2]]

@@ -1,4 +1,5 @@
-"""The environment around the crowd: floor, the concert venue, the corridor walls.
+"""The environment around the crowd: floor, the concert venue, the corridor walls (the
+crossing's plaza: :mod:`crowdstudy.render.plaza`).
 
 Geometry is built as world-space triangle lists (positions, normals, linear-RGB colour
 plus a pattern id, see :mod:`crowdstudy.render.venue`). Elements that would stand between
@@ -87,7 +88,8 @@ def _color(rgb) -> np.ndarray:
 
 
 def build_environment(scenario: str, design) -> Environment:
-    """The environment of ``scenario`` ("concert" or "corridor") for a study design."""
+    """The environment of ``scenario`` ("concert" or "corridor") for a study design (a
+    crossing's plaza: :func:`crowdstudy.render.plaza.plaza_environment`)."""
     if scenario == "corridor":
         params = design.scenario_of("corridor")
         length, width = float(params["length"]), float(params["width"])

@@ -84,15 +84,25 @@ def _shared_inputs() -> dict:
 
 
 def _palette_digest() -> str:
-    """What decides the characters' looks: the palettes, the appearance and dressing rules
-    (their source files) and the paint shader."""
+    """What decides the characters' looks: the palettes, the appearance and dressing rules,
+    the hair, hands and audience figures (their source files), and the paint and character
+    shaders."""
     from importlib import resources
 
     from crowdstudy.render import appearance, garments, palette
 
     sources = [
         resources.files("crowdstudy.render").joinpath(*p).read_text(encoding="utf-8")
-        for p in (("appearance.py",), ("garments.py",), ("shaders", "paint.frag"))
+        for p in (
+            ("appearance.py",),
+            ("garments.py",),
+            ("hair.py",),
+            ("hands.py",),
+            ("figures.py",),
+            ("shaders", "paint.frag"),
+            ("shaders", "character.frag"),
+            ("shaders", "lighting.glsl"),
+        )
     ]
     return _digest(
         [

@@ -1,5 +1,6 @@
 """The concert venue around the study's crowd area: a hall, a stage with lights, and a
-surrounding audience of low-detail standing figures.
+surrounding audience of low-detail people (decimated MakeHuman bodies,
+:mod:`crowdstudy.render.figures`).
 
 Everything is static world-space geometry in the row layout of
 :mod:`crowdstudy.render.scene` (``x y z nx ny nz r g b pattern``, linear RGB). The
@@ -21,7 +22,6 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from collections.abc import Sequence
 
 import numpy as np
 
@@ -110,12 +110,6 @@ class Elements:
         return self.vertices[self.indices]
 
 
-def _rows(points, normals, colors, pattern) -> np.ndarray:
-    out = np.zeros((len(points), 10), dtype=np.float32)
-    out[:, :3], out[:, 3:6], out[:, 6:9], out[:, 9] = points, normals, colors, pattern
-    return out
-
-
 def _tris(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(T, 3, 3) triangles -> (3T, 3) points and their flat (3T, 3) unit normals."""
     n = np.cross(points[:, 1] - points[:, 0], points[:, 2] - points[:, 0])
@@ -123,105 +117,10 @@ def _tris(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return points.reshape(-1, 3), np.repeat(n, 3, axis=0)
 
 
-def _lathe(rings: Sequence[tuple[float, float, float, float, float]], sides: int, cap: bool = True) -> np.ndarray:
-    """(T, 3, 3) triangles of a faceted solid through horizontal elliptic rings.
-
-    ``rings``: (z, rx, ry, cx, cy) from bottom to top (m); a ring of radius 0 is an apex.
-    The top ring is closed by a cap when ``cap``; faces wind counter-clockwise outwards.
-    """
-    a = 2 * np.pi * (np.arange(sides) + 0.5) / sides
-    ring = [np.c_[cx + rx * np.cos(a), cy + ry * np.sin(a), np.full(sides, z)] for z, rx, ry, cx, cy in rings]
-    tris = []
-    j = (np.arange(sides) + 1) % sides
-    for lo, hi in zip(ring[:-1], ring[1:], strict=True):
-        tris.append(np.stack([lo, lo[j], hi[j]], axis=1))
-        tris.append(np.stack([lo, hi[j], hi], axis=1))
-    if cap:
-        top = ring[-1]
-        c = top.mean(axis=0)
-        tris.append(np.stack([np.broadcast_to(c, top.shape), top, top[j]], axis=1))
-    t = np.concatenate(tris)
-    area = np.linalg.norm(np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0]), axis=1)
-    return t[area > 1e-12]
-
-
-def _limb(p0, p1, r0: float, r1: float, sides: int = 5) -> np.ndarray:
-    """(T, 3, 3) triangles of a faceted tapered tube from ``p0`` to ``p1`` (closed at p1)."""
-    p0, p1 = np.asarray(p0, float), np.asarray(p1, float)
-    axis = p1 - p0
-    length = float(np.linalg.norm(axis))
-    t = _lathe([(0.0, r0, r0, 0.0, 0.0), (length, r1, r1, 0.0, 0.0)], sides)
-    w = axis / length
-    u = np.cross(w, (1.0, 0.0, 0.0) if abs(w[0]) < 0.9 else (0.0, 1.0, 0.0))
-    u /= np.linalg.norm(u)
-    v = np.cross(w, u)
-    return t @ np.stack([u, v, w]) + p0
-
-
-# Figure templates for a unit stature (1 m); parts: 0 legs, 1 torso and arms, 2 skin, 3 hair.
-def _smooth(tris: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Shared vertices of (T, 3, 3) triangles: (V, 3) points, (V, 3) area-weighted unit
-    normals, (T, 3) corner indices."""
-    key = np.round(tris.reshape(-1, 3), 6)
-    pts, inverse = np.unique(key, axis=0, return_inverse=True)
-    faces = inverse.reshape(-1, 3)
-    fn = np.cross(tris[:, 1] - tris[:, 0], tris[:, 2] - tris[:, 0])
-    normals = np.zeros_like(pts)
-    for k in range(3):
-        np.add.at(normals, faces[:, k], fn)
-    normals /= np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-12)
-    return pts, normals, faces
-
-
-def _template(arms: str, detail: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """(V, 3) points, (V, 3) normals, (T, 3) faces, (V,) part id of a figure 1 m tall
-    (shoulders 0.26, hips 0.2, head 0.095 wide), facing +y with the shoulders along x.
-
-    ``arms``: "none" (hanging), "one" or "both" raised; ``detail``: 1 (near, about 100
-    triangles) or 0 (far, about 40: legs in one piece, arms merged into the torso)."""
-    k = 5 if detail else 4
-    parts = []
-    if detail:
-        for sx in (-1, 1):
-            parts.append(
-                (_lathe([(0.0, 0.035, 0.042, sx * 0.05, 0.01), (0.47, 0.05, 0.05, sx * 0.052, 0.0)], 4, cap=False), 0)
-            )
-    else:
-        parts.append((_lathe([(0.0, 0.085, 0.04, 0, 0.01), (0.47, 0.1, 0.05, 0, 0.0)], 4, cap=False), 0))
-    torso = [(0.46, 0.10, 0.06, 0, 0), (0.79, 0.125 if detail else 0.14, 0.065, 0, 0), (0.82, 0.06, 0.045, 0, 0)]
-    if detail:
-        torso.insert(1, (0.62, 0.095, 0.055, 0, 0))
-    parts.append((_lathe(torso, k), 1))
-    for side, raised in ((-1, arms == "both"), (1, arms in ("one", "both"))):
-        if raised:
-            shoulder, hand = np.array((side * 0.115, 0.0, 0.78)), np.array((side * 0.16, 0.03, 1.17))
-        elif detail:
-            shoulder, hand = np.array((side * 0.135, 0.0, 0.78)), np.array((side * 0.15, 0.01, 0.44))
-        else:
-            continue
-        wrist = shoulder + 0.85 * (hand - shoulder)
-        parts.append((_limb(shoulder, wrist, 0.027, 0.022, 4), 1))
-        parts.append((_limb(wrist, hand, 0.022, 0.018, 3), 2))
-    parts.append(
-        (
-            _lathe(
-                [(0.81, 0.028, 0.028, 0, 0.0), (0.86, 0.045, 0.05, 0, 0.005), (0.93, 0.047, 0.055, 0, 0.0)][
-                    :: 1 if detail else 2
-                ],
-                k,
-                cap=False,
-            ),
-            2,
-        )
-    )
-    parts.append((_lathe([(0.93, 0.047, 0.055, 0, 0.0), (0.99, 0.03, 0.035, 0, -0.005)], k), 3))
-    pts, nrm, faces, ids = [], [], [], []
-    offset = 0
-    for tris, part in parts:
-        p, n, f = _smooth(tris)
-        pts.append(p), nrm.append(n), faces.append(f + offset), ids.append(np.full(len(p), part))
-        offset += len(p)
-    return np.concatenate(pts), np.concatenate(nrm), np.concatenate(faces), np.concatenate(ids)
+def _rows(points, normals, colors, pattern) -> np.ndarray:
+    out = np.zeros((len(points), 10), dtype=np.float32)
+    out[:, :3], out[:, 3:6], out[:, 6:9], out[:, 9] = points, normals, colors, pattern
+    return out
 
 
 _SHIRTS = (
@@ -241,6 +140,17 @@ _SHIRTS = (
 _TROUSERS = ((22, 24, 32), (34, 44, 66), (28, 28, 30), (56, 56, 60), (70, 62, 48), (40, 52, 78))
 _SKIN = ((190, 156, 134), (170, 130, 102), (144, 104, 78), (116, 80, 58), (90, 62, 44), (70, 48, 34))
 _HAIR = ((22, 18, 16), (44, 32, 24), (78, 56, 36), (130, 100, 64), (110, 110, 110))
+
+
+_SHOES = ((20, 20, 22), (40, 38, 38), (200, 200, 196), (70, 52, 40))
+_POSES = ("none", "one", "both")
+
+
+def _figure(pose: int, detail: int, sex: int):
+    """A figure template (:func:`crowdstudy.render.figures.figure_template`)."""
+    from crowdstudy.render.figures import figure_template
+
+    return figure_template(_POSES[pose], detail, ("female", "male")[sex])
 
 
 def audience(
@@ -300,11 +210,12 @@ def audience(
     pose = rng.choice(3, n, p=(0.86, 0.11, 0.03)) * detail  # arms down, one or both raised (near figures)
     phase = rng.uniform(0.0, 0.999, n)
     cols = [srgb_to_linear(np.array(p)[rng.integers(len(p), size=n)]) for p in (_TROUSERS, _SHIRTS, _SKIN, _HAIR)]
-    templates = {(m, d): _template(name, d) for m, name in enumerate(("none", "one", "both")) for d in (0, 1)}
-    palette = np.stack(cols, axis=1)  # (n, 4 parts, 3)
+    cols.append(srgb_to_linear(np.array(_SHOES)[rng.integers(len(_SHOES), size=n)]))
+    sex = rng.integers(2, size=n)
+    palette = np.stack(cols, axis=1)  # (n, 5 parts: figures.PARTS, 3)
     out = []
     for i in range(n):
-        pts, nrm, faces, ids = templates[int(pose[i]), int(detail[i])]
+        pts, nrm, faces, ids = _figure(int(pose[i]), int(detail[i]), int(sex[i]))
         c, s = math.cos(yaw[i] - math.pi / 2), math.sin(yaw[i] - math.pi / 2)
         rot = np.array([[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, 1.0]])  # row vectors: p @ rot
         scale = np.array([girth[i], girth[i], 1.0]) * stature[i]

@@ -1,4 +1,6 @@
-"""``crowdstudy analyze responses.csv --out DIR``: the paper's analysis of exported responses."""
+"""``crowdstudy analyze responses.csv --out DIR``: the analysis of exported responses, each
+stage by its task (Likert and slider ratings from responses.csv, 2AFC choices from
+comparisons.csv beside it or ``--comparisons FILE``)."""
 
 from __future__ import annotations
 
@@ -52,6 +54,12 @@ def configure(parser: argparse.ArgumentParser) -> None:
         "beside the responses file, when there is one)",
     )
     parser.add_argument(
+        "--comparisons",
+        default=None,
+        help="comparisons.csv of the study export (the 2AFC trials; default: comparisons.csv beside the "
+        "responses file, when there is one)",
+    )
+    parser.add_argument(
         "--stars",
         choices=("always", "omnibus"),
         default="always",
@@ -71,6 +79,8 @@ def run(args: argparse.Namespace) -> int:
         raise InvalidInputError(f"responses file {str(path)!r} does not exist")
     if not 0 < args.alpha < 1:
         raise InvalidInputError(f"--alpha must be in (0, 1), got {args.alpha}")
+    if args.comparisons is not None and not Path(args.comparisons).is_file():
+        raise InvalidInputError(f"--comparisons file {args.comparisons!r} does not exist")
     design = load_design(args.design)
     check_output_dir(args.out, "--out")
     options = AnalysisOptions(
@@ -84,7 +94,15 @@ def run(args: argparse.Namespace) -> int:
         figures=not args.no_figures,
         stars=args.stars,
     )
-    result = analyze(path, design, args.out, options, progress=True, participants=args.participants)
+    result = analyze(
+        path,
+        design,
+        args.out,
+        options,
+        progress=True,
+        participants=args.participants,
+        comparisons=args.comparisons,
+    )
     print(result.summary)
     print(f"wrote {len(result.files)} files to {args.out}")
     return 0

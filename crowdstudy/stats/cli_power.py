@@ -1,6 +1,11 @@
 """``crowdstudy power -n 20 --method-effect 0.5 --sims 200 --seed 1``: Monte-Carlo power of
 the Method effect and the Density x Method interaction for a study of a given size.
 
+The design decides the methods and the stage's task: ``--method-effect NAME=POINTS``
+(repeatable) gives each method its effect relative to the reference (``--method-effect
+POINTS`` alone means Ours, as before); a 2afc stage reports the power of each pair's
+logistic mixed model (:mod:`crowdstudy.stats.power`).
+
 The effect can be given in Likert points (``--method-effect``) or standardised (``--dz``,
 ``--eta-p2``); ``--pilot responses.csv`` fits the whole simulation model to a pilot study
 first (explicit options then override the fitted values). The output table has the power
@@ -23,10 +28,12 @@ def configure(parser: argparse.ArgumentParser) -> None:
     size = parser.add_mutually_exclusive_group()
     size.add_argument(
         "--method-effect",
-        type=float,
+        action="append",
         default=None,
-        help="Ours - Baseline on QCR at the mid density, Likert points (other composites scale it; "
-        "default 1.0, or the pilot's)",
+        metavar="[NAME=]POINTS",
+        help="a method's effect relative to the reference on QCR at the mid density, Likert points "
+        "(other composites scale it); repeatable, NAME=POINTS per method; POINTS alone means Ours "
+        "(default Ours 1.0, or the pilot's)",
     )
     size.add_argument(
         "--dz",
@@ -95,12 +102,45 @@ def _model(args, design):
         if getattr(args, k) is not None
     }
     if args.method_effect is not None:
-        extra["method_effect"] = args.method_effect
+        effects = _method_effects(args.method_effect, design)
+        treated = model.treated_method
+        if treated in effects:
+            extra["method_effect"] = effects.pop(treated)
+        if effects:
+            extra["method_effects"] = {**dict(model.method_effects), **effects}
     model = dataclasses.replace(model, **extra)
     if args.dz is not None or args.eta_p2 is not None:
         points = method_points(model, design, args.stage, dz=args.dz, eta_p2=args.eta_p2)
         model = dataclasses.replace(model, method_effect=points)
     return model, fitted
+
+
+def _method_effects(values: list[str], design) -> dict[str, float]:
+    """``--method-effect`` values as {method: points}: ``NAME=POINTS`` or ``POINTS`` (Ours);
+    an unknown method, the reference or a non-number is an error naming the option."""
+    out: dict[str, float] = {}
+    for text in values:
+        name, sep, number = text.rpartition("=")
+        name = name.strip() if sep else "Ours"
+        try:
+            points = float(number)
+        except ValueError:
+            raise InvalidInputError(f"--method-effect {text!r}: expected POINTS or NAME=POINTS, a number") from None
+        if name not in design.methods[1:]:
+            raise InvalidInputError(
+                f"--method-effect {text!r}: {name!r} is not a method of the design other than its reference "
+                f"{design.methods[0]!r}; its methods: {', '.join(design.methods)}"
+            )
+        if name in out:
+            raise InvalidInputError(f"--method-effect: {name!r} is given twice")
+        out[name] = points
+    return out
+
+
+def _effects_text(model) -> str:
+    """The method effects of the run, for its heading line."""
+    effects = {model.treated_method: model.method_effect, **dict(getattr(model, "method_effects", {}))}
+    return ", ".join(f"{m} {v:.3g}" for m, v in effects.items())
 
 
 def run(args: argparse.Namespace) -> int:
@@ -133,14 +173,15 @@ def run(args: argparse.Namespace) -> int:
         progress=True,
     )
     print(
-        f"power of a {args.participants}-participant study, stage {args.stage}, method effect "
-        f"{model.method_effect:.3g} points, {args.sims} simulated studies (alpha = {args.alpha}; "
+        f"power of a {args.participants}-participant study, stage {args.stage} ({result.settings['task']}), "
+        f"method effects {_effects_text(model)} points, {args.sims} simulated studies (alpha = {args.alpha}; "
         f"ci: exact Clopper-Pearson 95 %)"
     )
+    sizes = ["share_b_median"] if result.settings["task"] == "2afc" else ["np2_median", "dz_median"]
     print(
         format_table(
             result.table.to_dict("records"),
-            ["composite", "effect", "power", "ci_low", "ci_high", "n_significant", "sims", "np2_median", "dz_median"],
+            ["composite", "effect", "power", "ci_low", "ci_high", "n_significant", "sims", *sizes],
         )
     )
     if args.out:

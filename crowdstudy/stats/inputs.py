@@ -190,13 +190,16 @@ def load_responses(
     *,
     participants: str | Path | pd.DataFrame | Literal[False] | None = None,
     simulated: bool | None = None,
+    allow_empty: bool = False,
 ) -> LoadedResponses:
     """Read and check the responses of one analysis.
 
     ``responses``: a DataFrame in the responses.csv schema (``attrs["simulated"]`` marks
     it simulated) or a path to the CSV (its sidecar ``STEM.json`` is read). ``participants``:
     participants.csv (path or DataFrame; None: participants.csv beside a responses path
-    when it exists; False: none). ``simulated``: overrides the sidecar.
+    when it exists; False: none). ``simulated``: overrides the sidecar. ``allow_empty``: a
+    table without rows is returned empty (a design whose stages are all 2afc) instead of
+    being an error.
 
     Each participant must answer each stimulus once (a repeated answer is an error naming
     participant, cell and rows) and every stage present must have all its design levels.
@@ -215,12 +218,14 @@ def load_responses(
         side = {"simulated": True} if responses.attrs.get("simulated") else {}
     if participants is None and path is not None and (path.parent / "participants.csv").is_file():
         participants = path.parent / "participants.csv"
+    is_sim = bool(side.get("simulated", False)) if simulated is None else bool(simulated)
+    note = str(side["note"]) if side.get("note") else ""
+    if allow_empty and len(responses) == 0:
+        return LoadedResponses(data=responses, source=source, simulated=is_sim, note=note, exclusions=None)
     data = validate_responses(responses.reset_index(drop=True), design, source=source)
     excl = None
     if participants is not None and participants is not False:
         psrc = "participants" if isinstance(participants, pd.DataFrame) else str(participants)
         data, excl = apply_exclusions(data, read_participants(participants), psrc)
     check_complete(data, design, source=source)  # rows named by their index: the file's data rows
-    is_sim = bool(side.get("simulated", False)) if simulated is None else bool(simulated)
-    note = str(side["note"]) if side.get("note") else ""
     return LoadedResponses(data=data, source=source, simulated=is_sim, note=note, exclusions=excl)

@@ -43,8 +43,8 @@ from crowdstudy.stats.options import AnalysisOptions, StarsRule
 from crowdstudy.stats.posthoc import POSTHOC_COLUMNS, pairwise_from_cells
 from crowdstudy.stats.report import apa_summary, descriptives_from_cells
 from crowdstudy.stats.results import AnalysisResult, CompositeResult, Robustness
-from crowdstudy.stats.robust import mixed_model, ordinal_method_check
-from crowdstudy.stats.scoring import FACTORS, cell_means, composite_scores, item_reliability
+from crowdstudy.stats.robust import friedman_test, mixed_model, ordinal_method_check
+from crowdstudy.stats.scoring import FACTOR_NAMES, FactorNames, cell_means, composite_scores, item_reliability
 
 __all__ = ["analyze", "compute", "compute_composite", "AnalysisReport", "posthoc_for_significant"]
 
@@ -77,6 +77,7 @@ def analyze(
     participants: str | Path | pd.DataFrame | Literal[False] | None = None,
     simulated: bool | None = None,
     progress: bool = False,
+    comparisons: str | Path | pd.DataFrame | Literal[False] | None = None,
 ) -> AnalysisReport:
     """Run the paper's analysis; write tables, figures and the summary when ``out_dir`` is set.
 
@@ -88,7 +89,11 @@ def analyze(
     beside a responses path when it exists; False: none): excluded participants are
     dropped first and counted per reason in summary.md and analysis.json. ``simulated``:
     overrides the sidecar (True prints "SIMULATED data" on every figure). ``progress``: a
-    progress bar over the ANOVAs.
+    progress bar over the ANOVAs. ``comparisons``: the 2AFC trials (comparisons.csv, path
+    or DataFrame; default: comparisons.csv beside a responses path when it exists; False:
+    none); each 2afc stage of the design present in them is analysed
+    (:mod:`crowdstudy.stats.comparisons`). A responses file without rows is allowed when
+    there are comparisons (a design whose stages are all 2afc).
 
     Each participant must answer each stimulus once (a repeated answer is an error naming
     participant, cell and rows) and every stage present must have all its design levels.
@@ -98,8 +103,23 @@ def analyze(
 
         design = load_design()
     options = AnalysisOptions() if options is None else options
-    loaded = load_responses(responses, design, participants=participants, simulated=simulated)
-    result = compute(loaded, design, options, progress=progress)
+    if comparisons is None and isinstance(responses, (str, Path)):
+        beside = Path(responses).parent / "comparisons.csv"
+        comparisons = beside if beside.is_file() else None
+    choices = None
+    if comparisons is not None and comparisons is not False:
+        from crowdstudy.stats.comparisons import load_comparisons
+
+        if participants is None and isinstance(responses, (str, Path)):
+            beside = Path(responses).parent / "participants.csv"
+            participants = beside if beside.is_file() else None
+        choices, _ = load_comparisons(
+            comparisons, design, participants=participants if participants is not False else None
+        )
+    loaded = load_responses(
+        responses, design, participants=participants, simulated=simulated, allow_empty=choices is not None
+    )
+    result = compute(loaded, design, options, progress=progress, comparisons=choices)
     from crowdstudy.stats.summary import summary_text
 
     summary = summary_text(result)
@@ -116,19 +136,27 @@ def compute(
     design: StudyDesign,
     options: AnalysisOptions,
     *,
-    factors: Sequence[str] = FACTORS,
+    factors: Sequence[str] | None = None,
+    names: FactorNames = FACTOR_NAMES,
     progress: bool = False,
+    comparisons: pd.DataFrame | None = None,
 ) -> AnalysisResult:
     """Every number of the analysis of ``responses`` (from
     :func:`~crowdstudy.stats.inputs.load_responses`), without file I/O.
 
-    ``factors``: the within factors of the ANOVA, in order (columns of
-    :func:`~crowdstudy.stats.scoring.cell_means`); one with a single level in a stage is
-    left out of that stage's model, except Method, which must vary."""
-    chosen, comps = _selection(responses, design, options)
+    ``names``: the names of the within factors (:class:`~crowdstudy.stats.scoring.FactorNames`;
+    every table, figure and summary uses them); ``factors``: the within factors of the
+    ANOVA, in order (default ``names.order``); one with a single level in a stage is left
+    out of that stage's model, except the method factor, which must vary. Each stage is
+    analysed by its task: ``likert`` and ``slider`` stages from ``responses``, ``2afc``
+    stages from ``comparisons`` (validated by
+    :func:`~crowdstudy.stats.comparisons.validate_comparisons`; None: none) with
+    :func:`~crowdstudy.stats.comparisons.compute_choices`."""
+    factors = names.order if factors is None else tuple(factors)
+    chosen, comps, afc = _selection(responses, design, options, comparisons)
     data = responses.data
-    reliability = item_reliability(data, design, by="scenario")
-    scored = composite_scores(data, design)
+    reliability = _reliability(data, design) if len(data) else pd.DataFrame()
+    scored = composite_scores(data, design) if len(data) else data
     results: dict[tuple[int, str], CompositeResult] = {}
     work = [(st, c) for st in chosen for c in comps]
     iterator = work
@@ -138,26 +166,53 @@ def compute(
         iterator = progress_bar(work, desc="analysis", unit="anova", leave=False)
     for st, comp in iterator:
         results[(st.number, comp)] = compute_composite(
-            scored, design, st, comp, factors, options, source=responses.source
+            scored, design, st, comp, factors, options, source=responses.source, names=names
         )
+    choices = {}
+    if afc:
+        from crowdstudy.stats.comparisons import compute_choices
+
+        choices = {st.number: compute_choices(comparisons, design, st, level=options.level, names=names) for st in afc}
+    people = set(data["participant_id"].astype(str)) if len(data) else set()
+    if comparisons is not None:
+        people |= set(comparisons["participant_id"].astype(str))
     return AnalysisResult(
         design=design,
         options=options,
-        stages=tuple(chosen),
+        stages=tuple(st for st in design.stages if st in chosen or st in afc),
         source=responses.source,
         simulated=responses.simulated,
         note=responses.note,
-        n_participants=int(data["participant_id"].nunique()),
+        n_participants=len(people),
         exclusions=responses.exclusions,
         reliability=reliability,
         results=results,
+        names=names,
+        choices=choices,
     )
 
 
+def _reliability(data: pd.DataFrame, design: StudyDesign) -> pd.DataFrame:
+    """Item-pair reliability per scenario; with slider stages, per scenario and task (a
+    ``task`` column first), since the two scales do not mix."""
+    from crowdstudy.stats.scoring import row_tasks
+
+    tasks = row_tasks(data)
+    if (tasks == "likert").all():
+        return item_reliability(data, design, by="scenario")
+    parts = []
+    for task in dict.fromkeys(tasks):
+        part = item_reliability(data[(tasks == task).to_numpy()], design, by="scenario")
+        part.insert(0, "task", task)
+        parts.append(part)
+    return pd.concat(parts, ignore_index=True)
+
+
 def _selection(
-    responses: LoadedResponses, design: StudyDesign, options: AnalysisOptions
-) -> tuple[list[Stage], list[str]]:
-    """The stages (present in the responses and chosen) and composites to analyse."""
+    responses: LoadedResponses, design: StudyDesign, options: AnalysisOptions, comparisons: pd.DataFrame | None
+) -> tuple[list[Stage], list[str], list[Stage]]:
+    """The rating stages (present in the responses and chosen), the composites and the
+    2afc stages (present in the comparisons and chosen) to analyse."""
     comps = list(design.composites) if options.composites is None else list(options.composites)
     for c in comps:
         if c not in design.composites:
@@ -169,11 +224,16 @@ def _selection(
             raise InvalidInputError(
                 f"stage {number!r} is not in the design ({design.source}); it defines {', '.join(map(str, numbers))}"
             )
-    present = sorted(set(responses.data["stage"]))
+    present = sorted(set(responses.data["stage"])) if len(responses.data) else []
     chosen = [st for st in design.stages if st.number in present and (stages is None or st.number in stages)]
-    if not chosen:
-        raise InvalidInputError(f"no responses for the chosen stage(s) {stages}; responses hold stage(s) {present}")
-    return chosen, comps
+    compared = sorted(set(comparisons["stage"])) if comparisons is not None else []
+    afc = [st for st in design.stages if st.number in compared and (stages is None or st.number in stages)]
+    if not chosen and not afc:
+        raise InvalidInputError(
+            f"no responses for the chosen stage(s) {stages}; responses hold stage(s) {present}"
+            + (f", comparisons stage(s) {compared}" if comparisons is not None else "")
+        )
+    return chosen, comps, afc
 
 
 def compute_composite(
@@ -185,33 +245,36 @@ def compute_composite(
     options: AnalysisOptions,
     *,
     source: str = "responses",
+    names: FactorNames = FACTOR_NAMES,
 ) -> CompositeResult:
     """The analysis of one (stage, composite): ``scored`` from
     :func:`~crowdstudy.stats.scoring.composite_scores`."""
     o = options
-    long = cell_means(scored, comp, design, stage=stage.number)
+    method, density = names.method, names.density
+    long = cell_means(scored, comp, design, stage=stage.number, names=names)
     # a factor with a single level in this stage (a custom design with one viewpoint,
-    # say) is left out of the model; Method must vary
-    used = [f for f in factors if f == "Method" or long[f].nunique() > 1]
+    # say) is left out of the model; the method factor must vary
+    used = [f for f in factors if f == method or long[f].nunique() > 1]
     try:
         cm = cell_matrix(long, comp, used, "participant_id", missing=o.missing, duplicates="raise")
     except InvalidInputError as exc:
         raise InvalidInputError(f"{source}: stage {stage.number} ({stage.scenario}), {comp}: {exc}") from None
     table = anova_from_cells(cm, correction=o.anova_correction, effsize=o.effsize, alpha=o.alpha)
-    others = [f for f in used if f != "Method"]
+    others = [f for f in used if f != method]
     trends = (
         pd.concat(
             [
-                polynomial_contrasts(cm, "Density", level=o.level),
-                polynomial_contrasts(cm, "Density", "Method", level=o.level),
+                polynomial_contrasts(cm, density, level=o.level),
+                polynomial_contrasts(cm, density, method, level=o.level),
             ],
             ignore_index=True,
         )
-        if "Density" in used
+        if density in used
         else None
     )
-    show, gate = _stars_shown(table, o.alpha, o.stars)
-    label = f"Stage {stage.number} ({stage.scenario}), {comp}"
+    show, gate = _stars_shown(table, o.alpha, o.stars, method)
+    scale = _scale_name(design, stage)
+    label = f"Stage {stage.number} ({stage.scenario}), {comp}" + (f" ({scale})" if scale else "")
     return CompositeResult(
         stage=stage.number,
         scenario=stage.scenario,
@@ -220,17 +283,31 @@ def compute_composite(
         cells=cm,
         anova=table,
         posthoc=posthoc_for_significant(cm, table, alpha=o.alpha, adjust=o.adjust, level=o.level),
-        method_by_cell=pairwise_from_cells(cm, "Method", others, adjust=o.adjust, level=o.level),
-        method=pairwise_from_cells(cm, "Method", [], adjust=o.adjust, level=o.level),
+        method_by_cell=pairwise_from_cells(cm, method, others, adjust=o.adjust, level=o.level),
+        method=pairwise_from_cells(cm, method, [], adjust=o.adjust, level=o.level),
         simple_effects=simple_effects(cm, others) if others else None,
         trends=trends,
         descriptives=descriptives_from_cells(cm, comp),
         shapiro=shapiro_from_cells(cm, alpha=o.alpha),
         apa=apa_summary(table, alpha=o.alpha, effsize=o.effsize, label=label),
-        robustness=_robustness(long, comp, used, cm, o.alpha) if o.robustness else None,
+        robustness=_robustness(long, comp, used, cm, o.alpha, method) if o.robustness else None,
         stars_shown=show,
         stars_gate=gate,
+        names=names,
+        task=stage.task,
+        scale=scale,
     )
+
+
+def _scale_name(design: StudyDesign, stage: Stage) -> str:
+    """How the tables name a stage's answer scale: "" for the paper's Likert stages (their
+    tables are as before), ``"slider 0-100"`` for a slider stage."""
+    if stage.task == "slider":
+        from crowdstudy.stats.scoring import scale_range
+
+        lo, hi = scale_range(design, "slider")
+        return f"slider {lo}-{hi}"
+    return ""
 
 
 def posthoc_for_significant(
@@ -253,19 +330,23 @@ def posthoc_for_significant(
     return pd.concat(parts, ignore_index=True)
 
 
-def _stars_shown(table: pd.DataFrame, alpha: float, rule: StarsRule) -> tuple[bool, str]:
-    """Whether the figure's per-cell Method stars are drawn, and the ANOVA effect(s) that
-    gate them: under ``"omnibus"`` only when the Method main effect or an interaction with
-    Method is significant."""
+def _stars_shown(table: pd.DataFrame, alpha: float, rule: StarsRule, method: str) -> tuple[bool, str]:
+    """Whether the figure's per-cell method stars are drawn, and the ANOVA effect(s) that
+    gate them: under ``"omnibus"`` only when the method main effect or an interaction with
+    the method factor is significant."""
     if rule == "always":
         return True, ""
-    involved = table[table["Source"].str.split(":").map(lambda f: "Method" in f)]
+    involved = table[table["Source"].str.split(":").map(lambda f: method in f)]
     gate = " or ".join(involved["Source"])
     return bool((involved["p"] < alpha).any()), gate
 
 
-def _robustness(long: pd.DataFrame, comp: str, factors: list[str], cm: CellMatrix, alpha: float) -> Robustness:
-    ordinal = ordinal_method_check(cm, alpha=alpha)
+def _robustness(
+    long: pd.DataFrame, comp: str, factors: list[str], cm: CellMatrix, alpha: float, method: str
+) -> Robustness:
+    ordinal = ordinal_method_check(cm, alpha=alpha, method=method)
+    k = len(cm.levels[cm.factors.index(method)])
+    friedman = friedman_test(cm, method=method) if k > 2 else None
     try:
         mixed = mixed_model(
             long,
@@ -273,7 +354,8 @@ def _robustness(long: pd.DataFrame, comp: str, factors: list[str], cm: CellMatri
             factors,
             "participant_id",
             levels={f: list(lv) for f, lv in zip(cm.factors, cm.levels, strict=True)},
+            method=method,
         )
     except InvalidInputError as exc:  # degenerate data: said in the summary, not fatal
-        return Robustness(ordinal=ordinal, mixed=None, mixed_note=str(exc))
-    return Robustness(ordinal=ordinal, mixed=mixed)
+        return Robustness(ordinal=ordinal, mixed=None, mixed_note=str(exc), friedman=friedman)
+    return Robustness(ordinal=ordinal, mixed=mixed, friedman=friedman)

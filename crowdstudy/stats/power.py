@@ -9,6 +9,19 @@ Standardised terms: each row also reports the median partial eta squared of the 
 the simulated studies and, for Method, the median d_z of the Ours - Baseline difference of
 the participants' means; :func:`method_points` converts a planned d_z (or eta_p^2 of the
 Method effect) into the Likert-point ``method_effect`` of the model.
+
+The analysed stage's task decides what is simulated and tested:
+
+- a ``likert`` or ``slider`` stage: the ANOVA's effects (``effects``); with more than two
+  methods also one row per method against the reference (effect ``"Baseline - Stiff"``):
+  the Tukey-adjusted pairwise comparison of the Method main effect, and the median d_z of
+  that method's difference from the reference;
+- a ``2afc`` stage (choices from :func:`~crowdstudy.stats.synthetic.simulate_study`): one
+  row per pair of the stage (effect ``"a vs b"``), the power of the pair's logistic mixed
+  model (random intercept per participant, the intercept's Wald z test of P(b) = 1/2:
+  :func:`~crowdstudy.stats.choice_models.logistic_mixed_model`, fitted without the Density
+  terms the analysis adds, which leave the intercept's test nearly the same and cost
+  several times the time), and the median share of trials choosing ``b``.
 """
 
 from __future__ import annotations
@@ -22,13 +35,13 @@ import pandas as pd
 from crowdstudy.errors import InvalidInputError
 from crowdstudy.stats._data import cell_matrix
 from crowdstudy.stats.anova import anova_from_cells
-from crowdstudy.stats.scoring import FACTORS, cell_means, composite_scores
+from crowdstudy.stats.scoring import FACTOR_NAMES, cell_means, composite_scores
 from crowdstudy.stats.synthetic import ResponseModel, simulate_responses
 
 __all__ = ["power_analysis", "PowerResult", "DEFAULT_EFFECTS", "method_points", "clopper_pearson"]
 
 #: Effects whose power is reported by default.
-DEFAULT_EFFECTS = ("Method", "Density:Method")
+DEFAULT_EFFECTS = (FACTOR_NAMES.method, f"{FACTOR_NAMES.density}:{FACTOR_NAMES.method}")
 
 
 def clopper_pearson(hits: int, n: int, level: float = 0.95) -> tuple[float, float]:
@@ -120,69 +133,133 @@ def power_analysis(
     if stage not in [s.number for s in design.stages]:
         raise InvalidInputError(f"stage {stage!r} is not in the design; stages: {[s.number for s in design.stages]}")
     model = model or ResponseModel.for_design(design)
-    comps = list(design.composites) if composites is None else list(composites)
-    for c in comps:
-        if c not in design.composites:
-            raise InvalidInputError(f"unknown composite {c!r}; the design defines {', '.join(design.composites)}")
-    effects = list(effects)
+    st = next(s_ for s_ in design.stages if s_.number == stage)
     seeds = np.random.SeedSequence(int(seed)).generate_state(int(sims), dtype=np.uint32)
     iterator = range(int(sims))
     if progress:
         from crowdstudy.progress import progress_bar
 
         iterator = progress_bar(iterator, desc="power", unit="study", leave=False)
-    pvals = np.full((int(sims), len(comps) * len(effects)), np.nan)
-    np2 = np.full_like(pvals, np.nan)
-    dzs = np.full((int(sims), len(comps)), np.nan)
-    for i in iterator:
-        raw = simulate_responses(design, int(n_participants), model, seed=int(seeds[i]), stages=[stage])
-        scored = composite_scores(raw, design)
-        for ci, comp in enumerate(comps):
-            long = cell_means(scored, comp, design, stage=stage)
-            cm = cell_matrix(long, comp, list(FACTORS), "participant_id")
-            table = anova_from_cells(cm, correction=correction, alpha=alpha).set_index("Source")
-            grid = cm.values.reshape(len(cm.subjects), -1, cm.shape[-1])
-            diff = grid[:, :, -1].mean(axis=1) - grid[:, :, 0].mean(axis=1)
-            sd = diff.std(ddof=1)
-            dzs[i, ci] = diff.mean() / sd if sd > 0 else np.nan
-            for ei, eff in enumerate(effects):
-                if eff not in table.index:
-                    raise InvalidInputError(f"effect {eff!r} is not an ANOVA source; sources: {', '.join(table.index)}")
-                pvals[i, ci * len(effects) + ei] = table.at[eff, "p"]
-                np2[i, ci * len(effects) + ei] = table.at[eff, "np2"]
-    columns = [f"{c}/{e}" for c in comps for e in effects]
-    rows = []
-    for j, col in enumerate(columns):
-        hits = int((pvals[:, j] < alpha).sum())
-        pw = hits / sims
-        se = float(np.sqrt(pw * (1 - pw) / sims))
-        comp, eff = col.split("/", 1)
-        lo, hi = clopper_pearson(hits, int(sims))
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", RuntimeWarning)
-            dz_med = float(np.nanmedian(dzs[:, comps.index(comp)])) if eff == "Method" else float("nan")
-            np2_med = float(np.nanmedian(np2[:, j]))
-        rows.append(
-            {
-                "composite": comp,
-                "effect": eff,
-                "power": pw,
-                "mc_se": se,
-                "ci_low": lo,
-                "ci_high": hi,
-                "n_significant": hits,
-                "sims": int(sims),
-                "np2_median": np2_med,
-                "dz_median": dz_med,
-            }
+    if st.task == "2afc":
+        rows = _choice_power(design, st, int(n_participants), model, seeds, iterator, alpha)
+        pvals = pd.DataFrame(rows.pop("p_values"))
+        table = pd.DataFrame(rows["rows"])
+    else:
+        comps = list(design.composites) if composites is None else list(composites)
+        for c in comps:
+            if c not in design.composites:
+                raise InvalidInputError(f"unknown composite {c!r}; the design defines {', '.join(design.composites)}")
+        table, pvals = _rating_power(
+            design, st, int(n_participants), model, seeds, iterator, comps, effects, alpha, correction
         )
     settings = {
         "n_participants": int(n_participants),
         "sims": int(sims),
         "seed": int(seed),
         "stage": int(stage),
+        "task": st.task,
         "alpha": float(alpha),
         "correction": correction,
         "model": dataclasses.asdict(model),
     }
-    return PowerResult(pd.DataFrame(rows), pd.DataFrame(pvals, columns=columns), settings)
+    return PowerResult(table, pvals, settings)
+
+
+def _power_row(composite: str, effect: str, p: np.ndarray, alpha: float) -> dict:
+    """power, its Monte-Carlo SE and exact interval from the studies' p-values."""
+    sims = len(p)
+    hits = int((p < alpha).sum())
+    pw = hits / sims
+    lo, hi = clopper_pearson(hits, sims)
+    return {
+        "composite": composite,
+        "effect": effect,
+        "power": pw,
+        "mc_se": float(np.sqrt(pw * (1 - pw) / sims)),
+        "ci_low": lo,
+        "ci_high": hi,
+        "n_significant": hits,
+        "sims": sims,
+    }
+
+
+def _median(x: np.ndarray) -> float:
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        return float(np.nanmedian(x))
+
+
+def _rating_power(design, st, n, model, seeds, iterator, comps, effects, alpha, correction):
+    """The ANOVA effects' power (and each method against the reference, k > 2)."""
+    from crowdstudy.stats.posthoc import pairwise_from_cells
+
+    methods = list(st.methods)
+    ref = methods[0]
+    contrasts = [f"{ref} - {m}" for m in methods[1:]] if len(methods) > 2 else []
+    labels = [*effects, *contrasts]
+    sims = len(seeds)
+    pvals = np.full((sims, len(comps) * len(labels)), np.nan)
+    np2 = np.full_like(pvals, np.nan)
+    dzs = np.full((sims, len(comps), len(methods) - 1), np.nan)
+    for i in iterator:
+        raw = simulate_responses(design, n, model, seed=int(seeds[i]), stages=[st.number])
+        scored = composite_scores(raw, design)
+        for ci, comp in enumerate(comps):
+            long = cell_means(scored, comp, design, stage=st.number)
+            cm = cell_matrix(long, comp, list(FACTOR_NAMES.order), "participant_id")
+            table = anova_from_cells(cm, correction=correction, alpha=alpha).set_index("Source")
+            grid = cm.values.reshape(len(cm.subjects), -1, cm.shape[-1]).mean(axis=1)  # (n, k) method means
+            for j in range(1, len(methods)):
+                diff = grid[:, j] - grid[:, 0]
+                sd = diff.std(ddof=1)
+                dzs[i, ci, j - 1] = diff.mean() / sd if sd > 0 else np.nan
+            for ei, eff in enumerate(effects):
+                if eff not in table.index:
+                    raise InvalidInputError(f"effect {eff!r} is not an ANOVA source; sources: {', '.join(table.index)}")
+                pvals[i, ci * len(labels) + ei] = table.at[eff, "p"]
+                np2[i, ci * len(labels) + ei] = table.at[eff, "np2"]
+            if contrasts:
+                pairs = pairwise_from_cells(cm, FACTOR_NAMES.method, []).set_index("contrast")["p_adj"]
+                for j, con in enumerate(contrasts):
+                    pvals[i, ci * len(labels) + len(effects) + j] = pairs[con]
+    columns = [f"{c}/{e}" for c in comps for e in labels]
+    rows = []
+    for j, col in enumerate(columns):
+        comp, eff = col.split("/", 1)
+        ci = comps.index(comp)
+        if eff == FACTOR_NAMES.method:
+            dz = _median(dzs[:, ci, -1])
+        elif eff in contrasts:
+            dz = _median(dzs[:, ci, contrasts.index(eff)])
+        else:
+            dz = float("nan")
+        rows.append({**_power_row(comp, eff, pvals[:, j], alpha), "np2_median": _median(np2[:, j]), "dz_median": dz})
+    return pd.DataFrame(rows), pd.DataFrame(pvals, columns=columns)
+
+
+def _choice_power(design, st, n, model, seeds, iterator, alpha) -> dict:
+    """Each pair's power in a 2afc stage (see the module docstring)."""
+    from crowdstudy.stats.choice_models import logistic_mixed_model
+    from crowdstudy.stats.synthetic import simulate_study
+
+    sims = len(seeds)
+    pvals = np.full((sims, len(st.pairs)), np.nan)
+    shares = np.full_like(pvals, np.nan)
+    for i in iterator:
+        data = simulate_study(design, n, model, seed=int(seeds[i]), stages=[st.number]).comparisons
+        left, right = data["method_left"].astype(str), data["method_right"].astype(str)
+        for j, (a, b) in enumerate(st.pairs):
+            sub = data[((left == a) & (right == b)) | ((left == b) & (right == a))]
+            y = (sub["chosen_method"].astype(str) == b).to_numpy(float)
+            shares[i, j] = y.mean()
+            try:
+                fit = logistic_mixed_model(
+                    y, np.ones((len(y), 1)), sub["participant_id"].to_numpy(), ["(Intercept)"], polish=False
+                )
+                pvals[i, j] = float(fit.fixed["p"].iloc[0])
+            except InvalidInputError:  # every choice the same: the share is 0 or 1
+                pvals[i, j] = 0.0
+    rows = []
+    for j, (a, b) in enumerate(st.pairs):
+        rows.append({**_power_row("2afc", f"{a} vs {b}", pvals[:, j], alpha), "share_b_median": _median(shares[:, j])})
+    return {"rows": rows, "p_values": {f"2afc/{a} vs {b}": pvals[:, j] for j, (a, b) in enumerate(st.pairs)}}

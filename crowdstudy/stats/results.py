@@ -12,9 +12,11 @@ import pandas as pd
 
 from crowdstudy.design import Stage, StudyDesign
 from crowdstudy.stats._data import CellMatrix
+from crowdstudy.stats.comparisons import ChoiceResult
 from crowdstudy.stats.inputs import Exclusions
 from crowdstudy.stats.options import AnalysisOptions
 from crowdstudy.stats.robust import MixedModelResult
+from crowdstudy.stats.scoring import FACTOR_NAMES, FactorNames
 
 __all__ = ["Robustness", "CompositeResult", "AnalysisResult"]
 
@@ -29,6 +31,8 @@ class Robustness:
     ordinal: pd.DataFrame
     mixed: MixedModelResult | None
     mixed_note: str = ""
+    #: Friedman's test over the k methods per cell (None with two methods)
+    friedman: pd.DataFrame | None = None
 
 
 @dataclasses.dataclass(frozen=True)
@@ -44,6 +48,8 @@ class CompositeResult:
     ``shapiro``; ``apa``: one sentence per significant effect; ``robustness`` (None when
     not asked for). ``stars_shown``: whether the figure draws the per-cell stars, and
     ``stars_gate`` the ANOVA effect(s) that decide it under the ``"omnibus"`` rule.
+    ``names``: the factor names; ``task``: the stage's task (``likert`` or ``slider``);
+    ``scale``: "" for Likert, ``"slider 0-100"`` for a slider stage.
     """
 
     stage: int
@@ -63,16 +69,25 @@ class CompositeResult:
     robustness: Robustness | None
     stars_shown: bool
     stars_gate: str
+    names: FactorNames = FACTOR_NAMES
+    task: str = "likert"
+    scale: str = ""
 
     @property
     def label(self) -> str:
-        """``"Stage 1 (concert), QCR"``: the heading of its summary section and figures."""
-        return f"Stage {self.stage} ({self.scenario}), {self.composite}"
+        """``"Stage 1 (concert), QCR"``: the heading of its summary section and figures
+        (a slider stage's ends with its scale, ``" (slider 0-100)"``)."""
+        return f"Stage {self.stage} ({self.scenario}), {self.composite}" + (f" ({self.scale})" if self.scale else "")
+
+    @property
+    def method_factor(self) -> str:
+        """The method factor's name (``names.method``)."""
+        return self.names.method
 
     @property
     def others(self) -> tuple[str, ...]:
-        """The factors other than Method: the cells Method is compared within."""
-        return tuple(f for f in self.factors if f != "Method")
+        """The factors other than the method: the cells the methods are compared within."""
+        return tuple(f for f in self.factors if f != self.names.method)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -85,7 +100,9 @@ class AnalysisResult:
     sidecar's note); ``n_participants``: participants after the exclusions
     (``exclusions``: who was dropped, or None without a participants table);
     ``reliability``: item-pair reliability per scenario; ``results``: (stage number,
-    composite) -> :class:`CompositeResult`, stage by stage.
+    composite) -> :class:`CompositeResult`, stage by stage (rating stages: Likert and
+    slider); ``names``: the factor names; ``choices``: stage number ->
+    :class:`~crowdstudy.stats.comparisons.ChoiceResult` for each 2AFC stage analysed.
     """
 
     design: StudyDesign
@@ -98,6 +115,9 @@ class AnalysisResult:
     exclusions: Exclusions | None
     reliability: pd.DataFrame
     results: dict[tuple[int, str], CompositeResult]
+    names: FactorNames = FACTOR_NAMES
+    #: stage number -> the 2AFC analysis of that stage (comparisons.csv)
+    choices: dict[int, ChoiceResult] = dataclasses.field(default_factory=dict)
 
     @property
     def simulated_note(self) -> str:

@@ -5,9 +5,21 @@ The paper's rule: ``Q' = 7 - Q`` for the negative items Q2, Q4, Q6 (in general
 ``likert_points + 1 - Q`` for every item with ``reverse = true`` in the design),
 reliability of each pair checked first, then QCR = (Q1 + Q2')/2, QCA = (Q3 + Q4')/2,
 QOR = (Q5 + Q6')/2 (the design's ``[composites]``).
+
+Rows of a ``slider`` stage (``task`` column ``slider``) hold integers on the design's
+slider scale (0..100 by default) and are reversed as ``maximum + minimum - Q`` (``100 -
+Q``); their composites are means on that scale. A responses table without a ``task``
+column is read as all ``likert`` (exports written before tasks existed).
+
+The names of the within factors (``Density``, ``Viewpoint``, ``Method``) are defined once,
+by :class:`FactorNames`; every table and figure takes them from the value passed to
+:func:`cell_means` and the analysis.
 """
 
 from __future__ import annotations
+
+import dataclasses
+from typing import Literal
 
 import numpy as np
 import pandas as pd
@@ -24,13 +36,44 @@ __all__ = [
     "cell_means",
     "FACTOR_COLUMNS",
     "FACTORS",
+    "FACTOR_NAMES",
+    "FactorNames",
     "REQUIRED_COLUMNS",
+    "RatingTask",
+    "row_tasks",
+    "scale_range",
 ]
 
-#: responses.csv column -> factor name used in the analysis tables.
-FACTOR_COLUMNS = {"density_level": "Density", "viewpoint": "Viewpoint", "method": "Method"}
+#: The tasks whose answers are ratings in responses.csv (2AFC trials go to comparisons.csv).
+RatingTask = Literal["likert", "slider"]
+
+
+@dataclasses.dataclass(frozen=True)
+class FactorNames:
+    """The names the analysis gives the design's three within factors (the columns
+    ``density_level``, ``viewpoint`` and ``method`` of responses.csv): every table, figure
+    and summary line uses them."""
+
+    density: str = "Density"
+    viewpoint: str = "Viewpoint"
+    method: str = "Method"
+
+    def columns(self) -> dict[str, str]:
+        """responses.csv column -> factor name."""
+        return {"density_level": self.density, "viewpoint": self.viewpoint, "method": self.method}
+
+    @property
+    def order(self) -> tuple[str, str, str]:
+        """The factors in the ANOVA's order: density, viewpoint, method."""
+        return (self.density, self.viewpoint, self.method)
+
+
+#: The factor names of the paper's analysis.
+FACTOR_NAMES = FactorNames()
+#: responses.csv column -> factor name used in the analysis tables (the default names).
+FACTOR_COLUMNS = FACTOR_NAMES.columns()
 #: The within factors of the study's ANOVA, in order (the columns :func:`cell_means` names).
-FACTORS = tuple(FACTOR_COLUMNS.values())
+FACTORS = FACTOR_NAMES.order
 #: Columns an analysis needs (the item columns come from the design).
 REQUIRED_COLUMNS = ("participant_id", "stage", "scenario", "density_level", "viewpoint", "method")
 
@@ -41,6 +84,23 @@ def _design(design):
 
         return load_design()
     return design
+
+
+def row_tasks(responses: pd.DataFrame) -> pd.Series:
+    """Each row's task: the ``task`` column, or ``"likert"`` for every row of a table
+    without one."""
+    if "task" in responses.columns:
+        return responses["task"].astype(str)
+    return pd.Series("likert", index=responses.index)
+
+
+def scale_range(design, task: str) -> tuple[int, int]:
+    """The lowest and highest answer of a rating ``task``: 1..points for ``likert``, the
+    slider's minimum..maximum (0..100) for ``slider``."""
+    if task == "slider":
+        sl = design.slider
+        return (sl.minimum, sl.maximum) if sl is not None else (0, 100)
+    return 1, int(design.likert_points)
 
 
 def _where(out: pd.DataFrame, i: int) -> str:
@@ -74,15 +134,18 @@ def validate_responses(responses: pd.DataFrame, design=None, *, source: str = "r
         if out[col].isna().any():
             i = int(out[col].isna().to_numpy().nonzero()[0][0])
             raise InvalidInputError(f"{source}: column {col!r} {row_label(i)} is empty")
-    top = design.likert_points
+    tasks = _check_tasks(out, source)
+    low = np.where(tasks == "slider", scale_range(design, "slider")[0], 1)
+    high = np.where(tasks == "slider", scale_range(design, "slider")[1], design.likert_points)
     for col in items:
         raw = out[col]
         num = pd.to_numeric(raw, errors="coerce")
-        bad = num.isna() | (num != np.round(num)) | (num < 1) | (num > top)
+        bad = num.isna() | (num != np.round(num)) | (num < low) | (num > high)
         if bad.any():
             i = int(bad.to_numpy().nonzero()[0][0])
             raise InvalidInputError(
-                f"{source}: column {col!r} {_where(out, i)} holds {plain(raw.iloc[i])}; expected an integer 1..{top}"
+                f"{source}: column {col!r} {_where(out, i)} holds {plain(raw.iloc[i])}; expected an integer "
+                f"{int(low[i])}..{int(high[i])} ({tasks[i]} answer)"
             )
         out[col] = num.astype(int)
     stage = pd.to_numeric(out["stage"], errors="coerce")
@@ -108,11 +171,19 @@ def validate_responses(responses: pd.DataFrame, design=None, *, source: str = "r
         if not rows.any():
             continue
         sub = out[rows]
+        if st.task == "2afc" or (tasks[rows] != st.task).any():
+            j = int((tasks[rows] != st.task).nonzero()[0][0]) if st.task != "2afc" else 0
+            i = int(rows.nonzero()[0][j])
+            raise InvalidInputError(
+                f"{source}: column 'task' {_where(out, i)} says {tasks[i]!r}, but stage {number} ({st.scenario}) "
+                f"of the design ({design.source}) is a {st.task} stage"
+                + ("; its trials belong in comparisons.csv" if st.task == "2afc" else "")
+            )
         for col, known, what in (
             ("scenario", [st.scenario], "scenario"),
             ("density_level", list(design.densities), "density level"),
             ("viewpoint", list(st.viewpoints), "viewpoint"),
-            ("method", list(design.methods), "method"),
+            ("method", list(st.methods or design.methods), "method"),
         ):
             off = ~sub[col].astype(str).isin(known)
             if off.any():
@@ -124,6 +195,19 @@ def validate_responses(responses: pd.DataFrame, design=None, *, source: str = "r
                     f"({design.source}) has the {what}(s) {', '.join(known)}"
                 )
     return out
+
+
+def _check_tasks(out: pd.DataFrame, source: str) -> np.ndarray:
+    """The rows' tasks as an array; an unknown or 2afc task is an error naming the row."""
+    tasks = row_tasks(out).to_numpy()
+    bad = ~np.isin(tasks, ["likert", "slider"])
+    if bad.any():
+        i = int(bad.nonzero()[0][0])
+        hint = " (2AFC trials belong in comparisons.csv)" if tasks[i] == "2afc" else ""
+        raise InvalidInputError(
+            f"{source}: column 'task' {_where(out, i)} holds {tasks[i]!r}; expected 'likert' or 'slider'{hint}"
+        )
+    return tasks
 
 
 def check_complete(data: pd.DataFrame, design=None, *, source: str = "responses") -> None:
@@ -147,7 +231,7 @@ def check_complete(data: pd.DataFrame, design=None, *, source: str = "responses"
         for col, known, what in (
             ("density_level", list(design.densities), "density level"),
             ("viewpoint", list(st.viewpoints), "viewpoint"),
-            ("method", list(design.methods), "method"),
+            ("method", list(st.methods or design.methods), "method"),
         ):
             absent = [lv for lv in known if lv not in set(sub[col].astype(str))]
             if absent:
@@ -174,12 +258,15 @@ def check_complete(data: pd.DataFrame, design=None, *, source: str = "responses"
 
 
 def reverse_items(responses: pd.DataFrame, design=None) -> pd.DataFrame:
-    """Copy with every reversed item ``Q`` replaced by ``likert_points + 1 - Q``."""
+    """Copy with every reversed item ``Q`` replaced by ``likert_points + 1 - Q`` (a slider
+    row's by ``maximum + minimum - Q``, 100 - Q)."""
     design = _design(design)
     out = validate_responses(responses, design)
+    slider = (row_tasks(out) == "slider").to_numpy()
+    lo, hi = scale_range(design, "slider")
     for it in design.items:
         if it.reverse:
-            out[it.id] = design.likert_points + 1 - out[it.id]
+            out[it.id] = np.where(slider, lo + hi - out[it.id], design.likert_points + 1 - out[it.id])
     out.attrs["reversed"] = [it.id for it in design.items if it.reverse]
     return out
 
@@ -247,12 +334,20 @@ def composite_scores(responses: pd.DataFrame, design=None) -> pd.DataFrame:
     return scored
 
 
-def cell_means(scored: pd.DataFrame, composite: str, design=None, *, stage: int | None = None) -> pd.DataFrame:
+def cell_means(
+    scored: pd.DataFrame,
+    composite: str,
+    design=None,
+    *,
+    stage: int | None = None,
+    names: FactorNames = FACTOR_NAMES,
+) -> pd.DataFrame:
     """Per participant x (Density, Viewpoint, Method) mean of ``composite`` for one stage.
 
     ``scored``: output of :func:`composite_scores`. Returns a long DataFrame with columns
-    ``participant_id``, ``Density``, ``Viewpoint``, ``Method`` (categoricals ordered as in
-    the design; only the levels present) and ``composite``'s name.
+    ``participant_id``, the three factors as ``names`` names them (categoricals ordered as
+    in the design, the reference method first; only the levels present) and
+    ``composite``'s name.
     """
     design = _design(design)
     if composite not in scored.columns:
@@ -265,13 +360,14 @@ def cell_means(scored: pd.DataFrame, composite: str, design=None, *, stage: int 
         "viewpoint": list(design.viewpoints),
         "method": list(design.methods),
     }
+    columns = names.columns()
     g = (
-        data.groupby(["participant_id", *FACTOR_COLUMNS], observed=True)[composite]
+        data.groupby(["participant_id", *columns], observed=True)[composite]
         .mean()
         .reset_index()
-        .rename(columns=FACTOR_COLUMNS)
+        .rename(columns=columns)
     )
-    for col, name in FACTOR_COLUMNS.items():
+    for col, name in columns.items():
         present = [lv for lv in order[col] if lv in set(g[name])]
         g[name] = pd.Categorical(g[name], categories=present, ordered=True)
-    return g.sort_values(["participant_id", *FACTOR_COLUMNS.values()]).reset_index(drop=True)
+    return g.sort_values(["participant_id", *columns.values()]).reset_index(drop=True)

@@ -26,12 +26,21 @@ def summary_text(result: AnalysisResult) -> str:
         f"Sphericity correction: {o.anova_correction!r} (alpha = {o.alpha}); post hoc adjustment: {o.adjust}; "
         f"intervals: {100 * o.level:g}% ({o.adjust}-adjusted where the p is)",
         "",
-        "## Item-pair reliability (after reversing the negative items)",
-        "",
-        to_markdown(result.reliability),
     ]
-    for res in result.results.values():
-        lines += _composite_lines(res, o.alpha, o.level)
+    if len(result.reliability):
+        lines += [
+            "## Item-pair reliability (after reversing the negative items)",
+            "",
+            to_markdown(result.reliability),
+        ]
+    for st in result.stages:
+        for (number, _), res in result.results.items():
+            if number == st.number:
+                lines += _composite_lines(res, o.alpha, o.level)
+        if st.number in result.choices:
+            from crowdstudy.stats.choice_report import choice_summary_lines
+
+            lines += choice_summary_lines(result.choices[st.number], o.alpha)
     return "\n".join(lines) + "\n"
 
 
@@ -41,26 +50,28 @@ def _composite_lines(res: CompositeResult, alpha: float, level: float) -> list[s
     if table.attrs["note"]:
         lines.append(f"Note: {table.attrs['note']}.")
     lines += res.apa or ["No significant effect."]
-    lines += ["", "Method: " + "; ".join(contrast_text(r, level) for r in res.method.to_dict("records")) + "."]
+    method, density = res.names.method, res.names.density
+    pairs = "; ".join(contrast_text(r, level) for r in res.method.to_dict("records"))
+    lines += ["", f"{method}: {pairs}."]
     if res.simple_effects is not None:
-        sig = res.simple_effects[res.simple_effects["term"] == "Method"]
+        sig = res.simple_effects[res.simple_effects["term"] == method]
         lines.append(
-            f"Simple effects (Method within each {' x '.join(res.others)} cell, joint_tests, unadjusted): "
+            f"Simple effects ({method} within each {' x '.join(res.others)} cell, joint_tests, unadjusted): "
             f"p < {alpha} in {int((sig['p'] < alpha).sum())} of {len(sig)} cells."
         )
     if res.trends is not None:
-        lin = res.trends[(res.trends["contrast"] == "linear") & (res.trends["by"] == "Method")]
+        lin = res.trends[(res.trends["contrast"] == "linear") & (res.trends["by"] == method)]
         lines.append(
-            "Linear trend over Density: "
+            f"Linear trend over {density}: "
             + "; ".join(
-                f"{r['Method']} {r['estimate']:.2f} [{r['lower_CL']:.2f}, {r['upper_CL']:.2f}] "
+                f"{r[method]} {r['estimate']:.2f} [{r['lower_CL']:.2f}, {r['upper_CL']:.2f}] "
                 f"(coefficients {r['coefficients']})"
                 for r in lin.to_dict("records")
             )
             + "."
         )
     if res.robustness is not None:
-        lines += _robustness_lines(res.robustness, table, alpha)
+        lines += _robustness_lines(res.robustness, table, alpha, method)
     lines.append(_assumption_text(res, alpha))
     if not res.stars_shown:
         lines.append(f"Figure stars omitted: the ANOVA's {res.stars_gate} effect is not significant (--stars omnibus).")
@@ -86,30 +97,51 @@ def _assumption_text(res: CompositeResult, alpha: float) -> str:
     return text
 
 
-def _robustness_lines(rob: Robustness, table: pd.DataFrame, alpha: float) -> list[str]:
+def _robustness_lines(rob: Robustness, table: pd.DataFrame, alpha: float, method: str) -> list[str]:
     lines = []
-    anova_p = float(table.set_index("Source").at["Method", "p"])
+    anova_p = float(table.set_index("Source").at[method, "p"])
     mm = rob.mixed
     if mm is not None:
-        m = mm.method
+        rows = mm.contrasts.to_dict("records") if mm.contrasts is not None else [mm.method]
+        text = "; ".join(
+            f"{m['contrast']} = {m['estimate']:.2f}, 95% CI [{m['lower_CL']:.2f}, {m['upper_CL']:.2f}], "
+            f"Wald z = {m['z']:.2f}, {format_p(m['p'])}"
+            for m in rows
+        )
+        slopes = f"{method} slope" if len(rows) == 1 else f"{len(rows)} {method} slopes"
         lines.append(
-            f"Robustness, mixed model (REML; random intercept and Method slope per participant; "
+            f"Robustness, mixed model (REML; random intercept and {slopes} per participant; "
             f"{mm.n_participants} participants ({mm.n_incomplete} incomplete, kept), "
-            f"{mm.n_obs} cell scores): {m['contrast']} = {m['estimate']:.2f}, 95% CI "
-            f"[{m['lower_CL']:.2f}, {m['upper_CL']:.2f}], Wald z = {m['z']:.2f}, {format_p(m['p'])} "
-            f"(ANOVA Method: {format_p(anova_p)})."
+            f"{mm.n_obs} cell scores): {text} (ANOVA {method}: {format_p(anova_p)})."
         )
     elif rob.mixed_note:
         lines.append(f"Robustness: {rob.mixed_note}.")
     od = rob.ordinal
-    allrow = od[od["cell"] == "all"].iloc[0]
-    cells = od[od["cell"] != "all"]
-    lines.append(
-        f"Robustness, ordinal check (no interval assumption; {od.attrs['contrast']} per participant): "
-        f"Wilcoxon signed-rank on each participant's mean difference V = {allrow['V']:g}, "
-        f"{format_p(allrow['p_wilcoxon'])}; sign test {int(allrow['n_pos'])}+/{int(allrow['n_neg'])}-, "
-        f"{format_p(allrow['p_sign'])}. Per cell: Wilcoxon p < {alpha} in "
-        f"{int((cells['p_wilcoxon'] < alpha).sum())} of {len(cells)} cells, paired t in "
-        f"{int((cells['p_t'] < alpha).sum())}; the two agree in {int(cells['agree'].sum())}."
-    )
+    groups = [(None, od)] if "contrast" not in od.columns else list(od.groupby("contrast", sort=False))
+    for contrast, part in groups:
+        allrow = part[part["cell"] == "all"].iloc[0]
+        cells = part[part["cell"] != "all"]
+        what = od.attrs["contrast"] if contrast is None else contrast
+        holm = (
+            ""
+            if contrast is None
+            else f" (Holm over the {len(groups)} contrasts: {format_p(allrow['p_wilcoxon_holm'])})"
+        )
+        lines.append(
+            f"Robustness, ordinal check (no interval assumption; {what} per participant): "
+            f"Wilcoxon signed-rank on each participant's mean difference V = {allrow['V']:g}, "
+            f"{format_p(allrow['p_wilcoxon'])}{holm}; sign test {int(allrow['n_pos'])}+/{int(allrow['n_neg'])}-, "
+            f"{format_p(allrow['p_sign'])}. Per cell: Wilcoxon p < {alpha} in "
+            f"{int((cells['p_wilcoxon'] < alpha).sum())} of {len(cells)} cells, paired t in "
+            f"{int((cells['p_t'] < alpha).sum())}; the two agree in {int(cells['agree'].sum())}."
+        )
+    if rob.friedman is not None:
+        fr = rob.friedman
+        a = fr[fr["cell"] == "all"].iloc[0]
+        cells = fr[fr["cell"] != "all"]
+        lines.append(
+            f"Friedman test of the {int(a['k'])} methods on each participant's means: "
+            f"chi2({int(a['df'])}) = {a['chi2']:.2f}, {format_p(a['p'])}; per cell p < {alpha} in "
+            f"{int((cells['p'] < alpha).sum())} of {len(cells)} cells."
+        )
     return lines

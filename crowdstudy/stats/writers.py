@@ -18,6 +18,12 @@ Output folder layout (``out_dir``)::
         <COMP>_shapiro.csv, <COMP>_qq.png
         <COMP>_by_density.png      one composite; scores_by_density.png: all composites
                                    (each with a .json of the plotted numbers)
+        <COMP>_friedman.csv        Friedman's test of the k methods per cell (k > 2)
+        2afc_*                     a 2AFC stage's tables and figures
+                                   (:mod:`crowdstudy.stats.choice_report`)
+
+A slider stage's tables are those of a Likert stage, on the 0-100 scale, their captions and
+the summary naming the scale.
 
 The figures (matplotlib) are drawn only when the options ask for them, and imported only
 then.
@@ -25,6 +31,7 @@ then.
 
 from __future__ import annotations
 
+import dataclasses
 import json
 from pathlib import Path
 
@@ -51,6 +58,7 @@ _REPORTED = [
     "p_spher",
     "correction_applied",
 ]
+_ORDINAL_KEYS = ("contrast", "V", "p_wilcoxon", "p_wilcoxon_holm", "p_sign", "p_sign_holm", "n_pos", "n_neg")
 _POSTHOC_REPORTED = [
     "effect",
     "factor",
@@ -70,6 +78,8 @@ _POSTHOC_REPORTED = [
 def write_analysis(result: AnalysisResult, summary: str, out_dir: Path) -> list[Path]:
     """Write every table and figure of ``result``, ``summary`` (summary.md) and
     analysis.json under ``out_dir``; returns the files written, in order."""
+    from crowdstudy.stats.choice_report import choice_figures, write_choice_tables
+
     files: list[Path] = []
     for res in result.results.values():
         d = out_dir / _stage_dir(res.stage, res.scenario)
@@ -78,8 +88,15 @@ def write_analysis(result: AnalysisResult, summary: str, out_dir: Path) -> list[
             files += _composite_figures(result, res, d)
     if result.options.figures:
         for st in result.stages:
-            files += _stage_figure(result, st, out_dir / _stage_dir(st.number, st.scenario))
-    files += write_table(result.reliability, out_dir / "reliability", caption="Item-pair reliability")
+            if any(number == st.number for number, _ in result.results):
+                files += _stage_figure(result, st, out_dir / _stage_dir(st.number, st.scenario))
+    for number, ch in result.choices.items():
+        d = out_dir / _stage_dir(number, ch.scenario)
+        files += write_choice_tables(ch, d)
+        if result.options.figures:
+            files += choice_figures(ch, d, result.design.densities, note=result.simulated_note)
+    if len(result.reliability):
+        files += write_table(result.reliability, out_dir / "reliability", caption="Item-pair reliability")
     summary_path = out_dir / "summary.md"
     summary_path.write_text(summary)
     files.append(summary_path)
@@ -96,6 +113,7 @@ def _stage_dir(number: int, scenario: str) -> str:
 def write_composite_tables(res: CompositeResult, d: Path, adjust: str) -> list[Path]:
     """The tables of one (stage, composite) in folder ``d`` (see the module docstring)."""
     comp, label = res.composite, res.label
+    method, density = res.names.method, res.names.density
     files = write_table(res.anova, d / f"{comp}_anova", formats=("csv",))  # every column
     files += write_table(
         res.anova[_REPORTED], d / f"{comp}_anova", formats=("md", "tex"), caption=f"{label}: repeated-measures ANOVA"
@@ -124,14 +142,16 @@ def write_composite_tables(res: CompositeResult, d: Path, adjust: str) -> list[P
             rob.ordinal,
             d / f"{comp}_ordinal",
             formats=("csv", "md"),
-            caption=f"{label}: Method without interval assumptions (signed-rank, sign test)",
+            caption=f"{label}: {method} without interval assumptions (signed-rank, sign test)",
         )
+    if rob is not None and rob.friedman is not None:
+        files += write_table(rob.friedman, d / f"{comp}_friedman", formats=("csv",))
     if res.trends is not None:
         files += write_table(
             res.trends,
             d / f"{comp}_trends",
             formats=("csv", "md"),
-            caption=f"{label}: polynomial contrasts over Density",
+            caption=f"{label}: polynomial contrasts over {density}",
         )
     factors = list(res.factors)
     cells = res.descriptives[res.descriptives["effect"] == ":".join(factors)]
@@ -157,8 +177,9 @@ def _composite_figures(result: AnalysisResult, res: CompositeResult, d: Path) ->
             res.cells, d / f"{res.composite}_qq.png", title=f"{res.label}: residual Q-Q plots", shapiro=res.shapiro
         )
     ]
-    if "Density" in res.factors:
-        caption = stars_caption(o.adjust, len(design.methods), rule=o.stars, gate=res.stars_gate)
+    if res.names.density in res.factors:
+        k = len(res.cells.levels[res.cells.factors.index(res.names.method)])
+        caption = stars_caption(o.adjust, k, rule=o.stars, gate=res.stars_gate, method=res.names.method)
         files.append(
             method_figure(
                 {res.composite: _panel(res)},
@@ -168,9 +189,18 @@ def _composite_figures(result: AnalysisResult, res: CompositeResult, d: Path) ->
                 title=res.label + o.figure_note,
                 caption=caption,
                 note=result.simulated_note,
+                **_scale_args(result, res),
             )
         )
     return files
+
+
+def _scale_args(result: AnalysisResult, res: CompositeResult) -> dict:
+    """method_figure's factor names and y range: the Likert points, or the slider's scale."""
+    from crowdstudy.stats.scoring import scale_range
+
+    lo, hi = scale_range(result.design, res.task)
+    return {"names": res.names, "ylim": (float(lo), float(hi)), "scale": res.scale}
 
 
 def _stage_figure(result: AnalysisResult, stage: Stage, d: Path) -> list[Path]:
@@ -179,9 +209,11 @@ def _stage_figure(result: AnalysisResult, stage: Stage, d: Path) -> list[Path]:
 
     o, design = result.options, result.design
     comps = [res for (number, _), res in result.results.items() if number == stage.number]
-    if "Density" not in comps[0].factors:
+    first = comps[0]
+    if first.names.density not in first.factors:
         return []
     gates = sorted({res.stars_gate for res in comps if res.stars_gate})
+    k = len(first.cells.levels[first.cells.factors.index(first.names.method)])
     return [
         method_figure(
             {res.composite: _panel(res) for res in comps},
@@ -189,8 +221,9 @@ def _stage_figure(result: AnalysisResult, stage: Stage, d: Path) -> list[Path]:
             density_values=design.densities,
             error=o.error_bars,
             title=f"Stage {stage.number} ({stage.scenario}){o.figure_note}",
-            caption=stars_caption(o.adjust, len(design.methods), rule=o.stars, gate=gates[0] if gates else ""),
+            caption=stars_caption(o.adjust, k, rule=o.stars, gate=gates[0] if gates else "", method=first.names.method),
             note=result.simulated_note,
+            **_scale_args(result, first),
         )
     ]
 
@@ -213,7 +246,32 @@ def analysis_record(result: AnalysisResult) -> dict:
         "participants": result.n_participants,
         "exclusions": ex.as_dict() if ex is not None else None,
         "results": [_composite_record(r) for r in result.results.values()],
+        "factors": dataclasses.asdict(result.names),
+        "stages": [_stage_record(result, st) for st in result.stages],
     }
+
+
+def _stage_record(result: AnalysisResult, stage: Stage) -> dict:
+    """One stage's entry of analysis.json: its task, methods (the reference first) and every
+    result (a rating stage's composites as in ``results``; a 2AFC stage's shares, pair
+    models and Bradley-Terry scale)."""
+    from crowdstudy.stats.choice_report import choice_record
+
+    entry = {
+        "stage": stage.number,
+        "key": stage.key,
+        "scenario": stage.scenario,
+        "task": stage.task,
+        "methods": list(stage.methods),
+        "pairs": [list(p) for p in stage.pairs],
+    }
+    if stage.number in result.choices:
+        entry.update(choice_record(result.choices[stage.number]))
+    else:
+        comps = [r for (n, _), r in result.results.items() if n == stage.number]
+        entry["scale"] = comps[0].scale if comps and comps[0].scale else f"likert 1-{result.design.likert_points}"
+        entry["results"] = [_composite_record(r) for r in comps]
+    return entry
 
 
 def _composite_record(r: CompositeResult) -> dict:
@@ -224,6 +282,7 @@ def _composite_record(r: CompositeResult) -> dict:
         mm = rob.mixed
         robust["mixed_model"] = {
             **mm.method,
+            "contrasts": mm.contrasts.to_dict("records") if mm.contrasts is not None else [mm.method],
             "variances": mm.variances,
             "loglik": mm.loglik,
             "n_obs": mm.n_obs,
@@ -231,7 +290,8 @@ def _composite_record(r: CompositeResult) -> dict:
             "n_incomplete": mm.n_incomplete,
         }
     if rob is not None:
-        a = rob.ordinal[rob.ordinal["cell"] == "all"].iloc[0]
+        alls = rob.ordinal[rob.ordinal["cell"] == "all"]
+        a = alls.iloc[0]
         robust["ordinal_all_cells"] = {
             "V": float(a["V"]),
             "p_wilcoxon": float(a["p_wilcoxon"]),
@@ -239,6 +299,14 @@ def _composite_record(r: CompositeResult) -> dict:
             "n_pos": int(a["n_pos"]),
             "n_neg": int(a["n_neg"]),
         }
+        if "contrast" in alls.columns:
+            robust["ordinal_all_cells_by_contrast"] = [
+                {k: (v if isinstance(v, str) else float(v)) for k, v in row.items() if k in _ORDINAL_KEYS}
+                for row in alls.to_dict("records")
+            ]
+        if rob.friedman is not None:
+            f = rob.friedman[rob.friedman["cell"] == "all"].iloc[0]
+            robust["friedman_all_cells"] = {k: float(f[k]) for k in ("chi2", "df", "p", "n", "k")}
     return {
         "stage": r.stage,
         "scenario": r.scenario,
@@ -258,6 +326,9 @@ def _composite_record(r: CompositeResult) -> dict:
             }
             for row in r.anova.itertuples()
         },
+        "task": r.task,
+        "method_factor": r.names.method,
+        "method_contrasts": r.method[["contrast", "estimate", "lower_CL", "upper_CL", "p_adj"]].to_dict("records"),
         "method_contrast": {
             k: (m[k] if isinstance(m[k], str) else float(m[k]))
             for k in (

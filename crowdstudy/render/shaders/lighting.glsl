@@ -60,3 +60,31 @@ void floor_terms(vec3 world, out vec3 diffuse, out vec3 add) {
     diffuse = (u_sky_color + u_light_color * ndl * sh) * fog;
     add = u_fog_color * (1.0 - fog);
 }
+
+// Characters, per pixel, by material: the weights of skin and of hair (cloth the rest):
+// skin: wrapped diffuse (the terminator softened over ~40 degrees) with a warm tint where
+//       the wrap reaches past it (light scattered under the skin), a tighter specular;
+// hair: a Kajiya-Kay highlight along strands running down the head (anisotropic);
+// cloth: matte, a faint broad sheen.
+void character_terms(vec3 world, vec3 normal, float sh, float skin, float hair, out vec3 diffuse, out vec3 add) {
+    vec3 n = normalize(normal);
+    vec3 v = normalize(u_eye - world);
+    if (dot(n, v) < 0.0) n = -n;
+    float nl = dot(n, u_light_dir);
+    float wrap = 0.3 * skin;
+    float lambert = max(nl, 0.0);
+    float wrapped = max((nl + wrap) / (1.0 + wrap), 0.0);
+    vec3 scatter = vec3(0.0);
+    if (wrap > 0.0) scatter = vec3(0.12, 0.03, 0.01) * max(wrapped - lambert, 0.0) * 1.5;
+    vec3 ambient = mix(u_ground_color, u_sky_color, 0.5 + 0.5 * n.z);
+    float rim = pow(1.0 - max(dot(n, v), 0.0), 3.0) * mix(0.08, 0.14, skin);
+    vec3 h = normalize(u_light_dir + v);
+    float nh = max(dot(n, h), 0.0);
+    float spec = mix(pow(nh, 12.0) * 0.015, pow(nh, 48.0) * 0.09, skin);   // cloth / skin
+    vec3 t = vec3(0.0, 0.0, 1.0) - n * n.z;                                // hair: strands downwards
+    float th = dot(normalize(t + vec3(1e-4)), h);
+    spec = mix(spec, pow(sqrt(max(1.0 - th * th, 0.0)), 64.0) * 0.12, hair);
+    float fog = exp(-u_fog_density * length(u_eye - world));
+    diffuse = (ambient + u_light_color * (mix(lambert, wrapped, skin) + scatter) * sh) * fog;
+    add = (rim + spec * sh) * u_light_color * fog + u_fog_color * (1.0 - fog);
+}
