@@ -438,16 +438,6 @@ def _study(design, out: Path, participants: int, seed: int, duration: float) -> 
     server_args = ["--stimuli", str(stimuli_dir.resolve()), "--db", db_url]
     if design.source and design.source != "<memory>":
         server_args += ["--design", str(design.source)]
-    if any(st.task != "likert" for st in design.stages):
-        # the simulated participants answer Likert trials; 2afc and slider trials join them
-        # (and this step) once the server and the bots run them (issue #41)
-        print(
-            "the design has "
-            + ", ".join(f"a {st.task} stage ({st.key})" for st in design.stages if st.task != "likert")
-            + ": the demo's simulated participants answer Likert stages only, so the study step stops "
-            "after the stimulus set"
-        )
-        return {"stimulus manifest": stimuli_dir / "manifest.csv"}
     with LocalServer(server_args) as server:
         print(f"server running at {server.url}")
         result = run_simulation(server.url, participants, seed=seed, admin_token=server.admin_token)

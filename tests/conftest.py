@@ -24,6 +24,7 @@ SLOWEST_FIRST = (
     "test_study_load.py",
     "test_stimuli.py",
     "test_physics_meta.py",
+    "test_live.py",
     "test_physics_solver.py",
 )
 

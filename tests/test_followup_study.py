@@ -245,3 +245,51 @@ def test_the_example_follow_up_study_builds_on_the_quick_preset(tmp_path, capsys
         for m in ("Baseline", "Ours", "Paper")
     }
     assert metrics["Ours"] < metrics["Baseline"] and metrics["Paper"] < metrics["Baseline"], metrics
+    _serve_answer_export_analyze(out, design, tmp_path)
+
+
+def _serve_answer_export_analyze(stimuli: Path, design, tmp_path: Path) -> None:
+    """The rest of the chain on the built set: serve it, simulated participants answer through
+    the server's participant API, export, analyze. The Likert stage's Method has k - 1 = 2
+    degrees of freedom; the effects the participants were given come back out within their
+    intervals (the mixed model's contrasts to the reference, each 2AFC pair's logit)."""
+    from crowdstudy.stats.options import AnalysisOptions
+    from crowdstudy.stats.pipeline import analyze
+    from crowdstudy.stats.synthetic import ResponseModel
+    from crowdstudy.study.bots import run_simulation
+    from crowdstudy.study.export import export_study
+    from crowdstudy.study.local_server import LocalServer
+
+    effects = {"Ours": 1.0, "Paper": 0.4}
+    db = tmp_path / "study.db"
+    with LocalServer(["--stimuli", str(stimuli), "--design", str(EXAMPLE), "--db", f"sqlite:///{db}"]) as srv:
+        res = run_simulation(srv.url, 30, admin_token=srv.admin_token, seed=3, method_effects=effects)
+    assert res.errors == [] and len(res.participants) == 30
+    responses = tmp_path / "export" / "responses.csv"
+    summary = export_study(f"sqlite:///{db}", responses, online=EXAMPLE)
+    # Likert: 2 densities x 2 viewpoints x 3 methods; 2AFC: 3 pairs x 2 densities x 1 viewpoint
+    assert summary["responses"] == 30 * 12 and summary["comparisons"] == 30 * 6
+    options = AnalysisOptions(composites=["QCR"], figures=False)
+    report = analyze(responses, design, tmp_path / "analysis", options)
+    likert = report.results[(1, "QCR")]
+    method_row = likert.anova.set_index("Source").loc["Method"]
+    assert method_row["ddof1"] == 2
+    # Each new database draws its own secret key, so the same draws land on other trials in
+    # every run: the checks use 99.9 % intervals (z = 3.29), or a 95 % one would miss one run
+    # in twenty. The contrasts' 95 % Wald intervals widen by 3.29 / 1.96.
+    contrasts = likert.robustness.mixed.contrasts.set_index("contrast")
+    for name, truth in (("Baseline - Ours", -effects["Ours"]), ("Baseline - Paper", -effects["Paper"])):
+        lo, hi = contrasts.at[name, "lower_CL"], contrasts.at[name, "upper_CL"]
+        mid, half = (lo + hi) / 2, (hi - lo) / 2 * 3.29 / 1.96
+        assert mid - half < truth < mid + half, (name, contrasts)
+    model = ResponseModel()
+    pairs = report.result.choices[2].pairs
+    assert len(pairs) == 3
+    for pm in pairs:
+        truth = model.choice_slope * (effects.get(pm.method_b, 0.0) - effects.get(pm.method_a, 0.0))
+        row = pm.fit.fixed.iloc[0]
+        assert abs(row["estimate"] - truth) < 3.29 * row["SE"], (pm.pair, row)
+    shares = report.result.choices[2].shares.query("cell == 'all'").set_index("method")
+    assert (shares["shown"] == 30 * 2 * 2).all()  # each method is in two pairs, two cells
+    assert (shares["lower_CL"] < shares["share"]).all() and (shares["share"] < shares["upper_CL"]).all()
+    assert shares.at["Ours", "lower_CL"] > 0.5 > shares.at["Baseline", "upper_CL"], shares

@@ -15,11 +15,14 @@ import pytest
 ROOT = Path(__file__).resolve().parent.parent
 FIGS = ROOT / "paper_figs"
 EXPECTED = [
+    "fig1_hero",
     "fig2_capsules",
     "fig3_overlap",
     "fig4_damping",
     "fig5_frames",
+    "fig6_live",
     "fig7_questionnaire",
+    "fig8_samples",
     "fig_results",
     "fig_runtime",
 ]
@@ -214,3 +217,63 @@ def test_fig_runtime_cost_grows_with_the_crowd(tmp_path):
     # measured: 264 -> 1543 contacts, 1.75 -> 6.76 ms of CPU time per step (3.9x); bars with margin
     assert rows[60]["contacts"] > 3 * rows[20]["contacts"] > 0
     assert rows[60]["cpu_ms"] > 1.5 * rows[20]["cpu_ms"] > 0
+
+
+def _png(path: Path) -> np.ndarray:
+    from PIL import Image
+
+    return np.asarray(Image.open(path).convert("RGB")).astype(int)
+
+
+@pytest.mark.slow
+def test_fig1_hero_frame_is_full_hd_and_corrected(tmp_path, design):
+    data = _figure("fig1_hero", tmp_path, "--refresh")
+    img = _png(tmp_path / "fig1_hero.png")
+    assert img.shape == (1080, 1920, 3) and [data["width"], data["height"]] == [1920, 1080]
+    assert data["level"] == "D5" and data["characters"] == design.n_characters("D5") and data["method"] == "Ours"
+    # a picture, not a cleared frame: the crowd in the lower middle differs from the dark ceiling
+    assert img.std() > 30 and abs(img[700:900, 700:1200].mean() - img[:100].mean()) > 30
+    # measured at the quick clip's last frame: Baseline 3.2 L, Ours 0.27 L per character
+    litres = data["overlap_litres_per_character"]
+    assert litres["Baseline"] > 1.0 and litres["Ours"] < litres["Baseline"] / 4, litres
+
+
+@pytest.mark.slow
+def test_fig6_live_walker_baseline_above_ours_at_three_moments(tmp_path):
+    data = _figure("fig6_live", tmp_path, "--refresh")
+    panels = {(p["method"], p["moment"]): p for p in data["panels"]}
+    moments = ["entering", "middle", "leaving"]
+    assert list(panels) == [(m, t) for m in ("Baseline", "Ours") for t in moments]
+    # the three moments follow the walker across the floor (x from -1.5 to 1.5 m), in order
+    x = [panels[("Baseline", t)]["walker_xy"][0] for t in moments]
+    assert x[0] < -0.8 and abs(x[1]) < 0.3 and x[2] > 0.8
+    frames = [panels[("Baseline", t)]["frame"] for t in moments]
+    assert frames == sorted(frames) and frames == [panels[("Ours", t)]["frame"] for t in moments]
+    # the walker's ring is inside its panel
+    for p in data["panels"]:
+        assert 0 < p["ring_px"][0] < data["width"] and 0 < p["ring_px"][1] < data["height"]
+    # measured (quick, litres): Baseline 14.0 / 8.5 / 22.4, Ours 5.1 / 0.17 / 7.1 -- the live loop
+    # sees no frame ahead, so the walker enters the crowd before the contacts push it aside
+    base = sum(panels[("Baseline", t)]["walker_overlap_l"] for t in moments)
+    ours = sum(panels[("Ours", t)]["walker_overlap_l"] for t in moments)
+    assert base > 5.0 and ours < base / 2, (base, ours)
+    red = {m: sum(panels[(m, t)]["red_fraction"] for t in moments) for m in ("Baseline", "Ours")}
+    assert red["Ours"] < red["Baseline"] / 2, red
+    assert data["walker"]["index"] == 60 and data["live_ms"]["cpu"]["median_ms"] > 0
+    assert _png(tmp_path / "fig6_live.png").shape[1] > 1000
+
+
+@pytest.mark.slow
+def test_fig8_samples_grid_of_densities_viewpoints_scenarios(tmp_path, design):
+    data = _figure("fig8_samples", tmp_path)
+    panels = data["panels"]
+    # quick: concert V1 and V4, corridor V3, by D1 and D5: 6 panels, each a distinct picture
+    rows = {(p["stage"], p["viewpoint"]) for p in panels}
+    assert rows == {("stationary", "V1"), ("stationary", "V4"), ("walking", "V3")}
+    assert {p["level"] for p in panels} == {"D1", "D5"} and len(panels) == 6
+    assert {(p["row"], p["column"]) for p in panels} == {(r, c) for r in range(3) for c in range(2)}
+    for p in panels:
+        assert p["characters"] == design.n_characters(p["level"]) and p["image_std"] > 20
+        assert p["scenario"] == ("concert" if p["stage"] == "stationary" else "corridor")
+    assert len({round(p["image_mean"], 3) for p in panels}) == 6
+    assert data["method"] == "Ours" and [data["width"], data["height"]] == [320, 180]

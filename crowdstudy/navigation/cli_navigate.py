@@ -41,13 +41,13 @@ def run(args: argparse.Namespace) -> int:
         )
     if args.seed is not None and args.seed < 0:
         raise InvalidInputError(f"--seed: expected a non-negative integer, got {args.seed}")
-    check_output_path(args.out, "--out")
-    if args.plot:
-        check_output_path(args.plot, "--plot")
     sc = _walking_scenario(design, args.scenario)
     stage = next((st for st in design.stages if st.scenario == sc.name), None)
     if stage is None and args.seed is None:
         raise InvalidInputError(f"--seed: no stage of the design walks {sc.name!r}; give a seed")
+    check_output_path(args.out, "--out")
+    if args.plot:
+        check_output_path(args.plot, "--plot")
     seed = design.cell_seed(stage, args.density) if args.seed is None else args.seed
     if sc.kind == "crossing":
         if args.bidirectional:
@@ -98,7 +98,9 @@ def _walking_scenario(design, name: str | None):
         for sc in design.scenarios.values():
             if sc.kind == kind:
                 return sc
-    raise InvalidInputError("--scenario: the design has no walking scenario (a corridor or a crossing)")
+    raise InvalidInputError(
+        f"{design.source}: no stage of the design is a corridor or a crossing (navigate walks one of them)"
+    )
 
 
 def _crossing(design, name: str, seed: int, args: argparse.Namespace) -> int:
