@@ -10,7 +10,8 @@ mkdir -p "$STAMP_DIR"
 
 # --- Debian packages ---------------------------------------------------------
 DEB_PKGS=(python3 python3-venv python3-dev ffmpeg chromium libegl1 libegl-mesa0 libgl1-mesa-dri
-          libgles2 libglib2.0-0 fonts-dejavu-core nodejs npm git ca-certificates postgresql)
+          libgles2 libglib2.0-0 fonts-dejavu-core nodejs npm git ca-certificates postgresql
+          assimp-utils assimp-testmodels minetest-data blender python3-numpy)
 missing=()
 for p in "${DEB_PKGS[@]}"; do
     case "$p" in
