@@ -10,7 +10,8 @@ mkdir -p "$STAMP_DIR"
 
 # --- Debian packages ---------------------------------------------------------
 DEB_PKGS=(python3 python3-venv python3-dev ffmpeg chromium libegl1 libegl-mesa0 libgl1-mesa-dri
-          libgles2 libglib2.0-0 fonts-dejavu-core nodejs npm git ca-certificates postgresql)
+          libgles2 libglib2.0-0 fonts-dejavu-core nodejs npm git ca-certificates postgresql
+          assimp-utils assimp-testmodels minetest-data blender python3-numpy)
 missing=()
 for p in "${DEB_PKGS[@]}"; do
     case "$p" in
@@ -120,6 +121,19 @@ if [ -f tests/js/package-lock.json ]; then
         echo "[setup] installing the glTF tests' npm packages (three, gltf-validator)"
         (cd tests/js && npm ci --no-audit --no-fund --loglevel=error)
         touch "$STAMP_DIR/npm-gltf"
+    fi
+fi
+
+# --- Blender as a Python module (bpy, PyPI), for the USD interchange tests ----------
+# Blender's own USD exporter writes real UsdSkel files for tests/test_import_usd.py, and
+# Blender imports the corrected ones (Debian's blender is built without USD). Best effort:
+# without it those tests skip and say why.
+if [ -z "${CROWDSTUDY_BPY_PYTHON:-}" ] && [ ! -f "$STAMP_DIR/bpy" ]; then
+    echo "[setup] installing Blender's bpy module (PyPI wheel, about 520 MB) into build/bpy-venv"
+    if bash scripts/setup_bpy.sh > build/bpy-setup.log 2>&1; then
+        touch "$STAMP_DIR/bpy"
+    else
+        echo "[setup] note: bpy not installed (build/bpy-setup.log); the Blender USD tests will skip" >&2
     fi
 fi
 

@@ -80,11 +80,14 @@ def crowd_of(
     columns: int | None = None,
     seed: int = 0,
     last_rate: float | None = None,
+    lift: float = 0.0,
 ) -> Path:
     """Write a crowd of ``n`` copies of ``src``'s scene (see the module docstring), copies
     ``spacing`` m apart on a grid of ``columns`` (default: a square), each turned by a
     random yaw within +-20 deg and its keys rolled by ``shift_keys * i``; ``last_rate``
-    stretches the last copy's key times by that factor (a character keyed at another rate)."""
+    stretches the last copy's key times by that factor (a character keyed at another rate);
+    ``lift`` raises every copy by that many metres (a file whose origin is the pelvis, not
+    the floor)."""
     d = _Doc(Path(src))
     doc = d.doc
     anims = doc.get("animations", [])
@@ -120,7 +123,7 @@ def crowd_of(
             doc["skins"].append(sk)
         yaw = float(rng.uniform(-0.35, 0.35))
         holder = {
-            "translation": [spacing * (i % cols - (cols - 1) / 2), 0.0, spacing * (i // cols)],
+            "translation": [spacing * (i % cols - (cols - 1) / 2), lift, spacing * (i // cols)],
             "rotation": [0.0, math.sin(yaw / 2), 0.0, math.cos(yaw / 2)],
             "children": [remap[r] for r in roots],
         }

@@ -20,7 +20,9 @@ Rigify: Blender's Rigify metarig.
 | left_ankle | | LeftFoot | leftFoot | J_Bip_L_Foot | foot.L | LeftFoot |
 | left_foot | | LeftToeBase | leftToes | J_Bip_L_ToeBase | toe.L | LeftToeBase |
 
-(right side alike). Mixamo and CMU come from ``crowdstudy.body.skeleton.BVH_NAME_MAPS``.
+(right side alike). The ``bcn`` table maps the ``B_Hip_Left``, ``B_Clavicle_Left``,
+``B_UpperArm_Left``, ``B_ForeArm_Left`` style (assimp's BCN_Epileptic test model; see
+``_B_MID``/``_B_SIDE``). Mixamo and CMU come from ``crowdstudy.body.skeleton.BVH_NAME_MAPS``.
 Names are compared after dropping a namespace (``mixamorig:``, ``mixamorig1:``, Blender's
 ``mixamorig_``), Rigify's ``DEF-``/``ORG-`` prefixes, case, and the characters
 ``_ . - space``. A VRM file's own humanoid table (``VRM`` or ``VRMC_vrm`` extension) takes
@@ -56,6 +58,31 @@ _MID_TABLE = {  # our joint -> (VRM, VRoid, Rigify)
 }
 
 
+# The ``B_*_Left``/``_Right`` style of assimp's BCN_Epileptic test model (tests/data/SOURCES.md):
+# the legs hang from ``B_LowerPelvis`` beside the spine, so the pelvis is the root of both;
+# no head bone (the face hangs from ``B_Neck``), so the head is ``B_Neck`` and the neck the
+# joint below it.
+_B_MID = {
+    "B_Root_Pelvis_L": "pelvis",
+    "B_Spine1": "spine1",
+    "B_Spine3": "spine2",
+    "B_Spine4": "spine3",
+    "B_Root_Neck_T": "neck",
+    "B_Neck": "head",
+}
+_B_SIDE = {
+    "collar": "Clavicle",
+    "shoulder": "UpperArm",
+    "elbow": "ForeArm",
+    "wrist": "Hand",
+    "hand": "Finger1",
+    "hip": "Hip",
+    "knee": "Knee",
+    "ankle": "Ankle",
+    "foot": "Toe",
+}
+
+
 def _tables() -> dict[str, dict[str, str]]:
     vrm, vroid, rigify = {}, {}, {}
     for ours, (a, b, c) in _MID_TABLE.items():
@@ -66,6 +93,10 @@ def _tables() -> dict[str, dict[str, str]]:
             vroid[f"J_Bip_{letter}_{b}"] = f"{side}_{suffix}"
             rigify[f"{c}.{letter}"] = f"{side}_{suffix}"
     mixamo = {k.split(":", 1)[1]: v for k, v in BVH_NAME_MAPS["mixamo"].items()}
+    bcn = dict(_B_MID)
+    for suffix, stem in _B_SIDE.items():
+        for side in ("left", "right"):
+            bcn[f"B_{stem}_{side.title()}"] = f"{side}_{suffix}"
     return {
         "crowdstudy": {name: name for name in JOINT_NAMES},
         "mixamo": mixamo,
@@ -73,6 +104,7 @@ def _tables() -> dict[str, dict[str, str]]:
         "vroid": vroid,
         "rigify": rigify,
         "cmu": dict(BVH_NAME_MAPS["cmu"]),
+        "bcn": bcn,
     }
 
 

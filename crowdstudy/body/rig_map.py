@@ -15,10 +15,11 @@ Output: a :class:`RigMap`, per physics joint the source joint and HOW it was fou
     Ready Player Me, VRM, VRoid, Rigify, CMU, crowdstudy's own exports);
 ``topology``
     the skeleton's shape (:func:`topology_map`): the root of the legs is the joint where two
-    chains go down and one goes up; in each leg chain the hip is the first joint of the long
+    chains go down and one goes up (or where one chain goes down to a lower-pelvis joint
+    that splits into the two legs, beside the spine); in each leg chain the hip is the first joint of the long
     descent, the ankle the first joint near the chain's bottom, the knee the chain joint
     half-way between them; the spine chain rises to the head, the arms are the two
-    sideways branches of it (their branch point is ``spine3``), the wrist is where the
+    longest sideways branches of it (held out or hanging) (their branch point is ``spine3``), the wrist is where the
     fingers branch, the elbow the chain joint half-way between shoulder and wrist; left and
     right by the side hints, else by the toes' forward direction, else by ``forward``;
 ``map``
@@ -203,7 +204,7 @@ def map_rig(
     if _complete(by_name.values()) and not _hierarchy_errors(by_name, parents):
         joints = {j: MappedJoint(s, "name", conv) for s, j in by_name.items()}
     else:
-        topo = topology_map(parents, rest, sides_arr, forward, label)
+        topo = topology_map(parents, rest, sides_arr, forward, label, labels)
         joints = {j: MappedJoint(s, "topology", rule) for j, (s, rule) in topo.items()}
         # name matches that fit the skeleton's shape replace the topology's guesses
         for s, j in by_name.items():
@@ -330,13 +331,24 @@ def _post_order(kids: list[list[int]], parents: np.ndarray) -> list[int]:
 
 
 def topology_map(
-    parents: np.ndarray, rest: np.ndarray, sides: np.ndarray, forward: Sequence[float] | np.ndarray | None, label: str
+    parents: np.ndarray,
+    rest: np.ndarray,
+    sides: np.ndarray,
+    forward: Sequence[float] | np.ndarray | None,
+    label: str,
+    labels: Sequence[str] | None = None,
 ) -> dict[str, tuple[int, str]]:
     """{physics joint: (rig joint, rule)} from the skeleton's shape alone (the rules of the
     module docstring). Raises InvalidInputError when the rig is not a humanoid or too coarse."""
     tree = _Tree.build(parents, rest)
-    if tree.height <= 0 or len(parents) < 10:
+    if tree.height <= 0:
         raise InvalidInputError(f"{label}: not a humanoid rig ({len(parents)} joints, no vertical extent)")
+    if len(parents) < 10:  # a blocky figure: one joint per limb
+        raise InvalidInputError(
+            f"{label}: too coarse for the physics skeleton ({len(parents)} joints: {', '.join(labels or ())}): "
+            "required joints missing: the knees, the elbows, the ankles, the wrists "
+            "(each limb needs three joints; give them with --map)"
+        )
     pelvis, legs, spine = _find_pelvis(tree, label)
     out: dict[str, tuple[int, str]] = {"pelvis": (pelvis, "legs and spine branch here")}
     leg_maps = [_leg(tree, c, label) for c in legs]
@@ -361,6 +373,11 @@ def _find_pelvis(tree: _Tree, label: str) -> tuple[int, list[int], int]:
         z = tree.rest[k, 2]
         down = [c for c in tree.kids[k] if tree.zmin(c) < z - 0.2 * h]
         up = [c for c in tree.kids[k] if tree.zmax(c) > z + 0.15 * h]
+        if len(down) == 1 and up:  # both legs under one lower-pelvis joint beside the spine
+            d = down[0]
+            while len(tree.kids[d]) == 1:
+                d = tree.kids[d][0]
+            down = [c for c in tree.kids[d] if tree.zmin(c) < z - 0.2 * h] or down
         if len(down) >= 2 and up:
             down = sorted(down, key=lambda c: tree.zmin(c))[:2]
             spine = max(up, key=lambda c: (tree.zmax(c), len(tree.sub[c])))
@@ -425,8 +442,11 @@ def _arms(tree: _Tree, chain: list[int], label: str) -> tuple[list[int], int]:
             if c in on_chain:
                 continue
             reach = np.linalg.norm(tree.rest[tree.sub[c], :2] - axis, axis=1).max()
-            if reach >= 0.2 * h:
-                cands.append((reach, c, k))
+            # arms held out (T-pose) reach far sideways; arms hanging at rest (a real
+            # rig's A- or I-pose) less so, but they are the longest branches
+            if reach >= 0.12 * h:
+                length = np.linalg.norm(tree.rest[tree.sub[c]] - tree.rest[k], axis=1).max()
+                cands.append((float(length), c, k))
     if len(cands) < 2:
         raise InvalidInputError(f"{label}: not a humanoid rig: no two arms branch sideways from the spine")
     cands.sort(reverse=True)

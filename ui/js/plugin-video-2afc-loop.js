@@ -182,8 +182,6 @@ var jsPsychVideo2afcLoop = (function (jspsych) {
         display_element.innerHTML = "";
         this.jsPsych.finishTrial(data);
       };
-      const notify = (msg) => { hint.textContent = msg || "Saving..."; };
-      const setInputs = (on) => { for (const input of form.querySelectorAll("input")) input.disabled = !on; };
 
       form.addEventListener("submit", async (ev) => {
         ev.preventDefault();
@@ -199,21 +197,7 @@ var jsPsychVideo2afcLoop = (function (jspsych) {
           ...quality.snapshot(now),
         };
         saving = true;
-        button.disabled = true;
-        setInputs(false);
-        hint.textContent = "Saving...";
-        try {
-          if (trial.save) await trial.save(data, notify);
-          finish(data);
-        } catch (err) {
-          saving = false;
-          setInputs(true);
-          hint.textContent = "";
-          errorBox.textContent = "Your answer could not be saved: " + (err && err.message ? err.message : err) +
-            ". Please try again.";
-          errorBox.hidden = false;
-          button.disabled = false;
-        }
+        saving = await Kit.saveThenFinish({ form, button, hint, errorBox, save: trial.save, data, finish });
       });
     }
   }

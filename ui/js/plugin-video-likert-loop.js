@@ -215,7 +215,6 @@ var jsPsychVideoLikertLoop = (function (jspsych) {
         this.jsPsych.finishTrial(data);
       };
 
-      const notify = (msg) => { hint.textContent = msg || "Saving..."; };
 
       form.addEventListener("submit", async (ev) => {
         ev.preventDefault();
@@ -231,20 +230,7 @@ var jsPsychVideoLikertLoop = (function (jspsych) {
           fullscreen_exits: fsExits,
         };
         saving = true;
-        button.disabled = true;
-        for (const input of form.querySelectorAll("input")) input.disabled = true;
-        hint.textContent = "Saving...";
-        try {
-          if (trial.save) await trial.save(data, notify);
-          finish(data);
-        } catch (err) {
-          saving = false;
-          for (const input of form.querySelectorAll("input")) input.disabled = false;
-          hint.textContent = "";
-          showError("Your answer could not be saved: " + (err && err.message ? err.message : err) +
-            ". Please try again.");
-          button.disabled = false;
-        }
+        saving = await CrowdstudyVideoKit.saveThenFinish({ form, button, hint, errorBox, save: trial.save, data, finish });
       });
     }
   }

@@ -100,5 +100,29 @@ var CrowdstudyVideoKit = (function () {
     for (const u of urls) release(u);
   }
 
-  return { prefetch, source, release, escapeHtml, watchQuality, countPlays, setUpVideo, tearDown };
+  /** Save a trial's answer before the trial ends (every trial type does it the same way): the
+   * form is disabled, `save(data, notify)` awaited (the POST that commits the answer), then
+   * `finish(data)`. On a rejection the form comes back with the message, so the participant
+   * can try again with the answer still on the page. Returns true once finished. */
+  async function saveThenFinish({ form, button, hint, errorBox, save, data, finish }) {
+    const setInputs = (on) => { for (const input of form.querySelectorAll("input")) input.disabled = !on; };
+    button.disabled = true;
+    setInputs(false);
+    hint.textContent = "Saving...";
+    try {
+      if (save) await save(data, (msg) => { hint.textContent = msg || "Saving..."; });
+      finish(data);
+      return true;
+    } catch (err) {
+      setInputs(true);
+      hint.textContent = "";
+      errorBox.textContent = "Your answer could not be saved: " + (err && err.message ? err.message : err) +
+        ". Please try again.";
+      errorBox.hidden = false;
+      button.disabled = false;
+      return false;
+    }
+  }
+
+  return { prefetch, source, release, escapeHtml, watchQuality, countPlays, setUpVideo, tearDown, saveThenFinish };
 })();
