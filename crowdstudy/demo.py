@@ -123,9 +123,10 @@ def _layouts(
     kinds = {design.scenarios[st.scenario].kind: st for st in stages}
     layouts, rows = [], []
     concert = kinds.get("concert")
-    for level in design.densities if concert is not None else ():
-        crowd = concert_layout(design, level, design.cell_seed(concert, level), scenario=concert.scenario)
-        layouts.append(crowd)
+    if concert is not None:
+        for level in design.densities:
+            crowd = concert_layout(design, level, design.cell_seed(concert, level), scenario=concert.scenario)
+            layouts.append(crowd)
         rows.append(
             {
                 "level": level,

@@ -360,19 +360,22 @@ class _Reader:
     def fail(self, key: str, msg: str) -> NoReturn:
         raise InvalidInputError(f"{self.source}: key '{self._key(key)}' {msg}")
 
-    def get(self, key: str, kind: type[_T], default: Any = dataclasses.MISSING) -> _T:
-        """The value of ``key``, of type ``kind`` (an integer counts as a float, a bool
-        only as a bool), else ``default``; missing without a default is an error."""
+    def get(self, key: str, kind: type[_T] | tuple[type[_T], ...], default: Any = dataclasses.MISSING) -> _T:
+        """The value of ``key``, of type ``kind`` or one of the types ``kind`` lists (an
+        integer counts as a float, a bool only as a bool), else ``default``; missing without
+        a default is an error."""
         self.used.add(key)
         if key not in self.table:
             if default is dataclasses.MISSING:
                 self.fail(key, "is missing")
             return default
         value = self.table[key]
-        if kind is float and isinstance(value, int) and not isinstance(value, bool):
+        kinds = kind if isinstance(kind, tuple) else (kind,)
+        if float in kinds and isinstance(value, int) and not isinstance(value, bool):
             value = float(value)
-        if isinstance(value, bool) and kind is not bool or not isinstance(value, kind):
-            self.fail(key, f"must be {kind.__name__}, got {type(value).__name__} {value!r}")
+        if isinstance(value, bool) and bool not in kinds or not isinstance(value, kinds):
+            names = " or ".join(k.__name__ for k in kinds)
+            self.fail(key, f"must be {names}, got {type(value).__name__} {value!r}")
         return cast(_T, value)  # checked above: isinstance(value, kind)
 
     def number(
@@ -779,7 +782,7 @@ def _crossing_params(r: _Reader, width: float, depth: float) -> dict[str, Any]:
 def _per_flow(r: _Reader, key: str, default: float, *, lo: float, hi: float) -> list[float]:
     """A per-flow number: one for both flows or a list of two, each in [lo, hi]."""
     value = r.get(key, (float, list), default)
-    values = [value, value] if isinstance(value, float) else value
+    values = [value, value] if isinstance(value, (int, float)) else value  # get made an int a float
     if len(values) != 2 or not all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in values):
         r.fail(key, f"must be a number or a list of two numbers (one per flow), got {value!r}")
     if not all(math.isfinite(v) and lo <= v <= hi for v in values):

@@ -190,8 +190,10 @@ def _mujoco_animation(method: Method, baseline: CrowdAnimation, timings: dict | 
     _import_mujoco(method)
     from crowdstudy.physics.mujoco_peer import mujoco_peer
 
-    kwargs = {} if method.setting is None else {"setting": method.setting}
-    out, timing = mujoco_peer(baseline, None, **kwargs)
+    if method.setting is None:
+        out, timing = mujoco_peer(baseline, None)
+    else:
+        out, timing = mujoco_peer(baseline, None, setting=method.setting)
     if timings is not None:
         timings.update(timing)
     return out.replace(

@@ -320,8 +320,8 @@ def _obstacles(value: object, path: str) -> None:
     wall_segments(value, path)
 
 
-def _plaza(value: object, path: str) -> None:
-    _mapping(value, path)
+def _plaza(raw: object, path: str) -> None:
+    value = _mapping(raw, path)
     for key in ("width", "depth"):
         if key not in value:
             raise InvalidInputError(f"{path}.{key}: missing (the plaza's extent in m)")
@@ -348,8 +348,8 @@ def _loop(value: object, path: str) -> None:
 _CORRECTIONS = ("none", "physics", "paper", "mujoco", "files")
 
 
-def _recipe(value: object, path: str) -> None:
-    _mapping(value, path)
+def _recipe(raw: object, path: str) -> None:
+    value = _mapping(raw, path)
     if value.get("correction") not in _CORRECTIONS:
         raise _fail(f"{path}.correction", f"one of {', '.join(_CORRECTIONS)}", value.get("correction"))
     if "config" in value:

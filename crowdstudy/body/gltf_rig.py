@@ -321,7 +321,7 @@ def weld(vertices: np.ndarray, faces: np.ndarray, weights: np.ndarray, uv: np.nd
     ``(vertices, faces int32, weights, uv)``."""
     from scipy.sparse import coo_matrix
     from scipy.sparse.csgraph import connected_components
-    from scipy.spatial import cKDTree
+    from scipy.spatial import cKDTree  # pyright: ignore[reportAttributeAccessIssue]  # missing from scipy stubs
 
     pairs = cKDTree(vertices).query_pairs(tol, output_type="ndarray")
     if uv is not None and len(pairs):

@@ -181,7 +181,7 @@ def map_rig(
     rest: np.ndarray,
     *,
     sides: Sequence[int] | None = None,
-    forward: Sequence[float] | None = None,
+    forward: Sequence[float] | np.ndarray | None = None,
     overrides: Mapping[str, str | int] | None = None,
     label: str = "rig",
     table: tuple[str, Mapping[int, str]] | None = None,
@@ -334,7 +334,7 @@ def topology_map(
     parents: np.ndarray,
     rest: np.ndarray,
     sides: np.ndarray,
-    forward: Sequence[float] | None,
+    forward: Sequence[float] | np.ndarray | None,
     label: str,
     labels: Sequence[str] | None = None,
 ) -> dict[str, tuple[int, str]]:
@@ -529,7 +529,9 @@ def _spine(tree: _Tree, chain: list[int], branch: int, label: str) -> dict[str, 
     return out
 
 
-def _left_direction(tree: _Tree, legs: list[dict], forward: Sequence[float] | None, label: str) -> np.ndarray | None:
+def _left_direction(
+    tree: _Tree, legs: list[dict], forward: Sequence[float] | np.ndarray | None, label: str
+) -> np.ndarray | None:
     """The horizontal direction of the rig's left: up x forward, forward from the toes when
     the legs have them, else ``forward``; None when neither is known."""
     dirs = [tree.rest[m["foot"][0]] - tree.rest[m["ankle"][0]] for m in legs if "foot" in m]

@@ -29,6 +29,7 @@ from __future__ import annotations
 import dataclasses
 import hashlib
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -51,6 +52,9 @@ from crowdstudy.interchange.gltf_sampling import (
     world_at_frames,
 )
 from crowdstudy.interchange.retarget import RetargetFrames, to_physics
+
+if TYPE_CHECKING:
+    from crowdstudy.scene import CrowdAnimation
 
 __all__ = ["ImportedCharacter", "ImportedCrowd", "read_crowd", "RATE_TOLERANCE"]
 
@@ -85,7 +89,7 @@ class ImportedCrowd:
     channels: list[Channel]
     times: np.ndarray
     characters: list[ImportedCharacter]
-    anim: object
+    anim: CrowdAnimation
     bodies: list
     usd: object = None
 

@@ -173,7 +173,7 @@ def world_at_frames(
 ) -> tuple[dict[int, np.ndarray], dict[int, np.ndarray]]:
     """World and local matrices, ``{node: (F, 4, 4)}``, of ``nodes`` and all their ancestors
     at ``times`` (F,) s."""
-    by_node: dict[int, dict[str, np.ndarray]] = {}
+    by_node: dict[int, dict[str, Channel]] = {}
     for ch in channels:
         by_node.setdefault(ch.node, {})[ch.path] = ch
     need: set[int] = set()

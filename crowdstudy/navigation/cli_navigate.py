@@ -43,12 +43,15 @@ def run(args: argparse.Namespace) -> int:
         raise InvalidInputError(f"--seed: expected a non-negative integer, got {args.seed}")
     sc = _walking_scenario(design, args.scenario)
     stage = next((st for st in design.stages if st.scenario == sc.name), None)
-    if stage is None and args.seed is None:
+    if args.seed is not None:
+        seed = args.seed
+    elif stage is not None:
+        seed = design.cell_seed(stage, args.density)
+    else:
         raise InvalidInputError(f"--seed: no stage of the design walks {sc.name!r}; give a seed")
     check_output_path(args.out, "--out")
     if args.plot:
         check_output_path(args.plot, "--plot")
-    seed = design.cell_seed(stage, args.density) if args.seed is None else args.seed
     if sc.kind == "crossing":
         if args.bidirectional:
             raise InvalidInputError("--bidirectional: applies to a corridor, not to the crossing " + repr(sc.name))

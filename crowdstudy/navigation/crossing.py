@@ -200,7 +200,7 @@ def _setup(design, level, seed, *, duration, fps, warm_up, params, scenario) -> 
     flows = []
     for k, direction in enumerate((np.array([1.0, 0.0]), np.array([math.cos(angle), math.sin(angle)]))):
         v_mean, v_sd = float(sc["preferred_speed"][k]) * factor, float(sc["preferred_speed_sd"][k]) * factor
-        reach = _half_extent(direction, width, depth) + _UPSTREAM_MARGIN + (v_mean + v_sd) * (warm_up + duration)
+        reach = _half_extent(direction, width, depth) + _UPSTREAM_MARGIN + (v_mean + v_sd) * (float(warm_up) + duration)
         flows.append(
             _Flow(
                 direction=direction,
@@ -263,7 +263,7 @@ def _initial_agents(s: _Setup) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 def _separate(points: np.ndarray, min_dist: float, polygons: list[np.ndarray], max_iter: int = 3000) -> np.ndarray:
     """Push discs apart until all centres are ``min_dist`` apart and at least ``min_dist /
     2`` outside every obstacle polygon. ``points``: (N, 2) metres."""
-    from scipy.spatial import cKDTree
+    from scipy.spatial import cKDTree  # pyright: ignore[reportAttributeAccessIssue]  # missing from scipy stubs
 
     pts = points.copy()
     for _ in range(max_iter):

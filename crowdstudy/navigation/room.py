@@ -14,6 +14,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import time
+from collections.abc import Callable
 
 import numpy as np
 
@@ -124,6 +125,65 @@ class _Steer:
         return d / np.maximum(dist, 1e-9)[:, None] * self.speeds[:, None]
 
 
+_Engine = tuple[Callable[[np.ndarray], None], Callable[[], None], Callable[[], np.ndarray]]
+
+
+def _crowdstudy_engine(scenario: RoomScenario, pos0: np.ndarray, walls, device: str | None) -> _Engine:
+    """crowdstudy's ORCA as ``(set_pref, do_step, read)``: preferred velocities (N, 2) m/s in,
+    positions (N, 2) m out."""
+    sim = ORCASimulator(
+        pos0, scenario.simulated_radius, scenario.max_speed, params=scenario.params, obstacles=walls, device=device
+    )
+
+    def set_pref(pref: np.ndarray) -> None:
+        sim.set_preferred_velocities(pref)
+
+    def do_step() -> None:
+        sim.step()
+        if sim.device != "cpu":
+            sim.synchronize()
+
+    def read() -> np.ndarray:
+        return sim.positions
+
+    return set_pref, do_step, read
+
+
+def _pyrvo_engine(scenario: RoomScenario, pos0: np.ndarray, walls) -> _Engine:
+    """pyrvo (RVO2) as ``(set_pref, do_step, read)``, same units and shapes as
+    :func:`_crowdstudy_engine`."""
+    try:
+        import pyrvo
+    except ImportError:
+        raise MissingDependencyError("pyrvo is not installed: pip install 'crowdstudy[peers]' (or pyrvo)") from None
+    p = scenario.params
+    sim = pyrvo.RVOSimulator()  # pyright: ignore[reportAttributeAccessIssue]  # re-exported by a compiled module
+    sim.set_time_step(float(p.time_step))
+    sim.set_agent_defaults(
+        float(p.neighbor_dist),
+        int(p.max_neighbors),
+        float(p.time_horizon),
+        float(p.time_horizon_obst),
+        float(scenario.simulated_radius),
+        float(scenario.max_speed),
+    )
+    for q in pos0:
+        sim.add_agent((float(q[0]), float(q[1])))
+    for a, b in walls:
+        sim.add_obstacle([(float(a[0]), float(a[1])), (float(b[0]), float(b[1]))])
+    sim.process_obstacles()
+    agents = range(scenario.n_agents)
+
+    def set_pref(pref: np.ndarray) -> None:
+        for i in agents:
+            sim.set_agent_pref_velocity(i, (float(pref[i, 0]), float(pref[i, 1])))
+
+    def read() -> np.ndarray:
+        return np.array([sim.get_agent_position(i).to_tuple() for i in agents])
+
+    return set_pref, sim.do_step, read
+
+
 def run_room(
     scenario: RoomScenario,
     steps: int,
@@ -141,53 +201,11 @@ def run_room(
     pos0, speeds, goals = scenario.initial_state()
     steer = _Steer(goals, speeds)
     p = scenario.params
-    n = scenario.n_agents
     walls = scenario.walls()
     if engine == "crowdstudy":
-        sim = ORCASimulator(
-            pos0, scenario.simulated_radius, scenario.max_speed, params=p, obstacles=walls, device=device
-        )
-
-        def set_pref(pref):
-            sim.set_preferred_velocities(pref)
-
-        def do_step():
-            sim.step()
-            if sim.device != "cpu":
-                sim.synchronize()
-
-        def read():
-            return sim.positions
+        set_pref, do_step, read = _crowdstudy_engine(scenario, pos0, walls, device)
     elif engine == "pyrvo":
-        try:
-            import pyrvo
-        except ImportError:
-            raise MissingDependencyError("pyrvo is not installed: pip install 'crowdstudy[peers]' (or pyrvo)") from None
-        sim = pyrvo.RVOSimulator()
-        sim.set_time_step(float(p.time_step))
-        sim.set_agent_defaults(
-            float(p.neighbor_dist),
-            int(p.max_neighbors),
-            float(p.time_horizon),
-            float(p.time_horizon_obst),
-            float(scenario.simulated_radius),
-            float(scenario.max_speed),
-        )
-        for q in pos0:
-            sim.add_agent((float(q[0]), float(q[1])))
-        for a, b in walls:
-            sim.add_obstacle([(float(a[0]), float(a[1])), (float(b[0]), float(b[1]))])
-        sim.process_obstacles()
-        agents = range(n)
-
-        def set_pref(pref):
-            for i in agents:
-                sim.set_agent_pref_velocity(i, (float(pref[i, 0]), float(pref[i, 1])))
-
-        do_step = sim.do_step
-
-        def read():
-            return np.array([sim.get_agent_position(i).to_tuple() for i in agents])
+        set_pref, do_step, read = _pyrvo_engine(scenario, pos0, walls)
     else:
         raise InvalidInputError(f"engine: expected 'crowdstudy' or 'pyrvo', got {engine!r}")
 

@@ -17,10 +17,15 @@ import dataclasses
 import json
 import time
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from crowdstudy.errors import InvalidInputError
+
+if TYPE_CHECKING:
+    from crowdstudy.interchange.gltf_crowd import ImportedCrowd
+    from crowdstudy.scene import CrowdAnimation
 
 __all__ = [
     "GLTF_SUFFIXES",
@@ -59,8 +64,8 @@ class GltfCorrection:
     """What :func:`correct_gltf` did: the imported crowd, the corrected animation, the
     output's bytes, the overlap report (a JSON-ready dict) and the timings (s)."""
 
-    crowd: object
-    corrected: object
+    crowd: ImportedCrowd
+    corrected: CrowdAnimation
     data: bytes
     overlap: dict
     timings: dict

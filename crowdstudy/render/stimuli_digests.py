@@ -142,9 +142,9 @@ def _method_inputs(design, recipe, cell: str, physics) -> dict:
     from crowdstudy.recipes import files_digest, method_physics_config
 
     if recipe.correction in ("physics", "paper"):
-        return {
-            "physics": method_physics_config(recipe, None if physics is None else physics_config_of(physics)).as_dict()
-        }
+        config = method_physics_config(recipe, None if physics is None else physics_config_of(physics))
+        if config is not None:  # always, for these two corrections
+            return {"physics": config.as_dict()}
     if recipe.correction == "mujoco":
         from crowdstudy.physics.mujoco_peer import resolve_setting
 

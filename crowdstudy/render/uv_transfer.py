@@ -96,7 +96,7 @@ def project_face_uvs(
         triangle closest to its centroid; each corner takes the closest point of that chart
         (among near-ties, the one whose texture coordinate is nearest the centroid's: the
         face's side of a cut)."""
-    from scipy.spatial import cKDTree
+    from scipy.spatial import cKDTree  # pyright: ignore[reportAttributeAccessIssue]  # missing from scipy stubs
 
     faces = np.asarray(faces, dtype=np.int64)
     tri_pos = np.asarray(positions, dtype=np.float64)[faces]
@@ -144,7 +144,7 @@ def project_face_uvs(
 def _onto_chart(points: np.ndarray, chart_uv: np.ndarray) -> np.ndarray:
     """(P, 2) texture coordinates moved to the closest point of a chart's triangles
     ``chart_uv`` (T, 3, 2) in texture space (unchanged where already on it)."""
-    from scipy.spatial import cKDTree
+    from scipy.spatial import cKDTree  # pyright: ignore[reportAttributeAccessIssue]  # missing from scipy stubs
 
     flat = np.concatenate([chart_uv, np.zeros(chart_uv.shape[:2] + (1,))], axis=-1)
     k = min(_CANDIDATES, len(flat))
@@ -202,7 +202,7 @@ def fit_vertex_uvs(
     """
     from scipy.sparse import coo_matrix, identity
     from scipy.sparse.linalg import spsolve
-    from scipy.spatial import cKDTree
+    from scipy.spatial import cKDTree  # pyright: ignore[reportAttributeAccessIssue]  # missing from scipy stubs
 
     positions, uv = np.asarray(positions, dtype=np.float64), np.asarray(uv, dtype=np.float64)
     faces = np.asarray(faces, dtype=np.int64)
@@ -232,4 +232,5 @@ def fit_vertex_uvs(
     # the normal equations (A^T A + s^2 I) x = A^T t + s^2 x0, sparse and positive definite
     normal = (a.T @ a + identity(len(uv), format="csr") * smooth**2).tocsc()
     rhs = a.T @ target[keep] + smooth**2 * uv
-    return np.column_stack([spsolve(normal, rhs[:, axis]) for axis in range(2)])
+    cols = [np.asarray(spsolve(normal, rhs[:, axis])) for axis in range(2)]
+    return np.column_stack(cols)

@@ -6,6 +6,7 @@ from __future__ import annotations
 import dataclasses
 import itertools
 import warnings
+from typing import Any
 
 import numpy as np
 import pandas as pd
@@ -55,7 +56,7 @@ class CellMatrix:
         return list(itertools.product(*self.levels))
 
 
-def factor_levels(series: pd.Series) -> tuple:
+def factor_levels(series: pd.Series) -> tuple[Any, ...]:
     """Level order of a factor: categorical order if categorical, else sorted unique values."""
     if isinstance(series.dtype, pd.CategoricalDtype):
         present = set(series.dropna().unique())
@@ -90,11 +91,13 @@ def _wide_to_long(data: pd.DataFrame, within: list[str], subject: str | None) ->
         names = within
     if any(n is None for n in names):
         raise InvalidInputError("wide data: name the column levels (data.columns.names) or pass within=[...]")
-    subj = subject or data.index.name or "subject"
+    names = [str(n) for n in names]
+    subj = subject or str(data.index.name or "subject")
     long = data.copy()
     long.columns = pd.MultiIndex.from_tuples([c if isinstance(c, tuple) else (c,) for c in cols], names=names)
     long.index = long.index.rename(subj)
-    long = long.stack(list(range(len(names))), future_stack=True).rename("value").reset_index()
+    stacked = long.stack(list(range(len(names))), future_stack=True)  # every level: a Series
+    long = stacked.rename("value").reset_index()  # pyright: ignore[reportArgumentType]  # stubs: stack may be a frame
     return long, "value", names, subj
 
 
@@ -151,9 +154,8 @@ def cell_matrix(
     levels = [factor_levels(data[w]) for w in within]
     for w, lv in zip(within, levels, strict=True):
         if len(lv) < 2:
-            raise InvalidInputError(
-                f"within factor {w!r} has a single level {plain(lv[0])}; a factor needs >= 2 levels"
-            )
+            found = f"a single level {plain(lv[0])}" if lv else "no level (no rows)"
+            raise InvalidInputError(f"within factor {w!r} has {found}; a factor needs >= 2 levels")
     frame = pd.DataFrame({"_s": data[subject].to_numpy(), "_y": y.to_numpy()})
     for i, w in enumerate(within):
         frame[f"_f{i}"] = data[w].to_numpy()

@@ -10,12 +10,16 @@ from __future__ import annotations
 
 import warnings
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 import pandas as pd
 from scipy import stats as _st
 
 from crowdstudy.stats._data import CellMatrix, cell_matrix
+
+if TYPE_CHECKING:
+    from matplotlib.axes import Axes
 
 __all__ = ["cell_residuals", "shapiro_by_cell", "shapiro_from_cells", "qq_figure", "qq_figure_from_cells"]
 
@@ -108,11 +112,12 @@ def qq_figure_from_cells(
     axes[0, 0].yaxis.set_major_locator(matplotlib.ticker.MaxNLocator(4, steps=[1, 2, 5, 10], symmetric=True))
     axes[0, 0].xaxis.set_major_locator(matplotlib.ticker.MaxNLocator(4, steps=[1, 2, 5, 10], symmetric=True))
     for j, cell in enumerate(cm.cells()):
-        ax = axes[j // n_cols, j % n_cols]
+        ax: Axes = axes[j // n_cols, j % n_cols]  # pyright: ignore[reportAssignmentType]  # stubs: an array of Axes
         (osm, osr), (slope, icpt, _) = _st.probplot(res[:, j], dist="norm")
         ax.plot(osm, osr, "o", ms=2.2, color="#1f4e79")
         xs = np.array([osm.min(), osm.max()])
-        ax.plot(xs, icpt + slope * xs, "-", lw=0.8, color="#c0392b")
+        fit = icpt + slope * xs  # pyright: ignore[reportOperatorIssue]  # scipy stubs: the fit is two floats
+        ax.plot(xs, fit, "-", lw=0.8, color="#c0392b")
         p = shp["p"].iloc[j]
         # y given: matplotlib then skips placing each title above its axes' tick labels (none
         # are on top), which would measure the ticks of the 40 panels a second time (the

@@ -19,6 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
+from crowdstudy.stats.choice_models import BradleyTerryResult
 from crowdstudy.stats.comparisons import ChoiceResult
 from crowdstudy.stats.report import format_p, write_table
 
@@ -155,14 +156,14 @@ def choice_figures(
     )
     files = [_save(fig, d / "2afc_shares.png", dpi)]
     if res.bradley_terry is not None:
-        files.append(_bt_figure(res, d / "2afc_bradley_terry.png", styles, note, dpi))
+        files.append(_bt_figure(res, res.bradley_terry, d / "2afc_bradley_terry.png", styles, note, dpi))
     return files
 
 
-def _bt_figure(res: ChoiceResult, out: Path, styles: dict, note: str, dpi: int) -> Path:
+def _bt_figure(res: ChoiceResult, bt: BradleyTerryResult, out: Path, styles: dict, note: str, dpi: int) -> Path:
     import matplotlib.pyplot as plt
 
-    ab = res.bradley_terry.abilities
+    ab = bt.abilities
     fig, ax = plt.subplots(figsize=(4.6, 1.2 + 0.45 * len(ab)), layout="constrained")
     y = np.arange(len(ab))[::-1]
     for yy, r in zip(y, ab.to_dict("records"), strict=True):

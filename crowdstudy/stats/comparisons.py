@@ -28,6 +28,7 @@ from __future__ import annotations
 import dataclasses
 import itertools
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pandas as pd
@@ -311,7 +312,7 @@ def pair_model(data: pd.DataFrame, a: str, b: str, levels: list[str], names: Fac
     y = (sub["chosen_method"].astype(str) == b).to_numpy(float)
     groups = sub["participant_id"].astype(str).to_numpy()
     present = [lv for lv in levels if lv in set(sub["density_level"].astype(str))]
-    base = dict(method_a=a, method_b=b, n_trials=len(sub), chose_b=int(y.sum()))
+    base: dict[str, Any] = dict(method_a=a, method_b=b, n_trials=len(sub), chose_b=int(y.sum()))
     if len(sub) == 0:
         return PairModel(terms="intercept", fit=None, note="no trials", **base)
     note = ""

@@ -67,12 +67,14 @@ def method_points(
     the densities is ``method_effect`` times the mean density multiplier. Clipping at the
     scale's ends is ignored, so check the realised ``dz_median`` of the power table.
     """
-    if (dz is None) == (eta_p2 is None):
-        raise InvalidInputError("give exactly one of dz or eta_p2")
-    if eta_p2 is not None:
+    if dz is not None and eta_p2 is None:
+        d_z = float(dz)
+    elif eta_p2 is not None and dz is None:
         if not 0 <= eta_p2 < 1:
             raise InvalidInputError(f"eta_p2 must be in [0, 1), got {eta_p2!r}")
-        dz = float(np.sqrt(eta_p2 / (1.0 - eta_p2)))
+        d_z = float(np.sqrt(eta_p2 / (1.0 - eta_p2)))
+    else:
+        raise InvalidInputError("give exactly one of dz or eta_p2")
     st = next((s for s in design.stages if s.number == stage), None)
     if st is None:
         raise InvalidInputError(f"stage {stage!r} is not in the design")
@@ -87,7 +89,7 @@ def method_points(
     )
     if unit <= 0:
         raise InvalidInputError("the model's density_slope leaves no Method effect at any density")
-    return float(dz) * sd / unit
+    return d_z * sd / unit
 
 
 @dataclasses.dataclass

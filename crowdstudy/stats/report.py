@@ -75,7 +75,7 @@ def apa_summary(
 ) -> list[str]:
     """One sentence per significant effect (``p < alpha`` under the table's rule)."""
     alpha = table.attrs.get("alpha", 0.05) if alpha is None else alpha
-    effsize = effsize or table.attrs.get("effsize", "np2")
+    es_col = effsize or str(table.attrs.get("effsize", "np2"))
     out = []
     for _, row in table.iterrows():
         if row["p"] < alpha:
@@ -85,7 +85,7 @@ def apa_summary(
             what = (
                 f"a significant {name} interaction" if kind == "interaction" else f"a significant main effect of {name}"
             )
-            out.append(f"{lead}{what}, {apa_effect(row, effsize)}.")
+            out.append(f"{lead}{what}, {apa_effect(row, es_col)}.")
     return out
 
 

@@ -163,12 +163,16 @@ class _Reml:
         second pass from the first optimum polishes the larger, q > 2, problems)."""
         from scipy import optimize
 
-        x0 = self.start()
         opts = {"xtol": 1e-10, "ftol": 1e-14, "maxiter": 50000}
-        opt = None
-        for _ in range(1 if self.q <= 2 else 3):
-            opt = optimize.minimize(lambda t: self.solve(t)[0], x0, method="Powell", options=opts, bounds=self.bounds())
-            x0 = list(opt.x)
+
+        def run(x0):
+            return optimize.minimize(
+                lambda t: self.solve(t)[0], x0, method="Powell", options=opts, bounds=self.bounds()
+            )
+
+        opt = run(self.start())
+        for _ in range(0 if self.q <= 2 else 2):
+            opt = run(list(opt.x))
         return opt
 
 
@@ -395,7 +399,7 @@ def _ordinal_rows(flat: np.ndarray, others: list[str], labels: list[tuple], alph
         w, s = signed_rank_test(d), sign_test(d)
         sd = d.std(ddof=1)
         p_t = float(2.0 * _st.t.sf(abs(d.mean()) / (sd / np.sqrt(n)), n - 1)) if sd > 0 else float("nan")
-        row = dict(zip(others, lab, strict=True)) if lab is not None else {f: "" for f in others}
+        row: dict[str, object] = dict(zip(others, lab, strict=True)) if lab is not None else dict.fromkeys(others, "")
         row.update(
             cell=" ".join(map(str, lab)) if lab is not None else "all",
             n=n,
@@ -449,7 +453,7 @@ def friedman_test(cm: CellMatrix, *, method: str = FACTOR_NAMES.method) -> pd.Da
         denom = 1.0 - ties / (n * (k**3 - k))
         r = ranks.sum(axis=0)
         chi2 = (12.0 / (n * k * (k + 1)) * float((r**2).sum()) - 3.0 * n * (k + 1)) / denom if denom > 0 else np.nan
-        row = dict(zip(others, lab, strict=True)) if lab is not None else {f: "" for f in others}
+        row: dict[str, object] = dict(zip(others, lab, strict=True)) if lab is not None else dict.fromkeys(others, "")
         row.update(
             cell=" ".join(map(str, lab)) if lab is not None else "all",
             n=n,

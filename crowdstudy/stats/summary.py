@@ -99,7 +99,7 @@ def _assumption_text(res: CompositeResult, alpha: float) -> str:
 
 def _robustness_lines(rob: Robustness, table: pd.DataFrame, alpha: float, method: str) -> list[str]:
     lines = []
-    anova_p = float(table.set_index("Source").at[method, "p"])
+    anova_p = float(table.set_index("Source").at[method, "p"])  # pyright: ignore[reportArgumentType]  # stubs: .at is any scalar
     mm = rob.mixed
     if mm is not None:
         rows = mm.contrasts.to_dict("records") if mm.contrasts is not None else [mm.method]
