@@ -482,6 +482,52 @@ def _set_main(args) -> int:
     return 0
 
 
+#: the steps the SSIM check compares (renderer options), the stimulus settings among them
+SSIM_STEPS = {
+    "4x MSAA (before)": {"msaa": 4},
+    "no anti-aliasing": {"msaa": 0},
+    "FXAA (the set)": {"msaa": 0, "post_aa": "fxaa"},
+    "FXAA, 1024 shadow map": {"msaa": 0, "post_aa": "fxaa", "shadow_size": 1024},
+    "FXAA, coarser levels of detail (x1.5)": {"msaa": 0, "post_aa": "fxaa", "lod_scale": 1.5},
+}
+
+
+def _ssim_main(args) -> int:
+    """``--ssim``: each step's SSIM and CPU time per frame on the checked frames."""
+    from benchmarks.render_fidelity import fidelity_rows
+    from crowdstudy.design import load_design
+    from crowdstudy.render.context import context_info
+    from crowdstudy.render.fidelity import SSIM_BAR
+
+    design = load_design()
+    info = context_info()
+    print(f"renderer: {info['renderer']} | {_cpus()} CPUs | load {os.getloadavg()[0]:.2f}", flush=True)
+    rows = fidelity_rows(design, SSIM_STEPS, width=args.width, height=args.height, frames=args.frames)
+    summary = []
+    for name in SSIM_STEPS:
+        mine = [r for r in rows if r["config"] == name]
+        summary.append(
+            {
+                "config": name,
+                "ssim_min": min(r["ssim"] for r in mine),
+                "ssim_mean": float(np.mean([r["ssim"] for r in mine])),
+                "cpu_s": float(np.mean([r["cpu_s"] for r in mine])),
+                "meets_bar": all(r["meets_bar"] for r in mine),
+            }
+        )
+    before = summary[0]["cpu_s"]
+    for row in summary:
+        row["cpu_vs_before"] = row["cpu_s"] / before
+    print(format_table(rows))
+    print(f"per step (SSIM bar {SSIM_BAR}; CPU s per frame, mean over the frames):")
+    print(format_table(summary))
+    path = write_report(
+        "render_ssim", rows, steps=summary, ssim_bar=SSIM_BAR, gl=info, cpus=_cpus(), load=os.getloadavg()[0]
+    )
+    print(f"report: {path}")
+    return 0
+
+
 def _aa_label(settings: dict) -> str:
     """The anti-aliasing of render settings in words: "4x MSAA", "FXAA", "4x MSAA + FXAA", "no AA"."""
     parts = [f"{settings['msaa']}x MSAA"] if settings.get("msaa", 0) > 1 else []
@@ -548,9 +594,17 @@ def main(argv: list[str]) -> int:
     parser.add_argument("--workers", type=int, default=None, help="--set: worker processes (default: stimuli's)")
     parser.add_argument("--full", action="store_true", help="--set: build the whole set for real (hours)")
     parser.add_argument("--out", default=None, help="--set --full: keep the set in this folder")
+    parser.add_argument(
+        "--ssim",
+        action="store_true",
+        help="the SSIM check alone: four study frames against their supersampled references, per "
+        "anti-aliasing and detail setting, with the CPU time per frame",
+    )
     args = parser.parse_args(argv)
     if args.set:
         return _set_main(args)
+    if args.ssim:
+        return _ssim_main(args)
 
     from crowdstudy.render.context import context_info
     from crowdstudy.render.renderer import CrowdRenderer

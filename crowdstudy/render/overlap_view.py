@@ -117,6 +117,8 @@ def _owner_boxes(start, end, radius, candidates: np.ndarray) -> np.ndarray:
     out = np.zeros((n, 2 * _MAX_OWNERS + 1, 4), np.float32)
     for a in range(n):
         count = int(candidates[a, 0])
+        if count == 0:
+            continue  # no owners
         ids = candidates[a, 1 : 1 + count].astype(np.int64)
         owners, first = np.unique(ids // 24, return_index=True)
         if len(owners) > _MAX_OWNERS:
