@@ -436,11 +436,10 @@ def _set_main(args) -> int:
                 "stage_totals": stage_totals,
             }
     proj["cpu_h_over_cores"] = proj["cpu_h"] / _cpus()
-    from benchmarks.render_fidelity import fidelity_rows
-    from crowdstudy.render.fidelity import SSIM_BAR
+    from crowdstudy.render.fidelity import SSIM_BAR, check_frames
 
     print("SSIM against the supersampled frames (the set's settings, and 4x MSAA before):", flush=True)
-    ssim = fidelity_rows(design, {"set": full, "4x MSAA": {"msaa": 4}}, width=full["width"], height=full["height"])
+    ssim = check_frames(design, {"set": full, "4x MSAA": {"msaa": 4}}, width=full["width"], height=full["height"])
     ssim_min = min(r["ssim"] for r in ssim if r["config"] == "set")
     print(format_table(ssim))
     label = "full set, built" if args.full else f"sample of {proj['measured']['videos']} videos x {frames} frames"
@@ -494,15 +493,14 @@ SSIM_STEPS = {
 
 def _ssim_main(args) -> int:
     """``--ssim``: each step's SSIM and CPU time per frame on the checked frames."""
-    from benchmarks.render_fidelity import fidelity_rows
     from crowdstudy.design import load_design
     from crowdstudy.render.context import context_info
-    from crowdstudy.render.fidelity import SSIM_BAR
+    from crowdstudy.render.fidelity import SSIM_BAR, check_frames
 
     design = load_design()
     info = context_info()
     print(f"renderer: {info['renderer']} | {_cpus()} CPUs | load {os.getloadavg()[0]:.2f}", flush=True)
-    rows = fidelity_rows(design, SSIM_STEPS, width=args.width, height=args.height, frames=args.frames)
+    rows = check_frames(design, SSIM_STEPS, width=args.width, height=args.height, frames=args.frames, progress=print)
     summary = []
     for name in SSIM_STEPS:
         mine = [r for r in rows if r["config"] == name]
