@@ -272,7 +272,14 @@ def _set_main(args) -> int:
     from crowdstudy.motion.baseline import LOOP_DISSOLVE_SECONDS
     from crowdstudy.render.context import context_info
     from crowdstudy.render.renderer import CrowdRenderer, baseline_color_positions
-    from crowdstudy.render.stimuli import _Runner, build_stimuli, default_workers, preset_settings, video_job
+    from crowdstudy.render.stimuli import (
+        _Runner,
+        build_stimuli,
+        default_workers,
+        preset_settings,
+        renderer_options,
+        video_job,
+    )
 
     design = load_design()
     full = preset_settings(design, "full")
@@ -290,7 +297,7 @@ def _set_main(args) -> int:
     # where the time of a frame goes, per view (one D5 renderer), and the encoder's quality
     d5 = build_baseline(design, "stationary", "D5", duration=1.0)
     per_view, raw = {}, []
-    with CrowdRenderer(d5, design=design, width=full["width"], height=full["height"], msaa=full["msaa"]) as r:
+    with CrowdRenderer(d5, design=design, **renderer_options(full)) as r:
         for view in sorted({s.viewpoint for s in stimuli}):
             r.set_view(view)
             for f in range(r.layers.phases()):  # every static layer of the view drawn
@@ -471,6 +478,17 @@ def _set_main(args) -> int:
         full=bool(args.full),
         frames_per_video=frames,
         settings={k: full[k] for k in ("msaa", "post_aa", "crf", "x264_preset", "red_frames") if k in full},
+        summary=[
+            {
+                "wall_h": proj["wall_h"],
+                "cpu_h": proj["cpu_h"],
+                "cpu_h_over_cores": proj["cpu_h_over_cores"],
+                **{f"{k}_cpu_h": v for k, v in proj.get("parts_h_cpu", {}).items()},
+                "workers": workers,
+                "ssim_min": ssim_min,
+                "meets_bar": bool(proj["wall_h"] <= 1.0 and ssim_min >= SSIM_BAR),
+            }
+        ],
         ssim=ssim,
         ssim_min=ssim_min,
         ssim_bar=SSIM_BAR,
