@@ -325,6 +325,14 @@ def blend_frames(a, b, weight: float | np.floating | np.ndarray):
     return out.tobytes() if as_bytes else out.reshape(np.shape(a))
 
 
+def _red_samples(renderer, plan, n: int) -> list[float]:
+    """The overlap view's red fraction on ``n`` evenly spaced frames of ``plan``, on the
+    standard levels of detail (``lod_scale`` 1) whatever the video's."""
+    renderer.characters.lod_scale = 1.0
+    picks = plan.source[np.linspace(0, len(plan) - 1, min(n, len(plan))).round().astype(int)]
+    return [renderer.overlap(int(src), image=False).red_fraction for src in picks]
+
+
 def render_video(
     anim,
     viewpoint,
@@ -425,11 +433,7 @@ def render_video(
             raise
         clock.lap("frames")
         if not overlap_view and red_sample_frames > 0:
-            renderer.characters.lod_scale = 1.0  # the red fraction on the standard levels of detail
-            for src in plan.source[
-                np.linspace(0, len(plan) - 1, min(red_sample_frames, len(plan))).round().astype(int)
-            ]:
-                red.append(renderer.overlap(int(src), image=False).red_fraction)
+            red += _red_samples(renderer, plan, red_sample_frames)
         clock.lap("red")
     seconds = time.perf_counter() - t0
     return {
