@@ -50,7 +50,8 @@ def frame_ssim(image: np.ndarray, reference: np.ndarray) -> float:
 
     if image.shape != reference.shape:
         raise InvalidInputError(f"image: expected the reference's shape {reference.shape}, got {image.shape}")
-    return float(structural_similarity(luma(image), luma(reference), data_range=255.0))
+    score = structural_similarity(luma(image), luma(reference), data_range=255.0)  # a float without full=True
+    return float(score)  # pyright: ignore[reportArgumentType]
 
 
 def reference_frame(renderer_factory, view, frame: int, *, width: int, height: int, scale: int = 2) -> np.ndarray:
