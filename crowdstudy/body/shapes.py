@@ -20,20 +20,19 @@ of two draws (:data:`BodyShapes`), the same random numbers for both:
     to 0.15-0.85 (weight also rises 0.05 per decade over 30, as adult weight does): a narrow
     spread, most bodies of one slim build.
 ``"population"``
-    weight follows the body-mass index (BMI, kg/m^2) of adult populations
+    each body's body-mass index (BMI, kg/m^2) is drawn from adult populations
     (:data:`BMI_STATS`): a log-normal per sex around the global age-standardised mean BMI of
     the NCD Risk Factor Collaboration ("Trends in adult body-mass index in 200 countries
     from 1975 to 2014", Lancet 387:1377-1396, 2016: 24.2 men, 24.4 women in 2014), its
     median rising with age (:data:`BMI_AGE_SLOPE`), correlated with the build draw
     (r = 0.6). The spread within a population (sd of ln BMI) and the age slope are this
-    module's assumptions, not the paper's figures. MakeHuman's weight macro does not reach
-    a population's BMI on its own (it interacts with muscle and age), so a body's BMI
-    *percentile* among its sex's adults is mapped onto the macro (:func:`bmi_percentile_weight`):
-    the crowd's ranking from slim to heavy follows the population. Muscle spreads wider
-    than the study draw's. Both are clipped to :data:`POPULATION_LIMITS`, where the capsule
-    proxies still fit the mesh (intersection over union >= 0.75) and the hands still clear
-    the belly (``crowdstudy.motion.selfcontact``); the very thinnest bodies, the most
-    muscular ones, fit the capsules worst.
+    module's assumptions, not figures of that paper. The weight and muscle macros are then
+    those whose mesh has that BMI (:func:`macros_for_bmi`, on :data:`MESH_BMI`, the mesh
+    measured): MakeHuman's weight macro alone spans only BMI 19-24 at average muscle, a
+    heavy body is also a softer one (lower muscle). Both macros stay within
+    :data:`POPULATION_LIMITS`, where the capsule proxies fit the heavy meshes as well as
+    the study's (intersection over union >= 0.75) and the hands clear the belly as often
+    (``crowdstudy.motion.selfcontact``); the heaviest women's tail stops near BMI 31.
 """
 
 from __future__ import annotations
@@ -70,8 +69,9 @@ _SHAPE_LIMIT = 2.0
 BodyShapes = Literal["study", "population"]
 BODY_SHAPES: tuple[BodyShapes, ...] = get_args(BodyShapes)
 
-#: (median BMI kg/m^2 at 40 years, sd of ln BMI) per sex: the medians are NCD-RisC's 2014
-#: global means; the sds are assumptions (about 3.7 and 4.7 kg/m^2 at the median).
+#: (median BMI kg/m^2 at 40 years, sd of ln BMI) per sex: NCD-RisC's 2014 global
+#: age-standardised means taken as the medians; the sds are assumptions (about 3.7 and
+#: 4.7 kg/m^2 at the median).
 BMI_STATS = {"male": (24.2, 0.15), "female": (24.4, 0.19)}
 #: ln(BMI) per decade of age from 20 to 60 years (flat outside), relative to 40 years (an assumption).
 BMI_AGE_SLOPE = 0.04
@@ -81,7 +81,7 @@ POPULATION_LIMITS = {"weight": (0.15, 0.95), "muscle": (0.1, 0.8)}
 MACRO_GRID = (0.0, 0.25, 0.5, 0.75, 1.0)
 #: BMI (kg/m^2) of MakeHuman's mesh on :data:`MACRO_GRID`, per sex: its volume x 1010 kg/m^3
 #: over height^2, measured at the sex's mean height, age 25, proportions 0.5 (age 60 moves
-#: it by less than 0.6). Muscle 0 is a soft body, 0.5 an average one whose weight macro
+#: it by at most 0.8). Muscle 0 is a soft body, 0.5 an average one whose weight macro
 #: spans only BMI 19-24.
 MESH_BMI = {
     "male": (
