@@ -188,6 +188,10 @@ def test_a_population_design_animates_and_records_its_bodies(tmp_path):
     assert "bodies" not in study.meta and list(study.bodies) == sample_bodies(study.n_characters, seed)
     with pytest.raises(InvalidInputError, match=r"meta\.bodies\.shapes: expected one of study, population"):
         check_meta({"bodies": {"shapes": "fat"}})
+    from crowdstudy.body.shapes import BODY_SHAPES
+    from crowdstudy.scene_meta import _BODY_SHAPES
+
+    assert _BODY_SHAPES == BODY_SHAPES  # the meta schema's copy of the names
     stim = design.stimuli()[0]
     settings = {"duration": 1.0, "fps": 30, "metric_frames": 10}
     as_study = dataclasses.replace(design, body_shapes="study")
