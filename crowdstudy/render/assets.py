@@ -60,9 +60,12 @@ __all__ = [
     "BOUND_RADIUS",
     "LOD_PIXELS",
     "DRESS_MIN_HEIGHT",
+    "POST_AA",
 ]
 
 N_BONES = 24
+#: the post-process anti-aliasing filters (:class:`~crowdstudy.render.gpu.ColorTargets`)
+POST_AA = ("none", "fxaa")
 #: periodic copies drawn of a corridor's crowd: at k * L along x, k in COPIES
 COPIES = (-2, -1, 0, 1, 2)
 #: m, bounding sphere of a character around its pelvis (arms raised)
@@ -87,6 +90,14 @@ class RenderOptions:
         max_faces: faces per body template (None = full meshes), "auto" resolved from the
             height: 3000 at 1080p, scaled down to 600 for small previews.
         static_layer: draw what the characters do not change once per view.
+        post_aa: "none" or "fxaa": a post-process anti-aliasing pass on the finished frame
+            (cheaper than MSAA on a CPU rasteriser; see ``fxaa.frag``).
+        detail_height: the image height (px) that chooses the characters' detail (texture
+            size, mesh faces, levels of detail); the image height unless set. A frame
+            rendered larger with the detail of a smaller one is its supersampled reference.
+        lod_scale: how many times taller than :data:`LOD_PIXELS` says a character must be on
+            screen to keep each finer level of detail (1: those bounds; 0: every character
+            at the finest level).
     """
 
     width: int
@@ -96,6 +107,9 @@ class RenderOptions:
     shadow_size: int
     max_faces: int | None
     static_layer: bool
+    post_aa: str = "none"
+    detail_height: int = 1080
+    lod_scale: float = 1.0
 
     @classmethod
     def validated(
@@ -108,6 +122,9 @@ class RenderOptions:
         shadow_size: int = 2048,
         max_faces: int | str | None = "auto",
         static_layer: bool = True,
+        post_aa: str = "none",
+        detail_height: int | None = None,
+        lod_scale: float = 1.0,
     ) -> RenderOptions:
         """The options, or an :class:`InvalidInputError` naming the bad one."""
         for name, value in (("width", width), ("height", height)):
@@ -115,8 +132,18 @@ class RenderOptions:
                 raise InvalidInputError(f"{name}: expected an integer pixel size in [16, 8192], got {value!r}")
         if not isinstance(msaa, (int, np.integer)) or msaa < 0 or msaa > 16:
             raise InvalidInputError(f"msaa: expected 0..16 samples per pixel, got {msaa!r}")
+        if post_aa not in POST_AA:
+            raise InvalidInputError(f"post_aa: expected one of {', '.join(POST_AA)}, got {post_aa!r}")
+        if detail_height is None:
+            detail_height = height
+        elif not isinstance(detail_height, (int, np.integer)) or not 16 <= detail_height <= 8192:
+            raise InvalidInputError(
+                f"detail_height: expected an integer pixel size in [16, 8192], got {detail_height!r}"
+            )
+        if isinstance(lod_scale, bool) or not isinstance(lod_scale, (int, float)) or not 0 <= lod_scale <= 8:
+            raise InvalidInputError(f"lod_scale: expected a number in [0, 8], got {lod_scale!r}")
         if max_faces == "auto":
-            max_faces = int(np.clip(3000 * int(height) / 1080, 600, 3000))
+            max_faces = int(np.clip(3000 * int(detail_height) / 1080, 600, 3000))
         elif max_faces is not None and (not isinstance(max_faces, (int, np.integer)) or max_faces < 100):
             raise InvalidInputError(f"max_faces: expected 'auto', None or an integer >= 100, got {max_faces!r}")
         if not isinstance(shadow_size, (int, np.integer)) or not 64 <= shadow_size <= 8192:
@@ -129,6 +156,9 @@ class RenderOptions:
             shadow_size=int(shadow_size),
             max_faces=max_faces,
             static_layer=bool(static_layer),
+            post_aa=str(post_aa),
+            detail_height=int(detail_height),
+            lod_scale=float(lod_scale),
         )
 
 

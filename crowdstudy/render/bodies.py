@@ -321,13 +321,17 @@ def _surface_decimation(
     Returns ``(faces (F', 3), cluster (R,) render vertex -> welded cluster, gather (R',)
     new vertex -> cluster, uv (R', 2))`` or None when no decimation is needed. Positions,
     weights and normals are per cluster (``values[cluster]`` means, then ``[gather]``).
-    Cached per topology and face count."""
+    Cached per mesh (topology and positions) and face count."""
     if max_faces is None or len(faces) <= max_faces:
         return None
+    # keyed on the positions too: the group's first body decides the decimation, so a
+    # key on the topology alone made a crowd's meshes depend on the crowds drawn before
     key = (
-        "surface-v4",
+        "surface-v5",
         hashlib.sha1(
-            np.ascontiguousarray(faces, dtype=np.int64).tobytes() + np.ascontiguousarray(weld, dtype=np.int64).tobytes()
+            np.ascontiguousarray(faces, dtype=np.int64).tobytes()
+            + np.ascontiguousarray(weld, dtype=np.int64).tobytes()
+            + np.ascontiguousarray(verts, dtype=np.float64).tobytes()
         ).hexdigest(),
         int(max_faces),
     )

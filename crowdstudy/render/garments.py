@@ -103,7 +103,10 @@ def _fuse(points: np.ndarray, mask: np.ndarray, radius: float, rounds: int) -> n
     idx = np.flatnonzero(mask)
     if len(idx) == 0:
         return points
-    key = (hashlib.sha1(idx.tobytes()).hexdigest(), float(radius))
+    # the neighbour lists depend on where the points are, not only on which: keyed on both,
+    # so a render never depends on the bodies a process dressed before
+    where = np.ascontiguousarray(points[idx], dtype=np.float64)
+    key = (hashlib.sha1(idx.tobytes() + where.tobytes()).hexdigest(), float(radius))
     if key not in _FUSE:
         if len(_FUSE) > 64:
             _FUSE.clear()

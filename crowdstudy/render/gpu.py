@@ -48,10 +48,15 @@ __all__ = [
     "set_uniform",
     "gl_matrix",
     "REST_WIDTH",
+    "FXAA_SETTINGS",
 ]
 
 #: texels per row of a group's rest-shape texture
 REST_WIDTH = 4096
+
+#: the FXAA pass's thresholds (``fxaa.frag``): edges with a luma contrast under 1/32, or
+#: under 1/8 of the brightest neighbour, are left alone; the sub-pixel blend at 3/4
+FXAA_SETTINGS = {"u_edge_min": 1.0 / 32.0, "u_edge_rel": 1.0 / 8.0, "u_subpix": 0.75}
 
 
 @functools.cache
@@ -384,16 +389,20 @@ class ShadowMap:
 
 
 class ColorTargets:
-    """Where a frame is drawn and read back: with MSAA (``samples`` > 0: the ``msaa``
-    samples asked for, at most what the driver supports) the passes draw into the
-    multisampled ``fbo_msaa`` and :meth:`resolve` averages it into the single-sampled
-    ``fbo_out``; without, they draw into ``fbo_out``. The static layers are made here too
+    """Where a frame is drawn and read back, the one place that knows about anti-aliasing.
+
+    With MSAA (``samples`` > 0: the ``msaa`` samples asked for, at most what the driver
+    supports) the passes draw into the multisampled ``fbo_msaa`` and :meth:`resolve`
+    averages it; without, they draw into a single-sampled target. ``post_aa`` "fxaa"
+    then smooths the edges with a full-screen pass (``fxaa.frag``) into ``fbo_out``, from
+    which the frame is read: the passes draw into ``fbo_scene`` (a colour texture) and
+    :meth:`resolve` runs the filter. The static layers are made here too
     (:meth:`layer_framebuffer`), with the draw target's samples, so a frame can start from
     a copy of one."""
 
-    def __init__(self, objects: GpuObjects, width: int, height: int, msaa: int):
+    def __init__(self, objects: GpuObjects, width: int, height: int, msaa: int, post_aa: str = "none"):
         ctx, own = objects.ctx, objects.own
-        self.objects, self.width, self.height = objects, width, height
+        self.objects, self.width, self.height, self.post_aa = objects, width, height, post_aa
         self.samples = int(min(msaa, ctx.max_samples)) if msaa > 1 else 0
         size = (width, height)
         self.fbo_msaa = self.layer_framebuffer() if self.samples else None
@@ -402,11 +411,35 @@ class ColorTargets:
                 color_attachments=[own(ctx.renderbuffer(size, 4))], depth_attachment=own(ctx.depth_renderbuffer(size))
             )
         )
+        self.fbo_scene = self._fxaa = None
+        if post_aa == "fxaa":
+            import moderngl
+
+            scene = own(ctx.texture(size, 4))
+            scene.filter = (moderngl.LINEAR, moderngl.LINEAR)
+            scene.repeat_x = scene.repeat_y = False
+            depth = own(ctx.depth_renderbuffer(size))
+            self.fbo_scene = own(ctx.framebuffer(color_attachments=[scene], depth_attachment=depth))
+            prog = own(
+                ctx.program(
+                    vertex_shader="#version 330 core\n" + shader_source("fullscreen.vert"),
+                    fragment_shader="#version 330 core\n" + shader_source("fxaa.frag"),
+                )
+            )
+            for name, value in FXAA_SETTINGS.items():
+                set_uniform(prog, name, value)
+            set_uniform(prog, "u_texel", (1.0 / width, 1.0 / height))
+            set_uniform(prog, "u_color", 7)
+            self._fxaa = (scene, own(ctx.vertex_array(prog, [])))
+        elif post_aa != "none":
+            raise ValueError(f"post_aa: expected 'none' or 'fxaa', got {post_aa!r}")
 
     @property
     def draw(self):
         """The framebuffer the passes draw a frame into."""
-        return self.fbo_msaa if self.fbo_msaa is not None else self.fbo_out
+        if self.fbo_msaa is not None:
+            return self.fbo_msaa
+        return self.fbo_scene if self.fbo_scene is not None else self.fbo_out
 
     def layer_framebuffer(self):
         """A new colour (RGBA8) + depth framebuffer like the draw target."""
@@ -424,9 +457,21 @@ class ColorTargets:
         return self.width * self.height * max(1, self.samples) * 8
 
     def resolve(self) -> None:
-        """Average the multisampled frame into ``fbo_out`` (nothing to do without MSAA)."""
+        """Finish the frame in ``fbo_out``: average the MSAA samples, then the post-process
+        filter (nothing to do without either)."""
+        ctx = self.objects.ctx
         if self.fbo_msaa is not None:
-            self.objects.ctx.copy_framebuffer(self.fbo_out, self.fbo_msaa)
+            ctx.copy_framebuffer(self.fbo_scene if self.fbo_scene is not None else self.fbo_out, self.fbo_msaa)
+        if self._fxaa is not None:
+            import moderngl
+
+            scene, vao = self._fxaa
+            self.fbo_out.use()
+            ctx.viewport = (0, 0, self.width, self.height)
+            ctx.disable(moderngl.DEPTH_TEST | moderngl.CULL_FACE)
+            scene.use(7)
+            vao.render(moderngl.TRIANGLES, vertices=3)
+            ctx.enable(moderngl.DEPTH_TEST)
 
     def read(self) -> bytes:
         """The output as raw RGB bytes, bottom row first."""

@@ -119,13 +119,26 @@ class CharacterPass:
     a camera, :meth:`draw` draws every group with one instanced call of a program on
     ``character.vert`` (colour, depth, id or overlap).
 
+    ``lod_scale``: a character keeps each finer level while it is ``lod_scale`` times
+    taller on screen than :data:`~crowdstudy.render.assets.LOD_PIXELS` says (0: every
+    character at the finest level).
+
     ``per_kind``: draw with the programs compiled for one kind of template group
     (textured or region-coloured) in place of the one that branches on it (the same
     picture; llvmpipe pays for both sides of a branch)."""
 
-    def __init__(self, ctx, resources: CharacterResources, programs: Programs, *, period: float | None, height: int):
+    def __init__(
+        self,
+        ctx,
+        resources: CharacterResources,
+        programs: Programs,
+        *,
+        period: float | None,
+        height: int,
+        lod_scale: float = 1.0,
+    ):
         self.ctx, self.resources, self.programs = ctx, resources, programs
-        self.period, self.height = period, height
+        self.period, self.height, self.lod_scale = period, height, lod_scale
         self.per_kind = True
 
     def select(self, roots: np.ndarray, vp: np.ndarray, camera, *, shadow: bool = False) -> None:
@@ -138,6 +151,7 @@ class CharacterPass:
         copies = COPIES if self.period else (0,)
         eye = np.asarray(camera.eye)
         focal_px = self.height / (2.0 * np.tan(np.radians(camera.fov) / 2.0))
+        focal_px = focal_px / self.lod_scale if self.lod_scale > 0 else np.inf  # 0: all at the finest level
         for gl in self.resources.groups:
             if shadow and not gl.coarse:
                 gl.count = 0

@@ -127,6 +127,15 @@ class CrowdRenderer:
             shadows) once per view into multisampled colour + depth layers, and start each
             frame from a copy of its layer (the same picture, byte for byte; False draws
             everything every frame).
+        post_aa: "none", or "fxaa": smooth the finished frame's edges with a full-screen
+            pass (with ``msaa`` 0, a fraction of MSAA's cost on a CPU rasteriser).
+        detail_height: the image height that chooses the characters' detail (texture
+            size, faces, levels of detail); default ``height``. The supersampled reference
+            of a frame (:mod:`crowdstudy.render.fidelity`) is rendered larger with the
+            detail of the frame it checks.
+        lod_scale: characters keep each finer level of detail while this many times taller
+            on screen than :data:`~crowdstudy.render.assets.LOD_PIXELS` says (0: all at the
+            finest level, as the supersampled reference draws them).
 
     The parts it is made of are attributes: ``options``, ``assets``, ``meshes``,
     ``lighting`` (CPU); ``programs``, ``character_resources``, ``shadow_map``, ``targets``
@@ -148,6 +157,9 @@ class CrowdRenderer:
         max_faces: int | str | None = "auto",
         color_positions=None,
         static_layer: bool = True,
+        post_aa: str = "none",
+        detail_height: int | None = None,
+        lod_scale: float = 1.0,
     ):
         self.options = opts = RenderOptions.validated(
             width=width,
@@ -157,6 +169,9 @@ class CrowdRenderer:
             shadow_size=shadow_size,
             max_faces=max_faces,
             static_layer=static_layer,
+            post_aa=post_aa,
+            detail_height=detail_height,
+            lod_scale=lod_scale,
         )
         self.width, self.height, self.shadows = opts.width, opts.height, opts.shadows
         self.assets = a = CrowdAssets.build(
@@ -169,15 +184,17 @@ class CrowdRenderer:
         self._bones = FrameBones(a.anim, a.bodies)
         # what each character wears, painted once on its UVs (textured bodies); the drawn
         # surface dressed to match
-        tex_albedo, codes = paint_albedo(gpu, a.bodies, a.looks, opts.height)
-        self.meshes = CharacterMeshes.build(a.bodies, a.looks, codes, height=opts.height, max_faces=opts.max_faces)
+        tex_albedo, codes = paint_albedo(gpu, a.bodies, a.looks, opts.detail_height)
+        self.meshes = CharacterMeshes.build(
+            a.bodies, a.looks, codes, height=opts.detail_height, max_faces=opts.max_faces
+        )
         self.lighting = Lighting.for_scene(a.env, a.period)
         self.programs = programs = Programs.compile(gpu)
         self.character_resources = CharacterResources(gpu, self.meshes, a.colors, tex_albedo, programs)
         self.shadow_map = ShadowMap(gpu, opts.shadow_size)
         parts = EnvironmentParts.build(a.anim, a.env, self.lighting, shadows=opts.shadows)
         buffers = EnvironmentBuffers(gpu, parts, programs, len(a.env.cutaway.indices))
-        self.targets = ColorTargets(gpu, opts.width, opts.height, opts.msaa)
+        self.targets = ColorTargets(gpu, opts.width, opts.height, opts.msaa, opts.post_aa)
         programs.set_constants(
             self.lighting,
             a.env,
@@ -187,7 +204,14 @@ class CrowdRenderer:
             period=a.period,
         )
         # the passes
-        self.characters = CharacterPass(ctx, self.character_resources, programs, period=a.period, height=opts.height)
+        self.characters = CharacterPass(
+            ctx,
+            self.character_resources,
+            programs,
+            period=a.period,
+            height=opts.detail_height,
+            lod_scale=opts.lod_scale,
+        )
         self.shadow_pass = ShadowPass(
             ctx, self.shadow_map, self.characters, self.lighting.view_proj, enabled=opts.shadows
         )

@@ -69,6 +69,7 @@ __all__ = [
     "video_job",
     "animation_record",
     "preset_settings",
+    "renderer_options",
 ]
 
 MANIFEST_COLUMNS = (
@@ -95,17 +96,19 @@ MANIFEST_COLUMNS = (
 )
 
 #: Render settings per preset; None = the design's value. "quick" keeps the design's
-#: character counts and only shrinks resolution and duration. x264 "superfast" at crf 18:
-#: on 1080p D5 concert frames (V1) PSNR 44.9 dB against the lossless encode of the same
-#: 4:2:0 frames, vs 44.3 dB for "faster" and 43.6 dB for "veryfast", at half the encoder
-#: CPU time of "faster" (0.058 against 0.115 s per frame) and 1.4x its bytes (88 kB per
-#: frame, 2.1 Mbit/s); `crowdstudy bench render --set` measures it again.
+#: character counts and only shrinks resolution and duration. "full" anti-aliases with
+#: the FXAA pass instead of 4x MSAA: on a CPU rasteriser MSAA multiplies the characters'
+#: fragment work, and the filtered frames stay within the SSIM bar of their supersampled
+#: references (:data:`crowdstudy.render.fidelity.SSIM_BAR`); x264 "superfast" at crf 18
+#: costs about half the encoder time of "faster" at a similar PSNR against the lossless
+#: encode. `crowdstudy bench render --set` measures both again (docs: the rendering guide).
 PRESETS = {
     "full": {
         "width": None,
         "height": None,
         "duration": None,
-        "msaa": 4,
+        "msaa": 0,
+        "post_aa": "fxaa",
         "crf": 18,
         "x264_preset": "superfast",
         "red_frames": 10,
@@ -141,6 +144,14 @@ def preset_settings(design, preset: str, *, duration: float | None = None) -> di
     p["duration"] = float(duration if duration is not None else p["duration"] or design.duration)
     p["fps"] = float(design.fps)
     return p
+
+
+def renderer_options(settings: dict) -> dict:
+    """The :class:`~crowdstudy.render.renderer.CrowdRenderer` options among a preset's
+    settings (:func:`preset_settings`): image size, anti-aliasing, levels of detail and
+    shadow map, those present."""
+    keys = ("width", "height", "msaa", "post_aa", "lod_scale", "shadow_size")
+    return {k: settings[k] for k in keys if k in settings}
 
 
 def _software_version() -> str:
@@ -309,6 +320,9 @@ def video_job(job: dict) -> dict:
             preset=s["x264_preset"],
             red_sample_frames=s["red_frames"],
             color_positions=job.get("color_positions"),
+            post_aa=s.get("post_aa", "none"),
+            lod_scale=s.get("lod_scale", 1.0),
+            shadow_size=s.get("shadow_size", 2048),
         )
         if job.get("return_bytes"):
             res["video_bytes"] = out.read_bytes()

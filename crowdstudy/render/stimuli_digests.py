@@ -86,8 +86,8 @@ def _shared_inputs() -> dict:
 
 def _palette_digest() -> str:
     """What decides the characters' looks: the palettes, the appearance and dressing rules,
-    the hair, hands and audience figures (their source files), and the paint and character
-    shaders."""
+    the hair, hands and audience figures (their source files), and the paint, character and
+    anti-aliasing shaders."""
     from importlib import resources
 
     from crowdstudy.render import appearance, garments, palette
@@ -103,6 +103,7 @@ def _palette_digest() -> str:
             ("shaders", "paint.frag"),
             ("shaders", "character.frag"),
             ("shaders", "lighting.glsl"),
+            ("shaders", "fxaa.frag"),
         )
     ]
     return _digest(
@@ -206,6 +207,8 @@ def video_digest(design, stimulus, settings: dict, *, physics=None, body_loader=
     render = {
         k: settings[k] for k in ("width", "height", "duration", "fps", "msaa", "crf", "x264_preset", "red_frames")
     }
+    # settings added later enter the digest only when set, so older sets keep their digests
+    render.update({k: settings[k] for k in ("post_aa", "lod_scale", "shadow_size") if k in settings})
     return _digest(
         {
             "stimulus_id": stimulus.stimulus_id,

@@ -344,6 +344,9 @@ def render_video(
     shadows: bool = True,
     red_sample_frames: int = 0,
     color_positions=None,
+    post_aa: str = "none",
+    lod_scale: float = 1.0,
+    shadow_size: int = 2048,
 ) -> dict:
     """Render an animation to an MP4.
 
@@ -362,6 +365,10 @@ def render_video(
         color_positions: (N, 2) positions deciding the clothing colours (see
             :class:`~crowdstudy.render.renderer.CrowdRenderer`); give the Baseline's frame 0
             when rendering its corrected version.
+        msaa, post_aa, lod_scale, shadow_size: the renderer's anti-aliasing, levels of
+            detail and shadow map (see :class:`~crowdstudy.render.renderer.CrowdRenderer`).
+            The overlap view's samples are measured at ``lod_scale`` 1 whatever the video's,
+            so the red fraction does not depend on the speed settings.
     Returns:
         dict: path, frames, width, height, fps, duration, sha256, seconds, seconds_per_frame,
         red_fraction (list, per measured frame), mean_red_fraction (or None),
@@ -396,8 +403,11 @@ def render_video(
         height=height,
         msaa=msaa,
         shadows=shadows,
+        shadow_size=shadow_size,
         body_loader=body_loader,
         color_positions=color_positions,
+        post_aa=post_aa,
+        lod_scale=lod_scale,
     ) as renderer:
         renderer.set_view(viewpoint)
         renderer.draw_layers()
@@ -415,6 +425,7 @@ def render_video(
             raise
         clock.lap("frames")
         if not overlap_view and red_sample_frames > 0:
+            renderer.characters.lod_scale = 1.0  # the red fraction on the standard levels of detail
             for src in plan.source[
                 np.linspace(0, len(plan) - 1, min(red_sample_frames, len(plan))).round().astype(int)
             ]:
