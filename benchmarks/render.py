@@ -272,7 +272,14 @@ def _set_main(args) -> int:
     from crowdstudy.motion.baseline import LOOP_DISSOLVE_SECONDS
     from crowdstudy.render.context import context_info
     from crowdstudy.render.renderer import CrowdRenderer, baseline_color_positions
-    from crowdstudy.render.stimuli import _Runner, build_stimuli, default_workers, preset_settings, video_job
+    from crowdstudy.render.stimuli import (
+        _Runner,
+        build_stimuli,
+        default_workers,
+        preset_settings,
+        renderer_options,
+        video_job,
+    )
 
     design = load_design()
     full = preset_settings(design, "full")
@@ -290,7 +297,7 @@ def _set_main(args) -> int:
     # where the time of a frame goes, per view (one D5 renderer), and the encoder's quality
     d5 = build_baseline(design, "stationary", "D5", duration=1.0)
     per_view, raw = {}, []
-    with CrowdRenderer(d5, design=design, width=full["width"], height=full["height"], msaa=full["msaa"]) as r:
+    with CrowdRenderer(d5, design=design, **renderer_options(full)) as r:
         for view in sorted({s.viewpoint for s in stimuli}):
             r.set_view(view)
             for f in range(r.layers.phases()):  # every static layer of the view drawn
@@ -436,11 +443,10 @@ def _set_main(args) -> int:
                 "stage_totals": stage_totals,
             }
     proj["cpu_h_over_cores"] = proj["cpu_h"] / _cpus()
-    from benchmarks.render_fidelity import fidelity_rows
-    from crowdstudy.render.fidelity import SSIM_BAR
+    from crowdstudy.render.fidelity import SSIM_BAR, check_frames
 
     print("SSIM against the supersampled frames (the set's settings, and 4x MSAA before):", flush=True)
-    ssim = fidelity_rows(design, {"set": full, "4x MSAA": {"msaa": 4}}, width=full["width"], height=full["height"])
+    ssim = check_frames(design, {"set": full, "4x MSAA": {"msaa": 4}}, width=full["width"], height=full["height"])
     ssim_min = min(r["ssim"] for r in ssim if r["config"] == "set")
     print(format_table(ssim))
     label = "full set, built" if args.full else f"sample of {proj['measured']['videos']} videos x {frames} frames"
@@ -472,6 +478,17 @@ def _set_main(args) -> int:
         full=bool(args.full),
         frames_per_video=frames,
         settings={k: full[k] for k in ("msaa", "post_aa", "crf", "x264_preset", "red_frames") if k in full},
+        summary=[
+            {
+                "wall_h": proj["wall_h"],
+                "cpu_h": proj["cpu_h"],
+                "cpu_h_over_cores": proj["cpu_h_over_cores"],
+                **{f"{k}_cpu_h": v for k, v in proj.get("parts_h_cpu", {}).items()},
+                "workers": workers,
+                "ssim_min": ssim_min,
+                "meets_bar": bool(proj["wall_h"] <= 1.0 and ssim_min >= SSIM_BAR),
+            }
+        ],
         ssim=ssim,
         ssim_min=ssim_min,
         ssim_bar=SSIM_BAR,
@@ -479,6 +496,51 @@ def _set_main(args) -> int:
     )
     print(f"report: {path}")
     print(json.dumps({k: v for k, v in proj.items() if k != "measured"}, default=float))
+    return 0
+
+
+#: the steps the SSIM check compares (renderer options), the stimulus settings among them
+SSIM_STEPS = {
+    "4x MSAA (before)": {"msaa": 4},
+    "no anti-aliasing": {"msaa": 0},
+    "FXAA (the set)": {"msaa": 0, "post_aa": "fxaa"},
+    "FXAA, 1024 shadow map": {"msaa": 0, "post_aa": "fxaa", "shadow_size": 1024},
+    "FXAA, coarser levels of detail (x1.5)": {"msaa": 0, "post_aa": "fxaa", "lod_scale": 1.5},
+}
+
+
+def _ssim_main(args) -> int:
+    """``--ssim``: each step's SSIM and CPU time per frame on the checked frames."""
+    from crowdstudy.design import load_design
+    from crowdstudy.render.context import context_info
+    from crowdstudy.render.fidelity import SSIM_BAR, check_frames
+
+    design = load_design()
+    info = context_info()
+    print(f"renderer: {info['renderer']} | {_cpus()} CPUs | load {os.getloadavg()[0]:.2f}", flush=True)
+    rows = check_frames(design, SSIM_STEPS, width=args.width, height=args.height, frames=args.frames, progress=print)
+    summary = []
+    for name in SSIM_STEPS:
+        mine = [r for r in rows if r["config"] == name]
+        summary.append(
+            {
+                "config": name,
+                "ssim_min": min(r["ssim"] for r in mine),
+                "ssim_mean": float(np.mean([r["ssim"] for r in mine])),
+                "cpu_s": float(np.mean([r["cpu_s"] for r in mine])),
+                "meets_bar": all(r["meets_bar"] for r in mine),
+            }
+        )
+    before = summary[0]["cpu_s"]
+    for row in summary:
+        row["cpu_vs_before"] = row["cpu_s"] / before
+    print(format_table(rows))
+    print(f"per step (SSIM bar {SSIM_BAR}; CPU s per frame, mean over the frames):")
+    print(format_table(summary))
+    path = write_report(
+        "render_ssim", rows, steps=summary, ssim_bar=SSIM_BAR, gl=info, cpus=_cpus(), load=os.getloadavg()[0]
+    )
+    print(f"report: {path}")
     return 0
 
 
@@ -548,9 +610,17 @@ def main(argv: list[str]) -> int:
     parser.add_argument("--workers", type=int, default=None, help="--set: worker processes (default: stimuli's)")
     parser.add_argument("--full", action="store_true", help="--set: build the whole set for real (hours)")
     parser.add_argument("--out", default=None, help="--set --full: keep the set in this folder")
+    parser.add_argument(
+        "--ssim",
+        action="store_true",
+        help="the SSIM check alone: four study frames against their supersampled references, per "
+        "anti-aliasing and detail setting, with the CPU time per frame",
+    )
     args = parser.parse_args(argv)
     if args.set:
         return _set_main(args)
+    if args.ssim:
+        return _ssim_main(args)
 
     from crowdstudy.render.context import context_info
     from crowdstudy.render.renderer import CrowdRenderer

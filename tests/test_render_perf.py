@@ -212,3 +212,37 @@ def test_taking_the_character_pass_apart_leaves_the_renderer_as_it_was(design):
     assert all(np.isfinite(v) for v in parts.values()) and parts["full"] > 0
     assert parts["fragments"] == pytest.approx(parts["full"] - parts["vertex+setup"])
     assert np.array_equal(before, after)
+
+
+def test_overlap_owner_boxes_hold_their_owners_capsules():
+    """The boxes overlap.frag skips owners by: each owner's range of a character's sorted
+    candidates holds that owner's capsules only, and its box holds every one of them
+    (ends widened by the radius); a character without candidates has no owners."""
+    from crowdstudy.render.overlap_view import _candidates, _owner_boxes
+
+    rng = np.random.default_rng(4)
+    n = 6
+    centre = np.c_[rng.uniform(0, 1.2, n), rng.uniform(0, 1.2, n), np.ones(n)]
+    centre[-1] = [40.0, 40.0, 1.0]  # far from everyone: no candidates
+    start = centre[:, None, :] + rng.normal(0, 0.2, (n, 24, 3))
+    end = start + rng.normal(0, 0.1, (n, 24, 3))
+    radius = rng.uniform(0.03, 0.12, (n, 24))
+    cand = _candidates(start, end, radius, None)
+    boxes = _owner_boxes(start, end, radius, cand)
+    assert cand[-1, 0] == 0 and boxes[-1, 0, 0] == 0
+    for a in range(n - 1):
+        ids = cand[a, 1 : 1 + int(cand[a, 0])].astype(int)
+        n_owners = int(boxes[a, 0, 0])
+        assert n_owners == len(np.unique(ids // 24)) > 0
+        covered = 0
+        for k in range(n_owners):
+            lo, hi = boxes[a, 1 + 2 * k], boxes[a, 2 + 2 * k]
+            part = ids[int(lo[3]) : int(hi[3])]
+            assert len(np.unique(part // 24)) == 1
+            o, b = part // 24, part % 24
+            for pts in (start[o, b], end[o, b]):
+                assert np.all(pts - radius[o, b, None] >= lo[:3] - 1e-5) and np.all(
+                    pts + radius[o, b, None] <= hi[:3] + 1e-5
+                )
+            covered += len(part)
+        assert covered == len(ids)

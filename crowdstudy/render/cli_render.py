@@ -63,6 +63,12 @@ def configure(parser: argparse.ArgumentParser) -> None:
         "length, its extra frames dissolved into the loop seam)",
     )
     parser.add_argument("--msaa", type=int, default=4, help="anti-aliasing samples per pixel (0 = off)")
+    parser.add_argument(
+        "--post-aa",
+        choices=("none", "fxaa"),
+        default="none",
+        help="post-process anti-aliasing (the stimulus videos use --msaa 0 --post-aa fxaa)",
+    )
     parser.add_argument("--no-shadows", action="store_true", help="skip the shadow map")
     parser.add_argument(
         "--colors-from",
@@ -115,6 +121,7 @@ def run(args: argparse.Namespace) -> int:
             width=args.width or design.video_width,
             height=args.height or design.video_height,
             msaa=args.msaa,
+            post_aa=args.post_aa,
             shadows=not args.no_shadows,
             color_positions=colors,
         ) as renderer:
@@ -141,6 +148,7 @@ def run(args: argparse.Namespace) -> int:
         duration=args.duration,
         fps=args.fps,
         msaa=args.msaa,
+        post_aa=args.post_aa,
         overlap_view=args.overlap,
         design=design,
         progress=not args.quiet,

@@ -8,16 +8,21 @@ way scikit-image's ``structural_similarity`` does on their luma (Rec. 601 weight
 7x7 uniform window, data range 255): 1 means identical structure.
 
 The stimulus renderer's settings are held to :data:`SSIM_BAR` on the study's frames
-(``crowdstudy bench render --ssim``).
+(:func:`check_frames`; ``crowdstudy bench render --ssim`` and ``--set``): the D3 concert
+from V1 (the wide view the bar was set on), the D5 corridor from V3, the D5 concert from
+V4 and the D1 corridor from V2, each at frame 10 of its Baseline.
 """
 
 from __future__ import annotations
+
+import functools
+import time
 
 import numpy as np
 
 from crowdstudy.errors import InvalidInputError
 
-__all__ = ["SSIM_BAR", "box_downsample", "luma", "frame_ssim", "reference_frame"]
+__all__ = ["SSIM_BAR", "FRAMES", "box_downsample", "luma", "frame_ssim", "reference_frame", "check_frames"]
 
 #: the lowest SSIM a stimulus frame may have against its supersampled reference: 4x MSAA
 #: at the frame's size scores just above it on the concert's wide view
@@ -61,3 +66,56 @@ def reference_frame(renderer_factory, view, frame: int, *, width: int, height: i
     ) as r:
         r.set_view(view)
         return box_downsample(r.render(frame), scale)
+
+
+#: (stage key, density level, viewpoint, frame) of the frames checked
+FRAMES = (
+    ("stationary", "D3", "V1", 10),
+    ("walking", "D5", "V3", 10),
+    ("stationary", "D5", "V4", 10),
+    ("walking", "D1", "V2", 10),
+)
+
+
+def check_frames(design, configs: dict, *, width: int, height: int, frames: int = 4, progress=None) -> list[dict]:
+    """The SSIM check: each of :data:`FRAMES` (its Baseline, built here) rendered with each
+    of ``configs`` (name -> renderer options, or a stimulus preset's settings) against its
+    :func:`reference_frame`. One row per frame and configuration: stage, level, view,
+    config, ssim, meets_bar (:data:`SSIM_BAR`), cpu_s and wall_s (medians per frame over
+    ``frames`` frames drawn after it by the same renderer, its set-up done)."""
+    from crowdstudy.motion import build_baseline
+    from crowdstudy.render.renderer import CrowdRenderer
+    from crowdstudy.render.stimuli import renderer_options
+
+    rows = []
+    for stage, level, view, frame in FRAMES:
+        anim = build_baseline(design, stage, level, duration=max(1.0, (frame + frames + 2) / design.fps))
+        factory = functools.partial(CrowdRenderer, anim, design=design)
+        ref = reference_frame(factory, view, frame, width=width, height=height)
+        for name, options in configs.items():
+            with factory(**{**renderer_options(options), "width": width, "height": height}) as r:
+                r.set_view(view)
+                r.draw_layers()
+                image = r.render(frame)
+                cpu, wall = [], []
+                for f in range(frame + 1, frame + 1 + frames):
+                    c0, t0 = time.process_time(), time.perf_counter()
+                    r.render_raw(f)
+                    cpu.append(time.process_time() - c0)
+                    wall.append(time.perf_counter() - t0)
+            ssim = frame_ssim(image, ref)
+            rows.append(
+                {
+                    "stage": stage,
+                    "level": level,
+                    "view": view,
+                    "config": name,
+                    "ssim": ssim,
+                    "meets_bar": bool(ssim >= SSIM_BAR),
+                    "cpu_s": float(np.median(cpu)),
+                    "wall_s": float(np.median(wall)),
+                }
+            )
+            if progress is not None:
+                progress(f"  SSIM {stage} {level} {view} {name}: {ssim:.4f}, {np.median(cpu):.3f} CPU-s per frame")
+    return rows

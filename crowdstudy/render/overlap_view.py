@@ -33,6 +33,7 @@ __all__ = ["OverlapFrame", "OverlapPass", "overlap_frame", "capsules_from_skinni
 
 RED = np.array([225, 25, 30], dtype=np.float32)
 _MAX_CANDIDATES = 160
+_MAX_OWNERS = 48  # owners of a character's candidates with a box each (more: scan them all)
 
 
 @dataclasses.dataclass
@@ -102,6 +103,36 @@ def _candidates(start, end, radius, period: float | None) -> np.ndarray:
     return out
 
 
+def _owner_boxes(start, end, radius, candidates: np.ndarray) -> np.ndarray:
+    """(N, 2 * _MAX_OWNERS + 1, 4) float32: per character, its candidates grouped by owner
+    (they are sorted by id, so each owner's are contiguous): texel 0 holds the number of
+    owners (-1: too many, scan the list), then per owner ``(lo.xyz, first)`` and
+    ``(hi.xyz, last)``: the box around that owner's candidate capsules (each widened by its
+    radius) and the owner's range ``[first, last)`` in the candidate list. A point outside
+    the box is inside none of them, so ``overlap.frag`` skips the owner's capsules: the
+    same mask for a fraction of the capsule tests."""
+    n = start.shape[0]
+    lo = (np.minimum(start, end) - radius[..., None]).astype(np.float64)
+    hi = (np.maximum(start, end) + radius[..., None]).astype(np.float64)
+    out = np.zeros((n, 2 * _MAX_OWNERS + 1, 4), np.float32)
+    for a in range(n):
+        count = int(candidates[a, 0])
+        if count == 0:
+            continue  # no owners
+        ids = candidates[a, 1 : 1 + count].astype(np.int64)
+        owners, first = np.unique(ids // 24, return_index=True)
+        if len(owners) > _MAX_OWNERS:
+            out[a, 0, 0] = -1.0
+            continue
+        last = np.append(first[1:], count)
+        out[a, 0, 0] = len(owners)
+        for k, (o, f, e) in enumerate(zip(owners, first, last, strict=True)):
+            bones = ids[f:e] - o * 24
+            out[a, 1 + 2 * k, :3], out[a, 1 + 2 * k, 3] = lo[o, bones].min(axis=0), f
+            out[a, 2 + 2 * k, :3], out[a, 2 + 2 * k, 3] = hi[o, bones].max(axis=0), e
+    return out
+
+
 class OverlapPass:
     """The id and overlap passes of the overlap view, drawn with a renderer's
     :class:`~crowdstudy.render.passes.CharacterPass` (its instances as the camera's
@@ -119,12 +150,21 @@ class OverlapPass:
         self.fbo_mask = ctx.framebuffer(color_attachments=[self.tex_mask])
         self.tex_caps = ctx.texture((48, n_characters), 4, dtype="f4")
         self.tex_cand = ctx.texture((_MAX_CANDIDATES + 1, n_characters), 1, dtype="f4")
-        for tex in (self.tex_ids, self.tex_mask, self.tex_caps, self.tex_cand):
+        self.tex_owners = ctx.texture((2 * _MAX_OWNERS + 1, n_characters), 4, dtype="f4")
+        self.tex_bodies = ctx.texture((2, n_characters), 4, dtype="f4")
+        for tex in (self.tex_ids, self.tex_mask, self.tex_caps, self.tex_cand, self.tex_owners, self.tex_bodies):
             tex.filter = (moderngl.NEAREST, moderngl.NEAREST)
         prog = characters.programs.overlap
         # moderngl's stub types prog[name] as any member (attribute, varying, block): these are uniforms
-        for name, unit in (("u_ids", 4), ("u_capsules", 5), ("u_candidates", 6)):
-            prog[name].value = unit  # pyright: ignore[reportAttributeAccessIssue]
+        for name, unit in (
+            ("u_ids", 4),
+            ("u_capsules", 5),
+            ("u_candidates", 6),
+            ("u_owners", 7),
+            ("u_bodies", 8),
+        ):
+            if name in prog:  # the boxes are compiled out of the OVERLAP_SCAN_ALL variant
+                prog[name].value = unit  # pyright: ignore[reportAttributeAccessIssue]
         prog["u_period"].value = float(characters.period or 0.0)  # pyright: ignore[reportAttributeAccessIssue]
 
     def run(
@@ -141,7 +181,19 @@ class OverlapPass:
         caps[:, :, 0, :3], caps[:, :, 0, 3] = start, radius
         caps[:, :, 1, :3], caps[:, :, 1, 3] = end, np.arange(start.shape[0])[:, None]
         self.tex_caps.write(caps.tobytes())
-        self.tex_cand.write(_candidates(start, end, radius, self.characters.period).tobytes())
+        candidates = _candidates(start, end, radius, self.characters.period)
+        self.tex_cand.write(candidates.tobytes())
+        self.tex_owners.write(_owner_boxes(start, end, radius, candidates).tobytes())
+        bodies = np.stack(
+            [
+                (np.minimum(start, end) - radius[..., None]).min(axis=1),
+                (np.maximum(start, end) + radius[..., None]).max(axis=1),
+            ],
+            axis=1,
+        )  # (N, 2, 3): the box around each character's capsules
+        self.tex_bodies.write(
+            np.concatenate([bodies, np.zeros((len(bodies), 2, 1))], axis=2).astype(np.float32).tobytes()
+        )
         ctx, view = self.ctx, (0, 0, self.width, self.height)
         ctx.viewport = view
         # pass 1: visible character ids
@@ -159,6 +211,8 @@ class OverlapPass:
         self.tex_ids.use(4)
         self.tex_caps.use(5)
         self.tex_cand.use(6)
+        self.tex_owners.use(7)
+        self.tex_bodies.use(8)
         self.characters.programs.overlap["u_tolerance"].value = float(tolerance)  # pyright: ignore[reportAttributeAccessIssue]
         self.characters.draw(self.characters.programs.overlap, vp)
         ctx.enable(moderngl.DEPTH_TEST)
@@ -176,6 +230,8 @@ class OverlapPass:
             self.tex_mask,
             self.tex_caps,
             self.tex_cand,
+            self.tex_owners,
+            self.tex_bodies,
         ):
             o.release()
 

@@ -173,8 +173,12 @@ def animation_record(path: str | Path, digest: str, metrics: dict) -> dict:
 
 
 def default_workers() -> int:
-    """Local worker processes of ``build_stimuli`` by default: one per 4 CPUs, at least 1."""
-    return max(1, (os.cpu_count() or 1) // 4)
+    """Local worker processes of ``build_stimuli`` by default: one per 2 CPUs, and one per
+    CPU up to 2. A software rasteriser runs a frame's vertex stage and the Python side on
+    one thread, so two single-threaded workers keep two cores busier than one worker with
+    two rendering threads (each worker gets ``LP_NUM_THREADS`` = CPUs / workers)."""
+    cpus = os.cpu_count() or 1
+    return max(min(2, cpus), cpus // 2)
 
 
 def _limit_threads(workers: int) -> None:

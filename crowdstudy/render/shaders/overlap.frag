@@ -5,6 +5,8 @@
 uniform sampler2D u_ids;        // RG32F: visible character index (-1 none), copy code
 uniform sampler2D u_capsules;   // RGBA32F, width 48: (a.xyz, radius), (b.xyz, owner) per capsule, row = character
 uniform sampler2D u_candidates; // R32F, width K + 1: count, then flat capsule indices (owner * 24 + bone)
+uniform sampler2D u_bodies;     // RGBA32F, width 2: the box (lo.xyz), (hi.xyz) around each character's capsules
+uniform sampler2D u_owners;     // RGBA32F: owner count (-1: scan all), then per owner (lo.xyz, first), (hi.xyz, last)
 uniform float u_period;         // periodic length along x (0 = not periodic)
 uniform float u_tolerance;      // metres: a point counts as inside when deeper than this
 
@@ -20,6 +22,26 @@ float segment_distance(vec3 p, vec3 a, vec3 b) {
     return length(p - (a + t * ab));
 }
 
+// whether p lies deeper than u_tolerance inside one of the candidates [first, last) of the
+// fragment's character (those of owner `only` unless `any_owner`)
+bool inside_any(vec3 p, int first, int last, bool any_owner, int only) {
+    for (int i = first; i < last; ++i) {
+        int ci = int(texelFetch(u_candidates, ivec2(i + 1, v_char), 0).r + 0.5);
+        int owner = ci / 24;
+        if (!any_owner && owner != only) continue;
+        int bone = ci - owner * 24;
+        vec4 a = texelFetch(u_capsules, ivec2(bone * 2, owner), 0);
+        vec4 b = texelFetch(u_capsules, ivec2(bone * 2 + 1, owner), 0);
+        vec3 off = vec3(0.0);
+        if (u_period > 0.0) {
+            float dx = p.x - 0.5 * (a.x + b.x);
+            off.x = u_period * floor(dx / u_period + 0.5);
+        }
+        if (segment_distance(p, a.xyz + off, b.xyz + off) < a.w - u_tolerance) return true;
+    }
+    return false;
+}
+
 void main() {
     vec2 vis = texelFetch(u_ids, ivec2(gl_FragCoord.xy), 0).rg;
     int vis_char = int(vis.r + 0.5);
@@ -33,6 +55,16 @@ void main() {
     // candidates are sorted by id (owner * 24 + bone), so bisect to that owner's <= 24
     // entries instead of scanning them all (the same capsules tested, the same mask)
     if (!self_visible) {
+        // a hidden fragment can only be marked inside the visible character: outside the
+        // box around its capsules, it is inside none of them
+        vec3 lo = texelFetch(u_bodies, ivec2(0, vis_char), 0).xyz;
+        vec3 hi = texelFetch(u_bodies, ivec2(1, vis_char), 0).xyz;
+        vec3 q = p;
+        if (u_period > 0.0) {
+            float dx = p.x - 0.5 * (lo.x + hi.x);
+            q.x -= u_period * floor(dx / u_period + 0.5);
+        }
+        if (any(lessThan(q, lo)) || any(greaterThan(q, hi))) discard;
         int target = vis_char * 24;
         int a = 0, b = count;
         while (a < b) {
@@ -43,22 +75,32 @@ void main() {
         last = min(count, a + 24);
     }
 #endif
-    for (int i = first; i < last; ++i) {
-        int ci = int(texelFetch(u_candidates, ivec2(i + 1, v_char), 0).r + 0.5);
-        int owner = ci / 24;
-        if (!self_visible && owner != vis_char) continue;
-        int bone = ci - owner * 24;
-        vec4 a = texelFetch(u_capsules, ivec2(bone * 2, owner), 0);
-        vec4 b = texelFetch(u_capsules, ivec2(bone * 2 + 1, owner), 0);
-        vec3 off = vec3(0.0);
-        if (u_period > 0.0) {
-            float dx = p.x - 0.5 * (a.x + b.x);
-            off.x = u_period * floor(dx / u_period + 0.5);
+#ifndef OVERLAP_SCAN_ALL
+    // the visible surface of the fragment's own character: visit only the owners whose box
+    // (their candidate capsules, widened by the radii) holds the point
+    float owners = texelFetch(u_owners, ivec2(0, v_char), 0).r;  // -1: too many, scan the list
+    if (self_visible && owners > -0.5) {
+        int n_owners = int(owners + 0.5);
+        for (int k = 0; k < n_owners; ++k) {
+            vec4 lo = texelFetch(u_owners, ivec2(1 + 2 * k, v_char), 0);
+            vec4 hi = texelFetch(u_owners, ivec2(2 + 2 * k, v_char), 0);
+            vec3 q = p;
+            if (u_period > 0.0) {
+                float dx = p.x - 0.5 * (lo.x + hi.x);
+                q.x -= u_period * floor(dx / u_period + 0.5);
+            }
+            if (any(lessThan(q, lo.xyz)) || any(greaterThan(q, hi.xyz))) continue;
+            if (inside_any(p, int(lo.w + 0.5), int(hi.w + 0.5), true, -1)) {
+                f_mask = vec4(1.0);
+                return;
+            }
         }
-        if (segment_distance(p, a.xyz + off, b.xyz + off) < a.w - u_tolerance) {
-            f_mask = vec4(1.0);
-            return;
-        }
+        discard;
+    }
+#endif
+    if (inside_any(p, first, last, self_visible, vis_char)) {
+        f_mask = vec4(1.0);
+        return;
     }
     discard;
 }
