@@ -403,6 +403,13 @@ def _parser() -> argparse.ArgumentParser:
     )
     parser.add_argument("--bars-only", action="store_true", help="only the --bars measurement")
     parser.add_argument(
+        "--shapes",
+        choices=("study", "population"),
+        default="study",
+        help="--bars: the bodies' shape draw (default 'study', the paper's; 'population': "
+        "weights spread as adults' BMI, [bodies] shapes of a design)",
+    )
+    parser.add_argument(
         "--cells",
         default="",
         metavar="SCENE:LEVEL,...",
@@ -511,7 +518,13 @@ def _main_bars(args, config, trial: str) -> int:
     cells = parse_cells(args.cells, list(load_design().densities))
     seeds = parse_seeds(args.seeds)
     bars = measure_bars(
-        args.bars or 20.0, config=config, cells=cells, seeds=seeds, tolerances=TOLERANCES, report=_print_row
+        args.bars or 20.0,
+        config=config,
+        cells=cells,
+        seeds=seeds,
+        tolerances=TOLERANCES,
+        report=_print_row,
+        body_shapes=args.shapes,
     )
     print("bars: " + "; ".join(BAR_TEXT.values()), flush=True)
     extra: dict = {}
@@ -524,7 +537,8 @@ def _main_bars(args, config, trial: str) -> int:
         print(f"figure: {extra['figure']}", flush=True)
         name = f"physics_bars_seeds{trial}"
     else:
-        name = "physics_bars_trial" if trial or cells is not None or seeds != [None] else "physics_bars"
+        trial_run = trial or cells is not None or seeds != [None] or args.shapes != "study"
+        name = "physics_bars_trial" if trial_run else "physics_bars"
     path = write_report(
         name,
         bars,
@@ -532,6 +546,7 @@ def _main_bars(args, config, trial: str) -> int:
         bar_text=BAR_TEXT,
         config_changes=list(args.config),
         seeds=["study" if v is None else v for v in seeds],
+        body_shapes=args.shapes,
         **extra,
     )
     print(f"wrote {path}", file=sys.stderr)
@@ -613,7 +628,11 @@ def _main_steps(args, config, trial: str, sizes: list[int], devices: list[dict],
     cg_rows = compare_cg(d5)
     print(format_table(cg_rows), flush=True)
     peer_rows = [] if args.no_peer else _run_mujoco(args)
-    bars = measure_bars(args.bars, config=config, tolerances=TOLERANCES, report=_print_row) if args.bars > 0 else []
+    bars = (
+        measure_bars(args.bars, config=config, tolerances=TOLERANCES, report=_print_row, body_shapes=args.shapes)
+        if args.bars > 0
+        else []
+    )
     path = write_report(
         f"physics{trial}",
         rows,

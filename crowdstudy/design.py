@@ -17,10 +17,13 @@ import math
 import tomllib
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any, Literal, NamedTuple, NoReturn, TypeVar, cast, get_args
+from typing import TYPE_CHECKING, Any, Literal, NamedTuple, NoReturn, TypeVar, cast, get_args
 
 from crowdstudy.errors import InvalidInputError
 from crowdstudy.package_data import resource_path
+
+if TYPE_CHECKING:
+    from crowdstudy.body.shapes import BodyShapes
 
 __all__ = [
     "StudyDesign",
@@ -250,6 +253,9 @@ class StudyDesign:
     #: the design's ``[online]`` table as written (the online study's controls, validated by
     #: ``crowdstudy.study.quality.online_config``), or None
     online: dict | None = None
+    #: ``[bodies] shapes``: the MakeHuman bodies' weight and muscle draw
+    #: (:data:`~crowdstudy.body.shapes.BodyShapes`); the paper's design keeps ``"study"``
+    body_shapes: BodyShapes = "study"
 
     @property
     def reference_method(self) -> str:
@@ -478,6 +484,7 @@ def parse_design(raw: dict, source: str = "<memory>") -> StudyDesign:
     scenarios = _read_scenarios(top, stages, width, depth)
     points, labels, items, comparison, slider = _read_questionnaire(top, stages)
     composites = _read_composites(top, items)
+    body_shapes = _read_bodies(top)
     top.close(allowed_extra=("online",))  # the online study's controls: crowdstudy.study.quality
 
     return StudyDesign(
@@ -503,7 +510,23 @@ def parse_design(raw: dict, source: str = "<memory>") -> StudyDesign:
         comparison=comparison,
         slider=slider,
         online=raw.get("online"),
+        body_shapes=body_shapes,
     )
+
+
+def _read_bodies(top: _Reader) -> BodyShapes:
+    """``[bodies]`` (optional): ``shapes``, the characters' body-shape draw
+    (:data:`~crowdstudy.body.shapes.BodyShapes`, default ``"study"``, the paper's)."""
+    from crowdstudy.body.shapes import BODY_SHAPES
+
+    if "bodies" not in top.table:
+        return "study"
+    bodies = top.table_("bodies")
+    shapes = bodies.get("shapes", str, "study")
+    if shapes not in BODY_SHAPES:
+        bodies.fail("shapes", f"must be one of {', '.join(map(repr, BODY_SHAPES))}, got {shapes!r}")
+    bodies.close()
+    return cast("BodyShapes", shapes)
 
 
 def _read_floor(top: _Reader) -> tuple[float, float]:

@@ -72,6 +72,11 @@ The motion (:mod:`crowdstudy.motion.baseline`):
     correction takes (``config``: the ``PhysicsConfig`` overrides, e.g. ``{"damping": 0.06}``;
     ``setting``: the MuJoCo tuning; ``path``: the folder of the user's animations). Written
     by :func:`crowdstudy.recipes.make_method_animation` (``crowdstudy stimuli``).
+``bodies`` (:class:`BodiesMeta` or absent)
+    ``{"shapes": "population"}``: the bodies' weight and muscle were drawn with that
+    :data:`~crowdstudy.body.shapes.BodyShapes` (a design's ``[bodies] shapes``); absent: the
+    default ``"study"`` draw (so the paper's animations keep their bytes). Written by
+    :func:`crowdstudy.motion.baseline.build_baseline` and ``crowdstudy animate``.
 ``tempo`` (float bpm, or None; concert)
     the beat the dancers share (None: each motion-capture clip at its own tempo).
 ``loop`` (:class:`Loop`)
@@ -123,6 +128,7 @@ __all__ = [
     "PhysicsLoop",
     "PhysicsMeta",
     "Recipe",
+    "BodiesMeta",
     "SceneMeta",
     "check_meta",
     "loop_mode",
@@ -224,6 +230,12 @@ class Recipe(TypedDict, total=False):
     path: str
 
 
+class BodiesMeta(TypedDict):
+    """``meta["bodies"]``: the body-shape draw (``crowdstudy.body.shapes.BodyShapes``)."""
+
+    shapes: str
+
+
 class SceneMeta(TypedDict, total=False):
     """A :class:`~crowdstudy.scene.CrowdAnimation`'s ``meta``: every key optional (the
     module's docstring says what each means and who writes it); other keys allowed."""
@@ -246,6 +258,7 @@ class SceneMeta(TypedDict, total=False):
     source: str
     method: str
     recipe: Recipe
+    bodies: BodiesMeta
     tempo: float | None
     loop: Loop
     provenance: dict[str, Any]
@@ -356,6 +369,16 @@ def _recipe(raw: object, path: str) -> None:
         _mapping(value["config"], f"{path}.config")
 
 
+#: The body-shape draws (``crowdstudy.body.shapes.BODY_SHAPES``, kept here as text too).
+_BODY_SHAPES = ("study", "population")
+
+
+def _bodies(raw: object, path: str) -> None:
+    value = _mapping(raw, path)
+    if value.get("shapes") not in _BODY_SHAPES:
+        raise _fail(f"{path}.shapes", f"one of {', '.join(_BODY_SHAPES)}", value.get("shapes"))
+
+
 def _physics(value: object, path: str) -> None:
     value = _mapping(value, path)
     if "config" in value:
@@ -406,6 +429,7 @@ _CHECKS: dict[str, Callable[[object, str], object]] = {
     "loop": _loop,
     "physics": _physics,
     "recipe": _recipe,
+    "bodies": _bodies,
     "provenance": _optional(_mapping),
     "baseline_provenance": _optional(_mapping),
     "imported": _mapping,

@@ -206,3 +206,25 @@ def test_the_seed_figure_draws_each_crowd_and_the_bars(bench, tmp_path):
     assert red.sum() > 100 and blue.sum() > 100
     top, bottom = red[: img.shape[0] // 2], red[img.shape[0] // 2 :]
     assert top.any() and bottom.any()  # the overlap bar above, the tracking bars below
+
+
+def test_measure_bars_draws_the_asked_body_shapes(monkeypatch, bench):
+    """``--shapes population`` reaches the Baseline's bodies (the physics stubbed out)."""
+    import crowdstudy.physics.corrector as corrector
+
+    seen = []
+
+    class Stop(Exception):
+        pass
+
+    def fake_correct(base, config=None, **kw):
+        seen.append((base.meta.get("bodies"), base.bodies[0]))
+        raise Stop
+
+    monkeypatch.setattr(corrector, "correct", fake_correct)
+    for shapes in ("population", "study"):
+        with pytest.raises(Stop):
+            acceptance.measure_bars(0.2, cells=[("stationary", "D1")], body_shapes=shapes)
+    assert seen[0][0] == {"shapes": "population"} and seen[1][0] is None
+    assert seen[0][1]["weight"] != seen[1][1]["weight"]
+    assert bench._parser().parse_args(["--bars-only", "--shapes", "population"]).shapes == "population"

@@ -14,6 +14,7 @@ from collections.abc import Callable, Sequence
 
 import numpy as np
 
+from crowdstudy.body.shapes import BodyShapes
 from crowdstudy.metrics.bars import BarTolerances, check_bars, failed_bars, loop_mode, smoothness_columns
 
 __all__ = ["measure_bars", "measure_cell", "profile_columns"]
@@ -40,6 +41,7 @@ def measure_bars(
     seeds: Sequence[int | None] = (None,),
     tolerances: BarTolerances | None = None,
     report: Callable[[dict], None] | None = None,
+    body_shapes: BodyShapes = "study",
 ) -> list[dict]:
     """Every (stage, density) cell of the study, ``duration`` seconds each: one row per cell
     and seed (:func:`measure_cell`), cells in the design's order (stationary, then walking;
@@ -49,10 +51,13 @@ def measure_bars(
     defaults); ``cells``: (stage, level) pairs to measure (None: all ten); ``seeds``: the
     cells' seeds, each one a crowd of its own (layout, bodies, clips; None: the design's
     seed of the cell, the study's stimulus); ``tolerances``: the bars (None: the defaults);
-    ``report`` is called with each row as it is measured."""
+    ``report`` is called with each row as it is measured; ``body_shapes`` the bodies' draw
+    (:data:`~crowdstudy.body.shapes.BodyShapes`; the paper's design: ``"study"``)."""
+    import dataclasses
+
     from crowdstudy.design import load_design
 
-    design = load_design()
+    design = dataclasses.replace(load_design(), body_shapes=body_shapes)
     levels = list(design.densities)
     rows = []
     for stage in ("stationary", "walking"):

@@ -30,6 +30,7 @@ from crowdstudy.body.rotations import (
     quat_nearest_sign,
     quaternion_to_axis_angle,
 )
+from crowdstudy.body.shapes import BodyShapes
 from crowdstudy.body.skeleton import DEFAULT_PELVIS_HEIGHT, JOINT_INDEX, JOINT_NAMES, PARENTS, mirror_pose
 from crowdstudy.errors import InvalidInputError
 from crowdstudy.motion.clip import MotionClip
@@ -42,6 +43,7 @@ from crowdstudy.scene import Crowd, CrowdAnimation
 
 __all__ = [
     "build_baseline",
+    "bodies_meta",
     "animate_stationary",
     "animate_walking",
     "body_scales",
@@ -104,10 +106,17 @@ def _body_geometry(bodies: list[dict]) -> tuple[np.ndarray, np.ndarray, np.ndarr
     return rest, pelvis / DEFAULT_PELVIS_HEIGHT, ankle
 
 
-def _sampled(n: int, seed, model: str) -> list[dict]:
+def _sampled(n: int, seed, model: str, shapes: BodyShapes = "study") -> list[dict]:
     from crowdstudy.body import sample_bodies
 
-    return sample_bodies(n, seed, model=model)
+    return sample_bodies(n, seed, model=model, shapes=shapes)
+
+
+def bodies_meta(shapes: BodyShapes) -> dict:
+    """``meta["bodies"]`` of an animation whose bodies were drawn with ``shapes``
+    (:data:`~crowdstudy.body.shapes.BodyShapes`): ``{"shapes": ...}``, or ``{}`` for the
+    default ``"study"`` draw, whose animations stay the bytes they always were."""
+    return {} if shapes == "study" else {"bodies": {"shapes": shapes}}
 
 
 def _bodies(n: int, seed, bodies):
@@ -798,6 +807,7 @@ def build_baseline(
     seed: int | None = None,
     dissolve: float | None = None,
     body_model: str = "makehuman",
+    body_shapes: BodyShapes | None = None,
 ) -> CrowdAnimation:
     """The Baseline animation of one (stage, density) cell of a study design.
 
@@ -811,6 +821,8 @@ def build_baseline(
             video's loop cross-dissolve (default :data:`LOOP_DISSOLVE_SECONDS`; 0 = none).
         body_model: the bodies' model for ``sample_bodies`` ("makehuman", or "open" for the
             generated mannequins).
+        body_shapes: the bodies' shape draw for ``sample_bodies``
+            (:data:`~crowdstudy.body.shapes.BodyShapes`; default the design's ``[bodies] shapes``).
 
     The concert is exactly periodic over ``duration`` (``meta["loop"]["mode"] ==
     "periodic"``); the corridor and the crossing have T + D frames (T = duration * fps, D = dissolve * fps,
@@ -818,7 +830,8 @@ def build_baseline(
 
     Returns:
         CrowdAnimation with meta {stage, stage_number, scenario, density_level, density,
-        n_characters, seed, method "Baseline", provenance, loop, periodic (corridor)}.
+        n_characters, seed, method "Baseline", provenance, loop, periodic (corridor)}, and
+        ``bodies`` {"shapes"} when the shapes are not the default ``"study"`` draw.
     """
     from crowdstudy.design import StudyDesign, load_design
 
@@ -844,6 +857,8 @@ def build_baseline(
         "method": "Baseline",
         "provenance": provenance(seed, design=design.source),
     }
+    shapes = design.body_shapes if body_shapes is None else body_shapes
+    meta.update(bodies_meta(shapes))
     if scenario.name != scenario.kind:  # a design's own name for a scenario of a known kind
         meta["scenario_name"] = scenario.name
     if scenario.kind == "concert":
@@ -852,7 +867,7 @@ def build_baseline(
         crowd = concert_layout(design, level, seed, scenario=scenario.name)
         sc = scenario.params
         names = list_clips("dance", "procedural") if sc.get("motion", "mocap") == "procedural" else None
-        bodies = _sampled(crowd.n_agents, seed, body_model)
+        bodies = _sampled(crowd.n_agents, seed, body_model, shapes)
         return animate_stationary(
             crowd,
             duration=duration,
@@ -864,16 +879,25 @@ def build_baseline(
             bodies=bodies,
         )
     if scenario.kind in ("corridor", "crossing"):
-        return _walking_cell(design, scenario, level, seed, duration, fps, dissolve, body_model, meta)
+        return _walking_cell(design, scenario, level, seed, duration, fps, dissolve, (body_model, shapes), meta)
     raise InvalidInputError(f"stage {st.key!r}: scenario {st.scenario!r} ({scenario.kind}) has no Baseline animation")
 
 
 def _walking_cell(
-    design, scenario, level: str, seed: int, duration: float, fps: float, dissolve, body_model: str, meta: dict
+    design,
+    scenario,
+    level: str,
+    seed: int,
+    duration: float,
+    fps: float,
+    dissolve,
+    body: tuple[str, BodyShapes],
+    meta: dict,
 ) -> CrowdAnimation:
     """The Baseline of a walking cell (a corridor or a crossing scenario): its navigation
     run ``dissolve`` s (default :data:`LOOP_DISSOLVE_SECONDS`) past ``duration``, then
-    :func:`animate_walking` with those frames dissolved into the video's start."""
+    :func:`animate_walking` with those frames dissolved into the video's start; ``body`` is
+    the bodies' (model, shapes)."""
     from crowdstudy.navigation import corridor_crowd, crossing_crowd
 
     dissolve = LOOP_DISSOLVE_SECONDS if dissolve is None else float(dissolve)
@@ -892,5 +916,5 @@ def _walking_cell(
         dissolve_frames=n_dissolve,
         walks=walks,
         meta=meta,
-        bodies=_sampled(crowd.n_agents, seed, body_model),
+        bodies=_sampled(crowd.n_agents, seed, *body),
     )

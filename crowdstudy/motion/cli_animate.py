@@ -59,7 +59,8 @@ def run(args: argparse.Namespace) -> int:
     else:
         check_output_dir(out, "--out")
     if args.crowd is not None:
-        from crowdstudy.motion.baseline import animate_stationary, animate_walking
+        from crowdstudy.body import sample_bodies
+        from crowdstudy.motion.baseline import animate_stationary, animate_walking, bodies_meta
         from crowdstudy.scene import Crowd
 
         crowd = Crowd.load(args.crowd)
@@ -67,6 +68,8 @@ def run(args: argparse.Namespace) -> int:
         meta = {k: crowd.meta[k] for k in ("density_level", "density", "n_characters") if k in crowd.meta}
         meta["seed"] = seed
         meta["source"] = str(args.crowd)
+        meta.update(bodies_meta(design.body_shapes))
+        bodies = sample_bodies(crowd.n_agents, seed, shapes=design.body_shapes)
         if crowd.n_frames == 1:
             anim = animate_stationary(
                 crowd,
@@ -74,11 +77,12 @@ def run(args: argparse.Namespace) -> int:
                 fps=args.fps or design.fps,
                 seed=seed,
                 meta={**meta, "stage": "stationary"},
+                bodies=bodies,
             )
         else:
             if args.duration is not None:
                 raise InvalidInputError("--duration: a trajectory file sets the duration; leave it out")
-            anim = animate_walking(crowd, fps=args.fps, seed=seed, meta={**meta, "stage": "walking"})
+            anim = animate_walking(crowd, fps=args.fps, seed=seed, meta={**meta, "stage": "walking"}, bodies=bodies)
         path = out / "animation.npz" if out.suffix != ".npz" else out
         anim.save(path)
         print(_summary(anim, path))

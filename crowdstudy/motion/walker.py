@@ -95,7 +95,7 @@ def live_scene(design=None, level: str = "D5", path: WalkerPath | None = None, *
         raise InvalidInputError(f"path: expected a WalkerPath, got {type(path).__name__}")
     design = design if isinstance(design, StudyDesign) else load_design(design)
     fps = float(design.fps if fps is None else fps)
-    body = sample_bodies(1, path.body_seed)[0]
+    body = sample_bodies(1, path.body_seed, shapes=design.body_shapes)[0]
     rot_w, root_w, speed = walker_motion(path, body, fps)
     n = len(root_w)
     crowd = build_baseline(design, "stationary", level, duration=n / fps, fps=fps)

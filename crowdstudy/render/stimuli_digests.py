@@ -4,7 +4,8 @@ Digests are SHA-256 of a canonical JSON of their inputs (:func:`digest_inputs` l
 animation's):
 
 * an animation's: the design cell (stage, scenario and its layout/navigation parameters,
-  floor, density level and value, character count, seed), the preset's duration, frame rate
+  floor, density level and value, character count, seed, the body shapes when a design
+  asks for other than the default ``"study"`` draw), the preset's duration, frame rate
   and metric frames, the body model (``OPEN_MODEL_VERSION``, the scene file schema), the
   motion library (``crowdstudy.motion.library.library_digest``), the package version, the
   method's name and recipe (:meth:`crowdstudy.design.Method.recipe`) and what the recipe
@@ -177,6 +178,8 @@ def digest_inputs(design, stimulus, settings: dict, *, physics=None, method: str
         "characters": stimulus.n_characters,
         "seed": stimulus.seed,
     }
+    if design.body_shapes != "study":  # the paper's cells keep the digests they had
+        cell["body_shapes"] = design.body_shapes
     out = {
         "cell": cell,
         "duration": settings["duration"],
