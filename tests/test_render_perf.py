@@ -218,7 +218,7 @@ def test_overlap_owner_boxes_hold_their_owners_capsules():
     """The boxes overlap.frag skips owners by: each owner's range of a character's sorted
     candidates holds that owner's capsules only, and its box holds every one of them
     (ends widened by the radius); a character without candidates has no owners."""
-    from crowdstudy.render.overlap_view import _candidates, _owner_boxes
+    from crowdstudy.render.overlap_view import _candidates, _capsule_boxes, _owner_boxes
 
     rng = np.random.default_rng(4)
     n = 6
@@ -227,8 +227,8 @@ def test_overlap_owner_boxes_hold_their_owners_capsules():
     start = centre[:, None, :] + rng.normal(0, 0.2, (n, 24, 3))
     end = start + rng.normal(0, 0.1, (n, 24, 3))
     radius = rng.uniform(0.03, 0.12, (n, 24))
-    cand = _candidates(start, end, radius, None)
-    boxes = _owner_boxes(start, end, radius, cand)
+    cand = _candidates(start, end, _capsule_boxes(start, end, radius), None)
+    boxes = _owner_boxes(_capsule_boxes(start, end, radius), cand)
     assert cand[-1, 0] == 0 and boxes[-1, 0, 0] == 0
     for a in range(n - 1):
         ids = cand[a, 1 : 1 + int(cand[a, 0])].astype(int)

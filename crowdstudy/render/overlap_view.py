@@ -77,12 +77,17 @@ def capsules_from_skinning(bodies: list, skinning: np.ndarray) -> tuple[np.ndarr
     return start, end, radius
 
 
-def _candidates(start, end, radius, period: float | None) -> np.ndarray:
+def _capsule_boxes(start, end, radius) -> tuple[np.ndarray, np.ndarray]:
+    """``(lo, hi)``, each (N, 24, 3): the axis-aligned box around every capsule (its
+    segment widened by its radius). A point outside a capsule's box is not inside it."""
+    return np.minimum(start, end) - radius[..., None], np.maximum(start, end) + radius[..., None]
+
+
+def _candidates(start, end, boxes: tuple[np.ndarray, np.ndarray], period: float | None) -> np.ndarray:
     """(N, K + 1) float32: count, then flat capsule ids (owner * 24 + bone) near each
-    character, in increasing order."""
+    character, in increasing order; ``boxes`` are the capsules' (:func:`_capsule_boxes`)."""
     n = start.shape[0]
-    lo = np.minimum(start, end) - radius[..., None]
-    hi = np.maximum(start, end) + radius[..., None]
+    lo, hi = boxes
     body_lo, body_hi = lo.min(axis=1), hi.max(axis=1)  # (N, 3)
     out = np.zeros((n, _MAX_CANDIDATES + 1), np.float32)
     centre = 0.5 * (body_lo + body_hi)
@@ -103,17 +108,16 @@ def _candidates(start, end, radius, period: float | None) -> np.ndarray:
     return out
 
 
-def _owner_boxes(start, end, radius, candidates: np.ndarray) -> np.ndarray:
+def _owner_boxes(boxes: tuple[np.ndarray, np.ndarray], candidates: np.ndarray) -> np.ndarray:
     """(N, 2 * _MAX_OWNERS + 1, 4) float32: per character, its candidates grouped by owner
     (they are sorted by id, so each owner's are contiguous): texel 0 holds the number of
     owners (-1: too many, scan the list), then per owner ``(lo.xyz, first)`` and
     ``(hi.xyz, last)``: the box around that owner's candidate capsules (each widened by its
     radius) and the owner's range ``[first, last)`` in the candidate list. A point outside
     the box is inside none of them, so ``overlap.frag`` skips the owner's capsules: the
-    same mask for a fraction of the capsule tests."""
-    n = start.shape[0]
-    lo = (np.minimum(start, end) - radius[..., None]).astype(np.float64)
-    hi = (np.maximum(start, end) + radius[..., None]).astype(np.float64)
+    same mask for a fraction of the capsule tests. ``boxes``: :func:`_capsule_boxes`."""
+    lo, hi = boxes
+    n = lo.shape[0]
     out = np.zeros((n, 2 * _MAX_OWNERS + 1, 4), np.float32)
     for a in range(n):
         count = int(candidates[a, 0])
@@ -181,16 +185,11 @@ class OverlapPass:
         caps[:, :, 0, :3], caps[:, :, 0, 3] = start, radius
         caps[:, :, 1, :3], caps[:, :, 1, 3] = end, np.arange(start.shape[0])[:, None]
         self.tex_caps.write(caps.tobytes())
-        candidates = _candidates(start, end, radius, self.characters.period)
+        boxes = _capsule_boxes(start, end, radius)
+        candidates = _candidates(start, end, boxes, self.characters.period)
         self.tex_cand.write(candidates.tobytes())
-        self.tex_owners.write(_owner_boxes(start, end, radius, candidates).tobytes())
-        bodies = np.stack(
-            [
-                (np.minimum(start, end) - radius[..., None]).min(axis=1),
-                (np.maximum(start, end) + radius[..., None]).max(axis=1),
-            ],
-            axis=1,
-        )  # (N, 2, 3): the box around each character's capsules
+        self.tex_owners.write(_owner_boxes(boxes, candidates).tobytes())
+        bodies = np.stack([boxes[0].min(axis=1), boxes[1].max(axis=1)], axis=1)  # (N, 2, 3): each character's box
         self.tex_bodies.write(
             np.concatenate([bodies, np.zeros((len(bodies), 2, 1))], axis=2).astype(np.float32).tobytes()
         )

@@ -312,11 +312,8 @@ def video_job(job: dict) -> dict:
             anim,
             job["viewpoint"],
             out,
-            width=s["width"],
-            height=s["height"],
             duration=s["duration"],
             fps=s["fps"],
-            msaa=s["msaa"],
             design=job["design"],
             progress=job.get("progress", False),
             body_loader=job.get("body_loader"),
@@ -324,9 +321,7 @@ def video_job(job: dict) -> dict:
             preset=s["x264_preset"],
             red_sample_frames=s["red_frames"],
             color_positions=job.get("color_positions"),
-            post_aa=s.get("post_aa", "none"),
-            lod_scale=s.get("lod_scale", 1.0),
-            shadow_size=s.get("shadow_size", 2048),
+            **renderer_options(s),  # size, anti-aliasing, levels of detail, shadow map
         )
         if job.get("return_bytes"):
             res["video_bytes"] = out.read_bytes()

@@ -22,6 +22,12 @@ float segment_distance(vec3 p, vec3 a, vec3 b) {
     return length(p - (a + t * ab));
 }
 
+// whether p lies outside the box [lo, hi] (m), the box moved by whole periods to p's side
+bool outside_box(vec3 p, vec3 lo, vec3 hi) {
+    if (u_period > 0.0) p.x -= u_period * floor((p.x - 0.5 * (lo.x + hi.x)) / u_period + 0.5);
+    return any(lessThan(p, lo)) || any(greaterThan(p, hi));
+}
+
 // whether p lies deeper than u_tolerance inside one of the candidates [first, last) of the
 // fragment's character (those of owner `only` unless `any_owner`)
 bool inside_any(vec3 p, int first, int last, bool any_owner, int only) {
@@ -57,14 +63,8 @@ void main() {
     if (!self_visible) {
         // a hidden fragment can only be marked inside the visible character: outside the
         // box around its capsules, it is inside none of them
-        vec3 lo = texelFetch(u_bodies, ivec2(0, vis_char), 0).xyz;
-        vec3 hi = texelFetch(u_bodies, ivec2(1, vis_char), 0).xyz;
-        vec3 q = p;
-        if (u_period > 0.0) {
-            float dx = p.x - 0.5 * (lo.x + hi.x);
-            q.x -= u_period * floor(dx / u_period + 0.5);
-        }
-        if (any(lessThan(q, lo)) || any(greaterThan(q, hi))) discard;
+        if (outside_box(p, texelFetch(u_bodies, ivec2(0, vis_char), 0).xyz,
+                        texelFetch(u_bodies, ivec2(1, vis_char), 0).xyz)) discard;
         int target = vis_char * 24;
         int a = 0, b = count;
         while (a < b) {
@@ -84,12 +84,7 @@ void main() {
         for (int k = 0; k < n_owners; ++k) {
             vec4 lo = texelFetch(u_owners, ivec2(1 + 2 * k, v_char), 0);
             vec4 hi = texelFetch(u_owners, ivec2(2 + 2 * k, v_char), 0);
-            vec3 q = p;
-            if (u_period > 0.0) {
-                float dx = p.x - 0.5 * (lo.x + hi.x);
-                q.x -= u_period * floor(dx / u_period + 0.5);
-            }
-            if (any(lessThan(q, lo.xyz)) || any(greaterThan(q, hi.xyz))) continue;
+            if (outside_box(p, lo.xyz, hi.xyz)) continue;
             if (inside_any(p, int(lo.w + 0.5), int(hi.w + 0.5), true, -1)) {
                 f_mask = vec4(1.0);
                 return;
