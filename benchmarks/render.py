@@ -113,7 +113,7 @@ def _passes(renderer, frame: int) -> dict:
 
     renderer.render_raw(frame)  # the frame's static layer drawn, its programs compiled
     timed("bones upload", lambda: renderer.load_frame(frame))
-    timed("shadow pass", lambda: renderer.shadow_pass.run(renderer.character_positions(frame), renderer.camera))
+    timed("shadow pass", lambda: renderer.draw_shadows(frame))
     vp = None
 
     def prepare():
@@ -155,12 +155,15 @@ def _character_parts(renderer, frame: int, reps: int = 4) -> dict:
     shader that writes one colour. So ``fragments`` = full - vertex+setup, of which
     ``shading`` = full - constant-colour is the cost of the characters' fragment shader
     (texture, lighting) and the rest rasterisation, depth test and colour writes."""
-    from crowdstudy.render.gpu import group_vertex_array, shader_source
+    from crowdstudy.render.gpu import group_vertex_array, set_uniform, shader_source
 
     ctx = renderer.ctx
     flat = ctx.program(
         vertex_shader="#version 330 core\n" + shader_source("character.vert"), fragment_shader=_FLAT_FRAGMENT
     )
+    # the samplers the vertex stage pulls from, on the units CharacterPass.draw binds
+    set_uniform(flat, "u_bones", 0)
+    set_uniform(flat, "u_rest", 1)
     added = []
     for gl in renderer.character_resources.groups:
         gl.vaos[flat] = vao = group_vertex_array(ctx, flat, gl.vbo, gl.inst, gl.ibo)
@@ -171,7 +174,7 @@ def _character_parts(renderer, frame: int, reps: int = 4) -> dict:
         for _ in range(reps):
             renderer.render_raw(frame)
             renderer.load_frame(frame)
-            renderer.shadow_pass.run(renderer.character_positions(frame), renderer.camera)
+            renderer.draw_shadows(frame)
             vp = renderer.prepare(frame, upload=False)
             _bind_frame_target(renderer, vp).clear(0.5, 0.5, 0.5, 1.0, depth=1.0)
             ctx.finish()

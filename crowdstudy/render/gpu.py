@@ -394,9 +394,10 @@ class ColorTargets:
     With MSAA (``samples`` > 0: the ``msaa`` samples asked for, at most what the driver
     supports) the passes draw into the multisampled ``fbo_msaa`` and :meth:`resolve`
     averages it; without, they draw into a single-sampled target. ``post_aa`` "fxaa"
-    then smooths the edges with a full-screen pass (``fxaa.frag``) into ``fbo_out``, from
-    which the frame is read: the passes draw into ``fbo_scene`` (a colour texture) and
-    :meth:`resolve` runs the filter. The static layers are made here too
+    then smooths the edges into ``fbo_out``, from which the frame is read: the passes draw
+    into ``fbo_scene`` (a colour texture) and :meth:`resolve` runs the filter
+    (``fxaa.frag``) in two full-screen passes, a copy that marks the edge pixels in
+    ``fbo_out``'s depth buffer, then the filter where marked. The static layers are made here too
     (:meth:`layer_framebuffer`), with the draw target's samples, so a frame can start from
     a copy of one."""
 
@@ -420,17 +421,20 @@ class ColorTargets:
             scene.repeat_x = scene.repeat_y = False
             depth = own(ctx.depth_renderbuffer(size))
             self.fbo_scene = own(ctx.framebuffer(color_attachments=[scene], depth_attachment=depth))
-            prog = own(
-                ctx.program(
-                    vertex_shader="#version 330 core\n" + shader_source("fullscreen.vert"),
-                    fragment_shader="#version 330 core\n" + shader_source("fxaa.frag"),
+            passes = []
+            for head in ("#define FXAA_MARK 1\n", ""):
+                prog = own(
+                    ctx.program(
+                        vertex_shader="#version 330 core\n" + shader_source("fullscreen.vert"),
+                        fragment_shader="#version 330 core\n" + head + shader_source("fxaa.frag"),
+                    )
                 )
-            )
-            for name, value in FXAA_SETTINGS.items():
-                set_uniform(prog, name, value)
-            set_uniform(prog, "u_texel", (1.0 / width, 1.0 / height))
-            set_uniform(prog, "u_color", 7)
-            self._fxaa = (scene, own(ctx.vertex_array(prog, [])))
+                for name, value in FXAA_SETTINGS.items():
+                    set_uniform(prog, name, value)
+                set_uniform(prog, "u_texel", (1.0 / width, 1.0 / height))
+                set_uniform(prog, "u_color", 7)
+                passes.append(own(ctx.vertex_array(prog, [])))
+            self._fxaa = (scene, *passes)
         elif post_aa != "none":
             raise ValueError(f"post_aa: expected 'none' or 'fxaa', got {post_aa!r}")
 
@@ -465,13 +469,23 @@ class ColorTargets:
         if self._fxaa is not None:
             import moderngl
 
-            scene, vao = self._fxaa
-            self.fbo_out.use()
+            scene, mark, blend = self._fxaa
+            out = self.fbo_out
+            out.use()
             ctx.viewport = (0, 0, self.width, self.height)
-            ctx.disable(moderngl.DEPTH_TEST | moderngl.CULL_FACE)
-            scene.use(7)
-            vao.render(moderngl.TRIANGLES, vertices=3)
+            ctx.disable(moderngl.CULL_FACE)
             ctx.enable(moderngl.DEPTH_TEST)
+            scene.use(7)
+            # every pixel copied, the edge pixels marked in the depth buffer (0)...
+            ctx.depth_func = "1"
+            mark.render(moderngl.TRIANGLES, vertices=3)
+            # ... and filtered where marked: the triangle at depth 0.5 passes the early
+            # depth test there only, so the rasteriser skips the unmarked blocks' shading
+            ctx.depth_func = ">"
+            out.depth_mask = False
+            blend.render(moderngl.TRIANGLES, vertices=3)
+            out.depth_mask = True
+            ctx.depth_func = "<"
 
     def read(self) -> bytes:
         """The output as raw RGB bytes, bottom row first."""

@@ -3,8 +3,8 @@
 A frame, in order (:class:`~crowdstudy.render.renderer.CrowdRenderer` runs them):
 
 1. the frame's skinning matrices are uploaded (one texture row per character);
-2. :class:`ShadowPass`: every character near the lit area, with the coarsest mesh, into
-   the key light's shadow map;
+2. :class:`ShadowPass`: every character near the lit area whose shadow can fall into the
+   camera's view, with the coarsest mesh, into the key light's shadow map;
 3. :meth:`CharacterPass.select`: the camera's instances: culled to the view frustum, each
    at its level of detail by on-screen size, sorted front to back;
 4. :class:`ColorPass`: into the draw target, a copy of the view's static layer
@@ -44,6 +44,7 @@ __all__ = [
     "ENV_PARTS",
     "MAX_LAYERS",
     "LAYER_BUDGET",
+    "SHADOW_MARGIN",
 ]
 
 #: the environment's parts: the ground with and without the shadow lookup, the venue's
@@ -53,6 +54,9 @@ ENV_PARTS = frozenset({"floor_shadowed", "floor_plain", "cut_static", "cut_figur
 MAX_LAYERS = 16
 #: bytes: beyond it the audience figures are drawn every frame instead of into layers
 LAYER_BUDGET = 2 << 30
+#: m beyond a character's bounding sphere that its shadow is still looked up: the lookup's
+#: offset along the normal (0.02 m) and the filter's reach (a few shadow-map texels)
+SHADOW_MARGIN = 0.15
 
 
 def cull_back_faces(ctx, on: bool) -> None:
@@ -85,18 +89,42 @@ def _frustum_planes(vp: np.ndarray) -> np.ndarray:
 _INSTANCE = np.dtype([("c", "<i4"), ("m", "<i4"), ("s", "<f4")])
 
 
+def _shadow_reaches(centres: np.ndarray, planes: np.ndarray, light_dir: np.ndarray) -> np.ndarray:
+    """Whether the shadow of a character with its bounding sphere at each of ``centres``
+    (N, 3) can fall inside the frustum ``planes`` (a camera's): the sphere swept away
+    from the light (unit vector ``light_dir`` towards it) down to the ground, a capsule,
+    reaches into every plane's inner side. Conservative: the receivers (floor, walls,
+    other characters) lie at or above the ground, and :data:`SHADOW_MARGIN` covers the
+    lookup's offset and filter."""
+    reach = BOUND_RADIUS + SHADOW_MARGIN
+    t = (centres[:, 2] + reach) / max(float(light_dir[2]), 1e-3)  # m along -light_dir to the ground
+    ends = centres - t[:, None] * light_dir
+    near = np.maximum(centres @ planes[:, :3].T, ends @ planes[:, :3].T) + planes[:, 3]
+    return np.all(near > -reach, axis=1)
+
+
 def _instance_table(
-    members: np.ndarray, roots: np.ndarray, planes: np.ndarray, copies, period: float | None, lod: tuple | None
+    members: np.ndarray,
+    roots: np.ndarray,
+    planes: np.ndarray,
+    copies,
+    period: float | None,
+    lod: tuple | None,
+    receivers: tuple | None = None,
 ) -> np.ndarray:
     """The instances of one template group: (character, member index, x shift) of each of
     its ``members`` (and periodic copy) whose bounding sphere reaches into the frustum
     ``planes``, sorted front to back. ``lod`` (eye, focal length px, level, number of
-    levels): only the instances drawn at that level of detail; None: all (shadow casters)."""
+    levels): only the instances drawn at that level of detail; None: all (shadow casters).
+    ``receivers`` (a camera's frustum planes, the unit vector towards the light): only the
+    casters whose shadow can fall inside that frustum (:func:`_shadow_reaches`)."""
     chars, local, shifts, depth = [], [], [], []
     for k in copies:
         shift = k * (period or 0.0)
         centres = roots[members] + np.array([shift, 0.0, 0.0])
         visible = np.all(centres @ planes[:, :3].T + planes[:, 3] > -BOUND_RADIUS, axis=1)
+        if receivers is not None:
+            visible &= _shadow_reaches(centres, *receivers)
         if lod is not None:
             eye, focal_px, level, n_levels = lod
             size = focal_px * 1.8 / np.maximum(np.linalg.norm(centres - eye, axis=1), 1e-6)  # pixels tall
@@ -141,13 +169,18 @@ class CharacterPass:
         self.period, self.height, self.lod_scale = period, height, lod_scale
         self.per_kind = True
 
-    def select(self, roots: np.ndarray, vp: np.ndarray, camera, *, shadow: bool = False) -> None:
+    def select(
+        self, roots: np.ndarray, vp: np.ndarray, camera, *, shadow: bool = False, receivers: tuple | None = None
+    ) -> None:
         """Fill each group's instance buffer with the characters at ``roots`` (N, 3) (and
         their periodic copies) inside the frustum of ``vp``, sorted front to back so early
         depth testing skips the shading of hidden fragments (the crowd overdraws itself
         heavily). ``shadow``: every caster with the coarse mesh; else each level of detail
-        by ``camera`` distance."""
+        by ``camera`` distance. ``receivers`` (shadow casters only: the camera's world-to-
+        clip matrix, the unit vector towards the light): only the casters whose shadow can
+        fall inside the camera's view."""
         planes = _frustum_planes(vp)
+        seen = None if receivers is None else (_frustum_planes(receivers[0]), np.asarray(receivers[1], float))
         copies = COPIES if self.period else (0,)
         eye = np.asarray(camera.eye)
         focal_px = self.height / (2.0 * np.tan(np.radians(camera.fov) / 2.0))
@@ -157,7 +190,7 @@ class CharacterPass:
                 gl.count = 0
                 continue
             lod = None if shadow else (eye, focal_px, gl.level, self.resources.n_levels)
-            data = _instance_table(gl.group.members, roots, planes, copies, self.period, lod)
+            data = _instance_table(gl.group.members, roots, planes, copies, self.period, lod, seen)
             if len(data):
                 gl.inst.write(data.tobytes())
             gl.count = len(data)
@@ -188,15 +221,29 @@ class CharacterPass:
 
 
 class ShadowPass:
-    """The shadow casters (every character near the lit area, with the coarsest mesh) into
-    the shadow map, seen from the key light (``light_vp``); nothing when ``enabled`` is
-    False."""
+    """The shadow casters (the characters near the lit area whose shadow can fall into the
+    camera's view, with the coarsest mesh) into the shadow map, seen from the key light
+    (``light_vp``, the unit vector towards it ``light_dir``); nothing when ``enabled`` is
+    False. Casters whose shadow cannot reach the view change no pixel of the frame, only
+    the shadow map's unseen texels."""
 
-    def __init__(self, ctx, shadow_map: ShadowMap, characters: CharacterPass, light_vp: np.ndarray, *, enabled: bool):
+    def __init__(
+        self,
+        ctx,
+        shadow_map: ShadowMap,
+        characters: CharacterPass,
+        light_vp: np.ndarray,
+        light_dir: np.ndarray,
+        *,
+        enabled: bool,
+    ):
         self.ctx, self.shadow_map, self.characters = ctx, shadow_map, characters
-        self.light_vp, self.enabled = light_vp, enabled
+        self.light_vp, self.light_dir, self.enabled = light_vp, np.asarray(light_dir, float), enabled
 
-    def run(self, roots: np.ndarray, camera) -> None:
+    def run(self, roots: np.ndarray, camera, view_proj: np.ndarray | None = None) -> None:
+        """Draw the shadow map for the characters at ``roots``; ``view_proj`` (the camera's
+        world-to-clip matrix): only the casters whose shadow can fall into its view; None:
+        every caster in the light's frustum."""
         import moderngl
 
         if not self.enabled:
@@ -208,7 +255,8 @@ class ShadowPass:
         ctx.enable(moderngl.DEPTH_TEST)
         ctx.disable(moderngl.CULL_FACE)
         # shadow casters: every instance near the lit area (the light's own frustum)
-        self.characters.select(roots, self.light_vp, camera, shadow=True)
+        receivers = None if view_proj is None else (view_proj, self.light_dir)
+        self.characters.select(roots, self.light_vp, camera, shadow=True, receivers=receivers)
         cull_back_faces(ctx, True)
         self.characters.draw(self.characters.programs.depth, self.light_vp)
         cull_back_faces(ctx, False)

@@ -213,7 +213,12 @@ class CrowdRenderer:
             lod_scale=opts.lod_scale,
         )
         self.shadow_pass = ShadowPass(
-            ctx, self.shadow_map, self.characters, self.lighting.view_proj, enabled=opts.shadows
+            ctx,
+            self.shadow_map,
+            self.characters,
+            self.lighting.view_proj,
+            self.lighting.direction,
+            enabled=opts.shadows,
         )
         self.environment = EnvironmentPass(ctx, buffers, programs, a.env, a.anim.fps)
         self.layers = StaticLayers(
@@ -288,10 +293,17 @@ class CrowdRenderer:
         self.characters.select(self.character_positions(frame), vp, camera)
         return vp
 
+    def draw_shadows(self, frame: int) -> None:
+        """The shadow map of ``frame`` (its bones loaded): the casters whose shadow can fall
+        into the camera's view."""
+        camera = self._require_camera()
+        vp = camera.view_projection(self.width / self.height)
+        self.shadow_pass.run(self.character_positions(frame), camera, vp)
+
     def _draw_frame(self, frame: int) -> None:
         camera = self._require_camera()
         self.load_frame(frame)
-        self.shadow_pass.run(self.character_positions(frame), camera)
+        self.draw_shadows(frame)
         vp = self.prepare(frame, upload=False)
         self.color_pass.run(self.targets.draw, vp, camera.eye, self.environment.beat(frame))
         self.targets.resolve()

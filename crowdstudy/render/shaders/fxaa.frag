@@ -1,11 +1,15 @@
 // Fast approximate anti-aliasing of a finished (display-encoded) frame, after the idea of
 // Lottes' FXAA: find pixels on a luma edge, walk along the edge to both of its ends, and
 // blend each pixel with its neighbour across the edge in proportion to where the pixel
-// lies on the staircase step (plus a sub-pixel blend for isolated specks). One full-screen
-// pass: 9 unfiltered taps, then a short walk (2 steps of 2 and 4 pixels each way,
-// after the first): on llvmpipe the walk is most of the cost, and longer walks scored no
-// better against the supersampled frames (`crowdstudy bench render --ssim`). The edges of
-// the characters against each other and against the floor are what it smooths (their
+// lies on the staircase step (plus a sub-pixel blend for isolated specks). Two full-screen
+// passes (ColorTargets.resolve): with FXAA_MARK defined, every pixel is copied and the
+// edge pixels (5 taps: the centre and its 4 neighbours) get depth 0; then, where the
+// depth test finds that mark, the filter: 9 unfiltered taps and a short walk (2 steps of
+// 2 and 4 pixels each way, after the first). A rasteriser on the CPU shades a block of
+// pixels whole, both sides of every branch, so skipping the unmarked blocks (about 7 in
+// 10) by the depth test is what saves their shading; longer walks scored no better
+// against the supersampled frames (`crowdstudy bench render --ssim`). The edges of the
+// characters against each other and against the floor are what it smooths (their
 // textures are filtered already).
 uniform sampler2D u_color;   // the frame (RGBA8, bilinear, clamped)
 uniform vec2 u_texel;        // 1 / frame size (pixels)
@@ -36,7 +40,15 @@ void main() {
     float lo = min(m, min(min(n, s), min(e, w)));
     float hi = max(m, max(max(n, s), max(e, w)));
     float range = hi - lo;
-    if (range < max(u_edge_min, hi * u_edge_rel)) {
+    bool edge = range >= max(u_edge_min, hi * u_edge_rel);
+#ifdef FXAA_MARK
+    // the first pass: every pixel as it is, and its depth 0 where the second pass is to
+    // run (1 elsewhere)
+    f_color = centre;
+    gl_FragDepth = edge ? 0.0 : 1.0;
+    return;
+#endif
+    if (!edge) {
         f_color = centre;
         return;
     }
