@@ -147,6 +147,20 @@ def _passes(renderer, frame: int) -> dict:
 _FLAT_FRAGMENT = "#version 330 core\nout vec4 f_color;\nvoid main() { f_color = vec4(0.6, 0.5, 0.4, 1.0); }\n"
 
 
+def _constant_colour_program(ctx):
+    """The characters' vertex stage with a fragment shader that writes one colour."""
+    from crowdstudy.render.gpu import set_uniform, shader_source
+
+    flat = ctx.program(
+        vertex_shader="#version 330 core\n" + shader_source("character.vert"), fragment_shader=_FLAT_FRAGMENT
+    )
+    # the textures the vertex stage pulls the bones and rest shapes from, on the units
+    # CharacterPass.draw binds them to
+    set_uniform(flat, "u_bones", 0)
+    set_uniform(flat, "u_rest", 1)
+    return flat
+
+
 def _character_parts(renderer, frame: int, reps: int = 4) -> dict:
     """Where the characters' pass goes (median wall s over ``reps`` draws of one frame, the
     pass alone as :func:`_passes` times it): ``full``, with the renderer's shaders;
@@ -155,15 +169,10 @@ def _character_parts(renderer, frame: int, reps: int = 4) -> dict:
     shader that writes one colour. So ``fragments`` = full - vertex+setup, of which
     ``shading`` = full - constant-colour is the cost of the characters' fragment shader
     (texture, lighting) and the rest rasterisation, depth test and colour writes."""
-    from crowdstudy.render.gpu import group_vertex_array, set_uniform, shader_source
+    from crowdstudy.render.gpu import group_vertex_array
 
     ctx = renderer.ctx
-    flat = ctx.program(
-        vertex_shader="#version 330 core\n" + shader_source("character.vert"), fragment_shader=_FLAT_FRAGMENT
-    )
-    # the samplers the vertex stage pulls from, on the units CharacterPass.draw binds
-    set_uniform(flat, "u_bones", 0)
-    set_uniform(flat, "u_rest", 1)
+    flat = _constant_colour_program(ctx)
     added = []
     for gl in renderer.character_resources.groups:
         gl.vaos[flat] = vao = group_vertex_array(ctx, flat, gl.vbo, gl.inst, gl.ibo)

@@ -124,3 +124,24 @@ def test_a_crowd_renders_the_same_after_another_crowd():
     garments._FUSE.clear()
     garments._fuse(points_a, mask, 0.03, 2)
     assert np.array_equal(garments._fuse(points_b, mask, 0.03, 2), alone)
+
+
+def test_fxaa_filters_exactly_the_pixels_it_marks(design):
+    """The FXAA pass skips the blocks without an edge (the mark in the depth buffer): its
+    frame equals the filter run on every pixel, and the filter changed some pixels."""
+    import moderngl
+
+    anim = crowd_animation(grid_positions(9, margin=0.45), n_frames=1)
+    with mannequin_renderer(anim, design, shadows=False, width=384, height=216, msaa=0, post_aa="fxaa") as r:
+        r.set_view("V3")
+        two_pass = r.render(0)
+        scene, _mark, blend = r.targets._fxaa
+        r.targets.fbo_out.use()
+        r.ctx.disable(moderngl.DEPTH_TEST)
+        scene.use(7)
+        blend.render(moderngl.TRIANGLES, vertices=3)  # the filter on every pixel
+        r.ctx.enable(moderngl.DEPTH_TEST)
+        every = np.frombuffer(r.targets.read(), np.uint8).reshape(r.height, r.width, 3)[::-1]
+        unfiltered = np.frombuffer(scene.read(), np.uint8).reshape(r.height, r.width, 4)[::-1, :, :3]
+    assert np.array_equal(two_pass, every)
+    assert np.any(two_pass != unfiltered)

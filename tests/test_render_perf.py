@@ -246,3 +246,63 @@ def test_overlap_owner_boxes_hold_their_owners_capsules():
                 )
             covered += len(part)
         assert covered == len(ids)
+
+
+def test_shadow_casters_are_culled_to_the_view_without_changing_a_pixel(design):
+    """In the corridor (five periodic copies) the shadow pass draws only the casters whose
+    shadow can reach the camera's view; the picture equals the one drawn with every caster
+    in the light's frustum, and the copies far along the corridor are left out."""
+    anim = crowd_animation(
+        grid_positions(6, extent=(4.0, 3.0), margin=0.45),
+        n_frames=2,
+        scenario="corridor",
+        period=4.0,
+        velocity=(1.0, 0.0),
+    )
+
+    def casters(r):
+        return sum(gl.count for gl in r.character_resources.groups if gl.coarse)
+
+    with mannequin_renderer(anim, design) as r:
+        for view in ("V1", "V3"):
+            r.set_view(view)
+            culled = r.render(1)
+            r.load_frame(1)
+            r.draw_shadows(1)
+            n_culled = casters(r)
+            r.shadow_pass.run(r.character_positions(1), r.camera)  # every caster in the light's frustum
+            n_all = casters(r)
+            vp = r.prepare(1, upload=False)
+            r.color_pass.run(r.targets.draw, vp, r.camera.eye, r.environment.beat(1))
+            r.targets.resolve()
+            every = np.frombuffer(r.targets.read(), np.uint8).reshape(r.height, r.width, 3)[::-1]
+            assert np.array_equal(culled, every), view
+            assert 0 < n_culled < n_all, (view, n_culled, n_all)
+
+
+def test_the_constant_colour_probe_draws_the_characters_where_the_renderer_does(design):
+    """The breakdown's constant-colour program runs the characters' vertex stage as the
+    renderer's program does: the same depth at every pixel."""
+    from crowdstudy.bench import load_benchmark
+    from crowdstudy.render.gpu import group_vertex_array
+
+    probe = load_benchmark("render")
+    anim = crowd_animation(grid_positions(8, margin=0.45), n_frames=2)
+    with mannequin_renderer(anim, design, msaa=0) as r:  # a depth buffer glReadPixels reads
+        r.set_view("V1")
+        r.render(1)
+        flat = probe._constant_colour_program(r.ctx)
+        for gl in r.character_resources.groups:
+            gl.vaos[flat] = group_vertex_array(r.ctx, flat, gl.vbo, gl.inst, gl.ibo)
+        vp = r.prepare(1)
+        depths = []
+        for prog in (r.programs.character, flat):
+            fbo = probe._bind_frame_target(r, vp)
+            fbo.clear(0.0, 0.0, 0.0, 1.0, depth=1.0)
+            probe._draw_characters(r, prog, vp)
+            depths.append(np.frombuffer(fbo.read(attachment=-1, components=1, dtype="f4"), np.float32))
+        for gl in r.character_resources.groups:
+            gl.vaos.pop(flat).release()
+        flat.release()
+    assert 0.01 < np.mean(depths[0] < 1.0) < 0.9
+    assert np.array_equal(depths[0], depths[1])
