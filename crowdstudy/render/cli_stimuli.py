@@ -31,7 +31,11 @@ def configure(parser: argparse.ArgumentParser) -> None:
         help="seconds per video instead of the preset's (a short pilot set; at most the design's)",
     )
     parser.add_argument("--scheduler", help="Dask distributed scheduler address, tcp://HOST:PORT")
-    parser.add_argument("--workers", type=int, help="local worker processes (default one per 4 CPUs; 0 = in process)")
+    parser.add_argument(
+        "--workers",
+        type=int,
+        help="local worker processes (default one per 2 CPUs, at least 2 with 2 CPUs; 0 = in process)",
+    )
     add_config_option(
         parser,
         "the physics every `physics` method of the design starts from (then its own config "

@@ -507,8 +507,8 @@ def build_stimuli(
         duration: seconds per video instead of the preset's (a short pilot set); at most the
             design's duration.
         scheduler: "tcp://HOST:PORT" of a Dask distributed scheduler; None = local.
-        workers: local worker processes (default: one per 4 CPUs, at least 1; 0 = run in
-            this process).
+        workers: local worker processes (default :func:`default_workers`: one per 2 CPUs,
+            at least 2 with 2 CPUs; 0 = run in this process).
         body_loader: record -> Body override (tests); default ``crowdstudy.body.load_body``.
         physics: the :class:`~crowdstudy.physics.PhysicsConfig` (or a dict of its fields,
             :meth:`~crowdstudy.physics.PhysicsConfig.from_overrides`) every ``physics``
