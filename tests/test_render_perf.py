@@ -75,16 +75,21 @@ def test_static_layers_give_the_per_frame_picture(design, view):
         assert len(layered.layers.layers) == len({f % 15 for f in (0, 7, 15, 19)})  # drawn on first use
 
 
-def test_static_layers_follow_the_camera_and_the_corridor_walls(design):
-    """set_view redraws the layers; in the corridor the walls, which the characters'
-    shadows reach, stay in the per-frame pass."""
-    anim = crowd_animation(
+def _corridor(n_frames: int):
+    """Six walkers in a 4 m periodic corridor (drawn as five copies along it)."""
+    return crowd_animation(
         grid_positions(6, extent=(4.0, 3.0), margin=0.45),
-        n_frames=3,
+        n_frames=n_frames,
         scenario="corridor",
         period=4.0,
         velocity=(1.0, 0.0),
     )
+
+
+def test_static_layers_follow_the_camera_and_the_corridor_walls(design):
+    """set_view redraws the layers; in the corridor the walls, which the characters'
+    shadows reach, stay in the per-frame pass."""
+    anim = _corridor(n_frames=3)
     with mannequin_renderer(anim, design) as layered, mannequin_renderer(anim, design, static_layer=False) as plain:
         assert "walls" not in layered.layers.parts
         for view in ("V3", "V4"):
@@ -252,13 +257,7 @@ def test_shadow_casters_are_culled_to_the_view_without_changing_a_pixel(design):
     """In the corridor (five periodic copies) the shadow pass draws only the casters whose
     shadow can reach the camera's view; the picture equals the one drawn with every caster
     in the light's frustum, and the copies far along the corridor are left out."""
-    anim = crowd_animation(
-        grid_positions(6, extent=(4.0, 3.0), margin=0.45),
-        n_frames=2,
-        scenario="corridor",
-        period=4.0,
-        velocity=(1.0, 0.0),
-    )
+    anim = _corridor(n_frames=2)
 
     def casters(r):
         return sum(gl.count for gl in r.character_resources.groups if gl.coarse)
